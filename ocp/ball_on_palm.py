@@ -1,0 +1,754 @@
+"""Rolling an object on a flat palm: eq. 8 of the paper as a direct-collocation NLP.
+
+State: the palm/object contact coordinates eta_p = (x, y, u, v, psi); input: the palm
+contact velocity w = d/dt (x, y) [m/s]. The dynamics are the general rolling equations
+(:meth:`ocp.contact.ContactPair.rates_driven_by_a`) for the plane against the object's
+surface; for a sphere they are the paper's eq. 8 (tested). Objective: control effort
+integral |w|^2 dt. Goals and via-points are equality constraints on any subset of eta.
+
+One NLP is built per problem *structure* (object shape, intervals per segment, which
+coordinates each goal/via-point fixes) and cached; everything that changes between
+requests (initial state, goal values, radius, segment durations, bounds) is a parameter
+or a bound.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
+from functools import cache
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .collocation import HermiteSimpson, hermite_sample
+from .contact import ContactPair
+from .problem import (
+    CONTACT_COORDS,
+    MAX_INTERVALS,
+    PERIODIC,
+    BallOnPalmProblem,
+    ObjectSpec,
+    ProblemError,
+)
+from .solution import (
+    Certificate,
+    Solution,
+    SolverStats,
+    Status,
+    Trajectory,
+    status_from_ipopt,
+)
+from .surfaces import SURFACES, Plane, Surface, rotation_from_vector
+
+__all__ = ["BallOnPalmModel", "BallOnPalmPlanner", "model_for", "plan"]
+
+FloatArray = NDArray[np.float64]
+NX, NU = 5, 2
+_GUESS_SUBSTEPS = 2  # RK4 steps per half interval in the initial-guess simulation
+
+
+def wrap_difference(a: FloatArray | float, b: FloatArray | float) -> FloatArray:
+    """a - b wrapped into [-pi, pi)."""
+    return np.asarray((np.asarray(a) - np.asarray(b) + np.pi) % (2 * np.pi) - np.pi)
+
+
+def coordinate_error(coord: str, value: float, target: float) -> float:
+    """|value - target| in m or rad, modulo 2 pi for the periodic coordinates."""
+    i = CONTACT_COORDS.index(coord)
+    d = float(wrap_difference(value, target)) if PERIODIC[i] else value - target
+    return abs(d)
+
+
+@dataclass(frozen=True)
+class BallOnPalmModel:
+    """Named CasADi functions of the palm/object contact for one object shape."""
+
+    surface: Surface
+    #: (eta, w, params) -> eta_dot: the rolling equations, eq. 3 / eq. 8.
+    dynamics: ca.Function
+    #: (eta, w, params, chart) -> (R_po, p_po, contact_point, contact_normal, omega_roll)
+    kinematics: ca.Function
+    #: (eta, eta_dot, params, chart) -> (v_slip [m/s], omega [rad/s]), from d/dt g_po.
+    twist: ca.Function
+
+    @staticmethod
+    def build(surface: Surface) -> BallOnPalmModel:
+        pair = ContactPair(Plane, surface)
+        eta = ca.SX.sym("eta", NX)
+        eta_dot = ca.SX.sym("eta_dot", NX)
+        w = ca.SX.sym("w", NU)
+        params = ca.SX.sym("params", surface.n_params)
+        chart = ca.SX.sym("chart", 3, 3)
+        none = ca.SX(0, 1)
+        eye = ca.SX.eye(3)
+        dyn = ca.Function("ball_on_palm_dynamics", [eta, w, params],
+                          [pair.rates_driven_by_a(eta, w, none, params)],
+                          ["eta", "w", "params"], ["eta_dot"])
+        R_po, p_po = pair.pose(eta, none, params, eye, chart)
+        cp, cn = pair.contact_point(eta, none, eye)
+        omega = pair.rolling_velocity(eta, w, none, params)
+        kin = ca.Function("ball_on_palm_kinematics", [eta, w, params, chart],
+                          [R_po, p_po, cp, cn, omega],
+                          ["eta", "w", "params", "chart"],
+                          ["R_po", "p_po", "contact_point", "contact_normal", "omega_roll"])
+        # Velocity of the object's material point at the contact, relative to the palm:
+        # v = dR/dt p_b + dp/dt with p_b = chart f_b(alpha_b) held fixed in the object.
+        R_dot = ca.reshape(ca.jtimes(ca.vec(R_po), eta, eta_dot), 3, 3)
+        p_dot = ca.jtimes(p_po, eta, eta_dot)
+        p_b = chart @ surface.geometry(eta[2:4], params)[0]
+        v_slip = R_dot @ p_b + p_dot
+        W = R_dot @ R_po.T
+        omega_s = ca.vertcat(W[2, 1], W[0, 2], W[1, 0])
+        twist = ca.Function("ball_on_palm_contact_twist", [eta, eta_dot, params, chart],
+                            [v_slip, omega_s], ["eta", "eta_dot", "params", "chart"],
+                            ["v_slip", "omega"])
+        return BallOnPalmModel(surface, dyn, kin, twist)
+
+    @cache  # noqa: B019 - models live for the whole process
+    def guess_simulator(self, n: int) -> ca.Function:
+        """RK4 over n intervals: (x0, W, h, params, u_lim) -> (X nodes 1..n, X midpoints).
+
+        W holds the input at 2 * _GUESS_SUBSTEPS + 1 equally spaced times per interval
+        (columns interval-major). The latitude is clipped to the chart's allowed band.
+        """
+        m = _GUESS_SUBSTEPS
+        x = ca.SX.sym("x", NX)
+        Wk = ca.SX.sym("W", NU, 2 * m + 1)
+        h = ca.SX.sym("h")
+        params = ca.SX.sym("params", self.surface.n_params)
+        u_lim = ca.SX.sym("u_lim")
+        dt = h / (2 * m)
+
+        def f(xx: ca.SX, j: int) -> ca.SX:  # input at sub-time j/2 (half steps use averages)
+            w = Wk[:, j // 2] if j % 2 == 0 else (Wk[:, j // 2] + Wk[:, j // 2 + 1]) / 2
+            return self.dynamics(xx, w, params)
+
+        xs = x
+        mid = x
+        for i in range(2 * m):
+            k1 = f(xs, 2 * i)
+            k2 = f(xs + dt / 2 * k1, 2 * i + 1)
+            k3 = f(xs + dt / 2 * k2, 2 * i + 1)
+            k4 = f(xs + dt * k3, 2 * i + 2)
+            xs = xs + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            xs = ca.vertcat(xs[0:2], ca.fmin(ca.fmax(xs[2], -u_lim), u_lim), xs[3:])
+            if i == m - 1:
+                mid = xs
+        step = ca.Function("guess_step", [x, Wk, h, params, u_lim], [xs, mid])
+        sim = step.mapaccum("guess_sim", n, [0], [0])
+        Wall = ca.SX.sym("Wall", NU, n * (2 * m + 1))
+        hs = ca.SX.sym("hs", 1, n)
+        Wsplit = ca.horzsplit(Wall, list(range(0, n * (2 * m + 1) + 1, 2 * m + 1)))
+        Xn, Xm = sim(x, ca.horzcat(*Wsplit), hs, ca.repmat(params, 1, n), ca.repmat(u_lim, 1, n))
+        return ca.Function("guess_simulator", [x, Wall, hs, params, u_lim], [Xn, Xm],
+                           ["x0", "W", "h", "params", "u_lim"], ["X", "Xm"])
+
+    @cache  # noqa: B019 - one integrator per model, models live for the process
+    def reintegrator(self, n_sub: int) -> ca.Function:
+        """CVODES over one interval in normalised time s in [0, 1], output at n_sub points.
+
+        Parameters q = (w_k, w_m, w_k+1, h, params): the input is the collocation quadratic.
+        """
+        s = ca.SX.sym("s")
+        x = ca.SX.sym("x", NX)
+        q = ca.SX.sym("q", 3 * NU + 1 + self.surface.n_params)
+        w0, wm, w1, h, params = q[0:2], q[2:4], q[4:6], q[6], q[7:]
+        w = 2 * (s - 0.5) * (s - 1) * w0 - 4 * s * (s - 1) * wm + 2 * s * (s - 0.5) * w1
+        ode = h * self.dynamics(x, w, params)
+        grid = list(np.linspace(0.0, 1.0, n_sub + 1)[1:])
+        return ca.integrator("reintegrate", "cvodes", {"x": x, "p": q, "t": s, "ode": ode},
+                             0.0, grid, {"abstol": 1e-13, "reltol": 1e-11})
+
+
+@cache
+def model_for(shape: str) -> BallOnPalmModel:
+    """The (cached) model for an object shape name ("sphere", "ellipsoid")."""
+    return BallOnPalmModel.build(SURFACES[shape])
+
+
+# -- NLP -----------------------------------------------------------------------------------
+
+#: IPOPT settings shared by every structure. Constraint violation (goals, dynamics, in
+#: scaled units) must be tight; the optimality (dual) tolerance is looser because a pure
+#: reorientation has a continuum of optimal plans (rotating the loop about the vertical
+#: through the contact leaves the cost unchanged), where IPOPT's dual residual stalls.
+IPOPT_OPTIONS: dict[str, Any] = {
+    "ipopt.tol": 1e-6,
+    "ipopt.constr_viol_tol": 1e-10,
+    "ipopt.acceptable_tol": 1e-4,
+    "ipopt.acceptable_iter": 10,
+    "ipopt.acceptable_constr_viol_tol": 1e-9,
+    "ipopt.mu_strategy": "adaptive",
+}
+
+@dataclass(frozen=True)
+class Structure:
+    """What fixes the shape of the NLP; everything else is a parameter or a bound."""
+
+    shape: str
+    segments: tuple[int, ...]
+    goal_mask: tuple[bool, ...]
+    via_masks: tuple[tuple[bool, ...], ...]
+
+    @staticmethod
+    def of(problem: BallOnPalmProblem) -> Structure:
+        def mask(coords: Any) -> tuple[bool, ...]:
+            return tuple(c in coords for c in CONTACT_COORDS)
+
+        return Structure(problem.object.shape, problem.segment_intervals(),
+                         mask(problem.goal), tuple(mask(vp.coords) for vp in problem.via_points))
+
+
+class _StopCallback(ca.Callback):
+    """IPOPT iteration callback enforcing a per-solve deadline and iteration limit."""
+
+    def __init__(self, nx: int, ng: int, np_: int) -> None:
+        ca.Callback.__init__(self)
+        self._sizes = {"x": nx, "lam_x": nx, "g": ng, "lam_g": ng, "lam_p": np_, "f": 1}
+        self.deadline = math.inf
+        self.max_iter = 1000
+        self.iterations = 0
+        self.reason: Status | None = None
+        self.construct("dexroll_stop", {})
+
+    def arm(self, deadline: float, max_iter: int) -> None:
+        self.deadline, self.max_iter, self.iterations, self.reason = deadline, max_iter, 0, None
+
+    def get_n_in(self) -> int:
+        return int(ca.nlpsol_n_out())
+
+    def get_n_out(self) -> int:
+        return 1
+
+    def get_name_in(self, i: int) -> str:
+        return str(ca.nlpsol_out(i))
+
+    def get_name_out(self, i: int) -> str:
+        return "ret"
+
+    def get_sparsity_in(self, i: int) -> ca.Sparsity:
+        n = self._sizes.get(ca.nlpsol_out(i), 0)
+        return ca.Sparsity.dense(n) if n else ca.Sparsity(0, 0)
+
+    def eval(self, arg: list[Any]) -> list[int]:
+        self.iterations += 1
+        if time.perf_counter() > self.deadline:
+            self.reason = Status.TIME_LIMIT
+            return [1]
+        if self.iterations > self.max_iter:
+            self.reason = Status.ITERATION_LIMIT
+            return [1]
+        return [0]
+
+
+@dataclass
+class _NLP:
+    structure: Structure
+    solver: ca.Function
+    stop: _StopCallback
+    unpack: ca.Function
+    pack: ca.Function
+    params: ca.Function  # (shape_params, seg_durations, goal, vias) -> p
+    left_cols: list[int]  # input column at the start of each interval
+    right_cols: list[int]  # input column at the end of each interval
+    n_g: int
+    build_time: float
+
+
+def _build(st: Structure) -> _NLP:
+    t0 = time.perf_counter()
+    model = model_for(st.shape)
+    n_seg = len(st.segments)
+    n_via = len(st.via_masks)
+    hs = HermiteSimpson(NX, NU, st.segments)
+    shape_p = ca.SX.sym("shape", model.surface.n_params)
+    seg_T = ca.SX.sym("seg_T", n_seg)
+    goal = ca.SX.sym("goal", NX)
+    vias = ca.SX.sym("vias", NX, n_via)
+    p = ca.vertcat(shape_p, seg_T, goal, ca.vec(vias))
+    L = ca.mmax(shape_p)  # length scale [m]
+    T = ca.sum1(seg_T)
+    x_scale = ca.vertcat(L, L, 1, 1, 1)
+    u_scale = ca.vertcat(L, L) / T
+
+    g = [hs.defects(model.dynamics, shape_p, x_scale, u_scale, seg_T)]
+
+    def targets(x_node: ca.SX, target: ca.SX, mask: tuple[bool, ...]) -> list[ca.SX]:
+        out = []
+        for i, on in enumerate(mask):
+            if not on:
+                continue
+            if PERIODIC[i]:  # zero iff equal modulo 2 pi, with a non-zero slope there
+                out.append(2 * ca.sin((x_node[i] - target[i]) / 2))
+            else:
+                out.append(x_node[i] - target[i] / x_scale[i])
+        return out
+
+    ends = hs.segment_end_nodes
+    for j, vmask in enumerate(st.via_masks):
+        g += targets(hs.X[:, ends[j]], vias[:, j], vmask)
+    g += targets(hs.X[:, ends[-1]], goal, st.goal_mask)
+    g_all = ca.vertcat(*g)
+
+    us = ca.SX.sym("us", NU)
+    effort = hs.simpson(ca.Function("effort", [ca.SX.sym("xs", NX), us], [ca.sumsqr(us)]),
+                        seg_T / T)
+
+    stop = _StopCallback(hs.w.numel(), g_all.numel(), p.numel())
+    opts = {
+        "ipopt.print_level": 0,
+        "ipopt.sb": "yes",
+        "print_time": False,
+        "ipopt.max_iter": 100_000,  # per-solve limits come from the callback
+        **IPOPT_OPTIONS,
+        "iteration_callback": stop,
+        "error_on_fail": False,
+    }
+    solver = ca.nlpsol("ball_on_palm", "ipopt", {"x": hs.w, "p": p, "f": effort, "g": g_all},
+                       opts)
+    params = ca.Function("params", [shape_p, seg_T, goal, vias], [p],
+                         ["shape", "seg_T", "goal", "vias"], ["p"])
+    return _NLP(st, solver, stop, hs.unpack(), hs.pack(), params, hs.left_cols,
+                hs.right_cols, g_all.numel(),
+                time.perf_counter() - t0)
+
+
+# -- initial guesses -----------------------------------------------------------------------
+
+def _palm_anchors(problem: BallOnPalmProblem) -> FloatArray:
+    """Palm points the reference path passes at the segment boundaries (2 x n_seg+1)."""
+    pts = [np.array(problem.initial[:2], dtype=float)]
+    for coords in [*(vp.coords for vp in problem.via_points), problem.goal]:
+        q = pts[-1].copy()
+        for i, c in enumerate(("x", "y")):
+            if c in coords:
+                q[i] = coords[c]
+        pts.append(q)
+    return np.array(pts).T
+
+
+def _reference_input(problem: BallOnPalmProblem, loop: float) -> Callable[[FloatArray],
+                                                                         FloatArray]:
+    """w(t) of a reference palm path: straight lines between anchors plus a closed loop.
+
+    The system is nonholonomic: a straight-line guess cannot change the object's
+    orientation without moving it, and IPOPT started there can stall and report the
+    problem infeasible. A loop of signed size ``loop`` (fraction of the object size),
+    superposed over the whole horizon, gives the guess the net rotation a pure
+    reorientation needs (the holonomy of rolling around a closed path).
+    """
+    anchors = _palm_anchors(problem)
+    tb = problem.segment_times
+    T = problem.duration
+    r = abs(loop) * problem.object.length_scale
+    sgn = 1.0 if loop >= 0 else -1.0
+
+    def w(t: FloatArray) -> FloatArray:
+        seg = np.clip(np.searchsorted(tb, t, side="right") - 1, 0, len(tb) - 2)
+        lin = (anchors[:, seg + 1] - anchors[:, seg]) / (tb[seg + 1] - tb[seg])
+        ph = 2 * np.pi * t / T
+        loop_v = (2 * np.pi / T) * r * np.vstack([-np.sin(ph), sgn * np.cos(ph)])
+        return np.asarray(lin + loop_v)
+
+    return w
+
+
+def _simulate_guess(model: BallOnPalmModel, problem: BallOnPalmProblem, t_nodes: FloatArray,
+                    w_of_t: Callable[[FloatArray], FloatArray], nlp: _NLP
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Forward-simulate the reference input (RK4): a dynamically consistent initial guess."""
+    n = len(t_nodes) - 1
+    h = np.diff(t_nodes)
+    frac = np.arange(_GUESS_SUBSTEPS * 2 + 1) / (_GUESS_SUBSTEPS * 2)
+    times = (t_nodes[:-1, None] + h[:, None] * frac[None, :]).ravel()
+    W = w_of_t(times)  # nu x (n * (2 substeps + 1))
+    u_lim = math.pi / 2 - problem.pole_margin
+    Xn, Xm = model.guess_simulator(n)(np.asarray(problem.initial, dtype=float), W, h,
+                                      list(problem.object.dimensions), u_lim)
+    X = np.vstack([np.asarray(problem.initial, dtype=float), np.asarray(Xn).T])
+    tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+    # node inputs per segment: evaluated just inside the interval they belong to
+    eps = 1e-9 * problem.duration
+    U = np.zeros((n + len(nlp.structure.segments), NU))
+    U[nlp.left_cols] = w_of_t(t_nodes[:-1] + eps).T
+    U[nlp.right_cols] = w_of_t(t_nodes[1:] - eps).T
+    return X, np.asarray(Xm).T, U, w_of_t(tm).T
+
+
+def _guesses(model: BallOnPalmModel, problem: BallOnPalmProblem, t_nodes: FloatArray, nlp: _NLP,
+             warm: Solution | None
+             ) -> Iterator[tuple[FloatArray, FloatArray, FloatArray, FloatArray]]:
+    """Initial guesses (X, Xm, U, Um) in the order they are tried.
+
+    A warm start (a previous plan, sampled with its collocation polynomials) comes first;
+    then forward simulations of reference palm paths (see :func:`_reference_input`).
+    """
+    if warm is not None and abs(float(warm.nodes.t[-1]) - problem.duration) < 1e-9:
+        eps = 1e-9 * problem.duration
+        n = len(t_nodes) - 1
+        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+        U = np.zeros((n + len(nlp.structure.segments), NU))
+        U[nlp.left_cols] = warm.sample(t_nodes[:-1] + eps).w
+        U[nlp.right_cols] = warm.sample(t_nodes[1:] - eps).w
+        sm = warm.sample(tm)
+        yield warm.sample(t_nodes).eta, sm.eta, U, sm.w
+    for loop in _guess_loops(problem):
+        yield _simulate_guess(model, problem, t_nodes, _reference_input(problem, loop), nlp)
+
+
+def _rotation_symmetric(problem: BallOnPalmProblem) -> bool:
+    """True for a pure reorientation about the palm normal with no via-points.
+
+    The goal fixes the palm point and the object point to their initial values, so the net
+    motion is a rotation about the vertical through the contact. Rotating a whole plan about
+    that vertical leaves both its cost and its final pose unchanged: the optima form a
+    continuum, on which IPOPT's convergence stalls unless one member is picked (the gauge
+    bound in :meth:`BallOnPalmPlanner._bounds`).
+    """
+    if problem.via_points or "psi" not in problem.goal:
+        return False
+    return all(c in problem.goal and abs(problem.goal[c] - problem.initial[i]) < 1e-12
+               for i, c in enumerate(CONTACT_COORDS[:4]))
+
+
+def _guess_loops(problem: BallOnPalmProblem) -> list[float]:
+    """Loop sizes to try, in order: loops first when the object's orientation is a target."""
+    orient = any(c in problem.goal for c in ("u", "v", "psi")) or any(
+        c in vp.coords for vp in problem.via_points for c in ("u", "v", "psi"))
+    return [0.5, -0.5, 0.0, 1.0, -1.0] if orient else [0.0, 0.5, -0.5]
+
+
+# -- the planner ---------------------------------------------------------------------------
+
+class BallOnPalmPlanner:
+    """Plans with a cache of NLPs keyed by problem structure (one per process is enough)."""
+
+    def __init__(self, n_reintegration_substeps: int = 8, max_iter_per_guess: int = 300
+                 ) -> None:
+        self._cache: dict[Structure, _NLP] = {}
+        self.n_sub = n_reintegration_substeps
+        #: IPOPT iterations spent on one initial guess before the next one is tried.
+        self.max_iter_per_guess = max_iter_per_guess
+
+    def nlp_for(self, problem: BallOnPalmProblem) -> tuple[_NLP, bool]:
+        """The NLP for this problem's structure, and whether it came from the cache."""
+        st = Structure.of(problem)
+        hit = st in self._cache
+        if not hit:
+            self._cache[st] = _build(st)
+        return self._cache[st], hit
+
+    def solve(self, problem: BallOnPalmProblem, warm_start: Solution | None = None
+              ) -> Solution:
+        """Plan; raises :class:`ProblemError` (before building anything) on bad input.
+
+        ``warm_start``: a previous plan of a similar problem, tried first as the initial
+        guess. When IPOPT converges but the certificate finds the discretisation too coarse
+        (state defect), the plan is re-solved on a grid twice as fine, warm-started from
+        the coarse one, up to ``problem.max_refinements`` times.
+        """
+        problem.validate()
+        deadline = time.perf_counter() + problem.options.time_limit
+        iter_budget = problem.options.max_iter
+        totals = {"build": 0.0, "solve": 0.0, "cert": 0.0, "iter": 0, "attempts": 0}
+        sol = self._solve_once(problem, warm_start, deadline, iter_budget, totals)
+        refinements = 0
+        while (sol.status is Status.INACCURATE and refinements < problem.max_refinements
+               and 2 * problem.n_intervals <= MAX_INTERVALS
+               and all(f.startswith(("angle_defect", "position_defect", "goal"))
+                       for f in sol.certificate.failures)):
+            refinements += 1
+            problem = replace(problem, n_intervals=2 * problem.n_intervals)
+            sol = self._solve_once(problem, sol, deadline, iter_budget - int(totals["iter"]),
+                                   totals)
+        stats = replace(sol.stats, iterations=int(totals["iter"]),
+                        attempts=int(totals["attempts"]), build_time=totals["build"],
+                        solve_time=totals["solve"], certificate_time=totals["cert"],
+                        refinements=refinements)
+        return replace(sol, stats=stats)
+
+    def _solve_once(self, problem: BallOnPalmProblem, warm: Solution | None, deadline: float,
+                    iter_budget: int, totals: dict[str, float]) -> Solution:
+        nlp, hit = self.nlp_for(problem)
+        build_time = 0.0 if hit else nlp.build_time
+        model = model_for(problem.object.shape)
+
+        L = problem.object.length_scale
+        seg_T = np.diff(problem.segment_times)
+        T = problem.duration
+        x_scale = np.array([L, L, 1, 1, 1])
+        u_scale = L / T
+        goal = np.array([problem.goal.get(c, 0.0) for c in CONTACT_COORDS])
+        vias = np.array([[vp.coords.get(c, 0.0) for c in CONTACT_COORDS]
+                         for vp in problem.via_points]).T.reshape(NX, -1)
+        p = nlp.params(problem.object.dimensions, seg_T, goal, vias)
+        lbx, ubx = self._bounds(problem, nlp, x_scale, u_scale)
+
+        t_nodes = self._node_times(problem, nlp.structure)
+        attempts: list[dict[str, Any]] = []
+        t_solve = time.perf_counter()
+        for X, Xm, U, Um in _guesses(model, problem, t_nodes, nlp, warm):
+            w0 = nlp.pack((X / x_scale).T, (Xm / x_scale).T, U.T / u_scale, Um.T / u_scale)
+            w0 = np.clip(np.asarray(w0).ravel(), lbx, ubx)
+            remaining_iter = iter_budget - sum(a["iter"] for a in attempts)
+            nlp.stop.arm(deadline, max(1, min(remaining_iter, self.max_iter_per_guess)))
+            res = nlp.solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
+            stats = nlp.solver.stats()
+            raw = str(stats["return_status"])
+            status = nlp.stop.reason if raw == "User_Requested_Stop" and nlp.stop.reason \
+                else status_from_ipopt(raw)
+            g = np.asarray(res["g"]).ravel()
+            attempts.append({"w": np.asarray(res["x"]).ravel(), "status": status, "raw": raw,
+                             "iter": int(stats["iter_count"]), "f": float(res["f"]),
+                             "viol": float(np.max(np.abs(g))) if g.size else 0.0})
+            if status is Status.SOLVED or nlp.stop.reason is Status.TIME_LIMIT \
+                    or remaining_iter <= self.max_iter_per_guess:
+                break
+        solve_time = time.perf_counter() - t_solve
+        best = next((a for a in attempts if a["status"] is Status.SOLVED),
+                    min(attempts, key=lambda a: a["viol"]))
+        sol = self._solution(problem, nlp, model, best, attempts, t_nodes, x_scale, u_scale,
+                             build_time, hit, solve_time)
+        totals["build"] += build_time
+        totals["solve"] += solve_time
+        totals["cert"] += sol.stats.certificate_time
+        totals["iter"] += sol.stats.iterations
+        totals["attempts"] += sol.stats.attempts
+        return sol
+
+    # -- helpers --------------------------------------------------------------------------
+    @staticmethod
+    def _node_times(problem: BallOnPalmProblem, st: Structure) -> FloatArray:
+        tb = problem.segment_times
+        pieces = [np.linspace(tb[s], tb[s + 1], n + 1)[:-1] for s, n in enumerate(st.segments)]
+        return np.concatenate([*pieces, [tb[-1]]])
+
+    @staticmethod
+    def _bounds(problem: BallOnPalmProblem, nlp: _NLP, x_scale: FloatArray, u_scale: float
+                ) -> tuple[FloatArray, FloatArray]:
+        n = sum(nlp.structure.segments)
+        L = problem.object.length_scale
+        u_lim = math.pi / 2 - problem.pole_margin
+        xb = np.array([problem.palm_half_extent / L] * 2 + [u_lim, np.inf, np.inf])
+        ub_x = np.tile(xb, (n + 1, 1))
+        ub_x[0] = np.asarray(problem.initial) / x_scale
+        lb_x = -np.tile(xb, (n + 1, 1))
+        lb_x[0] = ub_x[0]
+        ub_xm = np.tile(xb, (n, 1))
+        ub_u = np.full((n + len(nlp.structure.segments), NU),
+                       problem.max_contact_speed / u_scale)
+        ub_um = np.full((n, NU), problem.max_contact_speed / u_scale)
+        lb_u = -ub_u
+        if _rotation_symmetric(problem):
+            # Gauge: the plan's rotation about the contact normal is free; depart along +x.
+            c0 = nlp.left_cols[0]
+            lb_u[c0, 0], lb_u[c0, 1], ub_u[c0, 1] = 0.0, 0.0, 0.0
+        lbx = nlp.pack(lb_x.T, -ub_xm.T, lb_u.T, -ub_um.T)
+        ubx = nlp.pack(ub_x.T, ub_xm.T, ub_u.T, ub_um.T)
+        return np.asarray(lbx).ravel(), np.asarray(ubx).ravel()
+
+    def _solution(self, problem: BallOnPalmProblem, nlp: _NLP, model: BallOnPalmModel,
+                  best: dict[str, Any], attempts: list[dict[str, Any]], t_nodes: FloatArray,
+                  x_scale: FloatArray, u_scale: float, build_time: float, hit: bool,
+                  solve_time: float) -> Solution:
+        Xs, Xms, Us, Ums = (np.asarray(a) for a in nlp.unpack(best["w"]))
+        X, Xm = (Xs.T * x_scale), (Xms.T * x_scale)
+        Ucols, Um = Us.T * u_scale, Ums.T * u_scale
+        U0, U1 = Ucols[nlp.left_cols], Ucols[nlp.right_cols]
+        U = np.vstack([U0, U1[-1:]])  # node inputs, outgoing at via-points
+        params = np.asarray(problem.object.dimensions, dtype=float)
+        chart = rotation_from_vector(problem.object.chart_rotation)
+        n = len(U0)
+        F0 = np.asarray(model.dynamics.map(n)(X[:-1].T, U0.T, params)).T
+        F1 = np.asarray(model.dynamics.map(n)(X[1:].T, U1.T, params)).T
+        t_mid = (t_nodes[:-1] + t_nodes[1:]) / 2
+
+        def trajectory(t: FloatArray, eta: FloatArray, w: FloatArray) -> Trajectory:
+            m = len(t)
+            eta_dot = np.asarray(model.dynamics.map(m)(eta.T, w.T, params)).T
+            R, pos, cp, cn, om = model.kinematics.map(m)(eta.T, w.T, params, np.tile(chart, m))
+            return Trajectory(t=t, eta=eta, eta_dot=eta_dot, w=w,
+                              rolling_velocity=np.asarray(om).T,
+                              object_position=np.asarray(pos).T,
+                              object_rotation=np.asarray(R).T.reshape(m, 3, 3).transpose(0, 2, 1),
+                              contact_point=np.asarray(cp).T, contact_normal=np.asarray(cn).T)
+
+        order = np.argsort(np.concatenate([t_nodes, t_mid]), kind="stable")
+        grid = trajectory(np.concatenate([t_nodes, t_mid])[order],
+                          np.vstack([X, Xm])[order], np.vstack([U, Um])[order])
+        nodes = trajectory(t_nodes, X, U)
+
+        def sampler(t: FloatArray) -> Trajectory:
+            if np.any((t < -1e-12) | (t > problem.duration + 1e-12)):
+                raise ValueError(f"sample times must lie in [0, {problem.duration}] s")
+            x, u = hermite_sample(t_nodes, X, F0, F1, U0, Um, U1,
+                                  np.clip(t, 0, problem.duration))
+            return trajectory(t, x, u)
+
+        ends = [0, *self._segment_end_nodes(nlp.structure)]
+        goal_error = self._goal_errors(problem, X, ends)
+        t_cert = time.perf_counter()
+        cert = certify(problem, model, t_nodes, X, U0, Um, U1, ends, self.n_sub)
+        cert_time = time.perf_counter() - t_cert
+
+        status: Status = best["status"]
+        if status is Status.SOLVED and not cert.passed:
+            status = Status.INACCURATE
+        message = {
+            Status.SOLVED: "converged; certificate passed",
+            Status.INACCURATE: "converged, but the certificate failed: "
+                               + "; ".join(cert.failures) + " (refine n_intervals)",
+            Status.INFEASIBLE: "IPOPT reports the goals locally infeasible from every initial "
+                               "guess tried; the last iterate is returned",
+            Status.ITERATION_LIMIT: f"iteration limit {problem.options.max_iter} reached; "
+                                    "the last iterate is returned",
+            Status.TIME_LIMIT: f"time limit {problem.options.time_limit} s reached; "
+                               "the last iterate is returned",
+            Status.NUMERICAL_ERROR: f"IPOPT stopped with {best['raw']}; "
+                                    "the last iterate is returned",
+        }[status]
+        stats = SolverStats(raw_status=best["raw"],
+                            iterations=sum(a["iter"] for a in attempts),
+                            attempts=len(attempts), build_time=build_time,
+                            solve_time=solve_time, certificate_time=cert_time,
+                            objective=float(best["f"]) * problem.object.length_scale**2
+                            / problem.duration, cache_hit=hit, n_intervals=len(t_nodes) - 1)
+        return Solution(status=status, message=message, stats=stats, grid=grid, nodes=nodes,
+                        certificate=cert, goal_error=goal_error, _sampler=sampler)
+
+    @staticmethod
+    def _segment_end_nodes(st: Structure) -> list[int]:
+        return [int(k) for k in np.cumsum(st.segments)]
+
+    @staticmethod
+    def _goal_errors(problem: BallOnPalmProblem, X: FloatArray, ends: list[int]
+                     ) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for j, vp in enumerate(problem.via_points):
+            for c, val in vp.coords.items():
+                out[f"via_points[{j}].{c}"] = coordinate_error(
+                    c, X[ends[j + 1], CONTACT_COORDS.index(c)], val)
+        for c, val in problem.goal.items():
+            out[f"goal.{c}"] = coordinate_error(c, X[ends[-1], CONTACT_COORDS.index(c)], val)
+        return out
+
+
+def certify(problem: BallOnPalmProblem, model: BallOnPalmModel, t_nodes: FloatArray,
+            X: FloatArray, U0: FloatArray, Um: FloatArray, U1: FloatArray, ends: list[int],
+            n_sub: int) -> Certificate:
+    """The physical certificate of a plan, computed independently of the NLP.
+
+    Re-integrates the collocation inputs from the initial state with CVODES over the whole
+    horizon (never reset to the NLP's states), then checks the rolling laws along the
+    re-integrated motion at ``n_sub`` points per interval. See :class:`Certificate`.
+    """
+    params = np.asarray(problem.object.dimensions, dtype=float)
+    chart = rotation_from_vector(problem.object.chart_rotation)
+    F = model.reintegrator(n_sub)
+    n = len(t_nodes) - 1
+    x = np.asarray(X[0], dtype=float)
+    Xr = [x]
+    samples_x, samples_w = [], []
+    s = np.linspace(0.0, 1.0, n_sub + 1)[1:]
+    for k in range(n):
+        h = t_nodes[k + 1] - t_nodes[k]
+        q = np.concatenate([U0[k], Um[k], U1[k], [h], params])
+        xs = np.asarray(F(x0=x, p=q)["xf"]).T
+        w = (2 * (s - 0.5) * (s - 1))[:, None] * U0[k] - (4 * s * (s - 1))[:, None] * Um[k] \
+            + (2 * s * (s - 0.5))[:, None] * U1[k]
+        samples_x.append(xs)
+        samples_w.append(w)
+        x = xs[-1]
+        Xr.append(x)
+    Xr_arr = np.array(Xr)
+    sx = np.vstack([X[:1], *samples_x])
+    sw = np.vstack([U0[:1], *samples_w])
+    m = len(sx)
+    eta_dot = np.asarray(model.dynamics.map(m)(sx.T, sw.T, params))
+    v_slip, omega = model.twist.map(m)(sx.T, eta_dot, params, np.tile(chart, m))
+    v_slip, omega = np.asarray(v_slip).T, np.asarray(omega).T
+    R, pos, _cp, cn, _ = model.kinematics.map(m)(sx.T, sw.T, params, np.tile(chart, m))
+    R = np.asarray(R).T.reshape(m, 3, 3).transpose(0, 2, 1)
+    pos, cn = np.asarray(pos).T, np.asarray(cn).T
+    spin = np.abs(np.sum(omega * cn, axis=1))
+    # Height of the object's lowest point above the palm plane z = 0, from the closed-form
+    # support function of the shape in the object frame (no chart involved).
+    heights = np.array([pos[i, 2] - model.surface.support_height(-R[i].T @ np.array([0, 0, 1.0]),
+                                                                 params) for i in range(m)])
+    d = Xr_arr - X
+    pos_def = float(np.max(np.abs(d[:, :2])))
+    ang = np.column_stack([d[:, 2], wrap_difference(Xr_arr[:, 3:], X[:, 3:])])
+    ang_def = float(np.max(np.abs(ang)))
+    goal_err = BallOnPalmPlanner._goal_errors(problem, Xr_arr, ends)
+    max_goal = max(goal_err.values(), default=0.0)
+
+    o = problem.options
+    speed = float(np.max(np.linalg.norm(sw, axis=1)))
+    omega_max = float(np.max(np.linalg.norm(omega, axis=1)))
+    tol = {
+        "position_defect": o.cert_position_tol,
+        "angle_defect": o.cert_angle_tol,
+        "slip_speed": 1e-9 * max(speed, 1e-3),
+        "spin_rate": 1e-9 * max(omega_max, 1e-3),
+        "height": 1e-9 * problem.object.length_scale,
+        "goal": max(o.cert_position_tol, o.cert_angle_tol),
+    }
+    vals = {
+        "position_defect": pos_def,
+        "angle_defect": ang_def,
+        "slip_speed": float(np.max(np.linalg.norm(v_slip, axis=1))),
+        "spin_rate": float(np.max(spin)),
+        "height": float(np.max(np.abs(heights))),
+        "goal": max_goal,
+    }
+    failures = tuple(f"{k} {vals[k]:.3g} > {tol[k]:.3g}" for k in vals if not vals[k] <= tol[k])
+    return Certificate(max_position_defect=pos_def, max_angle_defect=ang_def,
+                       max_slip_speed=vals["slip_speed"], max_spin_rate=vals["spin_rate"],
+                       max_height_error=vals["height"], max_goal_error=max_goal,
+                       n_samples=m, tolerances=tol, failures=failures)
+
+
+def contact_coordinates(obj: ObjectSpec, position_xy: ArrayLike, rotation: ArrayLike
+                        ) -> tuple[float, float, float, float, float]:
+    """Contact coordinates (x, y, u, v, psi) of the object resting on the palm.
+
+    ``rotation`` is the object's orientation in the palm frame (3x3) and ``position_xy``
+    the palm point under it [m]. The inverse of the pose map: the contact point on the
+    object is the support point whose outward normal points down the palm normal, (u, v)
+    its coordinates in the object's chart, psi the angle between the two contact frames.
+    """
+    R = np.asarray(rotation, dtype=float).reshape(3, 3)
+    surf, params = obj.surface, obj.dimensions
+    chart = rotation_from_vector(obj.chart_rotation)
+    p_b = surf.support_point(R.T @ np.array([0.0, 0.0, -1.0]), params)
+    u, v = surf.inverse(chart.T @ p_b, params)
+    _, R_gauss, _, _, _ = surf.geometry([u, v], params)
+    R_cc = R @ chart @ np.asarray(R_gauss)  # palm contact frame is the identity
+    psi = math.atan2(-R_cc[0, 1], R_cc[0, 0])
+    xy = np.asarray(position_xy, dtype=float)
+    return (float(xy[0]), float(xy[1]), float(u), float(v), psi)
+
+
+def object_pose(obj: ObjectSpec, eta: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """(R_po, p_po): the object's pose in the palm frame at contact coordinates ``eta``."""
+    model = model_for(obj.shape)
+    chart = rotation_from_vector(obj.chart_rotation)
+    R, p, _, _, _ = model.kinematics(np.asarray(eta, dtype=float), [0.0, 0.0],
+                                     list(obj.dimensions), chart)
+    return np.asarray(R), np.asarray(p).ravel()
+
+
+_DEFAULT = BallOnPalmPlanner()
+
+
+def plan(problem: BallOnPalmProblem) -> Solution:
+    """Plan with the process-wide planner (and its NLP cache)."""
+    return _DEFAULT.solve(problem)
+
+
+__all__ += ["ProblemError", "certify", "contact_coordinates", "object_pose"]

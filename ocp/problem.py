@@ -1,0 +1,228 @@
+"""Problem specifications, validated as a whole before any NLP is built.
+
+Units are SI throughout: lengths in m, angles in rad, times in s, speeds in m/s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .surfaces import SURFACES, Surface
+
+__all__ = [
+    "CONTACT_COORDS",
+    "BallOnPalmProblem",
+    "ObjectSpec",
+    "ProblemError",
+    "SolverOptions",
+    "ViaPoint",
+]
+
+#: Names of the palm/object contact coordinates eta_p = (x, y, u, v, psi):
+#: palm point (x, y) [m], object chart latitude/longitude (u, v) [rad], contact angle [rad].
+CONTACT_COORDS: tuple[str, ...] = ("x", "y", "u", "v", "psi")
+#: Which contact coordinates are angles with period 2 pi (v and psi).
+PERIODIC: tuple[bool, ...] = (False, False, False, True, True)
+
+#: Limits that keep a problem sane (and an NLP bounded in size).
+MAX_INTERVALS = 2000
+MAX_VIA_POINTS = 50
+MAX_POSITION = 10.0  # m, any palm coordinate
+MAX_DURATION = 3600.0  # s
+
+
+class ProblemError(ValueError):
+    """A problem that cannot be planned. ``errors`` lists (field, reason) pairs."""
+
+    def __init__(self, errors: Sequence[tuple[str, str]]) -> None:
+        self.errors = list(errors)
+        super().__init__("; ".join(f"{f}: {r}" for f, r in self.errors))
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """The rolled object: a closed surface with its chart.
+
+    ``shape`` is ``"sphere"`` (dimensions = (radius,)) or ``"ellipsoid"`` (an ellipsoid of
+    revolution, dimensions = (equatorial semi-axis a, polar semi-axis c)), in m.
+    ``chart_rotation`` is the rotation vector [rad] of the object's chart patch in the
+    object frame; the contact coordinates (u, v, psi) are measured in that patch.
+    """
+
+    shape: str = "sphere"
+    dimensions: tuple[float, ...] = (0.03,)
+    chart_rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def surface(self) -> Surface:
+        return SURFACES[self.shape]
+
+    @property
+    def length_scale(self) -> float:
+        """Characteristic length [m] used to scale the NLP (the largest semi-axis)."""
+        return float(max(self.dimensions))
+
+
+@dataclass(frozen=True)
+class ViaPoint:
+    """Contact coordinates (any subset of CONTACT_COORDS) to pass through at ``time`` [s]."""
+
+    time: float
+    coords: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Limits and tolerances passed to IPOPT for one solve."""
+
+    max_iter: int = 1000
+    time_limit: float = 60.0  # s, wall clock for the whole plan (all initial guesses)
+    tol: float = 1e-8
+    #: Tolerances of the physical certificate (see ocp.certificate).
+    cert_position_tol: float = 1e-6  # m: re-integration defect of the palm coordinates
+    cert_angle_tol: float = 1e-4  # rad: re-integration defect of the angles
+
+
+@dataclass(frozen=True)
+class BallOnPalmProblem:
+    """Roll an object on a flat palm from ``initial`` to ``goal`` (eq. 8, generalised).
+
+    ``initial`` are the five contact coordinates (x, y, u, v, psi) at t = 0; ``goal``
+    any non-empty subset of them at t = ``duration``; ``via_points`` subsets at given
+    interior times. ``n_intervals`` is the number of collocation intervals over the whole
+    horizon. ``pole_margin`` [rad] keeps |u| <= pi/2 - pole_margin on the object chart.
+    ``max_contact_speed`` [m/s] bounds each component of the palm contact velocity and
+    ``palm_half_extent`` [m] the palm coordinates.
+    """
+
+    object: ObjectSpec
+    initial: tuple[float, float, float, float, float]
+    goal: Mapping[str, float]
+    duration: float
+    via_points: tuple[ViaPoint, ...] = ()
+    n_intervals: int = 50
+    pole_margin: float = math.radians(15.0)
+    max_contact_speed: float = 1.0
+    palm_half_extent: float = 0.5
+    max_refinements: int = 2
+    options: SolverOptions = field(default_factory=SolverOptions)
+
+    # -- validation -----------------------------------------------------------------------
+    def errors(self) -> list[tuple[str, str]]:
+        """Every reason this problem is invalid, as (field, reason); empty when valid."""
+        errs: list[tuple[str, str]] = []
+        obj = self.object
+        if obj.shape not in SURFACES or SURFACES[obj.shape].singular_u is None:
+            closed = sorted(n for n, s in SURFACES.items() if s.singular_u is not None)
+            errs.append(("object.shape", f"unknown object shape {obj.shape!r}; one of {closed}"))
+        else:
+            errs += [("object.dimensions", r)
+                     for r in obj.surface.validate_params(obj.dimensions)]
+        if len(obj.chart_rotation) != 3 or not all(map(math.isfinite, obj.chart_rotation)):
+            errs.append(("object.chart_rotation",
+                         "must be 3 finite numbers (rotation vector, rad)"))
+
+        margin_ok = math.isfinite(self.pole_margin) and 0.0 < self.pole_margin < math.pi / 2
+        if not margin_ok:
+            errs.append(("pole_margin", f"must be in (0, pi/2) rad, got {self.pole_margin}"))
+        if not (math.isfinite(self.duration) and 0.0 < self.duration <= MAX_DURATION):
+            errs.append(("duration", f"must be in (0, {MAX_DURATION}] s, got {self.duration}"))
+        if not (math.isfinite(self.max_contact_speed) and self.max_contact_speed > 0.0):
+            errs.append(("max_contact_speed", f"must be > 0 m/s, got {self.max_contact_speed}"))
+        if not (math.isfinite(self.palm_half_extent) and
+                0.0 < self.palm_half_extent <= MAX_POSITION):
+            errs.append(("palm_half_extent",
+                         f"must be in (0, {MAX_POSITION}] m, got {self.palm_half_extent}"))
+        n_via = len(self.via_points)
+        if n_via > MAX_VIA_POINTS:
+            errs.append(("via_points", f"at most {MAX_VIA_POINTS} via-points, got {n_via}"))
+        if not (n_via + 1 <= self.n_intervals <= MAX_INTERVALS):
+            errs.append(("n_intervals",
+                         f"must be in [{n_via + 1}, {MAX_INTERVALS}] (one interval per segment "
+                         f"between via-points at least), got {self.n_intervals}"))
+        if not (0 <= self.max_refinements <= 5):
+            errs.append(("max_refinements", f"must be in [0, 5], got {self.max_refinements}"))
+        o = self.options
+        if not (1 <= o.max_iter <= 100_000):
+            errs.append(("options.max_iter", f"must be in [1, 100000], got {o.max_iter}"))
+        if not (math.isfinite(o.time_limit) and o.time_limit > 0):
+            errs.append(("options.time_limit", f"must be > 0 s, got {o.time_limit}"))
+        if not (math.isfinite(o.tol) and 0 < o.tol < 1):
+            errs.append(("options.tol", f"must be in (0, 1), got {o.tol}"))
+
+        u_max = math.pi / 2 - self.pole_margin if margin_ok else math.pi / 2
+        if len(self.initial) != 5:
+            errs.append(("initial", f"must have 5 coordinates {CONTACT_COORDS}, "
+                                    f"got {len(self.initial)}"))
+        else:
+            errs += self._coord_errors("initial", dict(zip(CONTACT_COORDS, self.initial,
+                                                           strict=True)), u_max)
+        if not self.goal and not self.via_points:
+            errs.append(("goal", "empty goal and no via-points: nothing to plan"))
+        errs += self._coord_errors("goal", self.goal, u_max)
+
+        last = 0.0
+        for i, vp in enumerate(self.via_points):
+            name = f"via_points[{i}]"
+            if not (math.isfinite(vp.time) and last < vp.time < self.duration):
+                errs.append((f"{name}.time",
+                             f"must be strictly increasing and inside (0, duration = "
+                             f"{self.duration} s), got {vp.time}"))
+            else:
+                last = vp.time
+            if not vp.coords:
+                errs.append((f"{name}.coords", "empty: give at least one coordinate"))
+            errs += self._coord_errors(f"{name}.coords", vp.coords, u_max)
+        return errs
+
+    def _coord_errors(self, name: str, coords: Mapping[str, float], u_max: float
+                      ) -> list[tuple[str, str]]:
+        errs: list[tuple[str, str]] = []
+        for key, value in coords.items():
+            where = f"{name}.{key}"
+            if key not in CONTACT_COORDS:
+                errs.append((where, f"unknown coordinate {key!r}; allowed: {CONTACT_COORDS}"))
+                continue
+            if not math.isfinite(value):
+                errs.append((where, f"must be finite, got {value}"))
+            elif key in ("x", "y") and abs(value) > min(self.palm_half_extent, MAX_POSITION):
+                errs.append((where, f"|{key}| = {abs(value):.4g} m is outside the palm "
+                                    f"(palm_half_extent = {self.palm_half_extent} m)"))
+            elif key == "u" and abs(value) > u_max:
+                errs.append((where,
+                             f"|u| = {abs(value):.4f} rad is at or beyond the chart pole "
+                             f"limit pi/2 - pole_margin = {u_max:.4f} rad; rotate the object "
+                             f"chart (object.chart_rotation) so the contact is away from its "
+                             f"poles"))
+        return errs
+
+    def validate(self) -> None:
+        """Raise :class:`ProblemError` naming every bad field, before any NLP is built."""
+        errs = self.errors()
+        if errs:
+            raise ProblemError(errs)
+
+    # -- derived data ---------------------------------------------------------------------
+    @property
+    def segment_times(self) -> np.ndarray:
+        """Boundaries of the segments between via-points: [0, t_1, ..., duration] [s]."""
+        return np.array([0.0, *(vp.time for vp in self.via_points), self.duration])
+
+    def segment_intervals(self) -> tuple[int, ...]:
+        """Intervals per segment, proportional to segment duration, at least 1 each."""
+        dt = np.diff(self.segment_times)
+        n_seg = len(dt)
+        counts = np.maximum(1, np.floor(self.n_intervals * dt / self.duration).astype(int))
+        # hand the remaining intervals to the segments with the largest remainders
+        while counts.sum() < self.n_intervals:
+            share = self.n_intervals * dt / self.duration - counts
+            counts[int(np.argmax(share))] += 1
+        while counts.sum() > self.n_intervals:
+            i = int(np.argmax(np.where(counts > 1, counts, -1)))
+            counts[i] -= 1
+        assert len(counts) == n_seg
+        return tuple(int(c) for c in counts)

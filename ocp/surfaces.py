@@ -1,0 +1,306 @@
+"""Parameterised surfaces: an orthogonal chart f(u, v) written once, its geometry derived.
+
+A :class:`Surface` holds one CasADi expression, the chart ``f(u, v; params)`` in the body
+frame. Everything Montana's contact equations need is derived from it symbolically
+(Murray, Li, Sastry 1994, ch. 5.2; Montana 1988):
+
+* Gauss frame ``R = [x y z]``, ``x = f_u/|f_u|``, ``y = f_v/|f_v|``,
+  ``z = f_u x f_v / |f_u x f_v|`` (outward normal);
+* metric ``M = diag(|f_u|, |f_v|)``                       [m];
+* curvature ``K = [x y]^T [z_u/|f_u|, z_v/|f_v|]``         [1/m];
+* torsion ``T = y^T [x_u/|f_u|, x_v/|f_v|]``               [1/m].
+
+A :class:`Chart` is a surface with a fixed rotation ``R_chart`` of its coordinate patch
+relative to the body, so that each contact can have its own patch and keep the patch's
+singular points (the poles of a sphere's latitude/longitude chart) away from where the
+contact goes. Rotating the patch rotates ``f`` and the Gauss frame; ``M``, ``K`` and
+``T`` are intrinsic to the patch and do not change.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "Chart",
+    "Ellipsoid",
+    "Plane",
+    "Sphere",
+    "Surface",
+    "safe_norm",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Length below which a vector is treated as zero when normalised [m]. Far below any
+#: physical length in a hand (mm), far above round-off of squared lengths.
+_NORM_EPS = 1e-15
+
+
+def safe_norm(v: ca.SX) -> ca.SX:
+    """|v| with a finite value and gradient at v = 0: sqrt(v.v + eps^2), eps = 1e-15."""
+    return ca.sqrt(ca.dot(v, v) + _NORM_EPS**2)
+
+
+ChartExpr = Callable[[ca.SX, ca.SX, ca.SX], ca.SX]
+
+
+class Surface:
+    """A smooth surface given by an orthogonal, right-handed chart f(u, v; params).
+
+    Parameters
+    ----------
+    name:
+        Name of the shape (``"plane"``, ``"sphere"``, ...).
+    chart:
+        ``chart(u, v, params) -> 3x1 SX``, the point of the surface in the body frame [m].
+    param_names:
+        Names of the shape parameters (all lengths in m), in the order of ``params``.
+    periodic:
+        For each chart coordinate, whether it is an angle with period 2 pi.
+    singular_u:
+        Chart latitude |u| at which the chart is singular (pi/2 for the sphere), or None
+        when the chart has no singular points.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        chart: ChartExpr,
+        param_names: Sequence[str],
+        periodic: tuple[bool, bool],
+        singular_u: float | None,
+        coord_names: tuple[str, str],
+    ) -> None:
+        self.name = name
+        self.param_names = tuple(param_names)
+        self.periodic = periodic
+        self.singular_u = singular_u
+        self.coord_names = coord_names
+        self._chart = chart
+
+    @property
+    def n_params(self) -> int:
+        return len(self.param_names)
+
+    def chart_expr(self, u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
+        """The chart f(u, v; params) in the body frame [m]."""
+        return self._chart(u, v, params)
+
+    @cached_property
+    def geometry(self) -> ca.Function:
+        """Named CasADi function ``(alpha, params) -> (p, R, M, K, T)``.
+
+        ``p`` is f(alpha) [m], ``R`` the Gauss frame (3x3), ``M`` the metric (2x2) [m],
+        ``K`` the curvature (2x2) [1/m], ``T`` the torsion (1x2) [1/m], all derived
+        symbolically from the chart.
+        """
+        u = ca.SX.sym("u")
+        v = ca.SX.sym("v")
+        params = ca.SX.sym("params", self.n_params)
+        f = self._chart(u, v, params)
+        f_u = ca.jacobian(f, u)
+        f_v = ca.jacobian(f, v)
+        m_u = safe_norm(f_u)
+        m_v = safe_norm(f_v)
+        x = f_u / m_u
+        y = f_v / m_v
+        n = ca.cross(f_u, f_v)
+        z = n / safe_norm(n)
+        z_u = ca.jacobian(z, u)
+        z_v = ca.jacobian(z, v)
+        x_u = ca.jacobian(x, u)
+        x_v = ca.jacobian(x, v)
+        R = ca.horzcat(x, y, z)
+        M = ca.diag(ca.vertcat(m_u, m_v))
+        K = ca.vertcat(
+            ca.horzcat(ca.dot(x, z_u) / m_u, ca.dot(x, z_v) / m_v),
+            ca.horzcat(ca.dot(y, z_u) / m_u, ca.dot(y, z_v) / m_v),
+        )
+        T = ca.horzcat(ca.dot(y, x_u) / m_u, ca.dot(y, x_v) / m_v)
+        alpha = ca.vertcat(u, v)
+        return ca.Function(
+            f"{self.name}_geometry",
+            [alpha, params],
+            [f, R, M, K, T],
+            ["alpha", "params"],
+            ["p", "R", "M", "K", "T"],
+        )
+
+    @cached_property
+    def orthogonality(self) -> ca.Function:
+        """``(alpha, params) -> f_u . f_v`` [m^2]: zero for an orthogonal chart."""
+        u = ca.SX.sym("u")
+        v = ca.SX.sym("v")
+        params = ca.SX.sym("params", self.n_params)
+        f = self._chart(u, v, params)
+        val = ca.dot(ca.jacobian(f, u), ca.jacobian(f, v))
+        return ca.Function(
+            f"{self.name}_orthogonality", [ca.vertcat(u, v), params], [val],
+            ["alpha", "params"], ["fu_dot_fv"],
+        )
+
+    def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
+        """Chart coordinates (u, v) of a point of the surface given in the patch frame."""
+        raise NotImplementedError(f"{self.name} has no inverse chart")
+
+    def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
+        """h(n) = max_{p on surface} n . p for a unit direction n in the body frame [m].
+
+        Closed form, independent of the chart: used by the certificate to check that the
+        object touches the palm without the contact coordinates.
+        """
+        raise NotImplementedError(f"{self.name} is not a closed convex surface")
+
+    def support_point(self, direction: ArrayLike, params: ArrayLike) -> FloatArray:
+        """The point of the surface whose outward normal is the unit ``direction`` [m]."""
+        raise NotImplementedError(f"{self.name} is not a closed convex surface")
+
+    def validate_params(self, params: Sequence[float]) -> list[str]:
+        """Reasons why ``params`` do not describe this surface (empty when they do)."""
+        errors = []
+        if len(params) != self.n_params:
+            errors.append(f"expected {self.n_params} parameters {self.param_names}")
+            return errors
+        for name, value in zip(self.param_names, params, strict=True):
+            if not np.isfinite(value):
+                errors.append(f"{name} must be finite, got {value}")
+            elif value <= 0.0:
+                errors.append(f"{name} must be > 0 m, got {value}")
+        return errors
+
+
+def _plane_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
+    return ca.vertcat(u, v, 0)
+
+
+def _sphere_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
+    rho = params[0]
+    return rho * ca.vertcat(ca.cos(u) * ca.cos(v), -ca.cos(u) * ca.sin(v), ca.sin(u))
+
+
+def _spheroid_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
+    a, c = params[0], params[1]
+    return ca.vertcat(a * ca.cos(u) * ca.cos(v), -a * ca.cos(u) * ca.sin(v), c * ca.sin(u))
+
+
+class _Plane(Surface):
+    def __init__(self) -> None:
+        super().__init__("plane", _plane_chart, (), (False, False), None, ("x", "y"))
+
+    def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
+        p = np.asarray(point, dtype=float)
+        return np.array([p[0], p[1]])
+
+
+class _Sphere(Surface):
+    """Sphere of radius rho, f = rho (cos u cos v, -cos u sin v, sin u); poles at u = +-pi/2."""
+
+    def __init__(self) -> None:
+        super().__init__("sphere", _sphere_chart, ("radius",), (False, True), np.pi / 2,
+                         ("u", "v"))
+
+    def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
+        p = np.asarray(point, dtype=float)
+        r = float(np.linalg.norm(p))
+        return np.array([np.arcsin(np.clip(p[2] / r, -1.0, 1.0)), np.arctan2(-p[1], p[0])])
+
+    def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
+        return float(np.asarray(params, dtype=float)[0])
+
+    def support_point(self, direction: ArrayLike, params: ArrayLike) -> FloatArray:
+        d = np.asarray(direction, dtype=float)
+        return float(np.asarray(params, dtype=float)[0]) * d / np.linalg.norm(d)
+
+
+class _Ellipsoid(Surface):
+    """Ellipsoid of revolution with semi-axes (a, a, c) about the body z axis.
+
+    f = (a cos u cos v, -a cos u sin v, c sin u). This latitude/longitude chart is
+    orthogonal only when the two equatorial semi-axes are equal, which is why the
+    ellipsoid shipped here is one of revolution (a spheroid, prolate or oblate); its
+    curvature is not a multiple of the identity, so it exercises the general derivation.
+    """
+
+    def __init__(self) -> None:
+        super().__init__("ellipsoid", _spheroid_chart, ("equatorial_semi_axis", "polar_semi_axis"),
+                         (False, True), np.pi / 2, ("u", "v"))
+
+    def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
+        p = np.asarray(point, dtype=float)
+        a, c = np.asarray(params, dtype=float)
+        return np.array([np.arctan2(p[2] / c, np.hypot(p[0], p[1]) / a),
+                         np.arctan2(-p[1], p[0])])
+
+    def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
+        n = np.asarray(normal, dtype=float)
+        a, c = np.asarray(params, dtype=float)
+        q = np.array([a * a, a * a, c * c])
+        return float(np.sqrt(np.sum(q * n * n)))
+
+    def support_point(self, direction: ArrayLike, params: ArrayLike) -> FloatArray:
+        d = np.asarray(direction, dtype=float)
+        a, c = np.asarray(params, dtype=float)
+        q = np.array([a * a, a * a, c * c])
+        return np.asarray(q * d / np.sqrt(np.sum(q * d * d)))
+
+
+#: The flat palm or a flat fingertip pad: f(x, y) = (x, y, 0), normal +z.
+Plane: Surface = _Plane()
+#: Sphere of radius rho (latitude u, longitude v).
+Sphere: Surface = _Sphere()
+#: Ellipsoid of revolution (a, a, c) (latitude u, longitude v).
+Ellipsoid: Surface = _Ellipsoid()
+
+SURFACES: dict[str, Surface] = {s.name: s for s in (Plane, Sphere, Ellipsoid)}
+
+
+def rotation_from_vector(rotvec: ArrayLike) -> FloatArray:
+    """Rotation matrix exp([w]x) of a rotation vector w [rad] (Rodrigues)."""
+    w = np.asarray(rotvec, dtype=float).reshape(3)
+    theta = float(np.linalg.norm(w))
+    if theta < 1e-12:
+        return np.eye(3)
+    k = w / theta
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(theta) * kx + (1.0 - np.cos(theta)) * (kx @ kx)
+
+
+@dataclass(frozen=True)
+class Chart:
+    """A surface's coordinate patch rotated by ``rotation`` (3x3) relative to the body.
+
+    ``p_body = rotation @ f(u, v)``; Gauss frame in the body ``rotation @ R(u, v)``.
+    """
+
+    surface: Surface
+    params: tuple[float, ...] = ()
+    rotation: tuple[tuple[float, ...], ...] = field(
+        default=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)))
+
+    @staticmethod
+    def of(surface: Surface, params: Sequence[float] = (), rotvec: ArrayLike | None = None
+           ) -> Chart:
+        R = np.eye(3) if rotvec is None else rotation_from_vector(rotvec)
+        return Chart(surface, tuple(float(p) for p in params),
+                     tuple(tuple(float(x) for x in row) for row in R))
+
+    @property
+    def R(self) -> FloatArray:
+        return np.array(self.rotation, dtype=float)
+
+    def frame(self, alpha: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """(p, R): contact point and Gauss frame in the body frame at chart coordinates."""
+        p, R, _, _, _ = self.surface.geometry(np.asarray(alpha, dtype=float), self.params)
+        Rc = self.R
+        return Rc @ np.asarray(p).reshape(3), Rc @ np.asarray(R)
+
+    def inverse(self, point_body: ArrayLike) -> FloatArray:
+        """Chart coordinates of a surface point given in the body frame."""
+        return self.surface.inverse(self.R.T @ np.asarray(point_body, dtype=float), self.params)
