@@ -1,0 +1,109 @@
+"""Command line: ``dexroll plan request.json`` and ``dexroll demo [folder]``.
+
+Exit codes: 0 the plan is solved (certificate passed), 1 a plan was computed but is not
+solved (see its status), 2 the request is invalid (each bad field is named on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from ocp.ball_on_palm import plan
+from ocp.problem import ProblemError
+from ocp.solution import Status
+
+from .schemas import BallOnPalmRequest, PlanResult, validation_errors
+
+__all__ = ["main", "plan_request"]
+
+EXIT_SOLVED, EXIT_NOT_SOLVED, EXIT_INVALID = 0, 1, 2
+
+
+def plan_request(raw: object) -> tuple[PlanResult, str]:
+    """Validate and plan a decoded JSON request: (result, one-screen summary)."""
+    try:
+        request = BallOnPalmRequest.model_validate(raw)
+        problem = request.to_problem()
+        problem.validate()
+    except ValidationError as exc:
+        result = PlanResult.invalid(validation_errors(exc))
+        return result, _invalid_summary(result)
+    except ProblemError as exc:
+        result = PlanResult.invalid(exc.errors)
+        return result, _invalid_summary(result)
+    solution = plan(problem)
+    return PlanResult.from_solution(solution, request.sample_times), solution.summary()
+
+
+def _invalid_summary(result: PlanResult) -> str:
+    lines = ["status       invalid_input"]
+    lines += [f"  {e.field}: {e.reason}" for e in result.errors]
+    return "\n".join(lines)
+
+
+def _read(path: Path) -> tuple[object | None, PlanResult | None]:
+    try:
+        return json.loads(path.read_text()), None
+    except (OSError, UnicodeDecodeError) as exc:
+        return None, PlanResult.invalid([("request", f"cannot read {path}: {exc}")])
+    except json.JSONDecodeError as exc:
+        return None, PlanResult.invalid([("request", f"{path} is not valid JSON: {exc}")])
+
+
+def _exit_code(result: PlanResult) -> int:
+    if result.status is Status.INVALID_INPUT:
+        return EXIT_INVALID
+    return EXIT_SOLVED if result.status is Status.SOLVED else EXIT_NOT_SOLVED
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    path = Path(args.request)
+    raw, failed = _read(path)
+    if failed is not None:
+        result, summary = failed, _invalid_summary(failed)
+    else:
+        result, summary = plan_request(raw)
+    out = Path(args.output) if args.output else Path(f"{path.stem}.result.json")
+    out.write_text(result.model_dump_json(indent=1))
+    stream = sys.stderr if result.status is Status.INVALID_INPUT else sys.stdout
+    print(f"{path}:\n{summary}\nresult       {out}", file=stream)
+    return _exit_code(result)
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    folder = Path(args.folder)
+    files = sorted(folder.glob("*.json"))
+    if not files:
+        print(f"no request files (*.json) in {folder}", file=sys.stderr)
+        return EXIT_INVALID
+    worst = EXIT_SOLVED
+    for path in files:
+        raw, failed = _read(path)
+        result, summary = (failed, _invalid_summary(failed)) if failed else plan_request(raw)
+        print(f"== {path.name}\n{summary}\n")
+        worst = max(worst, _exit_code(result))
+    return worst
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="dexroll", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("plan", help="solve a request file, write the result as JSON")
+    p.add_argument("request", help="request JSON file (SI units)")
+    p.add_argument("-o", "--output", help="result file (default: ./<request>.result.json)")
+    p.set_defaults(func=_cmd_plan)
+    d = sub.add_parser("demo", help="plan every request in a folder and print summaries")
+    d.add_argument("folder", nargs="?", default="examples")
+    d.set_defaults(func=_cmd_demo)
+    args = parser.parse_args(argv)
+    return int(args.func(args))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

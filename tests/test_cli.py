@@ -1,0 +1,77 @@
+"""The command line, run as a real process on the shipped examples."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = sorted((ROOT / "examples").glob("*.json"))
+
+
+def dexroll(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "planner_service.cli", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=600, check=False)
+
+
+def test_examples_include_the_paper_triangle_and_a_pure_reorientation() -> None:
+    names = {p.stem for p in EXAMPLES}
+    assert "triangle" in names
+    assert any(n.startswith("reorient") for n in names)
+
+
+@pytest.mark.parametrize("request_file", EXAMPLES, ids=[p.stem for p in EXAMPLES])
+def test_plan_writes_a_certified_result_and_a_summary(request_file: Path, tmp_path: Path
+                                                      ) -> None:
+    out = tmp_path / "result.json"
+    proc = dexroll("plan", str(request_file), "-o", str(out), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    for word in ("status", "iterations", "goal error", "certificate", "solve"):
+        assert word in proc.stdout
+    assert len(proc.stdout.splitlines()) <= 24, "the summary fits on one screen"
+    result = json.loads(out.read_text())
+    assert result["status"] == "solved"
+    assert result["certificate"]["passed"] is True
+    request = json.loads(request_file.read_text())
+    grid = result["grid"]
+    assert grid["t"][0] == 0.0 and abs(grid["t"][-1] - request["duration"]) < 1e-12
+    # every goal coordinate is met at the final time, in SI units
+    names = ["x", "y", "u", "v", "psi"]
+    for key, target in request.get("goal", {}).items():
+        assert abs(grid["eta"][-1][names.index(key)] - target) < 1e-6
+
+
+def test_invalid_request_exits_2_and_names_the_field(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"initial": {"x": 0, "y": 0, "u": 0, "v": 0, "psi": 0},
+                               "goal": {"x": 0.01, "w": 2}, "duration": -1,
+                               "object": {"dimensions": [-0.02]}}))
+    proc = dexroll("plan", str(bad), "-o", str(tmp_path / "out.json"), cwd=tmp_path)
+    assert proc.returncode == 2
+    for field in ("goal.w", "duration", "object.dimensions.0"):
+        assert field in proc.stderr
+    assert "Traceback" not in proc.stderr + proc.stdout
+    result = json.loads((tmp_path / "out.json").read_text())
+    assert result["status"] == "invalid_input"
+    assert {e["field"] for e in result["errors"]} >= {"goal.w", "duration"}
+
+
+def test_goal_at_chart_pole_is_rejected_with_its_reason(tmp_path: Path) -> None:
+    bad = tmp_path / "pole.json"
+    bad.write_text(json.dumps({"initial": {"x": 0, "y": 0, "u": 0, "v": 0, "psi": 0},
+                               "goal": {"u": 1.5707963}, "duration": 1}))
+    proc = dexroll("plan", str(bad), "-o", str(tmp_path / "out.json"), cwd=tmp_path)
+    assert proc.returncode == 2
+    assert "goal.u" in proc.stderr and "pole" in proc.stderr
+
+
+def test_unreadable_request_is_an_error_not_a_traceback(tmp_path: Path) -> None:
+    bad = tmp_path / "broken.json"
+    bad.write_text("{not json")
+    proc = dexroll("plan", str(bad), "-o", str(tmp_path / "out.json"), cwd=tmp_path)
+    assert proc.returncode == 2
+    assert "not valid JSON" in proc.stderr and "Traceback" not in proc.stderr
