@@ -1,0 +1,48 @@
+"""Shared test helpers (import as ``from helpers import assert_close``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+
+def _as_float_array(x: Any) -> np.ndarray:
+    """A float array from numpy data, Python numbers or a CasADi DM (``np.array(DM)`` works)."""
+    return np.array(x, dtype=float)
+
+
+def assert_close(actual: Any, expected: Any, atol: float, rtol: float = 0.0,
+                 err_msg: str = "") -> None:
+    """Assert |actual - expected| <= atol + rtol |expected| element by element.
+
+    Unlike ``np.allclose`` it has no default tolerance (state it at the call), and it fails
+    on any NaN or inf in ``actual`` or ``expected`` (NaN never passes as "close").
+    ``expected`` may be a scalar (compared with every element of ``actual``); otherwise the
+    shapes must agree, up to singleton axes (a CasADi column (n, 1) matches a numpy (n,)).
+    """
+    if not (np.isfinite(atol) and atol >= 0.0 and np.isfinite(rtol) and rtol >= 0.0):
+        raise ValueError(f"tolerances must be finite and >= 0, got atol={atol}, rtol={rtol}")
+    a = _as_float_array(actual)
+    e = _as_float_array(expected)
+    prefix = f"{err_msg}: " if err_msg else ""
+    if not np.all(np.isfinite(a)):
+        raise AssertionError(f"{prefix}actual has non-finite entries:\n{a}")
+    if not np.all(np.isfinite(e)):
+        raise AssertionError(f"{prefix}expected has non-finite entries:\n{e}")
+    if e.ndim > 0 and a.shape != e.shape:
+        if np.squeeze(a).shape != np.squeeze(e).shape:
+            raise AssertionError(f"{prefix}shape mismatch: actual {a.shape}, expected {e.shape}")
+        a, e = np.squeeze(a), np.squeeze(e)
+    err = np.abs(a - e)
+    tol = atol + rtol * np.abs(e)
+    bad = err > tol
+    if np.any(bad):
+        worst = np.unravel_index(np.argmax(err - tol), err.shape) if err.ndim else ()
+        raise AssertionError(
+            f"{prefix}{int(np.sum(bad))} of {err.size} entries differ by more than "
+            f"atol={atol:g} + rtol={rtol:g}*|expected|; worst at {worst}: "
+            f"actual={a[worst]!r}, expected={np.broadcast_to(e, a.shape)[worst]!r}, "
+            f"error={err[worst]:.3e}, tolerance={np.broadcast_to(tol, err.shape)[worst]:.3e}\n"
+            f"actual:\n{a}\nexpected:\n{e}"
+        )
