@@ -649,6 +649,13 @@ def certify(problem: BallOnPalmProblem, model: BallOnPalmModel, t_nodes: FloatAr
     """
     params = np.asarray(problem.object.dimensions, dtype=float)
     chart = rotation_from_vector(problem.object.chart_rotation)
+    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U0)) and np.all(np.isfinite(Um))
+            and np.all(np.isfinite(U1))):
+        nan = float("nan")
+        return Certificate(max_position_defect=nan, max_angle_defect=nan, max_slip_speed=nan,
+                           max_spin_rate=nan, max_height_error=nan, max_goal_error=nan,
+                           n_samples=0, tolerances={},
+                           failures=("the plan has non-finite states or inputs",))
     F = model.reintegrator(n_sub)
     n = len(t_nodes) - 1
     x = np.asarray(X[0], dtype=float)

@@ -30,6 +30,8 @@ class Status(StrEnum):
     NUMERICAL_ERROR = "numerical_error"
     #: The request was rejected before any NLP was built (see the message).
     INVALID_INPUT = "invalid_input"
+    #: An unexpected error inside the planner; the message names it.
+    ERROR = "error"
 
 
 _IPOPT_STATUS = {

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from .schemas import BallOnPalmRequest, PlanResult, validation_errors
 __all__ = ["main", "plan_request"]
 
 EXIT_SOLVED, EXIT_NOT_SOLVED, EXIT_INVALID = 0, 1, 2
+log = logging.getLogger("dexroll")
 
 
 def plan_request(raw: object) -> tuple[PlanResult, str]:
@@ -36,7 +38,12 @@ def plan_request(raw: object) -> tuple[PlanResult, str]:
     except ProblemError as exc:
         result = PlanResult.invalid(exc.errors)
         return result, _invalid_summary(result)
-    solution = plan(problem)
+    try:
+        solution = plan(problem)
+    except Exception as exc:  # a failure is a typed result, never a traceback
+        log.exception("planner failed")
+        result = PlanResult(status=Status.ERROR, message=f"planner failed: {exc!r}")
+        return result, f"status       error\nmessage      {result.message}"
     return PlanResult.from_solution(solution, request.sample_times), solution.summary()
 
 

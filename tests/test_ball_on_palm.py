@@ -276,3 +276,14 @@ def test_structure_is_built_once_and_reused_with_new_values() -> None:
     assert second.status is Status.SOLVED
     assert_close(second.nodes.eta[-1, :2], [-0.03, 0.02], atol=GOAL_TOL)
     assert_close(second.nodes.object_position[:, 2], 0.04, atol=1e-12)
+
+
+def test_certificate_of_a_non_finite_plan_fails_instead_of_crashing() -> None:
+    problem = triangle(30)
+    n = 30
+    t = np.linspace(0, 6, n + 1)
+    X = np.zeros((n + 1, 5))
+    X[3, 2] = np.nan
+    U = np.zeros((n, 2))
+    cert = certify(problem, model_for("sphere"), t, X, U, U, U, [0, 10, 20, 30], 4)
+    assert not cert.passed
