@@ -1,31 +1,57 @@
-# dexroll: `make run` plans the example requests, `make test` runs the whole suite.
-# Both create .venv from nothing when it is missing.
+# dexroll: `make run` starts the planning service, `make test` runs the whole suite.
+# Both create .venv from nothing when it is missing. The Dockerfile runs the same targets.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-STAMP := $(VENV)/.installed
+PIP := $(BIN)/python -m pip --disable-pip-version-check
+DEPS := $(VENV)/.deps
+INSTALLED := $(VENV)/.installed
+DEV := $(VENV)/.dev
 
-.PHONY: run test lint bench clean
+.PHONY: deps install run demo openapi test lint bench clean
 
-$(STAMP): pyproject.toml
-	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
-	touch $(STAMP)
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
 
-run: $(STAMP)
+# third-party runtime dependencies only (their own Docker layer)
+$(DEPS): pyproject.toml clients/python/pyproject.toml tools/requirements.py | $(BIN)/python
+	$(PIP) install --quiet --upgrade pip
+	$(BIN)/python tools/requirements.py > $(VENV)/requirements.txt
+	$(PIP) install --quiet -r $(VENV)/requirements.txt
+	touch $@
+
+# the two packages themselves: the service (dexroll) and the client with the wire models
+$(INSTALLED): $(DEPS)
+	$(PIP) install --quiet --no-deps -e ./clients/python -e .
+	touch $@
+
+$(DEV): $(INSTALLED)
+	$(PIP) install --quiet -e '.[dev]'
+	touch $@
+
+deps: $(DEPS)
+
+install: $(INSTALLED)
+
+run: $(INSTALLED)
+	$(BIN)/dexroll serve
+
+demo: $(INSTALLED)
 	$(BIN)/dexroll demo examples
 
-test: $(STAMP)
+openapi: $(INSTALLED)
+	$(BIN)/dexroll openapi > openapi.json
+
+test: $(DEV)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -q
 
-lint: $(STAMP)
+lint: $(DEV)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 
-bench: $(STAMP)
+bench: $(INSTALLED)
 	$(BIN)/python benchmarks/ball_on_palm.py
 
 clean:

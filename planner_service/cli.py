@@ -1,4 +1,4 @@
-"""Command line: ``dexroll plan request.json`` and ``dexroll demo [folder]``.
+"""Command line: ``dexroll serve``, ``dexroll plan request.json``, ``dexroll demo [folder]``.
 
 Exit codes: 0 the plan is solved (certificate passed), 1 a plan was computed but is not
 solved (see its status), 2 the request is invalid (each bad field is named on stderr).
@@ -14,11 +14,11 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
+from dexroll_client.models import BallOnPalmRequest, PlanResult, PlanStatus
 from ocp.ball_on_palm import plan
 from ocp.problem import ProblemError
-from ocp.solution import Status
 
-from .schemas import BallOnPalmRequest, PlanResult, validation_errors
+from .convert import invalid_result, result_from_solution, to_problem, validation_errors
 
 __all__ = ["main", "plan_request"]
 
@@ -30,21 +30,21 @@ def plan_request(raw: object) -> tuple[PlanResult, str]:
     """Validate and plan a decoded JSON request: (result, one-screen summary)."""
     try:
         request = BallOnPalmRequest.model_validate(raw)
-        problem = request.to_problem()
+        problem = to_problem(request)
         problem.validate()
     except ValidationError as exc:
-        result = PlanResult.invalid(validation_errors(exc))
+        result = invalid_result(validation_errors(exc))
         return result, _invalid_summary(result)
     except ProblemError as exc:
-        result = PlanResult.invalid(exc.errors)
+        result = invalid_result(exc.errors)
         return result, _invalid_summary(result)
     try:
         solution = plan(problem)
     except Exception as exc:  # a failure is a typed result, never a traceback
         log.exception("planner failed")
-        result = PlanResult(status=Status.ERROR, message=f"planner failed: {exc!r}")
+        result = PlanResult(status=PlanStatus.ERROR, message=f"planner failed: {exc!r}")
         return result, f"status       error\nmessage      {result.message}"
-    return PlanResult.from_solution(solution, request.sample_times), solution.summary()
+    return result_from_solution(solution, request.sample_times), solution.summary()
 
 
 def _invalid_summary(result: PlanResult) -> str:
@@ -57,15 +57,15 @@ def _read(path: Path) -> tuple[object | None, PlanResult | None]:
     try:
         return json.loads(path.read_text()), None
     except (OSError, UnicodeDecodeError) as exc:
-        return None, PlanResult.invalid([("request", f"cannot read {path}: {exc}")])
+        return None, invalid_result([("request", f"cannot read {path}: {exc}")])
     except json.JSONDecodeError as exc:
-        return None, PlanResult.invalid([("request", f"{path} is not valid JSON: {exc}")])
+        return None, invalid_result([("request", f"{path} is not valid JSON: {exc}")])
 
 
 def _exit_code(result: PlanResult) -> int:
-    if result.status is Status.INVALID_INPUT:
+    if result.status is PlanStatus.INVALID_INPUT:
         return EXIT_INVALID
-    return EXIT_SOLVED if result.status is Status.SOLVED else EXIT_NOT_SOLVED
+    return EXIT_SOLVED if result.status is PlanStatus.SOLVED else EXIT_NOT_SOLVED
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
@@ -77,7 +77,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         result, summary = plan_request(raw)
     out = Path(args.output) if args.output else Path(f"{path.stem}.result.json")
     out.write_text(result.model_dump_json(indent=1))
-    stream = sys.stderr if result.status is Status.INVALID_INPUT else sys.stdout
+    stream = sys.stderr if result.status is PlanStatus.INVALID_INPUT else sys.stdout
     print(f"{path}:\n{summary}\nresult       {out}", file=stream)
     return _exit_code(result)
 
@@ -97,6 +97,33 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return worst
 
 
+def _cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from .app import create_app
+    from .settings import Settings
+
+    overrides = {k: v for k, v in (("host", args.host), ("port", args.port),
+                                   ("data_dir", args.data_dir), ("workers", args.workers))
+                 if v is not None}
+    settings = Settings(**overrides)
+    logging.basicConfig(level=settings.log_level.upper(),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    log.info("dexroll service on http://%s:%d (data in %s, %d workers)", settings.host,
+             settings.port, settings.data_dir, settings.workers)
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
+                log_level=settings.log_level.lower())
+    return 0
+
+
+def _cmd_openapi(args: argparse.Namespace) -> int:
+    from .app import create_app
+    from .settings import Settings
+
+    print(json.dumps(create_app(Settings()).openapi(), indent=1, sort_keys=True))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="dexroll", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -108,6 +135,16 @@ def main(argv: list[str] | None = None) -> int:
     d = sub.add_parser("demo", help="plan every request in a folder and print summaries")
     d.add_argument("folder", nargs="?", default="examples")
     d.set_defaults(func=_cmd_demo)
+    v = sub.add_parser("serve", help="run the planning service (settings: DEXROLL_* "
+                                     "environment variables; flags override them)")
+    v.add_argument("--host")
+    v.add_argument("--port", type=int)
+    v.add_argument("--data-dir")
+    v.add_argument("--workers", type=int)
+    v.set_defaults(func=_cmd_serve)
+    o = sub.add_parser("openapi", help="print the service's OpenAPI document (the contract "
+                                       "committed as openapi.json)")
+    o.set_defaults(func=_cmd_openapi)
     args = parser.parse_args(argv)
     return int(args.func(args))
 

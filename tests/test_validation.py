@@ -9,9 +9,10 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
+from dexroll_client.models import BallOnPalmRequest
 from ocp.ball_on_palm import BallOnPalmPlanner
 from ocp.problem import BallOnPalmProblem, ObjectSpec, ProblemError, ViaPoint
-from planner_service.schemas import BallOnPalmRequest, validation_errors
+from planner_service.convert import to_problem, validation_errors
 
 GOOD = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)), initial=(0, 0, 0, 0, 0),
                          goal={"x": 0.02}, duration=1.0)
@@ -94,5 +95,5 @@ def test_request_reaches_core_validation_for_physics_errors() -> None:
     """A goal at a chart pole passes the schema's ranges; the core names it."""
     request = BallOnPalmRequest.model_validate({**REQUEST, "goal": {"u": 1.55}})
     with pytest.raises(ProblemError) as info:
-        request.to_problem().validate()
+        to_problem(request).validate()
     assert info.value.errors[0][0] == "goal.u"

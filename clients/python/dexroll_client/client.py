@@ -1,0 +1,492 @@
+"""Synchronous and asynchronous clients of the dexroll planning service.
+
+Both clients wrap an injected httpx client (``httpx.Client`` / ``httpx.AsyncClient``, with
+``base_url`` set) or create their own with ``from_url``::
+
+    with DexrollClient.from_url("http://127.0.0.1:8000") as client:
+        job = client.plan(request, timeout=120)          # submit, then wait until finished
+
+    async with AsyncDexrollClient.from_url("http://127.0.0.1:8000") as client:
+        job = await client.plan(request, timeout=120)
+
+A context manager (and ``close()``) closes only an httpx client the dexroll client created
+itself; an injected one stays open, its owner closes it.
+
+Requests may be a :class:`~dexroll_client.models.PlanRequest` or a plain dict; a dict is
+validated with the model first, so a bad request fails locally (pydantic's
+``ValidationError`` names the field) before any HTTP.
+
+Errors (see :mod:`dexroll_client.errors`)::
+
+    DexrollError
+     ├── TransportError            no HTTP response (wraps the httpx exception)
+     ├── PlanTimeoutError          plan() gave up waiting (.job_id if a job was created)
+     └── APIError                  4xx/5xx: .status_code, .error, .message, .detail, .body
+          ├── InvalidRequestError  (422)
+          ├── RequestTooLargeError (413)
+          ├── NotFoundError        (404)
+          ├── ConflictError        (409)
+          └── ServiceUnavailableError (503; .retry_after)
+
+Design: every operation is written once, as a generator that yields what to do (send an HTTP
+request, sleep) and decodes the responses it is sent back (sans-I/O). The sync client runs
+these generators with ``httpx.Client`` and ``time.sleep``, the async one with
+``httpx.AsyncClient`` and ``asyncio.sleep``; neither holds any protocol logic of its own.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+import uuid
+from collections.abc import Awaitable, Callable, Generator, Mapping
+from dataclasses import dataclass, field
+from types import TracebackType
+from typing import Any, Self, TypeVar
+from urllib.parse import quote
+
+import httpx
+from pydantic import BaseModel, TypeAdapter, ValidationError
+
+from dexroll_client.errors import (
+    APIError,
+    PlanTimeoutError,
+    TransportError,
+    error_from_response,
+    parse_retry_after,
+)
+from dexroll_client.models import Job, JobList, ModelCatalog, PlanRequest
+
+__all__ = ["DEFAULT_TIMEOUT", "MAX_WAIT", "AsyncDexrollClient", "DexrollClient", "RequestLike"]
+
+#: The service's cap on ``POST /v1/plans?wait=`` [s].
+MAX_WAIT = 30.0
+#: Default httpx timeout of clients made by ``from_url`` [s].
+DEFAULT_TIMEOUT = 30.0
+#: Extra read time granted to a request beyond the ``wait`` it asks the service for [s].
+_WAIT_MARGIN = 10.0
+#: Read time granted to a cancel: the service waits (up to 10 s) for the worker to stop [s].
+_CANCEL_READ_TIMEOUT = 20.0
+
+#: A plan request: the model, or a dict of the same shape (validated before sending).
+RequestLike = PlanRequest | Mapping[str, Any]
+
+_M = TypeVar("_M", bound=BaseModel)
+_T = TypeVar("_T")
+
+_REQUEST = TypeAdapter(PlanRequest)
+
+
+# -- sans-I/O core: what to send, how to read the answer --------------------------------------
+
+@dataclass(frozen=True)
+class _Call:
+    """One HTTP request to make (relative to the httpx client's ``base_url``)."""
+
+    method: str
+    path: str
+    params: dict[str, str | int] = field(default_factory=dict)
+    headers: dict[str, str] = field(default_factory=dict)
+    json: Any = None
+    #: The response may take this long to start (server-side long poll) [s].
+    min_read_timeout: float | None = None
+
+
+@dataclass(frozen=True)
+class _Sleep:
+    seconds: float
+
+
+#: An operation: yields calls (answered with their response) and sleeps (answered with
+#: None); returns the operation's result.
+_Op = Generator[_Call | _Sleep, httpx.Response | None, _T]
+
+
+def _as_request(request: RequestLike) -> PlanRequest:
+    """The request as a validated model (raises pydantic's ValidationError, locally)."""
+    return _REQUEST.validate_python(request)
+
+
+def _job_path(job_id: str) -> str:
+    if not isinstance(job_id, str) or not job_id:
+        raise ValueError(f"job_id must be a non-empty string, got {job_id!r}")
+    return f"/v1/plans/{quote(job_id, safe='')}"
+
+
+def _format_seconds(seconds: float) -> str:
+    return f"{seconds:.3f}".rstrip("0").rstrip(".") or "0"
+
+
+def _submit_call(request: PlanRequest, wait: float | None,
+                 idempotency_key: str | None) -> _Call:
+    params: dict[str, str | int] = {}
+    min_read: float | None = None
+    if wait is not None:
+        if not (math.isfinite(wait) and wait >= 0.0):
+            raise ValueError(f"wait must be a finite number of seconds >= 0, got {wait!r}")
+        params["wait"] = _format_seconds(wait)
+        min_read = wait + _WAIT_MARGIN
+    headers: dict[str, str] = {}
+    if idempotency_key is not None:
+        if not (idempotency_key and idempotency_key.isascii() and idempotency_key.isprintable()):
+            raise ValueError("idempotency_key must be a non-empty string of printable ASCII "
+                             f"characters, got {idempotency_key!r}")
+        headers["Idempotency-Key"] = idempotency_key
+    return _Call("POST", "/v1/plans", params=params, headers=headers,
+                 json=request.model_dump(mode="json"), min_read_timeout=min_read)
+
+
+def _cancel_call(job_id: str) -> _Call:
+    return _Call("DELETE", _job_path(job_id), min_read_timeout=_CANCEL_READ_TIMEOUT)
+
+
+def _decode(response: httpx.Response, model: type[_M]) -> _M:
+    """The body of a 2xx response as ``model``; an :class:`APIError` for anything else."""
+    if not response.is_success:
+        raise error_from_response(response)
+    try:
+        return model.model_validate_json(response.content)
+    except ValidationError as exc:
+        raise APIError(
+            response.status_code, "invalid_response",
+            f"the service's {response.request.method} {response.request.url.path} answer is "
+            f"not a valid {model.__name__}: {exc.error_count()} error(s), first: "
+            f"{exc.errors()[0]['msg']} at {'.'.join(map(str, exc.errors()[0]['loc']))}",
+            response=response) from exc
+
+
+def _probe(response: httpx.Response) -> bool:
+    """A health/readiness answer: 2xx is True, 5xx is False, anything else an error."""
+    if response.is_success:
+        return True
+    if response.is_server_error:
+        return False
+    raise error_from_response(response)
+
+
+def _exchange(call: _Call) -> Generator[_Call | _Sleep, httpx.Response | None, httpx.Response]:
+    response = yield call
+    if response is None:  # pragma: no cover - a driver bug
+        raise RuntimeError("the driver answered an HTTP call with no response")
+    return response
+
+
+def _one(call: _Call, model: type[_M]) -> _Op[_M]:
+    response = yield from _exchange(call)
+    return _decode(response, model)
+
+
+def _probe_op(path: str) -> _Op[bool]:
+    response = yield from _exchange(_Call("GET", path))
+    return _probe(response)
+
+
+def _submit_op(request: RequestLike, wait: float | None, idempotency_key: str | None
+               ) -> _Op[Job]:
+    call = _submit_call(_as_request(request), wait, idempotency_key)
+    return (yield from _one(call, Job))
+
+
+def _plan_op(request: RequestLike, *, timeout: float | None, idempotency_key: str | None,
+             poll_initial: float, poll_max: float) -> _Op[Job]:
+    """Submit, then wait until the job is terminal (see ``DexrollClient.plan``)."""
+    req = _as_request(request)
+    if timeout is not None and not (timeout >= 0.0 and math.isfinite(timeout)):
+        raise ValueError(f"timeout must be None or a finite number >= 0, got {timeout!r}")
+    if not (math.isfinite(poll_initial) and poll_initial > 0.0):
+        raise ValueError(f"poll_initial must be > 0, got {poll_initial!r}")
+    if not (math.isfinite(poll_max) and poll_max >= poll_initial):
+        raise ValueError(f"poll_max must be >= poll_initial, got {poll_max!r}")
+    # One key for every attempt: a POST retried after a 503 cannot create a second job.
+    key = idempotency_key if idempotency_key is not None else str(uuid.uuid4())
+    deadline = None if timeout is None else time.monotonic() + timeout
+
+    def remaining() -> float:
+        return math.inf if deadline is None else deadline - time.monotonic()
+
+    # 1. Submit, long-polling on the POST; retry while the queue is full (503).
+    delay = poll_initial
+    while True:
+        wait = max(0.0, min(remaining(), MAX_WAIT))
+        response = yield from _exchange(_submit_call(req, wait, key))
+        if response.status_code != 503:
+            job = _decode(response, Job)
+            break
+        unavailable = error_from_response(response)
+        asked = parse_retry_after(response.headers.get("Retry-After"))
+        left = remaining()
+        if left <= 0.0 or (asked is not None and asked > left):
+            hint = "" if asked is None else f" and asked to retry after {asked:g} s"
+            raise PlanTimeoutError(
+                f"the service was unavailable{hint}, beyond the {timeout} s timeout: "
+                f"{unavailable.message}", timeout=timeout) from unavailable
+        pause = asked if asked is not None else min(delay, left)
+        delay = min(2.0 * delay, poll_max)
+        yield _Sleep(pause)
+
+    # 2. Poll with capped exponential backoff; the first poll, and any after a 503, no
+    # sooner than its Retry-After (a Retry-After on a 200 has no standard meaning: ignored,
+    # so that the caller's backoff still applies).
+    delay = poll_initial
+    retry_after = parse_retry_after(response.headers.get("Retry-After"))
+    while not job.state.terminal:
+        left = remaining()
+        if left <= 0.0:
+            raise PlanTimeoutError(
+                f"job {job.id} still {job.state.value} after the {timeout} s timeout; it "
+                f"keeps running on the service (get() or cancel() it by id)",
+                job_id=job.id, job=job, timeout=timeout)
+        yield _Sleep(min(max(delay, retry_after or 0.0), left))
+        delay = min(2.0 * delay, poll_max)
+        response = yield from _exchange(_Call("GET", _job_path(job.id)))
+        if response.status_code == 503:  # briefly unavailable: keep polling
+            retry_after = parse_retry_after(response.headers.get("Retry-After"))
+            continue
+        retry_after = None
+        job = _decode(response, Job)
+    return job
+
+
+def _request_timeout(client_timeout: httpx.Timeout, call: _Call) -> httpx.Timeout:
+    """The client's timeout, with the read timeout raised to cover a server-side wait."""
+    need = call.min_read_timeout
+    if need is None or client_timeout.read is None or client_timeout.read >= need:
+        return client_timeout
+    return httpx.Timeout(connect=client_timeout.connect, read=need,
+                         write=client_timeout.write, pool=client_timeout.pool)
+
+
+def _check_base_url(http: httpx.Client | httpx.AsyncClient) -> None:
+    if not str(http.base_url):
+        raise ValueError("the httpx client needs a base_url (e.g. "
+                         "httpx.Client(base_url='http://127.0.0.1:8000')), or use from_url()")
+
+
+def _transport_error(call: _Call, exc: httpx.RequestError) -> TransportError:
+    return TransportError(f"{call.method} {call.path} failed: {type(exc).__name__}: {exc}",
+                          cause=exc)
+
+
+# -- the synchronous client -------------------------------------------------------------------
+
+class DexrollClient:
+    """Blocking client of the dexroll service, wrapping an ``httpx.Client``.
+
+    ``http`` must have ``base_url`` set to the service root; it is not closed by this client
+    (use ``from_url`` to let the client own one).
+    """
+
+    def __init__(self, http: httpx.Client) -> None:
+        _check_base_url(http)
+        self._http = http
+        self._owns_http = False
+        self._sleep: Callable[[float], None] = time.sleep
+
+    @classmethod
+    def from_url(cls, base_url: str, *, timeout: float | httpx.Timeout = DEFAULT_TIMEOUT,
+                 headers: Mapping[str, str] | None = None) -> Self:
+        """A client with its own ``httpx.Client`` (closed by ``close()`` / the ``with``)."""
+        client = cls(httpx.Client(base_url=base_url, timeout=timeout, headers=headers))
+        client._owns_http = True
+        return client
+
+    @property
+    def http(self) -> httpx.Client:
+        """The wrapped httpx client."""
+        return self._http
+
+    def close(self) -> None:
+        """Close the httpx client if this client created it (``from_url``)."""
+        if self._owns_http:
+            self._http.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({str(self._http.base_url)!r})"
+
+    def _send(self, call: _Call) -> httpx.Response:
+        try:
+            return self._http.request(
+                call.method, call.path, params=call.params or None,
+                headers=call.headers or None, json=call.json,
+                timeout=_request_timeout(self._http.timeout, call))
+        except httpx.RequestError as exc:
+            raise _transport_error(call, exc) from exc
+
+    def _run(self, op: _Op[_T]) -> _T:
+        try:
+            step = next(op)
+            while True:
+                if isinstance(step, _Sleep):
+                    self._sleep(step.seconds)
+                    step = op.send(None)
+                else:
+                    step = op.send(self._send(step))
+        except StopIteration as done:
+            result: _T = done.value
+            return result
+        finally:
+            op.close()
+
+    def submit(self, request: RequestLike, *, wait: float | None = None,
+               idempotency_key: str | None = None) -> Job:
+        """Submit a plan request; the job, finished (with ``result``) if it finished within
+        ``wait`` seconds (service default 1 s, max 30), else queued or running.
+
+        With ``idempotency_key``, a retried submit returns the job of the first one (a
+        different body with the same key raises ConflictError).
+        """
+        return self._run(_submit_op(request, wait, idempotency_key))
+
+    def get(self, job_id: str) -> Job:
+        """The job (with ``result`` once terminal); NotFoundError for an unknown id."""
+        return self._run(_one(_Call("GET", _job_path(job_id)), Job))
+
+    def cancel(self, job_id: str) -> Job:
+        """Cancel a job; the cancelled job. ConflictError (``error == "already_finished"``)
+        if it was already terminal, NotFoundError for an unknown id."""
+        return self._run(_one(_cancel_call(job_id), Job))
+
+    def list(self, limit: int = 50, offset: int = 0) -> JobList:
+        """One page of jobs (without results); ``next_offset`` is None on the last page."""
+        call = _Call("GET", "/v1/plans", params={"limit": limit, "offset": offset})
+        return self._run(_one(call, JobList))
+
+    def models(self) -> ModelCatalog:
+        """The planners, objects and fingers the service knows."""
+        return self._run(_one(_Call("GET", "/v1/models"), ModelCatalog))
+
+    def health(self) -> bool:
+        """Whether the service is alive (``/healthz``); TransportError if unreachable."""
+        return self._run(_probe_op("/healthz"))
+
+    def ready(self) -> bool:
+        """Whether the service accepts work (``/readyz``); TransportError if unreachable."""
+        return self._run(_probe_op("/readyz"))
+
+    def plan(self, request: RequestLike, *, timeout: float | None = None,
+             idempotency_key: str | None = None, poll_initial: float = 0.1,
+             poll_max: float = 2.0) -> Job:
+        """Submit a request and wait until its job is terminal; the terminal job, whatever
+        its state (succeeded, infeasible, timed_out, failed, cancelled): look at
+        ``job.state`` and ``job.result.status``.
+
+        Polls with exponential backoff from ``poll_initial`` to ``poll_max`` seconds, never
+        sooner than a ``Retry-After``; a full queue (503) on submit is retried after its
+        ``Retry-After``, with the same idempotency key (a fresh uuid4 when none is given),
+        so retries never create two jobs. After ``timeout`` seconds (None: no limit) raises
+        PlanTimeoutError, whose ``job_id`` names the job if one was created.
+        """
+        return self._run(_plan_op(request, timeout=timeout, idempotency_key=idempotency_key,
+                                  poll_initial=poll_initial, poll_max=poll_max))
+
+
+# -- the asynchronous client ------------------------------------------------------------------
+
+class AsyncDexrollClient:
+    """Asynchronous client of the dexroll service, wrapping an ``httpx.AsyncClient``; the
+    same methods as :class:`DexrollClient`, as coroutines."""
+
+    def __init__(self, http: httpx.AsyncClient) -> None:
+        _check_base_url(http)
+        self._http = http
+        self._owns_http = False
+        self._sleep: Callable[[float], Awaitable[None]] = asyncio.sleep
+
+    @classmethod
+    def from_url(cls, base_url: str, *, timeout: float | httpx.Timeout = DEFAULT_TIMEOUT,
+                 headers: Mapping[str, str] | None = None) -> Self:
+        """A client with its own ``httpx.AsyncClient`` (closed by ``aclose()`` / the
+        ``async with``)."""
+        client = cls(httpx.AsyncClient(base_url=base_url, timeout=timeout, headers=headers))
+        client._owns_http = True
+        return client
+
+    @property
+    def http(self) -> httpx.AsyncClient:
+        """The wrapped httpx client."""
+        return self._http
+
+    async def aclose(self) -> None:
+        """Close the httpx client if this client created it (``from_url``)."""
+        if self._owns_http:
+            await self._http.aclose()
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(self, exc_type: type[BaseException] | None,
+                        exc: BaseException | None, tb: TracebackType | None) -> None:
+        await self.aclose()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({str(self._http.base_url)!r})"
+
+    async def _send(self, call: _Call) -> httpx.Response:
+        try:
+            return await self._http.request(
+                call.method, call.path, params=call.params or None,
+                headers=call.headers or None, json=call.json,
+                timeout=_request_timeout(self._http.timeout, call))
+        except httpx.RequestError as exc:
+            raise _transport_error(call, exc) from exc
+
+    async def _run(self, op: _Op[_T]) -> _T:
+        try:
+            step = next(op)
+            while True:
+                if isinstance(step, _Sleep):
+                    await self._sleep(step.seconds)
+                    step = op.send(None)
+                else:
+                    step = op.send(await self._send(step))
+        except StopIteration as done:
+            result: _T = done.value
+            return result
+        finally:
+            op.close()
+
+    async def submit(self, request: RequestLike, *, wait: float | None = None,
+                     idempotency_key: str | None = None) -> Job:
+        """See :meth:`DexrollClient.submit`."""
+        return await self._run(_submit_op(request, wait, idempotency_key))
+
+    async def get(self, job_id: str) -> Job:
+        """See :meth:`DexrollClient.get`."""
+        return await self._run(_one(_Call("GET", _job_path(job_id)), Job))
+
+    async def cancel(self, job_id: str) -> Job:
+        """See :meth:`DexrollClient.cancel`."""
+        return await self._run(_one(_cancel_call(job_id), Job))
+
+    async def list(self, limit: int = 50, offset: int = 0) -> JobList:
+        """See :meth:`DexrollClient.list`."""
+        call = _Call("GET", "/v1/plans", params={"limit": limit, "offset": offset})
+        return await self._run(_one(call, JobList))
+
+    async def models(self) -> ModelCatalog:
+        """See :meth:`DexrollClient.models`."""
+        return await self._run(_one(_Call("GET", "/v1/models"), ModelCatalog))
+
+    async def health(self) -> bool:
+        """See :meth:`DexrollClient.health`."""
+        return await self._run(_probe_op("/healthz"))
+
+    async def ready(self) -> bool:
+        """See :meth:`DexrollClient.ready`."""
+        return await self._run(_probe_op("/readyz"))
+
+    async def plan(self, request: RequestLike, *, timeout: float | None = None,
+                   idempotency_key: str | None = None, poll_initial: float = 0.1,
+                   poll_max: float = 2.0) -> Job:
+        """See :meth:`DexrollClient.plan`."""
+        return await self._run(_plan_op(request, timeout=timeout,
+                                        idempotency_key=idempotency_key,
+                                        poll_initial=poll_initial, poll_max=poll_max))

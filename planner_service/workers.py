@@ -1,0 +1,247 @@
+"""Solver worker processes and the dispatcher that feeds them.
+
+Each worker is a *spawned* process (no fork: CasADi/IPOPT state is never shared) that
+keeps its planner, and so its cache of built NLPs, from job to job. The dispatcher is a
+thread of the service process. It hands queued jobs from the store to idle workers, and
+makes sure every job ends exactly once:
+
+* a worker's reply ends its job with the plan's typed status;
+* a job past its time limit (plus a grace period) gets its worker killed and replaced,
+  and ends ``timed_out`` (IPOPT normally stops itself at the limit before that);
+* a cancelled running job gets its worker killed and replaced, and ends ``cancelled``;
+* a worker that dies mid-solve ends its job ``failed`` with the exit code, and is replaced.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing as mp
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection, wait
+from typing import Any
+
+from dexroll_client.models import JobState, PlanStatus
+
+from .store import JobRow, Store
+
+__all__ = ["Dispatcher", "job_outcome"]
+
+log = logging.getLogger("dexroll.workers")
+
+
+def job_outcome(status: PlanStatus) -> JobState:
+    """The terminal job state for a plan's status."""
+    return {
+        PlanStatus.SOLVED: JobState.SUCCEEDED,
+        PlanStatus.INFEASIBLE: JobState.INFEASIBLE,
+        PlanStatus.TIME_LIMIT: JobState.TIMED_OUT,
+    }.get(status, JobState.FAILED)
+
+
+def _worker_main(conn: Connection) -> None:
+    """Body of a worker process: plan each request received, reply with the result."""
+    # Imports happen in the child: the parent's modules are not inherited under spawn.
+    from dexroll_client.models import BallOnPalmRequest, PlanResult
+    from ocp.ball_on_palm import BallOnPalmPlanner
+
+    from .convert import result_from_solution, to_problem
+
+    planner = BallOnPalmPlanner()
+    conn.send(("ready", None))
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, KeyboardInterrupt):
+            return
+        if msg is None:
+            return
+        job_id, request_json = msg
+        try:
+            request = BallOnPalmRequest.model_validate_json(request_json)
+            solution = planner.solve(to_problem(request))
+            result = result_from_solution(solution, request.sample_times)
+            conn.send(("done", (job_id, result.model_dump_json())))
+        except Exception as exc:  # reply with a typed error, never die on a bad job
+            log.exception("job %s failed in the worker", job_id)
+            failed = PlanResult(status=PlanStatus.ERROR, message=f"planner failed: {exc!r}")
+            conn.send(("done", (job_id, failed.model_dump_json())))
+
+
+@dataclass(eq=False)
+class _Slot:
+    process: Any  # multiprocessing SpawnProcess
+    conn: Connection
+    ready: bool = False
+    job: JobRow | None = None
+    deadline: float = float("inf")
+    started: float = field(default_factory=time.monotonic)
+
+
+class Dispatcher(threading.Thread):
+    """Feeds queued jobs to ``n_workers`` worker processes and ends every job once."""
+
+    def __init__(self, store: Store, n_workers: int, kill_grace: float,
+                 on_finish: Callable[[str], None]) -> None:
+        super().__init__(name="dexroll-dispatcher", daemon=True)
+        self.store = store
+        self.n_workers = n_workers
+        self.kill_grace = kill_grace
+        self.on_finish = on_finish
+        self._ctx = mp.get_context("spawn")
+        self._slots: list[_Slot] = []
+        self._cancel: queue.SimpleQueue[str] = queue.SimpleQueue()
+        self._wake_r, self._wake_w = self._ctx.Pipe(duplex=False)
+        self._wake_lock = threading.Lock()
+        self._stopping = threading.Event()
+
+    # -- called from other threads -----------------------------------------------------------
+    def wake(self) -> None:
+        """New work (a job or a cancellation) is waiting."""
+        with self._wake_lock:
+            self._wake_w.send(None)
+
+    def cancel_running(self, job_id: str) -> None:
+        self._cancel.put(job_id)
+        self.wake()
+
+    def stop(self) -> None:
+        self._stopping.set()
+        self.wake()
+        self.join(timeout=10)
+
+    @property
+    def ready_workers(self) -> int:
+        return sum(1 for s in self._slots if s.ready and s.process.is_alive())
+
+    def worker_pids(self) -> dict[str, int]:
+        """Pid of the worker running each job (for operators, and for tests)."""
+        return {s.job.id: s.process.pid for s in list(self._slots) if s.job is not None}
+
+    # -- the dispatcher thread -----------------------------------------------------------------
+    def _spawn(self) -> _Slot:
+        parent, child = self._ctx.Pipe()
+        proc = self._ctx.Process(target=_worker_main, args=(child,), name="dexroll-worker",
+                                 daemon=True)
+        proc.start()
+        child.close()
+        return _Slot(process=proc, conn=parent)
+
+    def _replace(self, slot: _Slot) -> None:
+        if slot.process.is_alive():
+            slot.process.kill()
+        slot.process.join(timeout=5)
+        slot.conn.close()
+        self._slots[self._slots.index(slot)] = self._spawn()
+
+    def _end(self, job_id: str, state: JobState, code: str, message: str,
+             raw_status: str | None = None, result: str | None = None) -> None:
+        if self.store.finish(job_id, state.value, code, message, raw_status, result):
+            log.info("job %s ended %s (%s)", job_id, state.value, code)
+        self.on_finish(job_id)
+
+    def run(self) -> None:
+        self._slots = [self._spawn() for _ in range(self.n_workers)]
+        try:
+            while not self._stopping.is_set():
+                self._step()
+        except Exception:  # pragma: no cover - keep the failure visible
+            log.exception("dispatcher crashed")
+            raise
+        finally:
+            for slot in self._slots:
+                with contextlib.suppress(OSError, BrokenPipeError):
+                    slot.conn.send(None)
+            for slot in self._slots:
+                slot.process.join(timeout=2)
+                if slot.process.is_alive():
+                    slot.process.kill()
+
+    def _step(self) -> None:
+        # hand queued jobs to idle, ready workers
+        for slot in self._slots:
+            if slot.ready and slot.job is None:
+                job = self.store.claim_next()
+                if job is None:
+                    break
+                slot.job = job
+                self.store.set_worker(job.id, slot.process.pid)
+                slot.started = time.monotonic()
+                slot.deadline = slot.started + job.time_limit + self.kill_grace
+                # if the worker died, its sentinel reports it below
+                with contextlib.suppress(OSError, BrokenPipeError):
+                    slot.conn.send((job.id, job.request))
+        waitables: list[Any] = [self._wake_r]
+        for slot in self._slots:
+            waitables += [slot.conn, slot.process.sentinel]
+        now = time.monotonic()
+        timeout = min([0.5] + [max(0.0, s.deadline - now) for s in self._slots if s.job])
+        ready = wait(waitables, timeout=timeout)
+        if self._wake_r in ready:
+            while self._wake_r.poll():
+                self._wake_r.recv()
+        for slot in list(self._slots):
+            if slot.conn in ready:
+                self._receive(slot)
+        for slot in list(self._slots):
+            if not slot.process.is_alive():
+                self._died(slot)
+        self._cancels()
+        self._deadlines()
+
+    def _receive(self, slot: _Slot) -> None:
+        try:
+            kind, payload = slot.conn.recv()
+        except (EOFError, OSError):
+            return  # the process is gone; handled by _died
+        if kind == "ready":
+            slot.ready = True
+            return
+        job_id, result_json = payload
+        from dexroll_client.models import PlanResult
+
+        result = PlanResult.model_validate_json(result_json)
+        slot.job, slot.deadline = None, float("inf")
+        raw = result.stats.raw_status if result.stats else None
+        self._end(job_id, job_outcome(result.status), result.status.value, result.message,
+                  raw, result_json)
+
+    def _died(self, slot: _Slot) -> None:
+        code = slot.process.exitcode
+        if slot.job is not None:
+            self._end(slot.job.id, JobState.FAILED, "worker_died",
+                      f"the worker process (pid {slot.process.pid}) died during the solve "
+                      f"(exit code {code}); the service replaced it")
+        else:
+            log.warning("idle worker %s exited with code %s; replacing it",
+                        slot.process.pid, code)
+        self._replace(slot)
+
+    def _cancels(self) -> None:
+        while True:
+            try:
+                job_id = self._cancel.get_nowait()
+            except queue.Empty:
+                return
+            for slot in self._slots:
+                if slot.job is not None and slot.job.id == job_id:
+                    self._end(job_id, JobState.CANCELLED, "cancelled",
+                              "cancelled while running; its worker was stopped and replaced")
+                    self._replace(slot)
+                    break
+            else:
+                self.on_finish(job_id)
+
+    def _deadlines(self) -> None:
+        now = time.monotonic()
+        for slot in list(self._slots):
+            if slot.job is not None and now > slot.deadline:
+                self._end(slot.job.id, JobState.TIMED_OUT, "killed_at_time_limit",
+                          f"the solve did not return within its time limit "
+                          f"{slot.job.time_limit} s (+{self.kill_grace} s grace); its worker "
+                          "was killed and replaced")
+                self._replace(slot)

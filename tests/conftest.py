@@ -1,0 +1,96 @@
+"""Fixtures: real dexroll services (uvicorn, worker processes, SQLite) on loopback ports."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+
+STARTUP_TIMEOUT = 120.0  # s: spawned workers import CasADi before the service is ready
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Server:
+    """A running `dexroll serve` process."""
+
+    url: str
+    data_dir: Path
+    process: subprocess.Popen[bytes]
+    log: Path
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout=10)
+
+    def log_text(self) -> str:
+        return self.log.read_text(errors="replace")
+
+
+def start_server(data_dir: Path, **env: str) -> Server:
+    """Start the service as a real process and wait until /readyz answers 200."""
+    port = free_port()
+    data_dir.mkdir(parents=True, exist_ok=True)
+    log = data_dir / f"server-{port}.log"
+    environ = {**os.environ, "DEXROLL_HOST": "127.0.0.1", "DEXROLL_PORT": str(port),
+               "DEXROLL_DATA_DIR": str(data_dir), "DEXROLL_WORKERS": "2",
+               "DEXROLL_KILL_GRACE": "2", **env}
+    with log.open("wb") as out:
+        proc = subprocess.Popen([sys.executable, "-m", "planner_service.cli", "serve"],
+                                env=environ, stdout=out, stderr=subprocess.STDOUT)
+    server = Server(f"http://127.0.0.1:{port}", data_dir, proc, log)
+    deadline = time.monotonic() + STARTUP_TIMEOUT
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"the service exited at start:\n{server.log_text()}")
+        try:
+            if httpx.get(f"{server.url}/readyz", timeout=2).status_code == 200:
+                return server
+        except httpx.TransportError:
+            pass
+        time.sleep(0.2)
+    server.stop()
+    raise RuntimeError(f"the service was not ready in {STARTUP_TIMEOUT} s:\n"
+                       f"{server.log_text()}")
+
+
+@pytest.fixture(scope="session")
+def live_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """One service shared by the tests that only need a healthy one (2 workers)."""
+    server = start_server(tmp_path_factory.mktemp("live"))
+    yield server
+    server.stop()
+
+
+@pytest.fixture
+def server_factory(tmp_path: Path) -> Iterator[Callable[..., Server]]:
+    """Start services of one's own (a fresh data folder each unless given); all stopped
+    at the end of the test."""
+    started: list[Server] = []
+
+    def factory(data_dir: Path | None = None, **env: str) -> Server:
+        server = start_server(data_dir or tmp_path / f"data{len(started)}", **env)
+        started.append(server)
+        return server
+
+    yield factory
+    for server in started:
+        server.stop()
