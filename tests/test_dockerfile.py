@@ -27,8 +27,9 @@ def instructions(keyword: str) -> list[str]:
 
 def dry_run(target: str) -> str:
     """The commands `make TARGET` would run from scratch (nothing is executed)."""
-    proc = subprocess.run(["make", "-n", "-B", target], cwd=ROOT, capture_output=True,
-                          text=True, check=True)
+    env = {k: v for k, v in os.environ.items() if k not in ("MAKELEVEL", "MAKEFLAGS", "MFLAGS")}
+    proc = subprocess.run(["make", "--no-print-directory", "-n", "-B", target], cwd=ROOT,
+                          env=env, capture_output=True, text=True, check=True)
     return proc.stdout
 
 

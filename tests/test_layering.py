@@ -31,3 +31,15 @@ def test_importing_ocp_loads_no_service_module() -> None:
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_wire_statuses_and_limits_match_the_core() -> None:
+    """The core and the wire contract cannot import each other; their shared vocabulary
+    (plan statuses, request limits) is pinned here instead."""
+    import dexroll_client.models as wire
+    import ocp.problem as core
+    from ocp.solution import Status
+
+    assert {s.value for s in Status} == {s.value for s in wire.PlanStatus}
+    for name in ("MAX_INTERVALS", "MAX_VIA_POINTS", "MAX_POSITION", "MAX_DURATION"):
+        assert getattr(core, name) == getattr(wire, name), name
