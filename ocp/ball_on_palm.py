@@ -25,7 +25,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .collocation import HermiteSimpson, hermite_sample
+from .collocation import HermiteSimpson, hermite_sample, reintegrate, reintegrator
 from .contact import ContactPair
 from .problem import (
     CONTACT_COORDS,
@@ -150,19 +150,8 @@ class BallOnPalmModel:
 
     @cache  # noqa: B019 - one integrator per model, models live for the process
     def reintegrator(self, n_sub: int) -> ca.Function:
-        """CVODES over one interval in normalised time s in [0, 1], output at n_sub points.
-
-        Parameters q = (w_k, w_m, w_k+1, h, params): the input is the collocation quadratic.
-        """
-        s = ca.SX.sym("s")
-        x = ca.SX.sym("x", NX)
-        q = ca.SX.sym("q", 3 * NU + 1 + self.surface.n_params)
-        w0, wm, w1, h, params = q[0:2], q[2:4], q[4:6], q[6], q[7:]
-        w = 2 * (s - 0.5) * (s - 1) * w0 - 4 * s * (s - 1) * wm + 2 * s * (s - 0.5) * w1
-        ode = h * self.dynamics(x, w, params)
-        grid = list(np.linspace(0.0, 1.0, n_sub + 1)[1:])
-        return ca.integrator("reintegrate", "cvodes", {"x": x, "p": q, "t": s, "ode": ode},
-                             0.0, grid, {"abstol": 1e-13, "reltol": 1e-11})
+        """CVODES over one interval with the collocation input (see collocation.py)."""
+        return reintegrator(self.dynamics, NX, NU, self.surface.n_params, n_sub)
 
 
 @cache
@@ -656,25 +645,8 @@ def certify(problem: BallOnPalmProblem, model: BallOnPalmModel, t_nodes: FloatAr
                            max_spin_rate=nan, max_height_error=nan, max_goal_error=nan,
                            n_samples=0, tolerances={},
                            failures=("the plan has non-finite states or inputs",))
-    F = model.reintegrator(n_sub)
-    n = len(t_nodes) - 1
-    x = np.asarray(X[0], dtype=float)
-    Xr = [x]
-    samples_x, samples_w = [], []
-    s = np.linspace(0.0, 1.0, n_sub + 1)[1:]
-    for k in range(n):
-        h = t_nodes[k + 1] - t_nodes[k]
-        q = np.concatenate([U0[k], Um[k], U1[k], [h], params])
-        xs = np.asarray(F(x0=x, p=q)["xf"]).T
-        w = (2 * (s - 0.5) * (s - 1))[:, None] * U0[k] - (4 * s * (s - 1))[:, None] * Um[k] \
-            + (2 * s * (s - 0.5))[:, None] * U1[k]
-        samples_x.append(xs)
-        samples_w.append(w)
-        x = xs[-1]
-        Xr.append(x)
-    Xr_arr = np.array(Xr)
-    sx = np.vstack([X[:1], *samples_x])
-    sw = np.vstack([U0[:1], *samples_w])
+    Xr_arr, sx, sw = reintegrate(model.reintegrator(n_sub), X[0], t_nodes, U0, Um, U1,
+                                 params, n_sub)
     m = len(sx)
     eta_dot = np.asarray(model.dynamics.map(m)(sx.T, sw.T, params))
     v_slip, omega = model.twist.map(m)(sx.T, eta_dot, params, np.tile(chart, m))

@@ -21,12 +21,13 @@ with scale vectors that may depend on parameters (e.g. the object radius).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HermiteSimpson", "hermite_sample"]
+__all__ = ["HermiteSimpson", "hermite_sample", "quadratic_input", "reintegrate", "reintegrator"]
 
 
 @dataclass
@@ -160,3 +161,49 @@ def hermite_sample(
     l1 = 2 * s * (s - 0.5)
     u = l0 * U0[k] + lm * Um[k] + l1 * U1[k]
     return x, u
+
+
+def quadratic_input(s: Any, u0: Any, um: Any, u1: Any) -> Any:
+    """The collocation input at normalised time s in [0, 1] of an interval."""
+    return 2 * (s - 0.5) * (s - 1) * u0 - 4 * s * (s - 1) * um + 2 * s * (s - 0.5) * u1
+
+
+def reintegrator(dynamics: ca.Function, nx: int, nu: int, n_params: int, n_sub: int
+                 ) -> ca.Function:
+    """CVODES over one interval in normalised time s in [0, 1], output at n_sub points.
+
+    ``dynamics(x, u, params)``; the integrator's parameters are (u_k, u_m, u_k+1, h,
+    params): the input is the interval's collocation quadratic.
+    """
+    s = ca.SX.sym("s")
+    x = ca.SX.sym("x", nx)
+    q = ca.SX.sym("q", 3 * nu + 1 + n_params)
+    u0, um, u1 = q[0:nu], q[nu:2 * nu], q[2 * nu:3 * nu]
+    h, params = q[3 * nu], q[3 * nu + 1:]
+    ode = h * dynamics(x, quadratic_input(s, u0, um, u1), params)
+    grid = list(np.linspace(0.0, 1.0, n_sub + 1)[1:])
+    return ca.integrator("reintegrate", "cvodes", {"x": x, "p": q, "t": s, "ode": ode},
+                         0.0, grid, {"abstol": 1e-13, "reltol": 1e-11})
+
+
+def reintegrate(F: ca.Function, x0: NDArray[np.float64], t_nodes: NDArray[np.float64],
+                U0: NDArray[np.float64], Um: NDArray[np.float64], U1: NDArray[np.float64],
+                params: NDArray[np.float64], n_sub: int
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Integrate the collocation inputs from ``x0`` over the whole horizon, never reset.
+
+    Returns (states at the nodes, states at the n_sub samples per interval preceded by
+    x0, inputs at those samples).
+    """
+    x = np.asarray(x0, dtype=float)
+    nodes, xs_all, ws_all = [x], [x[None, :]], [U0[:1]]
+    s = np.linspace(0.0, 1.0, n_sub + 1)[1:][:, None]
+    for k in range(len(t_nodes) - 1):
+        h = t_nodes[k + 1] - t_nodes[k]
+        q = np.concatenate([U0[k], Um[k], U1[k], [h], params])
+        xs = np.asarray(F(x0=x, p=q)["xf"]).T
+        xs_all.append(xs)
+        ws_all.append(quadratic_input(s, U0[k], Um[k], U1[k]))
+        x = xs[-1]
+        nodes.append(x)
+    return np.array(nodes), np.vstack(xs_all), np.vstack(ws_all)
