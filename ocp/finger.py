@@ -1,0 +1,528 @@
+"""A robot finger from a URDF: Pinocchio model, CasADi forward kinematics, inverse kinematics.
+
+The finger is a serial chain of revolute and prismatic joints read from a URDF by Pinocchio.
+Its fingertip frame (``"fingertip"`` in the built-in model) is the frame of the flat pad: its
+origin is the centre of the pad surface and its +z axis the pad's outward normal, so the pad
+is the :data:`~ocp.surfaces.Plane` chart ``f(x, y) = (x, y, 0)`` in that frame
+(docs/conventions.md). The finger's base is mounted in the palm frame P by a fixed pose
+``g_pb = (base_rotation, base_position)``; every pose and Jacobian here is in the palm frame.
+
+* :attr:`FingerModel.fk` is a CasADi function ``q -> (R, p)`` built from the Pinocchio model's
+  data (joint placements, joint types and axes, the tip frame's placement), not from a second
+  copy of the link dimensions, so that it can go into an NLP;
+* :meth:`FingerModel.fingertip_pose_pin` and :meth:`FingerModel.frame_jacobian_pin` are the
+  same quantities from Pinocchio itself (the reference the CasADi expressions are tested
+  against);
+* :func:`inverse_kinematics` is damped least squares (Levenberg-Marquardt) on the 6-D pose
+  error within the joint limits.
+
+The built-in finger (``ocp/models/k3s_finger.urdf``) is a 6-revolute finger in the spirit of
+the HKUST hand's modified Motoman K3S fingers (waist yaw, shoulder pitch, elbow pitch, wrist
+roll, wrist pitch, wrist roll), scaled to finger size, with a 30 mm x 30 mm flat pad. Its
+default mount puts the paper's initial joint angles (experiment 1) at a grasp of a 25 mm
+ball lying at palm point (0, 0), tilted 12.63 deg from the antipodal grasp.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from . import models as _models
+
+__all__ = [
+    "BUILTIN_URDF",
+    "DEFAULT_BASE_POSITION",
+    "DEFAULT_BASE_ROTATION",
+    "PAD_HALF_SIZE",
+    "PAPER_SEED",
+    "PAPER_SEED_DEG",
+    "ChainJoint",
+    "FingerModel",
+    "IKResult",
+    "builtin_urdf_text",
+    "inverse_kinematics",
+    "load_finger",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: File name of the built-in finger in the package ``ocp.models``.
+BUILTIN_URDF = "k3s_finger.urdf"
+
+#: Half the side of the built-in finger's square pad [m] (a 30 mm x 30 mm pad).
+PAD_HALF_SIZE = 0.015
+
+#: The built-in finger's default mount in the palm frame: its base frame is parallel to the
+#: palm frame (the finger reaches along the palm's +x at zero waist angle) ...
+DEFAULT_BASE_ROTATION: tuple[tuple[float, ...], ...] = (
+    (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+#: ... with its origin 49.2 mm on the palm's -x side of palm point (0, 0) and 33.4 mm below
+#: the palm surface (the finger stands beside the palm, on the hand's base) [m]. Chosen so
+#: that the paper's initial joint angles :data:`PAPER_SEED` press the pad centre onto a
+#: 25 mm ball at palm point (0, 0), tangent to it 12.63 deg from its top (to 0.03 mm), and
+#: every grasp of that ball at the triangle (0, 0), (0.03, 0), (0.03, 0.03) tilted up to
+#: 30 deg from the top is reached with more than 25 deg of margin to every joint limit.
+DEFAULT_BASE_POSITION: tuple[float, float, float] = (-0.0492, 0.0, -0.0334)
+
+#: The paper's initial joint angles of experiment 1 [deg] and [rad].
+PAPER_SEED_DEG: tuple[float, ...] = (0.0, -22.68, -12.34, 0.0, 47.65, 0.0)
+PAPER_SEED: FloatArray = np.deg2rad(np.array(PAPER_SEED_DEG))
+PAPER_SEED.setflags(write=False)
+
+#: Pinocchio joint types the CasADi kinematics supports: kind and fixed axis (None: the
+#: joint model carries its own ``axis``).
+_JOINT_TYPES: dict[str, tuple[str, tuple[float, float, float] | None]] = {
+    "JointModelRX": ("revolute", (1.0, 0.0, 0.0)),
+    "JointModelRY": ("revolute", (0.0, 1.0, 0.0)),
+    "JointModelRZ": ("revolute", (0.0, 0.0, 1.0)),
+    "JointModelRevoluteUnaligned": ("revolute", None),
+    "JointModelPX": ("prismatic", (1.0, 0.0, 0.0)),
+    "JointModelPY": ("prismatic", (0.0, 1.0, 0.0)),
+    "JointModelPZ": ("prismatic", (0.0, 0.0, 1.0)),
+    "JointModelPrismaticUnaligned": ("prismatic", None),
+}
+
+
+def builtin_urdf_text() -> str:
+    """The text of the built-in finger's URDF (shipped as package data of ``ocp.models``)."""
+    return resources.files(_models).joinpath(BUILTIN_URDF).read_text(encoding="utf-8")
+
+
+def _readonly(a: ArrayLike) -> FloatArray:
+    out = np.array(a, dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+def _skew(w: Any) -> Any:
+    """[w]x of a 3-vector, as a CasADi matrix."""
+    return ca.vertcat(
+        ca.horzcat(0, -w[2], w[1]), ca.horzcat(w[2], 0, -w[0]), ca.horzcat(-w[1], w[0], 0))
+
+
+def _axis_rotation(axis: FloatArray, angle: ca.SX) -> ca.SX:
+    """Rotation by ``angle`` [rad] about the unit ``axis``: c I + s [a]x + (1 - c) a a^T."""
+    c, s = ca.cos(angle), ca.sin(angle)
+    a = ca.DM(axis)
+    return c * ca.DM.eye(3) + s * _skew(a) + (1 - c) * (a @ a.T)
+
+
+@dataclass(frozen=True)
+class ChainJoint:
+    """One joint of the finger's serial chain, as the CasADi kinematics uses it.
+
+    ``placement_rotation``/``placement_translation`` [m] are the joint's placement in its
+    parent joint's frame (Pinocchio's ``jointPlacements``); the joint then rotates about
+    (revolute, q in rad) or slides along (prismatic, q in m) the unit ``axis`` of its frame.
+    """
+
+    name: str
+    kind: str
+    axis: FloatArray
+    index_q: int
+    placement_rotation: FloatArray
+    placement_translation: FloatArray
+
+
+@dataclass(frozen=True, eq=False)
+class FingerModel:
+    """A serial finger: Pinocchio model, fingertip (pad) frame, base mount, limits.
+
+    Attributes
+    ----------
+    model, data:
+        The Pinocchio ``Model`` and a ``Data`` for it (used by the ``*_pin`` helpers, which
+        are therefore not thread-safe; :func:`inverse_kinematics` makes its own ``Data``).
+    tip_frame, tip_frame_id:
+        Name and Pinocchio id of the fingertip frame: origin at the centre of the pad
+        surface, +z the pad's outward normal.
+    base_rotation, base_position:
+        Pose ``g_pb`` of the finger's base (the URDF root) in the palm frame [-, m].
+    lower, upper:
+        Joint position limits [rad or m], from the URDF.
+    velocity_limit:
+        Joint velocity limits [rad/s or m/s], from the URDF.
+    pad_half_size:
+        Half the side of the square pad [m].
+    urdf_text:
+        The URDF the model was built from.
+    joint_names:
+        The chain's joint names, in the order of q.
+    chain:
+        The chain's joints (placements, kinds, axes) the CasADi kinematics is built from.
+    tip_rotation, tip_translation:
+        Placement of the fingertip frame in the last joint's frame [-, m].
+    """
+
+    model: Any
+    data: Any
+    tip_frame: str
+    tip_frame_id: int
+    base_rotation: FloatArray
+    base_position: FloatArray
+    lower: FloatArray
+    upper: FloatArray
+    velocity_limit: FloatArray
+    pad_half_size: float
+    urdf_text: str
+    joint_names: tuple[str, ...]
+    chain: tuple[ChainJoint, ...] = field(repr=False)
+    tip_rotation: FloatArray = field(repr=False)
+    tip_translation: FloatArray = field(repr=False)
+
+    @property
+    def nq(self) -> int:
+        """Number of joints (one coordinate each)."""
+        return int(self.model.nq)
+
+    @property
+    def base_pose(self) -> FloatArray:
+        """The base's pose in the palm frame as a 4x4 homogeneous matrix [m]."""
+        g = np.eye(4)
+        g[:3, :3] = self.base_rotation
+        g[:3, 3] = self.base_position
+        return g
+
+    @cached_property
+    def length_scale(self) -> float:
+        """Sum of the chain's link offsets after the first joint, tip placement included [m].
+
+        The reach of an all-revolute finger is at most this; the inverse kinematics divides
+        position errors by it to weigh them against orientation errors in rad.
+        """
+        total = sum(float(np.linalg.norm(j.placement_translation)) for j in self.chain[1:])
+        total += float(np.linalg.norm(self.tip_translation))
+        return max(total, 1e-3)
+
+    @cached_property
+    def fk(self) -> ca.Function:
+        """CasADi function ``fingertip_pose``: ``q (nq) -> (R (3x3), p (3x1))``.
+
+        The fingertip frame's orientation ``R`` and origin ``p`` [m] in the palm frame,
+        ``g_pf(q) = g_pb * prod_i (M_i * g_i(q_i)) * M_tip``: ``M_i`` joint i's placement in
+        its parent joint's frame (Pinocchio's ``jointPlacements``), ``g_i(q_i)`` the rotation
+        about (or translation along) its axis, ``M_tip`` the tip frame's placement in the
+        last joint's frame.
+        """
+        q = ca.SX.sym("q", self.nq)
+        R, p = self._fk_expr(q)
+        return ca.Function("fingertip_pose", [q], [R, p], ["q"], ["R", "p"])
+
+    @cached_property
+    def jacobian(self) -> ca.Function:
+        """CasADi function ``fingertip_jacobian``: ``q (nq) -> J (6 x nq)``.
+
+        World-aligned (palm-frame) Jacobian of the fingertip frame: rows 0-2 map joint rates
+        to the velocity of the frame's origin [m/s], rows 3-5 to its angular velocity
+        [rad/s], both in palm coordinates (Pinocchio's ``LOCAL_WORLD_ALIGNED`` rotated into
+        the palm). Derived by differentiating :attr:`fk`: ``dp/dq`` and
+        ``vee(dR/dq_i R^T)``.
+        """
+        q = ca.SX.sym("q", self.nq)
+        R, p = self._fk_expr(q)
+        J_v = ca.jacobian(p, q)
+        dR = ca.jacobian(ca.vec(R), q)  # column i: vec(dR/dq_i), column-major
+        cols = []
+        for i in range(self.nq):
+            S = ca.reshape(dR[:, i], 3, 3) @ R.T
+            cols.append(0.5 * ca.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0],
+                                         S[1, 0] - S[0, 1]))
+        J_w = ca.horzcat(*cols)
+        return ca.Function("fingertip_jacobian", [q], [ca.vertcat(J_v, J_w)], ["q"], ["J"])
+
+    def _fk_expr(self, q: ca.SX) -> tuple[ca.SX, ca.SX]:
+        R: Any = ca.DM(self.base_rotation)
+        p: Any = ca.DM(self.base_position)
+        for joint in self.chain:
+            p = p + R @ ca.DM(joint.placement_translation)
+            R = R @ ca.DM(joint.placement_rotation)
+            qi = q[joint.index_q]
+            if joint.kind == "revolute":
+                R = R @ _axis_rotation(joint.axis, qi)
+            else:
+                p = p + R @ (ca.DM(joint.axis) * qi)
+        p = p + R @ ca.DM(self.tip_translation)
+        R = R @ ca.DM(self.tip_rotation)
+        return R, p
+
+    # -- Pinocchio's own kinematics ---------------------------------------------------------
+
+    def _check_q(self, q: ArrayLike) -> FloatArray:
+        qa = np.asarray(q, dtype=float).reshape(-1)
+        if qa.shape != (self.nq,):
+            raise ValueError(f"q must have {self.nq} entries, got {qa.shape[0]}")
+        return qa
+
+    def _pose_pin(self, q: FloatArray, data: Any) -> tuple[FloatArray, FloatArray]:
+        pin.framesForwardKinematics(self.model, data, q)
+        M = data.oMf[self.tip_frame_id]
+        R = self.base_rotation @ np.asarray(M.rotation)
+        p = self.base_rotation @ np.asarray(M.translation) + self.base_position
+        return R, p
+
+    def _jacobian_pin(self, q: FloatArray, data: Any) -> FloatArray:
+        J = pin.computeFrameJacobian(self.model, data, q, self.tip_frame_id,
+                                     pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        Rb = self.base_rotation
+        return np.vstack([Rb @ J[:3], Rb @ J[3:]])
+
+    def fingertip_pose_pin(self, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """(R, p): the fingertip frame in the palm frame by Pinocchio [-, m]."""
+        return self._pose_pin(self._check_q(q), self.data)
+
+    def frame_jacobian_pin(self, q: ArrayLike) -> FloatArray:
+        """6 x nq Jacobian of the fingertip frame by Pinocchio, rows (v [m/s]; omega [rad/s])
+        in palm coordinates (``LOCAL_WORLD_ALIGNED`` rotated by the base rotation)."""
+        return self._jacobian_pin(self._check_q(q), self.data)
+
+    def within_limits(self, q: ArrayLike, margin: float = 0.0) -> bool:
+        """Whether ``lower + margin <= q <= upper - margin`` for every joint."""
+        qa = self._check_q(q)
+        return bool(np.all(qa >= self.lower + margin) and np.all(qa <= self.upper - margin))
+
+
+def _rotation(R: ArrayLike, what: str) -> FloatArray:
+    Ra = np.asarray(R, dtype=float)
+    if Ra.shape != (3, 3) or not np.all(np.isfinite(Ra)):
+        raise ValueError(f"{what} must be a finite 3x3 matrix, got shape {Ra.shape}")
+    if not np.allclose(Ra.T @ Ra, np.eye(3), atol=1e-9) or np.linalg.det(Ra) < 0.0:
+        raise ValueError(f"{what} must be a rotation matrix (orthonormal, det +1)")
+    return Ra
+
+
+def _vector3(p: ArrayLike, what: str) -> FloatArray:
+    pa = np.asarray(p, dtype=float).reshape(-1)
+    if pa.shape != (3,) or not np.all(np.isfinite(pa)):
+        raise ValueError(f"{what} must be 3 finite numbers [m]")
+    return pa
+
+
+def _chain(model: Any, tip_frame_id: int, tip_frame: str) -> tuple[ChainJoint, ...]:
+    """The joints from the root to the tip frame; ValueError unless a supported serial chain."""
+    if model.njoints < 2:
+        raise ValueError("the URDF has no movable joint")
+    for i in range(1, model.njoints):
+        if model.parents[i] != i - 1:
+            raise ValueError(
+                f"the finger must be a serial chain: joint {model.names[i]!r} hangs from "
+                f"{model.names[model.parents[i]]!r}, not from the previous joint "
+                f"{model.names[i - 1]!r}")
+    last = model.njoints - 1
+    parent = model.frames[tip_frame_id].parentJoint
+    if parent != last:
+        raise ValueError(
+            f"the tip frame {tip_frame!r} is attached to joint {model.names[parent]!r}, but "
+            f"the chain ends at joint {model.names[last]!r}: the joints after it would not "
+            f"move it")
+    chain = []
+    for i in range(1, model.njoints):
+        jm = model.joints[i]
+        kind_axis = _JOINT_TYPES.get(jm.shortname())
+        if kind_axis is None:
+            raise ValueError(
+                f"joint {model.names[i]!r} is a Pinocchio {jm.shortname()}; only revolute "
+                f"(RX, RY, RZ, RevoluteUnaligned) and prismatic (PX, PY, PZ, "
+                f"PrismaticUnaligned) joints are supported (a URDF 'continuous' joint becomes "
+                f"an unbounded revolute: declare it 'revolute' with limits)")
+        kind, axis = kind_axis
+        if jm.nq != 1 or jm.nv != 1:
+            raise ValueError(f"joint {model.names[i]!r} must have one coordinate")
+        ax = np.array(axis if axis is not None else jm.extract().axis, dtype=float)
+        ax = ax / np.linalg.norm(ax)
+        M = model.jointPlacements[i]
+        chain.append(ChainJoint(
+            name=str(model.names[i]), kind=kind, axis=_readonly(ax), index_q=int(jm.idx_q),
+            placement_rotation=_readonly(M.rotation),
+            placement_translation=_readonly(M.translation)))
+    return tuple(chain)
+
+
+def load_finger(
+    urdf: str | Path | None = None,
+    tip_frame: str = "fingertip",
+    base_rotation: ArrayLike | None = None,
+    base_position: ArrayLike | None = None,
+    pad_half_size: float | None = None,
+) -> FingerModel:
+    """Load a finger from a URDF (``None``: the built-in K3S-like finger).
+
+    ``urdf`` is a file path, or the URDF's XML text itself (a string starting with ``<``).
+    ``tip_frame`` names the pad frame (a URDF link or joint). ``base_rotation`` (3x3) and
+    ``base_position`` [m] mount the URDF's root in the palm frame; when None they are the
+    built-in finger's :data:`DEFAULT_BASE_ROTATION`/:data:`DEFAULT_BASE_POSITION` for the
+    built-in URDF and the identity/origin for a user URDF. ``pad_half_size`` [m] defaults to
+    :data:`PAD_HALF_SIZE`.
+
+    Raises ValueError for an unknown tip frame, a chain that is not serial, a tip frame not
+    on the last joint, or joints other than revolute and prismatic ones.
+    """
+    builtin = urdf is None
+    if urdf is None:
+        text, source = builtin_urdf_text(), BUILTIN_URDF
+    elif isinstance(urdf, str) and urdf.lstrip().startswith("<"):
+        text, source = urdf, "text"
+    else:
+        text, source = Path(urdf).read_text(encoding="utf-8"), str(urdf)
+    try:
+        model = pin.buildModelFromXML(text)
+    except (RuntimeError, ValueError) as exc:
+        raise ValueError(f"cannot build a model from the URDF ({source}): {exc}") from exc
+    if not model.existFrame(tip_frame):
+        names = sorted({str(f.name) for f in model.frames})
+        raise ValueError(f"the URDF has no frame {tip_frame!r}; its frames are {names}")
+    tip_id = int(model.getFrameId(tip_frame))
+    chain = _chain(model, tip_id, tip_frame)
+    if base_rotation is None:
+        base_rotation = DEFAULT_BASE_ROTATION if builtin else np.eye(3)
+    if base_position is None:
+        base_position = DEFAULT_BASE_POSITION if builtin else np.zeros(3)
+    half = PAD_HALF_SIZE if pad_half_size is None else float(pad_half_size)
+    if not (np.isfinite(half) and half > 0.0):
+        raise ValueError(f"pad_half_size must be > 0 m, got {half}")
+    lower = np.asarray(model.lowerPositionLimit, dtype=float)
+    upper = np.asarray(model.upperPositionLimit, dtype=float)
+    if np.any(lower > upper):
+        raise ValueError("a joint's lower limit exceeds its upper limit")
+    vel = getattr(model, "upperVelocityLimit", None)
+    velocity = np.asarray(model.velocityLimit if vel is None else vel, dtype=float)
+    tip = model.frames[tip_id].placement
+    return FingerModel(
+        model=model,
+        data=model.createData(),
+        tip_frame=tip_frame,
+        tip_frame_id=tip_id,
+        base_rotation=_readonly(_rotation(base_rotation, "base_rotation")),
+        base_position=_readonly(_vector3(base_position, "base_position")),
+        lower=_readonly(lower),
+        upper=_readonly(upper),
+        velocity_limit=_readonly(velocity),
+        pad_half_size=half,
+        urdf_text=text,
+        joint_names=tuple(j.name for j in chain),
+        chain=chain,
+        tip_rotation=_readonly(tip.rotation),
+        tip_translation=_readonly(tip.translation),
+    )
+
+
+# -- inverse kinematics ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class IKResult:
+    """Outcome of :func:`inverse_kinematics`.
+
+    ``q`` the joint angles found [rad or m]; ``position_error`` |p(q) - p_target| [m];
+    ``orientation_error`` |log3(R_target^T R(q))| [rad]; ``converged`` whether both are
+    <= tol; ``within_limits`` whether q is within the joint limits; ``iterations`` the
+    number of Levenberg-Marquardt trials made.
+    """
+
+    q: FloatArray
+    position_error: float
+    orientation_error: float
+    converged: bool
+    within_limits: bool
+    iterations: int
+
+
+def _residual(finger: FingerModel, data: Any, q: FloatArray, R_t: FloatArray,
+              p_t: FloatArray) -> tuple[FloatArray, FloatArray, float, float]:
+    """Scaled pose residual r = ((p - p_t)/L, log3(R_t^T R)), its Jacobian, both errors."""
+    R, p = finger._pose_pin(q, data)
+    J = finger._jacobian_pin(q, data)
+    e_p = p - p_t
+    R_err = R_t.T @ R
+    e_r = np.asarray(pin.log3(R_err), dtype=float)
+    # d log3(R_t^T R) = Jlog3(R_err) omega_local, omega_local = R^T omega_palm
+    J_r = np.asarray(pin.Jlog3(R_err)) @ R.T @ J[3:]
+    L = finger.length_scale
+    r = np.concatenate([e_p / L, e_r])
+    Jr = np.vstack([J[:3] / L, J_r])
+    return r, Jr, float(np.linalg.norm(e_p)), float(np.linalg.norm(e_r))
+
+
+def _lm_step(H: FloatArray, g: FloatArray, lam: float, q: FloatArray, lower: FloatArray,
+             upper: FloatArray) -> FloatArray:
+    """Damped Gauss-Newton step, with the joints that sit at a limit and would leave the
+    box held fixed (the step is re-solved for the others)."""
+    n = q.size
+    free = np.ones(n, dtype=bool)
+    dq = np.zeros(n)
+    for _ in range(n + 1):
+        dq = np.zeros(n)
+        idx = np.flatnonzero(free)
+        if idx.size == 0:
+            break
+        A = H[np.ix_(idx, idx)] + lam * np.eye(idx.size)
+        dq[idx] = -np.linalg.solve(A, g[idx])
+        blocked = free & (((q <= lower) & (dq < 0.0)) | ((q >= upper) & (dq > 0.0)))
+        if not blocked.any():
+            break
+        free &= ~blocked
+    return dq
+
+
+def inverse_kinematics(
+    finger: FingerModel,
+    R_target: ArrayLike,
+    p_target: ArrayLike,
+    q_seed: ArrayLike,
+    tol: float = 1e-10,
+    max_iter: int = 200,
+) -> IKResult:
+    """Joint angles putting the fingertip frame at (R_target, p_target) in the palm frame.
+
+    Levenberg-Marquardt on the 6-D pose error ``((p - p_target) / L, log3(R_target^T R))``
+    (L = :attr:`FingerModel.length_scale` [m]) with Pinocchio's frame Jacobian and the
+    exact Jacobian of log3, starting from ``q_seed`` (clipped into the limits); every step
+    is projected onto the joint limits, joints pinned at a limit are held there. The
+    damping shrinks after a step that lowers the error and grows after one that does not.
+    Stops when both errors are <= ``tol`` (m and rad), after ``max_iter`` trials, or when
+    no step lowers the error any more (an unreachable target: ``converged`` False, no
+    exception). Deterministic.
+    """
+    R_t = _rotation(R_target, "R_target")
+    p_t = _vector3(p_target, "p_target")
+    q = np.clip(finger._check_q(q_seed), finger.lower, finger.upper)
+    if not np.all(np.isfinite(q)):
+        raise ValueError("q_seed must be finite")
+    data = finger.model.createData()
+    r, Jr, e_pos, e_rot = _residual(finger, data, q, R_t, p_t)
+    cost = 0.5 * float(r @ r)
+    H = Jr.T @ Jr
+    lam = 1e-3 * max(float(np.max(np.diag(H))), 1e-12)
+    lam_min, lam_max = 1e-14, 1e10
+    iterations = 0
+    while iterations < max_iter and not (e_pos <= tol and e_rot <= tol):
+        iterations += 1
+        g = Jr.T @ r
+        dq = _lm_step(H, g, lam, q, finger.lower, finger.upper)
+        q_new = np.clip(q + dq, finger.lower, finger.upper)
+        r_new, Jr_new, e_pos_new, e_rot_new = _residual(finger, data, q_new, R_t, p_t)
+        cost_new = 0.5 * float(r_new @ r_new)
+        if cost_new < cost:
+            q, r, Jr, e_pos, e_rot, cost = q_new, r_new, Jr_new, e_pos_new, e_rot_new, cost_new
+            H = Jr.T @ Jr
+            lam = max(lam / 10.0, lam_min)
+        else:
+            lam *= 10.0
+            if lam > lam_max:
+                break
+    return IKResult(
+        q=_readonly(q),
+        position_error=e_pos,
+        orientation_error=e_rot,
+        converged=bool(e_pos <= tol and e_rot <= tol),
+        within_limits=bool(np.all(q >= finger.lower) and np.all(q <= finger.upper)),
+        iterations=iterations,
+    )

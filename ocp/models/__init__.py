@@ -1,0 +1,1 @@
+"""Robot models shipped with dexroll (URDF files, read with importlib.resources)."""
