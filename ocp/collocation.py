@@ -183,7 +183,8 @@ def reintegrator(dynamics: ca.Function, nx: int, nu: int, n_params: int, n_sub: 
     ode = h * dynamics(x, quadratic_input(s, u0, um, u1), params)
     grid = list(np.linspace(0.0, 1.0, n_sub + 1)[1:])
     return ca.integrator("reintegrate", "cvodes", {"x": x, "p": q, "t": s, "ode": ode},
-                         0.0, grid, {"abstol": 1e-13, "reltol": 1e-11})
+                         0.0, grid, {"abstol": 1e-13, "reltol": 1e-11,
+                                                  "max_num_steps": 100_000})
 
 
 def reintegrate(F: ca.Function, x0: NDArray[np.float64], t_nodes: NDArray[np.float64],

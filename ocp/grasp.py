@@ -1,0 +1,55 @@
+"""Grasp geometry shared by the finger planners: grasp angles and the friction cone.
+
+For two contacts on an object (paper, section 3, after Montana 1988 and Nguyen 1986): with
+``d`` the vector from contact 1 to contact 2 and ``n1``, ``n2`` the object's outward normals
+there, the grasp angles are
+
+    Phi_1 = acos(-n1 . d / |d|),   Phi_2 = acos(n2 . d / |d|),
+
+and the grasp is force closure when max(Phi_1, Phi_2) < atan(mu).
+
+acos has an infinite slope at the antipodal optimum (Phi = 0), so the NLP never uses it:
+the cone is imposed in its cosine form ``-n1 . d >= |d| cos(atan mu)`` (and likewise for
+n2), and the grasp quality is measured by ``1 - cos Phi`` (~ Phi^2 / 2), smooth at 0.
+``|d|`` is a safe norm (finite gradient when the contacts coincide).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .surfaces import safe_norm
+
+__all__ = ["cone_cosine", "grasp_angles_numeric", "grasp_cosines"]
+
+Sym = Any
+
+
+def cone_cosine(mu: float) -> float:
+    """cos(atan(mu)) = 1/sqrt(1 + mu^2): the friction cone's half-angle cosine."""
+    return 1.0 / math.sqrt(1.0 + mu * mu)
+
+
+def grasp_cosines(p1: Sym, n1: Sym, p2: Sym, n2: Sym) -> tuple[Sym, Sym, Sym]:
+    """(cos Phi_1 |d|, cos Phi_2 |d|, |d|) for contacts (p1, n1), (p2, n2) (any frame).
+
+    Returned un-normalised so that constraints stay smooth: the cone at contact i is
+    ``c_i - |d| cos(atan mu) >= 0``.
+    """
+    d = p2 - p1
+    dist = safe_norm(d)
+    return -ca.dot(n1, d), ca.dot(n2, d), dist
+
+
+def grasp_angles_numeric(p1: np.ndarray, n1: np.ndarray, p2: np.ndarray, n2: np.ndarray
+                         ) -> tuple[float, float]:
+    """(Phi_1, Phi_2) [rad] for reporting (numpy, acos clipped)."""
+    d = np.asarray(p2, dtype=float) - np.asarray(p1, dtype=float)
+    dist = float(np.linalg.norm(d))
+    c1 = float(np.clip(-np.dot(n1, d) / dist, -1.0, 1.0))
+    c2 = float(np.clip(np.dot(n2, d) / dist, -1.0, 1.0))
+    return math.acos(c1), math.acos(c2)

@@ -1,0 +1,117 @@
+"""Laws on real plans of one flat fingertip rolling a ball on the palm (section 3)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from helpers import assert_close
+
+from ocp.finger import load_finger
+from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem, OneFingerSolution
+from ocp.problem import BallOnPalmProblem, ObjectSpec, ProblemError
+from ocp.solution import Status
+
+RHO = 0.025
+FINGER = load_finger(pad_half_size=0.05)
+PLANNER = OneFingerPlanner()
+#: The finger contact's chart patch on the ball: patch point (0, 0) is the ball's top at
+#: the start (the palm contact's patch has it at the bottom); u_f = 0.2 rad tilts the
+#: contact 11.5 deg from the top: grasp angles of 5.7 deg, away from antipodal.
+CONTACT = FingerContact(initial=(0.0, 0.0, 0.2, 0.0, 0.0), chart_rotation=(0.0, 0.0, math.pi))
+
+
+def roll(n: int = 40) -> OneFingerProblem:
+    """Roll the ball 10 mm along the palm's x axis in 2 s, the finger pressing on it."""
+    base = BallOnPalmProblem(object=ObjectSpec("sphere", (RHO,)),
+                             initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2),
+                             goal={"x": 0.01, "y": 0.0}, duration=2.0, n_intervals=n)
+    return OneFingerProblem(base=base, finger=FINGER, contact=CONTACT, mu=0.5,
+                            grasp_weight=100.0)
+
+
+@pytest.fixture(scope="module")
+def plan() -> OneFingerSolution:
+    return PLANNER.solve(roll())
+
+
+def test_short_roll_is_solved_and_certified(plan: OneFingerSolution) -> None:
+    assert plan.status is Status.SOLVED, plan.message
+    assert not plan.certificate_failures
+    assert max(plan.goal_error.values()) < 1e-6
+
+
+def test_closure_holds_along_plan(plan: OneFingerSolution) -> None:
+    """Pinocchio's forward kinematics of the joint angles puts the fingertip exactly where
+    the object pose and the finger contact coordinates say it is (eq. 6)."""
+    for i in range(len(plan.t)):
+        R_pin, p_pin = FINGER.fingertip_pose_pin(plan.q[i])
+        assert_close(p_pin, plan.fingertip_position[i], atol=1e-7)
+        assert_close(R_pin, plan.fingertip_rotation[i], atol=1e-6)
+
+
+def test_no_slip_or_spin_at_either_contact(plan: OneFingerSolution) -> None:
+    """Along the re-integrated motion (finger moved by its joints, ball by the palm
+    contact), the contact points do not slide or spin. At the palm the law holds exactly;
+    at the finger to the collocation accuracy (closure is imposed at collocation points)."""
+    c = plan.certificate
+    speed = float(np.max(np.linalg.norm(plan.w_p, axis=1)))  # ball centre speed [m/s]
+    assert c["max_slip_speed_palm"] < 1e-12
+    assert c["max_spin_rate_palm"] < 1e-12
+    # the pad's contact point moves at up to twice the centre speed
+    assert c["max_slip_speed_finger"] < 1e-3 * 2 * speed
+    assert c["max_spin_rate_finger"] < 1e-3 * 2 * speed / RHO
+
+
+def test_fingertip_pad_is_tangent_to_the_ball(plan: OneFingerSolution) -> None:
+    """The pad plane (from Pinocchio FK) is at one radius from the ball's centre, and the
+    contact lies on the pad."""
+    for i in range(len(plan.t)):
+        R_pin, p_pin = FINGER.fingertip_pose_pin(plan.q[i])
+        gap = float(R_pin[:, 2] @ (plan.object_position[i] - p_pin)) - RHO
+        assert abs(gap) < 1e-7
+    assert np.max(np.abs(plan.eta_f[:, :2])) <= FINGER.pad_half_size
+    assert_close(plan.object_position[:, 2], RHO, atol=1e-12)
+
+
+def test_grasp_stays_inside_the_friction_cone(plan: OneFingerSolution) -> None:
+    assert np.all(plan.cone_margin > 0.0)
+    assert np.all(plan.grasp_angles.max(axis=1) < math.atan(0.5))
+
+
+def test_grasp_angle_moves_towards_antipodal(plan: OneFingerSolution) -> None:
+    """Started 5.7 deg away from antipodal, the optimiser brings the grasp closer."""
+    worst = plan.grasp_angles.max(axis=1)
+    assert worst[0] > math.radians(5.0)
+    assert np.min(worst) < 0.25 * worst[0]
+    half = len(worst) // 2
+    assert np.all(np.diff(worst[: half // 2]) < 0), "it improves from the start"
+
+
+def test_joint_limits_are_respected(plan: OneFingerSolution) -> None:
+    assert np.all(plan.q >= FINGER.lower - 1e-9) and np.all(plan.q <= FINGER.upper + 1e-9)
+    assert np.all(np.abs(plan.q_dot) <= FINGER.velocity_limit + 1e-9)
+
+
+@pytest.mark.parametrize(("contact", "words"), [
+    (replace(CONTACT, initial=(0.0, 0.0, 1.2, 0.0, 0.0)), "outside the friction cone"),
+    (replace(CONTACT, initial=(0.049, 0.0, 0.2, 0.0, 0.0)), "leaves the pad"),
+])
+def test_impossible_initial_grasp_is_rejected_with_its_reason(contact: FingerContact,
+                                                              words: str) -> None:
+    with pytest.raises(ProblemError) as info:
+        PLANNER.solve(replace(roll(), contact=contact))
+    assert any(words in reason for _, reason in info.value.errors), info.value.errors
+    assert any(field.startswith("finger_contact.initial") for field, _ in info.value.errors)
+
+
+def test_unreachable_initial_grasp_is_rejected_with_the_distance() -> None:
+    far = replace(roll(), base=replace(roll().base, initial=(0.3, 0.0, 0.0, 0.0, -math.pi / 2),
+                                       goal={"x": 0.31}))
+    with pytest.raises(ProblemError) as info:
+        PLANNER.solve(far)
+    (field, reason), = info.value.errors
+    assert field == "finger_contact.initial" and "cannot reach" in reason
+    assert " m " in reason  # says by how much
