@@ -58,20 +58,25 @@ FloatArray = NDArray[np.float64]
 #: File name of the built-in finger in the package ``ocp.models``.
 BUILTIN_URDF = "k3s_finger.urdf"
 
-#: Half the side of the built-in finger's square pad [m] (a 30 mm x 30 mm pad).
-PAD_HALF_SIZE = 0.015
+#: Half the side of the built-in finger's square pad [m] (a 100 mm x 100 mm pad). In the
+#: paper's experiment 1 the contact travels across the fingertip as far as the ball's centre
+#: travels over the palm (its figure 7): up to 42 mm on the 30 mm triangle when the grasp is
+#: kept near antipodal, so the pad must be wider than that on each side.
+PAD_HALF_SIZE = 0.05
 
 #: The built-in finger's default mount in the palm frame: its base frame is parallel to the
 #: palm frame (the finger reaches along the palm's +x at zero waist angle) ...
 DEFAULT_BASE_ROTATION: tuple[tuple[float, ...], ...] = (
     (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-#: ... with its origin 49.2 mm on the palm's -x side of palm point (0, 0) and 33.4 mm below
-#: the palm surface (the finger stands beside the palm, on the hand's base) [m]. Chosen so
-#: that the paper's initial joint angles :data:`PAPER_SEED` press the pad centre onto a
-#: 25 mm ball at palm point (0, 0), tangent to it 12.63 deg from its top (to 0.03 mm), and
-#: every grasp of that ball at the triangle (0, 0), (0.03, 0), (0.03, 0.03) tilted up to
-#: 30 deg from the top is reached with more than 25 deg of margin to every joint limit.
-DEFAULT_BASE_POSITION: tuple[float, float, float] = (-0.0492, 0.0, -0.0334)
+#: ... with its origin 49 mm on the palm's -x side, 40 mm on its +y side of palm point
+#: (0, 0), and 10 mm below the palm surface (the finger stands beside the palm) [m]. While
+#: the ball's centre rolls along experiment 1's triangle the pad, pressing on its top, moves
+#: along a triangle twice as large (0, 0) - (60, 0) - (60, 60) mm (the paper's figure 6);
+#: from this mount IK reaches pad poses over that whole triangle, yawed up to 20 deg and
+#: tilted up to 20 deg, with at least 24 deg of margin to every joint limit (a sweep of 22
+#: pad positions x 15 orientations, 2 of them at the far corner out of reach). The paper's
+#: initial joint angles :data:`PAPER_SEED` seed the IK of the initial grasp.
+DEFAULT_BASE_POSITION: tuple[float, float, float] = (-0.049, 0.04, -0.01)
 
 #: The paper's initial joint angles of experiment 1 [deg] and [rad].
 PAPER_SEED_DEG: tuple[float, ...] = (0.0, -22.68, -12.34, 0.0, 47.65, 0.0)

@@ -73,8 +73,12 @@ class OneFingerProblem:
     finger: Any  # ocp.finger.FingerModel
     contact: FingerContact
     mu: float = 0.5
-    grasp_weight: float = 1.0
-    finger_effort_weight: float = 1.0
+    #: Weights of the objective (scaled, dimensionless terms): palm contact effort has
+    #: weight 1. Grasp quality dominates by default (the paper's second objective): moving
+    #: the finger contact over the ball and the joints is cheap, so the grasp converges to
+    #: antipodal quickly and stays there.
+    grasp_weight: float = 100.0
+    finger_effort_weight: float = 0.01
     joint_effort_weight: float = 0.01
     pad_margin: float = 0.002  # m kept between the contact and the pad's edge
 

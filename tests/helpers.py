@@ -12,7 +12,7 @@ def _as_float_array(x: Any) -> np.ndarray:
     return np.array(x, dtype=float)
 
 
-def assert_close(actual: Any, expected: Any, atol: float, rtol: float = 0.0,
+def assert_close(actual: Any, expected: Any, atol: Any, rtol: float = 0.0,
                  err_msg: str = "") -> None:
     """Assert |actual - expected| <= atol + rtol |expected| element by element.
 
@@ -20,8 +20,11 @@ def assert_close(actual: Any, expected: Any, atol: float, rtol: float = 0.0,
     on any NaN or inf in ``actual`` or ``expected`` (NaN never passes as "close").
     ``expected`` may be a scalar (compared with every element of ``actual``); otherwise the
     shapes must agree, up to singleton axes (a CasADi column (n, 1) matches a numpy (n,)).
+    ``atol`` is a number or an array of per-element tolerances of the compared shape.
     """
-    if not (np.isfinite(atol) and atol >= 0.0 and np.isfinite(rtol) and rtol >= 0.0):
+    atol_arr = np.asarray(atol, dtype=float)
+    if not (np.all(np.isfinite(atol_arr)) and np.all(atol_arr >= 0.0) and np.isfinite(rtol)
+            and rtol >= 0.0):
         raise ValueError(f"tolerances must be finite and >= 0, got atol={atol}, rtol={rtol}")
     a = _as_float_array(actual)
     e = _as_float_array(expected)
@@ -35,14 +38,15 @@ def assert_close(actual: Any, expected: Any, atol: float, rtol: float = 0.0,
             raise AssertionError(f"{prefix}shape mismatch: actual {a.shape}, expected {e.shape}")
         a, e = np.squeeze(a), np.squeeze(e)
     err = np.abs(a - e)
-    tol = atol + rtol * np.abs(e)
+    tol = np.broadcast_to(np.squeeze(atol_arr) if atol_arr.ndim else atol_arr,
+                          err.shape) + rtol * np.abs(e)
     bad = err > tol
     if np.any(bad):
-        worst = np.unravel_index(np.argmax(err - tol), err.shape) if err.ndim else ()
+        worst = tuple(int(i) for i in np.unravel_index(np.argmax(err - tol), err.shape))
         raise AssertionError(
             f"{prefix}{int(np.sum(bad))} of {err.size} entries differ by more than "
-            f"atol={atol:g} + rtol={rtol:g}*|expected|; worst at {worst}: "
+            f"atol + rtol*|expected| (rtol={rtol:g}); worst at {worst}: "
             f"actual={a[worst]!r}, expected={np.broadcast_to(e, a.shape)[worst]!r}, "
-            f"error={err[worst]:.3e}, tolerance={np.broadcast_to(tol, err.shape)[worst]:.3e}\n"
+            f"error={err[worst]:.3e}, tolerance={tol[worst]:.3e}\n"
             f"actual:\n{a}\nexpected:\n{e}"
         )

@@ -15,7 +15,7 @@ from ocp.problem import BallOnPalmProblem, ObjectSpec, ProblemError
 from ocp.solution import Status
 
 RHO = 0.025
-FINGER = load_finger(pad_half_size=0.05)
+FINGER = load_finger()
 PLANNER = OneFingerPlanner()
 #: The finger contact's chart patch on the ball: patch point (0, 0) is the ball's top at
 #: the start (the palm contact's patch has it at the bottom); u_f = 0.2 rad tilts the
@@ -28,8 +28,7 @@ def roll(n: int = 40) -> OneFingerProblem:
     base = BallOnPalmProblem(object=ObjectSpec("sphere", (RHO,)),
                              initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2),
                              goal={"x": 0.01, "y": 0.0}, duration=2.0, n_intervals=n)
-    return OneFingerProblem(base=base, finger=FINGER, contact=CONTACT, mu=0.5,
-                            grasp_weight=100.0)
+    return OneFingerProblem(base=base, finger=FINGER, contact=CONTACT, mu=0.5)
 
 
 @pytest.fixture(scope="module")
@@ -52,17 +51,34 @@ def test_closure_holds_along_plan(plan: OneFingerSolution) -> None:
         assert_close(R_pin, plan.fingertip_rotation[i], atol=1e-6)
 
 
+def rolling_speed(plan: OneFingerSolution) -> float:
+    """Worst speed of the finger contact over the ball [m/s]: the ball's own rolling
+    (up to twice its centre speed at the top) plus the contact's motion over it."""
+    return float(np.max(2 * np.linalg.norm(plan.w_p, axis=1)
+                        + RHO * np.linalg.norm(plan.w_f, axis=1)))
+
+
 def test_no_slip_or_spin_at_either_contact(plan: OneFingerSolution) -> None:
     """Along the re-integrated motion (finger moved by its joints, ball by the palm
-    contact), the contact points do not slide or spin. At the palm the law holds exactly;
-    at the finger to the collocation accuracy (closure is imposed at collocation points)."""
+    contact), the contact points do not slide or spin. At the palm the law holds to
+    round-off; at the finger to the collocation accuracy, because closure is imposed at
+    the collocation points: within 1 % of the rolling speed at this grid."""
     c = plan.certificate
-    speed = float(np.max(np.linalg.norm(plan.w_p, axis=1)))  # ball centre speed [m/s]
     assert c["max_slip_speed_palm"] < 1e-12
     assert c["max_spin_rate_palm"] < 1e-12
-    # the pad's contact point moves at up to twice the centre speed
-    assert c["max_slip_speed_finger"] < 1e-3 * 2 * speed
-    assert c["max_spin_rate_finger"] < 1e-3 * 2 * speed / RHO
+    speed = rolling_speed(plan)
+    assert c["max_slip_speed_finger"] < 1e-2 * speed
+    assert c["max_spin_rate_finger"] < 1e-2 * speed / RHO
+
+
+def test_finger_slip_vanishes_as_the_grid_is_refined(plan: OneFingerSolution) -> None:
+    """The finger's residual slip is discretisation error: a finer grid shrinks it."""
+    fine = PLANNER.solve(roll(80))
+    assert fine.status is Status.SOLVED
+    assert fine.certificate["max_slip_speed_finger"] < 0.5 * plan.certificate[
+        "max_slip_speed_finger"]
+    assert fine.certificate["max_closure_position_error"] < 0.5 * plan.certificate[
+        "max_closure_position_error"]
 
 
 def test_fingertip_pad_is_tangent_to_the_ball(plan: OneFingerSolution) -> None:
