@@ -38,7 +38,7 @@ from .contact import ContactPair
 from .grasp import cone_cosine, grasp_angles_numeric, grasp_cosines
 from .problem import CONTACT_COORDS, PERIODIC, BallOnPalmProblem
 from .solution import Status, status_from_ipopt
-from .surfaces import Plane, rotation_from_vector
+from .surfaces import SURFACES, Plane, rotation_from_vector
 
 __all__ = ["FingerContact", "OneFingerPlanner", "OneFingerProblem", "OneFingerSolution"]
 
@@ -91,6 +91,11 @@ class OneFingerProblem:
             if not (math.isfinite(value) and 0.0 <= value <= 1e6):
                 errs.append((name, f"must be in [0, 1e6], got {value}"))
         c = self.contact
+        why = self.base.object.surface.chart_rotation_error(
+            rotation_from_vector(c.chart_rotation)) if self.base.object.shape in SURFACES \
+            else None
+        if why is not None:
+            errs.append(("finger_contact.chart_rotation", why))
         if len(c.initial) != 5 or not all(map(math.isfinite, c.initial)):
             errs.append(("finger_contact.initial", "must be 5 finite numbers "
                                                    "(x_f, y_f, u_f, v_f, psi_f)"))

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .surfaces import SURFACES, Surface
+from .surfaces import SURFACES, Surface, rotation_from_vector
 
 __all__ = [
     "CONTACT_COORDS",
@@ -125,6 +125,10 @@ class BallOnPalmProblem:
         if len(obj.chart_rotation) != 3 or not all(map(math.isfinite, obj.chart_rotation)):
             errs.append(("object.chart_rotation",
                          "must be 3 finite numbers (rotation vector, rad)"))
+        elif obj.shape in SURFACES:
+            why = obj.surface.chart_rotation_error(rotation_from_vector(obj.chart_rotation))
+            if why is not None:
+                errs.append(("object.chart_rotation", why))
 
         margin_ok = math.isfinite(self.pole_margin) and 0.0 < self.pole_margin < math.pi / 2
         if not margin_ok:
@@ -193,11 +197,13 @@ class BallOnPalmProblem:
                 errs.append((where, f"|{key}| = {abs(value):.4g} m is outside the palm "
                                     f"(palm_half_extent = {self.palm_half_extent} m)"))
             elif key == "u" and abs(value) > u_max:
+                remedy = ("rotate the object chart (object.chart_rotation) so the contact "
+                          "is away from its poles") if self.object.shape == "sphere" else \
+                    ("the poles are the ends of the object's axis of revolution: keep the "
+                     "contact away from them or lower pole_margin")
                 errs.append((where,
                              f"|u| = {abs(value):.4f} rad is at or beyond the chart pole "
-                             f"limit pi/2 - pole_margin = {u_max:.4f} rad; rotate the object "
-                             f"chart (object.chart_rotation) so the contact is away from its "
-                             f"poles"))
+                             f"limit pi/2 - pole_margin = {u_max:.4f} rad; {remedy}"))
         return errs
 
     def validate(self) -> None:

@@ -162,6 +162,29 @@ class Surface:
         """The point of the surface whose outward normal is the unit ``direction`` [m]."""
         raise NotImplementedError(f"{self.name} is not a closed convex surface")
 
+    #: Which rotations of the chart patch leave the surface itself unchanged, so that the
+    #: rotated patch is another coordinate patch of the same body surface: "any" (sphere),
+    #: "axis" (rotations that map the body z axis to itself: +-z for a body symmetric about
+    #: its equator), "axis+" (rotations about +z only: the plane, whose normal is +z).
+    chart_symmetry: str = "axis+"
+
+    def chart_rotation_error(self, rotation: ArrayLike) -> str | None:
+        """Why ``rotation`` (3x3) is not a valid patch rotation of this surface, or None."""
+        R = np.asarray(rotation, dtype=float).reshape(3, 3)
+        if not np.allclose(R.T @ R, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+            return "not a rotation"
+        z = R @ np.array([0.0, 0.0, 1.0])
+        if self.chart_symmetry == "any":
+            return None
+        if self.chart_symmetry == "axis" and abs(abs(z[2]) - 1.0) < 1e-9:
+            return None
+        if self.chart_symmetry == "axis+" and abs(z[2] - 1.0) < 1e-9:
+            return None
+        which = "its axis of revolution (body z)" if self.chart_symmetry == "axis" else \
+            "its normal (body z)"
+        return (f"a {self.name}'s chart patch can only be turned about {which}: any other "
+                f"rotation would describe a different, rotated {self.name}")
+
     def validate_params(self, params: Sequence[float]) -> list[str]:
         """Reasons why ``params`` do not describe this surface (empty when they do)."""
         errors = []
@@ -202,6 +225,8 @@ class _Plane(Surface):
 class _Sphere(Surface):
     """Sphere of radius rho, f = rho (cos u cos v, -cos u sin v, sin u); poles at u = +-pi/2."""
 
+    chart_symmetry = "any"
+
     def __init__(self) -> None:
         super().__init__("sphere", _sphere_chart, ("radius",), (False, True), np.pi / 2,
                          ("u", "v"))
@@ -227,6 +252,8 @@ class _Ellipsoid(Surface):
     ellipsoid shipped here is one of revolution (a spheroid, prolate or oblate); its
     curvature is not a multiple of the identity, so it exercises the general derivation.
     """
+
+    chart_symmetry = "axis"
 
     def __init__(self) -> None:
         super().__init__("ellipsoid", _spheroid_chart, ("equatorial_semi_axis", "polar_semi_axis"),
@@ -288,6 +315,9 @@ class Chart:
     def of(surface: Surface, params: Sequence[float] = (), rotvec: ArrayLike | None = None
            ) -> Chart:
         R = np.eye(3) if rotvec is None else rotation_from_vector(rotvec)
+        error = surface.chart_rotation_error(R)
+        if error is not None:
+            raise ValueError(error)
         return Chart(surface, tuple(float(p) for p in params),
                      tuple(tuple(float(x) for x in row) for row in R))
 
