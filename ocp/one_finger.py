@@ -129,6 +129,8 @@ class OneFingerSolution:
     t: FloatArray
     eta_p: FloatArray
     eta_f: FloatArray
+    eta_p_dot: FloatArray  # rates of the palm contact coordinates ([m/s], [rad/s])
+    eta_f_dot: FloatArray  # rates of the finger contact coordinates ([m/s], [rad/s])
     q: FloatArray
     q_dot: FloatArray
     w_p: FloatArray
@@ -568,6 +570,8 @@ class OneFingerPlanner:
         Xg = np.vstack([X, Xm])[order]
         Ug = np.vstack([np.vstack([U0, U1[-1:]]), Um])[order]
         k = len(t)
+        prm = np.concatenate([shape, Rcp.ravel(order="F"), Rcf.ravel(order="F")])
+        xdot = np.asarray(m.dynamics.map(k)(Xg.T, Ug.T, prm)).T
         cart = m.cartesian.map(k)(Xg.T, shape, Rcp, Rcf)
         R_po = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
         p_po = np.asarray(cart[1]).T
@@ -595,7 +599,7 @@ class OneFingerPlanner:
         return OneFingerSolution(
             status=status, message=message, raw_status=raw, iterations=iterations,
             build_time=build_time, solve_time=solve_time, t=t, eta_p=Xg[:, 0:5],
-            eta_f=Xg[:, 5:10], q=Xg[:, 10:],
+            eta_f=Xg[:, 5:10], eta_p_dot=xdot[:, 0:5], eta_f_dot=xdot[:, 5:10], q=Xg[:, 10:],
             q_dot=Ug[:, 4:],
             w_p=Ug[:, 0:2], w_f=Ug[:, 2:4],
             object_position=p_po, object_rotation=R_po, fingertip_position=p_pf,

@@ -131,3 +131,18 @@ def test_unreachable_initial_grasp_is_rejected_with_the_distance() -> None:
     (field, reason), = info.value.errors
     assert field == "finger_contact.initial" and "cannot reach" in reason
     assert " m " in reason  # says by how much
+
+
+def test_reported_rates_are_the_rolling_equations_at_both_contacts(plan: OneFingerSolution
+                                                                   ) -> None:
+    """The contact-coordinate rates in the result follow from the inputs by the rolling
+    equations: the palm ones move the palm point with w_p, the finger ones move the ball
+    point with w_f, and integrating the rates reproduces the coordinates."""
+    assert_close(plan.eta_p_dot[:, 0:2], plan.w_p, atol=1e-12)
+    assert_close(plan.eta_f_dot[:, 2:4], plan.w_f, atol=1e-12)
+    # the grid alternates node, midpoint, node: Simpson's rule over each interval is the
+    # collocation condition, so it must hold to the NLP's tolerance
+    for eta, rate in ((plan.eta_p, plan.eta_p_dot), (plan.eta_f, plan.eta_f_dot)):
+        h = plan.t[2::2] - plan.t[:-2:2]
+        simpson = h[:, None] / 6 * (rate[:-2:2] + 4 * rate[1::2] + rate[2::2])
+        assert_close(eta[2::2] - eta[:-2:2], simpson, atol=1e-9)
