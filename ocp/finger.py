@@ -18,9 +18,12 @@ is the :data:`~ocp.surfaces.Plane` chart ``f(x, y) = (x, y, 0)`` in that frame
 
 The built-in finger (``ocp/models/k3s_finger.urdf``) is a 6-revolute finger in the spirit of
 the HKUST hand's modified Motoman K3S fingers (waist yaw, shoulder pitch, elbow pitch, wrist
-roll, wrist pitch, wrist roll), scaled to finger size, with a 30 mm x 30 mm flat pad. Its
-default mount puts the paper's initial joint angles (experiment 1) at a grasp of a 25 mm
-ball lying at palm point (0, 0), tilted 12.63 deg from the antipodal grasp.
+roll, wrist pitch, wrist roll), scaled to finger size, with a 100 mm x 100 mm flat pad. Its
+default mount (:data:`DEFAULT_BASE_POSITION`) lets the pad press on the top of a 25 mm ball
+anywhere along experiment 1's triangle, where the pad travels twice as far as the ball. The
+paper's initial joint angles are a configuration above the palm that seeds the inverse
+kinematics of the initial grasp; they are not that grasp's joint angles (the paper's
+finger dimensions are not given).
 """
 
 from __future__ import annotations

@@ -28,19 +28,22 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from dexroll_client.models import (
+    BUILTIN_FINGERS,
+    PLANNERS,
     ErrorBody,
     FieldError,
+    FingerInfo,
+    FingerModelSpec,
     Job,
     JobList,
     JobState,
     ModelCatalog,
     ObjectInfo,
     PlanRequest,
-    PlanResult,
 )
 from ocp.surfaces import SURFACES
 
-from .convert import to_problem
+from .convert import FINGERS, RESULT, request_errors, rotation_vector, wire_field
 from .settings import Settings
 from .store import IdempotencyConflictError, JobRow, Store
 from .workers import Dispatcher
@@ -145,7 +148,7 @@ def job_model(row: JobRow) -> Job:
                created_at=datetime.fromtimestamp(row.created_at, tz=UTC),
                started_at=_ts(row.started_at), finished_at=_ts(row.finished_at),
                worker_pid=row.worker_pid,
-               result=PlanResult.model_validate_json(row.result) if row.result else None)
+               result=RESULT.validate_json(row.result) if row.result else None)
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -196,10 +199,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         detail = []
         for e in exc.errors():
             loc = [str(p) for p in e.get("loc", ())]
-            if loc and loc[0] in ("body", "query", "header", "path"):
+            where = loc[0] if loc and loc[0] in ("body", "query", "header", "path") else None
+            if where is not None:
                 loc = loc[1:]
-            field = ".".join(loc) or "body"
+            field = (wire_field(loc) if where == "body" else ".".join(loc)) or "body"
             reason = str(e.get("msg", "invalid"))
+            if e.get("type") == "invalid_planner":
+                field = "planner"
             if e.get("type") == "json_invalid":
                 field, reason = "body", f"not valid JSON: {e.get('ctx', {}).get('error', '')}"
             detail.append(FieldError(field=field, reason=reason))
@@ -230,9 +236,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         idempotency_key: Annotated[str | None, Header(max_length=200, description=(
             "a retried POST with the same key returns the same job"))] = None,
     ) -> Job:
-        """Submit a planning request: 201 with the finished job, or 202 and a Location."""
-        problem = to_problem(body)
-        errors = problem.errors()
+        """Submit a planning request (`planner` picks the planner: `ball_on_palm`, the
+        default, or `one_finger`): 201 with the finished job, or 202 and a Location."""
+        # cheap checks (no NLP), in a thread: a finger's URDF and the inverse kinematics
+        # of its initial grasp take milliseconds
+        errors = await asyncio.to_thread(request_errors, body)
         if errors:
             detail = [FieldError(field=f, reason=r) for f, r in errors]
             raise ServiceError(422, "invalid_request",
@@ -310,7 +318,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         objects = [ObjectInfo(shape=name, parameters=list(s.param_names),
                               description=(s.__doc__ or name).strip().splitlines()[0])
                    for name, s in SURFACES.items() if s.singular_u is not None]
-        return ModelCatalog(planners=["ball_on_palm"], objects=objects, fingers=[])
+        fingers = []
+        for name in BUILTIN_FINGERS:
+            f = FINGERS.finger(FingerModelSpec(builtin=name))
+            fingers.append(FingerInfo(
+                name=name, tip_frame=f.tip_frame, n_joints=f.nq,
+                joint_names=list(f.joint_names), pad_half_size=f.pad_half_size,
+                base_position=[float(x) for x in f.base_position],
+                base_rotation=rotation_vector(f.base_rotation), urdf=f.urdf_text))
+        return ModelCatalog(planners=list(PLANNERS), objects=objects, fingers=fingers)
 
     @app.get("/healthz")
     def healthz() -> dict[str, str]:

@@ -1,5 +1,8 @@
 """Command line: ``dexroll serve``, ``dexroll plan request.json``, ``dexroll demo [folder]``.
 
+A request file is any planner's request (its ``planner`` field: ``ball_on_palm``, the
+default, or ``one_finger``), the same JSON as ``POST /v1/plans`` takes.
+
 Exit codes: 0 the plan is solved (certificate passed), 1 a plan was computed but is not
 solved (see its status), 2 the request is invalid (each bad field is named on stderr).
 """
@@ -9,51 +12,95 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 from pathlib import Path
 
 from pydantic import ValidationError
 
-from dexroll_client.models import BallOnPalmRequest, PlanResult, PlanStatus
-from ocp.ball_on_palm import plan
+from dexroll_client.models import AnyPlanResult, FingerPlanResult, PlanStatus
 from ocp.problem import ProblemError
+from ocp.solution import Solution
 
-from .convert import invalid_result, result_from_solution, to_problem, validation_errors
+from .convert import (
+    REQUEST,
+    error_result,
+    invalid_result,
+    planner_of,
+    request_errors,
+    solve,
+    validation_errors,
+)
 
-__all__ = ["main", "plan_request"]
+__all__ = ["finger_summary", "main", "plan_request"]
 
 EXIT_SOLVED, EXIT_NOT_SOLVED, EXIT_INVALID = 0, 1, 2
 log = logging.getLogger("dexroll")
 
 
-def plan_request(raw: object) -> tuple[PlanResult, str]:
+def plan_request(raw: object) -> tuple[AnyPlanResult, str]:
     """Validate and plan a decoded JSON request: (result, one-screen summary)."""
+    planner = planner_of(raw)
     try:
-        request = BallOnPalmRequest.model_validate(raw)
-        problem = to_problem(request)
-        problem.validate()
+        request = REQUEST.validate_python(raw)
     except ValidationError as exc:
-        result = invalid_result(validation_errors(exc))
+        result = invalid_result(validation_errors(exc), planner)
         return result, _invalid_summary(result)
-    except ProblemError as exc:
-        result = invalid_result(exc.errors)
+    errors = request_errors(request)
+    if errors:
+        result = invalid_result(errors, planner)
         return result, _invalid_summary(result)
     try:
-        solution = plan(problem)
+        result, solution = solve(request)
+    except ProblemError as exc:
+        result = invalid_result(exc.errors, planner)
+        return result, _invalid_summary(result)
     except Exception as exc:  # a failure is a typed result, never a traceback
         log.exception("planner failed")
-        result = PlanResult(status=PlanStatus.ERROR, message=f"planner failed: {exc!r}")
+        result = error_result(f"planner failed: {exc!r}", planner)
         return result, f"status       error\nmessage      {result.message}"
-    return result_from_solution(solution, request.sample_times), solution.summary()
+    if isinstance(solution, Solution):
+        return result, solution.summary()
+    assert isinstance(result, FingerPlanResult)
+    return result, finger_summary(result)
 
 
-def _invalid_summary(result: PlanResult) -> str:
+def finger_summary(result: FingerPlanResult) -> str:
+    """One screen on a one-finger plan."""
+    lines = [f"status       {result.status.value}"
+             + (f"  (IPOPT: {result.stats.raw_status})" if result.stats else ""),
+             f"message      {result.message}"]
+    if result.stats is not None:
+        s = result.stats
+        lines += [f"iterations   {s.iterations}",
+                  f"time         build {s.build_time * 1e3:.1f} ms, solve "
+                  f"{s.solve_time * 1e3:.1f} ms"]
+    if result.goal_error:
+        worst_goal = max(result.goal_error.values())
+        lines.append(f"goal error   {worst_goal:.3g} (worst of {len(result.goal_error)} "
+                     "targets)")
+    c = result.certificate
+    if c is not None:
+        lines.append("certificate  " + ("PASSED" if c.passed else "FAILED"))
+        lines += [f"  {f}" for f in c.failures[:6]]
+    t = result.trajectory
+    if t is not None and t.grasp_angles:
+        worst = [max(row) for row in t.grasp_angles]
+        lines.append(f"grasp angle  {math.degrees(worst[0]):.2f} deg at start, "
+                     f"{math.degrees(worst[-1]):.2f} at end, {math.degrees(max(worst)):.2f} "
+                     "max (larger of palm/finger)")
+        lines.append(f"cone margin  {math.degrees(min(t.cone_margin)):.2f} deg minimum "
+                     "(> 0: inside the friction cone)")
+    return "\n".join(lines)
+
+
+def _invalid_summary(result: AnyPlanResult) -> str:
     lines = ["status       invalid_input"]
     lines += [f"  {e.field}: {e.reason}" for e in result.errors]
     return "\n".join(lines)
 
 
-def _read(path: Path) -> tuple[object | None, PlanResult | None]:
+def _read(path: Path) -> tuple[object | None, AnyPlanResult | None]:
     try:
         return json.loads(path.read_text()), None
     except (OSError, UnicodeDecodeError) as exc:
@@ -62,7 +109,7 @@ def _read(path: Path) -> tuple[object | None, PlanResult | None]:
         return None, invalid_result([("request", f"{path} is not valid JSON: {exc}")])
 
 
-def _exit_code(result: PlanResult) -> int:
+def _exit_code(result: AnyPlanResult) -> int:
     if result.status is PlanStatus.INVALID_INPUT:
         return EXIT_INVALID
     return EXIT_SOLVED if result.status is PlanStatus.SOLVED else EXIT_NOT_SOLVED

@@ -25,13 +25,18 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from dexroll_client.models import JobState, PlanStatus
+from pydantic import TypeAdapter
+
+from dexroll_client.models import AnyPlanResult, JobState, PlanStatus
 
 from .store import JobRow, Store
 
 __all__ = ["Dispatcher", "job_outcome"]
 
 log = logging.getLogger("dexroll.workers")
+
+#: Parses a worker's reply: a result of any planner.
+_RESULT: TypeAdapter[AnyPlanResult] = TypeAdapter(AnyPlanResult)
 
 
 def job_outcome(status: PlanStatus) -> JobState:
@@ -44,14 +49,19 @@ def job_outcome(status: PlanStatus) -> JobState:
 
 
 def _worker_main(conn: Connection) -> None:
-    """Body of a worker process: plan each request received, reply with the result."""
+    """Body of a worker process: plan each request received, reply with the result.
+
+    The process keeps one planner per kind, and so their caches of built NLPs, from job to
+    job: the ball-on-palm planner, and the one-finger planner with the finger models it
+    was built for (``FingerCache``)."""
     # Imports happen in the child: the parent's modules are not inherited under spawn.
-    from dexroll_client.models import BallOnPalmRequest, PlanResult
     from ocp.ball_on_palm import BallOnPalmPlanner
+    from ocp.problem import ProblemError
 
-    from .convert import result_from_solution, to_problem
+    from .convert import REQUEST, FingerCache, error_result, invalid_result, solve
 
-    planner = BallOnPalmPlanner()
+    palm = BallOnPalmPlanner()
+    fingers = FingerCache()
     conn.send(("ready", None))
     while True:
         try:
@@ -61,15 +71,17 @@ def _worker_main(conn: Connection) -> None:
         if msg is None:
             return
         job_id, request_json = msg
+        planner = "ball_on_palm"
         try:
-            request = BallOnPalmRequest.model_validate_json(request_json)
-            solution = planner.solve(to_problem(request))
-            result = result_from_solution(solution, request.sample_times)
-            conn.send(("done", (job_id, result.model_dump_json())))
+            request = REQUEST.validate_json(request_json)
+            planner = request.planner
+            result, _ = solve(request, palm, fingers)
+        except ProblemError as exc:  # checked at submission; the store may be older
+            result = invalid_result(exc.errors, planner)
         except Exception as exc:  # reply with a typed error, never die on a bad job
             log.exception("job %s failed in the worker", job_id)
-            failed = PlanResult(status=PlanStatus.ERROR, message=f"planner failed: {exc!r}")
-            conn.send(("done", (job_id, failed.model_dump_json())))
+            result = error_result(f"planner failed: {exc!r}", planner)
+        conn.send(("done", (job_id, result.model_dump_json())))
 
 
 @dataclass(eq=False)
@@ -202,9 +214,7 @@ class Dispatcher(threading.Thread):
             slot.ready = True
             return
         job_id, result_json = payload
-        from dexroll_client.models import PlanResult
-
-        result = PlanResult.model_validate_json(result_json)
+        result = _RESULT.validate_json(result_json)
         slot.job, slot.deadline = None, float("inf")
         raw = result.stats.raw_status if result.stats else None
         self._end(job_id, job_outcome(result.status), result.status.value, result.message,

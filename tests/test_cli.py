@@ -37,12 +37,17 @@ def test_plan_writes_a_certified_result_and_a_summary(request_file: Path, tmp_pa
     assert result["status"] == "solved"
     assert result["certificate"]["passed"] is True
     request = json.loads(request_file.read_text())
-    grid = result["grid"]
-    assert grid["t"][0] == 0.0 and abs(grid["t"][-1] - request["duration"]) < 1e-12
+    # the plan's samples: ball-on-palm results call them grid/eta, finger results
+    # trajectory/eta_p (the palm contact coordinates)
+    if result.get("planner", "ball_on_palm") == "ball_on_palm":
+        samples, palm_eta = result["grid"], result["grid"]["eta"]
+    else:
+        samples, palm_eta = result["trajectory"], result["trajectory"]["eta_p"]
+    assert samples["t"][0] == 0.0 and abs(samples["t"][-1] - request["duration"]) < 1e-12
     # every goal coordinate is met at the final time, in SI units
     names = ["x", "y", "u", "v", "psi"]
     for key, target in request.get("goal", {}).items():
-        assert abs(grid["eta"][-1][names.index(key)] - target) < 1e-6
+        assert abs(palm_eta[-1][names.index(key)] - target) < 1e-6
 
 
 def test_invalid_request_exits_2_and_names_the_field(tmp_path: Path) -> None:

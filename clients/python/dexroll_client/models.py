@@ -13,25 +13,48 @@ from datetime import datetime
 from enum import StrEnum
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 __all__ = [
+    "BUILTIN_FINGERS",
     "MAX_DURATION",
+    "MAX_FINGER_JOINTS",
     "MAX_INTERVALS",
     "MAX_POSITION",
     "MAX_SAMPLES",
+    "MAX_URDF_CHARS",
     "MAX_VIA_POINTS",
+    "PLANNERS",
+    "AnyPlanResult",
     "BallOnPalmRequest",
     "CertificateModel",
     "ContactCoordinates",
     "ErrorBody",
     "FieldError",
+    "FingerCertificateModel",
+    "FingerContactCoordinates",
+    "FingerContactModel",
+    "FingerInfo",
+    "FingerModelSpec",
+    "FingerPlanResult",
+    "FingerStatsModel",
+    "FingerTrajectoryModel",
     "Job",
     "JobList",
     "JobState",
     "ModelCatalog",
     "ObjectInfo",
     "ObjectModel",
+    "OneFingerRequest",
     "PartialContactCoordinates",
     "PlanRequest",
     "PlanResult",
@@ -48,6 +71,14 @@ MAX_VIA_POINTS = 50
 MAX_POSITION = 10.0  # m
 MAX_DURATION = 3600.0  # s
 MAX_SAMPLES = 10_000
+#: Limits of a finger: joints of a URDF's chain, characters of a URDF document.
+MAX_FINGER_JOINTS = 16
+MAX_URDF_CHARS = 500_000
+
+#: The planners, by the value of a request's ``planner`` field.
+PLANNERS: tuple[str, ...] = ("ball_on_palm", "one_finger")
+#: The built-in fingers, by the value of ``finger.builtin``.
+BUILTIN_FINGERS: tuple[str, ...] = ("k3s",)
 
 
 class _Request(BaseModel):
@@ -124,11 +155,12 @@ class SolverModel(_Request):
         "certificate tolerance on the re-integration defect of u, v, psi [rad]"))
 
 
-class BallOnPalmRequest(_Request):
-    """Roll an object on the flat palm between contact configurations (paper, section 3)."""
+class _PalmRequest(_Request):
+    """What every planner shares: the object, its palm contact, goals, grid and limits.
 
-    planner: Literal["ball_on_palm"] = Field(default="ball_on_palm",
-                                             description="which planner")
+    Each planner's request narrows ``planner`` to its own name and adds its own fields."""
+
+    planner: str = Field(description="which planner")
     object: ObjectModel = Field(default_factory=ObjectModel)
     initial: ContactCoordinates = Field(description="contact coordinates at t = 0")
     goal: PartialContactCoordinates = Field(
@@ -164,9 +196,158 @@ class BallOnPalmRequest(_Request):
         return value
 
 
-#: Every planning request, told apart by its ``planner`` field. Later planners join this
-#: union (one endpoint serves them all).
-PlanRequest = BallOnPalmRequest
+class BallOnPalmRequest(_PalmRequest):
+    """Roll an object on the flat palm between contact configurations (paper, section 3)."""
+
+    planner: Literal["ball_on_palm"] = Field(default="ball_on_palm",
+                                             description="which planner")
+
+
+RotationVector = list[Annotated[float, Field(ge=-2 * math.pi, le=2 * math.pi)]]
+
+
+class FingerModelSpec(_Request):
+    """The finger: a built-in one (``{"builtin": "k3s"}``, the default) or one's own URDF
+    (``{"urdf": "<robot ...>...</robot>", "tip_frame": "..."}``), and its mount on the palm.
+
+    The finger is a serial chain of revolute and prismatic joints; its tip frame is the
+    flat square pad's frame: origin at the centre of the pad surface, +z the pad's outward
+    normal (docs/conventions.md)."""
+
+    builtin: Literal["k3s"] | None = Field(
+        default=None, description="a built-in finger (GET /v1/models lists them); the "
+                                  "default when `urdf` is not given")
+    urdf: str | None = Field(
+        default=None, min_length=1, max_length=MAX_URDF_CHARS,
+        description="the finger's URDF document, as XML text (not a path); lengths in m, "
+                    "angles in rad")
+    tip_frame: str = Field(default="fingertip", min_length=1, max_length=200,
+                           description="the URDF frame (link or joint) of the pad")
+    base_position: list[Position] | None = Field(
+        default=None, min_length=3, max_length=3,
+        description="origin of the finger's base (the URDF root) in the palm frame [m]; "
+                    "default: a built-in finger's own mount (GET /v1/models), the palm "
+                    "origin for a URDF")
+    base_rotation: RotationVector | None = Field(
+        default=None, min_length=3, max_length=3,
+        description="rotation vector [rad] of the finger's base in the palm frame; "
+                    "default: a built-in finger's own mount (GET /v1/models), none (base "
+                    "axes parallel to the palm's) for a URDF")
+    pad_half_size: float | None = Field(
+        default=None, gt=0.0, le=0.5,
+        description="half the side of the square pad [m]; default: the built-in "
+                    "finger's (GET /v1/models)")
+
+    @field_validator("urdf")
+    @classmethod
+    def _urdf_is_text(cls, value: str | None) -> str | None:
+        if value is not None and not value.lstrip().startswith("<"):
+            raise ValueError("must be the URDF document itself (XML text starting with "
+                             "'<'), not a file name")
+        return value
+
+    @model_validator(mode="after")
+    def _one_source(self) -> FingerModelSpec:
+        if self.builtin is not None and self.urdf is not None:
+            raise ValueError("give either `builtin` or `urdf`, not both")
+        return self
+
+
+class FingerContactCoordinates(_Request):
+    """The fingertip/ball contact coordinates eta_f = (x_f, y_f, u_f, v_f, psi_f)."""
+
+    x_f: Position = Field(description="contact point on the pad, x in the pad frame [m]")
+    y_f: Position = Field(description="contact point on the pad, y in the pad frame [m]")
+    u_f: Angle = Field(description="ball chart latitude in the finger contact's chart "
+                                   "patch [rad]")
+    v_f: Angle = Field(description="ball chart longitude in the finger contact's chart "
+                                   "patch [rad]")
+    psi_f: Angle = Field(description="contact angle psi_f [rad]")
+
+    def as_tuple(self) -> tuple[float, float, float, float, float]:
+        return (self.x_f, self.y_f, self.u_f, self.v_f, self.psi_f)
+
+
+class FingerContactModel(_Request):
+    """Where the fingertip touches the ball at t = 0, and the ball chart patch its
+    coordinates are measured in."""
+
+    initial: FingerContactCoordinates = Field(description="finger contact coordinates at "
+                                                          "t = 0")
+    chart_rotation: RotationVector = Field(
+        default_factory=lambda: [0.0, 0.0, math.pi], min_length=3, max_length=3,
+        description="rotation vector [rad] of the finger contact's chart patch in the "
+                    "object frame. The default [0, 0, pi] puts patch point (u_f, v_f) = "
+                    "(0, 0) at the antipode of the object chart's (0, 0): with the default "
+                    "object.chart_rotation and the palm contact starting at u = v = 0, that "
+                    "is the ball's top at t = 0")
+    q_seed: list[Angle] | None = Field(
+        default=None, min_length=1, max_length=MAX_FINGER_JOINTS,
+        description="joint angles [rad; m for a prismatic joint] from which the inverse "
+                    "kinematics of the initial grasp starts, one per joint; default: the "
+                    "paper's (0, -22.68, -12.34, 0, 47.65, 0) deg")
+
+
+class OneFingerRequest(_PalmRequest):
+    """Roll a ball on the palm with one flat fingertip pressing on it, keeping the grasp
+    inside the friction cone (paper, section 3). The plan holds the palm contact, the
+    finger contact and the finger's joint angles. ``sample_times`` is not supported (the
+    plan is returned at the collocation points) and the grid is not refined."""
+
+    planner: Literal["one_finger"] = Field(
+        default="one_finger",
+        description="which planner (a request body must say 'one_finger': a body without "
+                    "`planner` is a ball_on_palm request)")
+    finger: FingerModelSpec = Field(default_factory=FingerModelSpec)
+    finger_contact: FingerContactModel = Field(description="the fingertip/ball contact")
+    mu: float = Field(default=0.5, gt=0.0, le=10.0,
+                      description="friction coefficient at both contacts (dimensionless); "
+                                  "the friction cone's half-angle is atan(mu) [rad]")
+    grasp_weight: float = Field(
+        default=100.0, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the grasp-angle term, the time "
+                    "average of 1 - cos of the larger grasp angle (0 for an antipodal grasp)")
+    finger_effort_weight: float = Field(
+        default=0.01, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the finger contact's velocity "
+                    "over the ball |w_f|^2 [rad^2/s^2], relative to the palm contact's")
+    joint_effort_weight: float = Field(
+        default=0.01, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the joint rates |q_dot|^2 "
+                    "[rad^2/s^2]")
+    pad_margin: float = Field(default=0.002, ge=0.0, le=0.1,
+                              description="distance kept between the finger contact and "
+                                          "the pad's edge [m]")
+
+    @field_validator("sample_times")
+    @classmethod
+    def _no_sample_times(cls, value: list[float] | None) -> list[float] | None:
+        if value:
+            raise ValueError("not supported by the one_finger planner: its plan is "
+                             "returned at the collocation points (result.trajectory)")
+        return value
+
+
+def _planner_of(value: object) -> str | None:
+    """The ``planner`` of a request or result (a dict or a model); ``ball_on_palm`` when
+    absent."""
+    if isinstance(value, dict):
+        planner = value.get("planner", "ball_on_palm")
+        return planner if isinstance(planner, str) else None
+    if isinstance(value, BaseModel):
+        return getattr(value, "planner", None)
+    return "ball_on_palm"  # not an object: the default planner's model says why
+
+
+#: Every planning request, told apart by its ``planner`` field ("ball_on_palm" when the
+#: field is absent). Later planners join this union (one endpoint serves them all).
+PlanRequest = Annotated[
+    Annotated[BallOnPalmRequest, Tag("ball_on_palm")]
+    | Annotated[OneFingerRequest, Tag("one_finger")],
+    Discriminator(_planner_of, custom_error_type="invalid_planner",
+                  custom_error_message="planner must be one of 'ball_on_palm', "
+                                       "'one_finger'"),
+]
 
 
 # -- results --------------------------------------------------------------------------------
@@ -245,9 +426,11 @@ class FieldError(_Response):
 
 
 class PlanResult(_Response):
-    """A plan, or why there is none. ``grid``: the collocation points (nodes and
-    midpoints); ``samples``: the request's ``sample_times``."""
+    """A ball-on-palm plan, or why there is none. ``grid``: the collocation points (nodes
+    and midpoints); ``samples``: the request's ``sample_times``."""
 
+    planner: Literal["ball_on_palm"] = Field(default="ball_on_palm",
+                                             description="the planner of the request")
     status: PlanStatus
     message: str
     errors: list[FieldError] = Field(default_factory=list)
@@ -257,6 +440,95 @@ class PlanResult(_Response):
     certificate: CertificateModel | None = None
     grid: TrajectoryModel | None = None
     samples: TrajectoryModel | None = None
+
+
+class FingerTrajectoryModel(_Response):
+    """A one-finger plan at the collocation points (nodes and midpoints); rows are samples.
+    Palm frame, SI units."""
+
+    t: list[float] = Field(description="sample times [s]")
+    eta_p: Rows = Field(description="palm contact coordinates (x [m], y [m], u [rad], "
+                                    "v [rad], psi [rad])")
+    eta_f: Rows = Field(description="finger contact coordinates (x_f [m], y_f [m], "
+                                    "u_f [rad], v_f [rad], psi_f [rad])")
+    eta_p_dot: Rows = Field(description="rates of the palm contact coordinates ([m/s], "
+                                        "[rad/s])")
+    eta_f_dot: Rows = Field(description="rates of the finger contact coordinates ([m/s], "
+                                        "[rad/s])")
+    q: Rows = Field(description="joint angles, in the order of `joint_names` [rad; m for a "
+                                "prismatic joint]")
+    q_dot: Rows = Field(description="joint rates [rad/s; m/s for a prismatic joint]")
+    w_p: Rows = Field(description="palm contact velocity d/dt (x, y), an input [m/s]")
+    w_f: Rows = Field(description="finger contact velocity over the ball d/dt (u_f, v_f), "
+                                  "an input [rad/s]")
+    object_position: Rows = Field(description="object centre in the palm frame [m]")
+    object_orientation_wxyz: Rows = Field(description="object orientation in the palm "
+                                                      "frame, unit quaternion (w, x, y, z), "
+                                                      "w >= 0")
+    fingertip_position: Rows = Field(description="origin of the fingertip (pad) frame in "
+                                                 "the palm frame [m]")
+    fingertip_orientation_wxyz: Rows = Field(description="fingertip (pad) frame orientation "
+                                                         "in the palm frame, unit quaternion "
+                                                         "(w, x, y, z), w >= 0")
+    palm_contact_point: Rows = Field(description="palm/object contact point in the palm "
+                                                 "frame [m]")
+    finger_contact_point: Rows = Field(description="finger/object contact point in the "
+                                                   "palm frame [m]")
+    finger_contact_normal: Rows = Field(description="the object's outward normal at the "
+                                                    "finger contact, palm frame (unit)")
+    grasp_angles: Rows = Field(description="grasp angles (Phi_p, Phi_f) at the palm and "
+                                           "finger contacts: angle between the object's "
+                                           "normal there and the line joining the two "
+                                           "contacts, 0 for an antipodal grasp [rad]")
+    cone_margin: list[float] = Field(description="atan(mu) - max(Phi_p, Phi_f): positive "
+                                                 "inside the friction cone [rad]")
+
+
+class FingerCertificateModel(_Response):
+    """Physical validity of a one-finger plan, computed independently of the NLP: the
+    inputs re-integrated, the finger placed by Pinocchio's forward kinematics."""
+
+    passed: bool
+    values: dict[str, float] = Field(description="worst value of each check along the "
+                                                 "re-integrated motion (units as the "
+                                                 "quantity: m, rad, m/s, rad/s)")
+    tolerances: dict[str, float] = Field(description="tolerance of each check (units as "
+                                                     "the checked quantity)")
+    failures: list[str] = Field(description="checks that failed, with values")
+
+
+class FingerStatsModel(_Response):
+    raw_status: str = Field(description="IPOPT's return status")
+    iterations: int = Field(description="IPOPT iterations")
+    build_time: float = Field(description="NLP construction time [s] (0 when cached)")
+    solve_time: float = Field(description="IPOPT time [s]")
+
+
+class FingerPlanResult(_Response):
+    """A one-finger plan, or why there is none. ``trajectory``: the collocation points
+    (nodes and midpoints)."""
+
+    planner: Literal["one_finger"] = Field(default="one_finger",
+                                           description="the planner of the request")
+    status: PlanStatus
+    message: str
+    errors: list[FieldError] = Field(default_factory=list)
+    stats: FingerStatsModel | None = None
+    goal_error: dict[str, float] | None = Field(
+        default=None, description="error of each goal/via-point coordinate [m or rad]")
+    certificate: FingerCertificateModel | None = None
+    joint_names: list[str] = Field(default_factory=list,
+                                   description="the finger's joints, in the order of `q`")
+    trajectory: FingerTrajectoryModel | None = None
+
+
+#: A plan of any planner, told apart by its ``planner`` field (results stored before it
+#: existed are ball-on-palm plans).
+AnyPlanResult = Annotated[
+    Annotated[PlanResult, Tag("ball_on_palm")]
+    | Annotated[FingerPlanResult, Tag("one_finger")],
+    Discriminator(_planner_of),
+]
 
 
 # -- jobs -----------------------------------------------------------------------------------
@@ -295,7 +567,7 @@ class Job(_Response):
     finished_at: datetime | None = None
     worker_pid: int | None = Field(default=None, description="process id of the worker that "
                                                              "ran (or runs) the job")
-    result: PlanResult | None = Field(default=None, description="the plan, once finished "
+    result: AnyPlanResult | None = Field(default=None, description="the plan, once finished "
                                                                 "(also after a failure: the "
                                                                 "last iterate)")
 
@@ -323,13 +595,23 @@ class ObjectInfo(_Response):
 
 
 class FingerInfo(_Response):
-    name: str
-    tip_frame: str
+    name: str = Field(description="its `finger.builtin` name")
+    tip_frame: str = Field(description="the pad frame")
     n_joints: int
+    joint_names: list[str] = Field(default_factory=list, description="in the order of q")
+    pad_half_size: float | None = Field(default=None, description="half the side of the "
+                                                                  "square pad [m]")
+    base_position: list[float] | None = Field(
+        default=None, description="its default mount: origin of its base (the URDF root) in "
+                                  "the palm frame [m] (give it as `finger.base_position` with "
+                                  "this URDF as `finger.urdf` to get the same finger)")
+    base_rotation: list[float] | None = Field(
+        default=None, description="its default mount: rotation vector of its base in the "
+                                  "palm frame [rad]")
     urdf: str = Field(description="the URDF document")
 
 
 class ModelCatalog(_Response):
-    planners: list[str]
+    planners: list[str] = Field(description="values of a request's `planner`")
     objects: list[ObjectInfo]
     fingers: list[FingerInfo]
