@@ -39,6 +39,7 @@ from dexroll_client.models import (
 from ocp.ball_on_palm import BallOnPalmPlanner
 from ocp.ball_on_palm import plan as plan_ball_on_palm
 from ocp.finger import FingerModel, load_finger
+from ocp.greedy import GreedyResult, greedy_plan
 from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem, OneFingerSolution
 from ocp.problem import BallOnPalmProblem, ObjectSpec, ProblemError, SolverOptions, ViaPoint
 from ocp.solution import Solution, Trajectory, quaternion_wxyz
@@ -224,7 +225,7 @@ def request_errors(request: PlanRequest, fingers: FingerCache | None = None
 
 def solve(request: PlanRequest, palm: BallOnPalmPlanner | None = None,
           fingers: FingerCache | None = None
-          ) -> tuple[AnyPlanResult, Solution | OneFingerSolution]:
+          ) -> tuple[AnyPlanResult, Solution | OneFingerSolution | GreedyResult]:
     """Plan a request: (the wire result, the core's solution). ProblemError for a request
     that cannot be planned (:func:`request_errors` names the same fields beforehand).
     ``palm``: the ball-on-palm planner (default: the process-wide one); ``fingers``: the
@@ -239,6 +240,9 @@ def solve(request: PlanRequest, palm: BallOnPalmPlanner | None = None,
     errors = _seed_errors(finger_problem)
     if errors:
         raise ProblemError(errors)
+    if request.method == "greedy":
+        greedy = greedy_plan(finger_problem, planner=cache.planner)
+        return result_from_greedy(greedy, finger_problem.finger.joint_names), greedy
     finger_sol = cache.planner.solve(finger_problem)
     return result_from_finger_solution(finger_sol, finger_problem.finger.joint_names), \
         finger_sol
@@ -335,10 +339,15 @@ def result_from_solution(sol: Solution, sample_times: list[float] | None = None
                       grid=grid, samples=samples)
 
 
-def _finger_trajectory(sol: OneFingerSolution) -> FingerTrajectoryModel | None:
+def _finger_trajectory(sol: OneFingerSolution | GreedyResult) -> FingerTrajectoryModel | None:
+    if isinstance(sol, GreedyResult):  # its rates: differences of its steps
+        eta_p_dot, eta_f_dot = np.gradient(sol.eta_p, sol.t, axis=0), np.gradient(
+            sol.eta_f, sol.t, axis=0)
+    else:
+        eta_p_dot, eta_f_dot = sol.eta_p_dot, sol.eta_f_dot
     d: dict[str, Any] = {
-        "t": sol.t, "eta_p": sol.eta_p, "eta_f": sol.eta_f, "eta_p_dot": sol.eta_p_dot,
-        "eta_f_dot": sol.eta_f_dot, "q": sol.q, "q_dot": sol.q_dot,
+        "t": sol.t, "eta_p": sol.eta_p, "eta_f": sol.eta_f, "eta_p_dot": eta_p_dot,
+        "eta_f_dot": eta_f_dot, "q": sol.q, "q_dot": sol.q_dot,
         "w_p": sol.w_p, "w_f": sol.w_f, "object_position": sol.object_position,
         "object_orientation_wxyz": quaternion_wxyz(sol.object_rotation),
         "fingertip_position": sol.fingertip_position,
@@ -372,3 +381,32 @@ def result_from_finger_solution(sol: OneFingerSolution, joint_names: Sequence[st
                                build_time=sol.build_time, solve_time=sol.solve_time),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
         certificate=cert, joint_names=list(joint_names), trajectory=trajectory)
+
+
+def result_from_greedy(res: GreedyResult, joint_names: Sequence[str] = ()) -> FingerPlanResult:
+    """The wire result of a plan by the paper's greedy method. Its checks (closure of the
+    pseudo-inverse joint rates against Pinocchio's FK, joint limits, friction cone, feasible
+    steps) stand in the certificate; a plan with any failure is 'inaccurate'."""
+    values = {
+        "max_closure_position_error": float(res.closure_error[0]),
+        "max_closure_orientation_error": float(res.closure_error[1]),
+        "min_cone_margin": float(np.min(res.cone_margin)),
+        "joint_limit_margin": float(res.joint_limit_margin),
+        "max_velocity_ratio": float(res.max_velocity_ratio),
+        "fallback_steps": float(res.fallback_steps),
+        "palm_integration_error": float(res.palm_integration_error),
+        "joint_effort": float(res.joint_effort),
+    }
+    values = {k: v for k, v in values.items() if math.isfinite(v)}
+    failures = list(res.failures)
+    cert = FingerCertificateModel(passed=not failures, values=values,
+                                  tolerances={}, failures=failures)
+    status = PlanStatus.SOLVED if not failures else PlanStatus.INACCURATE
+    message = ("greedy plan (the paper's method); its checks passed" if not failures else
+               "greedy plan (the paper's method) failed its checks: " + "; ".join(failures))
+    return FingerPlanResult(
+        status=status, message=message,
+        stats=FingerStatsModel(raw_status="greedy", iterations=len(res.t) - 1, build_time=0.0,
+                               solve_time=float(res.compute_time)),
+        goal_error={k: float(v) for k, v in res.goal_error.items() if math.isfinite(v)},
+        certificate=cert, joint_names=list(joint_names), trajectory=_finger_trajectory(res))

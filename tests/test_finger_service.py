@@ -248,3 +248,28 @@ def test_cli_plans_the_finger_example(tmp_path: Path) -> None:
     result = FingerPlanResult.model_validate_json(out.read_text())
     assert result.status is PlanStatus.SOLVED and result.certificate is not None
     assert result.certificate.passed and result.trajectory is not None
+
+
+def test_the_papers_greedy_method_answers_the_same_request(client: DexrollClient,
+                                                          planned: Job) -> None:
+    """method=greedy plans the same request by the paper's section-3 method: the same palm
+    goal, a grasp brought towards antipodal inside the cone, the fingertip where Pinocchio's
+    FK of the joint angles puts it (up to its closure tolerance), comparable to the NLP."""
+    job = client.plan(roll(method="greedy"), timeout=180)
+    assert job.state is JobState.SUCCEEDED, job.message
+    result = job.result
+    assert isinstance(result, FingerPlanResult) and result.trajectory is not None
+    assert result.stats is not None and result.stats.raw_status == "greedy"
+    assert result.certificate is not None and result.certificate.passed
+    traj = result.trajectory
+    assert abs(traj.eta_p[-1][0] - ROLL["goal"]["x"]) < 1e-6
+    worst = np.max(traj.grasp_angles, axis=1)
+    assert worst[-1] < 0.25 * worst[0] and np.all(worst < math.atan(ROLL["mu"]))
+    finger = load_finger()
+    for q, p in zip(traj.q, traj.fingertip_position, strict=True):
+        assert_close(finger.fingertip_pose_pin(q)[1], np.array(p), atol=1e-12)
+    assert result.certificate.values["max_closure_position_error"] < 1e-4
+    # the same request by the NLP starts from the same initial grasp
+    nlp = planned.result
+    assert isinstance(nlp, FingerPlanResult) and nlp.trajectory is not None
+    assert_close(np.array(traj.q[0]), np.array(nlp.trajectory.q[0]), atol=1e-9)

@@ -318,6 +318,13 @@ class OneFingerRequest(_PalmRequest):
     pad_margin: float = Field(default=0.002, ge=0.0, le=0.1,
                               description="distance kept between the finger contact and "
                                           "the pad's edge [m]")
+    method: Literal["collocation", "greedy"] = Field(
+        default="collocation",
+        description="'collocation': the direct-collocation NLP (effort plus grasp quality "
+                    "over the whole horizon); 'greedy': the paper's own method (section 3): "
+                    "the finger contact velocity chosen step by step by a grid search in the "
+                    "ellipse bounding the rolling angle, joint rates from the Jacobian's "
+                    "pseudo-inverse (200 steps); the weights do not apply to it")
 
     @field_validator("sample_times")
     @classmethod
