@@ -252,7 +252,8 @@ class _NLP:
     unpack: ca.Function
     pack: ca.Function
     params: ca.Function
-    n_x: int
+    lbg: FloatArray  # constraint bounds (equalities, cones, epigraph)
+    ubg: FloatArray
     build_time: float
 
 
@@ -260,12 +261,14 @@ class OneFingerPlanner:
     """Direct-collocation planner for a palm + one finger grasp (cached per structure)."""
 
     def __init__(self) -> None:
-        self._models: dict[tuple[str, int], _Model] = {}
+        # Keyed by the finger object itself (hashed by identity; the key keeps it alive, so
+        # a new finger can never be mistaken for a freed one with the same id).
+        self._models: dict[tuple[str, Any], _Model] = {}
         self._nlps: dict[tuple[Any, ...], _NLP] = {}
         self._palm = BallOnPalmPlanner()
 
     def model(self, shape: str, finger: Any) -> _Model:
-        key = (shape, id(finger))
+        key = (shape, finger)
         if key not in self._models:
             self._models[key] = _Model(shape, finger)
         return self._models[key]
@@ -273,7 +276,7 @@ class OneFingerPlanner:
     # ...................................................................................
     def _build(self, problem: OneFingerProblem) -> tuple[_NLP, bool]:
         st = Structure.of(problem.base)
-        key = (st, id(problem.finger))
+        key = (st, problem.finger)
         if key in self._nlps:
             return self._nlps[key], True
         t0 = time.perf_counter()
@@ -352,9 +355,8 @@ class OneFingerPlanner:
         pack = ca.Function("pack", [hs.X, hs.Xm, hs.U, hs.Um, S, Sm], [w])
         params = ca.Function("params", [shape_p, seg_T, goal, vias, Rcp, Rcf, weights, ccone],
                              [p])
-        nlp = _NLP(solver, stop, hs, unpack, pack, params, m.nx, time.perf_counter() - t0)
-        nlp.lbg = np.array(lbg)  # type: ignore[attr-defined]
-        nlp.ubg = np.array(ubg)  # type: ignore[attr-defined]
+        nlp = _NLP(solver, stop, hs, unpack, pack, params, np.array(lbg), np.array(ubg),
+                   time.perf_counter() - t0)
         self._nlps[key] = nlp
         return nlp, False
 
@@ -438,8 +440,7 @@ class OneFingerPlanner:
         w0 = np.clip(np.asarray(w0).ravel(), lbx, ubx)
         nlp.stop.arm(t_start + base.options.time_limit, base.options.max_iter)
         t_solve = time.perf_counter()
-        res = nlp.solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=nlp.lbg,  # type: ignore[attr-defined]
-                         ubg=nlp.ubg)  # type: ignore[attr-defined]
+        res = nlp.solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=nlp.lbg, ubg=nlp.ubg)
         solve_time = time.perf_counter() - t_solve
         stats = nlp.solver.stats()
         raw = str(stats["return_status"])

@@ -73,12 +73,12 @@ _PLANNER_TAGS = ("ball_on_palm", "one_finger")
 class FingerCache:
     """A process's finger models and its one-finger planner, kept together.
 
-    The planner caches its NLPs per finger by ``id(finger)``, so the same request finger
-    must map to the same :class:`~ocp.finger.FingerModel` object from job to job (cached
-    here by URDF text, tip frame, mount and pad size), and no finger the planner has seen
-    may be freed while the planner lives (its id could be reused by another finger). With
-    more than ``max_fingers`` distinct fingers, the fingers and the planner are dropped
-    together and start afresh. Thread-safe (one lock for loading and checking).
+    The planner caches its NLPs per finger object, so the same request finger must map to
+    the same :class:`~ocp.finger.FingerModel` object from job to job (cached here by URDF
+    text, tip frame, mount and pad size) for its NLP to be reused. With more than
+    ``max_fingers`` distinct fingers, the fingers and the planner (with the NLPs it holds
+    for them) are dropped together and start afresh, which bounds the memory. Thread-safe
+    (one lock for loading and checking).
     """
 
     def __init__(self, max_fingers: int = 16) -> None:
