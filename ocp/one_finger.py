@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import casadi as ca
@@ -147,6 +147,9 @@ class OneFingerSolution:
     goal_error: dict[str, float]
     certificate: dict[str, float]
     certificate_failures: tuple[str, ...] = field(default=())
+    #: Grid doublings after the first solve (the returned plan has 2**refinements times the
+    #: requested intervals).
+    refinements: int = 0
 
     @property
     def ok(self) -> bool:
@@ -404,13 +407,39 @@ class OneFingerPlanner:
         return np.asarray(ik.q, dtype=float)
 
     def solve(self, problem: OneFingerProblem) -> OneFingerSolution:
-        from .problem import ProblemError
+        """Plan; ProblemError (before any NLP is built) on bad input or an impossible
+        initial grasp. When IPOPT converges but the certificate finds the grid too coarse
+        (finger slip or spin between collocation points, closure, re-integration defects),
+        the plan is re-solved on a grid twice as fine, warm-started from the coarse one, up
+        to ``problem.base.max_refinements`` times."""
+        from .problem import MAX_INTERVALS, ProblemError
 
         errs = problem.errors()
         if errs:
             raise ProblemError(errs)
-        t_start = time.perf_counter()
+        deadline = time.perf_counter() + problem.base.options.time_limit
         q0 = self.initial_grasp(problem)
+        sol = self._solve_once(problem, q0, None, deadline)
+        refinements, build, solve, iters = 0, sol.build_time, sol.solve_time, sol.iterations
+        discretisation = ("max_slip_speed_finger", "max_spin_rate_finger", "max_closure",
+                          "max_position_defect", "max_angle_defect", "max_joint_defect",
+                          "max_gap_error_finger")
+        while (sol.status is Status.INACCURATE
+               and refinements < problem.base.max_refinements
+               and 2 * problem.base.n_intervals <= MAX_INTERVALS
+               and all(f.startswith(discretisation) for f in sol.certificate_failures)
+               and time.perf_counter() < deadline):
+            refinements += 1
+            problem = replace(problem, base=replace(problem.base,
+                                                    n_intervals=2 * problem.base.n_intervals))
+            sol = self._solve_once(problem, q0, sol, deadline)
+            build, solve, iters = build + sol.build_time, solve + sol.solve_time, \
+                iters + sol.iterations
+        return replace(sol, build_time=build, solve_time=solve, iterations=iters,
+                       refinements=refinements)
+
+    def _solve_once(self, problem: OneFingerProblem, q0: FloatArray,
+                    warm: OneFingerSolution | None, deadline: float) -> OneFingerSolution:
         nlp, hit = self._build(problem)
         build_time = 0.0 if hit else nlp.build_time
         base = problem.base
@@ -432,13 +461,16 @@ class OneFingerPlanner:
         p = nlp.params(shape, np.diff(base.segment_times), goal, vias, Rcp, Rcf, weights,
                        cone_cosine(problem.mu))
         lbx, ubx = self._bounds(problem, nlp, m, q0, x_scale, u_scale)
-        X, Xm, U, Um = self._guess(problem, m, nlp, q0, t_nodes, Rcp, Rcf)
+        if warm is None:
+            X, Xm, U, Um = self._guess(problem, m, nlp, q0, t_nodes, Rcp, Rcf)
+        else:
+            X, Xm, U, Um = self._guess_from(warm, nlp, t_nodes)
         Sg = self._epigraph(m, X, shape, Rcp, Rcf)
         Smg = self._epigraph(m, Xm, shape, Rcp, Rcf)
         w0 = nlp.pack((X / x_scale).T, (Xm / x_scale).T, (U / u_scale).T, (Um / u_scale).T,
                       Sg[None, :], Smg[None, :])
         w0 = np.clip(np.asarray(w0).ravel(), lbx, ubx)
-        nlp.stop.arm(t_start + base.options.time_limit, base.options.max_iter)
+        nlp.stop.arm(deadline, base.options.max_iter)
         t_solve = time.perf_counter()
         res = nlp.solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=nlp.lbg, ubg=nlp.ubg)
         solve_time = time.perf_counter() - t_solve
@@ -480,6 +512,27 @@ class OneFingerPlanner:
         lbx = nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n])
         ubx = nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n])
         return np.asarray(lbx).ravel(), np.asarray(ubx).ravel()
+
+    @staticmethod
+    def _guess_from(coarse: OneFingerSolution, nlp: _NLP, t_nodes: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """An initial guess on a finer grid, interpolated from a coarse plan's samples."""
+        Xc = np.hstack([coarse.eta_p, coarse.eta_f, coarse.q])
+        Uc = np.hstack([coarse.w_p, coarse.w_f, coarse.q_dot])
+
+        def at(values: FloatArray, t: FloatArray) -> FloatArray:
+            return np.column_stack([np.interp(t, coarse.t, values[:, j])
+                                    for j in range(values.shape[1])])
+
+        n = len(t_nodes) - 1
+        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+        eps = 1e-9 * float(t_nodes[-1])
+        U = np.zeros((n + len(nlp.hs.segments), Uc.shape[1]))
+        U[nlp.hs.left_cols] = at(Uc, t_nodes[:-1] + eps)
+        U[nlp.hs.right_cols] = at(Uc, t_nodes[1:] - eps)
+        X = at(Xc, t_nodes)
+        X[0] = Xc[0]  # the fixed initial state, exactly
+        return X, at(Xc, tm), U, at(Uc, tm)
 
     @staticmethod
     def _epigraph(m: _Model, X: FloatArray, shape: FloatArray, Rcp: FloatArray,

@@ -378,7 +378,8 @@ def result_from_finger_solution(sol: OneFingerSolution, joint_names: Sequence[st
     return FingerPlanResult(
         status=PlanStatus(sol.status.value), message=message,
         stats=FingerStatsModel(raw_status=sol.raw_status, iterations=sol.iterations,
-                               build_time=sol.build_time, solve_time=sol.solve_time),
+                               build_time=sol.build_time, solve_time=sol.solve_time,
+                               refinements=sol.refinements),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
         certificate=cert, joint_names=list(joint_names), trajectory=trajectory)
 

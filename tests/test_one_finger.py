@@ -146,3 +146,19 @@ def test_reported_rates_are_the_rolling_equations_at_both_contacts(plan: OneFing
         h = plan.t[2::2] - plan.t[:-2:2]
         simpson = h[:, None] / 6 * (rate[:-2:2] + 4 * rate[1::2] + rate[2::2])
         assert_close(eta[2::2] - eta[:-2:2], simpson, atol=1e-9)
+
+
+def test_a_grid_too_coarse_for_a_fast_regrasp_is_refined_until_certified() -> None:
+    """A heavy grasp weight makes the finger re-grasp fast; on 20 intervals the finger then
+    slips between collocation points, which the certificate catches. Without refinement the
+    plan says so (inaccurate); with it the grid is doubled until the plan is certified."""
+    fast = replace(roll(20), grasp_weight=3000.0)
+    coarse = PLANNER.solve(replace(fast, base=replace(fast.base, max_refinements=0)))
+    assert coarse.status is Status.INACCURATE
+    assert coarse.certificate_failures
+    refined = PLANNER.solve(fast)
+    assert refined.status is Status.SOLVED, refined.message
+    assert refined.refinements >= 1 and not refined.certificate_failures
+    assert len(refined.t) == 2 * 20 * 2**refined.refinements + 1
+    assert refined.certificate["max_slip_speed_finger"] < coarse.certificate[
+        "max_slip_speed_finger"]

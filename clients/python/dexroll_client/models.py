@@ -292,7 +292,7 @@ class OneFingerRequest(_PalmRequest):
     """Roll a ball on the palm with one flat fingertip pressing on it, keeping the grasp
     inside the friction cone (paper, section 3). The plan holds the palm contact, the
     finger contact and the finger's joint angles. ``sample_times`` is not supported (the
-    plan is returned at the collocation points) and the grid is not refined."""
+    plan is returned at the collocation points)."""
 
     planner: Literal["one_finger"] = Field(
         default="one_finger",
@@ -509,6 +509,8 @@ class FingerStatsModel(_Response):
     iterations: int = Field(description="IPOPT iterations")
     build_time: float = Field(description="NLP construction time [s] (0 when cached)")
     solve_time: float = Field(description="IPOPT time [s]")
+    refinements: int = Field(default=0, description="grid doublings after the first solve "
+                                                    "(the certificate found the grid coarse)")
 
 
 class FingerPlanResult(_Response):
