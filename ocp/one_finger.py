@@ -30,10 +30,9 @@ from .ball_on_palm import (
     BallOnPalmPlanner,
     Structure,
     _StopCallback,
-    coordinate_error,
     model_for,
 )
-from .collocation import HermiteSimpson
+from .collocation import HermiteSimpson, reintegrate, reintegrator
 from .contact import ContactPair
 from .grasp import cone_cosine, grasp_angles_numeric, grasp_cosines
 from .problem import CONTACT_COORDS, PERIODIC, BallOnPalmProblem
@@ -166,6 +165,18 @@ def _vee_skew(E: Any) -> Any:
 class _Model:
     """CasADi functions of the palm + one finger grasp (one object shape, one finger)."""
 
+    def reintegrator(self, n_sub: int) -> ca.Function:
+        """CVODES over one interval with the collocation input (built once per n_sub)."""
+        if n_sub not in self._reintegrators:
+            self._reintegrators[n_sub] = reintegrator(self.dynamics, self.nx, self.nu,
+                                                      self.n_params, n_sub)
+        return self._reintegrators[n_sub]
+
+    @staticmethod
+    def params(shape: FloatArray, Rcp: FloatArray, Rcf: FloatArray) -> FloatArray:
+        """The dynamics' parameter vector (shape, vec(Rcp), vec(Rcf)), column-major."""
+        return np.concatenate([shape, Rcp.ravel(order="F"), Rcf.ravel(order="F")])
+
     def __init__(self, shape: str, finger: Any) -> None:
         surface = model_for(shape).surface
         self.surface = surface
@@ -198,6 +209,9 @@ class _Model:
                                     [x, u, ca.vertcat(shape_p, ca.vec(Rcp), ca.vec(Rcf))],
                                     [xdot], ["x", "u", "params"], ["x_dot"])
         self.n_params = surface.n_params + 18
+        # the finger contact's rates alone (initial guesses), (e, w_f, shape) -> e_dot
+        self.tip_rates = ca.Function("tip_rates", [e, u[2:4], shape_p], [ed])
+        self._reintegrators: dict[int, ca.Function] = {}
         closure_pos = p_pf - p_fk
         closure_rot = _vee_skew(R_fk.T @ R_pf)
         # contacts on the ball, in the ball frame
@@ -573,12 +587,7 @@ class OneFingerPlanner:
         palm = palm_plan.sample(ts)
         eta_p = palm.eta
         # integrate the finger contact (pad point and psi) with the rolling equations
-        tip = ContactPair(surface, Plane)
-        e = ca.SX.sym("e", 5)
-        wf = ca.SX.sym("wf", 2)
-        sp = ca.SX.sym("sp", surface.n_params)
-        rates = ca.Function("tip_rates", [e, wf, sp],
-                            [tip.rates_driven_by_a(e, wf, sp, ca.SX(0, 1))])
+        rates = m.tip_rates
         ef = np.zeros((len(ts), 5))
         ef[0] = problem.contact.initial
         for k in range(len(ts) - 1):
@@ -624,8 +633,7 @@ class OneFingerPlanner:
         Xg = np.vstack([X, Xm])[order]
         Ug = np.vstack([np.vstack([U0, U1[-1:]]), Um])[order]
         k = len(t)
-        prm = np.concatenate([shape, Rcp.ravel(order="F"), Rcf.ravel(order="F")])
-        xdot = np.asarray(m.dynamics.map(k)(Xg.T, Ug.T, prm)).T
+        xdot = np.asarray(m.dynamics.map(k)(Xg.T, Ug.T, m.params(shape, Rcp, Rcf))).T
         cart = m.cartesian.map(k)(Xg.T, shape, Rcp, Rcf)
         R_po = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
         p_po = np.asarray(cart[1]).T
@@ -635,14 +643,8 @@ class OneFingerPlanner:
         down = np.array([0.0, 0.0, -1.0])
         phis = np.array([grasp_angles_numeric(cp[i], down, cf[i], nf[i]) for i in range(k)])
         margin = math.atan(problem.mu) - phis.max(axis=1)
-        ends = [0, *(int(c) for c in np.cumsum(Structure.of(base).segments))]
-        goal_error: dict[str, float] = {}
-        for j, vp in enumerate(base.via_points):
-            for c, val in vp.coords.items():
-                goal_error[f"via_points[{j}].{c}"] = coordinate_error(
-                    c, X[ends[j + 1], CONTACT_COORDS.index(c)], val)
-        for c, val in base.goal.items():
-            goal_error[f"goal.{c}"] = coordinate_error(c, X[-1, CONTACT_COORDS.index(c)], val)
+        ends = [0, *BallOnPalmPlanner._segment_end_nodes(Structure.of(base))]
+        goal_error = BallOnPalmPlanner._goal_errors(base, X, ends)  # eta_p: X[:, 0:5]
         cert, failures = self._certify(problem, m, t_nodes, X, U0, Um, U1, Rcp, Rcf, shape)
         if status is Status.SOLVED and failures:
             status = Status.INACCURATE
@@ -667,14 +669,13 @@ class OneFingerPlanner:
                  ) -> tuple[dict[str, float], tuple[str, ...]]:
         """Re-integrate the inputs (CVODES) and check the laws along that motion, with the
         finger placed by Pinocchio's forward kinematics of the re-integrated joints."""
-        from .collocation import reintegrate, reintegrator
 
         base, finger = problem.base, problem.finger
         if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U0)) and
                 np.all(np.isfinite(Um)) and np.all(np.isfinite(U1))):
             return {}, ("the plan has non-finite states or inputs",)
-        prm = np.concatenate([shape, Rcp.ravel(order="F"), Rcf.ravel(order="F")])
-        F = reintegrator(m.dynamics, m.nx, m.nu, m.n_params, 4)
+        prm = m.params(shape, Rcp, Rcf)
+        F = m.reintegrator(4)
         try:
             Xr, sx, su = reintegrate(F, X[0], t_nodes, U0, Um, U1, prm, 4)
         except RuntimeError as exc:  # CVODES gave up: the plan is not a smooth motion
