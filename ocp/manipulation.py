@@ -1,0 +1,1446 @@
+"""Manipulating an object with any number of rolling contacts: one NLP for every grasp.
+
+A grasp is data: an object (:class:`~ocp.problem.ObjectSpec`), an optional flat palm it
+rests on (:class:`Palm`), and a list of flat fingertips (:class:`Fingertip`), each the pad
+of a finger from a URDF. The paper's section 3 (one finger pressing a ball on the palm),
+its section 4 (two fingers holding a ball in the air) and three or more fingers are the
+same code with different data (:class:`ManipulationPlanner`).
+
+States (scaled for IPOPT; docs/conventions.md)
+    * the object block: with a palm, its contact coordinates eta_p = (x, y, u, v, psi),
+      which fix the object's pose; without one, the object's pose itself: position
+      p [m] in the palm frame and orientation quaternion (w, x, y, z) (its rotation is
+      R(q / |q|), so the norm is not constrained);
+    * for each fingertip i: eta_i = (x_i, y_i, u_i, v_i, psi_i) (pad point [m], object
+      point [rad] in the contact's own chart patch, contact angle [rad]) and the finger's
+      joint angles q_i.
+Inputs
+    * the object block: the palm contact velocity w_p = d/dt (x, y) [m/s], or the object's
+      twist (v [m/s] in the palm frame, omega [rad/s] in the object frame);
+    * for each fingertip: w_i = d/dt (u_i, v_i) [rad/s] (the contact's motion over the
+      object, the paper's alpha_dot_of) and the joint rates q_dot_i.
+Dynamics: the rolling equations at every contact (eq. 3 via :class:`ContactPair`); the
+object's pose is a state only when no palm fixes it (q_dot = q (x) (0, omega) / 2).
+Path constraints at every collocation point: each finger's closure (eq. 6: the fingertip
+pose from the joints equals the pose from the object pose and the contact coordinates),
+force closure with a margin (friction cones; :mod:`ocp.force_closure` for 3+ contacts),
+contacts inside the pads, joint and joint-rate limits, chart pole margins, and, when the
+request asks, hard bounds on the tracking error.
+Objective (over normalised time): effort of every input, a weight times the grasp-angle
+epigraph s >= 1 - cos Phi_i, and a weighted tracking error on SE(3) between the object's
+pose and the desired one: |p - p_d|^2 / L^2 + (3 - tr(R_d^T R)) / 2 (the second term is
+1 - cos of the rotation angle between R and R_d, not an Euler-angle difference).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .ball_on_palm import (
+    IPOPT_OPTIONS,
+    BallOnPalmPlanner,
+    Structure,
+    _StopCallback,
+    model_for,
+)
+from .collocation import HermiteSimpson, reintegrate, reintegrator
+from .contact import ContactPair
+from .grasp import cone_cosine, grasp_angles_numeric, grasp_cosines
+from .problem import (
+    CONTACT_COORDS,
+    MAX_INTERVALS,
+    MAX_POSITION,
+    PERIODIC,
+    BallOnPalmProblem,
+    ObjectSpec,
+    ProblemError,
+    SolverOptions,
+    ViaPoint,
+)
+from .solution import Status, quaternion_wxyz, status_from_ipopt
+from .surfaces import SURFACES, Plane, rotation_from_vector
+
+__all__ = [
+    "ContactTrajectory",
+    "DesiredMotion",
+    "FingerTrajectory",
+    "Fingertip",
+    "ManipulationPlanner",
+    "ManipulationProblem",
+    "ManipulationSolution",
+    "MotionStep",
+    "ObjectPose",
+    "Palm",
+    "Tracking",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: The paper's initial joint angles of experiment 1 [deg]: the default IK seed of a finger.
+PAPER_SEED_DEG = (0.0, -22.68, -12.34, 0.0, 47.65, 0.0)
+#: Tracking bounds are imposed in the NLP at this fraction of the requested tolerance, so
+#: that the motion between collocation points stays inside the tolerance itself.
+TRACKING_BOUND_SHRINK = 0.95
+
+
+# -- rotations ---------------------------------------------------------------------------------
+
+def quaternion_matrix(q: ArrayLike) -> FloatArray:
+    """Rotation matrix of a quaternion (w, x, y, z) (normalised first)."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _quat_rotation_sym(q: Any) -> Any:
+    n2 = ca.dot(q, q)
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return ca.vertcat(
+        ca.horzcat(n2 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        ca.horzcat(2 * (x * y + w * z), n2 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        ca.horzcat(2 * (x * z - w * y), 2 * (y * z + w * x), n2 - 2 * (x * x + y * y))) / n2
+
+
+def _quat_rate_sym(q: Any, omega: Any) -> Any:
+    """d/dt q = q (x) (0, omega) / 2, omega in the body frame."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    a, b, c = omega[0], omega[1], omega[2]
+    return 0.5 * ca.vertcat(-(x * a + y * b + z * c), w * a + y * c - z * b,
+                            w * b + z * a - x * c, w * c + x * b - y * a)
+
+
+def _axis_angle(axis: ArrayLike, angle: float) -> FloatArray:
+    a = np.asarray(axis, dtype=float)
+    return rotation_from_vector(a / np.linalg.norm(a) * angle)
+
+
+def _log_rotation(R: FloatArray) -> FloatArray:
+    """Rotation vector of R (angle in [0, pi])."""
+    c = float(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))
+    angle = math.acos(c)
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-9:
+        return v / 2
+    if math.pi - angle < 1e-6:  # axis from the symmetric part
+        M = (R + np.eye(3)) / 2
+        axis = M[:, int(np.argmax(np.diag(M)))]
+        return axis / np.linalg.norm(axis) * angle
+    return v * angle / (2 * math.sin(angle))
+
+
+def rotation_angle_between(Ra: FloatArray, Rb: FloatArray) -> FloatArray:
+    """Geodesic angle [rad] between stacks of rotations (k, 3, 3)."""
+    tr = np.einsum("kji,kji->k", Ra, Rb)  # tr(Ra^T Rb)
+    return np.arccos(np.clip((tr - 1) / 2, -1.0, 1.0))
+
+
+# -- problem data --------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ObjectPose:
+    """A pose of the object in the palm frame: orientation quaternion (w, x, y, z) and
+    position [m]."""
+
+    orientation: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def rotation(self) -> FloatArray:
+        return quaternion_matrix(self.orientation)
+
+    def errors(self, name: str) -> list[tuple[str, str]]:
+        errs: list[tuple[str, str]] = []
+        q = self.orientation
+        if len(q) != 4 or not all(map(math.isfinite, q)) or \
+                not 0.5 < math.sqrt(sum(c * c for c in q)) < 1.5:
+            errs.append((f"{name}.orientation",
+                         "must be a unit quaternion (w, x, y, z) of 4 finite numbers"))
+        p = self.position
+        if len(p) != 3 or not all(math.isfinite(c) and abs(c) <= MAX_POSITION for c in p):
+            errs.append((f"{name}.position",
+                         f"must be 3 finite numbers within +-{MAX_POSITION} m"))
+        return errs
+
+
+@dataclass(frozen=True)
+class MotionStep:
+    """One step of a desired object motion: over ``duration`` [s], rotate by ``angle``
+    [rad] about ``axis`` (a direction in the palm frame, through the object's centre) and
+    translate its centre by ``translation`` [m] (palm frame)."""
+
+    duration: float
+    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    angle: float = 0.0
+    translation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class DesiredMotion:
+    """A desired object trajectory: poses at knot times, interpolated on SE(3).
+
+    Between knots the orientation follows the geodesic (constant axis) and the position
+    the straight line, both with the same time scaling: ``smooth`` (the default) eases in
+    and out (3 s^2 - 2 s^3, zero velocity at every knot), else constant rate.
+    """
+
+    times: tuple[float, ...]
+    orientations: tuple[tuple[float, float, float, float], ...]
+    positions: tuple[tuple[float, float, float], ...]
+    smooth: bool = True
+
+    @staticmethod
+    def from_steps(start: ObjectPose, steps: Sequence[MotionStep], smooth: bool = True
+                   ) -> DesiredMotion:
+        """The motion made of ``steps`` one after the other from ``start`` (the paper's
+        "rotate about Z by 20 deg, then about Y by 20 deg, ...")."""
+        R, p, t = start.rotation, np.asarray(start.position, dtype=float), 0.0
+        times, quats, pos = [0.0], [tuple(quaternion_wxyz(R))], [tuple(p)]
+        for s in steps:
+            t += float(s.duration)
+            if s.angle != 0.0:
+                R = _axis_angle(s.axis, s.angle) @ R
+            p = p + np.asarray(s.translation, dtype=float)
+            times.append(t)
+            quats.append(tuple(quaternion_wxyz(R)))
+            pos.append(tuple(p))
+        return DesiredMotion(tuple(times), tuple(quats),  # type: ignore[arg-type]
+                             tuple(pos), smooth)  # type: ignore[arg-type]
+
+    def errors(self, name: str, duration: float) -> list[tuple[str, str]]:
+        errs: list[tuple[str, str]] = []
+        n = len(self.times)
+        if n < 2 or len(self.orientations) != n or len(self.positions) != n:
+            return [(name, "needs at least 2 knots, with as many orientations and positions "
+                           f"as times (got {n}, {len(self.orientations)}, "
+                           f"{len(self.positions)})")]
+        ts = self.times
+        if not all(map(math.isfinite, ts)) or ts[0] != 0.0 or \
+                any(b <= a for a, b in itertools.pairwise(ts)):
+            errs.append((f"{name}.times", "must start at 0 and increase strictly"))
+        elif abs(ts[-1] - duration) > 1e-9 * max(1.0, duration):
+            errs.append((f"{name}.times",
+                         f"must end at the duration {duration} s, got {ts[-1]}"))
+        for i, q in enumerate(self.orientations):
+            errs += ObjectPose(q, self.positions[i]).errors(f"{name}[{i}]")
+        return errs
+
+    def at(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """(R (k, 3, 3), p (k, 3)) at times t (clipped to the knots' span)."""
+        ts = np.asarray(self.times, dtype=float)
+        tq = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), ts[0], ts[-1])
+        Rk = [quaternion_matrix(q) for q in self.orientations]
+        Pk = np.asarray(self.positions, dtype=float)
+        j = np.clip(np.searchsorted(ts, tq, side="right") - 1, 0, len(ts) - 2)
+        s = (tq - ts[j]) / (ts[j + 1] - ts[j])
+        if self.smooth:
+            s = s * s * (3 - 2 * s)
+        R = np.empty((len(tq), 3, 3))
+        for i, (jj, ss) in enumerate(zip(j, s, strict=True)):
+            R[i] = Rk[jj] @ rotation_from_vector(ss * _log_rotation(Rk[jj].T @ Rk[jj + 1]))
+        p = Pk[j] + s[:, None] * (Pk[j + 1] - Pk[j])
+        return R, p
+
+
+@dataclass(frozen=True)
+class Tracking:
+    """How hard the object follows a :class:`DesiredMotion`.
+
+    The weights multiply the integrals over normalised time of |p - p_d|^2 / L^2 and of
+    1 - cos(angle between R and R_d); ``*_tolerance`` (when given) are hard bounds [m],
+    [rad] on the errors at every instant (checked by the certificate between collocation
+    points too).
+    """
+
+    position_weight: float = 1e4
+    orientation_weight: float = 1e4
+    position_tolerance: float | None = None
+    orientation_tolerance: float | None = None
+
+
+@dataclass(frozen=True)
+class Palm:
+    """A flat palm (the z = 0 plane of the palm frame) carrying the object.
+
+    ``initial`` are the palm contact coordinates (x, y, u, v, psi) at t = 0 in the
+    object's chart (``ObjectSpec.chart_rotation``); ``goal`` and ``via_points`` fix any
+    subsets of them at the end and at interior times (as in the ball-on-palm problem).
+    """
+
+    initial: tuple[float, float, float, float, float]
+    goal: Mapping[str, float] = field(default_factory=dict)
+    via_points: tuple[ViaPoint, ...] = ()
+    palm_half_extent: float = 0.5
+    max_contact_speed: float = 1.0
+
+
+@dataclass(frozen=True)
+class Fingertip:
+    """A finger whose flat pad touches the object.
+
+    ``initial`` = (x_f, y_f, u_f, v_f, psi_f) at t = 0: pad point [m], object point [rad]
+    in this contact's chart patch (rotated in the object frame by ``chart_rotation``, a
+    rotation vector [rad]; choose it so that the contact stays away from the patch's
+    poles), contact angle [rad]. ``q_seed`` seeds the inverse kinematics of the initial
+    grasp (default: the paper's initial angles).
+    """
+
+    finger: Any  # ocp.finger.FingerModel
+    initial: tuple[float, float, float, float, float]
+    chart_rotation: tuple[float, float, float] = (math.pi / 2, 0.0, 0.0)
+    q_seed: tuple[float, ...] | None = None
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class ManipulationProblem:
+    """A grasp (object, optional palm, fingertips), a horizon and what to achieve.
+
+    Without a palm the object's pose at t = 0 is ``initial_pose`` and what it should do is
+    ``motion`` (tracked with ``tracking``). With a palm the object's pose comes from the
+    palm contact; the palm's goal and via-points and/or a ``motion`` say where it goes.
+    """
+
+    object: ObjectSpec
+    fingers: tuple[Fingertip, ...]
+    duration: float
+    palm: Palm | None = None
+    initial_pose: ObjectPose | None = None
+    motion: DesiredMotion | None = None
+    tracking: Tracking = field(default_factory=Tracking)
+    mu: float = 0.5
+    #: Weights of the objective terms (dimensionless, scaled): the object's own motion
+    #: (the palm contact velocity, or the free object's twist), the fingertip contacts'
+    #: motion over the object, the joint rates, and the grasp-angle epigraph.
+    object_effort_weight: float = 1.0
+    finger_effort_weight: float = 0.01
+    joint_effort_weight: float = 0.01
+    grasp_weight: float = 100.0
+    pad_margin: float = 0.002  # m kept between a contact and its pad's edge
+    n_intervals: int = 50
+    pole_margin: float = math.radians(15.0)
+    max_object_speed: float = 1.0  # m/s, each component of a free object's velocity
+    max_object_rate: float = 20.0  # rad/s, each component of a free object's angular rate
+    max_refinements: int = 2
+    options: SolverOptions = field(default_factory=SolverOptions)
+
+    @property
+    def n_contacts(self) -> int:
+        return len(self.fingers) + (self.palm is not None)
+
+    def palm_problem(self) -> BallOnPalmProblem:
+        """The ball-on-palm problem of the palm contact (its grid, goals, limits)."""
+        assert self.palm is not None
+        pm = self.palm
+        return BallOnPalmProblem(
+            object=self.object, initial=pm.initial, goal=pm.goal, duration=self.duration,
+            via_points=pm.via_points, n_intervals=self.n_intervals,
+            pole_margin=self.pole_margin, max_contact_speed=pm.max_contact_speed,
+            palm_half_extent=pm.palm_half_extent, max_refinements=self.max_refinements,
+            options=self.options)
+
+    def segments(self) -> tuple[tuple[int, ...], FloatArray]:
+        """(intervals per segment, segment boundary times): via-points split the grid."""
+        if self.palm is not None:
+            base = self.palm_problem()
+            return base.segment_intervals(), base.segment_times
+        return (self.n_intervals,), np.array([0.0, self.duration])
+
+    def with_intervals(self, n: int) -> ManipulationProblem:
+        return replace(self, n_intervals=n)
+
+    def errors(self) -> list[tuple[str, str]]:
+        """Every reason the problem is invalid, as (field, reason)."""
+        errs: list[tuple[str, str]] = []
+        palm_fields = ("initial", "goal", "via_points", "palm_half_extent",
+                       "max_contact_speed")
+        if self.palm is not None:
+            for name, why in self.palm_problem().errors():
+                if name == "goal" and self.motion is not None and "nothing to plan" in why:
+                    continue  # the motion says what to do
+                head = name.split(".")[0].split("[")[0]
+                errs.append((f"palm.{name}" if head in palm_fields else name, why))
+        else:
+            # the object, grid and solver fields, checked by the palm problem's own rules
+            errs += BallOnPalmProblem(self.object, (0.0, 0.0, 0.0, 0.0, 0.0), {"x": 0.0},
+                                      self.duration, n_intervals=self.n_intervals,
+                                      pole_margin=self.pole_margin,
+                                      max_refinements=self.max_refinements,
+                                      options=self.options).errors()
+            if self.initial_pose is None:
+                errs.append(("initial_pose", "required when no palm carries the object"))
+            else:
+                errs += self.initial_pose.errors("initial_pose")
+            if self.motion is None:
+                errs.append(("motion", "required when no palm carries the object: what "
+                                       "should the object do?"))
+        if self.motion is not None:
+            errs += self.motion.errors("motion", self.duration)
+        if self.n_contacts < 2:
+            errs.append(("fingers", "a grasp needs at least two contacts (a palm and a "
+                                    f"finger, or two fingers); got {self.n_contacts}"))
+        if not (math.isfinite(self.mu) and 0.0 < self.mu <= 10.0):
+            errs.append(("mu", f"must be in (0, 10], got {self.mu}"))
+        for name in ("object_effort_weight", "finger_effort_weight", "joint_effort_weight",
+                     "grasp_weight"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 1e6):
+                errs.append((name, f"must be in [0, 1e6], got {value}"))
+        tr = self.tracking
+        for name in ("position_weight", "orientation_weight"):
+            value = getattr(tr, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 1e8):
+                errs.append((f"tracking.{name}", f"must be in [0, 1e8], got {value}"))
+        for name, hi in (("position_tolerance", MAX_POSITION),
+                         ("orientation_tolerance", math.pi)):
+            value = getattr(tr, name)
+            if value is not None and not (math.isfinite(value) and 0.0 < value <= hi):
+                errs.append((f"tracking.{name}", f"must be in (0, {hi:.4g}], got {value}"))
+        if (tr.position_tolerance is not None or tr.orientation_tolerance is not None) \
+                and self.motion is None:
+            errs.append(("tracking", "tolerances given but no motion to track"))
+        for name in ("max_object_speed", "max_object_rate"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                errs.append((name, f"must be > 0, got {value}"))
+        u_lim = math.pi / 2 - self.pole_margin
+        for i, c in enumerate(self.fingers):
+            name = f"fingers[{i}]"
+            if self.object.shape in SURFACES and len(c.chart_rotation) == 3 and \
+                    all(map(math.isfinite, c.chart_rotation)):
+                why = self.object.surface.chart_rotation_error(
+                    rotation_from_vector(c.chart_rotation))
+                if why is not None:
+                    errs.append((f"{name}.chart_rotation", why))
+            else:
+                errs.append((f"{name}.chart_rotation", "must be 3 finite numbers "
+                                                       "(rotation vector, rad)"))
+            if len(c.initial) != 5 or not all(map(math.isfinite, c.initial)):
+                errs.append((f"{name}.initial", "must be 5 finite numbers "
+                                                "(x_f, y_f, u_f, v_f, psi_f)"))
+                continue
+            half = float(c.finger.pad_half_size) - self.pad_margin
+            for k, coord in ((0, "x_f"), (1, "y_f")):
+                if abs(c.initial[k]) > half:
+                    errs.append((f"{name}.initial.{coord}",
+                                 f"|{coord}| = {abs(c.initial[k]):.4g} m leaves the pad "
+                                 f"(half size {c.finger.pad_half_size} m less "
+                                 f"{self.pad_margin} m margin) by "
+                                 f"{abs(c.initial[k]) - half:.4g} m"))
+            if abs(c.initial[2]) > u_lim:
+                errs.append((f"{name}.initial.u_f",
+                             f"|u_f| = {abs(c.initial[2]):.4f} rad is beyond the chart pole "
+                             f"limit {u_lim:.4f} rad; rotate {name}.chart_rotation"))
+            if c.q_seed is not None and len(c.q_seed) != c.finger.nq:
+                errs.append((f"{name}.q_seed",
+                             f"must have {c.finger.nq} joint angles, got {len(c.q_seed)}"))
+        return errs
+
+    def validate(self) -> None:
+        errs = self.errors()
+        if errs:
+            raise ProblemError(errs)
+
+
+# -- solution --------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ContactTrajectory:
+    """One contact over the plan (rows are samples).
+
+    ``eta`` = (body point x, y [m], object point u, v [rad], psi [rad]): for the palm the
+    palm point, for a fingertip the pad point; ``w`` the contact's input (palm: d/dt (x, y)
+    [m/s]; fingertip: d/dt (u, v) [rad/s]); ``point`` the contact point and ``normal`` the
+    object's outward normal there, in the palm frame; ``force_angle`` the angle [rad]
+    between the pushing direction (-normal) and the internal force of the grasp that
+    certifies force closure (for two contacts: the paper's grasp angle).
+    """
+
+    name: str
+    body: str  # "palm" or "finger"
+    eta: FloatArray
+    eta_dot: FloatArray
+    w: FloatArray
+    point: FloatArray
+    normal: FloatArray
+    force_angle: FloatArray
+
+
+@dataclass(frozen=True)
+class FingerTrajectory:
+    """One finger over the plan: joint angles q [rad], rates q_dot [rad/s], the pad's pose
+    (position [m], rotation) in the palm frame."""
+
+    name: str
+    joint_names: tuple[str, ...]
+    q: FloatArray
+    q_dot: FloatArray
+    tip_position: FloatArray
+    tip_rotation: FloatArray
+
+
+@dataclass(frozen=True)
+class ManipulationSolution:
+    """A plan sampled on the collocation grid (nodes and midpoints, in time order)."""
+
+    status: Status
+    message: str
+    raw_status: str
+    iterations: int
+    build_time: float
+    solve_time: float
+    t: FloatArray
+    object_position: FloatArray
+    object_rotation: FloatArray
+    object_velocity: FloatArray  # [m/s], palm frame
+    object_angular_velocity: FloatArray  # [rad/s], palm frame
+    contacts: tuple[ContactTrajectory, ...]
+    fingers: tuple[FingerTrajectory, ...]
+    grasp_angle: FloatArray  # Phi*: the largest force angle over the contacts [rad]
+    cone_margin: FloatArray  # atan(mu) - Phi* [rad]
+    desired_position: FloatArray | None
+    desired_rotation: FloatArray | None
+    tracking_position_error: FloatArray | None  # [m]
+    tracking_angle_error: FloatArray | None  # [rad]
+    goal_error: dict[str, float]
+    certificate: dict[str, float]
+    certificate_failures: tuple[str, ...] = ()
+    refinements: int = 0
+    #: The collocation grid's raw values (states, inputs), for warm starts.
+    X: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    U: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+
+    @property
+    def ok(self) -> bool:
+        return self.status is Status.SOLVED
+
+
+# -- symbolic model --------------------------------------------------------------------------
+
+def _vee_skew(E: Any) -> Any:
+    """vee((E - E^T)/2): zero for E = I, ~ the rotation vector for E near I."""
+    return ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]) / 2
+
+
+def _vee(W: Any) -> Any:
+    return ca.vertcat(W[2, 1], W[0, 2], W[1, 0])
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Where each block sits in the state and input vectors."""
+
+    palm: bool
+    nqs: tuple[int, ...]
+
+    @property
+    def n_obj_x(self) -> int:
+        return 5 if self.palm else 7
+
+    @property
+    def n_obj_u(self) -> int:
+        return 2 if self.palm else 6
+
+    def x_eta(self, i: int) -> slice:  # finger i's contact coordinates
+        start = self.n_obj_x + sum(5 + n for n in self.nqs[:i])
+        return slice(start, start + 5)
+
+    def x_q(self, i: int) -> slice:
+        s = self.x_eta(i).stop
+        return slice(s, s + self.nqs[i])
+
+    def u_w(self, i: int) -> slice:
+        start = self.n_obj_u + sum(2 + n for n in self.nqs[:i])
+        return slice(start, start + 2)
+
+    def u_qd(self, i: int) -> slice:
+        s = self.u_w(i).stop
+        return slice(s, s + self.nqs[i])
+
+    @property
+    def nx(self) -> int:
+        return self.n_obj_x + sum(5 + n for n in self.nqs)
+
+    @property
+    def nu(self) -> int:
+        return self.n_obj_u + sum(2 + n for n in self.nqs)
+
+    def x_scale(self, L: Any) -> list[Any]:
+        out: list[Any] = [L, L, 1, 1, 1] if self.palm else [L, L, L, 1, 1, 1, 1]
+        for n in self.nqs:
+            out += [L, L, 1, 1, 1] + [1] * n
+        return out
+
+    def u_scale(self, L: Any, T: Any) -> list[Any]:
+        out: list[Any] = [L / T, L / T] if self.palm else [L / T] * 3 + [1 / T] * 3
+        for n in self.nqs:
+            out += [1 / T, 1 / T] + [1 / T] * n
+        return out
+
+    def angle_columns(self) -> list[int]:
+        cols = [2, 3, 4] if self.palm else [3, 4, 5, 6]
+        for i in range(len(self.nqs)):
+            e = self.x_eta(i)
+            cols += [e.start + 2, e.start + 3, e.start + 4]
+        return cols
+
+    def length_columns(self) -> list[int]:
+        cols = [0, 1] if self.palm else [0, 1, 2]
+        for i in range(len(self.nqs)):
+            e = self.x_eta(i)
+            cols += [e.start, e.start + 1]
+        return cols
+
+    def joint_columns(self) -> list[int]:
+        return [c for i in range(len(self.nqs)) for c in range(self.x_q(i).start,
+                                                                self.x_q(i).stop)]
+
+
+class _Model:
+    """CasADi functions of one grasp structure (object shape, palm or not, the fingers)."""
+
+    def __init__(self, shape: str, palm: bool, fingers: tuple[Any, ...]) -> None:
+        surface = model_for(shape).surface
+        self.surface = surface
+        self.fingers = fingers
+        lay = self.layout = _Layout(palm, tuple(int(f.nq) for f in fingers))
+        self.nx, self.nu = lay.nx, lay.nu
+        nf = len(fingers)
+        self.n_contacts = nf + palm
+        x = ca.SX.sym("x", self.nx)
+        u = ca.SX.sym("u", self.nu)
+        shape_p = ca.SX.sym("shape", surface.n_params)
+        charts = [ca.SX.sym(f"Rc{i}", 3, 3) for i in range(self.n_contacts)]
+        prm = ca.vertcat(shape_p, *[ca.vec(R) for R in charts])
+        self.n_params = int(prm.numel())
+        none = ca.SX(0, 1)
+        eye = ca.SX.eye(3)
+        tip = ContactPair(surface, Plane)  # A = object (finger patch), B = pad
+        xdot_parts: list[Any] = []
+        points, normals = [], []  # object frame
+        if palm:
+            pair = ContactPair(Plane, surface)  # A = palm, B = object
+            eta_p = x[0:5]
+            xdot_parts.append(pair.rates_driven_by_a(eta_p, u[0:2], none, shape_p))
+            R_po, p_po = pair.pose(eta_p, none, shape_p, eye, charts[0])
+            pc, Rg, _, _, _ = surface.geometry(eta_p[2:4], shape_p)
+            points.append(charts[0] @ pc)
+            normals.append(charts[0] @ Rg[:, 2])
+        else:
+            p_po, quat = x[0:3], x[3:7]
+            R_po = _quat_rotation_sym(quat)
+            xdot_parts += [u[0:3], _quat_rate_sym(quat, u[3:6])]
+        closure, fk_R, fk_p, tip_R, tip_p = [], [], [], [], []
+        for i, finger in enumerate(fingers):
+            eta, q = x[lay.x_eta(i)], x[lay.x_q(i)]
+            Rc = charts[i + palm]
+            e = ca.vertcat(eta[2:4], eta[0:2], eta[4])  # the pair's order (u, v, x, y, psi)
+            ed = tip.rates_driven_by_a(e, u[lay.u_w(i)], shape_p, none)
+            xdot_parts += [ca.vertcat(ed[2:4], ed[0:2], ed[4]), u[lay.u_qd(i)]]
+            R_of, p_of = tip.pose(e, shape_p, none, Rc, eye)
+            R_pf, p_pf = R_po @ R_of, p_po + R_po @ p_of
+            R_fk, p_fk = finger.fk(q)
+            closure.append(ca.vertcat(p_pf - p_fk, _vee_skew(R_fk.T @ R_pf)))
+            fk_R.append(R_fk)
+            fk_p.append(p_fk)
+            tip_R.append(R_pf)
+            tip_p.append(p_pf)
+            pc, Rg, _, _, _ = surface.geometry(eta[2:4], shape_p)
+            points.append(Rc @ pc)
+            normals.append(Rc @ Rg[:, 2])
+        e_ = ca.SX.sym("e", 5)
+        w_ = ca.SX.sym("w", 2)
+        self.tip_rates = ca.Function("tip_rates", [e_, w_, shape_p],
+                                     [tip.rates_driven_by_a(e_, w_, shape_p, none)])
+        xdot = ca.vertcat(*xdot_parts)
+        self.dynamics = ca.Function("manipulation_dynamics", [x, u, prm], [xdot],
+                                    ["x", "u", "params"], ["x_dot"])
+        self._reintegrators: dict[int, ca.Function] = {}
+        P = ca.horzcat(*points)  # object frame, 3 x n
+        N = ca.horzcat(*normals)
+        cl = ca.vertcat(*closure) if closure else ca.SX(0, 1)
+        self.path = ca.Function("manipulation_path", [x, prm], [cl, P, N, R_po, p_po],
+                                ["x", "params"], ["closure", "points", "normals", "R_po",
+                                                  "p_po"])
+        self.cartesian = ca.Function(
+            "manipulation_cartesian", [x, prm],
+            [R_po, p_po, ca.horzcat(*tip_R) if tip_R else ca.SX(3, 0),
+             ca.horzcat(*tip_p) if tip_p else ca.SX(3, 0), p_po + R_po @ P, R_po @ N],
+            ["x", "params"], ["R_po", "p_po", "R_pf", "p_pf", "points", "normals"])
+        # Rolling laws along a motion (certificate): each finger moves by its joints (FK),
+        # the object by its pose; material points of both bodies at every contact.
+        xd = ca.SX.sym("xd", self.nx)
+
+        def dot(expr: Any) -> Any:
+            return ca.reshape(ca.jtimes(ca.vec(expr), x, xd), expr.size1(), expr.size2())
+
+        R_po_dot, p_po_dot = dot(R_po), dot(p_po)
+        W_obj = R_po_dot @ R_po.T
+        omega_obj = _vee(W_obj)
+        outs = [p_po_dot, omega_obj]
+        names = ["v_obj", "omega_obj"]
+        if palm:
+            outs += [R_po_dot @ points[0] + p_po_dot, ca.dot(omega_obj, R_po @ normals[0])]
+            names += ["slip_palm", "spin_palm"]
+        for i in range(nf):
+            R_fk, p_fk = fk_R[i], fk_p[i]
+            c_pt = p_po + R_po @ points[i + palm]
+            on_pad = R_fk.T @ (c_pt - p_fk)
+            v_pad = dot(R_fk) @ on_pad + dot(p_fk)
+            v_obj = R_po_dot @ points[i + palm] + p_po_dot
+            omega_rel = _vee(dot(R_fk) @ R_fk.T - W_obj)
+            n_i = R_po @ normals[i + palm]
+            outs += [v_pad - v_obj, ca.dot(omega_rel, n_i), ca.dot(R_fk[:, 2], p_po - p_fk),
+                     R_fk[:, 2], on_pad]
+            names += [f"slip_{i}", f"spin_{i}", f"centre_above_pad_{i}", f"pad_normal_{i}",
+                      f"pad_point_{i}"]
+        self.laws = ca.Function("manipulation_laws", [x, xd, prm], outs,
+                                ["x", "x_dot", "params"], names)
+
+    def params(self, shape: FloatArray, charts: Sequence[FloatArray]) -> FloatArray:
+        return np.concatenate([np.asarray(shape, dtype=float),
+                               *[np.asarray(R).ravel(order="F") for R in charts]])
+
+    def reintegrator(self, n_sub: int) -> ca.Function:
+        if n_sub not in self._reintegrators:
+            self._reintegrators[n_sub] = reintegrator(self.dynamics, self.nx, self.nu,
+                                                      self.n_params, n_sub)
+        return self._reintegrators[n_sub]
+
+
+# -- force closure ---------------------------------------------------------------------------
+
+def force_angles(points: FloatArray, normals: FloatArray
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(Phi* (k,), per-contact force angles (k, n), grasp map onto (k,)) for contacts
+    (k, n, 3) with the object's outward normals. Two contacts: the paper's grasp angles
+    in closed form; three or more: :func:`ocp.force_closure.grasp_qualities`."""
+    k, n = points.shape[0], points.shape[1]
+    if n == 2:
+        ang = np.array([grasp_angles_numeric(points[i, 0], normals[i, 0], points[i, 1],
+                                             normals[i, 1]) for i in range(k)])
+        onto = np.linalg.norm(points[:, 1] - points[:, 0], axis=1) > 0
+        return ang.max(axis=1), ang, onto
+    from .force_closure import grasp_qualities
+
+    qs = grasp_qualities(points, normals)
+    return (np.array([q.angle for q in qs]), np.array([q.contact_angles for q in qs]),
+            np.array([q.rank_ok for q in qs]))
+
+
+# -- the planner -----------------------------------------------------------------------------
+
+@dataclass
+class _NLP:
+    solver: ca.Function
+    stop: _StopCallback
+    hs: HermiteSimpson
+    unpack: ca.Function
+    pack: ca.Function
+    params: ca.Function
+    lbg: FloatArray
+    ubg: FloatArray
+    build_time: float
+    n_force: int  # contacts with internal-force variables (0 for two contacts)
+
+
+def _charts(problem: ManipulationProblem) -> list[FloatArray]:
+    out = [rotation_from_vector(problem.object.chart_rotation)] if problem.palm else []
+    return out + [rotation_from_vector(c.chart_rotation) for c in problem.fingers]
+
+
+def _node_times(segments: tuple[int, ...], tb: FloatArray) -> FloatArray:
+    pieces = [np.linspace(tb[s], tb[s + 1], n + 1)[:-1] for s, n in enumerate(segments)]
+    return np.concatenate([*pieces, [tb[-1]]])
+
+
+def _goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[int]
+                 ) -> dict[str, float]:
+    if problem.palm is None:
+        return {}
+    out = BallOnPalmPlanner._goal_errors(problem.palm_problem(), X, ends)
+    return {f"palm.{k}": v for k, v in out.items()}
+
+
+class ManipulationPlanner:
+    """Direct-collocation planner for any grasp (NLPs cached per structure)."""
+
+    def __init__(self) -> None:
+        # keyed by the finger objects themselves (identity; the key keeps them alive)
+        self._models: dict[tuple[Any, ...], _Model] = {}
+        self._nlps: dict[tuple[Any, ...], _NLP] = {}
+        self._palm = BallOnPalmPlanner()
+
+    def model(self, problem: ManipulationProblem) -> _Model:
+        key = (problem.object.shape, problem.palm is not None,
+               tuple(c.finger for c in problem.fingers))
+        if key not in self._models:
+            self._models[key] = _Model(*key)
+        return self._models[key]
+
+    def _structure(self, problem: ManipulationProblem) -> tuple[Any, ...]:
+        segments, _ = problem.segments()
+        masks: tuple[Any, ...] = ((False,) * 5, ())
+        if problem.palm is not None:
+            st = Structure.of(problem.palm_problem())
+            masks = (st.goal_mask, st.via_masks)
+        return (problem.object.shape, problem.palm is not None, segments, *masks,
+                tuple(c.finger for c in problem.fingers), problem.motion is not None)
+
+    # ...................................................................................
+    def _build(self, problem: ManipulationProblem) -> tuple[_NLP, bool]:
+        key = self._structure(problem)
+        if key in self._nlps:
+            return self._nlps[key], True
+        t0 = time.perf_counter()
+        _, _, segments, goal_mask, via_masks, fingers, tracking = key
+        m = self.model(problem)
+        lay = m.layout
+        nc = m.n_contacts
+        hs = HermiteSimpson(m.nx, m.nu, segments)
+        n = hs.n_intervals
+        npts = 2 * n + 1
+        shape_p = ca.SX.sym("shape", m.surface.n_params)
+        seg_T = ca.SX.sym("seg_T", len(segments))
+        goal = ca.SX.sym("goal", 5)
+        vias = ca.SX.sym("vias", 5, len(via_masks))
+        charts = ca.SX.sym("charts", 9 * nc)
+        weights = ca.SX.sym("weights", 6)  # object, finger contacts, joints, grasp, pos, rot
+        ccone = ca.SX.sym("ccone")
+        tol = ca.SX.sym("tol", 2)
+        Pd = ca.SX.sym("Pd", 3, npts if tracking else 0)
+        Rd = ca.SX.sym("Rd", 9, npts if tracking else 0)
+        prm = ca.vertcat(shape_p, charts)
+        p = ca.vertcat(shape_p, seg_T, goal, ca.vec(vias), charts, weights, ccone, tol,
+                       ca.vec(Pd), ca.vec(Rd))
+        L = ca.mmax(shape_p)
+        T = ca.sum1(seg_T)
+        x_scale = ca.vertcat(*lay.x_scale(L))
+        u_scale = ca.vertcat(*lay.u_scale(L, T))
+        S = ca.SX.sym("S", 1, n + 1)  # grasp epigraph at nodes
+        Sm = ca.SX.sym("Sm", 1, n)  # and midpoints
+        n_force = nc if nc >= 3 else 0
+        F = ca.SX.sym("F", 3 * n_force, npts)  # internal forces (3+ contacts)
+        g: list[Any] = [hs.defects(m.dynamics, prm, x_scale, u_scale, seg_T)]
+        lbg: list[float] = [0.0] * g[0].numel()
+        ubg: list[float] = [0.0] * g[0].numel()
+
+        def add(expr: Any, lo: float, hi: float) -> None:
+            g.append(expr)
+            lbg.extend([lo] * expr.numel())
+            ubg.extend([hi] * expr.numel())
+
+        closure_scale = ca.vertcat(*([1 / L] * 3 + [1.0] * 3) * len(fingers)) \
+            if fingers else ca.SX(0, 1)
+        track_terms: list[Any] = []
+
+        def point(xs: Any, s: Any, col: int, fixed: bool) -> None:
+            cl, P, N, R_po, p_po = m.path(x_scale * xs, prm)
+            if not fixed and fingers:  # eq. 6: each fingertip where its kinematics put it
+                add(closure_scale * cl, 0.0, 0.0)
+            if nc == 2:
+                c1, c2, dist = grasp_cosines(P[:, 0], N[:, 0], P[:, 1], N[:, 1])
+                add(ca.vertcat(c1 - dist * ccone, c2 - dist * ccone) / L, 0.0, math.inf)
+                add(ca.vertcat(s - (1 - c1 / dist), s - (1 - c2 / dist)), 0.0, math.inf)
+            else:
+                from .force_closure import internal_force_residuals
+
+                eq, push, norms = internal_force_residuals(
+                    P, N, ca.reshape(F[:, col], 3, nc), L)
+                add(eq, 0.0, 0.0)
+                add(ca.sum1(push) - nc, 0.0, 0.0)
+                add(push - ccone * norms, 0.0, math.inf)
+                add(push - (1 - s) * norms, 0.0, math.inf)
+            if tracking:
+                ep = (p_po - Pd[:, col]) / L
+                er = (3 - ca.trace(ca.reshape(Rd[:, col], 3, 3).T @ R_po)) / 2
+                if not fixed:
+                    add(ca.vertcat(tol[0] - ca.sumsqr(ep), tol[1] - er), 0.0, math.inf)
+                track_terms.append(weights[4] * ca.sumsqr(ep) + weights[5] * er)
+
+        for k in range(n + 1):
+            point(hs.X[:, k], S[k], k, fixed=k == 0)  # node 0 is the given initial grasp
+        for k in range(n):
+            point(hs.Xm[:, k], Sm[k], n + 1 + k, fixed=False)
+
+        def target(x_node: Any, value: Any, mask: tuple[bool, ...]) -> None:
+            for i, on in enumerate(mask):
+                if on:
+                    r = 2 * ca.sin((x_node[i] - value[i]) / 2) if PERIODIC[i] else \
+                        x_node[i] - value[i] / x_scale[i]
+                    add(r, 0.0, 0.0)
+
+        ends = hs.segment_end_nodes
+        for j, vmask in enumerate(via_masks):
+            target(hs.X[:, ends[j]], vias[:, j], vmask)
+        target(hs.X[:, ends[-1]], goal, goal_mask)
+
+        us = ca.SX.sym("us", m.nu)
+        xs_ = ca.SX.sym("xs", m.nx)
+        parts = ([list(range(lay.n_obj_u))],
+                 [list(range(lay.u_w(i).start, lay.u_w(i).stop)) for i in range(len(fingers))],
+                 [list(range(lay.u_qd(i).start, lay.u_qd(i).stop))
+                  for i in range(len(fingers))])
+        f: Any = 0
+        for i, groups in enumerate(parts):
+            idx = [j for grp in groups for j in grp]
+            if idx:
+                term = ca.Function(f"effort{i}", [xs_, us], [ca.sumsqr(us[idx])])
+                f += weights[i] * hs.simpson(term, seg_T / T)
+        steps = hs.steps(seg_T / T)
+        for k, h in enumerate(steps):
+            f += weights[3] * h / 6 * (S[k] + 4 * Sm[k] + S[k + 1])
+            if tracking:
+                f += h / 6 * (track_terms[k] + 4 * track_terms[n + 1 + k]
+                              + track_terms[k + 1])
+
+        w = ca.vertcat(hs.w, S.T, Sm.T, ca.vec(F))
+        g_all = ca.vertcat(*g)
+        stop = _StopCallback(w.numel(), g_all.numel(), p.numel())
+        solver = ca.nlpsol("manipulation", "ipopt", {"x": w, "p": p, "f": f, "g": g_all}, {
+            "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+            "ipopt.max_iter": 100_000, **IPOPT_OPTIONS, "iteration_callback": stop,
+            "error_on_fail": False})
+        unpack = ca.Function("unpack", [w], [hs.X, hs.Xm, hs.U, hs.Um, S, Sm, F])
+        pack = ca.Function("pack", [hs.X, hs.Xm, hs.U, hs.Um, S, Sm, F], [w])
+        params = ca.Function("params", [shape_p, seg_T, goal, vias, charts, weights, ccone,
+                                        tol, Pd, Rd], [p])
+        nlp = _NLP(solver, stop, hs, unpack, pack, params, np.array(lbg), np.array(ubg),
+                   time.perf_counter() - t0, n_force)
+        self._nlps[key] = nlp
+        return nlp, False
+
+    # ...................................................................................
+    def initial_state(self, problem: ManipulationProblem) -> FloatArray:
+        """The state at t = 0, the fingers' joints by inverse kinematics; ProblemError
+        saying why the initial grasp is impossible (unreachable, outside the joint limits,
+        not in force closure)."""
+        from .finger import inverse_kinematics
+
+        m = self.model(problem)
+        lay = m.layout
+        x = np.zeros(m.nx)
+        if problem.palm is not None:
+            x[0:5] = problem.palm.initial
+        else:
+            assert problem.initial_pose is not None
+            x[0:3] = problem.initial_pose.position
+            q = np.asarray(problem.initial_pose.orientation, dtype=float)
+            x[3:7] = q / np.linalg.norm(q)
+        for i, c in enumerate(problem.fingers):
+            x[lay.x_eta(i)] = c.initial
+        prm = m.params(np.asarray(problem.object.dimensions, dtype=float), _charts(problem))
+        out = m.cartesian(x, prm)
+        R_pf, p_pf = np.asarray(out[2]), np.asarray(out[3])
+        errs: list[tuple[str, str]] = []
+        for i, c in enumerate(problem.fingers):
+            seed = np.asarray(c.q_seed if c.q_seed is not None else
+                              np.radians(PAPER_SEED_DEG)[: c.finger.nq], dtype=float)
+            if len(seed) < c.finger.nq:
+                seed = np.concatenate([seed, np.zeros(c.finger.nq - len(seed))])
+            ik = inverse_kinematics(c.finger, R_pf[:, 3 * i:3 * i + 3], p_pf[:, i], seed)
+            name = f"fingers[{i}].initial"
+            if not ik.converged:
+                errs.append((name, f"the finger cannot reach the initial grasp: after "
+                                   f"inverse kinematics its pad is {ik.position_error:.3g} m "
+                                   f"and {ik.orientation_error:.3g} rad from it"))
+            elif not ik.within_limits:
+                errs.append((name, "the initial grasp needs joint angles outside the "
+                                   "finger's limits"))
+            x[lay.x_q(i)] = ik.q
+        pts, nrm = np.asarray(out[4]).T[None], np.asarray(out[5]).T[None]
+        phi, _, onto = force_angles(pts, nrm)
+        cone = math.atan(problem.mu)
+        if not (phi[0] < cone and onto[0]):
+            errs.append(("fingers", f"the initial grasp is not in force closure: grasp angle "
+                                    f"{math.degrees(phi[0]):.2f} deg >= atan(mu) = "
+                                    f"{math.degrees(cone):.2f} deg, by "
+                                    f"{math.degrees(phi[0] - cone):.2f} deg"
+                         if onto[0] else "the initial grasp's contacts cannot resist every "
+                                         "wrench (grasp map not onto)"))
+        if errs:
+            raise ProblemError(errs)
+        return x
+
+    def solve(self, problem: ManipulationProblem) -> ManipulationSolution:
+        """Plan; ProblemError (before any NLP is built) on bad input or an impossible
+        initial grasp. When IPOPT converges but the certificate finds the grid too coarse
+        (slip between collocation points, closure, re-integration defects, tracking between
+        points), the plan is re-solved on a grid twice as fine, warm-started, up to
+        ``max_refinements`` times."""
+        problem.validate()
+        deadline = time.perf_counter() + problem.options.time_limit
+        x0 = self.initial_state(problem)
+        sol = self._solve_once(problem, x0, None, deadline)
+        refinements, build, solve, iters = 0, sol.build_time, sol.solve_time, sol.iterations
+        discretisation = ("max_slip_speed_", "max_spin_rate_", "max_closure",
+                          "max_length_defect", "max_angle_defect", "max_joint_defect",
+                          "max_gap_error_", "max_tracking_")
+        while (sol.status is Status.INACCURATE
+               and refinements < problem.max_refinements
+               and 2 * problem.n_intervals <= MAX_INTERVALS
+               and all(f.startswith(discretisation) for f in sol.certificate_failures)
+               and time.perf_counter() < deadline):
+            refinements += 1
+            problem = problem.with_intervals(2 * problem.n_intervals)
+            sol = self._solve_once(problem, x0, sol, deadline)
+            build, solve, iters = build + sol.build_time, solve + sol.solve_time, \
+                iters + sol.iterations
+        return replace(sol, build_time=build, solve_time=solve, iterations=iters,
+                       refinements=refinements)
+
+    def _scales(self, problem: ManipulationProblem, m: _Model
+                ) -> tuple[FloatArray, FloatArray]:
+        L, T = problem.object.length_scale, problem.duration
+        lay = m.layout
+        return (np.asarray(lay.x_scale(L), dtype=float),
+                np.asarray(lay.u_scale(L, T), dtype=float))
+
+    def _solve_once(self, problem: ManipulationProblem, x0: FloatArray,
+                    warm: ManipulationSolution | None, deadline: float
+                    ) -> ManipulationSolution:
+        nlp, hit = self._build(problem)
+        build_time = 0.0 if hit else nlp.build_time
+        m = self.model(problem)
+        x_scale, u_scale = self._scales(problem, m)
+        segments, tb = problem.segments()
+        t_nodes = _node_times(segments, tb)
+        n = len(t_nodes) - 1
+        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+        charts = _charts(problem)
+        shape = np.asarray(problem.object.dimensions, dtype=float)
+        prm = m.params(shape, charts)
+        L = problem.object.length_scale
+        goal = np.zeros(5)
+        vias = np.zeros((5, 0))
+        if problem.palm is not None:
+            goal = np.array([problem.palm.goal.get(c, 0.0) for c in CONTACT_COORDS])
+            vias = np.array([[vp.coords.get(c, 0.0) for c in CONTACT_COORDS]
+                             for vp in problem.palm.via_points]).T.reshape(5, -1)
+        tr = problem.tracking
+        weights = [problem.object_effort_weight, problem.finger_effort_weight,
+                   problem.joint_effort_weight, problem.grasp_weight, tr.position_weight,
+                   tr.orientation_weight]
+        tol = [1e6 if tr.position_tolerance is None else
+               (TRACKING_BOUND_SHRINK * tr.position_tolerance / L) ** 2,
+               1e6 if tr.orientation_tolerance is None else
+               1 - math.cos(TRACKING_BOUND_SHRINK * tr.orientation_tolerance)]
+        if problem.motion is not None:
+            Rd, Pd = problem.motion.at(np.concatenate([t_nodes, tm]))
+            Pd_, Rd_ = Pd.T, Rd.transpose(0, 2, 1).reshape(-1, 9).T  # column-major vec
+        else:
+            Pd_, Rd_ = np.zeros((3, 0)), np.zeros((9, 0))
+        p = nlp.params(shape, np.diff(tb), goal, vias, np.concatenate(
+            [R.ravel(order="F") for R in charts]), weights, cone_cosine(problem.mu), tol,
+            Pd_, Rd_)
+        lbx, ubx = self._bounds(problem, nlp, m, x0, x_scale, u_scale)
+        if warm is None:
+            X, Xm, U, Um = self._guess(problem, m, nlp, x0, t_nodes)
+        else:
+            X, Xm, U, Um = self._guess_from(warm, nlp, t_nodes)
+        Sg, Fg = self._epigraph(problem, m, np.vstack([X, Xm]), prm)
+        w0 = nlp.pack((X / x_scale).T, (Xm / x_scale).T, (U / u_scale).T, (Um / u_scale).T,
+                      Sg[None, : n + 1], Sg[None, n + 1:], Fg)
+        w0 = np.clip(np.asarray(w0).ravel(), lbx, ubx)
+        nlp.stop.arm(deadline, problem.options.max_iter)
+        t_solve = time.perf_counter()
+        res = nlp.solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=nlp.lbg, ubg=nlp.ubg)
+        solve_time = time.perf_counter() - t_solve
+        stats = nlp.solver.stats()
+        raw = str(stats["return_status"])
+        status = nlp.stop.reason if raw == "User_Requested_Stop" and nlp.stop.reason \
+            else status_from_ipopt(raw)
+        Xs, Xms, Us, Ums = (np.asarray(a) for a in nlp.unpack(res["x"])[:4])
+        X, Xm = Xs.T * x_scale, Xms.T * x_scale
+        Ucols, Um = Us.T * u_scale, Ums.T * u_scale
+        U0, U1 = Ucols[nlp.hs.left_cols], Ucols[nlp.hs.right_cols]
+        return self._solution(problem, m, status, raw, int(stats["iter_count"]), build_time,
+                              solve_time, t_nodes, X, Xm, U0, Um, U1, prm)
+
+    # ...................................................................................
+    @staticmethod
+    def _bounds(problem: ManipulationProblem, nlp: _NLP, m: _Model, x0: FloatArray,
+                x_scale: FloatArray, u_scale: FloatArray) -> tuple[FloatArray, FloatArray]:
+        n = nlp.hs.n_intervals
+        n_seg = len(nlp.hs.segments)
+        L = problem.object.length_scale
+        u_lim = math.pi / 2 - problem.pole_margin
+        inf = np.inf
+        if problem.palm is not None:
+            ext = problem.palm.palm_half_extent / L
+            hi = [ext, ext, u_lim, inf, inf]
+            uhi = [problem.palm.max_contact_speed] * 2
+        else:
+            hi = [MAX_POSITION / L] * 3 + [1.5] * 4
+            uhi = [problem.max_object_speed] * 3 + [problem.max_object_rate] * 3
+        lo = [-h for h in hi]
+        for c in problem.fingers:
+            pad = (float(c.finger.pad_half_size) - problem.pad_margin) / L
+            hi += [pad, pad, u_lim, inf, inf, *np.asarray(c.finger.upper)]
+            lo += [-pad, -pad, -u_lim, -inf, -inf, *np.asarray(c.finger.lower)]
+            uhi += [100.0, 100.0, *np.asarray(c.finger.velocity_limit)]
+        xb_hi, xb_lo = np.array(hi), np.array(lo)
+        lo_x, hi_x = np.tile(xb_lo, (n + 1, 1)), np.tile(xb_hi, (n + 1, 1))
+        lo_x[0] = hi_x[0] = x0 / x_scale
+        lo_xm, hi_xm = np.tile(xb_lo, (n, 1)), np.tile(xb_hi, (n, 1))
+        ub_in = np.array(uhi) / u_scale
+        lo_u, hi_u = np.tile(-ub_in, (n + n_seg, 1)), np.tile(ub_in, (n + n_seg, 1))
+        lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
+        zeros_s, twos_s = np.zeros((1, n + 1)), 2 * np.ones((1, n + 1))
+        big = 1e3 * np.ones((3 * nlp.n_force, 2 * n + 1))
+        lbx = nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n], -big)
+        ubx = nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n], big)
+        return np.asarray(lbx).ravel(), np.asarray(ubx).ravel()
+
+    @staticmethod
+    def _guess_from(coarse: ManipulationSolution, nlp: _NLP, t_nodes: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """An initial guess on a finer grid, interpolated from a coarse plan's samples."""
+        Xc, Uc = coarse.X, coarse.U
+
+        def at(values: FloatArray, t: FloatArray) -> FloatArray:
+            return np.column_stack([np.interp(t, coarse.t, values[:, j])
+                                    for j in range(values.shape[1])])
+
+        n = len(t_nodes) - 1
+        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+        eps = 1e-9 * float(t_nodes[-1])
+        U = np.zeros((n + len(nlp.hs.segments), Uc.shape[1]))
+        U[nlp.hs.left_cols] = at(Uc, t_nodes[:-1] + eps)
+        U[nlp.hs.right_cols] = at(Uc, t_nodes[1:] - eps)
+        X = at(Xc, t_nodes)
+        X[0] = Xc[0]  # the fixed initial state, exactly
+        return X, at(Xc, tm), U, at(Uc, tm)
+
+    @staticmethod
+    def _epigraph(problem: ManipulationProblem, m: _Model, Xall: FloatArray,
+                  prm: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Grasp epigraph values and internal-force guesses at the given states."""
+        k = len(Xall)
+        out = m.cartesian.map(k)(Xall.T, prm)
+        nc = m.n_contacts
+        pts = np.asarray(out[4]).T.reshape(k, nc, 3)
+        nrm = np.asarray(out[5]).T.reshape(k, nc, 3)
+        if nc == 2:
+            phi, _, _ = force_angles(pts, nrm)
+            return np.clip(1 - np.cos(phi), 0.0, 2.0), np.zeros((0, k))
+        # a pushing guess: each contact pushes along its inward normal (scaled so that the
+        # pushes sum to nc); IPOPT restores equilibrium
+        F = -nrm.reshape(k, 3 * nc).T
+        return np.full(k, 0.5), F
+
+    def _object_guess(self, problem: ManipulationProblem, m: _Model, x0: FloatArray,
+                      ts: FloatArray, prm: FloatArray) -> tuple[
+                          FloatArray, FloatArray, Any]:
+        """Object block states and inputs at ts, and pose(t) -> (R (k,3,3), p (k,3))."""
+        T = problem.duration
+        if problem.palm is not None:
+            base = problem.palm_problem()
+            if base.goal or base.via_points:
+                plan = self._palm.solve(base)
+
+                def pose(t: FloatArray) -> tuple[FloatArray, FloatArray]:
+                    tr = plan.sample(np.clip(t, 0.0, T))
+                    return tr.object_rotation, tr.object_position
+
+                smp = plan.sample(ts)
+                return smp.eta, smp.w, pose
+            xs = np.tile(x0, (len(ts), 1))
+            R0, p0 = (np.asarray(a) for a in m.cartesian(x0, prm)[:2])
+
+            def still(t: FloatArray) -> tuple[FloatArray, FloatArray]:
+                t = np.atleast_1d(t)
+                return np.tile(R0, (len(t), 1, 1)), np.tile(p0.ravel(), (len(t), 1))
+
+            return xs[:, 0:5], np.zeros((len(ts), 2)), still
+        assert problem.motion is not None
+        motion = problem.motion
+
+        def pose_m(t: FloatArray) -> tuple[FloatArray, FloatArray]:
+            return motion.at(t)
+
+        R, pos = motion.at(ts)
+        quats = quaternion_wxyz(R)
+        for i in range(1, len(quats)):  # sign continuity
+            if np.dot(quats[i], quats[i - 1]) < 0:
+                quats[i] = -quats[i]
+        if np.dot(quats[0], x0[3:7]) < 0:
+            quats = -quats
+        dt = 1e-5 * T
+        Rp, pp = motion.at(ts + dt)
+        Rn, pn = motion.at(ts - dt)
+        tp, tn = np.clip(ts + dt, 0, T), np.clip(ts - dt, 0, T)
+        span = (tp - tn)[:, None]
+        v = (pp - pn) / span
+        Wb = np.einsum("kji,kjl->kil", R, Rp - Rn) / span[:, :, None]  # R^T dR/dt
+        omega = np.stack([Wb[:, 2, 1] - Wb[:, 1, 2], Wb[:, 0, 2] - Wb[:, 2, 0],
+                          Wb[:, 1, 0] - Wb[:, 0, 1]], axis=1) / 2
+        return np.hstack([pos, quats]), np.hstack([v, omega]), pose_m
+
+    def _guess(self, problem: ManipulationProblem, m: _Model, nlp: _NLP, x0: FloatArray,
+               t_nodes: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """A consistent initial guess: the object's motion (the ball-on-palm plan, or the
+        desired motion); each fingertip's contact point kept where it started relative to
+        the object's centre (palm frame), its contact coordinates integrated with the
+        rolling equations; the joints by inverse kinematics along the way (closure holds);
+        joint rates by finite differences."""
+        from .finger import inverse_kinematics
+
+        lay = m.layout
+        charts = _charts(problem)
+        shape = np.asarray(problem.object.dimensions, dtype=float)
+        prm = m.params(shape, charts)
+        n = len(t_nodes) - 1
+        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+        ts = np.sort(np.concatenate([t_nodes, tm]))  # node, mid, node, ...
+        eps = 1e-9 * problem.duration
+        Xo, Wo, pose = self._object_guess(problem, m, x0, ts, prm)
+        cart0 = m.cartesian(x0, prm)
+        p_obj0 = np.asarray(cart0[1]).ravel()
+        pts0 = np.asarray(cart0[4])
+        X = np.zeros((len(ts), m.nx))
+        W = np.zeros((len(ts), m.nu))
+        X[:, : lay.n_obj_x], W[:, : lay.n_obj_u] = Xo, Wo
+        X[0, : lay.n_obj_x] = x0[: lay.n_obj_x]
+        dt = 1e-4 * problem.duration
+        palm = problem.palm is not None
+        for i, c in enumerate(problem.fingers):
+            offset = pts0[:, i + palm] - p_obj0
+            Rc = charts[i + palm]
+
+            def ball_point(t: FloatArray, offset: FloatArray = offset,
+                           Rc: FloatArray = Rc) -> FloatArray:
+                R, _ = pose(t)
+                pts = np.einsum("kji,j->ki", R, offset)  # R^T offset
+                return np.array([m.surface.inverse(Rc.T @ p_, shape) for p_ in pts])
+
+            alpha = ball_point(ts)
+            rate = (ball_point(ts + dt) - ball_point(ts - dt)) / (2 * dt)
+            rate[:, 1] = ((rate[:, 1] * 2 * dt + np.pi) % (2 * np.pi) - np.pi) / (2 * dt)
+            ef = np.zeros((len(ts), 5))
+            ef[0] = c.initial
+            for k in range(len(ts) - 1):
+                h = ts[k + 1] - ts[k]
+                e_k = np.array([alpha[k, 0], alpha[k, 1], ef[k, 0], ef[k, 1], ef[k, 4]])
+                w0_, w1_ = rate[k], rate[k + 1]
+                k1 = np.asarray(m.tip_rates(e_k, w0_, shape)).ravel()
+                k2 = np.asarray(m.tip_rates(e_k + h / 2 * k1, (w0_ + w1_) / 2, shape)).ravel()
+                k3 = np.asarray(m.tip_rates(e_k + h / 2 * k2, (w0_ + w1_) / 2, shape)).ravel()
+                k4 = np.asarray(m.tip_rates(e_k + h * k3, w1_, shape)).ravel()
+                e_next = e_k + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+                ef[k + 1] = [e_next[2], e_next[3], alpha[k + 1, 0], alpha[k + 1, 1],
+                             e_next[4]]
+            ef[0] = c.initial
+            X[:, lay.x_eta(i)] = ef
+            W[:, lay.u_w(i)] = rate
+        # joints by IK along the way, every finger
+        X[0] = x0
+        for i, c in enumerate(problem.fingers):
+            qs = np.zeros((len(ts), c.finger.nq))
+            qs[0] = x0[lay.x_q(i)]
+            for k in range(1, len(ts)):
+                X[k, lay.x_q(i)] = qs[k - 1]
+                out = m.cartesian(X[k], prm)
+                R_pf = np.asarray(out[2])[:, 3 * i:3 * i + 3]
+                p_pf = np.asarray(out[3])[:, i]
+                qs[k] = inverse_kinematics(c.finger, R_pf, p_pf, qs[k - 1]).q
+            X[:, lay.x_q(i)] = qs
+            W[:, lay.u_qd(i)] = np.gradient(qs, ts, axis=0)
+        Ucols = np.zeros((n + len(nlp.hs.segments), m.nu))
+        Ucols[nlp.hs.left_cols] = W[0:-1:2]
+        Ucols[nlp.hs.right_cols] = W[2::2]
+        if palm:  # the palm plan's inputs jump at via-points: take them from each side
+            base = problem.palm_problem()
+            if base.goal or base.via_points:
+                plan = self._palm.solve(base)
+                Ucols[nlp.hs.left_cols, 0:2] = plan.sample(t_nodes[:-1] + eps).w
+                Ucols[nlp.hs.right_cols, 0:2] = plan.sample(t_nodes[1:] - eps).w
+        return X[0::2], X[1::2], Ucols, W[1::2]
+
+    # ...................................................................................
+    def _solution(self, problem: ManipulationProblem, m: _Model, status: Status, raw: str,
+                  iterations: int, build_time: float, solve_time: float, t_nodes: FloatArray,
+                  X: FloatArray, Xm: FloatArray, U0: FloatArray, Um: FloatArray,
+                  U1: FloatArray, prm: FloatArray) -> ManipulationSolution:
+        lay = m.layout
+        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+        order = np.argsort(np.concatenate([t_nodes, tm]), kind="stable")
+        t = np.concatenate([t_nodes, tm])[order]
+        Xg = np.vstack([X, Xm])[order]
+        Ug = np.vstack([np.vstack([U0, U1[-1:]]), Um])[order]
+        k = len(t)
+        xdot = np.asarray(m.dynamics.map(k)(Xg.T, Ug.T, prm)).T
+        cart = m.cartesian.map(k)(Xg.T, prm)
+        nc, nf = m.n_contacts, len(problem.fingers)
+        R_po = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
+        p_po = np.asarray(cart[1]).T
+        R_pf = np.asarray(cart[2]).T.reshape(k, nf, 3, 3).transpose(0, 1, 3, 2) \
+            if nf else np.zeros((k, 0, 3, 3))
+        p_pf = np.asarray(cart[3]).T.reshape(k, nf, 3)
+        pts = np.asarray(cart[4]).T.reshape(k, nc, 3)
+        nrm = np.asarray(cart[5]).T.reshape(k, nc, 3)
+        laws = m.laws.map(k)(Xg.T, xdot.T, prm)
+        v_obj, w_obj = np.asarray(laws[0]).T, np.asarray(laws[1]).T
+        phi, angles, _ = force_angles(pts, nrm)
+        margin = math.atan(problem.mu) - phi
+        contacts: list[ContactTrajectory] = []
+        if problem.palm is not None:
+            contacts.append(ContactTrajectory("palm", "palm", Xg[:, 0:5], xdot[:, 0:5],
+                                              Ug[:, 0:2], pts[:, 0], nrm[:, 0],
+                                              angles[:, 0]))
+        fingers: list[FingerTrajectory] = []
+        palm = problem.palm is not None
+        for i, c in enumerate(problem.fingers):
+            name = c.name or f"finger{i}"
+            e = lay.x_eta(i)
+            contacts.append(ContactTrajectory(name, "finger", Xg[:, e], xdot[:, e],
+                                              Ug[:, lay.u_w(i)], pts[:, i + palm],
+                                              nrm[:, i + palm], angles[:, i + palm]))
+            fingers.append(FingerTrajectory(name, tuple(c.finger.joint_names),
+                                            Xg[:, lay.x_q(i)], Ug[:, lay.u_qd(i)],
+                                            p_pf[:, i], R_pf[:, i]))
+        Rd = Pd = ep = ea = None
+        if problem.motion is not None:
+            Rd, Pd = problem.motion.at(t)
+            ep = np.linalg.norm(p_po - Pd, axis=1)
+            ea = rotation_angle_between(Rd, R_po)
+        segments, _ = problem.segments()
+        ends = [0, *np.cumsum(segments).tolist()]
+        goal_error = _goal_errors(problem, X, ends)
+        cert, failures = self._certify(problem, m, t_nodes, X, U0, Um, U1, prm)
+        if status is Status.SOLVED and failures:
+            status = Status.INACCURATE
+        message = {
+            Status.SOLVED: "converged; certificate passed",
+            Status.INACCURATE: "converged, but the certificate failed: " + "; ".join(failures),
+        }.get(status, f"not solved: IPOPT {raw}; the last iterate is returned")
+        return ManipulationSolution(
+            status=status, message=message, raw_status=raw, iterations=iterations,
+            build_time=build_time, solve_time=solve_time, t=t, object_position=p_po,
+            object_rotation=R_po, object_velocity=v_obj, object_angular_velocity=w_obj,
+            contacts=tuple(contacts), fingers=tuple(fingers), grasp_angle=phi,
+            cone_margin=margin, desired_position=Pd, desired_rotation=Rd,
+            tracking_position_error=ep, tracking_angle_error=ea, goal_error=goal_error,
+            certificate=cert, certificate_failures=failures, X=Xg, U=Ug)
+
+    def _certify(self, problem: ManipulationProblem, m: _Model, t_nodes: FloatArray,
+                 X: FloatArray, U0: FloatArray, Um: FloatArray, U1: FloatArray,
+                 prm: FloatArray) -> tuple[dict[str, float], tuple[str, ...]]:
+        """Re-integrate the inputs (CVODES) and check the laws along that motion, each
+        finger placed by Pinocchio's forward kinematics of its re-integrated joints."""
+        if not all(np.all(np.isfinite(a)) for a in (X, U0, Um, U1)):
+            return {}, ("the plan has non-finite states or inputs",)
+        lay = m.layout
+        F = m.reintegrator(4)
+        try:
+            Xr, sx, su = reintegrate(F, X[0], t_nodes, U0, Um, U1, prm, 4)
+        except RuntimeError as exc:  # CVODES gave up: the plan is not a smooth motion
+            return {}, (f"re-integration failed: {str(exc).splitlines()[-1]}",)
+        n = len(sx)
+        xd = np.asarray(m.dynamics.map(n)(sx.T, su.T, prm))
+        laws = dict(zip(m.laws.name_out(), (np.asarray(a).T for a in
+                                            m.laws.map(n)(sx.T, xd, prm)), strict=True))
+        cart = m.cartesian.map(n)(sx.T, prm)
+        nc, nf = m.n_contacts, len(problem.fingers)
+        R_pf = np.asarray(cart[2]).T.reshape(n, nf, 3, 3).transpose(0, 1, 3, 2) \
+            if nf else np.zeros((n, 0, 3, 3))
+        p_pf = np.asarray(cart[3]).T.reshape(n, nf, 3)
+        R_po = np.asarray(cart[0]).T.reshape(n, 3, 3).transpose(0, 2, 1)
+        p_po = np.asarray(cart[1]).T
+        pts = np.asarray(cart[4]).T.reshape(n, nc, 3)
+        nrm = np.asarray(cart[5]).T.reshape(n, nc, 3)
+        L = problem.object.length_scale
+        shape = np.asarray(problem.object.dimensions, dtype=float)
+        o = problem.options
+        d = Xr - X
+        speed = float(np.max(np.abs(laws["v_obj"]))) + L * float(
+            np.max(np.abs(laws["omega_obj"]))) + L * float(np.max(np.abs(su)))
+        cert: dict[str, float] = {
+            "max_length_defect": float(np.max(np.abs(d[:, lay.length_columns()]))),
+            "max_angle_defect": float(np.max(np.abs(d[:, lay.angle_columns()]))),
+        }
+        tol: dict[str, float] = {
+            "max_length_defect": max(o.cert_position_tol, 1e-5),
+            "max_angle_defect": o.cert_angle_tol * 10,
+        }
+        if nf:
+            cert["max_joint_defect"] = float(np.max(np.abs(d[:, lay.joint_columns()])))
+            tol["max_joint_defect"] = o.cert_angle_tol * 10
+        if problem.palm is not None:
+            cert["max_slip_speed_palm"] = float(np.max(np.linalg.norm(laws["slip_palm"],
+                                                                      axis=1)))
+            cert["max_spin_rate_palm"] = float(np.max(np.abs(laws["spin_palm"])))
+            # the object touches the palm: support function of its shape along -z (no chart)
+            heights = np.array([m.surface.support_height(R.T @ [0.0, 0.0, -1.0], shape)
+                                for R in R_po])
+            cert["max_height_error_palm"] = float(np.max(np.abs(p_po[:, 2] - heights)))
+            tol["max_slip_speed_palm"] = 1e-8 * max(speed, 1e-3)
+            tol["max_spin_rate_palm"] = 1e-8 * max(speed / L, 1e-3)
+            tol["max_height_error_palm"] = 1e-9
+        pos_err = rot_err = 0.0
+        for i, c in enumerate(problem.fingers):
+            name = c.name or f"finger{i}"
+            q_i = sx[:, lay.x_q(i)]
+            for j in range(n):
+                R_pin, p_pin = c.finger.fingertip_pose_pin(q_i[j])
+                pos_err = max(pos_err, float(np.linalg.norm(p_pin - p_pf[j, i])))
+                E = R_pin.T @ R_pf[j, i]
+                rot_err = max(rot_err, float(np.arccos(np.clip((np.trace(E) - 1) / 2,
+                                                               -1, 1))))
+            # the pad's plane is tangent to the object: support function along the pad normal
+            pad_n = laws[f"pad_normal_{i}"]
+            h = np.array([m.surface.support_height(R_po[j].T @ (-pad_n[j]), shape)
+                          for j in range(n)])
+            gap = laws[f"centre_above_pad_{i}"].ravel() - h
+            cert[f"max_slip_speed_{name}"] = float(np.max(np.linalg.norm(laws[f"slip_{i}"],
+                                                                         axis=1)))
+            cert[f"max_spin_rate_{name}"] = float(np.max(np.abs(laws[f"spin_{i}"])))
+            cert[f"max_gap_error_{name}"] = float(np.max(np.abs(gap)))
+            cert[f"max_pad_excursion_{name}"] = float(np.max(np.abs(
+                laws[f"pad_point_{i}"][:, 0:2])))
+            cert[f"max_joint_limit_violation_{name}"] = float(max(
+                np.max(q_i - c.finger.upper), np.max(c.finger.lower - q_i), 0.0))
+            tol[f"max_slip_speed_{name}"] = 1e-2 * max(speed, 1e-3)
+            tol[f"max_spin_rate_{name}"] = 1e-2 * max(speed / L, 1e-3)
+            tol[f"max_gap_error_{name}"] = 1e-4
+            tol[f"max_pad_excursion_{name}"] = float(c.finger.pad_half_size)
+            tol[f"max_joint_limit_violation_{name}"] = 1e-6
+        if nf:
+            cert["max_closure_position_error"] = pos_err
+            cert["max_closure_orientation_error"] = rot_err
+            tol["max_closure_position_error"] = 1e-4
+            tol["max_closure_orientation_error"] = 1e-3
+        ts = np.concatenate([[t_nodes[0]], np.concatenate([
+            t_nodes[k] + (t_nodes[k + 1] - t_nodes[k]) * np.linspace(0, 1, 5)[1:]
+            for k in range(len(t_nodes) - 1)])])
+        if problem.motion is not None:
+            Rd, Pd = problem.motion.at(ts)
+            cert["max_tracking_position_error"] = float(np.max(np.linalg.norm(p_po - Pd,
+                                                                              axis=1)))
+            cert["max_tracking_angle_error"] = float(np.max(rotation_angle_between(Rd, R_po)))
+            tr = problem.tracking
+            if tr.position_tolerance is not None:
+                tol["max_tracking_position_error"] = tr.position_tolerance
+            if tr.orientation_tolerance is not None:
+                tol["max_tracking_angle_error"] = tr.orientation_tolerance
+        phi, _, onto = force_angles(pts, nrm)
+        cert["min_cone_margin"] = float(np.min(math.atan(problem.mu) - phi))
+        cert["max_grasp_angle"] = float(np.max(phi))
+        failures = [f"{k} {cert[k]:.3g} > {tol[k]:.3g}" for k in tol if not cert[k] <= tol[k]]
+        if not cert["min_cone_margin"] >= -1e-6:
+            failures.append(f"min_cone_margin {cert['min_cone_margin']:.3g} < 0 (force "
+                            f"closure lost)")
+        if not np.all(onto):
+            failures.append("the grasp map is not onto at some sample (force closure lost)")
+        cert.update({f"tol_{k}": v for k, v in tol.items()})
+        return cert, tuple(failures)
