@@ -214,8 +214,7 @@ class DesiredMotion:
             times.append(t)
             quats.append(tuple(quaternion_wxyz(R)))
             pos.append(tuple(p))
-        return DesiredMotion(tuple(times), tuple(quats),  # type: ignore[arg-type]
-                             tuple(pos), smooth)  # type: ignore[arg-type]
+        return DesiredMotion(tuple(times), tuple(quats), tuple(pos), smooth)
 
     def errors(self, name: str, duration: float) -> list[tuple[str, str]]:
         errs: list[tuple[str, str]] = []
@@ -418,10 +417,10 @@ class ManipulationProblem:
             name = f"fingers[{i}]"
             if self.object.shape in SURFACES and len(c.chart_rotation) == 3 and \
                     all(map(math.isfinite, c.chart_rotation)):
-                why = self.object.surface.chart_rotation_error(
+                bad = self.object.surface.chart_rotation_error(
                     rotation_from_vector(c.chart_rotation))
-                if why is not None:
-                    errs.append((f"{name}.chart_rotation", why))
+                if bad is not None:
+                    errs.append((f"{name}.chart_rotation", bad))
             else:
                 errs.append((f"{name}.chart_rotation", "must be 3 finite numbers "
                                                        "(rotation vector, rad)"))
@@ -962,7 +961,8 @@ class ManipulationPlanner:
         phi, _, onto = force_angles(pts, nrm)
         cone = math.atan(problem.mu)
         if not (phi[0] < cone and onto[0]):
-            errs.append(("fingers", f"the initial grasp is not in force closure: grasp angle "
+            errs.append(("fingers", f"the initial grasp is outside the friction cone (not in "
+                                    f"force closure): grasp angle "
                                     f"{math.degrees(phi[0]):.2f} deg >= atan(mu) = "
                                     f"{math.degrees(cone):.2f} deg, by "
                                     f"{math.degrees(phi[0] - cone):.2f} deg"
