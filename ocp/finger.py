@@ -1,11 +1,13 @@
 """A robot finger from a URDF: Pinocchio model, CasADi forward kinematics, inverse kinematics.
 
-The finger is a serial chain of revolute and prismatic joints read from a URDF by Pinocchio.
-Its fingertip frame (``"fingertip"`` in the built-in model) is the frame of the flat pad: its
-origin is the centre of the pad surface and its +z axis the pad's outward normal, so the pad
-is the :data:`~ocp.surfaces.Plane` chart ``f(x, y) = (x, y, 0)`` in that frame
-(docs/conventions.md). The finger's base is mounted in the palm frame P by a fixed pose
-``g_pb = (base_rotation, base_position)``; every pose and Jacobian here is in the palm frame.
+The finger is a serial chain of revolute and prismatic joints read from a URDF by Pinocchio:
+the whole URDF, or one finger of a hand's URDF (the branch of its tree that carries the tip
+frame, :mod:`ocp.hands`). Its fingertip frame (``"fingertip"`` in the built-in model) is the
+frame of the flat pad: its origin is the centre of the pad surface and its +z axis the pad's
+outward normal, so the pad is the :data:`~ocp.surfaces.Plane` chart ``f(x, y) = (x, y, 0)``
+in that frame (docs/conventions.md). The finger's base is mounted in the palm frame P by a
+fixed pose ``g_pb = (base_rotation, base_position)``; every pose and Jacobian here is in the
+palm frame.
 
 * :attr:`FingerModel.fk` is a CasADi function ``q -> (R, p)`` built from the Pinocchio model's
   data (joint placements, joint types and axes, the tip frame's placement), not from a second
@@ -354,6 +356,31 @@ def _chain(model: Any, tip_frame_id: int, tip_frame: str) -> tuple[ChainJoint, .
     return tuple(chain)
 
 
+def _reduce_to_tip_chain(model: Any, tip_frame_id: int) -> Any:
+    """The model restricted to the branch of the kinematic tree that carries the tip frame.
+
+    A hand's URDF is a tree: several fingers hang from its root (the palm). The branch of
+    the tip frame is the subtree of the root-level joint on the tip's path; every joint
+    outside it is locked at its neutral position with Pinocchio's ``buildReducedModel``
+    (the joints of the other fingers, which do not move this tip). A model with a single
+    root-level branch (a serial chain, or a chain that branches further out, which
+    :func:`_chain` rejects) is returned unchanged.
+    """
+    joint = int(model.frames[tip_frame_id].parentJoint)
+    if joint == 0:
+        return model  # the tip hangs from the root: no branch to keep
+    while model.parents[joint] != 0:
+        joint = int(model.parents[joint])
+    keep = {joint}
+    for i in range(1, model.njoints):
+        if model.parents[i] in keep:  # parents precede their children in Pinocchio
+            keep.add(i)
+    locked = [i for i in range(1, model.njoints) if i not in keep]
+    if not locked:
+        return model
+    return pin.buildReducedModel(model, locked, pin.neutral(model))
+
+
 def load_finger(
     urdf: str | Path | None = None,
     tip_frame: str = "fingertip",
@@ -364,14 +391,18 @@ def load_finger(
     """Load a finger from a URDF (``None``: the built-in K3S-like finger).
 
     ``urdf`` is a file path, or the URDF's XML text itself (a string starting with ``<``).
-    ``tip_frame`` names the pad frame (a URDF link or joint). ``base_rotation`` (3x3) and
-    ``base_position`` [m] mount the URDF's root in the palm frame; when None they are the
-    built-in finger's :data:`DEFAULT_BASE_ROTATION`/:data:`DEFAULT_BASE_POSITION` for the
-    built-in URDF and the identity/origin for a user URDF. ``pad_half_size`` [m] defaults to
-    :data:`PAD_HALF_SIZE`.
+    ``tip_frame`` names the pad frame (a URDF link or joint). The URDF may be a hand: a tree
+    of serial fingers hanging from its root link; the finger is then the branch carrying
+    ``tip_frame``, the other branches' joints locked at their neutral positions (see
+    :func:`_reduce_to_tip_chain`; the model, ``q`` and the limits are the branch's).
+    ``base_rotation`` (3x3) and ``base_position`` [m] mount the URDF's root in the palm
+    frame; when None they are the built-in finger's :data:`DEFAULT_BASE_ROTATION`/
+    :data:`DEFAULT_BASE_POSITION` for the built-in URDF and the identity/origin for a user
+    URDF. ``pad_half_size`` [m] defaults to :data:`PAD_HALF_SIZE`.
 
-    Raises ValueError for an unknown tip frame, a chain that is not serial, a tip frame not
-    on the last joint, or joints other than revolute and prismatic ones.
+    Raises ValueError for an unknown tip frame, a finger (the tip's branch) that is not a
+    serial chain, a tip frame not on its last joint, or joints other than revolute and
+    prismatic ones.
     """
     builtin = urdf is None
     if urdf is None:
@@ -387,6 +418,7 @@ def load_finger(
     if not model.existFrame(tip_frame):
         names = sorted({str(f.name) for f in model.frames})
         raise ValueError(f"the URDF has no frame {tip_frame!r}; its frames are {names}")
+    model = _reduce_to_tip_chain(model, int(model.getFrameId(tip_frame)))
     tip_id = int(model.getFrameId(tip_frame))
     chain = _chain(model, tip_id, tip_frame)
     if base_rotation is None:

@@ -81,6 +81,8 @@ __all__ = [
     "ObjectPose",
     "Palm",
     "Tracking",
+    "contact_chart_for_pad",
+    "hand_fingertips",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -90,6 +92,8 @@ PAPER_SEED_DEG = (0.0, -22.68, -12.34, 0.0, 47.65, 0.0)
 #: Tracking bounds are imposed in the NLP at this fraction of the requested tolerance, so
 #: that the motion between collocation points stays inside the tolerance itself.
 TRACKING_BOUND_SHRINK = 0.95
+#: Weight of the size of the internal-force variables (3+ contacts) in the objective.
+FORCE_REGULARISATION = 1e-3
 
 
 # -- rotations ---------------------------------------------------------------------------------
@@ -449,6 +453,45 @@ class ManipulationProblem:
         errs = self.errors()
         if errs:
             raise ProblemError(errs)
+
+
+def contact_chart_for_pad(obj: ObjectSpec, pose: ObjectPose, pad_rotation: ArrayLike
+                          ) -> tuple[float, float, float]:
+    """The chart rotation (rotation vector [rad]) of a fingertip contact's patch that puts
+    patch point (u, v) = (0, 0) with psi = 0 under a pad of rotation ``pad_rotation`` (palm
+    frame; its +z is the pad's outward normal, facing the object).
+
+    With it, the fingertip's initial contact coordinates (0, 0, 0, 0, 0) mean "the pad's
+    centre touches the object where the pad's normal points, the pad turned as given": the
+    usual way to state a grasp from the fingers' pad poses. The contact then sits on the
+    patch's equator, as far from its poles as it can be.
+    """
+    from .contact import R_contact
+
+    shape = np.asarray(obj.dimensions, dtype=float)
+    _, Rg, _, _, _ = obj.surface.geometry([0.0, 0.0], shape)
+    R_of = pose.rotation.T @ np.asarray(pad_rotation, dtype=float)
+    Rc = R_of @ np.asarray(R_contact(0.0)).T @ np.asarray(Rg).T
+    return tuple(float(c) for c in _log_rotation(Rc))  # type: ignore[return-value]
+
+
+def hand_fingertips(hand: Any, pose: ObjectPose | None = None,
+                    obj: ObjectSpec | None = None) -> tuple[Fingertip, ...]:
+    """Fingertips of a built-in hand (:func:`ocp.hands.load_hand`) in its nominal grasp of a
+    ball at ``pose`` (default: unrotated, at the hand's nominal position): each pad's centre
+    on the ball where the pad's normal points (contact coordinates all zero, charts from
+    :func:`contact_chart_for_pad`), the IK seeded with the hand's nominal joint angles."""
+    from .hands import grasp_poses
+
+    pose = pose or ObjectPose(position=tuple(hand.nominal_object_position))
+    obj = obj or ObjectSpec("sphere", (hand.nominal_radius,))
+    pads = grasp_poses(hand, pose.position, float(max(obj.dimensions)), pose.rotation)
+    seeds = hand.nominal_q or (None,) * hand.n_fingers
+    return tuple(
+        Fingertip(finger, (0.0, 0.0, 0.0, 0.0, 0.0), contact_chart_for_pad(obj, pose, R),
+                  q_seed=seed, name=f"f{k + 1}")
+        for k, (finger, (R, _), seed) in enumerate(zip(hand.fingers, pads, seeds,
+                                                       strict=True)))
 
 
 # -- solution --------------------------------------------------------------------------------
@@ -903,6 +946,11 @@ class ManipulationPlanner:
                 f += h / 6 * (track_terms[k] + 4 * track_terms[n + 1 + k]
                               + track_terms[k + 1])
 
+        if n_force:
+            # The internal forces that certify a grasp form a cone of dimension 3n - 6 - 1;
+            # a small penalty on their size picks one, so that IPOPT does not wander along
+            # flat directions (the grasp term only sees the worst force angle).
+            f += FORCE_REGULARISATION * ca.sumsqr(F) / (npts * n_force)
         w = ca.vertcat(hs.w, S.T, Sm.T, ca.vec(F))
         g_all = ca.vertcat(*g)
         stop = _StopCallback(w.numel(), g_all.numel(), p.numel())
