@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -61,7 +62,7 @@ BOTTOM = load_finger(base_rotation=RX,
 #: The ball starts with the orientation it has on the palm at eta_p = (0, 0, 0, 0, -90 deg)
 #: (experiment 1's start), so that the top finger's contact coordinates mean the same.
 R0 = object_pose(OBJ, (0.0, 0.0, 0.0, 0.0, -math.pi / 2))[0]
-START = ObjectPose(tuple(quaternion_wxyz(R0)), tuple(CENTRE))  # type: ignore[arg-type]
+START = ObjectPose(tuple(quaternion_wxyz(R0)), tuple(CENTRE))
 CHART_TOP = rotation_from_vector([0.0, 0.0, math.pi])
 CHART_BOTTOM = R0.T @ RX @ R0 @ CHART_TOP
 #: The paper's experiment 2: about Z by 20 deg, Y by 20, Z by -20, Y by -20 (1 s each).
@@ -70,7 +71,7 @@ STEPS = (MotionStep(1.0, (0, 0, 1), 20 * DEG), MotionStep(1.0, (0, 1, 0), 20 * D
 TOL_POS, TOL_ANG = 1e-3, 1.0 * DEG
 
 
-def two_fingers(n: int = 40, **kw: object) -> ManipulationProblem:
+def two_fingers(n: int = 40, **kw: Any) -> ManipulationProblem:
     fingers = (Fingertip(TOP, (0.0, 0.0, 0.1, 0.0, 0.0), log_rotation(CHART_TOP), name="top"),
                Fingertip(BOTTOM, (0.0, 0.0, 0.1, 0.0, 0.0), log_rotation(CHART_BOTTOM),
                          name="bottom"))
@@ -78,7 +79,7 @@ def two_fingers(n: int = 40, **kw: object) -> ManipulationProblem:
         OBJ, fingers, 4.0, initial_pose=START, motion=DesiredMotion.from_steps(START, STEPS),
         tracking=Tracking(position_tolerance=TOL_POS, orientation_tolerance=TOL_ANG),
         n_intervals=n)
-    return replace(problem, **kw)  # type: ignore[arg-type]
+    return replace(problem, **kw)
 
 
 @pytest.fixture(scope="module")
@@ -256,7 +257,7 @@ def test_one_finger_on_palm_is_unchanged_by_the_generalisation() -> None:
     ({"tracking": Tracking(position_tolerance=-1.0)}, "tracking.position_tolerance", "(0"),
     ({"mu": 0.0}, "mu", "(0, 10]"),
 ])
-def test_bad_problems_name_the_field(patch: dict[str, object], field: str, words: str) -> None:
+def test_bad_problems_name_the_field(patch: dict[str, Any], field: str, words: str) -> None:
     errs = two_fingers(**patch).errors()
     assert any(f == field and words in r for f, r in errs), errs
 
@@ -276,3 +277,56 @@ def test_palm_fields_are_named_under_palm() -> None:
     p = ManipulationProblem(OBJ, two_fingers().fingers[:1], 2.0,
                             palm=Palm((0.0, 0.0, 2.0, 0.0, 0.0), {"x": 0.01}))
     assert any(f == "palm.initial.u" for f, _ in p.errors()), p.errors()
+
+
+# -- three fingers: the built-in hand turns the ball about a tilted axis ---------------------
+
+@pytest.fixture(scope="module")
+def three() -> tuple[ManipulationProblem, ManipulationSolution]:
+    from ocp.hands import load_hand
+    from ocp.manipulation import hand_fingertips
+
+    hand = load_hand("three_finger")
+    start = ObjectPose(position=hand.nominal_object_position)
+    axis = (1.0, 0.0, 1.0)
+    problem = ManipulationProblem(
+        OBJ, hand_fingertips(hand, start, OBJ), 2.0, initial_pose=start,
+        motion=DesiredMotion.from_steps(start, [MotionStep(2.0, axis, 30 * DEG)]),
+        tracking=Tracking(position_tolerance=TOL_POS, orientation_tolerance=TOL_ANG),
+        n_intervals=20)
+    return problem, PLANNER.solve(problem)
+
+
+def test_three_fingers_turn_the_ball_in_force_closure(
+        three: tuple[ManipulationProblem, ManipulationSolution]) -> None:
+    """Every law at once on a three-contact plan: solved and certified; closure of each
+    finger by Pinocchio; the pads tangent to the ball; equal trace lengths on pad and ball;
+    the motion tracked within the tolerances; and force closure at every sample by the
+    generalised grasp angle recomputed from the returned contacts (grasp map onto, a
+    pushing internal force strictly inside every cone)."""
+    from ocp.force_closure import grasp_qualities
+
+    problem, plan = three
+    assert plan.status is Status.SOLVED, plan.message
+    assert len(plan.contacts) == 3 and len(plan.fingers) == 3
+    for tip, finger, contact in zip(problem.fingers, plan.fingers, plan.contacts, strict=True):
+        for i in range(0, len(plan.t), 5):
+            R_pin, p_pin = tip.finger.fingertip_pose_pin(finger.q[i])
+            assert_close(p_pin, finger.tip_position[i], atol=2e-7)
+            assert_close(R_pin, finger.tip_rotation[i], atol=2e-6)
+        n_pad = finger.tip_rotation[:, :, 2]
+        d = np.einsum("ki,ki->k", plan.object_position - finger.tip_position, n_pad)
+        assert_close(d, RHO, atol=1e-7)
+        x, y, u, v = (contact.eta_dot[:, j] for j in range(4))
+        assert_close(np.hypot(x, y), RHO * np.hypot(u, np.cos(contact.eta[:, 2]) * v),
+                     atol=1e-9)
+    Rd, pd = problem.motion.at(plan.t)  # type: ignore[union-attr]
+    assert np.all(np.linalg.norm(plan.object_position - pd, axis=1) <= TOL_POS)
+    assert np.all(rotation_angle_between(Rd, plan.object_rotation) <= TOL_ANG)
+    assert rotation_angle_between(plan.object_rotation[:1], plan.object_rotation[-1:])[0] \
+        == pytest.approx(30 * DEG, abs=TOL_ANG)
+    pts = np.stack([c.point for c in plan.contacts], axis=1)
+    nrm = np.stack([c.normal for c in plan.contacts], axis=1)
+    quality = grasp_qualities(pts, nrm)
+    assert all(q.force_closure(problem.mu) for q in quality)
+    assert_close([q.angle for q in quality], plan.grasp_angle, atol=1e-4)
