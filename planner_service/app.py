@@ -5,7 +5,7 @@ POST /v1/plans           submit a planning request; 201 + the finished job when 
 GET  /v1/plans/{id}      a job (with its plan once finished)
 GET  /v1/plans           jobs, newest first, paginated (?limit=&offset=)
 DELETE /v1/plans/{id}    cancel a queued or running job
-GET  /v1/models          built-in objects, fingers (with URDFs) and planners
+GET  /v1/models          built-in objects, fingers (with URDFs), hands and planners
 GET  /healthz, /readyz   liveness; readiness (store reachable, a worker ready)
 
 Every error is an ``ErrorBody`` (no traceback ever leaves the service); an invalid request
@@ -29,11 +29,15 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from dexroll_client.models import (
     BUILTIN_FINGERS,
+    BUILTIN_HANDS,
     PLANNERS,
     ErrorBody,
     FieldError,
     FingerInfo,
     FingerModelSpec,
+    HandFingerInfo,
+    HandInfo,
+    HandModel,
     Job,
     JobList,
     JobState,
@@ -41,9 +45,17 @@ from dexroll_client.models import (
     ObjectInfo,
     PlanRequest,
 )
+from ocp.manipulation import hand_fingertips
 from ocp.surfaces import SURFACES
 
-from .convert import FINGERS, RESULT, request_errors, rotation_vector, wire_field
+from .convert import (
+    FINGERS,
+    RESULT,
+    hand_finger_name,
+    request_errors,
+    rotation_vector,
+    wire_field,
+)
 from .settings import Settings
 from .store import IdempotencyConflictError, JobRow, Store
 from .workers import Dispatcher
@@ -237,7 +249,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "a retried POST with the same key returns the same job"))] = None,
     ) -> Job:
         """Submit a planning request (`planner` picks the planner: `ball_on_palm`, the
-        default, or `one_finger`): 201 with the finished job, or 202 and a Location."""
+        default, `one_finger` or `manipulation`): 201 with the finished job, or 202 and a
+        Location."""
         # cheap checks (no NLP), in a thread: a finger's URDF and the inverse kinematics
         # of its initial grasp take milliseconds
         errors = await asyncio.to_thread(request_errors, body)
@@ -314,7 +327,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # -- models and health ----------------------------------------------------------------------
     @app.get("/v1/models", response_model=ModelCatalog)
     def models() -> ModelCatalog:
-        """Built-in objects, fingers (with their URDFs) and planners."""
+        """Built-in objects, fingers (with their URDFs), hands and planners."""
         objects = [ObjectInfo(shape=name, parameters=list(s.param_names),
                               description=(s.__doc__ or name).strip().splitlines()[0])
                    for name, s in SURFACES.items() if s.singular_u is not None]
@@ -326,7 +339,25 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 joint_names=list(f.joint_names), pad_half_size=f.pad_half_size,
                 base_position=[float(x) for x in f.base_position],
                 base_rotation=rotation_vector(f.base_rotation), urdf=f.urdf_text))
-        return ModelCatalog(planners=list(PLANNERS), objects=objects, fingers=fingers)
+        hands = []
+        for name in BUILTIN_HANDS:
+            with FINGERS.lock:
+                hand = FINGERS.hand(HandModel(builtin=name))
+            nominal = hand_fingertips(hand)
+            hands.append(HandInfo(
+                name=name, n_fingers=hand.n_fingers,
+                fingers=[HandFingerInfo(
+                    name=hand_finger_name(hand, k), tip_frame=f.tip_frame, n_joints=f.nq,
+                    joint_names=list(f.joint_names), pad_half_size=f.pad_half_size,
+                    base_position=[float(x) for x in hand.mounts[k][1]],
+                    base_rotation=rotation_vector(hand.mounts[k][0]),
+                    nominal_q=None if hand.nominal_q is None else list(hand.nominal_q[k]),
+                    nominal_chart_rotation=list(nominal[k].chart_rotation))
+                    for k, f in enumerate(hand.fingers)],
+                nominal_object_position=list(hand.nominal_object_position),
+                nominal_radius=hand.nominal_radius, urdf=hand.urdf_text))
+        return ModelCatalog(planners=list(PLANNERS), objects=objects, fingers=fingers,
+                            hands=hands)
 
     @app.get("/healthz")
     def healthz() -> dict[str, str]:

@@ -1,7 +1,7 @@
 """Command line: ``dexroll serve``, ``dexroll plan request.json``, ``dexroll demo [folder]``.
 
 A request file is any planner's request (its ``planner`` field: ``ball_on_palm``, the
-default, or ``one_finger``), the same JSON as ``POST /v1/plans`` takes.
+default, ``one_finger`` or ``manipulation``), the same JSON as ``POST /v1/plans`` takes.
 
 Exit codes: 0 the plan is solved (certificate passed), 1 a plan was computed but is not
 solved (see its status), 2 the request is invalid (each bad field is named on stderr).
@@ -18,7 +18,12 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from dexroll_client.models import AnyPlanResult, FingerPlanResult, PlanStatus
+from dexroll_client.models import (
+    AnyPlanResult,
+    FingerPlanResult,
+    ManipulationResult,
+    PlanStatus,
+)
 from ocp.problem import ProblemError
 from ocp.solution import Solution
 
@@ -32,7 +37,7 @@ from .convert import (
     validation_errors,
 )
 
-__all__ = ["finger_summary", "main", "plan_request"]
+__all__ = ["finger_summary", "main", "manipulation_summary", "plan_request"]
 
 EXIT_SOLVED, EXIT_NOT_SOLVED, EXIT_INVALID = 0, 1, 2
 log = logging.getLogger("dexroll")
@@ -61,6 +66,8 @@ def plan_request(raw: object) -> tuple[AnyPlanResult, str]:
         return result, f"status       error\nmessage      {result.message}"
     if isinstance(solution, Solution):
         return result, solution.summary()
+    if isinstance(result, ManipulationResult):
+        return result, manipulation_summary(result)
     assert isinstance(result, FingerPlanResult)
     return result, finger_summary(result)
 
@@ -91,6 +98,49 @@ def finger_summary(result: FingerPlanResult) -> str:
                      "max (larger of palm/finger)")
         lines.append(f"cone margin  {math.degrees(min(t.cone_margin)):.2f} deg minimum "
                      "(> 0: inside the friction cone)")
+    return "\n".join(lines)
+
+
+def manipulation_summary(result: ManipulationResult) -> str:
+    """One screen on a manipulation plan."""
+    lines = [f"status       {result.status.value}"
+             + (f"  (IPOPT: {result.stats.raw_status})" if result.stats else ""),
+             f"message      {result.message}"]
+    if result.stats is not None:
+        s = result.stats
+        lines += [f"iterations   {s.iterations}, N = {s.n_intervals}, {s.refinements} "
+                  "refinement(s)",
+                  f"time         build {s.build_time * 1e3:.1f} ms, solve "
+                  f"{s.solve_time * 1e3:.1f} ms"]
+    t = result.trajectory
+    if t is not None:
+        lines.append("contacts     " + ", ".join(c.name for c in t.contacts))
+    if result.goal_error:
+        worst_goal = max(result.goal_error.values())
+        lines.append(f"goal error   {worst_goal:.3g} (worst of {len(result.goal_error)} "
+                     "palm targets)")
+    c = result.certificate
+    if t is not None and t.tracking_position_error and t.tracking_angle_error:
+        tol = c.tolerances if c is not None else {}
+        bounds = ""
+        if "max_tracking_position_error" in tol and "max_tracking_angle_error" in tol:
+            bounds = (f" (tolerances {tol['max_tracking_position_error'] * 1e3:.3g} mm, "
+                      f"{math.degrees(tol['max_tracking_angle_error']):.3g} deg)")
+        lines.append(f"tracking     {max(t.tracking_position_error) * 1e3:.3g} mm, "
+                     f"{math.degrees(max(t.tracking_angle_error)):.3g} deg worst{bounds}")
+    if c is not None:
+        lines.append("certificate  " + ("PASSED" if c.passed else "FAILED"))
+        slips = [v for k, v in c.values.items() if k.startswith("max_slip_speed_")]
+        if slips:
+            lines.append(f"  slip       {max(slips):.3g} m/s worst over "
+                         f"{len(slips)} contact(s)")
+        lines += [f"  {f}" for f in c.failures[:6]]
+    if t is not None and t.grasp_angle:
+        lines.append(f"grasp angle  {math.degrees(t.grasp_angle[0]):.2f} deg at start, "
+                     f"{math.degrees(t.grasp_angle[-1]):.2f} at end, "
+                     f"{math.degrees(max(t.grasp_angle)):.2f} max (largest force angle)")
+        lines.append(f"cone margin  {math.degrees(min(t.cone_margin)):.2f} deg minimum "
+                     "(> 0: force closure inside the friction cones)")
     return "\n".join(lines)
 
 

@@ -23,27 +23,49 @@ from dexroll_client.models import (
     AnyPlanResult,
     BallOnPalmRequest,
     CertificateModel,
+    ContactTrajectoryModel,
     FieldError,
     FingerCertificateModel,
+    FingerJointsModel,
     FingerModelSpec,
     FingerPlanResult,
     FingerStatsModel,
     FingerTrajectoryModel,
+    HandModel,
+    ManipulationCertificateModel,
+    ManipulationRequest,
+    ManipulationResult,
+    ManipulationStatsModel,
+    ManipulationTrajectoryModel,
+    MotionSamplesModel,
     OneFingerRequest,
     PlanRequest,
     PlanResult,
     PlanStatus,
+    SolverModel,
     StatsModel,
     TrajectoryModel,
 )
-from ocp.ball_on_palm import BallOnPalmPlanner
+from ocp.ball_on_palm import BallOnPalmPlanner, object_pose
 from ocp.ball_on_palm import plan as plan_ball_on_palm
 from ocp.finger import FingerModel, load_finger
 from ocp.greedy import GreedyResult, greedy_plan
+from ocp.hands import Hand, load_hand
+from ocp.manipulation import (
+    DesiredMotion,
+    Fingertip,
+    ManipulationPlanner,
+    ManipulationProblem,
+    ManipulationSolution,
+    MotionStep,
+    ObjectPose,
+    Palm,
+    Tracking,
+)
 from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem, OneFingerSolution
 from ocp.problem import BallOnPalmProblem, ObjectSpec, ProblemError, SolverOptions, ViaPoint
 from ocp.solution import Solution, Trajectory, quaternion_wxyz
-from ocp.surfaces import rotation_from_vector
+from ocp.surfaces import SURFACES, rotation_from_vector
 
 __all__ = [
     "REQUEST",
@@ -54,6 +76,7 @@ __all__ = [
     "planner_of",
     "request_errors",
     "result_from_finger_solution",
+    "result_from_manipulation_solution",
     "result_from_solution",
     "rotation_vector",
     "solve",
@@ -67,24 +90,28 @@ REQUEST: TypeAdapter[PlanRequest] = TypeAdapter(PlanRequest)
 #: Parses a result of any planner (by its ``planner``; default ball_on_palm).
 RESULT: TypeAdapter[AnyPlanResult] = TypeAdapter(AnyPlanResult)
 
-_PLANNER_TAGS = ("ball_on_palm", "one_finger")
+_PLANNER_TAGS = ("ball_on_palm", "one_finger", "manipulation")
+_MOTION_TAGS = ("steps", "samples")
 
 
 class FingerCache:
-    """A process's finger models and its one-finger planner, kept together.
+    """A process's finger models, hands and finger planners, kept together.
 
-    The planner caches its NLPs per finger object, so the same request finger must map to
-    the same :class:`~ocp.finger.FingerModel` object from job to job (cached here by URDF
-    text, tip frame, mount and pad size) for its NLP to be reused. With more than
-    ``max_fingers`` distinct fingers, the fingers and the planner (with the NLPs it holds
-    for them) are dropped together and start afresh, which bounds the memory. Thread-safe
-    (one lock for loading and checking).
+    The planners cache their NLPs per finger object, so the same request finger (or hand)
+    must map to the same :class:`~ocp.finger.FingerModel` objects from job to job (cached
+    here by URDF text, tip frame, mount and pad size; hands by name and mounts) for its NLP
+    to be reused. The one-finger planner and the manipulation planner share one NLP cache
+    (the one-finger planner is the general one with one finger's data). With more than
+    ``max_fingers`` distinct fingers (a hand's fingers count), the fingers, the hands and
+    the planners (with the NLPs they hold for them) are dropped together and start afresh,
+    which bounds the memory. Thread-safe (one lock for loading and checking).
     """
 
     def __init__(self, max_fingers: int = 16) -> None:
         self.max_fingers = max_fingers
         self.lock = threading.RLock()
         self._fingers: dict[tuple[Any, ...], FingerModel] = {}
+        self._hands: dict[tuple[Any, ...], Hand] = {}
         self._planner: OneFingerPlanner | None = None
 
     @property
@@ -94,6 +121,20 @@ class FingerCache:
             if self._planner is None:
                 self._planner = OneFingerPlanner()
             return self._planner
+
+    @property
+    def manipulation(self) -> ManipulationPlanner:
+        """The process's manipulation planner (the one-finger planner's own)."""
+        return self.planner.general
+
+    def _count(self) -> int:
+        return len(self._fingers) + sum(len(h.fingers) for h in self._hands.values())
+
+    def _make_room(self, n: int) -> None:
+        if self._count() + n > self.max_fingers:
+            self._fingers.clear()
+            self._hands.clear()
+            self._planner = None  # its NLPs refer to the fingers just dropped
 
     @staticmethod
     def _key(spec: FingerModelSpec) -> tuple[Any, ...]:
@@ -112,11 +153,24 @@ class FingerCache:
             if cached is not None:
                 return cached
             finger = _load(spec)
-            if len(self._fingers) >= self.max_fingers:
-                self._fingers.clear()
-                self._planner = None  # its NLPs refer to the fingers just dropped
+            self._make_room(1)
             self._fingers[key] = finger
             return finger
+
+    def hand(self, spec: HandModel) -> Hand:
+        """The built-in hand of a request (its fingers on the request's mounts);
+        ProblemError naming ``hand.mounts`` when they do not fit the hand."""
+        mounts = None if spec.mounts is None else tuple(
+            (tuple(m.position), tuple(m.rotation)) for m in spec.mounts)
+        key = (spec.builtin, mounts)
+        with self.lock:
+            cached = self._hands.get(key)
+            if cached is not None:
+                return cached
+            hand = _load_hand(spec)
+            self._make_room(len(hand.fingers))
+            self._hands[key] = hand
+            return hand
 
 
 def _load(spec: FingerModelSpec) -> FingerModel:
@@ -138,6 +192,22 @@ def _load(spec: FingerModelSpec) -> FingerModel:
         raise ProblemError([("finger.urdf", f"the finger has {finger.nq} joints; at most "
                                             f"{MAX_FINGER_JOINTS} are supported")])
     return finger
+
+
+def _load_hand(spec: HandModel) -> Hand:
+    mounts = None if spec.mounts is None else [
+        (rotation_from_vector(m.rotation), np.asarray(m.position, dtype=float))
+        for m in spec.mounts]
+    try:
+        return load_hand(spec.builtin, mounts=mounts)
+    except ValueError as exc:  # the mounts do not fit the hand
+        raise ProblemError([("hand.mounts" if spec.mounts is not None else "hand.builtin",
+                             str(exc))]) from exc
+
+
+def hand_finger_name(hand: Hand, index: int) -> str:
+    """The hand's name of its finger ``index`` (its tip frame's prefix: f1, f2, ...)."""
+    return hand.tip_frames[index].removesuffix("_fingertip")
 
 
 #: The fingers (and one-finger planner) of this process.
@@ -165,14 +235,186 @@ def _base_problem(request: BallOnPalmRequest | OneFingerRequest) -> BallOnPalmPr
     )
 
 
+# -- manipulation requests -------------------------------------------------------------------
+
+def _solver_options(o: SolverModel) -> SolverOptions:
+    return SolverOptions(max_iter=o.max_iter, time_limit=o.time_limit,
+                         cert_position_tol=o.cert_position_tol,
+                         cert_angle_tol=o.cert_angle_tol)
+
+
+def _prefixed(prefix: str, exc: ProblemError) -> ProblemError:
+    return ProblemError([(f"{prefix}.{f}", r) for f, r in exc.errors])
+
+
+def _motion(request: ManipulationRequest, start: ObjectPose | None
+            ) -> tuple[DesiredMotion | None, list[tuple[str, str]]]:
+    """The desired motion of a request from the object's pose ``start`` at t = 0, or the
+    reasons it has none (wire names)."""
+    m = request.motion
+    if m is None:
+        return None, []
+    if isinstance(m, MotionSamplesModel):  # the core checks the knots
+        return DesiredMotion(tuple(m.times),
+                             tuple(tuple(q) for q in m.orientations_wxyz),  # type: ignore[misc]
+                             tuple(tuple(p) for p in m.positions),  # type: ignore[misc]
+                             m.smooth), []
+    errors = [(f"motion.steps[{i}].axis", "must not be zero: a rotation needs an axis")
+              for i, s in enumerate(m.steps) if math.hypot(*s.axis) < 1e-12]
+    total = math.fsum(s.duration for s in m.steps)
+    if abs(total - request.duration) > 1e-9 * max(1.0, request.duration):
+        errors.append(("motion.steps", f"the steps' durations add up to {total:.6g} s, not "
+                                       f"the duration {request.duration} s"))
+    if errors:
+        return None, errors
+    if start is None:  # the request is invalid (its errors name why): any start will do
+        start = ObjectPose()
+    steps = [MotionStep(s.duration, (s.axis[0], s.axis[1], s.axis[2]), s.angle,
+                        (s.translation[0], s.translation[1], s.translation[2]))
+             for s in m.steps]
+    return DesiredMotion.from_steps(start, steps, m.smooth), []
+
+
+def _palm_pose(obj: ObjectSpec, palm: Palm) -> ObjectPose | None:
+    """The object's pose on the palm at t = 0 (None when the object's data cannot give
+    one: the core's checks name the field)."""
+    if obj.shape not in SURFACES or obj.surface.validate_params(obj.dimensions):
+        return None
+    try:
+        R, p = object_pose(obj, palm.initial)
+    except Exception:  # invalid data the core's checks report by name
+        return None
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(p))):
+        return None
+    w, x, y, z = (float(c) for c in quaternion_wxyz(R))
+    return ObjectPose((w, x, y, z), (float(p[0]), float(p[1]), float(p[2])))
+
+
+def _manipulation_problem(request: ManipulationRequest, cache: FingerCache
+                          ) -> ManipulationProblem:
+    """The core's problem of a manipulation request; ProblemError naming the wire fields
+    the core cannot even be given (a finger that does not load, a hand finger that does
+    not exist, duplicate names, a motion step without an axis)."""
+    errors: list[tuple[str, str]] = []
+    hand: Hand | None = None
+    if request.hand is not None:
+        try:
+            hand = cache.hand(request.hand)
+        except ProblemError as exc:
+            errors += exc.errors
+    tips: list[Fingertip] = []
+    names: dict[str, int] = {}
+    for i, f in enumerate(request.fingers):
+        where = f"fingers[{i}]"
+        model: FingerModel | None = None
+        default_name = f"finger{i}"
+        default_seed: tuple[float, ...] | None = None
+        if f.finger is not None:
+            try:
+                model = cache.finger(f.finger)
+            except ProblemError as exc:
+                errors += _prefixed(where, exc).errors
+        elif f.hand_finger is not None:
+            if request.hand is None:
+                errors.append((f"{where}.hand_finger", "no `hand` in the request to pick a "
+                                                       "finger from"))
+            elif hand is not None:
+                n = len(hand.fingers)
+                if f.hand_finger >= n:
+                    errors.append((f"{where}.hand_finger",
+                                   f"the {request.hand.builtin} hand has {n} fingers "
+                                   f"(indices 0 to {n - 1}), got {f.hand_finger}"))
+                else:
+                    model = hand.fingers[f.hand_finger]
+                    default_name = hand_finger_name(hand, f.hand_finger)
+                    if hand.nominal_q is not None:
+                        default_seed = hand.nominal_q[f.hand_finger]
+        name = f.name or default_name
+        if name == "palm":
+            errors.append((f"{where}.name", "'palm' names the palm contact; choose another"))
+        elif name in names:
+            errors.append((f"{where}.name", f"{name!r} is also the name of "
+                                            f"fingers[{names[name]}]; names must be unique"))
+        names.setdefault(name, i)
+        if model is not None:
+            rv = f.chart_rotation
+            tips.append(Fingertip(model, f.initial.as_tuple(), (rv[0], rv[1], rv[2]),
+                                  default_seed if f.q_seed is None else tuple(f.q_seed),
+                                  name))
+    rv = request.object.chart_rotation
+    obj = ObjectSpec(request.object.shape, tuple(request.object.dimensions),
+                     (rv[0], rv[1], rv[2]))
+    start = motion_start = None
+    if request.initial_pose is not None:
+        q, p = request.initial_pose.orientation_wxyz, request.initial_pose.position
+        start = motion_start = ObjectPose((q[0], q[1], q[2], q[3]), (p[0], p[1], p[2]))
+    palm = None
+    if request.palm is not None:
+        pm = request.palm
+        palm = Palm(pm.initial.as_tuple(), pm.goal.as_dict(),
+                    tuple(ViaPoint(vp.time, vp.coords.as_dict()) for vp in pm.via_points),
+                    pm.palm_half_extent, pm.max_contact_speed)
+        if start is not None:
+            errors.append(("initial_pose", "not used with a palm: the palm contact "
+                                           "(palm.initial) fixes the object's pose at t = 0"))
+        motion_start = _palm_pose(obj, palm)
+    motion, motion_errors = _motion(request, motion_start)
+    errors += motion_errors
+    if errors:
+        raise ProblemError(errors)
+    tr = request.tracking
+    return ManipulationProblem(
+        object=obj, fingers=tuple(tips), duration=request.duration, palm=palm,
+        initial_pose=start,
+        motion=motion,
+        tracking=Tracking(tr.position_weight, tr.orientation_weight, tr.position_tolerance,
+                          tr.orientation_tolerance),
+        mu=request.mu, object_effort_weight=request.object_effort_weight,
+        finger_effort_weight=request.finger_effort_weight,
+        joint_effort_weight=request.joint_effort_weight, grasp_weight=request.grasp_weight,
+        pad_margin=request.pad_margin, n_intervals=request.n_intervals,
+        pole_margin=request.pole_margin, max_object_speed=request.max_object_speed,
+        max_object_rate=request.max_object_rate, max_refinements=request.max_refinements,
+        options=_solver_options(request.solver))
+
+
+def _wire_name(field: str, request: ManipulationRequest) -> str:
+    """The wire name of a field the core names (``ManipulationProblem.errors()``)."""
+    if field.startswith("options."):
+        return "solver." + field.removeprefix("options.")
+    if field == "initial_pose.orientation":
+        return "initial_pose.orientation_wxyz"
+    if field == "motion" or field.startswith(("motion.", "motion[")):
+        if isinstance(request.motion, MotionSamplesModel):
+            # the core's motion[i].orientation / .position are the wire's i-th knot
+            head, _, rest = field.partition("].")
+            if rest in ("orientation", "position"):
+                index = head.removeprefix("motion[")
+                what = "orientations_wxyz" if rest == "orientation" else "positions"
+                return f"motion.{what}[{index}]"
+            return field
+        # a motion made of steps: its knots are the steps' ends
+        return "motion.steps" if field != "motion" else field
+    return field
+
+
+def _manipulation_errors(problem: ManipulationProblem, request: ManipulationRequest
+                         ) -> list[tuple[str, str]]:
+    return [(_wire_name(f, request), r) for f, r in problem.errors()]
+
+
 def to_problem(request: PlanRequest, fingers: FingerCache | None = None
-               ) -> BallOnPalmProblem | OneFingerProblem:
+               ) -> BallOnPalmProblem | OneFingerProblem | ManipulationProblem:
     """The core's problem for a request (the core then validates it as a whole: see
     ``problem.errors()``, or :func:`request_errors` for every check). A one-finger request
     loads its finger (cached in ``fingers``, default this process's); ProblemError naming
-    ``finger.urdf``/``finger.tip_frame`` when it cannot."""
+    ``finger.urdf``/``finger.tip_frame`` when it cannot. A manipulation request loads its
+    hand and fingers the same way; ProblemError naming the wire fields (e.g.
+    ``fingers[1].hand_finger``, ``motion.steps[2].axis``) the core cannot be given."""
     if isinstance(request, BallOnPalmRequest):
         return _base_problem(request)
+    if isinstance(request, ManipulationRequest):
+        return _manipulation_problem(request, fingers or FINGERS)
     if isinstance(request, OneFingerRequest):
         finger = (fingers or FINGERS).finger(request.finger)
         c = request.finger_contact
@@ -204,14 +446,23 @@ def request_errors(request: PlanRequest, fingers: FingerCache | None = None
                    ) -> list[tuple[str, str]]:
     """Everything wrong with a (schema-valid) request, as (field, reason) pairs; [] when it
     can be planned. Cheap (no NLP is built): the core's checks of the problem and, for a
-    one-finger request, loading the finger and the inverse kinematics of the initial grasp
-    (reachable, within the joint limits, inside the friction cone)."""
+    request with fingers, loading them and the inverse kinematics of the initial grasp
+    (reachable, within the joint limits, in force closure / inside the friction cone)."""
     cache = fingers or FINGERS
     with cache.lock:
         try:
             problem = to_problem(request, cache)
         except ProblemError as exc:
             return list(exc.errors)
+        if isinstance(problem, ManipulationProblem):
+            assert isinstance(request, ManipulationRequest)
+            errors = _manipulation_errors(problem, request)
+            if not errors:
+                try:
+                    cache.manipulation.initial_state(problem)
+                except ProblemError as exc:
+                    errors += exc.errors
+            return errors
         errors = list(problem.errors())
         if isinstance(problem, OneFingerProblem):
             errors += _seed_errors(problem)
@@ -225,16 +476,26 @@ def request_errors(request: PlanRequest, fingers: FingerCache | None = None
 
 def solve(request: PlanRequest, palm: BallOnPalmPlanner | None = None,
           fingers: FingerCache | None = None
-          ) -> tuple[AnyPlanResult, Solution | OneFingerSolution | GreedyResult]:
+          ) -> tuple[AnyPlanResult,
+                     Solution | OneFingerSolution | GreedyResult | ManipulationSolution]:
     """Plan a request: (the wire result, the core's solution). ProblemError for a request
     that cannot be planned (:func:`request_errors` names the same fields beforehand).
     ``palm``: the ball-on-palm planner (default: the process-wide one); ``fingers``: the
-    fingers and one-finger planner (default: this process's)."""
+    fingers, hands and finger planners (default: this process's)."""
     if isinstance(request, BallOnPalmRequest):
         problem = _base_problem(request)
         sol = palm.solve(problem) if palm is not None else plan_ball_on_palm(problem)
         return result_from_solution(sol, request.sample_times), sol
     cache = fingers or FINGERS
+    if isinstance(request, ManipulationRequest):
+        with cache.lock:  # the hand and fingers, by the cache's rules
+            manipulation = _manipulation_problem(request, cache)
+            planner = cache.manipulation
+        errors = _manipulation_errors(manipulation, request)
+        if errors:
+            raise ProblemError(errors)
+        manip_sol = planner.solve(manipulation)
+        return result_from_manipulation_solution(manip_sol), manip_sol
     finger_problem = to_problem(request, cache)
     assert isinstance(finger_problem, OneFingerProblem)
     errors = _seed_errors(finger_problem)
@@ -259,11 +520,13 @@ def rotation_vector(R: Any) -> list[float]:
 
 
 def wire_field(loc: Sequence[int | str]) -> str:
-    """The dotted field of a pydantic error location in a request body, without the tag
-    of the planner's model that a discriminated union puts first."""
+    """The dotted field of a pydantic error location in a request body, without the tags
+    that discriminated unions put in it (the planner's first, a motion's kind)."""
     parts = [str(p) for p in loc]
     if parts and parts[0] in _PLANNER_TAGS:
         parts = parts[1:]
+    if len(parts) > 1 and parts[0] == "motion" and parts[1] in _MOTION_TAGS:
+        del parts[1]  # the tag of the motion's kind (also a manipulation request's)
     return ".".join(parts)
 
 
@@ -291,6 +554,9 @@ def invalid_result(errors: list[tuple[str, str]], planner: str = "ball_on_palm"
     if planner == "one_finger":
         return FingerPlanResult(status=PlanStatus.INVALID_INPUT, message=message,
                                 errors=fields)
+    if planner == "manipulation":
+        return ManipulationResult(status=PlanStatus.INVALID_INPUT, message=message,
+                                  errors=fields)
     return PlanResult(status=PlanStatus.INVALID_INPUT, message=message, errors=fields)
 
 
@@ -298,6 +564,8 @@ def error_result(message: str, planner: str = "ball_on_palm") -> AnyPlanResult:
     """The result of a planner that failed unexpectedly (status ``error``)."""
     if planner == "one_finger":
         return FingerPlanResult(status=PlanStatus.ERROR, message=message)
+    if planner == "manipulation":
+        return ManipulationResult(status=PlanStatus.ERROR, message=message)
     return PlanResult(status=PlanStatus.ERROR, message=message)
 
 
@@ -411,3 +679,89 @@ def result_from_greedy(res: GreedyResult, joint_names: Sequence[str] = ()) -> Fi
                                solve_time=float(res.compute_time)),
         goal_error={k: float(v) for k, v in res.goal_error.items() if math.isfinite(v)},
         certificate=cert, joint_names=list(joint_names), trajectory=_finger_trajectory(res))
+
+
+def _rows(a: Any) -> list[Any]:
+    out: list[Any] = np.asarray(a, dtype=float).tolist()
+    return out
+
+
+def _certificate_parts(certificate: dict[str, float]
+                       ) -> tuple[dict[str, float], dict[str, float]]:
+    """(values, tolerances) of a core certificate dict (its ``tol_<key>`` entries are the
+    tolerances), finite entries only."""
+    values = {k: float(v) for k, v in certificate.items()
+              if not k.startswith("tol_") and math.isfinite(v)}
+    tolerances = {k.removeprefix("tol_"): float(v) for k, v in certificate.items()
+                  if k.startswith("tol_") and math.isfinite(v)}
+    return values, tolerances
+
+
+def _manipulation_trajectory(sol: ManipulationSolution) -> ManipulationTrajectoryModel | None:
+    arrays: dict[str, Any] = {
+        "t": sol.t, "object_position": sol.object_position,
+        "object_rotation": sol.object_rotation, "object_velocity": sol.object_velocity,
+        "object_angular_velocity": sol.object_angular_velocity,
+        "grasp_angle": sol.grasp_angle, "cone_margin": sol.cone_margin}
+    optional = {"desired_position": sol.desired_position,
+                "desired_rotation": sol.desired_rotation,
+                "tracking_position_error": sol.tracking_position_error,
+                "tracking_angle_error": sol.tracking_angle_error}
+    arrays.update({k: v for k, v in optional.items() if v is not None})
+    for c in sol.contacts:
+        arrays.update({f"{c.name}.{k}": getattr(c, k) for k in
+                       ("eta", "eta_dot", "w", "point", "normal", "force_angle")})
+    for f in sol.fingers:
+        arrays.update({f"{f.name}.{k}": getattr(f, k) for k in
+                       ("q", "q_dot", "tip_position", "tip_rotation")})
+    if not _all_finite(arrays):
+        return None  # JSON has no NaN; a diverged last iterate is reported by its status
+    return ManipulationTrajectoryModel(
+        t=_rows(sol.t), object_position=_rows(sol.object_position),
+        object_orientation_wxyz=_rows(quaternion_wxyz(sol.object_rotation)),
+        object_velocity=_rows(sol.object_velocity),
+        object_angular_velocity=_rows(sol.object_angular_velocity),
+        contacts=[ContactTrajectoryModel(
+            name=c.name, body="palm" if c.body == "palm" else "finger", eta=_rows(c.eta),
+            eta_dot=_rows(c.eta_dot), w=_rows(c.w), point=_rows(c.point),
+            normal=_rows(c.normal), force_angle=_rows(c.force_angle))
+            for c in sol.contacts],
+        fingers=[FingerJointsModel(
+            name=f.name, joint_names=list(f.joint_names), q=_rows(f.q), q_dot=_rows(f.q_dot),
+            tip_position=_rows(f.tip_position),
+            tip_orientation_wxyz=_rows(quaternion_wxyz(f.tip_rotation)))
+            for f in sol.fingers],
+        grasp_angle=_rows(sol.grasp_angle), cone_margin=_rows(sol.cone_margin),
+        desired_position=None if sol.desired_position is None else
+        _rows(sol.desired_position),
+        desired_orientation_wxyz=None if sol.desired_rotation is None else
+        _rows(quaternion_wxyz(sol.desired_rotation)),
+        tracking_position_error=None if sol.tracking_position_error is None else
+        _rows(sol.tracking_position_error),
+        tracking_angle_error=None if sol.tracking_angle_error is None else
+        _rows(sol.tracking_angle_error))
+
+
+def result_from_manipulation_solution(sol: ManipulationSolution) -> ManipulationResult:
+    """The wire result of a manipulation plan. A plan with non-finite values (a diverged
+    last iterate) keeps its status and drops its trajectory (JSON has no NaN)."""
+    values, tolerances = _certificate_parts(sol.certificate)
+    failures = list(sol.certificate_failures)
+    cert = ManipulationCertificateModel(passed=bool(values) and not failures, values=values,
+                                        tolerances=tolerances, failures=failures)
+    trajectory = _manipulation_trajectory(sol)
+    message = sol.message if trajectory is not None else \
+        sol.message + " (non-finite iterate omitted)"
+    status = PlanStatus(sol.status.value)
+    if trajectory is None and status is PlanStatus.SOLVED:  # pragma: no cover - defensive
+        status = PlanStatus.NUMERICAL_ERROR
+    timing = [sol.build_time, sol.solve_time]
+    return ManipulationResult(
+        status=status, message=message,
+        stats=ManipulationStatsModel(
+            raw_status=sol.raw_status, iterations=sol.iterations,
+            build_time=timing[0] if math.isfinite(timing[0]) else 0.0,
+            solve_time=timing[1] if math.isfinite(timing[1]) else 0.0,
+            refinements=sol.refinements, n_intervals=max((len(sol.t) - 1) // 2, 0)),
+        goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
+        certificate=cert, trajectory=trajectory)

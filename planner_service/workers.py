@@ -52,8 +52,8 @@ def _worker_main(conn: Connection) -> None:
     """Body of a worker process: plan each request received, reply with the result.
 
     The process keeps one planner per kind, and so their caches of built NLPs, from job to
-    job: the ball-on-palm planner, and the one-finger planner with the finger models it
-    was built for (``FingerCache``)."""
+    job: the ball-on-palm planner, and the finger planners (one-finger and manipulation,
+    one NLP cache) with the finger models and hands they were built for (``FingerCache``)."""
     # Imports happen in the child: the parent's modules are not inherited under spawn.
     from ocp.ball_on_palm import BallOnPalmPlanner
     from ocp.problem import ProblemError

@@ -30,23 +30,40 @@ def test_plan_writes_a_certified_result_and_a_summary(request_file: Path, tmp_pa
     out = tmp_path / "result.json"
     proc = dexroll("plan", str(request_file), "-o", str(out), cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    for word in ("status", "iterations", "goal error", "certificate", "solve"):
+    request = json.loads(request_file.read_text())
+    # a desired object motion is summarised by its tracking error, palm goals by theirs
+    aim = "tracking" if request.get("motion") else "goal error"
+    for word in ("status", "iterations", aim, "certificate", "solve"):
         assert word in proc.stdout
     assert len(proc.stdout.splitlines()) <= 24, "the summary fits on one screen"
     result = json.loads(out.read_text())
     assert result["status"] == "solved"
     assert result["certificate"]["passed"] is True
-    request = json.loads(request_file.read_text())
     # the plan's samples: ball-on-palm results call them grid/eta, finger results
-    # trajectory/eta_p (the palm contact coordinates)
-    if result.get("planner", "ball_on_palm") == "ball_on_palm":
+    # trajectory/eta_p (the palm contact coordinates), manipulation results trajectory and
+    # the palm contact's eta (if the grasp has a palm; its goal is palm.goal)
+    planner = result.get("planner", "ball_on_palm")
+    goal = request.get("goal", {})
+    if planner == "ball_on_palm":
         samples, palm_eta = result["grid"], result["grid"]["eta"]
-    else:
+    elif planner == "one_finger":
         samples, palm_eta = result["trajectory"], result["trajectory"]["eta_p"]
+    else:
+        samples = result["trajectory"]
+        palm = [c["eta"] for c in samples["contacts"] if c["body"] == "palm"]
+        palm_eta = palm[0] if palm else []
+        goal = (request.get("palm") or {}).get("goal", {})
+        # inside every friction cone, and within the tracking tolerances, at every sample
+        assert min(samples["cone_margin"]) > 0.0
+        tracking = request.get("tracking", {})
+        for key, errors in (("position_tolerance", "tracking_position_error"),
+                            ("orientation_tolerance", "tracking_angle_error")):
+            if tracking.get(key) is not None:
+                assert max(samples[errors]) <= tracking[key]
     assert samples["t"][0] == 0.0 and abs(samples["t"][-1] - request["duration"]) < 1e-12
     # every goal coordinate is met at the final time, in SI units
     names = ["x", "y", "u", "v", "psi"]
-    for key, target in request.get("goal", {}).items():
+    for key, target in goal.items():
         assert abs(palm_eta[-1][names.index(key)] - target) < 1e-6
 
 

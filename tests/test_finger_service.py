@@ -159,7 +159,7 @@ def test_fingertip_pose_is_pinocchio_fk_of_the_joint_angles(planned: Job) -> Non
 def test_models_lists_the_builtin_finger_whose_urdf_gives_the_same_kinematics(
         client: DexrollClient, planned: Job) -> None:
     catalog = client.models()
-    assert set(catalog.planners) == {"ball_on_palm", "one_finger"}
+    assert set(catalog.planners) == {"ball_on_palm", "one_finger", "manipulation"}
     (k3s,) = [f for f in catalog.fingers if f.name == "k3s"]
     assert k3s.n_joints == 6 and k3s.tip_frame == "fingertip" and len(k3s.joint_names) == 6
     model = pin.buildModelFromXML(k3s.urdf)

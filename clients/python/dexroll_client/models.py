@@ -26,9 +26,12 @@ from pydantic import (
 
 __all__ = [
     "BUILTIN_FINGERS",
+    "BUILTIN_HANDS",
     "MAX_DURATION",
+    "MAX_FINGERS",
     "MAX_FINGER_JOINTS",
     "MAX_INTERVALS",
+    "MAX_MOTION_KNOTS",
     "MAX_POSITION",
     "MAX_SAMPLES",
     "MAX_URDF_CHARS",
@@ -38,29 +41,48 @@ __all__ = [
     "BallOnPalmRequest",
     "CertificateModel",
     "ContactCoordinates",
+    "ContactTrajectoryModel",
     "ErrorBody",
     "FieldError",
     "FingerCertificateModel",
     "FingerContactCoordinates",
     "FingerContactModel",
     "FingerInfo",
+    "FingerJointsModel",
     "FingerModelSpec",
     "FingerPlanResult",
     "FingerStatsModel",
     "FingerTrajectoryModel",
+    "FingertipModel",
+    "HandFingerInfo",
+    "HandInfo",
+    "HandModel",
     "Job",
     "JobList",
     "JobState",
+    "ManipulationCertificateModel",
+    "ManipulationRequest",
+    "ManipulationResult",
+    "ManipulationStatsModel",
+    "ManipulationTrajectoryModel",
     "ModelCatalog",
+    "MotionModel",
+    "MotionSamplesModel",
+    "MotionStepModel",
+    "MotionStepsModel",
+    "MountModel",
     "ObjectInfo",
     "ObjectModel",
+    "ObjectPoseModel",
     "OneFingerRequest",
+    "PalmModel",
     "PartialContactCoordinates",
     "PlanRequest",
     "PlanResult",
     "PlanStatus",
     "SolverModel",
     "StatsModel",
+    "TrackingModel",
     "TrajectoryModel",
     "ViaPointModel",
 ]
@@ -76,9 +98,14 @@ MAX_FINGER_JOINTS = 16
 MAX_URDF_CHARS = 500_000
 
 #: The planners, by the value of a request's ``planner`` field.
-PLANNERS: tuple[str, ...] = ("ball_on_palm", "one_finger")
+PLANNERS: tuple[str, ...] = ("ball_on_palm", "one_finger", "manipulation")
 #: The built-in fingers, by the value of ``finger.builtin``.
 BUILTIN_FINGERS: tuple[str, ...] = ("k3s",)
+#: The built-in hands, by the value of ``hand.builtin``.
+BUILTIN_HANDS: tuple[str, ...] = ("two_finger", "three_finger")
+#: Limits of a manipulation request: fingertips, knots of a desired motion.
+MAX_FINGERS = 5
+MAX_MOTION_KNOTS = 1000
 
 
 class _Request(BaseModel):
@@ -335,6 +362,244 @@ class OneFingerRequest(_PalmRequest):
         return value
 
 
+# -- manipulation: any grasp (an optional palm, one or more fingertips) ----------------------
+
+Quaternion = list[Annotated[float, Field(ge=-2.0, le=2.0)]]
+
+
+class MountModel(_Request):
+    """Where a hand's finger is mounted: the pose of its base in the palm frame."""
+
+    position: list[Position] = Field(min_length=3, max_length=3,
+                                     description="origin of the finger's base in the palm "
+                                                 "frame [m]")
+    rotation: RotationVector = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
+        description="rotation vector [rad] of the finger's base in the palm frame")
+
+
+class HandModel(_Request):
+    """A built-in hand (``GET /v1/models`` lists them): its fingers, mounted on the palm,
+    to be used by ``fingers[].hand_finger``."""
+
+    builtin: Literal["two_finger", "three_finger"] = Field(
+        description="the built-in hand: 'two_finger' or 'three_finger'")
+    mounts: list[MountModel] | None = Field(
+        default=None, min_length=1, max_length=MAX_FINGERS,
+        description="the fingers' mounts on the palm, one per finger of the hand in its "
+                    "order; default: the hand's own (GET /v1/models)")
+
+
+class FingertipModel(_Request):
+    """One fingertip touching the object: which finger (``finger``: a finger model, or
+    ``hand_finger``: the index of a finger of ``hand``; exactly one of the two), where its
+    flat pad touches the object at t = 0, and the object chart patch its contact
+    coordinates are measured in."""
+
+    finger: FingerModelSpec | None = Field(
+        default=None, description="the finger (a built-in one or a URDF, and its mount); "
+                                  "give this or `hand_finger`")
+    hand_finger: int | None = Field(
+        default=None, ge=0, lt=MAX_FINGERS, validate_default=True,
+        description="index of a finger of the request's `hand` (0-based, in the hand's "
+                    "order); give this or `finger`")
+    name: str | None = Field(
+        default=None, min_length=1, max_length=40, pattern=r"^[A-Za-z][A-Za-z0-9_\-]*$",
+        description="a name for this contact in the result (unique, not 'palm'); default: "
+                    "the hand's name of the finger, else 'finger<i>'")
+    initial: FingerContactCoordinates = Field(
+        description="the contact coordinates at t = 0: (x_f, y_f) on the pad [m], "
+                    "(u_f, v_f) on the object in this contact's chart patch [rad], psi_f [rad]")
+    chart_rotation: RotationVector = Field(
+        min_length=3, max_length=3,
+        description="rotation vector [rad] of this contact's chart patch in the object "
+                    "frame: patch point (u_f, v_f) = (0, 0) is where the rotated x axis "
+                    "leaves the object (keep the contact near it, away from the patch's "
+                    "poles at u_f = +-pi/2)")
+    q_seed: list[Angle] | None = Field(
+        default=None, min_length=1, max_length=MAX_FINGER_JOINTS,
+        description="joint angles [rad; m for a prismatic joint] from which the inverse "
+                    "kinematics of the initial grasp starts, one per joint; default: a hand "
+                    "finger's nominal grasp angles (GET /v1/models), else the paper's "
+                    "(0, -22.68, -12.34, 0, 47.65, 0) deg")
+
+    @field_validator("hand_finger")
+    @classmethod
+    def _one_finger_source(cls, value: int | None, info: ValidationInfo) -> int | None:
+        if "finger" not in info.data:  # `finger` itself is invalid: reported there
+            return value
+        if value is not None and info.data["finger"] is not None:
+            raise ValueError("give either `finger` or `hand_finger`, not both")
+        if value is None and info.data["finger"] is None:
+            raise ValueError("give `finger` (a finger model) or `hand_finger` (the index of "
+                             "a finger of `hand`)")
+        return value
+
+
+class PalmModel(_Request):
+    """A flat palm (the palm frame's z = 0 plane) carrying the object, and the palm
+    contact's coordinates eta_p = (x, y, u, v, psi) in the object's chart
+    (``object.chart_rotation``)."""
+
+    initial: ContactCoordinates = Field(description="palm contact coordinates at t = 0")
+    goal: PartialContactCoordinates = Field(
+        default_factory=PartialContactCoordinates,
+        description="palm contact coordinates required at t = duration (any subset)")
+    via_points: list[ViaPointModel] = Field(default_factory=list, max_length=MAX_VIA_POINTS)
+    palm_half_extent: float = Field(default=0.5, gt=0.0, le=MAX_POSITION,
+                                    description="palm coordinates stay in [-e, e] [m]")
+    max_contact_speed: float = Field(default=1.0, gt=0.0, le=100.0,
+                                     description="bound on each palm contact velocity "
+                                                 "component [m/s]")
+
+
+class ObjectPoseModel(_Request):
+    """A pose of the object in the palm frame."""
+
+    orientation_wxyz: Quaternion = Field(
+        default_factory=lambda: [1.0, 0.0, 0.0, 0.0], min_length=4, max_length=4,
+        description="orientation, unit quaternion (w, x, y, z)")
+    position: list[Position] = Field(min_length=3, max_length=3,
+                                     description="the object's centre [m]")
+
+
+class MotionStepModel(_Request):
+    """Over ``duration``, rotate the object by ``angle`` about ``axis`` (through its
+    centre) and translate its centre by ``translation``."""
+
+    duration: float = Field(gt=0.0, le=MAX_DURATION, description="duration of the step [s]")
+    axis: list[Annotated[float, Field(ge=-1e3, le=1e3)]] = Field(
+        default_factory=lambda: [0.0, 0.0, 1.0], min_length=3, max_length=3,
+        description="rotation axis, a direction in the palm frame (any length but zero)")
+    angle: Angle = Field(default=0.0, description="rotation angle about `axis` [rad] "
+                                                  "(right hand)")
+    translation: list[Position] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
+        description="displacement of the object's centre, palm frame [m]")
+
+
+class MotionStepsModel(_Request):
+    """A desired motion as steps one after the other from the initial pose (the paper's
+    'rotate about Z by 20 deg, then about Y by 20 deg, ...'); the steps' durations add up
+    to the request's duration."""
+
+    kind: Literal["steps"] = Field(description="'steps'")
+    steps: list[MotionStepModel] = Field(min_length=1, max_length=MAX_MOTION_KNOTS - 1)
+    smooth: bool = Field(default=True, description="ease in and out of every step (zero "
+                                                   "velocity between steps); else constant "
+                                                   "rate")
+
+
+class MotionSamplesModel(_Request):
+    """A desired motion as poses at knot times (from 0 to the request's duration),
+    interpolated on SE(3): the geodesic between orientations, the straight line between
+    positions."""
+
+    kind: Literal["samples"] = Field(description="'samples'")
+    times: list[Annotated[float, Field(ge=0.0, le=MAX_DURATION)]] = Field(
+        min_length=2, max_length=MAX_MOTION_KNOTS,
+        description="knot times [s], from 0 to the duration, increasing")
+    orientations_wxyz: list[Annotated[Quaternion, Field(min_length=4, max_length=4)]] = Field(
+        min_length=2, max_length=MAX_MOTION_KNOTS,
+        description="the object's orientation at each knot, unit quaternion (w, x, y, z)")
+    positions: list[Annotated[list[Position], Field(min_length=3, max_length=3)]] = Field(
+        min_length=2, max_length=MAX_MOTION_KNOTS,
+        description="the object's centre at each knot, palm frame [m]")
+    smooth: bool = Field(default=True, description="ease in and out of every knot (zero "
+                                                   "velocity at knots); else constant rate")
+
+
+#: A desired object motion, told apart by its ``kind``.
+MotionModel = Annotated[MotionStepsModel | MotionSamplesModel, Field(discriminator="kind")]
+
+
+class TrackingModel(_Request):
+    """How hard the object follows ``motion``: weights of the tracking terms of the
+    objective, and optional hard bounds on the tracking errors at every instant."""
+
+    position_weight: float = Field(
+        default=1e4, ge=0.0, le=1e8,
+        description="weight (dimensionless) of the time average of |p - p_d|^2 / L^2 (L: "
+                    "the object's largest semi-axis)")
+    orientation_weight: float = Field(
+        default=1e4, ge=0.0, le=1e8,
+        description="weight (dimensionless) of the time average of 1 - cos(angle between "
+                    "the object's orientation and the desired one)")
+    position_tolerance: float | None = Field(
+        default=None, gt=0.0, le=MAX_POSITION,
+        description="bound on |p - p_d| at every instant [m] (checked by the certificate); "
+                    "null: none")
+    orientation_tolerance: float | None = Field(
+        default=None, gt=0.0, le=math.pi,
+        description="bound on the angle between the object's orientation and the desired "
+                    "one at every instant [rad]; null: none")
+
+
+class ManipulationRequest(_Request):
+    """Manipulate an object with any grasp: an optional flat palm carrying it and one or
+    more flat fingertips rolling on it (paper, sections 3 and 4, and beyond). Without a
+    palm the object starts at ``initial_pose`` and follows ``motion``; with one, its pose
+    comes from the palm contact, driven to the palm's goal/via-points and/or ``motion``.
+    The plan is returned at the collocation points (no ``sample_times``)."""
+
+    planner: Literal["manipulation"] = Field(description="which planner")
+    object: ObjectModel = Field(default_factory=ObjectModel)
+    hand: HandModel | None = Field(
+        default=None, description="a built-in hand whose fingers `fingers[].hand_finger` "
+                                  "picks")
+    fingers: list[FingertipModel] = Field(min_length=1, max_length=MAX_FINGERS,
+                                          description="the fingertips touching the object")
+    palm: PalmModel | None = Field(default=None, description="the palm carrying the object; "
+                                                             "null: held by the fingers alone")
+    initial_pose: ObjectPoseModel | None = Field(
+        default=None, description="the object's pose at t = 0 (required without a palm; "
+                                  "with one, the palm contact fixes it)")
+    motion: MotionModel | None = Field(default=None,
+                                       description="the desired object motion (required "
+                                                   "without a palm)")
+    tracking: TrackingModel = Field(default_factory=TrackingModel)
+    duration: float = Field(gt=0.0, le=MAX_DURATION, description="planning horizon [s]")
+    mu: float = Field(default=0.5, gt=0.0, le=10.0,
+                      description="friction coefficient at every contact (dimensionless); "
+                                  "the friction cone's half-angle is atan(mu) [rad]")
+    object_effort_weight: float = Field(
+        default=1.0, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the object's own motion: the palm "
+                    "contact velocity, or the free object's twist (scaled by the object's "
+                    "size and the duration)")
+    finger_effort_weight: float = Field(
+        default=0.01, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the fingertip contacts' motion "
+                    "over the object |w_i|^2 [rad^2/s^2]")
+    joint_effort_weight: float = Field(
+        default=0.01, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the joint rates |q_dot|^2 "
+                    "[rad^2/s^2]")
+    grasp_weight: float = Field(
+        default=100.0, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the grasp-quality term, the time "
+                    "average of 1 - cos of the largest force angle (0: every contact pushes "
+                    "along its normal)")
+    pad_margin: float = Field(default=0.002, ge=0.0, le=0.1,
+                              description="distance kept between each contact and its "
+                                          "pad's edge [m]")
+    n_intervals: int = Field(default=50, ge=1, le=MAX_INTERVALS,
+                             description="collocation intervals over the horizon")
+    pole_margin: float = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
+                               description="keep |u| <= pi/2 - pole_margin on every contact's "
+                                           "chart patch [rad]")
+    max_object_speed: float = Field(default=1.0, gt=0.0, le=100.0,
+                                    description="bound on each component of a free object's "
+                                                "velocity [m/s]")
+    max_object_rate: float = Field(default=20.0, gt=0.0, le=1000.0,
+                                   description="bound on each component of a free object's "
+                                               "angular velocity [rad/s]")
+    max_refinements: int = Field(default=2, ge=0, le=5,
+                                 description="grid doublings allowed when the certificate "
+                                             "finds the grid too coarse")
+    solver: SolverModel = Field(default_factory=SolverModel)
+
+
 def _planner_of(value: object) -> str | None:
     """The ``planner`` of a request or result (a dict or a model); ``ball_on_palm`` when
     absent."""
@@ -350,10 +615,11 @@ def _planner_of(value: object) -> str | None:
 #: field is absent). Later planners join this union (one endpoint serves them all).
 PlanRequest = Annotated[
     Annotated[BallOnPalmRequest, Tag("ball_on_palm")]
-    | Annotated[OneFingerRequest, Tag("one_finger")],
+    | Annotated[OneFingerRequest, Tag("one_finger")]
+    | Annotated[ManipulationRequest, Tag("manipulation")],
     Discriminator(_planner_of, custom_error_type="invalid_planner",
                   custom_error_message="planner must be one of 'ball_on_palm', "
-                                       "'one_finger'"),
+                                       "'one_finger', 'manipulation'"),
 ]
 
 
@@ -531,11 +797,114 @@ class FingerPlanResult(_Response):
     trajectory: FingerTrajectoryModel | None = None
 
 
+class ContactTrajectoryModel(_Response):
+    """One contact of a manipulation plan over time; rows are samples. Palm frame, SI
+    units."""
+
+    name: str = Field(description="'palm', or the fingertip's name")
+    body: Literal["palm", "finger"] = Field(description="the body touching the object")
+    eta: Rows = Field(description="contact coordinates: the body's point (x, y) [m] (palm: "
+                                  "palm plane; finger: pad frame), the object's point "
+                                  "(u, v) [rad] in this contact's chart patch, the contact "
+                                  "angle psi [rad]")
+    eta_dot: Rows = Field(description="rates of the contact coordinates ([m/s], [rad/s])")
+    w: Rows = Field(description="the contact's input: palm d/dt (x, y) [m/s]; fingertip "
+                                "d/dt (u, v) [rad/s] (its motion over the object)")
+    point: Rows = Field(description="the contact point [m]")
+    normal: Rows = Field(description="the object's outward normal at the contact (unit)")
+    force_angle: list[float] = Field(
+        description="angle between the contact's push (-normal) and the internal force of "
+                    "the grasp that certifies force closure [rad] (two contacts: the "
+                    "paper's grasp angle)")
+
+
+class FingerJointsModel(_Response):
+    """One finger of a manipulation plan over time; rows are samples."""
+
+    name: str = Field(description="the fingertip's name (as in `contacts`)")
+    joint_names: list[str] = Field(description="the finger's joints, in the order of `q`")
+    q: Rows = Field(description="joint angles [rad; m for a prismatic joint]")
+    q_dot: Rows = Field(description="joint rates [rad/s; m/s for a prismatic joint]")
+    tip_position: Rows = Field(description="origin of the fingertip (pad) frame in the palm "
+                                           "frame [m]")
+    tip_orientation_wxyz: Rows = Field(description="fingertip (pad) frame orientation in "
+                                                   "the palm frame, unit quaternion "
+                                                   "(w, x, y, z), w >= 0")
+
+
+class ManipulationTrajectoryModel(_Response):
+    """A manipulation plan at the collocation points (nodes and midpoints); rows are
+    samples. Palm frame, SI units."""
+
+    t: list[float] = Field(description="sample times [s]")
+    object_position: Rows = Field(description="object centre [m]")
+    object_orientation_wxyz: Rows = Field(description="object orientation, unit quaternion "
+                                                      "(w, x, y, z), w >= 0")
+    object_velocity: Rows = Field(description="velocity of the object's centre [m/s]")
+    object_angular_velocity: Rows = Field(description="the object's angular velocity, palm "
+                                                      "frame [rad/s]")
+    contacts: list[ContactTrajectoryModel] = Field(description="every contact: the palm's "
+                                                               "first (if any), then the "
+                                                               "fingertips' in request order")
+    fingers: list[FingerJointsModel] = Field(description="every finger, in request order")
+    grasp_angle: list[float] = Field(description="the largest force angle over the "
+                                                 "contacts [rad]")
+    cone_margin: list[float] = Field(description="atan(mu) - grasp_angle: positive inside "
+                                                 "every friction cone [rad]")
+    desired_position: Rows | None = Field(default=None, description="the desired object "
+                                                                    "centre [m] (null "
+                                                                    "without `motion`)")
+    desired_orientation_wxyz: Rows | None = Field(
+        default=None, description="the desired object orientation, unit quaternion "
+                                  "(w, x, y, z), w >= 0 (null without `motion`)")
+    tracking_position_error: list[float] | None = Field(
+        default=None, description="|p - p_d| [m] (null without `motion`)")
+    tracking_angle_error: list[float] | None = Field(
+        default=None, description="angle between the object's orientation and the desired "
+                                  "one [rad] (null without `motion`)")
+
+
+class ManipulationCertificateModel(FingerCertificateModel):
+    """Physical validity of a manipulation plan, computed independently of the NLP: the
+    inputs re-integrated (CVODES), every finger placed by Pinocchio's forward kinematics,
+    the laws checked along that motion (no slip or spin at any contact, pads tangent to
+    the object, closure, joint limits, force closure, tracking between collocation
+    points)."""
+
+    values: dict[str, float] = Field(description="worst value of each check along the "
+                                                 "re-integrated motion (units as the "
+                                                 "quantity: m, rad, m/s, rad/s); keys name "
+                                                 "the contact, e.g. max_slip_speed_<name>")
+
+
+class ManipulationStatsModel(FingerStatsModel):
+    iterations: int = Field(description="IPOPT iterations, refinements included")
+    n_intervals: int = Field(description="collocation intervals of the returned plan")
+
+
+class ManipulationResult(_Response):
+    """A manipulation plan, or why there is none. ``trajectory``: the collocation points
+    (nodes and midpoints)."""
+
+    planner: Literal["manipulation"] = Field(default="manipulation",
+                                             description="the planner of the request")
+    status: PlanStatus
+    message: str
+    errors: list[FieldError] = Field(default_factory=list)
+    stats: ManipulationStatsModel | None = None
+    goal_error: dict[str, float] | None = Field(
+        default=None, description="error of each palm goal/via-point coordinate [m or "
+                                  "rad], e.g. 'palm.x'")
+    certificate: ManipulationCertificateModel | None = None
+    trajectory: ManipulationTrajectoryModel | None = None
+
+
 #: A plan of any planner, told apart by its ``planner`` field (results stored before it
 #: existed are ball-on-palm plans).
 AnyPlanResult = Annotated[
     Annotated[PlanResult, Tag("ball_on_palm")]
-    | Annotated[FingerPlanResult, Tag("one_finger")],
+    | Annotated[FingerPlanResult, Tag("one_finger")]
+    | Annotated[ManipulationResult, Tag("manipulation")],
     Discriminator(_planner_of),
 ]
 
@@ -620,7 +989,47 @@ class FingerInfo(_Response):
     urdf: str = Field(description="the URDF document")
 
 
+class HandFingerInfo(_Response):
+    """One finger of a built-in hand (a manipulation request's ``fingers[].hand_finger``
+    is its index)."""
+
+    name: str = Field(description="the finger's name (a request's default contact name)")
+    tip_frame: str = Field(description="the pad frame in the hand's URDF")
+    n_joints: int
+    joint_names: list[str] = Field(default_factory=list, description="in the order of q")
+    pad_half_size: float = Field(description="half the side of the square pad [m]")
+    base_position: list[float] = Field(description="its default mount: origin of its base "
+                                                   "in the palm frame [m]")
+    base_rotation: list[float] = Field(description="its default mount: rotation vector of "
+                                                   "its base in the palm frame [rad]")
+    nominal_q: list[float] | None = Field(
+        default=None, description="joint angles of the hand's nominal grasp [rad] (the "
+                                  "default `q_seed` of this finger)")
+    nominal_chart_rotation: list[float] = Field(
+        description="in the nominal grasp (the nominal ball, unrotated), the "
+                    "`chart_rotation` [rad] that puts this finger's contact at "
+                    "`initial` = all zeros (the pad's centre, on the patch's (0, 0))")
+
+
+class HandInfo(_Response):
+    """A built-in hand: fingers around a palm, and its nominal grasp of a ball held in the
+    air (a manipulation request with ``initial_pose.position`` = ``nominal_object_position``,
+    ``object.dimensions`` = [``nominal_radius``] and each finger's
+    ``nominal_chart_rotation`` with all-zero ``initial`` coordinates grasps it so)."""
+
+    name: str = Field(description="its `hand.builtin` name")
+    n_fingers: int
+    fingers: list[HandFingerInfo]
+    nominal_object_position: list[float] = Field(description="centre of the nominal ball in "
+                                                             "the palm frame [m]")
+    nominal_radius: float = Field(description="radius of the nominal ball [m]")
+    urdf: str = Field(description="the hand's URDF document (root link: the palm frame)")
+
+
 class ModelCatalog(_Response):
     planners: list[str] = Field(description="values of a request's `planner`")
     objects: list[ObjectInfo]
     fingers: list[FingerInfo]
+    hands: list[HandInfo] = Field(default_factory=list,
+                                  description="built-in hands (a manipulation request's "
+                                              "`hand.builtin`)")
