@@ -579,8 +579,8 @@ class BallOnPalmPlanner:
                                   np.clip(t, 0, problem.duration))
             return trajectory(t, x, u)
 
-        ends = [0, *self._segment_end_nodes(nlp.structure)]
-        goal_error = self._goal_errors(problem, X, ends)
+        ends = [0, *np.cumsum(nlp.structure.segments).tolist()]
+        goal_error = goal_errors(problem, X, ends)
         t_cert = time.perf_counter()
         cert = certify(problem, model, t_nodes, X, U0, Um, U1, ends, self.n_sub)
         cert_time = time.perf_counter() - t_cert
@@ -610,21 +610,20 @@ class BallOnPalmPlanner:
         return Solution(status=status, message=message, stats=stats, grid=grid, nodes=nodes,
                         certificate=cert, goal_error=goal_error, _sampler=sampler)
 
-    @staticmethod
-    def _segment_end_nodes(st: Structure) -> list[int]:
-        return [int(k) for k in np.cumsum(st.segments)]
 
-    @staticmethod
-    def _goal_errors(problem: BallOnPalmProblem, X: FloatArray, ends: list[int]
-                     ) -> dict[str, float]:
-        out: dict[str, float] = {}
-        for j, vp in enumerate(problem.via_points):
-            for c, val in vp.coords.items():
-                out[f"via_points[{j}].{c}"] = coordinate_error(
-                    c, X[ends[j + 1], CONTACT_COORDS.index(c)], val)
-        for c, val in problem.goal.items():
-            out[f"goal.{c}"] = coordinate_error(c, X[ends[-1], CONTACT_COORDS.index(c)], val)
-        return out
+
+def goal_errors(problem: BallOnPalmProblem, X: FloatArray, ends: list[int]
+                ) -> dict[str, float]:
+    """Error of every goal and via-point coordinate (m or wrapped rad) of the palm contact
+    coordinates ``X[:, 0:5]`` at the segment end nodes ``ends`` (0 first)."""
+    out: dict[str, float] = {}
+    for j, vp in enumerate(problem.via_points):
+        for c, val in vp.coords.items():
+            out[f"via_points[{j}].{c}"] = coordinate_error(
+                c, X[ends[j + 1], CONTACT_COORDS.index(c)], val)
+    for c, val in problem.goal.items():
+        out[f"goal.{c}"] = coordinate_error(c, X[ends[-1], CONTACT_COORDS.index(c)], val)
+    return out
 
 
 def certify(problem: BallOnPalmProblem, model: BallOnPalmModel, t_nodes: FloatArray,
@@ -663,7 +662,7 @@ def certify(problem: BallOnPalmProblem, model: BallOnPalmModel, t_nodes: FloatAr
     pos_def = float(np.max(np.abs(d[:, :2])))
     ang = np.column_stack([d[:, 2], wrap_difference(Xr_arr[:, 3:], X[:, 3:])])
     ang_def = float(np.max(np.abs(ang)))
-    goal_err = BallOnPalmPlanner._goal_errors(problem, Xr_arr, ends)
+    goal_err = goal_errors(problem, Xr_arr, ends)
     max_goal = max(goal_err.values(), default=0.0)
 
     o = problem.options

@@ -50,6 +50,7 @@ from .ball_on_palm import (
     BallOnPalmPlanner,
     Structure,
     _StopCallback,
+    goal_errors,
     model_for,
 )
 from .collocation import HermiteSimpson, reintegrate, reintegrator
@@ -810,7 +811,7 @@ def _goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[int]
                  ) -> dict[str, float]:
     if problem.palm is None:
         return {}
-    out = BallOnPalmPlanner._goal_errors(problem.palm_problem(), X, ends)
+    out = goal_errors(problem.palm_problem(), X, ends)
     return {f"palm.{k}": v for k, v in out.items()}
 
 
