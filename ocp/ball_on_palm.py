@@ -173,6 +173,11 @@ IPOPT_OPTIONS: dict[str, Any] = {
     "ipopt.acceptable_iter": 10,
     "ipopt.acceptable_constr_viol_tol": 1e-9,
     "ipopt.mu_strategy": "adaptive",
+    # MUMPS with METIS ordering. The automatic choice (7) picked an ordering whose
+    # factorisations of the multi-finger KKT systems were ~25x slower and whose inertia
+    # corrections tripled the iterations (three fingers turning a ball 90 deg: 75 iterations
+    # and 23 s with the default, 22 iterations and 1.4 s with METIS; docs/performance.md).
+    "ipopt.mumps_pivot_order": 5,
 }
 
 @dataclass(frozen=True)
