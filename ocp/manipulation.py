@@ -968,6 +968,14 @@ class ManipulationPlanner:
         self._nlps[key] = nlp
         return nlp, False
 
+    def prepare(self, problem: ManipulationProblem) -> float:
+        """Build (and cache) the NLP of this problem's structure and its model's
+        re-integrator, without solving: a service's warm-up. Returns the build time [s]
+        (0 when already cached)."""
+        nlp, hit = self._build(problem)
+        self.model(problem).reintegrator(4)
+        return 0.0 if hit else nlp.build_time
+
     # ...................................................................................
     def initial_state(self, problem: ManipulationProblem) -> FloatArray:
         """The state at t = 0, the fingers' joints by inverse kinematics; ProblemError

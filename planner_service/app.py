@@ -175,7 +175,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         requeued, failed = store.recover()
         if requeued or failed:
             log.info("recovered the job store: %d re-queued, %d failed", requeued, failed)
-        dispatcher = Dispatcher(store, settings.workers, settings.kill_grace, notifier.notify)
+        dispatcher = Dispatcher(store, settings.workers, settings.kill_grace, notifier.notify,
+                                settings.warmup)
         dispatcher.start()
         state.update(store=store, dispatcher=dispatcher)
         try:

@@ -13,6 +13,10 @@
 | DEXROLL_DEFAULT_WAIT | 1.0 | how long POST waits for a plan by default [s] |
 | DEXROLL_MAX_WAIT | 30 | cap on POST's ?wait= [s] |
 | DEXROLL_LOG_LEVEL | info | log level |
+| DEXROLL_WARMUP | examples | requests whose NLPs a worker builds before it is ready |
+
+``DEXROLL_WARMUP``: comma-separated JSON request files or folders (relative to the working
+directory; missing ones are skipped, see ``planner_service.warmup``); empty: none.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ class Settings(BaseSettings):
     default_wait: float = Field(default=1.0, ge=0.0, le=600.0)
     max_wait: float = Field(default=30.0, ge=0.0, le=600.0)
     log_level: str = "info"
+    warmup: str = "examples"
 
     @property
     def db_path(self) -> Path:

@@ -48,20 +48,33 @@ def job_outcome(status: PlanStatus) -> JobState:
     }.get(status, JobState.FAILED)
 
 
-def _worker_main(conn: Connection) -> None:
+def _worker_main(conn: Connection, warmup: str = "") -> None:
     """Body of a worker process: plan each request received, reply with the result.
 
     The process keeps one planner per kind, and so their caches of built NLPs, from job to
     job: the ball-on-palm planner, and the finger planners (one-finger and manipulation,
-    one NLP cache) with the finger models and hands they were built for (``FingerCache``)."""
+    one NLP cache) with the finger models and hands they were built for (``FingerCache``).
+    Before it reports ready it builds the NLPs of the warm-up requests (``warmup``: files
+    or folders, see :mod:`planner_service.warmup`)."""
     # Imports happen in the child: the parent's modules are not inherited under spawn.
     from ocp.ball_on_palm import BallOnPalmPlanner
     from ocp.problem import ProblemError
 
     from .convert import REQUEST, FingerCache, error_result, invalid_result, solve
 
+    if not logging.getLogger().handlers:  # spawned: the service's logging is not inherited
+        logging.basicConfig(level=logging.INFO,
+                            format="%(asctime)s %(levelname)s [worker %(process)d] %(name)s: "
+                                   "%(message)s")
     palm = BallOnPalmPlanner()
     fingers = FingerCache()
+    if warmup:
+        from .warmup import request_files, warm_up
+
+        t0 = time.perf_counter()
+        built = warm_up(request_files(warmup), palm, fingers)
+        log.info("warm-up: %d structures built in %.1f s (%s)", len(built),
+                 time.perf_counter() - t0, ", ".join(f"{n} {t:.2f} s" for n, t in built))
     conn.send(("ready", None))
     while True:
         try:
@@ -98,12 +111,13 @@ class Dispatcher(threading.Thread):
     """Feeds queued jobs to ``n_workers`` worker processes and ends every job once."""
 
     def __init__(self, store: Store, n_workers: int, kill_grace: float,
-                 on_finish: Callable[[str], None]) -> None:
+                 on_finish: Callable[[str], None], warmup: str = "") -> None:
         super().__init__(name="dexroll-dispatcher", daemon=True)
         self.store = store
         self.n_workers = n_workers
         self.kill_grace = kill_grace
         self.on_finish = on_finish
+        self.warmup = warmup
         self._ctx = mp.get_context("spawn")
         self._slots: list[_Slot] = []
         self._cancel: queue.SimpleQueue[str] = queue.SimpleQueue()
@@ -137,7 +151,8 @@ class Dispatcher(threading.Thread):
     # -- the dispatcher thread -----------------------------------------------------------------
     def _spawn(self) -> _Slot:
         parent, child = self._ctx.Pipe()
-        proc = self._ctx.Process(target=_worker_main, args=(child,), name="dexroll-worker",
+        proc = self._ctx.Process(target=_worker_main, args=(child, self.warmup),
+                                 name="dexroll-worker",
                                  daemon=True)
         proc.start()
         child.close()

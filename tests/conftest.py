@@ -52,7 +52,7 @@ def start_server(data_dir: Path, **env: str) -> Server:
     log = data_dir / f"server-{port}.log"
     environ = {**os.environ, "DEXROLL_HOST": "127.0.0.1", "DEXROLL_PORT": str(port),
                "DEXROLL_DATA_DIR": str(data_dir), "DEXROLL_WORKERS": "2",
-               "DEXROLL_KILL_GRACE": "2", **env}
+               "DEXROLL_KILL_GRACE": "2", "DEXROLL_WARMUP": "", **env}
     with log.open("wb") as out:
         proc = subprocess.Popen([sys.executable, "-m", "planner_service.cli", "serve"],
                                 env=environ, stdout=out, stderr=subprocess.STDOUT)

@@ -1,0 +1,87 @@
+"""Warm-up: build the NLPs of common problem structures before a worker takes jobs.
+
+An NLP is built once per problem *structure* (planner, object shape, grid and via-point
+segments, which coordinates the goals fix, the finger or hand, whether a motion is tracked)
+and cached by the worker process; a request of a known structure pays only the solve. The
+service's workers build the structures of the requests listed in ``DEXROLL_WARMUP`` (JSON
+request files, or folders of them; by default the repository's ``examples/``) before they
+report ready, so that the first such request does not pay for it.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Iterable
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from dexroll_client.models import BallOnPalmRequest, ManipulationRequest, OneFingerRequest
+from ocp.ball_on_palm import BallOnPalmPlanner
+from ocp.manipulation import ManipulationProblem
+from ocp.one_finger import OneFingerPlanner, OneFingerProblem
+from ocp.problem import BallOnPalmProblem, ProblemError
+
+from .convert import REQUEST, FingerCache, request_errors, to_problem
+
+__all__ = ["request_files", "warm", "warm_up"]
+
+log = logging.getLogger("dexroll.warmup")
+
+
+def request_files(spec: str) -> list[Path]:
+    """The JSON request files named by ``spec``: comma-separated files or folders (a
+    folder stands for its ``*.json``, sorted); missing paths are logged and skipped."""
+    out: list[Path] = []
+    for part in (p.strip() for p in spec.split(",")):
+        if not part:
+            continue
+        path = Path(part)
+        if path.is_dir():
+            out += sorted(path.glob("*.json"))
+        elif path.is_file():
+            out.append(path)
+        else:
+            log.warning("warm-up: %s does not exist; skipped", path)
+    return out
+
+
+def warm(request: object, palm: BallOnPalmPlanner, fingers: FingerCache) -> float:
+    """Build the NLP of one request's structure in this process's planners (no solve).
+    Returns the build time [s] (0 when it was cached already)."""
+    if isinstance(request, OneFingerRequest) and request.method == "greedy":
+        return 0.0  # the greedy method builds no NLP
+    if not isinstance(request, BallOnPalmRequest | OneFingerRequest | ManipulationRequest):
+        return 0.0
+    with fingers.lock:
+        problem = to_problem(request, fingers)
+        general = fingers.manipulation
+    if isinstance(problem, BallOnPalmProblem):
+        t0 = time.perf_counter()
+        _, hit = palm.nlp_for(problem)
+        return 0.0 if hit else time.perf_counter() - t0
+    if isinstance(problem, OneFingerProblem):
+        return general.prepare(OneFingerPlanner.manipulation_problem(problem))
+    assert isinstance(problem, ManipulationProblem)
+    return general.prepare(problem)
+
+
+def warm_up(files: Iterable[Path], palm: BallOnPalmPlanner, fingers: FingerCache
+            ) -> list[tuple[str, float]]:
+    """Warm every valid request of ``files``; an invalid one is logged and skipped (a
+    warm-up never stops a worker). Returns (file name, build time [s])."""
+    done: list[tuple[str, float]] = []
+    for path in files:
+        try:
+            request = REQUEST.validate_python(json.loads(path.read_text(encoding="utf-8")))
+            errors = request_errors(request, fingers)
+            if errors:
+                log.warning("warm-up: %s is not a valid request (%s); skipped", path,
+                            "; ".join(f"{f}: {r}" for f, r in errors))
+                continue
+            done.append((path.name, warm(request, palm, fingers)))
+        except (OSError, ValueError, ValidationError, ProblemError) as exc:
+            log.warning("warm-up: %s skipped: %s", path, exc)
+    return done
