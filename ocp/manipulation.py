@@ -896,12 +896,14 @@ class ManipulationPlanner:
                 add(ca.vertcat(c1 - dist * ccone, c2 - dist * ccone) / L, 0.0, math.inf)
                 add(ca.vertcat(s - (1 - c1 / dist), s - (1 - c2 / dist)), 0.0, math.inf)
             else:
-                from .force_closure import internal_force_residuals
+                from .force_closure import PUSH_FLOOR, internal_force_residuals
 
                 eq, push, norms = internal_force_residuals(
                     P, N, ca.reshape(F[:, col], 3, nc), L)
                 add(eq, 0.0, 0.0)
                 add(ca.sum1(push) - nc, 0.0, 0.0)
+                # every contact loaded: an unloaded one would sit in its cone for free
+                add(push - PUSH_FLOOR, 0.0, math.inf)
                 add(push - ccone * norms, 0.0, math.inf)
                 add(push - (1 - s) * norms, 0.0, math.inf)
             if tracking:
