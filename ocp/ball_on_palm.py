@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from functools import cache
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -254,7 +255,7 @@ class _NLP:
     build_time: float
 
 
-def _build(st: Structure) -> _NLP:
+def _build(st: Structure, compile_dir: Path | None = None) -> _NLP:
     t0 = time.perf_counter()
     model = model_for(st.shape)
     n_seg = len(st.segments)
@@ -305,6 +306,10 @@ def _build(st: Structure) -> _NLP:
     }
     solver = ca.nlpsol("ball_on_palm", "ipopt", {"x": hs.w, "p": p, "f": effort, "g": g_all},
                        opts)
+    if compile_dir is not None:
+        from .compiled import compiled_solver
+
+        solver, _ = compiled_solver(solver, repr(st), opts, compile_dir)
     params = ca.Function("params", [shape_p, seg_T, goal, vias], [p],
                          ["shape", "seg_T", "goal", "vias"], ["p"])
     return _NLP(st, solver, stop, hs.unpack(), hs.pack(), params, hs.left_cols,
@@ -422,9 +427,13 @@ def _guess_loops(problem: BallOnPalmProblem) -> list[float]:
 class BallOnPalmPlanner:
     """Plans with a cache of NLPs keyed by problem structure (one per process is enough)."""
 
-    def __init__(self, n_reintegration_substeps: int = 8, max_iter_per_guess: int = 300
-                 ) -> None:
+    def __init__(self, n_reintegration_substeps: int = 8, max_iter_per_guess: int = 300,
+                 compile_dir: Path | None = None) -> None:
         self._cache: dict[Structure, _NLP] = {}
+        #: When set, each structure's NLP functions are generated as C, compiled with gcc
+        #: and cached there as a shared library (:mod:`ocp.compiled`): slow to build the
+        #: first time (tens of seconds), faster to solve, for structures used many times.
+        self.compile_dir = compile_dir
         self.n_sub = n_reintegration_substeps
         #: IPOPT iterations spent on one initial guess before the next one is tried.
         self.max_iter_per_guess = max_iter_per_guess
@@ -434,7 +443,7 @@ class BallOnPalmPlanner:
         st = Structure.of(problem)
         hit = st in self._cache
         if not hit:
-            self._cache[st] = _build(st)
+            self._cache[st] = _build(st, self.compile_dir)
         return self._cache[st], hit
 
     def solve(self, problem: BallOnPalmProblem, warm_start: Solution | None = None

@@ -175,8 +175,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         requeued, failed = store.recover()
         if requeued or failed:
             log.info("recovered the job store: %d re-queued, %d failed", requeued, failed)
-        dispatcher = Dispatcher(store, settings.workers, settings.kill_grace, notifier.notify,
-                                settings.warmup)
+        dispatcher = Dispatcher(
+            store, settings.workers, settings.kill_grace, notifier.notify, settings.warmup,
+            None if settings.compile_dir is None else str(settings.compile_dir.resolve()))
         dispatcher.start()
         state.update(store=store, dispatcher=dispatcher)
         try:

@@ -14,6 +14,11 @@
 | DEXROLL_MAX_WAIT | 30 | cap on POST's ?wait= [s] |
 | DEXROLL_LOG_LEVEL | info | log level |
 | DEXROLL_WARMUP | examples | requests whose NLPs a worker builds before it is ready |
+| DEXROLL_COMPILE_DIR | (none) | compile ball-on-palm NLPs to C libraries cached here |
+
+``DEXROLL_COMPILE_DIR``: when set, each ball-on-palm structure's NLP functions are
+generated as C, compiled with gcc (tens of seconds the first time) and kept there as a
+shared library that every worker and later service loads (``ocp.compiled``).
 
 ``DEXROLL_WARMUP``: comma-separated JSON request files or folders (relative to the working
 directory; missing ones are skipped, see ``planner_service.warmup``); empty: none.
@@ -45,6 +50,7 @@ class Settings(BaseSettings):
     max_wait: float = Field(default=30.0, ge=0.0, le=600.0)
     log_level: str = "info"
     warmup: str = "examples"
+    compile_dir: Path | None = None
 
     @property
     def db_path(self) -> Path:

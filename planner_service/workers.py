@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
+from pathlib import Path
 from typing import Any
 
 from pydantic import TypeAdapter
@@ -48,7 +49,8 @@ def job_outcome(status: PlanStatus) -> JobState:
     }.get(status, JobState.FAILED)
 
 
-def _worker_main(conn: Connection, warmup: str = "") -> None:
+def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = None
+                 ) -> None:
     """Body of a worker process: plan each request received, reply with the result.
 
     The process keeps one planner per kind, and so their caches of built NLPs, from job to
@@ -66,7 +68,7 @@ def _worker_main(conn: Connection, warmup: str = "") -> None:
         logging.basicConfig(level=logging.INFO,
                             format="%(asctime)s %(levelname)s [worker %(process)d] %(name)s: "
                                    "%(message)s")
-    palm = BallOnPalmPlanner()
+    palm = BallOnPalmPlanner(compile_dir=None if compile_dir is None else Path(compile_dir))
     fingers = FingerCache()
     if warmup:
         from .warmup import request_files, warm_up
@@ -111,13 +113,15 @@ class Dispatcher(threading.Thread):
     """Feeds queued jobs to ``n_workers`` worker processes and ends every job once."""
 
     def __init__(self, store: Store, n_workers: int, kill_grace: float,
-                 on_finish: Callable[[str], None], warmup: str = "") -> None:
+                 on_finish: Callable[[str], None], warmup: str = "",
+                 compile_dir: str | None = None) -> None:
         super().__init__(name="dexroll-dispatcher", daemon=True)
         self.store = store
         self.n_workers = n_workers
         self.kill_grace = kill_grace
         self.on_finish = on_finish
         self.warmup = warmup
+        self.compile_dir = compile_dir
         self._ctx = mp.get_context("spawn")
         self._slots: list[_Slot] = []
         self._cancel: queue.SimpleQueue[str] = queue.SimpleQueue()
@@ -151,7 +155,7 @@ class Dispatcher(threading.Thread):
     # -- the dispatcher thread -----------------------------------------------------------------
     def _spawn(self) -> _Slot:
         parent, child = self._ctx.Pipe()
-        proc = self._ctx.Process(target=_worker_main, args=(child, self.warmup),
+        proc = self._ctx.Process(target=_worker_main, args=(child, self.warmup, self.compile_dir),
                                  name="dexroll-worker",
                                  daemon=True)
         proc.start()
