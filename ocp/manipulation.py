@@ -1200,8 +1200,9 @@ class ManipulationPlanner:
 
     def _object_guess(self, problem: ManipulationProblem, m: _Model, x0: FloatArray,
                       ts: FloatArray, prm: FloatArray) -> tuple[
-                          FloatArray, FloatArray, Any]:
-        """Object block states and inputs at ts, and pose(t) -> (R (k,3,3), p (k,3))."""
+                          FloatArray, FloatArray, Any, Any]:
+        """Object block states and inputs at ts, pose(t) -> (R (k,3,3), p (k,3)), and the
+        palm plan's inputs w(t) (None when no palm plan was made)."""
         T = problem.duration
         if problem.palm is not None:
             base = problem.palm_problem()
@@ -1212,8 +1213,11 @@ class ManipulationPlanner:
                     tr = plan.sample(np.clip(t, 0.0, T))
                     return tr.object_rotation, tr.object_position
 
+                def palm_w(t: FloatArray) -> FloatArray:
+                    return plan.sample(t).w
+
                 smp = plan.sample(ts)
-                return smp.eta, smp.w, pose
+                return smp.eta, smp.w, pose, palm_w
             xs = np.tile(x0, (len(ts), 1))
             R0, p0 = (np.asarray(a) for a in m.cartesian(x0, prm)[:2])
 
@@ -1221,7 +1225,7 @@ class ManipulationPlanner:
                 t = np.atleast_1d(t)
                 return np.tile(R0, (len(t), 1, 1)), np.tile(p0.ravel(), (len(t), 1))
 
-            return xs[:, 0:5], np.zeros((len(ts), 2)), still
+            return xs[:, 0:5], np.zeros((len(ts), 2)), still, None
         assert problem.motion is not None
         motion = problem.motion
 
@@ -1244,7 +1248,7 @@ class ManipulationPlanner:
         Wb = np.einsum("kji,kjl->kil", R, Rp - Rn) / span[:, :, None]  # R^T dR/dt
         omega = np.stack([Wb[:, 2, 1] - Wb[:, 1, 2], Wb[:, 0, 2] - Wb[:, 2, 0],
                           Wb[:, 1, 0] - Wb[:, 0, 1]], axis=1) / 2
-        return np.hstack([pos, quats]), np.hstack([v, omega]), pose_m
+        return np.hstack([pos, quats]), np.hstack([v, omega]), pose_m, None
 
     def _guess(self, problem: ManipulationProblem, m: _Model, nlp: _NLP, x0: FloatArray,
                t_nodes: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -1263,7 +1267,7 @@ class ManipulationPlanner:
         tm = (t_nodes[:-1] + t_nodes[1:]) / 2
         ts = np.sort(np.concatenate([t_nodes, tm]))  # node, mid, node, ...
         eps = 1e-9 * problem.duration
-        Xo, Wo, pose = self._object_guess(problem, m, x0, ts, prm)
+        Xo, Wo, pose, palm_w = self._object_guess(problem, m, x0, ts, prm)
         cart0 = m.cartesian(x0, prm)
         p_obj0 = np.asarray(cart0[1]).ravel()
         pts0 = np.asarray(cart0[4])
@@ -1318,12 +1322,9 @@ class ManipulationPlanner:
         Ucols = np.zeros((n + len(nlp.hs.segments), m.nu))
         Ucols[nlp.hs.left_cols] = W[0:-1:2]
         Ucols[nlp.hs.right_cols] = W[2::2]
-        if palm:  # the palm plan's inputs jump at via-points: take them from each side
-            base = problem.palm_problem()
-            if base.goal or base.via_points:
-                plan = self._palm.solve(base)
-                Ucols[nlp.hs.left_cols, 0:2] = plan.sample(t_nodes[:-1] + eps).w
-                Ucols[nlp.hs.right_cols, 0:2] = plan.sample(t_nodes[1:] - eps).w
+        if palm_w is not None:  # the palm plan's inputs jump at via-points: both sides
+            Ucols[nlp.hs.left_cols, 0:2] = palm_w(t_nodes[:-1] + eps)
+            Ucols[nlp.hs.right_cols, 0:2] = palm_w(t_nodes[1:] - eps)
         return X[0::2], X[1::2], Ucols, W[1::2]
 
     # ...................................................................................
