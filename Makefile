@@ -8,7 +8,7 @@ DEPS := $(VENV)/.deps
 INSTALLED := $(VENV)/.installed
 DEV := $(VENV)/.dev
 
-.PHONY: deps install run demo openapi test lint bench clean
+.PHONY: deps install run demo openapi test lint bench bench-quick clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -53,6 +53,10 @@ lint: $(DEV)
 
 bench: $(INSTALLED)
 	$(BIN)/python benchmarks/ball_on_palm.py
+
+# the quick benchmark suite (docs/benchmarks.md): report in bench-results/quick-<time>/
+bench-quick: $(DEV)
+	$(BIN)/dexroll bench quick
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

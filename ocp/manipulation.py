@@ -1042,9 +1042,10 @@ class ManipulationPlanner:
         x0 = self.initial_state(problem)
         sol = self._solve_once(problem, x0, None, deadline)
         refinements, build, solve, iters = 0, sol.build_time, sol.solve_time, sol.iterations
+        # failures that shrink with the grid (what happens between collocation points)
         discretisation = ("max_slip_speed_", "max_spin_rate_", "max_closure",
                           "max_length_defect", "max_angle_defect", "max_joint_defect",
-                          "max_gap_error_", "max_tracking_")
+                          "max_gap_error_", "max_tracking_", "max_joint_limit_violation_")
         while (sol.status is Status.INACCURATE
                and refinements < problem.max_refinements
                and 2 * problem.n_intervals <= MAX_INTERVALS

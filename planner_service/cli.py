@@ -1,4 +1,5 @@
-"""Command line: ``dexroll serve``, ``dexroll plan request.json``, ``dexroll demo [folder]``.
+"""Command line: ``dexroll serve``, ``dexroll plan request.json``, ``dexroll demo [folder]``,
+``dexroll bench SUITE`` (docs/benchmarks.md).
 
 A request file is any planner's request (its ``planner`` field: ``ball_on_palm``, the
 default, ``one_finger`` or ``manipulation``), the same JSON as ``POST /v1/plans`` takes.
@@ -27,6 +28,7 @@ from dexroll_client.models import (
 from ocp.problem import ProblemError
 from ocp.solution import Solution
 
+from .bench import command as bench_command
 from .convert import (
     REQUEST,
     error_result,
@@ -242,6 +244,10 @@ def main(argv: list[str] | None = None) -> int:
     o = sub.add_parser("openapi", help="print the service's OpenAPI document (the contract "
                                        "committed as openapi.json)")
     o.set_defaults(func=_cmd_openapi)
+    b = sub.add_parser("bench", help="run a benchmark suite (quick, full or a suite file) "
+                                     "and write a report (docs/benchmarks.md)")
+    bench_command.add_arguments(b)
+    b.set_defaults(func=bench_command.main)
     args = parser.parse_args(argv)
     return int(args.func(args))
 

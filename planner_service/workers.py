@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import multiprocessing as mp
+import os
 import queue
 import threading
 import time
@@ -154,6 +155,12 @@ class Dispatcher(threading.Thread):
 
     # -- the dispatcher thread -----------------------------------------------------------------
     def _spawn(self) -> _Slot:
+        # One BLAS/OpenMP thread per worker: the workers are the parallelism (one per core
+        # by default), and a plan's last digits then do not depend on the machine's thread
+        # count (docs/benchmarks.md). Set before the child starts: spawned children inherit
+        # the environment and load their numeric libraries while importing.
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")
         parent, child = self._ctx.Pipe()
         proc = self._ctx.Process(target=_worker_main, args=(child, self.warmup, self.compile_dir),
                                  name="dexroll-worker",

@@ -1,0 +1,407 @@
+"""`dexroll bench`: suites as data, generated requests, the report, and the same rows
+whichever way a suite is run (1 or 2 pool workers, a live service)."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import io
+import json
+import math
+import sys
+import types
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import Server
+
+from dexroll_client.models import OneFingerRequest
+from ocp.ball_on_palm import object_pose
+from ocp.problem import ObjectSpec
+from planner_service import cli
+from planner_service.bench.command import run_bench
+from planner_service.bench.generators import GENERATORS
+from planner_service.bench.progress import Progress
+from planner_service.bench.report import summarise
+from planner_service.bench.rows import (
+    FIELDS,
+    comparable,
+    differences,
+    peer_status,
+    row_from_peer,
+)
+from planner_service.bench.runners import Scheduler, affinity_key
+from planner_service.bench.suite import (
+    PEER_METHODS,
+    Problem,
+    SuiteError,
+    Unit,
+    applicable,
+    builtin_suites,
+    expand,
+    load_suite,
+    units,
+)
+from planner_service.convert import REQUEST, request_errors, to_problem
+
+ROOT = Path(__file__).resolve().parents[1]
+OURS = ("collocation", "greedy")  # the project's methods (the peers are compared, not judged)
+
+
+def requests(problems: list[Problem]) -> list[dict[str, Any]]:
+    return [p.request for p in problems]
+
+
+# -- suites and their problems ----------------------------------------------------------------
+
+def test_shipped_suites_are_quick_and_full() -> None:
+    assert builtin_suites() == ["full", "quick"]
+    for name in ("quick", "full"):
+        suite = load_suite(name)
+        assert suite.name == name and suite.description
+
+
+def test_generation_is_deterministic_and_seeded() -> None:
+    suite = load_suite("quick")
+    first, second = expand(suite), expand(suite)
+    assert requests(first) == requests(second)
+    assert [p.id for p in first] == [p.id for p in second]
+    # another seed draws other problems
+    data = json.loads(json.dumps(suite.data))
+    data["families"][0]["seed"] += 1
+    other = expand(type(suite)(suite.name, suite.source, data), families=["translation"])
+    assert requests(other) != requests(expand(suite, families=["translation"]))
+
+
+def test_limit_keeps_a_prefix_of_each_family() -> None:
+    suite = load_suite("quick")
+    full, limited = expand(suite), expand(suite, limit=1)
+    assert {p.family for p in limited} == {p.family for p in full}
+    assert all(p in full for p in limited)
+    assert all(p.id.endswith("-000") or p.family == "paper" for p in limited)
+
+
+@pytest.mark.parametrize("name", ["quick", "full"])
+def test_every_generated_request_is_valid_on_the_wire_and_plannable(name: str) -> None:
+    problems = expand(load_suite(name))
+    assert len({p.id for p in problems}) == len(problems)
+    for unit in units(problems):
+        request = REQUEST.validate_python(unit.request)
+        assert request_errors(request) == [], (unit.problem_id, unit.method)
+        # and it goes through JSON as the client sends it
+        assert REQUEST.validate_json(json.dumps(unit.request)) == request
+
+
+def test_every_family_draws_its_own_planner_and_methods() -> None:
+    problems = expand(load_suite("quick"))
+    planners: dict[str, set[str]] = {}
+    for p in problems:
+        planners.setdefault(p.family, set()).add(p.planner)
+    assert planners == {"translation": {"ball_on_palm"}, "reorientation": {"ball_on_palm"},
+                        "full_goal": {"ball_on_palm"}, "one_finger": {"one_finger"},
+                        "two_fingers": {"manipulation"}, "three_fingers": {"manipulation"},
+                        "paper": {"one_finger", "manipulation"}}
+    methods = {(u.family, u.method) for u in units(problems)}
+    assert ("one_finger", "greedy") in methods and ("paper", "greedy") in methods
+    assert ("translation", "greedy") not in methods
+    assert ("two_fingers", "drake") not in methods and ("translation", "drake") in methods
+    greedy = [u for u in units(problems) if u.method == "greedy"]
+    assert all(u.request["method"] == "greedy" for u in greedy)
+    assert not any("method" in u.request for u in units(problems) if u.method != "greedy")
+
+
+def test_applicable_methods() -> None:
+    assert applicable("manipulation", "collocation")
+    assert applicable("one_finger", "greedy") and not applicable("ball_on_palm", "greedy")
+    assert all(applicable("ball_on_palm", m) for m in PEER_METHODS)
+    assert not any(applicable(p, m) for p in ("one_finger", "manipulation")
+                   for m in PEER_METHODS)
+
+
+def test_reorientations_return_to_the_palm_point_turned_within_the_limit() -> None:
+    """Each pure reorientation's goal is the same palm point with the object turned by at
+    most the family's angle; goals beyond the pole limit are in a rotated chart."""
+    rng = np.random.default_rng(3)
+    params = {"template": {"object": {"shape": "sphere", "dimensions": [0.025]},
+                           "duration": 2.0, "n_intervals": 30},
+              "angle_deg": [80.0, 90.0], "initial_psi": [-math.pi, math.pi]}
+    rotated = 0
+    for _ in range(200):
+        request, notes = GENERATORS["ball_reorientation"](rng, params)
+        assert request_errors(REQUEST.validate_python(request)) == []
+        chart = request["object"].get("chart_rotation", [0.0, 0.0, 0.0])
+        rotated += chart != [0.0, 0.0, 0.0]
+        obj = ObjectSpec("sphere", (0.025,), tuple(chart))  # type: ignore[arg-type]
+        g, i = request["goal"], request["initial"]
+        R0, p0 = object_pose(obj, [i[c] for c in ("x", "y", "u", "v", "psi")])
+        R1, p1 = object_pose(obj, [g[c] for c in ("x", "y", "u", "v", "psi")])
+        np.testing.assert_allclose(p1, p0, atol=1e-12)
+        angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(R1 @ R0.T) - 1) / 2))))
+        assert 80.0 - 1e-6 <= angle <= 90.0 + 1e-6, notes
+        assert max(abs(i["u"]), abs(g["u"])) <= math.radians(75.0)
+    assert rotated >= 3  # 80-90 deg turns put some goals beyond the pole limit
+
+
+def test_one_finger_grasps_start_inside_the_friction_cone() -> None:
+    for p in expand(load_suite("quick"), families=["one_finger"]):
+        request = REQUEST.validate_python(p.request)
+        assert isinstance(request, OneFingerRequest)
+        c = request.finger_contact.initial
+        # the angle from the ball's top; the grasp angles are half of it on a sphere
+        theta = math.acos(math.cos(c.u_f) * math.cos(c.v_f))
+        assert theta / 2 < 0.6 * math.atan(request.mu) + 1e-12
+
+
+def test_the_papers_experiments_are_fixed_members() -> None:
+    paper = {p.id: p for p in expand(load_suite("quick"), families=["paper"])}
+    assert set(paper) == {"experiment1", "experiment2"}
+    assert paper["experiment2"].request == json.loads(
+        (ROOT / "examples" / "experiment2_two_fingers.json").read_text())
+    path = ROOT / "experiments" / "experiment1.py"
+    spec = importlib.util.spec_from_file_location("experiment1_for_bench", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    expected = module.build_problem()
+    got = to_problem(REQUEST.validate_python(paper["experiment1"].request))
+    assert got.base == expected.base  # type: ignore[union-attr]
+    assert got.contact == expected.contact  # type: ignore[union-attr]
+    for field in ("mu", "grasp_weight", "finger_effort_weight", "joint_effort_weight",
+                  "pad_margin"):
+        assert getattr(got, field) == getattr(expected, field), field
+    assert got.finger.pad_half_size == expected.finger.pad_half_size  # type: ignore[union-attr]
+    # both suites carry the same two
+    full = {p.id: p.request for p in expand(load_suite("full"), families=["paper"])}
+    assert full == {k: p.request for k, p in paper.items()}
+
+
+def test_bad_suites_are_refused_with_the_reason(tmp_path: Path) -> None:
+    with pytest.raises(SuiteError, match="neither a shipped suite"):
+        load_suite("no-such-suite")
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"families": [{"name": "x", "generator": "nope", "count": 1,
+                                             "seed": 0}]}))
+    with pytest.raises(SuiteError, match="generator 'nope'"):
+        load_suite(bad)
+    with pytest.raises(SuiteError, match="unknown families"):
+        expand(load_suite("quick"), families=["nope"])
+    assert cli.main(["bench", str(bad), "--out", str(tmp_path / "r")]) == 2
+
+
+# -- pieces of the runners and the report -----------------------------------------------------
+
+def test_scheduler_keeps_structures_on_the_worker_that_built_them() -> None:
+    problems = expand(load_suite("quick"), families=["translation", "reorientation"])
+    todo = units(problems, ["collocation"])
+    scheduler = Scheduler(todo)
+    a = scheduler.next_for("a")
+    b = scheduler.next_for("b")
+    assert affinity_key(a) != affinity_key(b)  # two workers start two structures
+    a2 = scheduler.next_for("a")
+    assert affinity_key(a2) == affinity_key(a)  # and each goes on with its own
+    handed = [a, b, a2]
+    while scheduler:
+        handed.append(scheduler.next_for("a"))
+    assert sorted(u.key for u in handed) == sorted(u.key for u in todo)
+
+
+def test_progress_writes_one_line_per_unit_off_a_terminal() -> None:
+    out = io.StringIO()
+    bar = Progress(2, stream=out)
+    bar.update({"problem_id": "p-000", "method": "collocation", "status": "solved", "ok": True})
+    bar.update({"problem_id": "p-001", "method": "greedy", "status": "solved", "ok": False})
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 2
+    assert "1/2, 1 ok" in lines[0] and "2/2, 1 ok" in lines[1]
+    assert "certificate failed" in lines[1]
+
+
+def _fake_peers(available: dict[str, bool]) -> types.ModuleType:
+    module = types.ModuleType("planner_service.bench.peers")
+    module.available = lambda: available  # type: ignore[attr-defined]
+    module.PEER_METHODS = {m: (lambda request: None) for m in PEER_METHODS}  # type: ignore
+    return module
+
+
+def test_peer_status_says_why_a_peer_cannot_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "planner_service.bench.peers", None)
+    status = peer_status()
+    assert set(status) == set(PEER_METHODS)
+    assert all(why and "cannot be imported" in why for why in status.values())
+    monkeypatch.setitem(sys.modules, "planner_service.bench.peers",
+                        _fake_peers({"drake": False, "casadi_plain": True}))
+    status = peer_status()
+    assert status["casadi_plain"] is None and "drake is not installed" in str(status["drake"])
+
+
+def test_peer_outcome_rows() -> None:
+    unit = Unit("translation", "translation-000", "drake", "ball_on_palm", {}, "any")
+    outcome = types.SimpleNamespace(
+        status="solved", build_time=0.1, solve_time=0.2, iterations=12, goal_error=1e-9,
+        certificate={"passed": 0.0, "max_slip_speed": 1e-17, "max_angle_defect": 3e-4},
+        message="IPOPT: Success; certificate failed: angle_defect")
+    row = row_from_peer(unit, outcome, 0.5, 1, 100.0)
+    assert set(row) == set(FIELDS)
+    assert row["status"] == "solved" and not row["certificate_passed"] and not row["ok"]
+    assert row["cert_angle_defect_max"] == 3e-4 and "passed" not in row["certificate"]
+    assert row["iterations"] == 12
+
+
+def test_row_differences_leave_out_run_dependent_fields() -> None:
+    a = {"status": "solved", "iterations": 7, "solve_time": 1.0, "worker_pid": 1,
+         "certificate": {"max_slip_speed": 1e-6, "n": 2.0}}
+    b = dict(a, solve_time=2.0, worker_pid=2, certificate={"max_slip_speed": 1.0000001e-6,
+                                                           "n": 2.0})
+    assert differences(a, b) == {"certificate.max_slip_speed": (1e-6, 1.0000001e-6)}
+    assert differences(a, b, rel=1e-6) == {}
+    assert differences(a, dict(b, iterations=8), rel=1e-6) == {"iterations": (7, 8)}
+
+
+def test_missing_peers_are_skipped_and_reported(monkeypatch: pytest.MonkeyPatch,
+                                                tmp_path: Path) -> None:
+    monkeypatch.setitem(sys.modules, "planner_service.bench.peers", None)
+    code, doc = run_bench("quick", workers=1, out=tmp_path, methods=list(PEER_METHODS),
+                          families=["translation"], limit=1, progress=False)
+    assert code == 0 and doc["rows"] == []
+    assert set(doc["skipped_methods"]) == set(PEER_METHODS)
+    report = (tmp_path / "report.md").read_text()
+    assert "**skipped**: `drake`" in report and "cannot be imported" in report
+
+
+def test_summary_statistics() -> None:
+    def row(method: str, ok: bool, t: float, slip: float | None) -> dict[str, Any]:
+        return {"family": "f", "method": method, "ok": ok, "expected": "solved",
+                "status": "solved" if ok else "inaccurate",
+                "solve_time": t, "build_time": 0.0, "wall_time": t, "iterations": 3,
+                "peak_rss_mb": 1.0, "goal_error_max": 0.0, "cert_slip_speed_max": slip,
+                "cert_cone_margin_min": 0.3 if ok else -1.0}
+    rows = [row("collocation", True, t, 1e-9 * t) for t in (1.0, 2.0, 3.0, 4.0)]
+    rows.append(row("collocation", False, 10.0, 5.0))
+    (s,) = summarise(rows)
+    assert s["count"] == 5 and s["ok"] == 4 and s["success_rate"] == 0.8
+    assert s["solve_time_median"] == 3.0 and s["solve_time_max"] == 10.0
+    assert s["solve_time_p90"] == pytest.approx(np.percentile([1, 2, 3, 4, 10], 90))
+    assert s["cert_slip_speed_max"] == 4e-9  # residuals over the successful runs only
+    assert s["cert_cone_margin_min"] == 0.3
+    assert s["expected_solved_failed"] == 1
+    unavailable = dict(rows[0], method="drake", status="unavailable", ok=False)
+    _, peer = summarise([*rows, unavailable])
+    assert peer["count"] == 0 and peer["unavailable"] == 1 and peer["success_rate"] is None
+
+
+def test_exit_code_follows_the_suites_expectations(tmp_path: Path) -> None:
+    """A run expected to solve that does not makes the exit code 1; the same failure
+    expected (a known finding) leaves it 0 and is listed in the report."""
+    request = {"initial": {"x": 0, "y": 0, "u": 0, "v": 0, "psi": 0},
+               "goal": {"x": 0.03, "y": 0.01}, "duration": 1.0, "n_intervals": 10,
+               "solver": {"max_iter": 1}}
+    suite: dict[str, Any] = {"name": "tiny", "methods": ["collocation"],
+                             "fixed": [{"family": "capped", "id": "one-iteration",
+                                        "request": request}]}
+    path = tmp_path / "tiny.json"
+    path.write_text(json.dumps(suite))
+    assert cli.main(["bench", str(path), "--workers", "1", "--out", str(tmp_path / "a"),
+                     "--no-progress"]) == 1
+    suite["exceptions"] = [{"id": "one-iteration", "method": "collocation",
+                            "expected": "unsolved", "note": "one IPOPT iteration"}]
+    path.write_text(json.dumps(suite))
+    assert cli.main(["bench", str(path), "--workers", "1", "--out", str(tmp_path / "b"),
+                     "--no-progress"]) == 0
+    report = (tmp_path / "b" / "report.md").read_text()
+    assert "one-iteration | collocation | unsolved | iteration_limit" in report
+    assert "one IPOPT iteration" in report
+
+
+# -- the quick suite, run -----------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path]:
+    """The whole quick suite through the library, 2 workers, by the command line."""
+    out = tmp_path_factory.mktemp("bench") / "quick"
+    code = cli.main(["bench", "quick", "--workers", "2", "--out", str(out), "--no-progress"])
+    return code, out
+
+
+def _rows(out: Path) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = json.loads((out / "results.json").read_text())["rows"]
+    return rows
+
+
+def test_quick_suite_report_has_every_family_and_method(quick_run: tuple[int, Path]) -> None:
+    code, out = quick_run
+    assert code == 0, (out / "report.md").read_text()
+    for name in ("results.json", "results.csv", "report.md", "success_rate.png",
+                 "solve_times.png"):
+        assert (out / name).stat().st_size > 0, name
+    doc = json.loads((out / "results.json").read_text())
+    for key in ("suite", "run", "machine", "versions", "summary", "problems", "rows"):
+        assert key in doc, key
+    assert doc["run"]["runner"] == "pool" and doc["run"]["workers"] == 2
+    rows = doc["rows"]
+    expected = {(u.family, u.method) for u in units(expand(load_suite("quick")))
+                if u.method not in doc["skipped_methods"]}
+    assert {(r["family"], r["method"]) for r in rows} == expected
+    assert {(s["family"], s["method"]) for s in doc["summary"]} == expected
+    assert [(r["family"], r["problem_id"], r["method"]) for r in rows] == sorted(
+        (r["family"], r["problem_id"], r["method"]) for r in rows)
+    report = (out / "report.md").read_text()
+    for family, method in expected:
+        assert f"| {family} | {method} |" in report
+    # the CSV holds the same rows
+    with (out / "results.csv").open(newline="") as f:
+        table = list(csv.DictReader(f))
+    assert len(table) == len(rows) and list(table[0]) == list(FIELDS)
+    for line, row in zip(table, rows, strict=True):
+        assert (line["problem_id"], line["method"], line["status"]) == (
+            row["problem_id"], row["method"], row["status"])
+        assert line["ok"] == str(row["ok"])
+        assert json.loads(line["certificate"]) == row["certificate"]
+        if row["solve_time"] is not None:
+            assert float(line["solve_time"]) == row["solve_time"]
+
+
+def test_quick_suite_solves_are_certified(quick_run: tuple[int, Path]) -> None:
+    rows = _rows(quick_run[1])
+    for r in rows:
+        if r["method"] in OURS and r["status"] == "solved":
+            assert r["certificate_passed"], (r["problem_id"], r["method"], r["failures"])
+        assert r["ok"] == (r["status"] == "solved" and r["certificate_passed"])
+        if r["expected"] == "solved":
+            assert r["ok"], (r["problem_id"], r["method"], r["message"])
+        assert r["worker_pid"] and r["peak_rss_mb"] > 0
+    ours = [r for r in rows if r["method"] in OURS]
+    assert ours and all(r["iterations"] and r["certificate"] for r in ours)
+    assert len({r["worker_pid"] for r in rows}) == 2
+
+
+def test_one_worker_gives_the_same_rows(quick_run: tuple[int, Path], tmp_path: Path) -> None:
+    code, doc = run_bench("quick", workers=1, out=tmp_path, limit=1, progress=False)
+    assert code == 0
+    mine = [comparable(r) for r in doc["rows"]]
+    both = {(r["problem_id"], r["method"]) for r in doc["rows"]}
+    theirs = [comparable(r) for r in _rows(quick_run[1])
+              if (r["problem_id"], r["method"]) in both]
+    assert mine == theirs
+    assert len({r["worker_pid"] for r in doc["rows"]}) == 1
+
+
+def test_a_live_service_gives_the_same_rows(quick_run: tuple[int, Path], live_server: Server,
+                                            tmp_path: Path) -> None:
+    """The same problems through the service (the client) as through the library. The
+    ball-on-palm and one-finger plans are bit-identical whatever the BLAS threads; the
+    manipulation planner's last digits depend on them (docs/benchmarks.md)."""
+    code, doc = run_bench("quick", url=live_server.url, workers=2, out=tmp_path, limit=1,
+                          families=["translation", "one_finger"], methods=list(OURS),
+                          progress=False)
+    assert code == 0
+    assert doc["run"]["runner"] == "service"
+    mine = [comparable(r) for r in doc["rows"]]
+    assert len(mine) == 3  # translation-000; one_finger-000 by collocation and greedy
+    both = {(r["problem_id"], r["method"]) for r in doc["rows"]}
+    theirs = [comparable(r) for r in _rows(quick_run[1])
+              if (r["problem_id"], r["method"]) in both]
+    assert mine == theirs
+    assert all(r["peak_rss_mb"] is None and r["worker_pid"] for r in doc["rows"])
