@@ -93,6 +93,8 @@ PAPER_SEED_DEG = (0.0, -22.68, -12.34, 0.0, 47.65, 0.0)
 #: Tracking bounds are imposed in the NLP at this fraction of the requested tolerance, so
 #: that the motion between collocation points stays inside the tolerance itself.
 TRACKING_BOUND_SHRINK = 0.95
+#: Joint limits are imposed this far inside [rad or m] at the collocation points.
+JOINT_LIMIT_MARGIN = 1e-4
 #: Weight of the size of the internal-force variables (3+ contacts) in the objective.
 FORCE_REGULARISATION = 1e-3
 
@@ -1146,8 +1148,12 @@ class ManipulationPlanner:
         lo = [-h for h in hi]
         for c in problem.fingers:
             pad = (float(c.finger.pad_half_size) - problem.pad_margin) / L
-            hi += [pad, pad, u_lim, inf, inf, *np.asarray(c.finger.upper)]
-            lo += [-pad, -pad, -u_lim, -inf, -inf, *np.asarray(c.finger.lower)]
+            # joint limits backed off at the collocation points, so that the motion between
+            # them (checked by the certificate) stays inside the limits themselves
+            lower, upper = np.asarray(c.finger.lower), np.asarray(c.finger.upper)
+            back = np.minimum(JOINT_LIMIT_MARGIN, 0.01 * (upper - lower))
+            hi += [pad, pad, u_lim, inf, inf, *(upper - back)]
+            lo += [-pad, -pad, -u_lim, -inf, -inf, *(lower + back)]
             uhi += [100.0, 100.0, *np.asarray(c.finger.velocity_limit)]
         xb_hi, xb_lo = np.array(hi), np.array(lo)
         lo_x, hi_x = np.tile(xb_lo, (n + 1, 1)), np.tile(xb_hi, (n + 1, 1))
