@@ -83,6 +83,7 @@ __all__ = [
     "Palm",
     "Tracking",
     "contact_chart_for_pad",
+    "fingertip_errors",
     "hand_fingertips",
 ]
 
@@ -308,6 +309,37 @@ class Fingertip:
     name: str = ""
 
 
+def fingertip_errors(name: str, tip: Fingertip, obj: ObjectSpec, pad_margin: float,
+                     pole_margin: float) -> list[tuple[str, str]]:
+    """Why a fingertip's initial contact is invalid, as (field, reason) under ``name``:
+    its chart patch, its coordinates, the pad (less ``pad_margin``) and the patch's poles."""
+    errs: list[tuple[str, str]] = []
+    if obj.shape in SURFACES and len(tip.chart_rotation) == 3 and \
+            all(map(math.isfinite, tip.chart_rotation)):
+        bad = obj.surface.chart_rotation_error(rotation_from_vector(tip.chart_rotation))
+        if bad is not None:
+            errs.append((f"{name}.chart_rotation", bad))
+    else:
+        errs.append((f"{name}.chart_rotation", "must be 3 finite numbers "
+                                               "(rotation vector, rad)"))
+    if len(tip.initial) != 5 or not all(map(math.isfinite, tip.initial)):
+        return [*errs, (f"{name}.initial", "must be 5 finite numbers "
+                                           "(x_f, y_f, u_f, v_f, psi_f)")]
+    half = float(tip.finger.pad_half_size) - pad_margin
+    for k, coord in ((0, "x_f"), (1, "y_f")):
+        if abs(tip.initial[k]) > half:
+            errs.append((f"{name}.initial.{coord}",
+                         f"|{coord}| = {abs(tip.initial[k]):.4g} m leaves the pad "
+                         f"(half size {tip.finger.pad_half_size} m less {pad_margin} m "
+                         f"margin) by {abs(tip.initial[k]) - half:.4g} m"))
+    u_lim = math.pi / 2 - pole_margin
+    if abs(tip.initial[2]) > u_lim:
+        errs.append((f"{name}.initial.u_f",
+                     f"|u_f| = {abs(tip.initial[2]):.4f} rad is beyond the chart pole "
+                     f"limit {u_lim:.4f} rad; rotate {name}.chart_rotation"))
+    return errs
+
+
 @dataclass(frozen=True)
 class ManipulationProblem:
     """A grasp (object, optional palm, fingertips), a horizon and what to achieve.
@@ -419,34 +451,9 @@ class ManipulationProblem:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 errs.append((name, f"must be > 0, got {value}"))
-        u_lim = math.pi / 2 - self.pole_margin
         for i, c in enumerate(self.fingers):
             name = f"fingers[{i}]"
-            if self.object.shape in SURFACES and len(c.chart_rotation) == 3 and \
-                    all(map(math.isfinite, c.chart_rotation)):
-                bad = self.object.surface.chart_rotation_error(
-                    rotation_from_vector(c.chart_rotation))
-                if bad is not None:
-                    errs.append((f"{name}.chart_rotation", bad))
-            else:
-                errs.append((f"{name}.chart_rotation", "must be 3 finite numbers "
-                                                       "(rotation vector, rad)"))
-            if len(c.initial) != 5 or not all(map(math.isfinite, c.initial)):
-                errs.append((f"{name}.initial", "must be 5 finite numbers "
-                                                "(x_f, y_f, u_f, v_f, psi_f)"))
-                continue
-            half = float(c.finger.pad_half_size) - self.pad_margin
-            for k, coord in ((0, "x_f"), (1, "y_f")):
-                if abs(c.initial[k]) > half:
-                    errs.append((f"{name}.initial.{coord}",
-                                 f"|{coord}| = {abs(c.initial[k]):.4g} m leaves the pad "
-                                 f"(half size {c.finger.pad_half_size} m less "
-                                 f"{self.pad_margin} m margin) by "
-                                 f"{abs(c.initial[k]) - half:.4g} m"))
-            if abs(c.initial[2]) > u_lim:
-                errs.append((f"{name}.initial.u_f",
-                             f"|u_f| = {abs(c.initial[2]):.4f} rad is beyond the chart pole "
-                             f"limit {u_lim:.4f} rad; rotate {name}.chart_rotation"))
+            errs += fingertip_errors(name, c, self.object, self.pad_margin, self.pole_margin)
             if c.q_seed is not None and len(c.q_seed) != c.finger.nq:
                 errs.append((f"{name}.q_seed",
                              f"must have {c.finger.nq} joint angles, got {len(c.q_seed)}"))

@@ -33,10 +33,10 @@ from .manipulation import (
     ManipulationProblem,
     ManipulationSolution,
     Palm,
+    fingertip_errors,
 )
 from .problem import BallOnPalmProblem, ProblemError
 from .solution import Status
-from .surfaces import SURFACES, rotation_from_vector
 
 __all__ = ["FingerContact", "OneFingerPlanner", "OneFingerProblem", "OneFingerSolution"]
 
@@ -86,28 +86,9 @@ class OneFingerProblem:
             if not (math.isfinite(value) and 0.0 <= value <= 1e6):
                 errs.append((name, f"must be in [0, 1e6], got {value}"))
         c = self.contact
-        why = self.base.object.surface.chart_rotation_error(
-            rotation_from_vector(c.chart_rotation)) if self.base.object.shape in SURFACES \
-            else None
-        if why is not None:
-            errs.append(("finger_contact.chart_rotation", why))
-        if len(c.initial) != 5 or not all(map(math.isfinite, c.initial)):
-            errs.append(("finger_contact.initial", "must be 5 finite numbers "
-                                                   "(x_f, y_f, u_f, v_f, psi_f)"))
-        half = float(self.finger.pad_half_size) - self.pad_margin
-        if len(c.initial) == 5:
-            for i, name in ((0, "x_f"), (1, "y_f")):
-                if abs(c.initial[i]) > half:
-                    errs.append((f"finger_contact.initial.{name}",
-                                 f"|{name}| = {abs(c.initial[i]):.4g} m leaves the pad "
-                                 f"(half size {self.finger.pad_half_size} m less "
-                                 f"{self.pad_margin} m margin) by "
-                                 f"{abs(c.initial[i]) - half:.4g} m"))
-            u_lim = math.pi / 2 - self.base.pole_margin
-            if abs(c.initial[2]) > u_lim:
-                errs.append(("finger_contact.initial.u_f",
-                             f"|u_f| = {abs(c.initial[2]):.4f} rad is beyond the chart pole "
-                             f"limit {u_lim:.4f} rad; rotate finger_contact.chart_rotation"))
+        errs += fingertip_errors("finger_contact", Fingertip(self.finger, c.initial,
+                                                             c.chart_rotation),
+                                 self.base.object, self.pad_margin, self.base.pole_margin)
         return errs
 
 
