@@ -89,8 +89,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: The paper's initial joint angles of experiment 1 [deg]: the default IK seed of a finger.
-PAPER_SEED_DEG = (0.0, -22.68, -12.34, 0.0, 47.65, 0.0)
 #: Tracking bounds are imposed in the NLP at this fraction of the requested tolerance, so
 #: that the motion between collocation points stays inside the tolerance itself.
 TRACKING_BOUND_SHRINK = 0.95
@@ -992,7 +990,7 @@ class ManipulationPlanner:
         """The state at t = 0, the fingers' joints by inverse kinematics; ProblemError
         saying why the initial grasp is impossible (unreachable, outside the joint limits,
         not in force closure)."""
-        from .finger import inverse_kinematics
+        from .finger import PAPER_SEED, inverse_kinematics
 
         m = self.model(problem)
         lay = m.layout
@@ -1012,7 +1010,7 @@ class ManipulationPlanner:
         errs: list[tuple[str, str]] = []
         for i, c in enumerate(problem.fingers):
             seed = np.asarray(c.q_seed if c.q_seed is not None else
-                              np.radians(PAPER_SEED_DEG)[: c.finger.nq], dtype=float)
+                              PAPER_SEED[: c.finger.nq], dtype=float)
             if len(seed) < c.finger.nq:
                 seed = np.concatenate([seed, np.zeros(c.finger.nq - len(seed))])
             ik = inverse_kinematics(c.finger, R_pf[:, 3 * i:3 * i + 3], p_pf[:, i], seed)

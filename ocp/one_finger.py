@@ -143,6 +143,10 @@ _FIELD_NAMES = {"fingers[0].initial": "finger_contact.initial",
                 "fingers": "finger_contact.initial"}
 
 
+def _renamed(exc: ProblemError) -> ProblemError:
+    return ProblemError([(_FIELD_NAMES.get(f, f), r) for f, r in exc.errors])
+
+
 def _rename(text: str) -> str:
     for old, new in _CERT_NAMES.items():
         text = text.replace(old, new)
@@ -182,7 +186,7 @@ class OneFingerPlanner:
         try:
             x0 = self.general.initial_state(general)
         except ProblemError as exc:
-            raise ProblemError([(_FIELD_NAMES.get(f, f), r) for f, r in exc.errors]) from None
+            raise _renamed(exc) from None
         return np.asarray(x0[self.general.model(general).layout.x_q(0)], dtype=float)
 
     def solve(self, problem: OneFingerProblem) -> OneFingerSolution:
@@ -194,8 +198,11 @@ class OneFingerPlanner:
         errs = problem.errors()
         if errs:
             raise ProblemError(errs)
-        self.initial_grasp(problem)  # this planner's names for an impossible grasp
-        return self.from_general(self.general.solve(self.manipulation_problem(problem)))
+        try:
+            general = self.general.solve(self.manipulation_problem(problem))
+        except ProblemError as exc:  # an impossible initial grasp, in this planner's names
+            raise _renamed(exc) from None
+        return self.from_general(general)
 
     @staticmethod
     def from_general(sol: ManipulationSolution) -> OneFingerSolution:
