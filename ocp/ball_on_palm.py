@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .collocation import HermiteSimpson, hermite_sample, reintegrate, reintegrator
+from .collocation import HermiteSimpson, hermite_sample, node_times, reintegrate, reintegrator
 from .contact import ContactPair
 from .problem import (
     CONTACT_COORDS,
@@ -527,9 +527,7 @@ class BallOnPalmPlanner:
     # -- helpers --------------------------------------------------------------------------
     @staticmethod
     def _node_times(problem: BallOnPalmProblem, st: Structure) -> FloatArray:
-        tb = problem.segment_times
-        pieces = [np.linspace(tb[s], tb[s + 1], n + 1)[:-1] for s, n in enumerate(st.segments)]
-        return np.concatenate([*pieces, [tb[-1]]])
+        return node_times(st.segments, problem.segment_times)
 
     @staticmethod
     def _bounds(problem: BallOnPalmProblem, nlp: _NLP, x_scale: FloatArray, u_scale: float

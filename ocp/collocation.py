@@ -27,7 +27,16 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HermiteSimpson", "hermite_sample", "quadratic_input", "reintegrate", "reintegrator"]
+__all__ = ["HermiteSimpson", "hermite_sample", "left_input_columns", "node_times",
+           "quadratic_input", "reintegrate", "reintegrator"]
+
+
+def left_input_columns(segments: tuple[int, ...]) -> list[int]:
+    """Column of the node inputs holding the input at the start of each interval: a node
+    between two segments has two input columns (incoming and outgoing), so each segment
+    shifts the columns after it by one."""
+    return [k + s for s, n0 in enumerate(segments)
+            for k in range(sum(segments[:s]), sum(segments[:s]) + n0)]
 
 
 @dataclass
@@ -58,8 +67,7 @@ class HermiteSimpson:
     @property
     def left_cols(self) -> list[int]:
         """Column of U holding the input at the start of each interval."""
-        return [k + s for s, n0 in enumerate(self.segments) for k in
-                range(sum(self.segments[:s]), sum(self.segments[:s]) + n0)]
+        return left_input_columns(self.segments)
 
     @property
     def right_cols(self) -> list[int]:
@@ -126,6 +134,15 @@ class HermiteSimpson:
                               + 4 * integrand(self.Xm[:, k], self.Um[:, k])
                               + integrand(self.X[:, k + 1], self.U[:, rc[k]]))
         return total
+
+
+def node_times(segments: tuple[int, ...], boundaries: NDArray[np.float64]
+               ) -> NDArray[np.float64]:
+    """Times [s] of the grid's nodes: each segment (between consecutive ``boundaries``)
+    split evenly into its number of intervals."""
+    pieces = [np.linspace(boundaries[s], boundaries[s + 1], n + 1)[:-1]
+              for s, n in enumerate(segments)]
+    return np.concatenate([*pieces, [boundaries[-1]]])
 
 
 def hermite_sample(

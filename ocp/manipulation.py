@@ -53,7 +53,7 @@ from .ball_on_palm import (
     goal_errors,
     model_for,
 )
-from .collocation import HermiteSimpson, reintegrate, reintegrator
+from .collocation import HermiteSimpson, node_times, reintegrate, reintegrator
 from .contact import ContactPair
 from .grasp import cone_cosine, grasp_angles_numeric, grasp_cosines
 from .problem import (
@@ -809,11 +809,6 @@ def _charts(problem: ManipulationProblem) -> list[FloatArray]:
     return out + [rotation_from_vector(c.chart_rotation) for c in problem.fingers]
 
 
-def _node_times(segments: tuple[int, ...], tb: FloatArray) -> FloatArray:
-    pieces = [np.linspace(tb[s], tb[s + 1], n + 1)[:-1] for s, n in enumerate(segments)]
-    return np.concatenate([*pieces, [tb[-1]]])
-
-
 def _goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[int]
                  ) -> dict[str, float]:
     if problem.palm is None:
@@ -1081,7 +1076,7 @@ class ManipulationPlanner:
         m = self.model(problem)
         x_scale, u_scale = self._scales(problem, m)
         segments, tb = problem.segments()
-        t_nodes = _node_times(segments, tb)
+        t_nodes = node_times(segments, tb)
         n = len(t_nodes) - 1
         tm = (t_nodes[:-1] + t_nodes[1:]) / 2
         charts = _charts(problem)

@@ -105,6 +105,7 @@ from ocp.ball_on_palm import (
     goal_errors,
     model_for,
 )
+from ocp.collocation import left_input_columns, node_times
 from ocp.problem import CONTACT_COORDS, PERIODIC, BallOnPalmProblem
 from ocp.solution import Certificate, Status, status_from_ipopt
 from planner_service.convert import to_problem
@@ -164,8 +165,8 @@ class _Grid:
     def of(problem: BallOnPalmProblem) -> _Grid:
         st = Structure.of(problem)
         seg = st.segments
-        left = [k + s for s, n0 in enumerate(seg) for k in range(sum(seg[:s]), sum(seg[:s]) + n0)]
-        return _Grid(st, BallOnPalmPlanner._node_times(problem, st), left,
+        left = left_input_columns(seg)
+        return _Grid(st, node_times(seg, problem.segment_times), left,
                      [c + 1 for c in left], [0, *np.cumsum(seg).tolist()])
 
     @property
