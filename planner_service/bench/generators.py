@@ -180,14 +180,21 @@ def _start_orientation(rng: np.random.Generator, request: dict[str, Any],
     return (eta0[0], eta0[1]), np.asarray(R0)
 
 
-def ball_translation(rng: np.random.Generator, params: dict[str, Any]) -> Draw:
-    request = _template(params)
-    request["planner"] = "ball_on_palm"
+def _draw_palm_roll(rng: np.random.Generator, params: dict[str, Any],
+                    request: dict[str, Any]) -> None:
+    """Draw the palm contact's initial angle psi and a goal palm point (in this order, from
+    ``rng``) into ``request``."""
     base = request.get("initial", {"x": 0.0, "y": 0.0, "u": 0.0, "v": 0.0, "psi": 0.0})
     psi = _uniform(rng, _range(params, "initial_psi", (float(base["psi"]),) * 2))
     request["initial"] = {**base, "psi": psi}
     dx, dy = _palm_point(rng, params)
     request["goal"] = {"x": float(base["x"]) + dx, "y": float(base["y"]) + dy}
+
+
+def ball_translation(rng: np.random.Generator, params: dict[str, Any]) -> Draw:
+    request = _template(params)
+    request["planner"] = "ball_on_palm"
+    _draw_palm_roll(rng, params, request)
     return request, []
 
 
@@ -239,11 +246,7 @@ def one_finger_grasp(rng: np.random.Generator, params: dict[str, Any]) -> Draw:
     for _ in range(int(params.get("max_draws", 20))):
         request = copy.deepcopy(template)
         request["planner"] = "one_finger"
-        base = request.get("initial", {"x": 0.0, "y": 0.0, "u": 0.0, "v": 0.0, "psi": 0.0})
-        psi = _uniform(rng, _range(params, "initial_psi", (float(base["psi"]),) * 2))
-        request["initial"] = {**base, "psi": psi}
-        dx, dy = _palm_point(rng, params)
-        request["goal"] = {"x": float(base["x"]) + dx, "y": float(base["y"]) + dy}
+        _draw_palm_roll(rng, params, request)
         theta = theta_max * math.sqrt(float(rng.uniform()))
         phi = float(rng.uniform(0.0, 2.0 * math.pi))
         r_pad = _uniform(rng, pad)
