@@ -26,7 +26,14 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .collocation import HermiteSimpson, hermite_sample, node_times, reintegrate, reintegrator
+from .collocation import (
+    HermiteSimpson,
+    WarmStart,
+    hermite_sample,
+    node_times,
+    reintegrate,
+    reintegrator,
+)
 from .contact import ContactPair
 from .problem import (
     CONTACT_COORDS,
@@ -380,14 +387,16 @@ def _simulate_guess(model: BallOnPalmModel, problem: BallOnPalmProblem, t_nodes:
 
 
 def _guesses(model: BallOnPalmModel, problem: BallOnPalmProblem, t_nodes: FloatArray, nlp: _NLP,
-             warm: Solution | None
+             warm: Solution | WarmStart | None
              ) -> Iterator[tuple[FloatArray, FloatArray, FloatArray, FloatArray]]:
     """Initial guesses (X, Xm, U, Um) in the order they are tried.
 
-    A warm start (a previous plan, sampled with its collocation polynomials) comes first;
-    then forward simulations of reference palm paths (see :func:`_reference_input`).
+    A warm start comes first: a previous plan of the same duration sampled with its
+    collocation polynomials, or any :class:`~ocp.collocation.WarmStart` (interpolated,
+    stretched to the duration); then forward simulations of reference palm paths (see
+    :func:`_reference_input`).
     """
-    if warm is not None and abs(float(warm.nodes.t[-1]) - problem.duration) < 1e-9:
+    if isinstance(warm, Solution) and abs(float(warm.nodes.t[-1]) - problem.duration) < 1e-9:
         eps = 1e-9 * problem.duration
         n = len(t_nodes) - 1
         tm = (t_nodes[:-1] + t_nodes[1:]) / 2
@@ -396,6 +405,12 @@ def _guesses(model: BallOnPalmModel, problem: BallOnPalmProblem, t_nodes: FloatA
         U[nlp.right_cols] = warm.sample(t_nodes[1:] - eps).w
         sm = warm.sample(tm)
         yield warm.sample(t_nodes).eta, sm.eta, U, sm.w
+    elif warm is not None:
+        ws = warm.warm_start if isinstance(warm, Solution) else warm
+        X, Xm, U, Um = ws.on_grid(t_nodes, nlp.left_cols, nlp.right_cols,
+                                  len(t_nodes) - 1 + len(nlp.structure.segments))
+        X[0] = problem.initial
+        yield X, Xm, U, Um
     for loop in _guess_loops(problem):
         yield _simulate_guess(model, problem, t_nodes, _reference_input(problem, loop), nlp)
 
@@ -446,16 +461,21 @@ class BallOnPalmPlanner:
             self._cache[st] = _build(st, self.compile_dir)
         return self._cache[st], hit
 
-    def solve(self, problem: BallOnPalmProblem, warm_start: Solution | None = None
-              ) -> Solution:
+    def solve(self, problem: BallOnPalmProblem,
+              warm_start: Solution | WarmStart | None = None) -> Solution:
         """Plan; raises :class:`ProblemError` (before building anything) on bad input.
 
-        ``warm_start``: a previous plan of a similar problem, tried first as the initial
-        guess. When IPOPT converges but the certificate finds the discretisation too coarse
+        ``warm_start``: a previous plan of a similar problem (or its ``warm_start``), tried
+        first as the initial guess (the planner's own guesses follow if IPOPT does not
+        converge from it). When IPOPT converges but the certificate finds the discretisation too coarse
         (state defect), the plan is re-solved on a grid twice as fine, warm-started from
         the coarse one, up to ``problem.max_refinements`` times.
         """
         problem.validate()
+        if isinstance(warm_start, WarmStart):
+            errs = warm_start.errors("warm_start", NX, NU)
+            if errs:
+                raise ProblemError(errs)
         deadline = time.perf_counter() + problem.options.time_limit
         iter_budget = problem.options.max_iter
         totals = {"build": 0.0, "solve": 0.0, "cert": 0.0, "iter": 0, "attempts": 0}
@@ -475,7 +495,8 @@ class BallOnPalmPlanner:
                         refinements=refinements)
         return replace(sol, stats=stats)
 
-    def _solve_once(self, problem: BallOnPalmProblem, warm: Solution | None, deadline: float,
+    def _solve_once(self, problem: BallOnPalmProblem, warm: Solution | WarmStart | None,
+                    deadline: float,
                     iter_budget: int, totals: dict[str, float]) -> Solution:
         nlp, hit = self.nlp_for(problem)
         build_time = 0.0 if hit else nlp.build_time

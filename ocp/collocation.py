@@ -27,8 +27,8 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HermiteSimpson", "hermite_sample", "left_input_columns", "node_times",
-           "quadratic_input", "reintegrate", "reintegrator"]
+__all__ = ["HermiteSimpson", "WarmStart", "hermite_sample", "left_input_columns",
+           "node_times", "quadratic_input", "reintegrate", "reintegrator"]
 
 
 def left_input_columns(segments: tuple[int, ...]) -> list[int]:
@@ -37,6 +37,68 @@ def left_input_columns(segments: tuple[int, ...]) -> list[int]:
     shifts the columns after it by one."""
     return [k + s for s, n0 in enumerate(segments)
             for k in range(sum(segments[:s]), sum(segments[:s]) + n0)]
+
+
+@dataclass(frozen=True)
+class WarmStart:
+    """A previous plan as an initial guess: its states ``x`` (k, nx) and inputs ``u``
+    (k, nu), physical units and the planner's state and input layout, at increasing times
+    ``t`` (k,) [s] from 0 (a plan's collocation points; any samples will do).
+
+    A plan of another duration is stretched in time to the new one, and its inputs (all of
+    them rates) are scaled by the inverse ratio, so that states and inputs stay consistent.
+    The planner replaces the first state by the problem's own initial state.
+    """
+
+    t: NDArray[np.float64]
+    x: NDArray[np.float64]
+    u: NDArray[np.float64]
+
+    @staticmethod
+    def of(t: Any, x: Any, u: Any) -> WarmStart:
+        return WarmStart(np.asarray(t, dtype=float), np.atleast_2d(np.asarray(x, dtype=float)),
+                         np.atleast_2d(np.asarray(u, dtype=float)))
+
+    def errors(self, name: str, nx: int, nu: int) -> list[tuple[str, str]]:
+        """(field, reason) pairs; empty when this warm start fits states of size ``nx`` and
+        inputs of size ``nu``. Fields are ``name.t``, ``name.x``, ``name.u``."""
+        errs: list[tuple[str, str]] = []
+        t, x, u = self.t, self.x, self.u
+        if t.ndim != 1 or len(t) < 2:
+            return [(f"{name}.t", "must be a list of at least 2 sample times")]
+        if not np.all(np.isfinite(t)) or abs(t[0]) > 1e-12 * max(1.0, abs(t[-1])) \
+                or np.any(np.diff(t) <= 0):
+            errs.append((f"{name}.t", "must start at 0 and increase strictly (finite "
+                                      "values)"))
+        for key, a, n, what in (("x", x, nx, "states"), ("u", u, nu, "inputs")):
+            if a.ndim != 2 or a.shape != (len(t), n):
+                errs.append((f"{name}.{key}", f"must have one row of {n} {what} per sample "
+                                              f"time ({len(t)} x {n}), got "
+                                              f"{' x '.join(map(str, a.shape))}"))
+            elif not np.all(np.isfinite(a)):
+                errs.append((f"{name}.{key}", "must be finite"))
+        return errs
+
+    def on_grid(self, t_nodes: NDArray[np.float64], left_cols: list[int],
+                right_cols: list[int], n_u_cols: int) -> tuple[
+                    NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                    NDArray[np.float64]]:
+        """(X at the nodes, X at the midpoints, U at the node columns, U at the midpoints),
+        interpolated linearly after stretching to the grid's duration."""
+        ratio = float(t_nodes[-1]) / float(self.t[-1])
+        t = self.t * ratio
+        u = self.u / ratio
+
+        def at(values: NDArray[np.float64], ts: NDArray[np.float64]) -> NDArray[np.float64]:
+            return np.column_stack([np.interp(ts, t, values[:, j])
+                                    for j in range(values.shape[1])])
+
+        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+        eps = 1e-9 * float(t_nodes[-1])
+        U = np.zeros((n_u_cols, u.shape[1]))
+        U[left_cols] = at(u, t_nodes[:-1] + eps)
+        U[right_cols] = at(u, t_nodes[1:] - eps)
+        return at(self.x, t_nodes), at(self.x, tm), U, at(u, tm)
 
 
 @dataclass

@@ -53,7 +53,7 @@ from .ball_on_palm import (
     goal_errors,
     model_for,
 )
-from .collocation import HermiteSimpson, node_times, reintegrate, reintegrator
+from .collocation import HermiteSimpson, WarmStart, node_times, reintegrate, reintegrator
 from .contact import ContactPair
 from .grasp import cone_cosine, grasp_angles_numeric, grasp_cosines
 from .problem import (
@@ -574,6 +574,12 @@ class ManipulationSolution:
     def ok(self) -> bool:
         return self.status is Status.SOLVED
 
+    @property
+    def warm_start(self) -> WarmStart:
+        """This plan as the initial guess of another (its collocation points' states and
+        inputs)."""
+        return WarmStart(self.t, self.X, self.U)
+
 
 # -- symbolic model --------------------------------------------------------------------------
 
@@ -1033,17 +1039,38 @@ class ManipulationPlanner:
             raise ProblemError(errs)
         return x
 
-    def solve(self, problem: ManipulationProblem) -> ManipulationSolution:
+    def solve(self, problem: ManipulationProblem,
+              warm_start: WarmStart | ManipulationSolution | None = None
+              ) -> ManipulationSolution:
         """Plan; ProblemError (before any NLP is built) on bad input or an impossible
         initial grasp. When IPOPT converges but the certificate finds the grid too coarse
         (slip between collocation points, closure, re-integration defects, tracking between
         points), the plan is re-solved on a grid twice as fine, warm-started, up to
-        ``max_refinements`` times."""
+        ``max_refinements`` times.
+
+        ``warm_start``: a previous plan of a similar problem (a solution, or its
+        :attr:`ManipulationSolution.warm_start`), the initial guess instead of the
+        planner's own; when IPOPT does not converge from it, the plan is solved again from
+        the planner's own guess (within the time limit).
+        """
         problem.validate()
+        warm = warm_start.warm_start if isinstance(warm_start, ManipulationSolution) \
+            else warm_start
+        if warm is not None:
+            m = self.model(problem)
+            errs = warm.errors("warm_start", m.nx, m.nu)
+            if errs:
+                raise ProblemError(errs)
         deadline = time.perf_counter() + problem.options.time_limit
         x0 = self.initial_state(problem)
-        sol = self._solve_once(problem, x0, None, deadline)
-        refinements, build, solve, iters = 0, sol.build_time, sol.solve_time, sol.iterations
+        sol = self._solve_once(problem, x0, warm, deadline)
+        build, solve, iters = sol.build_time, sol.solve_time, sol.iterations
+        if warm is not None and sol.status not in (Status.SOLVED, Status.INACCURATE) \
+                and time.perf_counter() < deadline:
+            sol = self._solve_once(problem, x0, None, deadline)
+            build, solve, iters = build + sol.build_time, solve + sol.solve_time, \
+                iters + sol.iterations
+        refinements = 0
         # failures that shrink with the grid (what happens between collocation points)
         discretisation = ("max_slip_speed_", "max_spin_rate_", "max_closure",
                           "max_length_defect", "max_angle_defect", "max_joint_defect",
@@ -1055,7 +1082,7 @@ class ManipulationPlanner:
                and time.perf_counter() < deadline):
             refinements += 1
             problem = problem.with_intervals(2 * problem.n_intervals)
-            sol = self._solve_once(problem, x0, sol, deadline)
+            sol = self._solve_once(problem, x0, sol.warm_start, deadline)
             build, solve, iters = build + sol.build_time, solve + sol.solve_time, \
                 iters + sol.iterations
         return replace(sol, build_time=build, solve_time=solve, iterations=iters,
@@ -1069,7 +1096,7 @@ class ManipulationPlanner:
                 np.asarray(lay.u_scale(L, T), dtype=float))
 
     def _solve_once(self, problem: ManipulationProblem, x0: FloatArray,
-                    warm: ManipulationSolution | None, deadline: float
+                    warm: WarmStart | None, deadline: float
                     ) -> ManipulationSolution:
         nlp, hit = self._build(problem)
         build_time = 0.0 if hit else nlp.build_time
@@ -1109,7 +1136,9 @@ class ManipulationPlanner:
         if warm is None:
             X, Xm, U, Um = self._guess(problem, m, nlp, x0, t_nodes)
         else:
-            X, Xm, U, Um = self._guess_from(warm, nlp, t_nodes)
+            X, Xm, U, Um = warm.on_grid(t_nodes, nlp.hs.left_cols, nlp.hs.right_cols,
+                                        n + len(nlp.hs.segments))
+            X[0] = x0  # the fixed initial state, exactly
         Sg, Fg = self._epigraph(problem, m, np.vstack([X, Xm]), prm)
         w0 = nlp.pack((X / x_scale).T, (Xm / x_scale).T, (U / u_scale).T, (Um / u_scale).T,
                       Sg[None, : n + 1], Sg[None, n + 1:], Fg)
@@ -1167,26 +1196,6 @@ class ManipulationPlanner:
         lbx = nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n], -big)
         ubx = nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n], big)
         return np.asarray(lbx).ravel(), np.asarray(ubx).ravel()
-
-    @staticmethod
-    def _guess_from(coarse: ManipulationSolution, nlp: _NLP, t_nodes: FloatArray
-                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """An initial guess on a finer grid, interpolated from a coarse plan's samples."""
-        Xc, Uc = coarse.X, coarse.U
-
-        def at(values: FloatArray, t: FloatArray) -> FloatArray:
-            return np.column_stack([np.interp(t, coarse.t, values[:, j])
-                                    for j in range(values.shape[1])])
-
-        n = len(t_nodes) - 1
-        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
-        eps = 1e-9 * float(t_nodes[-1])
-        U = np.zeros((n + len(nlp.hs.segments), Uc.shape[1]))
-        U[nlp.hs.left_cols] = at(Uc, t_nodes[:-1] + eps)
-        U[nlp.hs.right_cols] = at(Uc, t_nodes[1:] - eps)
-        X = at(Xc, t_nodes)
-        X[0] = Xc[0]  # the fixed initial state, exactly
-        return X, at(Xc, tm), U, at(Uc, tm)
 
     @staticmethod
     def _epigraph(problem: ManipulationProblem, m: _Model, Xall: FloatArray,

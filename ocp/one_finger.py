@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .collocation import WarmStart
 from .manipulation import (
     Fingertip,
     ManipulationPlanner,
@@ -131,6 +132,13 @@ class OneFingerSolution:
     def ok(self) -> bool:
         return self.status is Status.SOLVED
 
+    @property
+    def warm_start(self) -> WarmStart:
+        """This plan as the initial guess of another: states (eta_p, eta_f, q) and inputs
+        (w_p, w_f, q_dot) at its collocation points."""
+        return WarmStart(self.t, np.hstack([self.eta_p, self.eta_f, self.q]),
+                         np.hstack([self.w_p, self.w_f, self.q_dot]))
+
 
 #: Certificate keys of the general planner -> this planner's names.
 _CERT_NAMES = {
@@ -189,17 +197,24 @@ class OneFingerPlanner:
             raise _renamed(exc) from None
         return np.asarray(x0[self.general.model(general).layout.x_q(0)], dtype=float)
 
-    def solve(self, problem: OneFingerProblem) -> OneFingerSolution:
+    def solve(self, problem: OneFingerProblem,
+              warm_start: WarmStart | OneFingerSolution | None = None) -> OneFingerSolution:
         """Plan; ProblemError (before any NLP is built) on bad input or an impossible
         initial grasp. When IPOPT converges but the certificate finds the grid too coarse
         (finger slip or spin between collocation points, closure, re-integration defects),
         the plan is re-solved on a grid twice as fine, warm-started from the coarse one, up
-        to ``problem.base.max_refinements`` times."""
+        to ``problem.base.max_refinements`` times.
+
+        ``warm_start``: a previous plan of a similar problem (or its ``warm_start``), the
+        initial guess instead of the planner's own (which is the fallback when IPOPT does
+        not converge from it)."""
         errs = problem.errors()
         if errs:
             raise ProblemError(errs)
+        warm = warm_start.warm_start if isinstance(warm_start, OneFingerSolution) \
+            else warm_start
         try:
-            general = self.general.solve(self.manipulation_problem(problem))
+            general = self.general.solve(self.manipulation_problem(problem), warm)
         except ProblemError as exc:  # an impossible initial grasp, in this planner's names
             raise _renamed(exc) from None
         return self.from_general(general)

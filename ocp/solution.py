@@ -9,6 +9,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .collocation import WarmStart
+
 __all__ = ["Certificate", "Solution", "SolverStats", "Status", "Trajectory",
            "quaternion_wxyz", "status_from_ipopt"]
 
@@ -197,6 +199,12 @@ class Solution:
     @property
     def ok(self) -> bool:
         return self.status is Status.SOLVED
+
+    @property
+    def warm_start(self) -> WarmStart:
+        """This plan as the initial guess of another: contact coordinates and palm contact
+        velocities at its collocation points."""
+        return WarmStart(self.grid.t, self.grid.eta, self.grid.w)
 
     def sample(self, t: FloatArray | list[float]) -> Trajectory:
         """The plan at any times in [0, duration], from the collocation polynomials."""
