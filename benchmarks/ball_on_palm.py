@@ -42,12 +42,12 @@ import casadi as ca
 import numpy as np
 
 from ocp.ball_on_palm import (
-    IPOPT_OPTIONS,
     BallOnPalmPlanner,
     contact_coordinates,
     model_for,
     object_pose,
 )
+from ocp.ipopt import IPOPT_OPTIONS
 from ocp.problem import CONTACT_COORDS, BallOnPalmProblem, ObjectSpec, ViaPoint
 from ocp.solution import Solution
 from ocp.surfaces import rotation_from_vector

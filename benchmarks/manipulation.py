@@ -138,16 +138,32 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
+def _option_value(text: str) -> Any:
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
 def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else "")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--cases", default=",".join(CASES))
     parser.add_argument("--mumps-pivot-order", type=int, default=None)
+    parser.add_argument("--ipopt", action="append", default=[], metavar="KEY=VALUE",
+                        help="override an IPOPT option for the run, e.g. "
+                             "mu_strategy=adaptive (repeatable)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
+    overrides: dict[str, Any] = {}
     if args.mumps_pivot_order is not None:
-        manipulation.IPOPT_OPTIONS = {**manipulation.IPOPT_OPTIONS,
-                                      "ipopt.mumps_pivot_order": args.mumps_pivot_order}
+        overrides["ipopt.mumps_pivot_order"] = args.mumps_pivot_order
+    for item in args.ipopt:
+        key, _, value = item.partition("=")
+        overrides[f"ipopt.{key.removeprefix('ipopt.')}"] = _option_value(value)
+    manipulation.IPOPT_OPTIONS = {**manipulation.IPOPT_OPTIONS, **overrides}
     cases = [c for c in args.cases.split(",") if c]
     unknown = sorted(set(cases) - set(CASES))
     if unknown:
@@ -156,9 +172,12 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
     meta = {"date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "cpus": os.cpu_count(), "python": platform.python_version(),
             "casadi": ca.__version__, "repeats": args.repeats,
-            "mumps_pivot_order": manipulation.IPOPT_OPTIONS["ipopt.mumps_pivot_order"]}
+            "mumps_pivot_order": manipulation.IPOPT_OPTIONS["ipopt.mumps_pivot_order"],
+            "ipopt_overrides": overrides}
     args.out.mkdir(parents=True, exist_ok=True)
     suffix = "" if args.mumps_pivot_order is None else f"_pivot{args.mumps_pivot_order}"
+    suffix += "".join(f"_{k.removeprefix('ipopt.')}-{v}" for k, v in overrides.items()
+                      if k != "ipopt.mumps_pivot_order")
     (args.out / f"manipulation{suffix}.json").write_text(
         json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n", encoding="utf-8")
     text = markdown(rows, meta)

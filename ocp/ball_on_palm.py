@@ -35,6 +35,7 @@ from .collocation import (
     reintegrator,
 )
 from .contact import ContactPair
+from .ipopt import IPOPT_OPTIONS, StopCallback
 from .problem import (
     CONTACT_COORDS,
     MAX_INTERVALS,
@@ -170,24 +171,6 @@ def model_for(shape: str) -> BallOnPalmModel:
 
 # -- NLP -----------------------------------------------------------------------------------
 
-#: IPOPT settings shared by every structure. Constraint violation (goals, dynamics, in
-#: scaled units) must be tight; the optimality (dual) tolerance is looser because a pure
-#: reorientation has a continuum of optimal plans (rotating the loop about the vertical
-#: through the contact leaves the cost unchanged), where IPOPT's dual residual stalls.
-IPOPT_OPTIONS: dict[str, Any] = {
-    "ipopt.tol": 1e-6,
-    "ipopt.constr_viol_tol": 1e-10,
-    "ipopt.acceptable_tol": 1e-4,
-    "ipopt.acceptable_iter": 10,
-    "ipopt.acceptable_constr_viol_tol": 1e-9,
-    "ipopt.mu_strategy": "adaptive",
-    # MUMPS with METIS ordering. The automatic choice (7) picked an ordering whose
-    # factorisations of the multi-finger KKT systems were ~25x slower and whose inertia
-    # corrections tripled the iterations (three fingers turning a ball 90 deg: 75 iterations
-    # and 23 s with the default, 22 iterations and 1.4 s with METIS; docs/performance.md).
-    "ipopt.mumps_pivot_order": 5,
-}
-
 @dataclass(frozen=True)
 class Structure:
     """What fixes the shape of the NLP; everything else is a parameter or a bound."""
@@ -206,53 +189,11 @@ class Structure:
                          mask(problem.goal), tuple(mask(vp.coords) for vp in problem.via_points))
 
 
-class _StopCallback(ca.Callback):
-    """IPOPT iteration callback enforcing a per-solve deadline and iteration limit."""
-
-    def __init__(self, nx: int, ng: int, np_: int) -> None:
-        ca.Callback.__init__(self)
-        self._sizes = {"x": nx, "lam_x": nx, "g": ng, "lam_g": ng, "lam_p": np_, "f": 1}
-        self.deadline = math.inf
-        self.max_iter = 1000
-        self.iterations = 0
-        self.reason: Status | None = None
-        self.construct("dexroll_stop", {})
-
-    def arm(self, deadline: float, max_iter: int) -> None:
-        self.deadline, self.max_iter, self.iterations, self.reason = deadline, max_iter, 0, None
-
-    def get_n_in(self) -> int:
-        return int(ca.nlpsol_n_out())
-
-    def get_n_out(self) -> int:
-        return 1
-
-    def get_name_in(self, i: int) -> str:
-        return str(ca.nlpsol_out(i))
-
-    def get_name_out(self, i: int) -> str:
-        return "ret"
-
-    def get_sparsity_in(self, i: int) -> ca.Sparsity:
-        n = self._sizes.get(ca.nlpsol_out(i), 0)
-        return ca.Sparsity.dense(n) if n else ca.Sparsity(0, 0)
-
-    def eval(self, arg: list[Any]) -> list[int]:
-        self.iterations += 1
-        if time.perf_counter() > self.deadline:
-            self.reason = Status.TIME_LIMIT
-            return [1]
-        if self.iterations > self.max_iter:
-            self.reason = Status.ITERATION_LIMIT
-            return [1]
-        return [0]
-
-
 @dataclass
 class _NLP:
     structure: Structure
     solver: ca.Function
-    stop: _StopCallback
+    stop: StopCallback
     unpack: ca.Function
     pack: ca.Function
     params: ca.Function  # (shape_params, seg_durations, goal, vias) -> p
@@ -301,7 +242,7 @@ def _build(st: Structure, compile_dir: Path | None = None) -> _NLP:
     effort = hs.simpson(ca.Function("effort", [ca.SX.sym("xs", NX), us], [ca.sumsqr(us)]),
                         seg_T / T)
 
-    stop = _StopCallback(hs.w.numel(), g_all.numel(), p.numel())
+    stop = StopCallback(hs.w.numel(), g_all.numel(), p.numel())
     opts = {
         "ipopt.print_level": 0,
         "ipopt.sb": "yes",
@@ -467,9 +408,9 @@ class BallOnPalmPlanner:
 
         ``warm_start``: a previous plan of a similar problem (or its ``warm_start``), tried
         first as the initial guess (the planner's own guesses follow if IPOPT does not
-        converge from it). When IPOPT converges but the certificate finds the discretisation too coarse
-        (state defect), the plan is re-solved on a grid twice as fine, warm-started from
-        the coarse one, up to ``problem.max_refinements`` times.
+        converge from it). When IPOPT converges but the certificate finds the
+        discretisation too coarse (state defect), the plan is re-solved on a grid twice as
+        fine, warm-started from the coarse one, up to ``problem.max_refinements`` times.
         """
         problem.validate()
         if isinstance(warm_start, WarmStart):

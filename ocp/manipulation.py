@@ -46,16 +46,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .ball_on_palm import (
-    IPOPT_OPTIONS,
     BallOnPalmPlanner,
     Structure,
-    _StopCallback,
     goal_errors,
     model_for,
 )
 from .collocation import HermiteSimpson, WarmStart, node_times, reintegrate, reintegrator
 from .contact import ContactPair
 from .grasp import cone_cosine, grasp_angles_numeric, grasp_cosines
+from .ipopt import IPOPT_OPTIONS, StopCallback
 from .problem import (
     CONTACT_COORDS,
     MAX_INTERVALS,
@@ -799,7 +798,7 @@ def force_angles(points: FloatArray, normals: FloatArray
 @dataclass
 class _NLP:
     solver: ca.Function
-    stop: _StopCallback
+    stop: StopCallback
     hs: HermiteSimpson
     unpack: ca.Function
     pack: ca.Function
@@ -964,7 +963,7 @@ class ManipulationPlanner:
             f += FORCE_REGULARISATION * ca.sumsqr(F) / (npts * n_force)
         w = ca.vertcat(hs.w, S.T, Sm.T, ca.vec(F))
         g_all = ca.vertcat(*g)
-        stop = _StopCallback(w.numel(), g_all.numel(), p.numel())
+        stop = StopCallback(w.numel(), g_all.numel(), p.numel())
         solver = ca.nlpsol("manipulation", "ipopt", {"x": w, "p": p, "f": f, "g": g_all}, {
             "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
             "ipopt.max_iter": 100_000, **IPOPT_OPTIONS, "iteration_callback": stop,

@@ -55,8 +55,9 @@ with CVODES from the initial state, the rolling laws checked along that motion:
     * initial guess: the project's first guess (its node states, and its node inputs,
       which are the segments' knot inputs one for one), clipped into the bounds;
     * IPOPT: the project's ``IPOPT_OPTIONS`` (without the ``ipopt.`` prefix) except the
-      MUMPS ordering (Drake's IPOPT is built with SPRAL as its only linear solver), the
-      request's ``max_iter`` and ``max_wall_time``. Drake gives IPOPT first derivatives
+      MUMPS ordering (Drake's IPOPT is built with SPRAL as its only linear solver) and the
+      barrier strategy (adaptive from IPOPT's default start, which suits its quasi-Newton
+      Hessian; :func:`drake_ipopt_options`), the request's ``max_iter`` and ``max_wall_time``. Drake gives IPOPT first derivatives
       only and sets a limited-memory (L-BFGS) Hessian approximation, where CasADi gives the
       exact Hessian of the Lagrangian (a reorientation takes about twice our iterations).
 
@@ -95,7 +96,6 @@ from numpy.typing import NDArray
 
 from dexroll_client.models import BallOnPalmRequest
 from ocp.ball_on_palm import (
-    IPOPT_OPTIONS,
     NX,
     BallOnPalmPlanner,
     Structure,
@@ -106,6 +106,7 @@ from ocp.ball_on_palm import (
     model_for,
 )
 from ocp.collocation import left_input_columns, node_times
+from ocp.ipopt import IPOPT_OPTIONS
 from ocp.problem import CONTACT_COORDS, PERIODIC, BallOnPalmProblem
 from ocp.solution import Certificate, Status, status_from_ipopt
 from planner_service.convert import to_problem
@@ -368,10 +369,13 @@ def drake_ipopt_options(problem: BallOnPalmProblem) -> dict[str, Any]:
     Drake's IPOPT is built with SPRAL as its only linear solver, so the MUMPS options
     (``mumps_pivot_order``) do not map and are left out; Drake itself sets
     ``hessian_approximation`` to ``limited-memory`` (it evaluates first derivatives only).
+    The barrier is IPOPT's adaptive strategy from its default start: the project's
+    monotone barrier from mu = 1e-3 suits an exact Hessian, and with Drake's L-BFGS it
+    ended the 90 deg reorientation in a restoration failure.
     """
     opts: dict[str, Any] = {k.removeprefix("ipopt."): v for k, v in IPOPT_OPTIONS.items()
-                            if not k.removeprefix("ipopt.").startswith("mumps_")}
-    opts.update(print_level=0, max_iter=problem.options.max_iter,
+                            if not k.removeprefix("ipopt.").startswith(("mumps_", "mu_"))}
+    opts.update(mu_strategy="adaptive", print_level=0, max_iter=problem.options.max_iter,
                 max_wall_time=float(problem.options.time_limit))
     return opts
 
