@@ -55,6 +55,7 @@ __all__ = [
     "IKResult",
     "builtin_urdf_text",
     "inverse_kinematics",
+    "inverse_kinematics_batch",
     "load_finger",
 ]
 
@@ -566,3 +567,62 @@ def inverse_kinematics(
         within_limits=bool(np.all(q >= finger.lower) and np.all(q <= finger.upper)),
         iterations=iterations,
     )
+
+
+def inverse_kinematics_batch(
+    finger: FingerModel,
+    R_targets: ArrayLike,
+    p_targets: ArrayLike,
+    q_seed: ArrayLike,
+    tol: float = 1e-10,
+    max_iter: int = 30,
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Joint angles for many fingertip poses at once: (q (k, nq), converged (k,)).
+
+    Damped Gauss-Newton on every target together (the CasADi forward kinematics and
+    Jacobian evaluated for all k at once, k small linear systems solved as one batch),
+    each started from ``q_seed`` ((nq,) for all, or (k, nq)) and kept inside the joint
+    limits. The pose error is the position error and the rotation vector of
+    ``R_target R^T`` in the palm frame. A target is converged when both errors are
+    <= ``tol`` (m and rad) within the limits; the others are left to the caller (e.g.
+    :func:`inverse_kinematics` from a neighbour's solution). Meant for the many nearby
+    poses along a motion, where every target is a few steps from the seed.
+    """
+    R_t = np.asarray(R_targets, dtype=float).reshape(-1, 3, 3)
+    p_t = np.asarray(p_targets, dtype=float).reshape(-1, 3)
+    k, nq = len(R_t), finger.nq
+    q = np.clip(np.broadcast_to(np.asarray(q_seed, dtype=float), (k, nq)).copy(),
+                finger.lower, finger.upper)
+    L = finger.length_scale
+    scale = np.array([1 / L] * 3 + [1.0] * 3)
+    done = np.zeros(k, dtype=bool)
+    for it in range(max_iter + 1):
+        R_, p_ = finger.fk(q.T)
+        R = np.asarray(R_).reshape(3, k, 3).transpose(1, 0, 2)  # (k, 3, 3)
+        e_p = p_t - np.asarray(p_).T
+        E = R_t @ R.transpose(0, 2, 1)  # rotation from the current pad to the target
+        e_r = _rotation_vectors(E)
+        err_p, err_r = np.linalg.norm(e_p, axis=1), np.linalg.norm(e_r, axis=1)
+        done = (err_p <= tol) & (err_r <= tol)
+        if done.all() or it == max_iter:
+            break
+        J = np.asarray(finger.jacobian(q.T)).reshape(6, k, nq).transpose(1, 0, 2)
+        J = J * scale[None, :, None]
+        e = np.concatenate([e_p, e_r], axis=1) * scale
+        H = J.transpose(0, 2, 1) @ J + 1e-9 * np.eye(nq)
+        g = np.einsum("kij,ki->kj", J, e)
+        dq = np.linalg.solve(H, g[..., None])[..., 0]
+        dq[done] = 0.0
+        q = np.clip(q + dq, finger.lower, finger.upper)
+    return q, done
+
+
+def _rotation_vectors(E: FloatArray) -> FloatArray:
+    """Rotation vectors (k, 3) of rotation matrices E (k, 3, 3) (angles below pi)."""
+    cos = np.clip((np.trace(E, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
+    angle = np.arccos(cos)
+    axis = np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0],
+                     E[:, 1, 0] - E[:, 0, 1]], axis=1) / 2  # sin(angle) * axis
+    sin = np.sin(angle)
+    factor = np.where(sin > 1e-12, angle / np.where(sin > 1e-12, sin, 1.0), 1.0)
+    return axis * factor[:, None]

@@ -17,6 +17,7 @@ from ocp.finger import (
     FingerModel,
     builtin_urdf_text,
     inverse_kinematics,
+    inverse_kinematics_batch,
     load_finger,
 )
 
@@ -203,6 +204,27 @@ def test_ik_of_an_unreachable_target_reports_failure_without_raising(
     assert not res.converged
     assert res.position_error > 0.5
     assert res.within_limits
+
+
+def test_batched_ik_reaches_nearby_poses_by_pinocchio_and_flags_the_unreachable(
+        finger: FingerModel) -> None:
+    """Poses along a motion (configurations drifting from a seed) and one pose out of reach:
+    the batched IK puts the pad on every reachable pose (checked with Pinocchio's forward
+    kinematics) inside the limits, and reports the unreachable one as not converged."""
+    rng = np.random.default_rng(11)
+    q_seed = random_q(finger, rng)
+    qs = np.clip(q_seed + np.cumsum(rng.normal(scale=0.02, size=(20, finger.nq)), axis=0),
+                 finger.lower, finger.upper)
+    poses = [finger.fingertip_pose_pin(q) for q in qs]
+    R_t = np.array([R for R, _ in poses] + [R_TOP])
+    p_t = np.array([p for _, p in poses] + [[1.0, 0.0, 0.05]])
+    q, ok = inverse_kinematics_batch(finger, R_t, p_t, q_seed, tol=1e-10)
+    assert ok[:-1].all() and not ok[-1]
+    assert np.all(q >= finger.lower) and np.all(q <= finger.upper)
+    for k in range(len(poses)):
+        R, p = finger.fingertip_pose_pin(q[k])
+        assert_close(p, p_t[k], atol=1e-10)
+        assert_close(R, R_t[k], atol=1e-9)
 
 
 def test_ik_is_deterministic(finger: FingerModel) -> None:

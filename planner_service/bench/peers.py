@@ -57,9 +57,10 @@ with CVODES from the initial state, the rolling laws checked along that motion:
     * IPOPT: the project's ``IPOPT_OPTIONS`` (without the ``ipopt.`` prefix) except the
       MUMPS ordering (Drake's IPOPT is built with SPRAL as its only linear solver) and the
       barrier strategy (adaptive from IPOPT's default start, which suits its quasi-Newton
-      Hessian; :func:`drake_ipopt_options`), the request's ``max_iter`` and ``max_wall_time``. Drake gives IPOPT first derivatives
-      only and sets a limited-memory (L-BFGS) Hessian approximation, where CasADi gives the
-      exact Hessian of the Lagrangian (a reorientation takes about twice our iterations).
+      Hessian; :func:`drake_ipopt_options`), the request's ``max_iter`` and
+      ``max_wall_time``. Drake gives IPOPT first derivatives only and sets a
+      limited-memory (L-BFGS) Hessian approximation, where CasADi gives the exact Hessian
+      of the Lagrangian (a reorientation takes about twice our iterations).
 
     Shapes other than the sphere are ``unavailable`` for this peer (eq. 8 is the sphere's).
 
