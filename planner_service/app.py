@@ -10,6 +10,10 @@ GET  /healthz, /readyz   liveness; readiness (store reachable, a worker ready)
 
 Every error is an ``ErrorBody`` (no traceback ever leaves the service); an invalid request
 is a 422 naming each bad field; a failed solve is a finished job with its typed status.
+
+A request's ``warm_start.job_id`` is resolved at submission: the job's plan (its result's
+``collocation`` block) replaces it before the new job is stored, so that every stored job
+is self-contained (a worker never looks another job up).
 """
 
 from __future__ import annotations
@@ -25,12 +29,14 @@ from typing import Annotated, Any
 from fastapi import FastAPI, Header, Query, Request, Response
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from dexroll_client.models import (
     BUILTIN_FINGERS,
     BUILTIN_HANDS,
     PLANNERS,
+    AnyPlanResult,
     ErrorBody,
     FieldError,
     FingerInfo,
@@ -44,6 +50,7 @@ from dexroll_client.models import (
     ModelCatalog,
     ObjectInfo,
     PlanRequest,
+    WarmStartModel,
 )
 from ocp.manipulation import hand_fingertips
 from ocp.surfaces import SURFACES
@@ -60,7 +67,7 @@ from .settings import Settings
 from .store import IdempotencyConflictError, JobRow, Store
 from .workers import Dispatcher
 
-__all__ = ["create_app"]
+__all__ = ["StoreUnavailableError", "create_app", "resolve_warm_start", "submission_errors"]
 
 log = logging.getLogger("dexroll.service")
 
@@ -68,7 +75,8 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     code: {"model": ErrorBody, "description": text} for code, text in [
         (404, "no such job"), (409, "conflict (idempotency key reuse, job already finished)"),
         (413, "request body too large"), (422, "invalid request: each bad field named"),
-        (503, "queue full or not ready; retry after Retry-After seconds")]}
+        (503, "queue full, not ready, or the job store unavailable; retry after "
+               "Retry-After seconds")]}
 
 
 class ServiceError(Exception):
@@ -163,6 +171,83 @@ def job_model(row: JobRow) -> Job:
                result=RESULT.validate_json(row.result) if row.result else None)
 
 
+class StoreUnavailableError(Exception):
+    """The job store could not be read."""
+
+
+def resolve_warm_start(body: PlanRequest, store: Store
+                       ) -> tuple[PlanRequest, list[tuple[str, str]]]:
+    """The request with its ``warm_start.job_id`` replaced by that job's plan (``t``, ``x``,
+    ``u`` and the column names of its result's ``collocation`` block), or the reasons, all
+    under ``warm_start.job_id``, why the job cannot be used (unknown, not finished, another
+    planner, no plan). A request without a job id is returned as it is.
+    StoreUnavailableError when the store cannot be read."""
+    ws = body.warm_start
+    if ws is None or ws.job_id is None:
+        return body, []
+    job_id = ws.job_id
+
+    def refused(reason: str) -> tuple[PlanRequest, list[tuple[str, str]]]:
+        return body, [("warm_start.job_id", reason)]
+
+    try:
+        row = store.get(job_id)
+    except Exception as exc:  # sqlite errors: the store is unavailable, not the request bad
+        raise StoreUnavailableError(str(exc)) from exc
+    if row is None:
+        return refused(f"no job {job_id!r} in this service")
+    if not JobState(row.state).terminal:
+        return refused(f"job {job_id} is still {row.state}: warm-start from it once it has "
+                       "finished")
+    if row.planner != body.planner:
+        return refused(f"job {job_id} is a {row.planner} plan; this request is for the "
+                       f"{body.planner} planner")
+    result: AnyPlanResult | None = None
+    if row.result:
+        try:
+            result = RESULT.validate_json(row.result)
+        except ValidationError:
+            log.warning("job %s: its stored result does not parse", job_id, exc_info=True)
+    if result is None or result.collocation is None:
+        return refused(f"job {job_id} ended {row.state} ({row.code}) without a plan at its "
+                       "collocation points to start from")
+    try:
+        inline = WarmStartModel.from_result(result)
+    except (ValidationError, ValueError) as exc:
+        reason = exc.errors()[0]["msg"] if isinstance(exc, ValidationError) else str(exc)
+        return refused(f"job {job_id}'s plan cannot be used as a warm start: {reason}")
+    return body.model_copy(update={"warm_start": inline}), []
+
+
+def _from_job(job_id: str, errors: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """Errors of a warm start resolved from a job, renamed to ``warm_start.job_id`` (the
+    field the client gave) with the inline field in the reason."""
+    out = []
+    for field, reason in errors:
+        if field == "warm_start" or field.startswith("warm_start."):
+            sub = field.removeprefix("warm_start").lstrip(".")
+            reason = f"job {job_id}'s plan does not fit this request: " + \
+                (f"{sub}: {reason}" if sub else reason)
+            field = "warm_start.job_id"
+        out.append((field, reason))
+    return out
+
+
+def submission_errors(body: PlanRequest, store: Store
+                      ) -> tuple[PlanRequest, list[tuple[str, str]]]:
+    """What ``POST /v1/plans`` checks before storing a job: the request with its warm
+    start's job id resolved (:func:`resolve_warm_start`), and every error of it as
+    (field, reason) pairs (:func:`~planner_service.convert.request_errors`; those of a plan
+    that came from a job named ``warm_start.job_id``). StoreUnavailableError when the store
+    cannot be read."""
+    job_id = body.warm_start.job_id if body.warm_start is not None else None
+    body, errors = resolve_warm_start(body, store)
+    if errors:  # check the rest of the request too: every bad field at once
+        body = body.model_copy(update={"warm_start": None})
+    more = request_errors(body)
+    return body, errors + (_from_job(job_id, more) if job_id is not None else more)
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """The service: job store, worker pool and API, configured by ``settings``."""
     settings = settings or Settings()
@@ -254,8 +339,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         default, `one_finger` or `manipulation`): 201 with the finished job, or 202 and a
         Location."""
         # cheap checks (no NLP), in a thread: a finger's URDF and the inverse kinematics
-        # of its initial grasp take milliseconds
-        errors = await asyncio.to_thread(request_errors, body)
+        # of its initial grasp take milliseconds; a warm start's job id is replaced by
+        # that job's plan (the new job is self-contained)
+        try:
+            body, errors = await asyncio.to_thread(submission_errors, body, store())
+        except StoreUnavailableError as exc:
+            raise ServiceError(503, "store_unavailable", f"the job store cannot be read to "
+                               f"look up warm_start.job_id: {exc}",
+                               headers={"Retry-After": "1"}) from exc
         if errors:
             detail = [FieldError(field=f, reason=r) for f, r in errors]
             raise ServiceError(422, "invalid_request",

@@ -3,6 +3,8 @@
 
 A request file is any planner's request (its ``planner`` field: ``ball_on_palm``, the
 default, ``one_finger`` or ``manipulation``), the same JSON as ``POST /v1/plans`` takes.
+``dexroll plan request.json --warm-start previous.result.json`` starts the solver from a
+previous plan (a result file as ``dexroll plan`` writes it: its ``collocation`` block).
 
 Exit codes: 0 the plan is solved (certificate passed), 1 a plan was computed but is not
 solved (see its status), 2 the request is invalid (each bad field is named on stderr).
@@ -31,6 +33,7 @@ from ocp.solution import Solution
 from .bench import command as bench_command
 from .convert import (
     REQUEST,
+    RESULT,
     error_result,
     invalid_result,
     planner_of,
@@ -39,7 +42,8 @@ from .convert import (
     validation_errors,
 )
 
-__all__ = ["finger_summary", "main", "manipulation_summary", "plan_request"]
+__all__ = ["finger_summary", "main", "manipulation_summary", "plan_request",
+           "with_warm_start"]
 
 EXIT_SOLVED, EXIT_NOT_SOLVED, EXIT_INVALID = 0, 1, 2
 log = logging.getLogger("dexroll")
@@ -167,9 +171,36 @@ def _exit_code(result: AnyPlanResult) -> int:
     return EXIT_SOLVED if result.status is PlanStatus.SOLVED else EXIT_NOT_SOLVED
 
 
+def with_warm_start(raw: object, path: Path) -> tuple[object, AnyPlanResult | None]:
+    """The decoded request ``raw`` with the plan of the result file ``path`` (its
+    ``collocation`` block) as its ``warm_start``; or the invalid result saying why not."""
+    planner = planner_of(raw)
+    previous, failed = _read(path)
+    if failed is not None:
+        return raw, invalid_result([("warm_start", failed.errors[0].reason)], planner)
+    try:
+        result = RESULT.validate_python(previous)
+    except ValidationError as exc:
+        reason = f"{path} is not a result file: {validation_errors(exc)[0][1]}"
+        return raw, invalid_result([("warm_start", reason)], planner)
+    if result.planner != planner:
+        return raw, invalid_result([("warm_start", f"{path} is a {result.planner} plan; the "
+                                                   f"request is for the {planner} planner")],
+                                   planner)
+    if result.collocation is None:
+        return raw, invalid_result([("warm_start", f"{path} holds no plan at its collocation "
+                                                   f"points (status {result.status.value})")],
+                                   planner)
+    if not isinstance(raw, dict):  # the request's own validation says what is wrong
+        return raw, None
+    return {**raw, "warm_start": result.collocation.model_dump(mode="json")}, None
+
+
 def _cmd_plan(args: argparse.Namespace) -> int:
     path = Path(args.request)
     raw, failed = _read(path)
+    if failed is None and args.warm_start:
+        raw, failed = with_warm_start(raw, Path(args.warm_start))
     if failed is not None:
         result, summary = failed, _invalid_summary(failed)
     else:
@@ -230,6 +261,10 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("plan", help="solve a request file, write the result as JSON")
     p.add_argument("request", help="request JSON file (SI units)")
     p.add_argument("-o", "--output", help="result file (default: ./<request>.result.json)")
+    p.add_argument("--warm-start", metavar="RESULT.json",
+                   help="start the solver from a previous plan: a result file of the same "
+                        "planner as this command writes it (its `collocation` block "
+                        "replaces the request's `warm_start`)")
     p.set_defaults(func=_cmd_plan)
     d = sub.add_parser("demo", help="plan every request in a folder and print summaries")
     d.add_argument("folder", nargs="?", default="examples")

@@ -6,6 +6,11 @@ client); the optimisation core (``ocp``) knows nothing of them.
 Every planner is reached the same way, by the command line, the worker processes and the
 HTTP API alike: :func:`request_errors` (cheap: what is wrong with a request, each field
 named), then :func:`solve` (plan it; the wire result and the core's solution).
+
+Warm starts: a result's ``collocation`` block is the core solution's ``warm_start`` (states
+and inputs at the collocation points) with every column named (:func:`collocation_names`);
+a request's inline ``warm_start`` becomes an :class:`ocp.collocation.WarmStart` for the
+planner (a ``job_id`` is the service's to resolve before the request gets here).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from dexroll_client.models import (
     AnyPlanResult,
     BallOnPalmRequest,
     CertificateModel,
+    CollocationModel,
     ContactTrajectoryModel,
     FieldError,
     FingerCertificateModel,
@@ -48,6 +54,7 @@ from dexroll_client.models import (
 )
 from ocp.ball_on_palm import BallOnPalmPlanner, object_pose
 from ocp.ball_on_palm import plan as plan_ball_on_palm
+from ocp.collocation import WarmStart
 from ocp.finger import FingerModel, load_finger
 from ocp.greedy import GreedyResult, greedy_plan
 from ocp.hands import Hand, load_hand
@@ -71,6 +78,7 @@ __all__ = [
     "REQUEST",
     "RESULT",
     "FingerCache",
+    "collocation_names",
     "error_result",
     "invalid_result",
     "planner_of",
@@ -82,6 +90,8 @@ __all__ = [
     "solve",
     "to_problem",
     "validation_errors",
+    "warm_start_errors",
+    "warm_start_of",
     "wire_field",
 ]
 
@@ -442,12 +452,128 @@ def _seed_errors(problem: OneFingerProblem) -> list[tuple[str, str]]:
     return []
 
 
+# -- warm starts -----------------------------------------------------------------------------
+
+#: Columns of a ball-on-palm plan: the contact coordinates; the palm contact velocity.
+BALL_ON_PALM_STATES = ("x", "y", "u", "v", "psi")
+BALL_ON_PALM_INPUTS = ("w_x", "w_y")
+#: Columns of a free object (no palm): position and quaternion (w, x, y, z); velocity (palm
+#: frame) and angular velocity in the object's own frame (ocp.manipulation._quat_rate_sym).
+_FREE_OBJECT_STATES = ("object.position.x", "object.position.y", "object.position.z",
+                       "object.orientation.w", "object.orientation.x",
+                       "object.orientation.y", "object.orientation.z")
+_FREE_OBJECT_INPUTS = ("object.velocity.x", "object.velocity.y", "object.velocity.z",
+                       "object.angular_velocity_body.x", "object.angular_velocity_body.y",
+                       "object.angular_velocity_body.z")
+
+
+def _grasp_names(palm: bool, fingers: Sequence[tuple[str, Sequence[str]]]
+                 ) -> tuple[list[str], list[str]]:
+    """(state names, input names) of the general planner's layout (``ocp.manipulation``'s
+    ``_Layout``): the object block (the palm contact, or the free object's pose), then per
+    fingertip (its contact name, its joint names) the contact coordinates and the joints."""
+    if palm:
+        states = [f"palm.{c}" for c in BALL_ON_PALM_STATES]
+        inputs = [f"palm.{c}" for c in BALL_ON_PALM_INPUTS]
+    else:
+        states, inputs = list(_FREE_OBJECT_STATES), list(_FREE_OBJECT_INPUTS)
+    for name, joints in fingers:
+        states += [f"{name}.{c}" for c in BALL_ON_PALM_STATES]
+        states += [f"{name}.q.{j}" for j in joints]
+        inputs += [f"{name}.w_u", f"{name}.w_v"] + [f"{name}.q_dot.{j}" for j in joints]
+    return states, inputs
+
+
+def collocation_names(problem: BallOnPalmProblem | OneFingerProblem | ManipulationProblem
+                      ) -> tuple[list[str], list[str]]:
+    """(state names, input names): the columns of a plan of ``problem`` at its collocation
+    points (a result's ``collocation`` block, a request's ``warm_start``). A one-finger plan
+    is the general planner's with the palm and one fingertip named ``finger``."""
+    if isinstance(problem, BallOnPalmProblem):
+        return list(BALL_ON_PALM_STATES), list(BALL_ON_PALM_INPUTS)
+    if isinstance(problem, OneFingerProblem):
+        return _grasp_names(True, [("finger", tuple(problem.finger.joint_names))])
+    return _grasp_names(problem.palm is not None,
+                        [(tip.name or f"finger{i}", tuple(tip.finger.joint_names))
+                         for i, tip in enumerate(problem.fingers)])
+
+
+def _collocation(ws: WarmStart, names: tuple[list[str], list[str]]
+                 ) -> CollocationModel | None:
+    """The wire block of a solution's ``warm_start`` (None when it does not fit its names
+    or holds non-finite values: JSON has no NaN)."""
+    t, x, u = (np.asarray(a, dtype=float) for a in (ws.t, ws.x, ws.u))
+    states, inputs = names
+    if t.ndim != 1 or len(t) < 2 or x.shape != (len(t), len(states)) \
+            or u.shape != (len(t), len(inputs)):
+        return None
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
+        return None
+    return CollocationModel(t=_rows(t), x=_rows(x), u=_rows(u), state_names=states,
+                            input_names=inputs)
+
+
+def warm_start_of(request: PlanRequest) -> WarmStart | None:
+    """The core's warm start of a request (None without one). ProblemError naming
+    ``warm_start.job_id`` for a job id: the service resolves those at submission; the
+    planners need the plan itself."""
+    ws = request.warm_start
+    if ws is None:
+        return None
+    if ws.t is None or ws.x is None or ws.u is None:
+        raise ProblemError([("warm_start.job_id", "a job id is looked up by the service "
+                                                  "(POST /v1/plans); here give the plan "
+                                                  "itself: `t`, `x`, `u` (a result's "
+                                                  "`collocation` block)")])
+    return WarmStart.of(ws.t, ws.x, ws.u)
+
+
+def _names_mismatch(given: Sequence[str], expected: Sequence[str]) -> str:
+    diff = next((i for i, (a, b) in enumerate(zip(given, expected, strict=False)) if a != b),
+                min(len(given), len(expected)))
+    where = (f"column {diff} is {given[diff]!r} in the warm start, "
+             f"{expected[diff]!r} in this request's plan" if diff < min(len(given),
+                                                                        len(expected))
+             else f"the warm start has {len(given)} columns, this request's plan "
+                  f"{len(expected)}")
+    shown = ", ".join(expected[:24]) + (", ..." if len(expected) > 24 else "")
+    return (f"not this request's columns: {where} (a plan of another planner, grasp, hand "
+            f"or finger?). This request's: {shown}. Drop the names to use the plan anyway")
+
+
+def warm_start_errors(request: PlanRequest,
+                      problem: BallOnPalmProblem | OneFingerProblem | ManipulationProblem
+                      ) -> list[tuple[str, str]]:
+    """What is wrong with a request's ``warm_start`` for its problem, fields named
+    (``warm_start.t``, ``warm_start.x``, ``warm_start.state_names``, ...)."""
+    ws = request.warm_start
+    if ws is None:
+        return []
+    if isinstance(request, OneFingerRequest) and request.method == "greedy":
+        return [("warm_start", "not used by the greedy method (it chooses each step from "
+                               "the current state, with no initial guess): drop it or use "
+                               "method 'collocation'")]
+    try:
+        warm = warm_start_of(request)
+    except ProblemError as exc:
+        return list(exc.errors)
+    assert warm is not None
+    states, inputs = collocation_names(problem)
+    errors = warm.errors("warm_start", len(states), len(inputs))
+    for field, given, expected in (("state_names", ws.state_names, states),
+                                   ("input_names", ws.input_names, inputs)):
+        if given is not None and list(given) != expected:
+            errors.append((f"warm_start.{field}", _names_mismatch(given, expected)))
+    return errors
+
+
 def request_errors(request: PlanRequest, fingers: FingerCache | None = None
                    ) -> list[tuple[str, str]]:
     """Everything wrong with a (schema-valid) request, as (field, reason) pairs; [] when it
     can be planned. Cheap (no NLP is built): the core's checks of the problem and, for a
     request with fingers, loading them and the inverse kinematics of the initial grasp
-    (reachable, within the joint limits, in force closure / inside the friction cone)."""
+    (reachable, within the joint limits, in force closure / inside the friction cone), and
+    that a ``warm_start`` fits the planner (its columns, see :func:`warm_start_errors`)."""
     cache = fingers or FINGERS
     with cache.lock:
         try:
@@ -462,7 +588,7 @@ def request_errors(request: PlanRequest, fingers: FingerCache | None = None
                     cache.manipulation.initial_state(problem)
                 except ProblemError as exc:
                     errors += exc.errors
-            return errors
+            return errors + warm_start_errors(request, problem)
         errors = list(problem.errors())
         if isinstance(problem, OneFingerProblem):
             errors += _seed_errors(problem)
@@ -471,7 +597,7 @@ def request_errors(request: PlanRequest, fingers: FingerCache | None = None
                     cache.planner.initial_grasp(problem)
                 except ProblemError as exc:
                     errors += exc.errors
-        return errors
+        return errors + warm_start_errors(request, problem)
 
 
 def solve(request: PlanRequest, palm: BallOnPalmPlanner | None = None,
@@ -481,10 +607,18 @@ def solve(request: PlanRequest, palm: BallOnPalmPlanner | None = None,
     """Plan a request: (the wire result, the core's solution). ProblemError for a request
     that cannot be planned (:func:`request_errors` names the same fields beforehand).
     ``palm``: the ball-on-palm planner (default: the process-wide one); ``fingers``: the
-    fingers, hands and finger planners (default: this process's)."""
+    fingers, hands and finger planners (default: this process's). A request's inline
+    ``warm_start`` is passed to the planner (the planner raises ProblemError naming
+    ``warm_start.x`` etc. when it does not fit)."""
+    warm = warm_start_of(request)
     if isinstance(request, BallOnPalmRequest):
         problem = _base_problem(request)
-        sol = palm.solve(problem) if palm is not None else plan_ball_on_palm(problem)
+        if palm is not None:
+            sol = palm.solve(problem, warm)
+        elif warm is None:
+            sol = plan_ball_on_palm(problem)
+        else:  # ocp.ball_on_palm.plan takes no warm start
+            sol = _warm_palm_planner().solve(problem, warm)
         return result_from_solution(sol, request.sample_times), sol
     cache = fingers or FINGERS
     if isinstance(request, ManipulationRequest):
@@ -494,7 +628,7 @@ def solve(request: PlanRequest, palm: BallOnPalmPlanner | None = None,
         errors = _manipulation_errors(manipulation, request)
         if errors:
             raise ProblemError(errors)
-        manip_sol = planner.solve(manipulation)
+        manip_sol = planner.solve(manipulation, warm)
         return result_from_manipulation_solution(manip_sol), manip_sol
     finger_problem = to_problem(request, cache)
     assert isinstance(finger_problem, OneFingerProblem)
@@ -502,11 +636,27 @@ def solve(request: PlanRequest, palm: BallOnPalmPlanner | None = None,
     if errors:
         raise ProblemError(errors)
     if request.method == "greedy":
+        if warm is not None:
+            raise ProblemError(warm_start_errors(request, finger_problem))
         greedy = greedy_plan(finger_problem, planner=cache.planner)
         return result_from_greedy(greedy, finger_problem.finger.joint_names), greedy
-    finger_sol = cache.planner.solve(finger_problem)
+    finger_sol = cache.planner.solve(finger_problem, warm)
     return result_from_finger_solution(finger_sol, finger_problem.finger.joint_names), \
         finger_sol
+
+
+_WARM_PALM: BallOnPalmPlanner | None = None
+_WARM_PALM_LOCK = threading.Lock()
+
+
+def _warm_palm_planner() -> BallOnPalmPlanner:
+    """A process-wide ball-on-palm planner for warm-started solves without a given planner
+    (``ocp.ball_on_palm.plan``, the default otherwise, takes no warm start)."""
+    global _WARM_PALM
+    with _WARM_PALM_LOCK:
+        if _WARM_PALM is None:
+            _WARM_PALM = BallOnPalmPlanner()
+        return _WARM_PALM
 
 
 def rotation_vector(R: Any) -> list[float]:
@@ -602,9 +752,11 @@ def result_from_solution(sol: Solution, sample_times: list[float] | None = None
     samples = _trajectory(sol.sample(sample_times)) if sample_times and grid else None
     message = sol.message if grid is not None else sol.message + " (non-finite iterate omitted)"
     goal_error = {k: v for k, v in sol.goal_error.items() if np.isfinite(v)}
+    collocation = None if grid is None else _collocation(
+        sol.warm_start, (list(BALL_ON_PALM_STATES), list(BALL_ON_PALM_INPUTS)))
     return PlanResult(status=PlanStatus(sol.status.value), message=message,
                       stats=StatsModel(**stats), goal_error=goal_error, certificate=cert,
-                      grid=grid, samples=samples)
+                      grid=grid, samples=samples, collocation=collocation)
 
 
 def _finger_trajectory(sol: OneFingerSolution | GreedyResult) -> FingerTrajectoryModel | None:
@@ -643,13 +795,18 @@ def result_from_finger_solution(sol: OneFingerSolution, joint_names: Sequence[st
     trajectory = _finger_trajectory(sol)
     message = sol.message if trajectory is not None else \
         sol.message + " (non-finite iterate omitted)"
+    nq = int(np.shape(sol.q)[1]) if np.ndim(sol.q) == 2 else 0
+    joints = list(joint_names) if len(joint_names) == nq else [f"j{i}" for i in range(nq)]
+    collocation = None if trajectory is None else _collocation(
+        sol.warm_start, _grasp_names(True, [("finger", joints)]))
     return FingerPlanResult(
         status=PlanStatus(sol.status.value), message=message,
         stats=FingerStatsModel(raw_status=sol.raw_status, iterations=sol.iterations,
                                build_time=sol.build_time, solve_time=sol.solve_time,
                                refinements=sol.refinements),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
-        certificate=cert, joint_names=list(joint_names), trajectory=trajectory)
+        certificate=cert, joint_names=list(joint_names), trajectory=trajectory,
+        collocation=collocation)
 
 
 def result_from_greedy(res: GreedyResult, joint_names: Sequence[str] = ()) -> FingerPlanResult:
@@ -756,6 +913,9 @@ def result_from_manipulation_solution(sol: ManipulationSolution) -> Manipulation
     if trajectory is None and status is PlanStatus.SOLVED:  # pragma: no cover - defensive
         status = PlanStatus.NUMERICAL_ERROR
     timing = [sol.build_time, sol.solve_time]
+    collocation = None if trajectory is None else _collocation(
+        sol.warm_start, _grasp_names(any(c.body == "palm" for c in sol.contacts),
+                                     [(f.name, tuple(f.joint_names)) for f in sol.fingers]))
     return ManipulationResult(
         status=status, message=message,
         stats=ManipulationStatsModel(
@@ -764,4 +924,4 @@ def result_from_manipulation_solution(sol: ManipulationSolution) -> Manipulation
             solve_time=timing[1] if math.isfinite(timing[1]) else 0.0,
             refinements=sol.refinements, n_intervals=max((len(sol.t) - 1) // 2, 0)),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
-        certificate=cert, trajectory=trajectory)
+        certificate=cert, trajectory=trajectory, collocation=collocation)

@@ -13,7 +13,12 @@ exception tree.
 
 from __future__ import annotations
 
-from dexroll_client.client import AsyncDexrollClient, DexrollClient, RequestLike
+from dexroll_client.client import (
+    AsyncDexrollClient,
+    DexrollClient,
+    RequestLike,
+    WarmStartLike,
+)
 from dexroll_client.errors import (
     APIError,
     ConflictError,
@@ -29,6 +34,7 @@ from dexroll_client.models import (
     AnyPlanResult,
     BallOnPalmRequest,
     CertificateModel,
+    CollocationModel,
     ContactCoordinates,
     ContactTrajectoryModel,
     ErrorBody,
@@ -71,6 +77,7 @@ from dexroll_client.models import (
     TrackingModel,
     TrajectoryModel,
     ViaPointModel,
+    WarmStartModel,
 )
 
 __all__ = [
@@ -79,6 +86,7 @@ __all__ = [
     "AsyncDexrollClient",
     "BallOnPalmRequest",
     "CertificateModel",
+    "CollocationModel",
     "ConflictError",
     "ContactCoordinates",
     "ContactTrajectoryModel",
@@ -131,4 +139,6 @@ __all__ = [
     "TrajectoryModel",
     "TransportError",
     "ViaPointModel",
+    "WarmStartLike",
+    "WarmStartModel",
 ]

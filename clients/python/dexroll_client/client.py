@@ -16,6 +16,14 @@ Requests may be a :class:`~dexroll_client.models.PlanRequest` or a plain dict; a
 validated with the model first, so a bad request fails locally (pydantic's
 ``ValidationError`` names the field) before any HTTP.
 
+Warm starts: ``plan(request, warm_start=previous)`` (and ``submit``) start IPOPT from a
+previous plan: ``previous`` is a result (its ``collocation`` block is sent), a ``Job`` of
+this service or its id (the service looks the job up), a ``CollocationModel`` or a
+``WarmStartModel``::
+
+    first = client.plan(request, timeout=120)
+    again = client.plan(slightly_different_request, warm_start=first.result, timeout=120)
+
 Errors (see :mod:`dexroll_client.errors`)::
 
     DexrollError
@@ -56,9 +64,20 @@ from dexroll_client.errors import (
     error_from_response,
     parse_retry_after,
 )
-from dexroll_client.models import Job, JobList, ModelCatalog, PlanRequest
+from dexroll_client.models import (
+    CollocationModel,
+    FingerPlanResult,
+    Job,
+    JobList,
+    ManipulationResult,
+    ModelCatalog,
+    PlanRequest,
+    PlanResult,
+    WarmStartModel,
+)
 
-__all__ = ["DEFAULT_TIMEOUT", "MAX_WAIT", "AsyncDexrollClient", "DexrollClient", "RequestLike"]
+__all__ = ["DEFAULT_TIMEOUT", "MAX_WAIT", "AsyncDexrollClient", "DexrollClient", "RequestLike",
+           "WarmStartLike", "warm_start_model"]
 
 #: The service's cap on ``POST /v1/plans?wait=`` [s].
 MAX_WAIT = 30.0
@@ -71,6 +90,11 @@ _CANCEL_READ_TIMEOUT = 20.0
 
 #: A plan request: the model, or a dict of the same shape (validated before sending).
 RequestLike = PlanRequest | Mapping[str, Any]
+#: A previous plan to warm-start from: a result (its ``collocation`` block), a job of this
+#: service or its id (looked up by the service), a collocation block, a ``WarmStartModel``,
+#: or a dict of a ``WarmStartModel``'s shape (e.g. a result's ``collocation`` as JSON).
+WarmStartLike = (WarmStartModel | CollocationModel | PlanResult | FingerPlanResult
+                 | ManipulationResult | Job | str | Mapping[str, Any])
 
 _M = TypeVar("_M", bound=BaseModel)
 _T = TypeVar("_T")
@@ -103,9 +127,41 @@ class _Sleep:
 _Op = Generator[_Call | _Sleep, httpx.Response | None, _T]
 
 
-def _as_request(request: RequestLike) -> PlanRequest:
-    """The request as a validated model (raises pydantic's ValidationError, locally)."""
-    return _REQUEST.validate_python(request)
+def warm_start_model(previous: WarmStartLike, planner: str | None = None) -> WarmStartModel:
+    """The ``warm_start`` of a request from a previous plan (see :data:`WarmStartLike`).
+
+    A result or a job of another planner than ``planner`` (when given) raises ValueError,
+    as does a result without a ``collocation`` block (no plan, a greedy plan, a diverged
+    last iterate); a job is passed by id (the service checks that it has finished)."""
+    if isinstance(previous, WarmStartModel):
+        return previous
+    if isinstance(previous, str):
+        if not previous:
+            raise ValueError("a warm start's job id must be a non-empty string")
+        return WarmStartModel(job_id=previous)
+    if isinstance(previous, Job | PlanResult | FingerPlanResult | ManipulationResult):
+        if planner is not None and previous.planner != planner:
+            what = "job" if isinstance(previous, Job) else "plan"
+            raise ValueError(f"a {previous.planner} {what} cannot warm-start a {planner} "
+                             "request")
+        if isinstance(previous, Job):
+            return WarmStartModel(job_id=previous.id)
+        return WarmStartModel.from_result(previous)
+    if isinstance(previous, CollocationModel):
+        return WarmStartModel.from_result(previous)
+    if isinstance(previous, Mapping):
+        return WarmStartModel.model_validate(previous)
+    raise TypeError(f"cannot warm-start from a {type(previous).__name__}: give a result, a "
+                    "Job, a job id, a CollocationModel or a WarmStartModel")
+
+
+def _as_request(request: RequestLike, warm_start: WarmStartLike | None = None) -> PlanRequest:
+    """The request as a validated model (raises pydantic's ValidationError, locally), with
+    ``warm_start`` (when given) as its ``warm_start``."""
+    req = _REQUEST.validate_python(request)
+    if warm_start is None:
+        return req
+    return req.model_copy(update={"warm_start": warm_start_model(warm_start, req.planner)})
 
 
 def _job_path(job_id: str) -> str:
@@ -133,8 +189,11 @@ def _submit_call(request: PlanRequest, wait: float | None,
             raise ValueError("idempotency_key must be a non-empty string of printable ASCII "
                              f"characters, got {idempotency_key!r}")
         headers["Idempotency-Key"] = idempotency_key
-    return _Call("POST", "/v1/plans", params=params, headers=headers,
-                 json=request.model_dump(mode="json"), min_read_timeout=min_read)
+    body = request.model_dump(mode="json")
+    if body.get("warm_start") is None:  # a service older than warm starts refuses the key
+        body.pop("warm_start", None)
+    return _Call("POST", "/v1/plans", params=params, headers=headers, json=body,
+                 min_read_timeout=min_read)
 
 
 def _cancel_call(job_id: str) -> _Call:
@@ -182,16 +241,17 @@ def _probe_op(path: str) -> _Op[bool]:
     return _probe(response)
 
 
-def _submit_op(request: RequestLike, wait: float | None, idempotency_key: str | None
-               ) -> _Op[Job]:
-    call = _submit_call(_as_request(request), wait, idempotency_key)
+def _submit_op(request: RequestLike, wait: float | None, idempotency_key: str | None,
+               warm_start: WarmStartLike | None = None) -> _Op[Job]:
+    call = _submit_call(_as_request(request, warm_start), wait, idempotency_key)
     return (yield from _one(call, Job))
 
 
 def _plan_op(request: RequestLike, *, timeout: float | None, idempotency_key: str | None,
-             poll_initial: float, poll_max: float) -> _Op[Job]:
+             poll_initial: float, poll_max: float, warm_start: WarmStartLike | None = None
+             ) -> _Op[Job]:
     """Submit, then wait until the job is terminal (see ``DexrollClient.plan``)."""
-    req = _as_request(request)
+    req = _as_request(request, warm_start)
     if timeout is not None and not (timeout >= 0.0 and math.isfinite(timeout)):
         raise ValueError(f"timeout must be None or a finite number >= 0, got {timeout!r}")
     if not (math.isfinite(poll_initial) and poll_initial > 0.0):
@@ -336,14 +396,16 @@ class DexrollClient:
             op.close()
 
     def submit(self, request: RequestLike, *, wait: float | None = None,
-               idempotency_key: str | None = None) -> Job:
+               idempotency_key: str | None = None,
+               warm_start: WarmStartLike | None = None) -> Job:
         """Submit a plan request; the job, finished (with ``result``) if it finished within
         ``wait`` seconds (service default 1 s, max 30), else queued or running.
 
         With ``idempotency_key``, a retried submit returns the job of the first one (a
-        different body with the same key raises ConflictError).
+        different body with the same key raises ConflictError). ``warm_start``: a previous
+        plan to start from (see :meth:`plan`).
         """
-        return self._run(_submit_op(request, wait, idempotency_key))
+        return self._run(_submit_op(request, wait, idempotency_key, warm_start))
 
     def get(self, job_id: str) -> Job:
         """The job (with ``result`` once terminal); NotFoundError for an unknown id."""
@@ -373,7 +435,7 @@ class DexrollClient:
 
     def plan(self, request: RequestLike, *, timeout: float | None = None,
              idempotency_key: str | None = None, poll_initial: float = 0.1,
-             poll_max: float = 2.0) -> Job:
+             poll_max: float = 2.0, warm_start: WarmStartLike | None = None) -> Job:
         """Submit a request and wait until its job is terminal; the terminal job, whatever
         its state (succeeded, infeasible, timed_out, failed, cancelled): look at
         ``job.state`` and ``job.result.status``.
@@ -383,9 +445,17 @@ class DexrollClient:
         ``Retry-After``, with the same idempotency key (a fresh uuid4 when none is given),
         so retries never create two jobs. After ``timeout`` seconds (None: no limit) raises
         PlanTimeoutError, whose ``job_id`` names the job if one was created.
+
+        ``warm_start``: a previous plan of a similar problem as IPOPT's initial guess,
+        replacing the request's own ``warm_start``: a result of the same planner (its
+        ``collocation`` block is sent), a finished ``Job`` of this service or its id (the
+        service looks it up; 422 naming ``warm_start.job_id`` if it cannot be used), a
+        ``CollocationModel`` or a ``WarmStartModel``. ValueError, locally, for a result or
+        job of another planner or a result without a ``collocation`` block.
         """
         return self._run(_plan_op(request, timeout=timeout, idempotency_key=idempotency_key,
-                                  poll_initial=poll_initial, poll_max=poll_max))
+                                  poll_initial=poll_initial, poll_max=poll_max,
+                                  warm_start=warm_start))
 
 
 # -- the asynchronous client ------------------------------------------------------------------
@@ -454,9 +524,10 @@ class AsyncDexrollClient:
             op.close()
 
     async def submit(self, request: RequestLike, *, wait: float | None = None,
-                     idempotency_key: str | None = None) -> Job:
+                     idempotency_key: str | None = None,
+                     warm_start: WarmStartLike | None = None) -> Job:
         """See :meth:`DexrollClient.submit`."""
-        return await self._run(_submit_op(request, wait, idempotency_key))
+        return await self._run(_submit_op(request, wait, idempotency_key, warm_start))
 
     async def get(self, job_id: str) -> Job:
         """See :meth:`DexrollClient.get`."""
@@ -485,8 +556,9 @@ class AsyncDexrollClient:
 
     async def plan(self, request: RequestLike, *, timeout: float | None = None,
                    idempotency_key: str | None = None, poll_initial: float = 0.1,
-                   poll_max: float = 2.0) -> Job:
+                   poll_max: float = 2.0, warm_start: WarmStartLike | None = None) -> Job:
         """See :meth:`DexrollClient.plan`."""
         return await self._run(_plan_op(request, timeout=timeout,
                                         idempotency_key=idempotency_key,
-                                        poll_initial=poll_initial, poll_max=poll_max))
+                                        poll_initial=poll_initial, poll_max=poll_max,
+                                        warm_start=warm_start))

@@ -36,10 +36,12 @@ __all__ = [
     "MAX_SAMPLES",
     "MAX_URDF_CHARS",
     "MAX_VIA_POINTS",
+    "MAX_WARM_START_COLUMNS",
     "PLANNERS",
     "AnyPlanResult",
     "BallOnPalmRequest",
     "CertificateModel",
+    "CollocationModel",
     "ContactCoordinates",
     "ContactTrajectoryModel",
     "ErrorBody",
@@ -85,6 +87,7 @@ __all__ = [
     "TrackingModel",
     "TrajectoryModel",
     "ViaPointModel",
+    "WarmStartModel",
 ]
 
 #: Limits of a request (the service's core enforces the same ones; a test checks).
@@ -106,6 +109,9 @@ BUILTIN_HANDS: tuple[str, ...] = ("two_finger", "three_finger")
 #: Limits of a manipulation request: fingertips, knots of a desired motion.
 MAX_FINGERS = 5
 MAX_MOTION_KNOTS = 1000
+#: Columns a warm start's states (or inputs) may have: the largest plan's (a free object's
+#: 7 states and five fingertips of 5 contact coordinates and MAX_FINGER_JOINTS joints each).
+MAX_WARM_START_COLUMNS = 7 + MAX_FINGERS * (5 + MAX_FINGER_JOINTS)
 
 
 class _Request(BaseModel):
@@ -182,6 +188,135 @@ class SolverModel(_Request):
         "certificate tolerance on the re-integration defect of u, v, psi [rad]"))
 
 
+# -- warm starts -----------------------------------------------------------------------------
+
+WarmValue = Annotated[float, Field(ge=-1e6, le=1e6)]
+WarmRows = list[Annotated[list[WarmValue], Field(min_length=1,
+                                                  max_length=MAX_WARM_START_COLUMNS)]]
+ColumnNames = list[Annotated[str, Field(min_length=1, max_length=200)]]
+
+
+class WarmStartModel(_Request):
+    """A previous plan as the initial guess of this one: either ``job_id`` (a finished job
+    of this service, with the same planner, whose result has a ``collocation`` block) or
+    the plan itself, ``t``, ``x``, ``u`` (a result's ``collocation`` block, passed as it
+    is: its ``state_names`` and ``input_names`` are optional and, when given, must be this
+    request's columns, which catches a plan of another hand or finger).
+
+    The service replaces ``job_id`` by that job's ``t``, ``x``, ``u`` at submission. A plan
+    of another duration is stretched in time to this request's (its inputs, all rates,
+    scaled by the inverse ratio), interpolated onto this request's grid, and its first state
+    replaced by this request's initial state. IPOPT starts from it; if it does not converge
+    from there, the planner falls back to its own initial guesses (within the time limit).
+    The layout of the columns is the result's ``collocation`` block's (see
+    :class:`CollocationModel`)."""
+
+    job_id: str | None = Field(
+        default=None, min_length=1, max_length=200, pattern=r"^[A-Za-z0-9_.\-]+$",
+        description="the `id` of a finished job of this service with the same planner, "
+                    "whose result has a `collocation` block (give this, or `t`, `x`, `u`)")
+    t: list[Annotated[float, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
+        default=None, min_length=2, max_length=MAX_SAMPLES,
+        description="the plan's sample times [s], from 0, strictly increasing (a result's "
+                    "`collocation.t`)")
+    x: WarmRows | None = Field(
+        default=None, max_length=MAX_SAMPLES,
+        description="the plan's states, one row per time in `t`, columns as a result's "
+                    "`collocation.state_names` (SI units: m, rad)")
+    u: WarmRows | None = Field(
+        default=None, max_length=MAX_SAMPLES,
+        description="the plan's inputs, one row per time in `t`, columns as a result's "
+                    "`collocation.input_names` (SI units: m/s, rad/s)")
+    state_names: ColumnNames | None = Field(
+        default=None, max_length=MAX_WARM_START_COLUMNS,
+        description="optional: the names of the columns of `x` (a result's "
+                    "`collocation.state_names`); when given they must be this request's")
+    input_names: ColumnNames | None = Field(
+        default=None, max_length=MAX_WARM_START_COLUMNS,
+        description="optional: the names of the columns of `u` (a result's "
+                    "`collocation.input_names`); when given they must be this request's")
+
+    @field_validator("t")
+    @classmethod
+    def _times(cls, value: list[float] | None) -> list[float] | None:
+        if value is None:
+            return value
+        if value[0] > 1e-12 * max(1.0, value[-1]):
+            raise ValueError(f"must start at 0 (the plan's start), got {value[0]}")
+        for i in range(1, len(value)):
+            if value[i] <= value[i - 1]:
+                raise ValueError(f"must increase strictly: t[{i}] = {value[i]} follows "
+                                 f"t[{i - 1}] = {value[i - 1]}")
+        return value
+
+    @field_validator("x", "u")
+    @classmethod
+    def _rows(cls, value: list[list[float]] | None, info: ValidationInfo
+              ) -> list[list[float]] | None:
+        if value is None:
+            return value
+        widths = sorted({len(row) for row in value})
+        if len(widths) > 1:
+            raise ValueError(f"every row must have the same number of columns, got rows of "
+                             f"{', '.join(map(str, widths))} columns")
+        t = info.data.get("t")
+        if t is not None and len(value) != len(t):
+            raise ValueError(f"must have one row per time in `t` ({len(t)} rows), got "
+                             f"{len(value)}")
+        return value
+
+    @field_validator("state_names", "input_names")
+    @classmethod
+    def _names(cls, value: list[str] | None, info: ValidationInfo) -> list[str] | None:
+        if value is None:
+            return value
+        key = "x" if info.field_name == "state_names" else "u"
+        rows = info.data.get(key)
+        if rows and len(value) != len(rows[0]):
+            raise ValueError(f"must name every column of `{key}` ({len(rows[0])}), got "
+                             f"{len(value)} names")
+        if len(set(value)) != len(value):
+            raise ValueError("names must be unique")
+        return value
+
+    @model_validator(mode="after")
+    def _one_form(self) -> WarmStartModel:
+        inline = [k for k in ("t", "x", "u") if getattr(self, k) is not None]
+        named = self.state_names is not None or self.input_names is not None
+        if self.job_id is not None:
+            if inline or named:
+                raise ValueError("give either `job_id` or the plan's `t`, `x`, `u`, not both")
+            return self
+        if not inline:
+            raise ValueError("give `job_id` (a finished job of this service) or a plan's "
+                             "`t`, `x` and `u` (a result's `collocation` block)")
+        missing = [k for k in ("t", "x", "u") if k not in inline]
+        if missing:
+            raise ValueError(f"{', '.join(f'`{k}`' for k in missing)} missing: give the "
+                             "plan's `t`, `x` and `u` together")
+        return self
+
+    @classmethod
+    def from_result(cls, result: PlanResult | FingerPlanResult | ManipulationResult
+                    | CollocationModel) -> WarmStartModel:
+        """The inline warm start of a result (its ``collocation`` block, names included),
+        or of a ``collocation`` block itself; ValueError when the result has none (an
+        invalid request, a greedy plan, a diverged last iterate)."""
+        c = result if isinstance(result, CollocationModel) else result.collocation
+        if c is None:
+            status = getattr(result, "status", None)
+            raise ValueError("the result has no `collocation` block to warm-start from"
+                             + (f" (its status: {status})" if status is not None else ""))
+        return cls(t=c.t, x=c.x, u=c.u, state_names=c.state_names,
+                   input_names=c.input_names)
+
+
+WARM_START_DESCRIPTION = (
+    "optional: a previous plan as IPOPT's initial guess (a finished job's id, or a "
+    "result's `collocation` block); stretched to this duration; the planner falls back to "
+    "its own guesses when IPOPT does not converge from it")
+
+
 class _PalmRequest(_Request):
     """What every planner shares: the object, its palm contact, goals, grid and limits.
 
@@ -211,6 +346,8 @@ class _PalmRequest(_Request):
     sample_times: list[Annotated[float, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
         default=None, max_length=MAX_SAMPLES,
         description="extra times [s] at which to sample the plan (collocation polynomials)")
+    warm_start: WarmStartModel | None = Field(default=None,
+                                              description=WARM_START_DESCRIPTION)
 
     @field_validator("sample_times")
     @classmethod
@@ -598,6 +735,8 @@ class ManipulationRequest(_Request):
                                  description="grid doublings allowed when the certificate "
                                              "finds the grid too coarse")
     solver: SolverModel = Field(default_factory=SolverModel)
+    warm_start: WarmStartModel | None = Field(default=None,
+                                              description=WARM_START_DESCRIPTION)
 
 
 def _planner_of(value: object) -> str | None:
@@ -698,6 +837,47 @@ class FieldError(_Response):
     reason: str
 
 
+class CollocationModel(_Response):
+    """A plan's states and inputs at its collocation points (nodes and midpoints), in the
+    planner's own layout: what a later request's ``warm_start`` takes (pass this block as
+    it is). Rows are samples; every column is named (SI units: m, rad; inputs m/s, rad/s).
+
+    Column names, by planner:
+
+    * ball_on_palm: states ``x, y, u, v, psi`` (the contact coordinates, as in ``initial``);
+      inputs ``w_x, w_y`` (the palm contact velocity d/dt (x, y)).
+    * one_finger (a palm and a fingertip named ``finger``): states ``palm.x, palm.y,
+      palm.u, palm.v, palm.psi``, ``finger.x, finger.y, finger.u, finger.v, finger.psi``
+      (the finger contact's (x_f, y_f, u_f, v_f, psi_f)), ``finger.q.<joint>`` for each
+      joint; inputs ``palm.w_x, palm.w_y``, ``finger.w_u, finger.w_v`` (d/dt (u_f, v_f):
+      the contact's motion over the ball), ``finger.q_dot.<joint>``.
+    * manipulation: the object first: with a palm, ``palm.x ... palm.psi`` / inputs
+      ``palm.w_x, palm.w_y``; without one, ``object.position.x, .y, .z`` (palm frame [m]),
+      ``object.orientation.w, .x, .y, .z`` (quaternion, object to palm frame) / inputs
+      ``object.velocity.x, .y, .z`` (d/dt position, palm frame [m/s]),
+      ``object.angular_velocity_body.x, .y, .z`` (the object's angular velocity in the
+      object's own frame [rad/s], unlike `trajectory.object_angular_velocity`, which is in
+      the palm frame); then each fingertip in request order, by its contact name:
+      ``<name>.x, <name>.y, <name>.u, <name>.v, <name>.psi``, ``<name>.q.<joint>`` /
+      inputs ``<name>.w_u, <name>.w_v``, ``<name>.q_dot.<joint>``."""
+
+    t: list[float] = Field(description="the collocation points' times [s], from 0, "
+                                       "increasing")
+    x: Rows = Field(description="the states, one row per time, columns `state_names` "
+                                "[m, rad]")
+    u: Rows = Field(description="the inputs, one row per time, columns `input_names` "
+                                "[m/s, rad/s]")
+    state_names: list[str] = Field(description="the name of each column of `x` (see the "
+                                               "model's description for the layout)")
+    input_names: list[str] = Field(description="the name of each column of `u`")
+
+
+COLLOCATION_DESCRIPTION = (
+    "the plan's states and inputs at its collocation points, every column named: pass it "
+    "as a later request's `warm_start` (null: no plan, a greedy plan, or a non-finite last "
+    "iterate)")
+
+
 class PlanResult(_Response):
     """A ball-on-palm plan, or why there is none. ``grid``: the collocation points (nodes
     and midpoints); ``samples``: the request's ``sample_times``."""
@@ -713,6 +893,8 @@ class PlanResult(_Response):
     certificate: CertificateModel | None = None
     grid: TrajectoryModel | None = None
     samples: TrajectoryModel | None = None
+    collocation: CollocationModel | None = Field(default=None,
+                                                 description=COLLOCATION_DESCRIPTION)
 
 
 class FingerTrajectoryModel(_Response):
@@ -795,6 +977,8 @@ class FingerPlanResult(_Response):
     joint_names: list[str] = Field(default_factory=list,
                                    description="the finger's joints, in the order of `q`")
     trajectory: FingerTrajectoryModel | None = None
+    collocation: CollocationModel | None = Field(default=None,
+                                                 description=COLLOCATION_DESCRIPTION)
 
 
 class ContactTrajectoryModel(_Response):
@@ -897,6 +1081,8 @@ class ManipulationResult(_Response):
                                   "rad], e.g. 'palm.x'")
     certificate: ManipulationCertificateModel | None = None
     trajectory: ManipulationTrajectoryModel | None = None
+    collocation: CollocationModel | None = Field(default=None,
+                                                 description=COLLOCATION_DESCRIPTION)
 
 
 #: A plan of any planner, told apart by its ``planner`` field (results stored before it
