@@ -698,9 +698,11 @@ def object_pose(obj: ObjectSpec, eta: ArrayLike) -> tuple[FloatArray, FloatArray
 _DEFAULT = BallOnPalmPlanner()
 
 
-def plan(problem: BallOnPalmProblem) -> Solution:
-    """Plan with the process-wide planner (and its NLP cache)."""
-    return _DEFAULT.solve(problem)
+def plan(problem: BallOnPalmProblem, warm_start: Solution | WarmStart | None = None
+         ) -> Solution:
+    """Plan with the process-wide planner (and its NLP cache); ``warm_start`` as in
+    :meth:`BallOnPalmPlanner.solve`."""
+    return _DEFAULT.solve(problem, warm_start)
 
 
 __all__ += ["ProblemError", "certify", "contact_coordinates", "object_pose"]

@@ -613,12 +613,8 @@ def solve(request: PlanRequest, palm: BallOnPalmPlanner | None = None,
     warm = warm_start_of(request)
     if isinstance(request, BallOnPalmRequest):
         problem = _base_problem(request)
-        if palm is not None:
-            sol = palm.solve(problem, warm)
-        elif warm is None:
-            sol = plan_ball_on_palm(problem)
-        else:  # ocp.ball_on_palm.plan takes no warm start
-            sol = _warm_palm_planner().solve(problem, warm)
+        sol = palm.solve(problem, warm) if palm is not None else \
+            plan_ball_on_palm(problem, warm)
         return result_from_solution(sol, request.sample_times), sol
     cache = fingers or FINGERS
     if isinstance(request, ManipulationRequest):
@@ -643,20 +639,6 @@ def solve(request: PlanRequest, palm: BallOnPalmPlanner | None = None,
     finger_sol = cache.planner.solve(finger_problem, warm)
     return result_from_finger_solution(finger_sol, finger_problem.finger.joint_names), \
         finger_sol
-
-
-_WARM_PALM: BallOnPalmPlanner | None = None
-_WARM_PALM_LOCK = threading.Lock()
-
-
-def _warm_palm_planner() -> BallOnPalmPlanner:
-    """A process-wide ball-on-palm planner for warm-started solves without a given planner
-    (``ocp.ball_on_palm.plan``, the default otherwise, takes no warm start)."""
-    global _WARM_PALM
-    with _WARM_PALM_LOCK:
-        if _WARM_PALM is None:
-            _WARM_PALM = BallOnPalmPlanner()
-        return _WARM_PALM
 
 
 def rotation_vector(R: Any) -> list[float]:
