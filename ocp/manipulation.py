@@ -51,10 +51,17 @@ from .ball_on_palm import (
     goal_errors,
     model_for,
 )
-from .collocation import HermiteSimpson, WarmStart, node_times, reintegrate, reintegrator
+from .collocation import (
+    HermiteSimpson,
+    NlpPoint,
+    WarmStart,
+    node_times,
+    reintegrate,
+    reintegrator,
+)
 from .contact import ContactPair
 from .grasp import cone_cosine, grasp_angles_numeric, grasp_cosines
-from .ipopt import IPOPT_OPTIONS, StopCallback
+from .ipopt import IPOPT_OPTIONS, IPOPT_WARM_OPTIONS, StopCallback
 from .problem import (
     CONTACT_COORDS,
     MAX_INTERVALS,
@@ -572,6 +579,8 @@ class ManipulationSolution:
     #: The collocation grid's raw values (states, inputs), for warm starts.
     X: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
     U: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    #: IPOPT's primal-dual point at this plan, for a warm start of the same NLP.
+    nlp_point: NlpPoint | None = field(default=None, repr=False)
 
     @property
     def ok(self) -> bool:
@@ -580,8 +589,8 @@ class ManipulationSolution:
     @property
     def warm_start(self) -> WarmStart:
         """This plan as the initial guess of another (its collocation points' states and
-        inputs)."""
-        return WarmStart(self.t, self.X, self.U)
+        inputs, and IPOPT's primal-dual point for a plan of the same NLP)."""
+        return WarmStart(self.t, self.X, self.U, self.nlp_point)
 
 
 # -- symbolic model --------------------------------------------------------------------------
@@ -811,6 +820,13 @@ class _NLP:
     ubg: FloatArray
     build_time: float
     n_force: int  # contacts with internal-force variables (0 for two contacts)
+    #: the problem as a function (w, p) -> (f, g), and the options of ``solver``: what the
+    #: warm-start solver is built from, when the first primal-dual warm start comes
+    oracle: ca.Function
+    options: dict[str, Any]
+    #: fingerprint of this NLP (structure, grid, fingers' models), for warm starts
+    fingerprint: str
+    warm_solver: ca.Function | None = None
 
 
 def _charts(problem: ManipulationProblem) -> list[FloatArray]:
@@ -824,6 +840,20 @@ def _goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[int]
         return {}
     out = goal_errors(problem.palm_problem(), X, ends)
     return {f"palm.{k}": v for k, v in out.items()}
+
+
+def _fingerprint(key: tuple[Any, ...], n_x: int, n_g: int) -> str:
+    """A structure key as a string that another process computes alike: the fingers by
+    their models (URDF, tip frame, mount), not by identity."""
+    import hashlib
+
+    shape, palm, segments, goal_mask, via_masks, fingers, tracking = key
+    parts = [repr((shape, palm, segments, goal_mask, via_masks, tracking, n_x, n_g))]
+    for f in fingers:
+        parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
+                  repr(np.asarray(f.base_rotation).round(12).tolist()),
+                  repr(np.asarray(f.base_position).round(12).tolist())]
+    return hashlib.sha256("|".join(parts).encode()).hexdigest()[:32]
 
 
 class ManipulationPlanner:
@@ -968,16 +998,19 @@ class ManipulationPlanner:
         w = ca.vertcat(hs.w, S.T, Sm.T, ca.vec(F))
         g_all = ca.vertcat(*g)
         stop = StopCallback(w.numel(), g_all.numel(), p.numel())
-        solver = ca.nlpsol("manipulation", "ipopt", {"x": w, "p": p, "f": f, "g": g_all}, {
-            "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
-            "ipopt.max_iter": 100_000, **IPOPT_OPTIONS, "iteration_callback": stop,
-            "error_on_fail": False})
+        options = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+                   "ipopt.max_iter": 100_000, **IPOPT_OPTIONS, "iteration_callback": stop,
+                   "error_on_fail": False}
+        solver = ca.nlpsol("manipulation", "ipopt", {"x": w, "p": p, "f": f, "g": g_all},
+                           options)
+        oracle = ca.Function("manipulation_nlp", [w, p], [f, g_all], ["x", "p"], ["f", "g"])
         unpack = ca.Function("unpack", [w], [hs.X, hs.Xm, hs.U, hs.Um, S, Sm, F])
         pack = ca.Function("pack", [hs.X, hs.Xm, hs.U, hs.Um, S, Sm, F], [w])
         params = ca.Function("params", [shape_p, seg_T, goal, vias, charts, weights, ccone,
                                         tol, Pd, Rd], [p])
         nlp = _NLP(solver, stop, hs, unpack, pack, params, np.array(lbg), np.array(ubg),
-                   time.perf_counter() - t0, n_force)
+                   time.perf_counter() - t0, n_force, oracle, options,
+                   _fingerprint(key, int(w.numel()), len(lbg)))
         self._nlps[key] = nlp
         return nlp, False
 
@@ -1146,11 +1179,25 @@ class ManipulationPlanner:
         w0 = nlp.pack((X / x_scale).T, (Xm / x_scale).T, (U / u_scale).T, (Um / u_scale).T,
                       Sg[None, : n + 1], Sg[None, n + 1:], Fg)
         w0 = np.clip(np.asarray(w0).ravel(), lbx, ubx)
+        solver, duals = nlp.solver, {}
+        mult = warm.nlp_point_for(nlp.fingerprint, len(lbx), len(nlp.lbg)) \
+            if warm is not None else None
+        if mult is not None:  # the previous primal-dual point of this very NLP
+            # states and inputs as interpolated above (this problem's scaling), the
+            # epigraph and internal-force variables as they were
+            n_xu = nlp.hs.w.numel()
+            w0[n_xu:] = np.clip(mult.w[n_xu:], lbx[n_xu:], ubx[n_xu:])
+            if nlp.warm_solver is None:
+                t_build = time.perf_counter()
+                nlp.warm_solver = ca.nlpsol("manipulation_warm", "ipopt", nlp.oracle,
+                                            {**nlp.options, **IPOPT_WARM_OPTIONS})
+                build_time += time.perf_counter() - t_build
+            solver, duals = nlp.warm_solver, {"lam_x0": mult.lam_x, "lam_g0": mult.lam_g}
         nlp.stop.arm(deadline, problem.options.max_iter)
         t_solve = time.perf_counter()
-        res = nlp.solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=nlp.lbg, ubg=nlp.ubg)
+        res = solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=nlp.lbg, ubg=nlp.ubg, **duals)
         solve_time = time.perf_counter() - t_solve
-        stats = nlp.solver.stats()
+        stats = solver.stats()
         raw = str(stats["return_status"])
         status = nlp.stop.reason if raw == "User_Requested_Stop" and nlp.stop.reason \
             else status_from_ipopt(raw)
@@ -1158,8 +1205,12 @@ class ManipulationPlanner:
         X, Xm = Xs.T * x_scale, Xms.T * x_scale
         Ucols, Um = Us.T * u_scale, Ums.T * u_scale
         U0, U1 = Ucols[nlp.hs.left_cols], Ucols[nlp.hs.right_cols]
-        return self._solution(problem, m, status, raw, int(stats["iter_count"]), build_time,
-                              solve_time, t_nodes, X, Xm, U0, Um, U1, prm)
+        sol = self._solution(problem, m, status, raw, int(stats["iter_count"]), build_time,
+                             solve_time, t_nodes, X, Xm, U0, Um, U1, prm)
+        point = [np.asarray(res[k]).ravel() for k in ("x", "lam_x", "lam_g")]
+        if not all(np.all(np.isfinite(a)) for a in point):
+            return sol
+        return replace(sol, nlp_point=NlpPoint(nlp.fingerprint, *point))
 
     # ...................................................................................
     @staticmethod

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .collocation import WarmStart
+from .collocation import NlpPoint, WarmStart
 from .manipulation import (
     Fingertip,
     ManipulationPlanner,
@@ -127,6 +127,8 @@ class OneFingerSolution:
     #: Grid doublings after the first solve (the returned plan has 2**refinements times the
     #: requested intervals).
     refinements: int = 0
+    #: IPOPT's primal-dual point at this plan, for a warm start of the same NLP.
+    nlp_point: NlpPoint | None = field(default=None, repr=False)
 
     @property
     def ok(self) -> bool:
@@ -137,7 +139,7 @@ class OneFingerSolution:
         """This plan as the initial guess of another: states (eta_p, eta_f, q) and inputs
         (w_p, w_f, q_dot) at its collocation points."""
         return WarmStart(self.t, np.hstack([self.eta_p, self.eta_f, self.q]),
-                         np.hstack([self.w_p, self.w_f, self.q_dot]))
+                         np.hstack([self.w_p, self.w_f, self.q_dot]), self.nlp_point)
 
 
 #: Certificate keys of the general planner -> this planner's names.
@@ -238,4 +240,4 @@ class OneFingerPlanner:
             goal_error={k.removeprefix("palm."): v for k, v in sol.goal_error.items()},
             certificate=cert,
             certificate_failures=tuple(_rename(f) for f in sol.certificate_failures),
-            refinements=sol.refinements)
+            refinements=sol.refinements, nlp_point=sol.nlp_point)

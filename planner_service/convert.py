@@ -44,6 +44,7 @@ from dexroll_client.models import (
     ManipulationStatsModel,
     ManipulationTrajectoryModel,
     MotionSamplesModel,
+    NlpPointModel,
     OneFingerRequest,
     PlanRequest,
     PlanResult,
@@ -54,7 +55,7 @@ from dexroll_client.models import (
 )
 from ocp.ball_on_palm import BallOnPalmPlanner, object_pose
 from ocp.ball_on_palm import plan as plan_ball_on_palm
-from ocp.collocation import WarmStart
+from ocp.collocation import NlpPoint, WarmStart
 from ocp.finger import FingerModel, load_finger
 from ocp.greedy import GreedyResult, greedy_plan
 from ocp.hands import Hand, load_hand
@@ -509,8 +510,11 @@ def _collocation(ws: WarmStart, names: tuple[list[str], list[str]]
         return None
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
         return None
+    pt = ws.nlp_point
+    point = None if pt is None else NlpPointModel(
+        nlp=pt.nlp, w=pt.w.tolist(), lam_x=pt.lam_x.tolist(), lam_g=pt.lam_g.tolist())
     return CollocationModel(t=_rows(t), x=_rows(x), u=_rows(u), state_names=states,
-                            input_names=inputs)
+                            input_names=inputs, nlp_point=point)
 
 
 def warm_start_of(request: PlanRequest) -> WarmStart | None:
@@ -525,7 +529,11 @@ def warm_start_of(request: PlanRequest) -> WarmStart | None:
                                                   "(POST /v1/plans); here give the plan "
                                                   "itself: `t`, `x`, `u` (a result's "
                                                   "`collocation` block)")])
-    return WarmStart.of(ws.t, ws.x, ws.u)
+    pt = ws.nlp_point
+    point = None if pt is None else NlpPoint(pt.nlp, np.asarray(pt.w, dtype=float),
+                                             np.asarray(pt.lam_x, dtype=float),
+                                             np.asarray(pt.lam_g, dtype=float))
+    return WarmStart.of(ws.t, ws.x, ws.u, point)
 
 
 def _names_mismatch(given: Sequence[str], expected: Sequence[str]) -> str:

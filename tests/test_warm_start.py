@@ -37,6 +37,7 @@ from dexroll_client import (
     PlanStatus,
     WarmStartModel,
 )
+from ocp.collocation import NlpPoint, WarmStart
 from ocp.manipulation import ManipulationProblem
 from planner_service.app import resolve_warm_start, submission_errors
 from planner_service.cli import main as cli_main
@@ -196,6 +197,19 @@ def test_a_one_finger_plan_warm_starts_a_nearby_one_through_the_conversion() -> 
     assert abs(warm.trajectory.eta_p[-1][0] - goal_x) <= GOAL_TOL
     assert_close(warm.trajectory.eta_p[0], [ROLL["initial"][k] for k in
                                             ("x", "y", "u", "v", "psi")], atol=1e-9)
+    # the collocation block carries IPOPT's primal-dual point of this NLP: a nearby problem
+    # of the same NLP starts from it, and an interior-point method then needs fewer
+    # iterations than from the planner's own guess
+    assert c.nlp_point is not None
+    assert len(c.nlp_point.w) == len(c.nlp_point.lam_x) > 0 and len(c.nlp_point.lam_g) > 0
+    nearby.pop("warm_start")
+    cold, _ = solve(REQUEST.validate_python(nearby), fingers=cache)
+    assert cold.status is PlanStatus.SOLVED and cold.stats is not None
+    assert warm.stats is not None and warm.stats.iterations < cold.stats.iterations
+    assert warm.stats.refinements == cold.stats.refinements == 0
+    # both are the same optimum (IPOPT's tolerance): the same plan to well below a micron
+    assert_close(np.array(warm.trajectory.eta_p), np.array(cold.trajectory.eta_p),
+                 atol=1e-6)
 
     # a ball-on-palm plan does not fit a one-finger request: named, nothing solved
     palm_plan = {"t": c.t, "x": [row[:5] for row in c.x], "u": [row[:2] for row in c.u],
@@ -208,6 +222,19 @@ def test_a_one_finger_plan_warm_starts_a_nearby_one_through_the_conversion() -> 
     # the greedy method takes no initial guess
     greedy = REQUEST.validate_python({**ROLL, "method": "greedy", "warm_start": c.model_dump()})
     assert "greedy" in dict(request_errors(greedy, cache))["warm_start"]
+
+
+def test_a_primal_dual_point_is_used_only_by_its_own_nlp() -> None:
+    point = NlpPoint("nlp-a", np.zeros(4), np.zeros(4), np.zeros(3))
+    ws = WarmStart.of([0.0, 1.0], np.zeros((2, 2)), np.zeros((2, 1)), point)
+    assert ws.nlp_point_for("nlp-a", 4, 3) is point
+    assert ws.nlp_point_for("nlp-b", 4, 3) is None  # another structure or grid
+    assert ws.nlp_point_for("nlp-a", 5, 3) is None  # sizes that do not fit
+    assert ws.nlp_point_for("nlp-a", 4, 2) is None
+    bad = WarmStart.of([0.0, 1.0], np.zeros((2, 2)), np.zeros((2, 1)),
+                       NlpPoint("nlp-a", np.zeros(4), np.array([0.0, np.nan, 0, 0]),
+                                np.zeros(3)))
+    assert [f for f, _ in bad.errors("warm_start", 2, 1)] == ["warm_start.nlp_point.lam_x"]
 
 
 def test_manipulation_columns_follow_the_planners_layout() -> None:

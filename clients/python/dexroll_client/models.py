@@ -32,6 +32,7 @@ __all__ = [
     "MAX_FINGER_JOINTS",
     "MAX_INTERVALS",
     "MAX_MOTION_KNOTS",
+    "MAX_NLP_POINT",
     "MAX_POSITION",
     "MAX_SAMPLES",
     "MAX_URDF_CHARS",
@@ -73,6 +74,7 @@ __all__ = [
     "MotionStepModel",
     "MotionStepsModel",
     "MountModel",
+    "NlpPointModel",
     "ObjectInfo",
     "ObjectModel",
     "ObjectPoseModel",
@@ -196,6 +198,32 @@ WarmRows = list[Annotated[list[WarmValue], Field(min_length=1,
 ColumnNames = list[Annotated[str, Field(min_length=1, max_length=200)]]
 
 
+#: Entries of a warm start's primal-dual point (the largest NLP's variables or constraints).
+MAX_NLP_POINT = 500_000
+
+
+class NlpPointModel(_Request):
+    """IPOPT's primal-dual point at a plan, in the NLP's own (scaled) order: meaningful only
+    to an NLP with the same fingerprint ``nlp`` (the same planner structure, grid and
+    finger models), which a warm start from it then starts from (a few IPOPT iterations
+    for a nearby problem instead of a cold solve's); ignored by any other NLP. Opaque:
+    pass it back as it came."""
+
+    nlp: str = Field(min_length=1, max_length=200, description="fingerprint of the NLP")
+    w: list[float] = Field(max_length=MAX_NLP_POINT, description="decision variables")
+    lam_x: list[float] = Field(max_length=MAX_NLP_POINT,
+                               description="multipliers of the variable bounds")
+    lam_g: list[float] = Field(max_length=MAX_NLP_POINT,
+                               description="multipliers of the constraints")
+
+    @model_validator(mode="after")
+    def _sizes(self) -> NlpPointModel:
+        if len(self.lam_x) != len(self.w):
+            raise ValueError(f"`lam_x` must have one entry per entry of `w` ({len(self.w)}), "
+                             f"got {len(self.lam_x)}")
+        return self
+
+
 class WarmStartModel(_Request):
     """A previous plan as the initial guess of this one: either ``job_id`` (a finished job
     of this service, with the same planner, whose result has a ``collocation`` block) or
@@ -235,6 +263,10 @@ class WarmStartModel(_Request):
         default=None, max_length=MAX_WARM_START_COLUMNS,
         description="optional: the names of the columns of `u` (a result's "
                     "`collocation.input_names`); when given they must be this request's")
+    nlp_point: NlpPointModel | None = Field(
+        default=None, description="optional: IPOPT's primal-dual point at that plan (a "
+                                  "result's `collocation.nlp_point`), used when this "
+                                  "request has the same NLP")
 
     @field_validator("t")
     @classmethod
@@ -282,7 +314,8 @@ class WarmStartModel(_Request):
     @model_validator(mode="after")
     def _one_form(self) -> WarmStartModel:
         inline = [k for k in ("t", "x", "u") if getattr(self, k) is not None]
-        named = self.state_names is not None or self.input_names is not None
+        named = self.state_names is not None or self.input_names is not None \
+            or self.nlp_point is not None
         if self.job_id is not None:
             if inline or named:
                 raise ValueError("give either `job_id` or the plan's `t`, `x`, `u`, not both")
@@ -308,7 +341,7 @@ class WarmStartModel(_Request):
             raise ValueError("the result has no `collocation` block to warm-start from"
                              + (f" (its status: {status})" if status is not None else ""))
         return cls(t=c.t, x=c.x, u=c.u, state_names=c.state_names,
-                   input_names=c.input_names)
+                   input_names=c.input_names, nlp_point=c.nlp_point)
 
 
 WARM_START_DESCRIPTION = (
@@ -870,6 +903,11 @@ class CollocationModel(_Response):
     state_names: list[str] = Field(description="the name of each column of `x` (see the "
                                                "model's description for the layout)")
     input_names: list[str] = Field(description="the name of each column of `u`")
+    nlp_point: NlpPointModel | None = Field(
+        default=None, description="IPOPT's primal-dual point at this plan (null for the "
+                                  "ball-on-palm planner, whose few iterations it would not "
+                                  "shorten): a warm start of a request with the same NLP "
+                                  "starts from it")
 
 
 COLLOCATION_DESCRIPTION = (
