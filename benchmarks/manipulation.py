@@ -33,7 +33,7 @@ from typing import Any
 
 import casadi as ca
 
-import ocp.manipulation as manipulation
+import ocp.nlp_blocks as nlp_blocks
 from ocp.hands import load_hand
 from ocp.manipulation import (
     DesiredMotion,
@@ -163,7 +163,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
     for item in args.ipopt:
         key, _, value = item.partition("=")
         overrides[f"ipopt.{key.removeprefix('ipopt.')}"] = _option_value(value)
-    manipulation.IPOPT_OPTIONS = {**manipulation.IPOPT_OPTIONS, **overrides}
+    nlp_blocks.IPOPT_OPTIONS = {**nlp_blocks.IPOPT_OPTIONS, **overrides}
     cases = [c for c in args.cases.split(",") if c]
     unknown = sorted(set(cases) - set(CASES))
     if unknown:
@@ -172,7 +172,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
     meta = {"date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "cpus": os.cpu_count(), "python": platform.python_version(),
             "casadi": ca.__version__, "repeats": args.repeats,
-            "mumps_pivot_order": manipulation.IPOPT_OPTIONS["ipopt.mumps_pivot_order"],
+            "mumps_pivot_order": nlp_blocks.IPOPT_OPTIONS["ipopt.mumps_pivot_order"],
             "ipopt_overrides": overrides}
     args.out.mkdir(parents=True, exist_ok=True)
     suffix = "" if args.mumps_pivot_order is None else f"_pivot{args.mumps_pivot_order}"

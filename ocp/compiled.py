@@ -23,7 +23,7 @@ from typing import Any
 
 import casadi as ca
 
-__all__ = ["compiled_solver"]
+__all__ = ["compiled_block_solver", "compiled_solver"]
 
 _CWD_LOCK = threading.Lock()
 DEFAULT_FLAGS = ("-O1",)
@@ -63,10 +63,69 @@ def compiled_solver(solver: ca.Function, key: str, options: dict[str, Any],
         library = cache_dir / f"{digest.hexdigest()[:24]}.so"
         hit = library.exists()
         if not hit:
-            out = Path(tmp) / "lib.so"
-            proc = subprocess.run([compiler, *flags, "-fPIC", "-shared", str(source), "-o",
-                                   str(out)], capture_output=True, text=True, check=False)
-            if proc.returncode != 0:
-                raise RuntimeError(f"{compiler} failed: {proc.stderr[-2000:]}")
-            os.replace(out, library)  # atomic: concurrent processes never see a partial file
+            _compile(source, library, flags, compiler)
     return ca.nlpsol(f"{solver.name()}_compiled", "ipopt", str(library), options), hit
+
+
+def _generate_functions(functions: list[ca.Function], name: str, folder: Path) -> Path:
+    """C for the given functions (one file), written into ``folder`` (see :func:`_generate`
+    for the working directory)."""
+    cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+    for fn in functions:
+        cg.add(fn)
+    with _CWD_LOCK:
+        cwd = Path.cwd()
+        os.chdir(folder)
+        try:
+            cg.generate()
+        finally:
+            os.chdir(cwd)
+    return folder / f"{name}.c"
+
+
+def _compile(source: Path, library: Path, flags: tuple[str, ...], compiler: str) -> None:
+    out = library.with_suffix(".tmp.so")
+    proc = subprocess.run([compiler, *flags, "-fPIC", "-shared", str(source), "-o", str(out)],
+                          capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{compiler} failed: {proc.stderr[-2000:]}")
+    os.replace(out, library)  # atomic: concurrent processes never see a partial file
+
+
+def compiled_block_solver(oracle: ca.Function, options: dict[str, Any], key: str,
+                          cache_dir: Path, flags: tuple[str, ...] = ("-O2",),
+                          compiler: str = "gcc") -> tuple[ca.Function, dict[str, Any]]:
+    """An IPOPT solver of the problem ``oracle`` ((x, p) -> (f, g)) whose derivatives are
+    the functions ``options["jac_g"]`` and ``options["hess_lag"]`` (the block-assembled ones
+    of :mod:`ocp.nlp_blocks`), everything compiled: the problem's own functions (objective,
+    constraints, gradient) and the two derivative functions, each a shared library cached in
+    ``cache_dir`` under the hash of its C. Returns (the solver, its options with the
+    compiled derivative functions). RuntimeError when the compiler is missing or fails."""
+    if shutil.which(compiler) is None:
+        raise RuntimeError(f"no C compiler {compiler!r} on PATH")
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    # the problem as expressions: the generated functions are then named nlp_f, nlp_g, ...
+    # as nlpsol looks them up in a library
+    x = ca.MX.sym("x", oracle.size1_in(0))
+    p = ca.MX.sym("p", oracle.size1_in(1))
+    f, g = oracle(x, p)
+    solver = ca.nlpsol("manipulation_plain", "ipopt", {"x": x, "p": p, "f": f, "g": g},
+                       options)
+    derivatives = [options["jac_g"], options["hess_lag"]]
+    with tempfile.TemporaryDirectory(dir=cache_dir) as tmp:
+        sources = [_generate(solver, "dexroll_nlp", Path(tmp)),
+                   _generate_functions(derivatives, "dexroll_derivatives", Path(tmp))]
+        libraries = []
+        for source in sources:
+            digest = hashlib.sha256()
+            for part in (key, ca.__version__, compiler, *flags):
+                digest.update(part.encode())
+            digest.update(source.read_bytes())
+            library = cache_dir / f"{digest.hexdigest()[:24]}.so"
+            if not library.exists():
+                _compile(source, library, flags, compiler)
+            libraries.append(library)
+    compiled = {**options, **{k: ca.external(fn.name(), str(libraries[1]))
+                              for k, fn in zip(("jac_g", "hess_lag"), derivatives,
+                                               strict=True)}}
+    return ca.nlpsol("manipulation_compiled", "ipopt", str(libraries[0]), compiled), compiled

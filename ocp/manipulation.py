@@ -39,6 +39,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -52,7 +53,6 @@ from .ball_on_palm import (
     model_for,
 )
 from .collocation import (
-    HermiteSimpson,
     NlpPoint,
     WarmStart,
     node_times,
@@ -60,13 +60,14 @@ from .collocation import (
     reintegrator,
 )
 from .contact import ContactPair
-from .grasp import cone_cosine, grasp_angles_numeric, grasp_cosines
-from .ipopt import IPOPT_OPTIONS, IPOPT_WARM_OPTIONS, StopCallback
+from .grasp import cone_cosine, grasp_angles_numeric
+from .ipopt import IPOPT_WARM_OPTIONS
+from .nlp_blocks import NLP as _NLP
+from .nlp_blocks import build_manipulation_nlp
 from .problem import (
     CONTACT_COORDS,
     MAX_INTERVALS,
     MAX_POSITION,
-    PERIODIC,
     BallOnPalmProblem,
     ObjectSpec,
     ProblemError,
@@ -808,27 +809,6 @@ def force_angles(points: FloatArray, normals: FloatArray
 
 # -- the planner -----------------------------------------------------------------------------
 
-@dataclass
-class _NLP:
-    solver: ca.Function
-    stop: StopCallback
-    hs: HermiteSimpson
-    unpack: ca.Function
-    pack: ca.Function
-    params: ca.Function
-    lbg: FloatArray
-    ubg: FloatArray
-    build_time: float
-    n_force: int  # contacts with internal-force variables (0 for two contacts)
-    #: the problem as a function (w, p) -> (f, g), and the options of ``solver``: what the
-    #: warm-start solver is built from, when the first primal-dual warm start comes
-    oracle: ca.Function
-    options: dict[str, Any]
-    #: fingerprint of this NLP (structure, grid, fingers' models), for warm starts
-    fingerprint: str
-    warm_solver: ca.Function | None = None
-
-
 def _charts(problem: ManipulationProblem) -> list[FloatArray]:
     out = [rotation_from_vector(problem.object.chart_rotation)] if problem.palm else []
     return out + [rotation_from_vector(c.chart_rotation) for c in problem.fingers]
@@ -842,13 +822,13 @@ def _goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[int]
     return {f"palm.{k}": v for k, v in out.items()}
 
 
-def _fingerprint(key: tuple[Any, ...], n_x: int, n_g: int) -> str:
+def _fingerprint(key: tuple[Any, ...], m: _Model) -> str:
     """A structure key as a string that another process computes alike: the fingers by
     their models (URDF, tip frame, mount), not by identity."""
     import hashlib
 
     shape, palm, segments, goal_mask, via_masks, fingers, tracking = key
-    parts = [repr((shape, palm, segments, goal_mask, via_masks, tracking, n_x, n_g))]
+    parts = [repr((shape, palm, segments, goal_mask, via_masks, tracking, m.nx, m.nu))]
     for f in fingers:
         parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
                   repr(np.asarray(f.base_rotation).round(12).tolist()),
@@ -859,7 +839,11 @@ def _fingerprint(key: tuple[Any, ...], n_x: int, n_g: int) -> str:
 class ManipulationPlanner:
     """Direct-collocation planner for any grasp (NLPs cached per structure)."""
 
-    def __init__(self) -> None:
+    def __init__(self, compile_dir: Path | None = None) -> None:
+        #: When set, each structure's NLP functions are generated as C, compiled with gcc
+        #: and cached there (:func:`ocp.compiled.compiled_block_solver`): seconds the first
+        #: time, IPOPT about 40 % faster on experiment 1 (docs/performance.md).
+        self.compile_dir = compile_dir
         # keyed by the finger objects themselves (identity; the key keeps them alive)
         self._models: dict[tuple[Any, ...], _Model] = {}
         self._nlps: dict[tuple[Any, ...], _NLP] = {}
@@ -886,131 +870,11 @@ class ManipulationPlanner:
         key = self._structure(problem)
         if key in self._nlps:
             return self._nlps[key], True
-        t0 = time.perf_counter()
-        _, _, segments, goal_mask, via_masks, fingers, tracking = key
+        _, _, segments, goal_mask, via_masks, _, tracking = key
         m = self.model(problem)
-        lay = m.layout
-        nc = m.n_contacts
-        hs = HermiteSimpson(m.nx, m.nu, segments)
-        n = hs.n_intervals
-        npts = 2 * n + 1
-        shape_p = ca.SX.sym("shape", m.surface.n_params)
-        seg_T = ca.SX.sym("seg_T", len(segments))
-        goal = ca.SX.sym("goal", 5)
-        vias = ca.SX.sym("vias", 5, len(via_masks))
-        charts = ca.SX.sym("charts", 9 * nc)
-        weights = ca.SX.sym("weights", 6)  # object, finger contacts, joints, grasp, pos, rot
-        ccone = ca.SX.sym("ccone")
-        tol = ca.SX.sym("tol", 2)
-        Pd = ca.SX.sym("Pd", 3, npts if tracking else 0)
-        Rd = ca.SX.sym("Rd", 9, npts if tracking else 0)
-        prm = ca.vertcat(shape_p, charts)
-        p = ca.vertcat(shape_p, seg_T, goal, ca.vec(vias), charts, weights, ccone, tol,
-                       ca.vec(Pd), ca.vec(Rd))
-        L = ca.mmax(shape_p)
-        T = ca.sum1(seg_T)
-        x_scale = ca.vertcat(*lay.x_scale(L))
-        u_scale = ca.vertcat(*lay.u_scale(L, T))
-        S = ca.SX.sym("S", 1, n + 1)  # grasp epigraph at nodes
-        Sm = ca.SX.sym("Sm", 1, n)  # and midpoints
-        n_force = nc if nc >= 3 else 0
-        F = ca.SX.sym("F", 3 * n_force, npts)  # internal forces (3+ contacts)
-        g: list[Any] = [hs.defects(m.dynamics, prm, x_scale, u_scale, seg_T)]
-        lbg: list[float] = [0.0] * g[0].numel()
-        ubg: list[float] = [0.0] * g[0].numel()
-
-        def add(expr: Any, lo: float, hi: float) -> None:
-            g.append(expr)
-            lbg.extend([lo] * expr.numel())
-            ubg.extend([hi] * expr.numel())
-
-        closure_scale = ca.vertcat(*([1 / L] * 3 + [1.0] * 3) * len(fingers)) \
-            if fingers else ca.SX(0, 1)
-        track_terms: list[Any] = []
-
-        def point(xs: Any, s: Any, col: int, fixed: bool) -> None:
-            cl, P, N, R_po, p_po = m.path(x_scale * xs, prm)
-            if not fixed and fingers:  # eq. 6: each fingertip where its kinematics put it
-                add(closure_scale * cl, 0.0, 0.0)
-            if nc == 2:
-                c1, c2, dist = grasp_cosines(P[:, 0], N[:, 0], P[:, 1], N[:, 1])
-                add(ca.vertcat(c1 - dist * ccone, c2 - dist * ccone) / L, 0.0, math.inf)
-                add(ca.vertcat(s - (1 - c1 / dist), s - (1 - c2 / dist)), 0.0, math.inf)
-            else:
-                from .force_closure import PUSH_FLOOR, internal_force_residuals
-
-                eq, push, norms = internal_force_residuals(
-                    P, N, ca.reshape(F[:, col], 3, nc), L)
-                add(eq, 0.0, 0.0)
-                add(ca.sum1(push) - nc, 0.0, 0.0)
-                # every contact loaded: an unloaded one would sit in its cone for free
-                add(push - PUSH_FLOOR, 0.0, math.inf)
-                add(push - ccone * norms, 0.0, math.inf)
-                add(push - (1 - s) * norms, 0.0, math.inf)
-            if tracking:
-                ep = (p_po - Pd[:, col]) / L
-                er = (3 - ca.trace(ca.reshape(Rd[:, col], 3, 3).T @ R_po)) / 2
-                if not fixed:
-                    add(ca.vertcat(tol[0] - ca.sumsqr(ep), tol[1] - er), 0.0, math.inf)
-                track_terms.append(weights[4] * ca.sumsqr(ep) + weights[5] * er)
-
-        for k in range(n + 1):
-            point(hs.X[:, k], S[k], k, fixed=k == 0)  # node 0 is the given initial grasp
-        for k in range(n):
-            point(hs.Xm[:, k], Sm[k], n + 1 + k, fixed=False)
-
-        def target(x_node: Any, value: Any, mask: tuple[bool, ...]) -> None:
-            for i, on in enumerate(mask):
-                if on:
-                    r = 2 * ca.sin((x_node[i] - value[i]) / 2) if PERIODIC[i] else \
-                        x_node[i] - value[i] / x_scale[i]
-                    add(r, 0.0, 0.0)
-
-        ends = hs.segment_end_nodes
-        for j, vmask in enumerate(via_masks):
-            target(hs.X[:, ends[j]], vias[:, j], vmask)
-        target(hs.X[:, ends[-1]], goal, goal_mask)
-
-        us = ca.SX.sym("us", m.nu)
-        xs_ = ca.SX.sym("xs", m.nx)
-        parts = ([list(range(lay.n_obj_u))],
-                 [list(range(lay.u_w(i).start, lay.u_w(i).stop)) for i in range(len(fingers))],
-                 [list(range(lay.u_qd(i).start, lay.u_qd(i).stop))
-                  for i in range(len(fingers))])
-        f: Any = 0
-        for i, groups in enumerate(parts):
-            idx = [j for grp in groups for j in grp]
-            if idx:
-                term = ca.Function(f"effort{i}", [xs_, us], [ca.sumsqr(us[idx])])
-                f += weights[i] * hs.simpson(term, seg_T / T)
-        steps = hs.steps(seg_T / T)
-        for k, h in enumerate(steps):
-            f += weights[3] * h / 6 * (S[k] + 4 * Sm[k] + S[k + 1])
-            if tracking:
-                f += h / 6 * (track_terms[k] + 4 * track_terms[n + 1 + k]
-                              + track_terms[k + 1])
-
-        if n_force:
-            # The internal forces that certify a grasp form a cone of dimension 3n - 6 - 1;
-            # a small penalty on their size picks one, so that IPOPT does not wander along
-            # flat directions (the grasp term only sees the worst force angle).
-            f += FORCE_REGULARISATION * ca.sumsqr(F) / (npts * n_force)
-        w = ca.vertcat(hs.w, S.T, Sm.T, ca.vec(F))
-        g_all = ca.vertcat(*g)
-        stop = StopCallback(w.numel(), g_all.numel(), p.numel())
-        options = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
-                   "ipopt.max_iter": 100_000, **IPOPT_OPTIONS, "iteration_callback": stop,
-                   "error_on_fail": False}
-        solver = ca.nlpsol("manipulation", "ipopt", {"x": w, "p": p, "f": f, "g": g_all},
-                           options)
-        oracle = ca.Function("manipulation_nlp", [w, p], [f, g_all], ["x", "p"], ["f", "g"])
-        unpack = ca.Function("unpack", [w], [hs.X, hs.Xm, hs.U, hs.Um, S, Sm, F])
-        pack = ca.Function("pack", [hs.X, hs.Xm, hs.U, hs.Um, S, Sm, F], [w])
-        params = ca.Function("params", [shape_p, seg_T, goal, vias, charts, weights, ccone,
-                                        tol, Pd, Rd], [p])
-        nlp = _NLP(solver, stop, hs, unpack, pack, params, np.array(lbg), np.array(ubg),
-                   time.perf_counter() - t0, n_force, oracle, options,
-                   _fingerprint(key, int(w.numel()), len(lbg)))
+        nlp = build_manipulation_nlp(m, segments, goal_mask, via_masks, tracking,
+                                     FORCE_REGULARISATION, _fingerprint(key, m),
+                                     self.compile_dir)
         self._nlps[key] = nlp
         return nlp, False
 
@@ -1131,20 +995,16 @@ class ManipulationPlanner:
         return (np.asarray(lay.x_scale(L), dtype=float),
                 np.asarray(lay.u_scale(L, T), dtype=float))
 
-    def _solve_once(self, problem: ManipulationProblem, x0: FloatArray,
-                    warm: WarmStart | None, deadline: float
-                    ) -> ManipulationSolution:
-        nlp, hit = self._build(problem)
-        build_time = 0.0 if hit else nlp.build_time
-        m = self.model(problem)
-        x_scale, u_scale = self._scales(problem, m)
+    @staticmethod
+    def parameters(problem: ManipulationProblem, nlp: _NLP) -> FloatArray:
+        """The NLP parameter vector of a problem (its structure's NLP ``nlp``): object,
+        segment durations, palm goal and via-points, charts, weights, cone, tracking
+        tolerances and the desired poses at every collocation point."""
         segments, tb = problem.segments()
         t_nodes = node_times(segments, tb)
-        n = len(t_nodes) - 1
         tm = (t_nodes[:-1] + t_nodes[1:]) / 2
         charts = _charts(problem)
         shape = np.asarray(problem.object.dimensions, dtype=float)
-        prm = m.params(shape, charts)
         L = problem.object.length_scale
         goal = np.zeros(5)
         vias = np.zeros((5, 0))
@@ -1165,9 +1025,24 @@ class ManipulationPlanner:
             Pd_, Rd_ = Pd.T, Rd.transpose(0, 2, 1).reshape(-1, 9).T  # column-major vec
         else:
             Pd_, Rd_ = np.zeros((3, 0)), np.zeros((9, 0))
-        p = nlp.params(shape, np.diff(tb), goal, vias, np.concatenate(
+        return np.asarray(nlp.params(shape, np.diff(tb), goal, vias, np.concatenate(
             [R.ravel(order="F") for R in charts]), weights, cone_cosine(problem.mu), tol,
-            Pd_, Rd_)
+            Pd_, Rd_)).ravel()
+
+    def _solve_once(self, problem: ManipulationProblem, x0: FloatArray,
+                    warm: WarmStart | None, deadline: float
+                    ) -> ManipulationSolution:
+        nlp, hit = self._build(problem)
+        build_time = 0.0 if hit else nlp.build_time
+        m = self.model(problem)
+        x_scale, u_scale = self._scales(problem, m)
+        segments, tb = problem.segments()
+        t_nodes = node_times(segments, tb)
+        n = len(t_nodes) - 1
+        charts = _charts(problem)
+        shape = np.asarray(problem.object.dimensions, dtype=float)
+        prm = m.params(shape, charts)
+        p = self.parameters(problem, nlp)
         lbx, ubx = self._bounds(problem, nlp, m, x0, x_scale, u_scale)
         if warm is None:
             X, Xm, U, Um = self._guess(problem, m, nlp, x0, t_nodes)

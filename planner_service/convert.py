@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -118,8 +119,10 @@ class FingerCache:
     which bounds the memory. Thread-safe (one lock for loading and checking).
     """
 
-    def __init__(self, max_fingers: int = 16) -> None:
+    def __init__(self, max_fingers: int = 16, compile_dir: Path | None = None) -> None:
         self.max_fingers = max_fingers
+        #: where the finger planners compile and cache their NLPs (None: not compiled)
+        self.compile_dir = compile_dir
         self.lock = threading.RLock()
         self._fingers: dict[tuple[Any, ...], FingerModel] = {}
         self._hands: dict[tuple[Any, ...], Hand] = {}
@@ -130,7 +133,7 @@ class FingerCache:
         """The process's one-finger planner (its NLP cache lives as long as the fingers)."""
         with self.lock:
             if self._planner is None:
-                self._planner = OneFingerPlanner()
+                self._planner = OneFingerPlanner(ManipulationPlanner(self.compile_dir))
             return self._planner
 
     @property

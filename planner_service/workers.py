@@ -69,8 +69,9 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
         logging.basicConfig(level=logging.INFO,
                             format="%(asctime)s %(levelname)s [worker %(process)d] %(name)s: "
                                    "%(message)s")
-    palm = BallOnPalmPlanner(compile_dir=None if compile_dir is None else Path(compile_dir))
-    fingers = FingerCache()
+    compiled = None if compile_dir is None else Path(compile_dir)
+    palm = BallOnPalmPlanner(compile_dir=compiled)
+    fingers = FingerCache(compile_dir=compiled)
     if warmup:
         from .warmup import request_files, warm_up
 

@@ -236,11 +236,11 @@ def test_one_finger_on_palm_is_unchanged_by_the_generalisation(
     now starts a monotone barrier at 1e-3, which converges to the same optimum within
     IPOPT's tolerance but not to these digits)."""
     import ocp.ball_on_palm
-    import ocp.manipulation
+    import ocp.nlp_blocks
 
-    then = {k: v for k, v in ocp.manipulation.IPOPT_OPTIONS.items() if k != "ipopt.mu_init"}
+    then = {k: v for k, v in ocp.nlp_blocks.IPOPT_OPTIONS.items() if k != "ipopt.mu_init"}
     then["ipopt.mu_strategy"] = "adaptive"
-    monkeypatch.setattr(ocp.manipulation, "IPOPT_OPTIONS", then)
+    monkeypatch.setattr(ocp.nlp_blocks, "IPOPT_OPTIONS", then)
     monkeypatch.setattr(ocp.ball_on_palm, "IPOPT_OPTIONS", then)
     planner = ManipulationPlanner()
     ref = np.load(DATA / "one_finger_roll_30c6ac4.npz")

@@ -1,0 +1,119 @@
+"""The block-assembled derivatives of the manipulation NLP (ocp.nlp_blocks) are the NLP's
+own: its constraint Jacobian and the Hessian of its Lagrangian equal CasADi's derivatives
+of the same (f, g) at random points, for every kind of grasp (a palm with via-points and a
+finger; two fingers tracking a motion; three fingers with internal forces), and the
+compiled NLP gives the same plan as the virtual machine's."""
+
+from __future__ import annotations
+
+import math
+import shutil
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import pytest
+from helpers import assert_close
+from test_manipulation import OBJ, one_finger_roll, two_fingers
+
+from ocp.hands import load_hand
+from ocp.manipulation import (
+    DesiredMotion,
+    ManipulationPlanner,
+    ManipulationProblem,
+    MotionStep,
+    ObjectPose,
+    Tracking,
+    hand_fingertips,
+)
+from ocp.one_finger import OneFingerPlanner
+from ocp.problem import ViaPoint
+from ocp.solution import Status
+
+
+def palm_with_via_points() -> ManipulationProblem:
+    problem = OneFingerPlanner.manipulation_problem(one_finger_roll())
+    assert problem.palm is not None
+    palm = replace(problem.palm, goal={"x": 0.0, "y": 0.0},
+                   via_points=(ViaPoint(0.7, {"x": 0.008}), ViaPoint(1.4, {"y": 0.006})))
+    return replace(problem, palm=palm, n_intervals=6)
+
+
+def three_fingers() -> ManipulationProblem:
+    hand = load_hand("three_finger")
+    start = ObjectPose(position=hand.nominal_object_position)
+    return ManipulationProblem(
+        OBJ, hand_fingertips(hand, start, OBJ), 2.0, initial_pose=start,
+        motion=DesiredMotion.from_steps(start, [MotionStep(2.0, (1.0, 0.0, 1.0),
+                                                           math.radians(20.0))]),
+        tracking=Tracking(position_tolerance=1e-3, orientation_tolerance=math.radians(1.0)),
+        n_intervals=4)
+
+
+CASES = {"palm_via_points": palm_with_via_points, "two_fingers_tracking":
+         lambda: two_fingers(n=4), "three_fingers_forces": three_fingers}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_block_jacobian_and_hessian_are_the_nlps_own(name: str) -> None:
+    problem = CASES[name]()
+    planner = ManipulationPlanner()
+    nlp, _ = planner._build(problem)
+    p = planner.parameters(problem, nlp)
+    nw, ng = nlp.pack.nnz_out(0), len(nlp.lbg)
+    w, lam_g = ca.MX.sym("w", nw), ca.MX.sym("lam_g", ng)
+    lam_f = ca.MX.sym("lam_f")
+    f, g = nlp.oracle(w, p)
+    reference = ca.Function("reference", [w, lam_f, lam_g],
+                            [ca.jacobian(g, w), ca.triu(ca.hessian(lam_f * f
+                                                                   + ca.dot(lam_g, g), w)[0])])
+    x0 = planner.initial_state(problem)
+    rng = np.random.default_rng(7)
+    m = planner.model(problem)
+    scale = np.asarray(m.layout.x_scale(problem.object.length_scale), dtype=float)
+    n_x, n_xm = nlp.hs.X.numel(), nlp.hs.Xm.numel()
+    for _ in range(2):
+        w0 = 0.1 * rng.normal(size=nw)
+        # states near the initial grasp (the contact charts stay away from their poles)
+        for start, count in ((0, problem.n_intervals + 1), (n_x, problem.n_intervals)):
+            X = np.tile(x0, (count, 1)) + 0.05 * rng.normal(size=(count, len(x0)))
+            w0[start:start + count * len(x0)] = (X / scale).ravel()
+        assert n_x + n_xm <= nw
+        lf, lg = 1.3, rng.normal(size=ng)
+        J_ref, H_ref = (np.asarray(ca.DM(a).full()) for a in reference(w0, lf, lg))
+        _, J = nlp.options["jac_g"](w0, p)
+        H = nlp.options["hess_lag"](w0, p, lf, lg)
+        J, H = np.asarray(ca.DM(J).full()), np.asarray(ca.DM(H).full())
+        assert np.all(np.isfinite(J_ref)) and np.all(np.isfinite(H_ref))
+        assert_close(J, J_ref, atol=1e-9 * max(1.0, float(np.abs(J_ref).max())))
+        assert_close(H, H_ref, atol=1e-9 * max(1.0, float(np.abs(H_ref).max())))
+        # and the constraint values that come with the Jacobian are g itself
+        g_ref = np.asarray(nlp.oracle(w0, p)[1]).ravel()
+        assert_close(np.asarray(nlp.options["jac_g"](w0, p)[0]).ravel(), g_ref, atol=0.0)
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
+def test_the_compiled_nlp_plans_what_the_virtual_machine_plans(tmp_path: Path) -> None:
+    problem = palm_with_via_points()
+    plain: Any = ManipulationPlanner().solve(problem)
+    compiled_planner = ManipulationPlanner(compile_dir=tmp_path)
+    compiled = compiled_planner.solve(problem)
+    nlp, _ = compiled_planner._build(problem)
+    assert nlp.compiled
+    assert plain.status is compiled.status is Status.SOLVED
+    assert not compiled.certificate_failures
+    assert_close(compiled.X, plain.X, atol=1e-8)
+    # two libraries per structure (problem functions, block derivatives; a refined grid
+    # is another structure) are cached on disk, and a second planner (another process,
+    # say) loads them instead of compiling again
+    libraries = sorted(p for p in tmp_path.iterdir() if p.is_file())
+    assert {p.suffix for p in libraries} == {".so"}
+    assert len(libraries) == 2 * (1 + compiled.refinements)
+    stamps = [p.stat().st_mtime_ns for p in libraries]
+    again = ManipulationPlanner(compile_dir=tmp_path)
+    again.prepare(problem)
+    assert again._build(problem)[0].compiled
+    assert sorted(p for p in tmp_path.iterdir() if p.is_file()) == libraries
+    assert [p.stat().st_mtime_ns for p in libraries] == stamps
