@@ -1,6 +1,7 @@
 """Benchmark of the manipulation planner (fingers, with or without a palm).
 
-Cases: the paper's experiment 1 (palm + one finger, 60 intervals), experiment 2 (two
+Cases: the paper's experiment 1 (palm + one finger, 60 intervals as in its script, and
+50: the planners' default grid), experiment 2 (two
 fingers, 40 intervals), and the three-finger hand turning the ball 30 deg about a tilted
 axis (20 intervals) and 90 deg about z (30 intervals). For each case:
 
@@ -28,6 +29,7 @@ import statistics
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -80,15 +82,17 @@ def _three(angle_deg: float, axis: tuple[float, float, float], duration: float,
 
 CASES: dict[str, Callable[[], ManipulationProblem]] = {
     "exp1_one_finger": lambda: _experiment("experiment1"),
+    # the same at the planners' default grid (a request's default n_intervals)
+    "exp1_one_finger_N50": lambda: replace(_experiment("experiment1"), n_intervals=50),
     "exp2_two_fingers": lambda: _experiment("experiment2"),
     "three_30_tilted": lambda: _three(30.0, (1.0, 0.0, 1.0), 2.0, 20),
     "three_90_z": lambda: _three(90.0, (0.0, 0.0, 1.0), 3.0, 30),
 }
 
 
-def run_case(name: str, repeats: int) -> dict[str, Any]:
+def run_case(name: str, repeats: int, compile_dir: Path | None = None) -> dict[str, Any]:
     problem = CASES[name]()
-    planner = ManipulationPlanner()
+    planner = ManipulationPlanner(compile_dir=compile_dir)
     t0 = time.perf_counter()
     first = planner.solve(problem)
     first_wall = time.perf_counter() - t0
@@ -156,6 +160,9 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
                         help="override an IPOPT option for the run, e.g. "
                              "mu_strategy=adaptive (repeatable)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--compile-dir", type=Path, default=None,
+                        help="compile the NLPs (C, gcc) and cache them here; the build column "
+                             "then includes the compile unless the cache has them")
     args = parser.parse_args(argv)
     overrides: dict[str, Any] = {}
     if args.mumps_pivot_order is not None:
@@ -168,16 +175,17 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, Any]]:
     unknown = sorted(set(cases) - set(CASES))
     if unknown:
         parser.error(f"unknown cases {unknown}; known: {sorted(CASES)}")
-    rows = [run_case(c, args.repeats) for c in cases]
+    rows = [run_case(c, args.repeats, args.compile_dir) for c in cases]
     meta = {"date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "cpus": os.cpu_count(), "python": platform.python_version(),
             "casadi": ca.__version__, "repeats": args.repeats,
             "mumps_pivot_order": nlp_blocks.IPOPT_OPTIONS["ipopt.mumps_pivot_order"],
-            "ipopt_overrides": overrides}
+            "ipopt_overrides": overrides, "compiled": args.compile_dir is not None}
     args.out.mkdir(parents=True, exist_ok=True)
     suffix = "" if args.mumps_pivot_order is None else f"_pivot{args.mumps_pivot_order}"
     suffix += "".join(f"_{k.removeprefix('ipopt.')}-{v}" for k, v in overrides.items()
                       if k != "ipopt.mumps_pivot_order")
+    suffix += "_compiled" if args.compile_dir is not None else ""
     (args.out / f"manipulation{suffix}.json").write_text(
         json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n", encoding="utf-8")
     text = markdown(rows, meta)

@@ -731,6 +731,19 @@ class _Model:
         w_ = ca.SX.sym("w", 2)
         self.tip_rates = ca.Function("tip_rates", [e_, w_, shape_p],
                                      [tip.rates_driven_by_a(e_, w_, shape_p, none)])
+        # one RK4 step of a fingertip's pad point and angle (x, y, psi) while its object
+        # point goes from a (rate w0) to the next (rate w1) in time h: the initial guess
+        c_, a_ = ca.SX.sym("c", 3), ca.SX.sym("a", 2)
+        w0_, w1_, h_ = ca.SX.sym("w0", 2), ca.SX.sym("w1", 2), ca.SX.sym("h")
+        e0 = ca.vertcat(a_, c_)  # the pair's order (u, v, x, y, psi)
+        k1 = self.tip_rates(e0, w0_, shape_p)
+        k2 = self.tip_rates(e0 + h_ / 2 * k1, (w0_ + w1_) / 2, shape_p)
+        k3 = self.tip_rates(e0 + h_ / 2 * k2, (w0_ + w1_) / 2, shape_p)
+        k4 = self.tip_rates(e0 + h_ * k3, w1_, shape_p)
+        e1 = e0 + h_ / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        self._roll_step = ca.Function("roll_step", [c_, a_, w0_, w1_, h_, shape_p],
+                                      [e1[2:5]])
+        self._rolls: dict[int, ca.Function] = {}
         xdot = ca.vertcat(*xdot_parts)
         self.dynamics = ca.Function("manipulation_dynamics", [x, u, prm], [xdot],
                                     ["x", "u", "params"], ["x_dot"])
@@ -775,6 +788,13 @@ class _Model:
                       f"pad_point_{i}"]
         self.laws = ca.Function("manipulation_laws", [x, xd, prm], outs,
                                 ["x", "x_dot", "params"], names)
+
+    def roll(self, steps: int) -> ca.Function:
+        """``steps`` RK4 steps of a pad point and angle (:attr:`_roll_step` accumulated):
+        (c0, a (2 x k), w0 (2 x k), w1 (2 x k), h (1 x k), shape (. x k)) -> c (3 x k)."""
+        if steps not in self._rolls:
+            self._rolls[steps] = self._roll_step.mapaccum("roll", steps)
+        return self._rolls[steps]
 
     def params(self, shape: FloatArray, charts: Sequence[FloatArray]) -> FloatArray:
         return np.concatenate([np.asarray(shape, dtype=float),
@@ -1236,19 +1256,12 @@ class ManipulationPlanner:
             rate = (ball_point(ts + dt) - ball_point(ts - dt)) / (2 * dt)
             rate[:, 1] = ((rate[:, 1] * 2 * dt + np.pi) % (2 * np.pi) - np.pi) / (2 * dt)
             ef = np.zeros((len(ts), 5))
+            ef[:, 2:4] = alpha
             ef[0] = c.initial
-            for k in range(len(ts) - 1):
-                h = ts[k + 1] - ts[k]
-                e_k = np.array([alpha[k, 0], alpha[k, 1], ef[k, 0], ef[k, 1], ef[k, 4]])
-                w0_, w1_ = rate[k], rate[k + 1]
-                k1 = np.asarray(m.tip_rates(e_k, w0_, shape)).ravel()
-                k2 = np.asarray(m.tip_rates(e_k + h / 2 * k1, (w0_ + w1_) / 2, shape)).ravel()
-                k3 = np.asarray(m.tip_rates(e_k + h / 2 * k2, (w0_ + w1_) / 2, shape)).ravel()
-                k4 = np.asarray(m.tip_rates(e_k + h * k3, w1_, shape)).ravel()
-                e_next = e_k + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-                ef[k + 1] = [e_next[2], e_next[3], alpha[k + 1, 0], alpha[k + 1, 1],
-                             e_next[4]]
-            ef[0] = c.initial
+            pad = np.asarray(m.roll(len(ts) - 1)(  # the pad point and angle, RK4 steps
+                ef[0, [0, 1, 4]], alpha[:-1].T, rate[:-1].T, rate[1:].T, np.diff(ts)[None],
+                np.tile(shape[:, None], (1, len(ts) - 1)))).T
+            ef[1:, 0:2], ef[1:, 4] = pad[:, 0:2], pad[:, 2]
             X[:, lay.x_eta(i)] = ef
             W[:, lay.u_w(i)] = rate
         # joints by IK along the way, every finger: the pads' poses do not depend on the
