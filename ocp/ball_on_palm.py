@@ -403,7 +403,8 @@ class BallOnPalmPlanner:
         return self._cache[st], hit
 
     def solve(self, problem: BallOnPalmProblem,
-              warm_start: Solution | WarmStart | None = None) -> Solution:
+              warm_start: Solution | WarmStart | None = None, *,
+              certify: bool = True) -> Solution:
         """Plan; raises :class:`ProblemError` (before building anything) on bad input.
 
         ``warm_start``: a previous plan of a similar problem (or its ``warm_start``), tried
@@ -411,6 +412,10 @@ class BallOnPalmPlanner:
         converge from it). When IPOPT converges but the certificate finds the
         discretisation too coarse (state defect), the plan is re-solved on a grid twice as
         fine, warm-started from the coarse one, up to ``problem.max_refinements`` times.
+
+        ``certify=False`` (for a plan that only seeds another planner's initial guess): no
+        certificate and so no refinement; the plan is at best ``INACCURATE`` and its
+        certificate's only failure says that it was not checked.
         """
         problem.validate()
         if isinstance(warm_start, WarmStart):
@@ -420,7 +425,7 @@ class BallOnPalmPlanner:
         deadline = time.perf_counter() + problem.options.time_limit
         iter_budget = problem.options.max_iter
         totals = {"build": 0.0, "solve": 0.0, "cert": 0.0, "iter": 0, "attempts": 0}
-        sol = self._solve_once(problem, warm_start, deadline, iter_budget, totals)
+        sol = self._solve_once(problem, warm_start, deadline, iter_budget, totals, certify)
         refinements = 0
         while (sol.status is Status.INACCURATE and refinements < problem.max_refinements
                and 2 * problem.n_intervals <= MAX_INTERVALS
@@ -437,8 +442,8 @@ class BallOnPalmPlanner:
         return replace(sol, stats=stats)
 
     def _solve_once(self, problem: BallOnPalmProblem, warm: Solution | WarmStart | None,
-                    deadline: float,
-                    iter_budget: int, totals: dict[str, float]) -> Solution:
+                    deadline: float, iter_budget: int, totals: dict[str, float],
+                    certify: bool = True) -> Solution:
         nlp, hit = self.nlp_for(problem)
         build_time = 0.0 if hit else nlp.build_time
         model = model_for(problem.object.shape)
@@ -478,7 +483,7 @@ class BallOnPalmPlanner:
         best = next((a for a in attempts if a["status"] is Status.SOLVED),
                     min(attempts, key=lambda a: a["viol"]))
         sol = self._solution(problem, nlp, model, best, attempts, t_nodes, x_scale, u_scale,
-                             build_time, hit, solve_time)
+                             build_time, hit, solve_time, certify)
         totals["build"] += build_time
         totals["solve"] += solve_time
         totals["cert"] += sol.stats.certificate_time
@@ -518,7 +523,7 @@ class BallOnPalmPlanner:
     def _solution(self, problem: BallOnPalmProblem, nlp: _NLP, model: BallOnPalmModel,
                   best: dict[str, Any], attempts: list[dict[str, Any]], t_nodes: FloatArray,
                   x_scale: FloatArray, u_scale: float, build_time: float, hit: bool,
-                  solve_time: float) -> Solution:
+                  solve_time: float, check: bool = True) -> Solution:
         Xs, Xms, Us, Ums = (np.asarray(a) for a in nlp.unpack(best["w"]))
         X, Xm = (Xs.T * x_scale), (Xms.T * x_scale)
         Ucols, Um = Us.T * u_scale, Ums.T * u_scale
@@ -556,7 +561,9 @@ class BallOnPalmPlanner:
         ends = [0, *np.cumsum(nlp.structure.segments).tolist()]
         goal_error = goal_errors(problem, X, ends)
         t_cert = time.perf_counter()
-        cert = certify(problem, model, t_nodes, X, U0, Um, U1, ends, self.n_sub)
+        cert = certify(problem, model, t_nodes, X, U0, Um, U1, ends, self.n_sub) if check \
+            else Certificate(math.nan, math.nan, math.nan, math.nan, math.nan, math.nan,
+                             0, {}, ("not certified (planned as an initial guess)",))
         cert_time = time.perf_counter() - t_cert
 
         status: Status = best["status"]

@@ -1172,7 +1172,7 @@ class ManipulationPlanner:
         if problem.palm is not None:
             base = problem.palm_problem()
             if base.goal or base.via_points:
-                plan = self._palm.solve(base)
+                plan = self._palm.solve(base, certify=False)  # a guess: no certificate
 
                 def pose(t: FloatArray) -> tuple[FloatArray, FloatArray]:
                     tr = plan.sample(np.clip(t, 0.0, T))

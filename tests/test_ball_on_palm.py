@@ -235,6 +235,16 @@ def test_certificate_is_consistent_with_reported_metrics(triangle_plan: Solution
 
 # -- statuses and the cache ------------------------------------------------------------------
 
+def test_an_uncertified_plan_is_never_called_solved(triangle_plan: Solution) -> None:
+    """certify=False (a plan that only seeds another planner's guess): the same plan, but
+    no certificate, so at best inaccurate, saying why, and never refined."""
+    guess = PLANNER.solve(triangle(), certify=False)
+    assert guess.status is Status.INACCURATE
+    assert guess.certificate.failures == ("not certified (planned as an initial guess)",)
+    assert not guess.certificate.passed and guess.stats.refinements == 0
+    assert_close(guess.grid.eta, triangle_plan.grid.eta, atol=1e-12)
+
+
 def test_iteration_limit_returns_typed_status_and_last_iterate() -> None:
     problem, _ = reorientation(SPHERE, (0.0, 0.0, math.pi / 2))
     sol = PLANNER.solve(replace(problem, options=SolverOptions(max_iter=2)))
