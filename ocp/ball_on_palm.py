@@ -424,7 +424,8 @@ class BallOnPalmPlanner:
                 raise ProblemError(errs)
         deadline = time.perf_counter() + problem.options.time_limit
         iter_budget = problem.options.max_iter
-        totals = {"build": 0.0, "solve": 0.0, "cert": 0.0, "iter": 0, "attempts": 0}
+        totals = {"build": 0.0, "solve": 0.0, "ipopt": 0.0, "cert": 0.0, "iter": 0,
+                  "attempts": 0}
         sol = self._solve_once(problem, warm_start, deadline, iter_budget, totals, certify)
         refinements = 0
         while (sol.status is Status.INACCURATE and refinements < problem.max_refinements
@@ -438,6 +439,7 @@ class BallOnPalmPlanner:
         stats = replace(sol.stats, iterations=int(totals["iter"]),
                         attempts=int(totals["attempts"]), build_time=totals["build"],
                         solve_time=totals["solve"], certificate_time=totals["cert"],
+                        ipopt_time=totals["ipopt"],
                         refinements=refinements)
         return replace(sol, stats=stats)
 
@@ -461,13 +463,16 @@ class BallOnPalmPlanner:
 
         t_nodes = self._node_times(problem, nlp.structure)
         attempts: list[dict[str, Any]] = []
+        ipopt_time = 0.0
         t_solve = time.perf_counter()
         for X, Xm, U, Um in _guesses(model, problem, t_nodes, nlp, warm):
             w0 = nlp.pack((X / x_scale).T, (Xm / x_scale).T, U.T / u_scale, Um.T / u_scale)
             w0 = np.clip(np.asarray(w0).ravel(), lbx, ubx)
             remaining_iter = iter_budget - sum(a["iter"] for a in attempts)
             nlp.stop.arm(deadline, max(1, min(remaining_iter, self.max_iter_per_guess)))
+            t_ipopt = time.perf_counter()
             res = nlp.solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
+            ipopt_time += time.perf_counter() - t_ipopt
             stats = nlp.solver.stats()
             raw = str(stats["return_status"])
             status = nlp.stop.reason if raw == "User_Requested_Stop" and nlp.stop.reason \
@@ -486,6 +491,7 @@ class BallOnPalmPlanner:
                              build_time, hit, solve_time, certify)
         totals["build"] += build_time
         totals["solve"] += solve_time
+        totals["ipopt"] += ipopt_time
         totals["cert"] += sol.stats.certificate_time
         totals["iter"] += sol.stats.iterations
         totals["attempts"] += sol.stats.attempts

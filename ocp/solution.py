@@ -175,6 +175,8 @@ class SolverStats:
     refinements: int = 0
     #: Collocation intervals of the returned plan.
     n_intervals: int = 0
+    #: The IPOPT calls alone [s] (part of ``solve_time``, which includes the guesses).
+    ipopt_time: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)

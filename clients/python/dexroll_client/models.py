@@ -863,6 +863,8 @@ class StatsModel(_Response):
     cache_hit: bool = Field(description="the NLP came from the structure cache")
     refinements: int = Field(description="grid doublings after the first solve")
     n_intervals: int = Field(description="collocation intervals of the returned plan")
+    ipopt_time: float = Field(default=0.0, description="the IPOPT calls alone [s] (part of "
+                                                       "`solve_time`)")
 
 
 class FieldError(_Response):
