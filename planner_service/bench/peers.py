@@ -574,6 +574,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--sizes", default="50,100", help="comma-separated n_intervals")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--methods", default=",".join(("ours", *PEER_METHODS)))
+    parser.add_argument("--rounds", type=int, default=1,
+                        help="run the methods side by side this many times, interleaved, and "
+                             "report the median over rounds (this machine's timing drifts by "
+                             "tens of percent between runs; interleaving compares like with "
+                             "like)")
     args = parser.parse_args(argv)
     planner = BallOnPalmPlanner()
     print("| request | N | method | status | build [ms] | solve [ms] | IPOPT [ms] | wall [ms] "
@@ -583,8 +588,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         data = json.loads(path.read_text())
         for n in (int(v) for v in args.sizes.split(",")):
             request = BallOnPalmRequest.model_validate({**data, "n_intervals": n})
-            rows = compare(request, args.repeats, args.methods.split(","), planner)
+            rounds = [compare(request, args.repeats, args.methods.split(","), planner)
+                      for _ in range(max(1, args.rounds))]
+            rows = rounds[-1]
             for name, r in rows.items():
+                for key in ("solve", "ipopt", "wall", "build"):
+                    r[key] = statistics.median(rnd[name][key] for rnd in rounds)
                 obj = "" if r["objective"] is None else f"{r['objective']:.6g}"
                 ge = "" if r["goal_error"] is None else f"{r['goal_error']:.2g}"
                 print(f"| {path.stem} | {n} | {name} | {r['status']} | {1e3 * r['build']:.1f} "
