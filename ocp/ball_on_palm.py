@@ -30,9 +30,11 @@ from .collocation import (
     HermiteSimpson,
     WarmStart,
     hermite_sample,
+    node_inputs,
     node_times,
     reintegrate,
     reintegrator,
+    target_residuals,
 )
 from .contact import ContactPair
 from .ipopt import IPOPT_OPTIONS, StopCallback
@@ -221,21 +223,10 @@ def _build(st: Structure, compile_dir: Path | None = None) -> _NLP:
 
     g = [hs.defects(model.dynamics, shape_p, x_scale, u_scale, seg_T)]
 
-    def targets(x_node: ca.SX, target: ca.SX, mask: tuple[bool, ...]) -> list[ca.SX]:
-        out = []
-        for i, on in enumerate(mask):
-            if not on:
-                continue
-            if PERIODIC[i]:  # zero iff equal modulo 2 pi, with a non-zero slope there
-                out.append(2 * ca.sin((x_node[i] - target[i]) / 2))
-            else:
-                out.append(x_node[i] - target[i] / x_scale[i])
-        return out
-
     ends = hs.segment_end_nodes
     for j, vmask in enumerate(st.via_masks):
-        g += targets(hs.X[:, ends[j]], vias[:, j], vmask)
-    g += targets(hs.X[:, ends[-1]], goal, st.goal_mask)
+        g += target_residuals(hs.X[:, ends[j]], vias[:, j], vmask, x_scale, PERIODIC)
+    g += target_residuals(hs.X[:, ends[-1]], goal, st.goal_mask, x_scale, PERIODIC)
     g_all = ca.vertcat(*g)
 
     us = ca.SX.sym("us", NU)
@@ -320,10 +311,8 @@ def _simulate_guess(model: BallOnPalmModel, problem: BallOnPalmProblem, t_nodes:
     X = np.vstack([np.asarray(problem.initial, dtype=float), np.asarray(Xn).T])
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
     # node inputs per segment: evaluated just inside the interval they belong to
-    eps = 1e-9 * problem.duration
-    U = np.zeros((n + len(nlp.structure.segments), NU))
-    U[nlp.left_cols] = w_of_t(t_nodes[:-1] + eps).T
-    U[nlp.right_cols] = w_of_t(t_nodes[1:] - eps).T
+    U = node_inputs(lambda ts: w_of_t(ts).T, t_nodes, nlp.left_cols, nlp.right_cols,
+                    n + len(nlp.structure.segments))
     return X, np.asarray(Xm).T, U, w_of_t(tm).T
 
 
@@ -338,12 +327,10 @@ def _guesses(model: BallOnPalmModel, problem: BallOnPalmProblem, t_nodes: FloatA
     :func:`_reference_input`).
     """
     if isinstance(warm, Solution) and abs(float(warm.nodes.t[-1]) - problem.duration) < 1e-9:
-        eps = 1e-9 * problem.duration
         n = len(t_nodes) - 1
         tm = (t_nodes[:-1] + t_nodes[1:]) / 2
-        U = np.zeros((n + len(nlp.structure.segments), NU))
-        U[nlp.left_cols] = warm.sample(t_nodes[:-1] + eps).w
-        U[nlp.right_cols] = warm.sample(t_nodes[1:] - eps).w
+        U = node_inputs(lambda ts: warm.sample(ts).w, t_nodes, nlp.left_cols,
+                        nlp.right_cols, n + len(nlp.structure.segments))
         sm = warm.sample(tm)
         yield warm.sample(t_nodes).eta, sm.eta, U, sm.w
     elif warm is not None:

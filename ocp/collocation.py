@@ -27,8 +27,9 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HermiteSimpson", "NlpPoint", "WarmStart", "hermite_sample", "left_input_columns",
-           "node_times", "quadratic_input", "reintegrate", "reintegrator"]
+__all__ = ["HermiteSimpson", "NlpPoint", "WarmStart", "hermite_sample",
+           "hermite_simpson_defects", "left_input_columns", "node_inputs", "node_times",
+           "quadratic_input", "reintegrate", "reintegrator", "target_residuals"]
 
 
 def left_input_columns(segments: tuple[int, ...]) -> list[int]:
@@ -37,6 +38,37 @@ def left_input_columns(segments: tuple[int, ...]) -> list[int]:
     shifts the columns after it by one."""
     return [k + s for s, n0 in enumerate(segments)
             for k in range(sum(segments[:s]), sum(segments[:s]) + n0)]
+
+
+def node_inputs(u_of_t: Any, t_nodes: NDArray[np.float64], left_cols: list[int],
+                right_cols: list[int], n_cols: int) -> NDArray[np.float64]:
+    """The inputs at the grid's node columns (rows): each interval's start column from
+    ``u_of_t`` (times -> rows) just after its start node, its end column just before its
+    end node, so that an input that jumps at a via-point node gets both sides."""
+    eps = 1e-9 * float(t_nodes[-1])
+    left = np.asarray(u_of_t(t_nodes[:-1] + eps))
+    U = np.zeros((n_cols, left.shape[1]))
+    U[left_cols] = left
+    U[right_cols] = u_of_t(t_nodes[1:] - eps)
+    return U
+
+
+def hermite_simpson_defects(xk: Any, xm: Any, xk1: Any, f0: Any, fm: Any, f1: Any,
+                            h: Any) -> Any:
+    """One interval's Hermite-Simpson defects (2 nx rows): with f0, fm, f1 the state's
+    derivatives at its start, midpoint and end,
+    x_m = (x_k + x_k+1)/2 + h/8 (f0 - f1) and x_k+1 - x_k = h/6 (f0 + 4 fm + f1)."""
+    return ca.vertcat(xm - (xk + xk1) / 2 - h / 8 * (f0 - f1),
+                      xk1 - xk - h / 6 * (f0 + 4 * fm + f1))
+
+
+def target_residuals(x_node: Any, value: Any, mask: tuple[bool, ...], x_scale: Any,
+                     periodic: tuple[bool, ...]) -> list[Any]:
+    """Residuals of a node's scaled state ``x_node`` against the physical ``value`` on the
+    coordinates ``mask`` selects: ``2 sin(d / 2)`` for a periodic coordinate (zero iff equal
+    modulo 2 pi, with a non-zero slope there), else ``x_node - value / x_scale``."""
+    return [2 * ca.sin((x_node[i] - value[i]) / 2) if periodic[i] else
+            x_node[i] - value[i] / x_scale[i] for i, on in enumerate(mask) if on]
 
 
 @dataclass(frozen=True)
@@ -127,10 +159,7 @@ class WarmStart:
                                     for j in range(values.shape[1])])
 
         tm = (t_nodes[:-1] + t_nodes[1:]) / 2
-        eps = 1e-9 * float(t_nodes[-1])
-        U = np.zeros((n_u_cols, u.shape[1]))
-        U[left_cols] = at(u, t_nodes[:-1] + eps)
-        U[right_cols] = at(u, t_nodes[1:] - eps)
+        U = node_inputs(lambda ts: at(u, ts), t_nodes, left_cols, right_cols, n_u_cols)
         return at(self.x, t_nodes), at(self.x, tm), U, at(u, tm)
 
 
@@ -215,8 +244,7 @@ class HermiteSimpson:
                 inv_sx * f(x_scale * xk, u_scale * self.U[:, lc[k]], p)
             f1 = inv_sx * f(x_scale * xk1, u_scale * self.U[:, rc[k]], p)
             fm = inv_sx * f(x_scale * self.Xm[:, k], u_scale * self.Um[:, k], p)
-            out.append(self.Xm[:, k] - (xk + xk1) / 2 - h / 8 * (f0 - f1))
-            out.append(xk1 - xk - h / 6 * (f0 + 4 * fm + f1))
+            out.append(hermite_simpson_defects(xk, self.Xm[:, k], xk1, f0, fm, f1, h))
             f_right = f1
         return ca.vertcat(*out)
 

@@ -55,6 +55,7 @@ from .ball_on_palm import (
 from .collocation import (
     NlpPoint,
     WarmStart,
+    node_inputs,
     node_times,
     reintegrate,
     reintegrator,
@@ -1231,7 +1232,6 @@ class ManipulationPlanner:
         n = len(t_nodes) - 1
         tm = (t_nodes[:-1] + t_nodes[1:]) / 2
         ts = np.sort(np.concatenate([t_nodes, tm]))  # node, mid, node, ...
-        eps = 1e-9 * problem.duration
         Xo, Wo, pose, palm_w = self._object_guess(problem, m, x0, ts, prm)
         cart0 = m.cartesian(x0, prm)
         p_obj0 = np.asarray(cart0[1]).ravel()
@@ -1265,8 +1265,8 @@ class ManipulationPlanner:
             X[:, lay.x_eta(i)] = ef
             W[:, lay.u_w(i)] = rate
         # joints by IK along the way, every finger: the pads' poses do not depend on the
-        # joints (one batched evaluation); each IK is seeded by extrapolating the last two
-        # solutions, so that it takes a step or two
+        # joints (one batched evaluation); one batched IK from the initial grasp's joints,
+        # and a sequential one from the previous point's where that does not converge
         X[0] = x0
         out = m.cartesian.map(len(ts))(X.T, prm)
         R_all = np.asarray(out[2]).reshape(3, len(ts), -1, 3)  # (3, k, finger, 3)
@@ -1285,8 +1285,8 @@ class ManipulationPlanner:
         Ucols[nlp.hs.left_cols] = W[0:-1:2]
         Ucols[nlp.hs.right_cols] = W[2::2]
         if palm_w is not None:  # the palm plan's inputs jump at via-points: both sides
-            Ucols[nlp.hs.left_cols, 0:2] = palm_w(t_nodes[:-1] + eps)
-            Ucols[nlp.hs.right_cols, 0:2] = palm_w(t_nodes[1:] - eps)
+            Ucols[:, 0:2] = node_inputs(palm_w, t_nodes, nlp.hs.left_cols,
+                                        nlp.hs.right_cols, len(Ucols))
         return X[0::2], X[1::2], Ucols, W[1::2]
 
     # ...................................................................................

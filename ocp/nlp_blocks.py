@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from .collocation import HermiteSimpson
+from .collocation import HermiteSimpson, hermite_simpson_defects, target_residuals
 from .grasp import grasp_cosines
 from .ipopt import IPOPT_OPTIONS, StopCallback
 from .problem import PERIODIC
@@ -219,9 +219,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     def fdyn(x_: Any, u_: Any) -> Any:
         return m.dynamics(x_scale * x_, u_scale * u_, prm) / x_scale
 
-    f0, fm, f1 = fdyn(xk, u0), fdyn(xm, um), fdyn(xk1, u1)
-    D = ca.vertcat(xm - (xk + xk1) / 2 - hq / 8 * (f0 - f1),
-                   xk1 - xk - hq / 6 * (f0 + 4 * fm + f1))
+    D = hermite_simpson_defects(xk, xm, xk1, fdyn(xk, u0), fdyn(xm, um), fdyn(xk1, u1), hq)
     groups = ([list(range(lay.n_obj_u))],
               [list(range(lay.u_w(i).start, lay.u_w(i).stop)) for i in range(nf)],
               [list(range(lay.u_qd(i).start, lay.u_qd(i).stop)) for i in range(nf)])
@@ -247,16 +245,9 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     goal_q = ca.SX.sym("goal", 5)
     vias_q = ca.SX.sym("vias", 5, nv)
     tg: list[Any] = []
-
-    def target(x_node: Any, value: Any, mask: tuple[bool, ...]) -> None:
-        for i, on in enumerate(mask):
-            if on:
-                tg.append(2 * ca.sin((x_node[i] - value[i]) / 2) if PERIODIC[i] else
-                          x_node[i] - value[i] / x_scale[i])
-
     for j, vmask in enumerate(via_masks):
-        target(xe[:, j], vias_q[:, j], vmask)
-    target(xe[:, nseg - 1], goal_q, goal_mask)
+        tg += target_residuals(xe[:, j], vias_q[:, j], vmask, x_scale, PERIODIC)
+    tg += target_residuals(xe[:, nseg - 1], goal_q, goal_mask, x_scale, PERIODIC)
     Gt = ca.vertcat(*tg) if tg else ca.SX(0, 1)
     lam_t = ca.SX.sym("lam", Gt.numel())
     ze = ca.vec(xe)
