@@ -18,6 +18,8 @@ import shutil
 import subprocess
 import tempfile
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -29,18 +31,63 @@ _CWD_LOCK = threading.Lock()
 DEFAULT_FLAGS = ("-O1",)
 
 
-def _generate(solver: ca.Function, name: str, folder: Path) -> Path:
-    """The solver's problem functions as C (``generate_dependencies``: the problem "nlp" and
-    every derivative function IPOPT asks for). CasADi writes that file into the working
-    directory only, so the directory is changed for the call, under a lock."""
+@contextmanager
+def _working_directory(folder: Path) -> Iterator[None]:
+    """CasADi writes generated C into the working directory only: change it for the call,
+    under a lock (other threads of the process see the change)."""
     with _CWD_LOCK:
         cwd = Path.cwd()
         os.chdir(folder)
         try:
-            solver.generate_dependencies(f"{name}.c", {"with_header": False})
+            yield
         finally:
             os.chdir(cwd)
+
+
+def _generate(solver: ca.Function, name: str, folder: Path) -> Path:
+    """The solver's problem functions as C (``generate_dependencies``: the problem "nlp" and
+    every derivative function IPOPT asks for), written into ``folder``."""
+    with _working_directory(folder):
+        solver.generate_dependencies(f"{name}.c", {"with_header": False})
     return folder / f"{name}.c"
+
+
+def _generate_functions(functions: list[ca.Function], name: str, folder: Path) -> Path:
+    """C for the given functions (one file), written into ``folder``."""
+    cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+    for fn in functions:
+        cg.add(fn)
+    with _working_directory(folder):
+        cg.generate()
+    return folder / f"{name}.c"
+
+
+def _check_compiler(compiler: str, cache_dir: Path) -> None:
+    if shutil.which(compiler) is None:
+        raise RuntimeError(f"no C compiler {compiler!r} on PATH")
+    cache_dir.mkdir(parents=True, exist_ok=True)
+
+
+def _cached_library(source: Path, key: str, cache_dir: Path, flags: tuple[str, ...],
+                    compiler: str) -> tuple[Path, bool]:
+    """The shared library of ``source`` in ``cache_dir``, named by the hash of the key, the
+    CasADi version, the compiler and flags, and the C itself: compiled next to the source
+    (a temporary folder) and moved into place unless it is already there. Returns (the
+    library, whether it came from the cache)."""
+    digest = hashlib.sha256()
+    for part in (key, ca.__version__, compiler, *flags):
+        digest.update(part.encode())
+    digest.update(source.read_bytes())
+    library = cache_dir / f"{digest.hexdigest()[:24]}.so"
+    if library.exists():
+        return library, True
+    out = source.with_suffix(".so")
+    proc = subprocess.run([compiler, *flags, "-fPIC", "-shared", str(source), "-o", str(out)],
+                          capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{compiler} failed: {proc.stderr[-2000:]}")
+    os.replace(out, library)  # atomic: concurrent processes never see a partial file
+    return library, False
 
 
 def compiled_solver(solver: ca.Function, key: str, options: dict[str, Any],
@@ -50,46 +97,11 @@ def compiled_solver(solver: ca.Function, key: str, options: dict[str, Any],
     cached in ``cache_dir``; ``options`` are nlpsol's (the same as ``solver``'s). Returns
     (the solver, whether the library came from the cache). Raises RuntimeError when the
     compiler is missing or fails (the caller keeps ``solver``)."""
-    if shutil.which(compiler) is None:
-        raise RuntimeError(f"no C compiler {compiler!r} on PATH")
-    cache_dir.mkdir(parents=True, exist_ok=True)
-    name = "dexroll_nlp"
+    _check_compiler(compiler, cache_dir)
     with tempfile.TemporaryDirectory(dir=cache_dir) as tmp:
-        source = _generate(solver, name, Path(tmp))
-        digest = hashlib.sha256()
-        for part in (key, ca.__version__, compiler, *flags):
-            digest.update(part.encode())
-        digest.update(source.read_bytes())
-        library = cache_dir / f"{digest.hexdigest()[:24]}.so"
-        hit = library.exists()
-        if not hit:
-            _compile(source, library, flags, compiler)
+        source = _generate(solver, "dexroll_nlp", Path(tmp))
+        library, hit = _cached_library(source, key, cache_dir, flags, compiler)
     return ca.nlpsol(f"{solver.name()}_compiled", "ipopt", str(library), options), hit
-
-
-def _generate_functions(functions: list[ca.Function], name: str, folder: Path) -> Path:
-    """C for the given functions (one file), written into ``folder`` (see :func:`_generate`
-    for the working directory)."""
-    cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-    for fn in functions:
-        cg.add(fn)
-    with _CWD_LOCK:
-        cwd = Path.cwd()
-        os.chdir(folder)
-        try:
-            cg.generate()
-        finally:
-            os.chdir(cwd)
-    return folder / f"{name}.c"
-
-
-def _compile(source: Path, library: Path, flags: tuple[str, ...], compiler: str) -> None:
-    out = library.with_suffix(".tmp.so")
-    proc = subprocess.run([compiler, *flags, "-fPIC", "-shared", str(source), "-o", str(out)],
-                          capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{compiler} failed: {proc.stderr[-2000:]}")
-    os.replace(out, library)  # atomic: concurrent processes never see a partial file
 
 
 def compiled_block_solver(oracle: ca.Function, options: dict[str, Any], key: str,
@@ -101,9 +113,7 @@ def compiled_block_solver(oracle: ca.Function, options: dict[str, Any], key: str
     constraints, gradient) and the two derivative functions, each a shared library cached in
     ``cache_dir`` under the hash of its C. Returns (the solver, its options with the
     compiled derivative functions). RuntimeError when the compiler is missing or fails."""
-    if shutil.which(compiler) is None:
-        raise RuntimeError(f"no C compiler {compiler!r} on PATH")
-    cache_dir.mkdir(parents=True, exist_ok=True)
+    _check_compiler(compiler, cache_dir)
     # the problem as expressions: the generated functions are then named nlp_f, nlp_g, ...
     # as nlpsol looks them up in a library
     x = ca.MX.sym("x", oracle.size1_in(0))
@@ -115,16 +125,8 @@ def compiled_block_solver(oracle: ca.Function, options: dict[str, Any], key: str
     with tempfile.TemporaryDirectory(dir=cache_dir) as tmp:
         sources = [_generate(solver, "dexroll_nlp", Path(tmp)),
                    _generate_functions(derivatives, "dexroll_derivatives", Path(tmp))]
-        libraries = []
-        for source in sources:
-            digest = hashlib.sha256()
-            for part in (key, ca.__version__, compiler, *flags):
-                digest.update(part.encode())
-            digest.update(source.read_bytes())
-            library = cache_dir / f"{digest.hexdigest()[:24]}.so"
-            if not library.exists():
-                _compile(source, library, flags, compiler)
-            libraries.append(library)
+        libraries = [_cached_library(source, key, cache_dir, flags, compiler)[0]
+                     for source in sources]
     compiled = {**options, **{k: ca.external(fn.name(), str(libraries[1]))
                               for k, fn in zip(("jac_g", "hess_lag"), derivatives,
                                                strict=True)}}
