@@ -601,7 +601,7 @@ def inverse_kinematics_batch(
         R = np.asarray(R_).reshape(3, k, 3).transpose(1, 0, 2)  # (k, 3, 3)
         e_p = p_t - np.asarray(p_).T
         E = R_t @ R.transpose(0, 2, 1)  # rotation from the current pad to the target
-        e_r = _rotation_vectors(E)
+        e_r = np.array([pin.log3(Ek) for Ek in E]).reshape(k, 3)
         err_p, err_r = np.linalg.norm(e_p, axis=1), np.linalg.norm(e_r, axis=1)
         done = (err_p <= tol) & (err_r <= tol)
         if done.all() or it == max_iter:
@@ -616,13 +616,3 @@ def inverse_kinematics_batch(
         q = np.clip(q + dq, finger.lower, finger.upper)
     return q, done
 
-
-def _rotation_vectors(E: FloatArray) -> FloatArray:
-    """Rotation vectors (k, 3) of rotation matrices E (k, 3, 3) (angles below pi)."""
-    cos = np.clip((np.trace(E, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
-    angle = np.arccos(cos)
-    axis = np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0],
-                     E[:, 1, 0] - E[:, 0, 1]], axis=1) / 2  # sin(angle) * axis
-    sin = np.sin(angle)
-    factor = np.where(sin > 1e-12, angle / np.where(sin > 1e-12, sin, 1.0), 1.0)
-    return axis * factor[:, None]
