@@ -98,9 +98,34 @@ class Surface:
         """Named CasADi function ``(alpha, params) -> (p, R, M, K, T)``.
 
         ``p`` is f(alpha) [m], ``R`` the Gauss frame (3x3), ``M`` the metric (2x2) [m],
-        ``K`` the curvature (2x2) [1/m], ``T`` the torsion (1x2) [1/m], all derived
-        symbolically from the chart.
+        ``K`` the curvature (2x2) [1/m], ``T`` the torsion (1x2) [1/m]: the closed forms
+        of :meth:`closed_form_geometry` where the surface has them, else
+        :attr:`derived_geometry`.
         """
+        u = ca.SX.sym("u")
+        v = ca.SX.sym("v")
+        params = ca.SX.sym("params", self.n_params)
+        closed = self.closed_form_geometry(u, v, params)
+        if closed is None:
+            return self.derived_geometry
+        return ca.Function(f"{self.name}_geometry", [ca.vertcat(u, v), params], list(closed),
+                           ["alpha", "params"], ["p", "R", "M", "K", "T"])
+
+    def closed_form_geometry(self, u: ca.SX, v: ca.SX, params: ca.SX
+                             ) -> tuple[ca.SX, ...] | None:
+        """(p, R, M, K, T) written out in closed form, or None (the default) to use the
+        derivation from the chart. A closed form is the same geometry (the tests check it
+        against :attr:`derived_geometry`) in a fraction of the operations: the derivation
+        normalises vectors with square roots that CasADi cannot simplify away, and every
+        NLP derivative pays for them (for the sphere on the palm: 115 operations per
+        evaluation of the rolling equations instead of 34, and a tenth of the operations
+        in their Hessian)."""
+        return None
+
+    @cached_property
+    def derived_geometry(self) -> ca.Function:
+        """``(alpha, params) -> (p, R, M, K, T)`` derived symbolically from the chart (the
+        definitions in the module's doc), whatever the surface."""
         u = ca.SX.sym("u")
         v = ca.SX.sym("v")
         params = ca.SX.sym("params", self.n_params)
@@ -126,7 +151,7 @@ class Surface:
         T = ca.horzcat(ca.dot(y, x_u) / m_u, ca.dot(y, x_v) / m_v)
         alpha = ca.vertcat(u, v)
         return ca.Function(
-            f"{self.name}_geometry",
+            f"{self.name}_derived_geometry",
             [alpha, params],
             [f, R, M, K, T],
             ["alpha", "params"],
@@ -213,6 +238,26 @@ def _spheroid_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
     return ca.vertcat(a * ca.cos(u) * ca.cos(v), -a * ca.cos(u) * ca.sin(v), c * ca.sin(u))
 
 
+def _revolution_geometry(u: ca.SX, v: ca.SX, a: ca.SX, c: ca.SX) -> tuple[ca.SX, ...]:
+    """(p, R, M, K, T) of the spheroid chart f = (a cos u cos v, -a cos u sin v, c sin u)
+    for |u| < pi/2, in closed form. With E = |f_u| = sqrt(a^2 sin^2 u + c^2 cos^2 u):
+    x = (-a sin u cos v, a sin u sin v, c cos u) / E, y = (-sin v, -cos v, 0),
+    z = (c cos u cos v, -c cos u sin v, a sin u) / E, M = diag(E, a cos u),
+    K = diag(a c / E^3, c / (a E)) and T = (0, -tan u / E). The sphere is a = c = rho
+    (K = I / rho, T = (0, -tan u / rho))."""
+    cu, su, cv, sv = ca.cos(u), ca.sin(u), ca.cos(v), ca.sin(v)
+    E = ca.sqrt((a * su) ** 2 + (c * cu) ** 2)
+    p = ca.vertcat(a * cu * cv, -a * cu * sv, c * su)
+    x = ca.vertcat(-a * su * cv, a * su * sv, c * cu) / E
+    y = ca.vertcat(-sv, -cv, 0)
+    z = ca.vertcat(c * cu * cv, -c * cu * sv, a * su) / E
+    R = ca.horzcat(x, y, z)
+    M = ca.diag(ca.vertcat(E, a * cu))
+    K = ca.diag(ca.vertcat(a * c / E**3, c / (a * E)))
+    T = ca.horzcat(0, -su / (cu * E))
+    return p, R, M, K, T
+
+
 class _Plane(Surface):
     def __init__(self) -> None:
         super().__init__("plane", _plane_chart, (), (False, False), None, ("x", "y"))
@@ -230,6 +275,10 @@ class _Sphere(Surface):
     def __init__(self) -> None:
         super().__init__("sphere", _sphere_chart, ("radius",), (False, True), np.pi / 2,
                          ("u", "v"))
+
+    def closed_form_geometry(self, u: ca.SX, v: ca.SX, params: ca.SX
+                             ) -> tuple[ca.SX, ...] | None:
+        return _revolution_geometry(u, v, params[0], params[0])
 
     def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
         p = np.asarray(point, dtype=float)
@@ -258,6 +307,10 @@ class _Ellipsoid(Surface):
     def __init__(self) -> None:
         super().__init__("ellipsoid", _spheroid_chart, ("equatorial_semi_axis", "polar_semi_axis"),
                          (False, True), np.pi / 2, ("u", "v"))
+
+    def closed_form_geometry(self, u: ca.SX, v: ca.SX, params: ca.SX
+                             ) -> tuple[ca.SX, ...] | None:
+        return _revolution_geometry(u, v, params[0], params[1])
 
     def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
         p = np.asarray(point, dtype=float)

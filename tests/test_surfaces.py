@@ -466,3 +466,21 @@ def test_safe_norm_is_finite_with_finite_gradient_at_zero() -> None:
     val_w, grad_w, _ = (np.array(x, dtype=float) for x in fun(w))
     assert_close(val_w, np.linalg.norm(w), atol=1e-15, err_msg="safe_norm(w) ~ |w|")
     assert_close(grad_w.ravel(), w / np.linalg.norm(w), atol=1e-12, err_msg="gradient ~ w/|w|")
+
+
+@SETTINGS
+@given(u=lat, v=lon, a=semi_axis, c=semi_axis)
+def test_closed_form_geometry_equals_the_derivation_from_the_chart(u: float, v: float,
+                                                                    a: float, c: float) -> None:
+    """The sphere's and the spheroid's closed forms (what every NLP differentiates) are the
+    geometry derived symbolically from their charts, to round-off, frame, metric, curvature
+    and torsion alike; and they are closed forms: fewer operations than the derivation."""
+    for surface, params in ((Sphere, [a]), (Ellipsoid, [a, c])):
+        closed = surface.geometry([u, v], params)
+        derived = surface.derived_geometry([u, v], params)
+        scale = {"p": max(a, c), "R": 1.0, "M": max(a, c), "K": 1.0 / min(a, c) ** 3 * max(a, c)
+                 ** 2, "T": 1.0 / (min(a, c) * np.cos(u))}
+        for name, x, y in zip("pRMKT", closed, derived, strict=True):
+            assert_close(np.array(x, dtype=float), np.array(y, dtype=float),
+                         atol=1e-12 * scale[name], err_msg=f"{surface.name} {name}")
+        assert surface.geometry.n_instructions() < surface.derived_geometry.n_instructions()

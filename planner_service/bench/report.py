@@ -231,6 +231,7 @@ def _plots(out: Path, rows: Sequence[Row], summary: Sequence[dict[str, Any]]
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     rng = np.random.default_rng(0)  # jitter of the points only
+    plotted = 0
     for j, m in enumerate(methods):
         for i, f in enumerate(families):
             times = [r["solve_time"] for r in rows if r["family"] == f and r["method"] == m
@@ -244,12 +245,17 @@ def _plots(out: Path, rows: Sequence[Row], summary: Sequence[dict[str, Any]]
                            and r["method"] == m and r.get("solve_time")])
             px = x + rng.uniform(-0.25, 0.25, len(times)) * width
             ts = np.array(times)
+            plotted += len(ts)
             ax.scatter(px[ok], ts[ok], s=12, color=colors[m], zorder=3, alpha=0.8)
             ax.scatter(px[~ok], ts[~ok], s=30, color="black", marker="x", zorder=4)
     for m in methods:
         ax.scatter([], [], color=colors[m], label=m, s=12)
     ax.scatter([], [], color="black", marker="x", label="not solved", s=30)
-    ax.set_yscale("log")
+    if plotted:
+        ax.set_yscale("log")
+    else:  # e.g. only a peer that models none of the suite's problems
+        ax.text(0.5, 0.5, "no run reported a solve time", transform=ax.transAxes,
+                ha="center")
     ax.set_xticks(range(len(families)), families, rotation=20, ha="right")
     ax.set_ylabel("solve time [s] (log)")
     ax.set_title("Solve time per family and method")
