@@ -159,6 +159,11 @@ class BallOnPalmModel:
         return ca.Function("guess_simulator", [x, Wall, hs, params, u_lim], [Xn, Xm],
                            ["x0", "W", "h", "params", "u_lim"], ["X", "Xm"])
 
+    @cache  # noqa: B019 - models live for the whole process
+    def mapped(self, name: str, m: int) -> ca.Function:
+        """The model's function ``name`` (dynamics, kinematics, twist) over m samples."""
+        return getattr(self, name).map(m)
+
     @cache  # noqa: B019 - one integrator per model, models live for the process
     def reintegrator(self, n_sub: int) -> ca.Function:
         """CVODES over one interval with the collocation input (see collocation.py)."""
@@ -621,17 +626,17 @@ def certify(problem: BallOnPalmProblem, model: BallOnPalmModel, t_nodes: FloatAr
     Xr_arr, sx, sw = reintegrate(model.reintegrator(n_sub), X[0], t_nodes, U0, Um, U1,
                                  params, n_sub)
     m = len(sx)
-    eta_dot = np.asarray(model.dynamics.map(m)(sx.T, sw.T, params))
-    v_slip, omega = model.twist.map(m)(sx.T, eta_dot, params, np.tile(chart, m))
+    eta_dot = np.asarray(model.mapped("dynamics", m)(sx.T, sw.T, params))
+    v_slip, omega = model.mapped("twist", m)(sx.T, eta_dot, params, np.tile(chart, m))
     v_slip, omega = np.asarray(v_slip).T, np.asarray(omega).T
-    R, pos, _cp, cn, _ = model.kinematics.map(m)(sx.T, sw.T, params, np.tile(chart, m))
+    R, pos, _cp, cn, _ = model.mapped("kinematics", m)(sx.T, sw.T, params, np.tile(chart, m))
     R = np.asarray(R).T.reshape(m, 3, 3).transpose(0, 2, 1)
     pos, cn = np.asarray(pos).T, np.asarray(cn).T
     spin = np.abs(np.sum(omega * cn, axis=1))
     # Height of the object's lowest point above the palm plane z = 0, from the closed-form
-    # support function of the shape in the object frame (no chart involved).
-    heights = np.array([pos[i, 2] - model.surface.support_height(-R[i].T @ np.array([0, 0, 1.0]),
-                                                                 params) for i in range(m)])
+    # support function of the shape in the object frame (no chart involved): the palm's
+    # downward normal in the object frame is -R^T e_z, minus the third row of R.
+    heights = pos[:, 2] - model.surface.support_heights(-R[:, 2, :], params)
     d = Xr_arr - X
     pos_def = float(np.max(np.abs(d[:, :2])))
     ang = np.column_stack([d[:, 2], wrap_difference(Xr_arr[:, 3:], X[:, 3:])])

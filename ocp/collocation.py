@@ -327,6 +327,23 @@ def reintegrator(dynamics: ca.Function, nx: int, nu: int, n_params: int, n_sub: 
                                                   "max_num_steps": 100_000})
 
 
+#: Chained re-integrators: (id of the interval integrator, intervals) -> (integrator, chain).
+_CHAINS: dict[tuple[int, int], tuple[ca.Function, ca.Function]] = {}
+
+
+def _chain(F: ca.Function, n: int) -> ca.Function:
+    """``F`` over n consecutive intervals as one CasADi call (``mapaccum``: each interval
+    starts where the previous one ended): (x0, q (nq x n)) -> (node states 1..n, samples)."""
+    key = (id(F), n)
+    if key not in _CHAINS:
+        x = ca.MX.sym("x", F.size1_in("x0"))
+        q = ca.MX.sym("q", F.size1_in("p"))
+        xs = F(x0=x, p=q)["xf"]
+        step = ca.Function("reintegrate_step", [x, q], [xs[:, -1], xs])
+        _CHAINS[key] = (F, step.mapaccum("reintegrate_chain", n, [0], [0]))
+    return _CHAINS[key][1]
+
+
 def reintegrate(F: ca.Function, x0: NDArray[np.float64], t_nodes: NDArray[np.float64],
                 U0: NDArray[np.float64], Um: NDArray[np.float64], U1: NDArray[np.float64],
                 params: NDArray[np.float64], n_sub: int
@@ -337,14 +354,11 @@ def reintegrate(F: ca.Function, x0: NDArray[np.float64], t_nodes: NDArray[np.flo
     x0, inputs at those samples).
     """
     x = np.asarray(x0, dtype=float)
-    nodes, xs_all, ws_all = [x], [x[None, :]], [U0[:1]]
-    s = np.linspace(0.0, 1.0, n_sub + 1)[1:][:, None]
-    for k in range(len(t_nodes) - 1):
-        h = t_nodes[k + 1] - t_nodes[k]
-        q = np.concatenate([U0[k], Um[k], U1[k], [h], params])
-        xs = np.asarray(F(x0=x, p=q)["xf"]).T
-        xs_all.append(xs)
-        ws_all.append(quadratic_input(s, U0[k], Um[k], U1[k]))
-        x = xs[-1]
-        nodes.append(x)
-    return np.array(nodes), np.vstack(xs_all), np.vstack(ws_all)
+    n = len(t_nodes) - 1
+    h = np.diff(t_nodes)[:, None]
+    q = np.hstack([U0[:n], Um[:n], U1[:n], h, np.tile(params, (n, 1))])
+    nodes, samples = _chain(F, n)(x, q.T)
+    s = np.linspace(0.0, 1.0, n_sub + 1)[1:][None, :, None]
+    ws = quadratic_input(s, U0[:n, None, :], Um[:n, None, :], U1[:n, None, :])
+    return (np.vstack([x, np.asarray(nodes).T]), np.vstack([x, np.asarray(samples).T]),
+            np.vstack([U0[:1], ws.reshape(n * n_sub, -1)]))

@@ -183,6 +183,10 @@ class Surface:
         """
         raise NotImplementedError(f"{self.name} is not a closed convex surface")
 
+    def support_heights(self, normals: ArrayLike, params: ArrayLike) -> FloatArray:
+        """:meth:`support_height` of each row of ``normals`` (k x 3) [m], as an array."""
+        return np.array([self.support_height(n, params) for n in np.asarray(normals)])
+
     def support_point(self, direction: ArrayLike, params: ArrayLike) -> FloatArray:
         """The point of the surface whose outward normal is the unit ``direction`` [m]."""
         raise NotImplementedError(f"{self.name} is not a closed convex surface")
@@ -288,6 +292,9 @@ class _Sphere(Surface):
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
         return float(np.asarray(params, dtype=float)[0])
 
+    def support_heights(self, normals: ArrayLike, params: ArrayLike) -> FloatArray:
+        return np.full(len(np.asarray(normals)), float(np.asarray(params, dtype=float)[0]))
+
     def support_point(self, direction: ArrayLike, params: ArrayLike) -> FloatArray:
         d = np.asarray(direction, dtype=float)
         return float(np.asarray(params, dtype=float)[0]) * d / np.linalg.norm(d)
@@ -323,6 +330,11 @@ class _Ellipsoid(Surface):
         a, c = np.asarray(params, dtype=float)
         q = np.array([a * a, a * a, c * c])
         return float(np.sqrt(np.sum(q * n * n)))
+
+    def support_heights(self, normals: ArrayLike, params: ArrayLike) -> FloatArray:
+        n = np.asarray(normals, dtype=float)
+        a, c = np.asarray(params, dtype=float)
+        return np.asarray(np.sqrt(n**2 @ np.array([a * a, a * a, c * c])))
 
     def support_point(self, direction: ArrayLike, params: ArrayLike) -> FloatArray:
         d = np.asarray(direction, dtype=float)

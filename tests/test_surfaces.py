@@ -484,3 +484,16 @@ def test_closed_form_geometry_equals_the_derivation_from_the_chart(u: float, v: 
             assert_close(np.array(x, dtype=float), np.array(y, dtype=float),
                          atol=1e-12 * scale[name], err_msg=f"{surface.name} {name}")
         assert surface.geometry.n_instructions() < surface.derived_geometry.n_instructions()
+
+
+@SETTINGS
+@given(a=semi_axis, c=semi_axis, seed=st.integers(0, 2**16))
+def test_support_heights_are_support_height_row_by_row(a: float, c: float, seed: int) -> None:
+    """The vectorised support function (the certificate's height check over every sample)
+    is the scalar one applied to each direction."""
+    n = np.random.default_rng(seed).normal(size=(9, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    for surface, params in ((Sphere, [a]), (Ellipsoid, [a, c])):
+        assert_close(surface.support_heights(n, params),
+                     np.array([surface.support_height(row, params) for row in n]),
+                     atol=1e-15, err_msg=surface.name)
