@@ -24,7 +24,7 @@ from planner_service import cli
 from planner_service.bench.command import run_bench
 from planner_service.bench.generators import GENERATORS
 from planner_service.bench.progress import Progress
-from planner_service.bench.report import summarise
+from planner_service.bench.report import ratios, summarise
 from planner_service.bench.rows import (
     FIELDS,
     comparable,
@@ -292,6 +292,30 @@ def test_summary_statistics() -> None:
     assert peer["count"] == 0 and peer["unavailable"] == 1 and peer["success_rate"] is None
 
 
+def test_ratios_against_the_collocation_method() -> None:
+    """A peer whose solves take k times as long on every problem has both ratios k; the
+    pairing goes by problem, over the problems both solved with a passed certificate."""
+    def row(pid: str, method: str, t: float | None, ok: bool = True) -> dict[str, Any]:
+        return {"family": "f", "problem_id": pid, "method": method, "ok": ok,
+                "expected": "any", "status": "solved", "solve_time": t, "build_time": 0.0,
+                "wall_time": t, "iterations": 3, "peak_rss_mb": 1.0}
+    ours = [row(f"p{i}", "collocation", t) for i, t in enumerate((0.01, 0.02, 0.04))]
+    peer = [row(f"p{i}", "drake", 12.5 * t) for i, t in enumerate((0.01, 0.02, 0.04))]
+    peer.append(row("p9", "drake", 99.0))  # no collocation run of p9: not paired
+    peer[0]["ok"] = False
+    rows = ours + peer
+    (q,) = ratios(rows, summarise(rows))
+    assert (q["family"], q["method"], q["reference"]) == ("f", "drake", "collocation")
+    assert q["paired"] == 2  # p0: the peer's plan failed; p9: no collocation run
+    assert q["paired_median"] == pytest.approx(12.5)
+    assert q["ratio_of_medians"] == pytest.approx(np.median([0.125, 0.25, 0.5, 99.0]) / 0.02)
+    # a method with no solve times has no ratio, and the reference is never compared
+    # with itself
+    untimed = [*ours, row("p0", "greedy", None)]
+    (q,) = ratios(untimed, summarise(untimed))
+    assert q["ratio_of_medians"] is None and q["paired_median"] is None and q["paired"] == 0
+
+
 def test_exit_code_follows_the_suites_expectations(tmp_path: Path) -> None:
     """A run expected to solve that does not makes the exit code 1; the same failure
     expected (a known finding) leaves it 0 and is listed in the report."""
@@ -350,6 +374,18 @@ def test_quick_suite_report_has_every_family_and_method(quick_run: tuple[int, Pa
     report = (out / "report.md").read_text()
     for family, method in expected:
         assert f"| {family} | {method} |" in report
+    # every other method that ran a family next to collocation is compared with it, and
+    # the ratio of medians is the summary's medians divided
+    by = {(s["family"], s["method"]): s for s in doc["summary"]}
+    compared = {(q["family"], q["method"]) for q in doc["ratios"]}
+    assert compared == {(f, m) for f, m in expected
+                        if m != "collocation" and (f, "collocation") in expected}
+    assert compared and "## Against `collocation`, in this run" in report
+    for q in doc["ratios"]:
+        ours, theirs = by[(q["family"], "collocation")], by[(q["family"], q["method"])]
+        assert q["ratio_of_medians"] == pytest.approx(theirs["solve_time_median"]
+                                                      / ours["solve_time_median"])
+        assert 0 <= q["paired"] <= min(ours["ok"], theirs["ok"])
     # the CSV holds the same rows
     with (out / "results.csv").open(newline="") as f:
         table = list(csv.DictReader(f))

@@ -21,7 +21,10 @@ import numpy as np
 from .rows import FIELDS
 from .suite import METHODS
 
-__all__ = ["machine_info", "summarise", "versions", "write_report"]
+__all__ = ["machine_info", "ratios", "summarise", "versions", "write_report"]
+
+#: The method the others are compared with (the project's planner).
+REFERENCE = "collocation"
 
 Row = dict[str, Any]
 
@@ -89,6 +92,37 @@ def summarise(rows: Sequence[Row], families: Sequence[str] = ()) -> list[dict[st
             vals = _values(ok, key)
             entry[key] = (max(vals) if worst_is_max else min(vals)) if vals else None
         out.append(entry)
+    return out
+
+
+def ratios(rows: Sequence[Row], summary: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Each other method against :data:`REFERENCE`, per family, measured in this run: how
+    many times longer its solves took (> 1: the reference is faster).
+
+    ``ratio_of_medians``: the method's median solve time over the reference's (each over
+    all its runs in the family, as in the summary); ``paired_median``: the median of the
+    per-problem ratio over the ``paired`` problems both solved with a passed certificate
+    (a plan that failed its certificate, or that the reference had to refine, is not the
+    same work)."""
+    by = {(s["family"], s["method"]): s for s in summary}
+    per_problem: dict[tuple[str, str], Row] = {(r["problem_id"], r["method"]): r
+                                               for r in rows}
+    out = []
+    for s in summary:
+        ref = by.get((s["family"], REFERENCE))
+        if s["method"] == REFERENCE or ref is None:
+            continue
+        mine = [r for r in rows if r["family"] == s["family"] and r["method"] == s["method"]]
+        pairs = [(per_problem[(r["problem_id"], REFERENCE)], r) for r in mine
+                 if (r["problem_id"], REFERENCE) in per_problem]
+        timed = [b["solve_time"] / a["solve_time"] for a, b in pairs
+                 if a["ok"] and b["ok"] and a.get("solve_time") and b.get("solve_time")]
+        tm, rm = s["solve_time_median"], ref["solve_time_median"]
+        out.append({"family": s["family"], "method": s["method"], "reference": REFERENCE,
+                    "reference_median": rm, "method_median": tm,
+                    "ratio_of_medians": tm / rm if tm and rm else None,
+                    "paired_median": float(np.median(timed)) if timed else None,
+                    "paired": len(timed)})
     return out
 
 
@@ -272,7 +306,8 @@ def write_report(out: Path, rows: Sequence[Row], meta: dict[str, Any],
     unexpected = [r for r in rows if r["expected"] == "solved" and not r["ok"]]
     fixed = [r for r in rows if r["expected"] == "unsolved" and r["ok"]]
     plots, no_plots = _plots(out, rows, summary)
-    doc = {**meta, "summary": summary, "problems": list(problems), "rows": list(rows),
+    doc = {**meta, "summary": summary, "ratios": ratios(rows, summary),
+           "problems": list(problems), "rows": list(rows),
            "unexpected_failures": [[r["family"], r["problem_id"], r["method"]]
                                    for r in unexpected],
            "plots": plots}
@@ -322,6 +357,19 @@ def _markdown(doc: dict[str, Any], summary: Sequence[dict[str, Any]], unexpected
               "certificate residuals are the worst over the successful runs (cone margin: "
               "the smallest; > 0 is inside the friction cones). Greedy iterations are its "
               "steps."]
+    if doc["ratios"]:
+        lines += ["", f"## Against `{REFERENCE}`, in this run", "",
+                  f"How many times longer each method's solves took than `{REFERENCE}`'s "
+                  "(> 1: it is slower), per family: the ratio of the median solve times over "
+                  "all runs, and the median of the per-problem ratios over the problems both "
+                  "solved with a passed certificate.", "",
+                  "| family | method | its median | reference median | ratio of medians | "
+                  "paired median ratio | problems both solved |",
+                  "|---|---|---:|---:|---:|---:|---:|"]
+        lines += [f"| {q['family']} | {q['method']} | {_fmt_time(q['method_median'])} | "
+                  f"{_fmt_time(q['reference_median'])} | {_fmt(q['ratio_of_medians'], '.2f')} | "
+                  f"{_fmt(q['paired_median'], '.2f')} | {q['paired']} |"
+                  for q in doc["ratios"]]
     if plots:
         lines += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
     elif no_plots:
