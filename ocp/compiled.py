@@ -19,13 +19,16 @@ import subprocess
 import tempfile
 import threading
 from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import wait as futures_wait
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import casadi as ca
 
-__all__ = ["compiled_block_solver", "compiled_solver"]
+__all__ = ["BackgroundCompiler", "block_sources", "compile_sources", "compiled_block_solver",
+           "compiled_solver", "load_block_solver"]
 
 _CWD_LOCK = threading.Lock()
 DEFAULT_FLAGS = ("-O1",)
@@ -104,6 +107,40 @@ def compiled_solver(solver: ca.Function, key: str, options: dict[str, Any],
     return ca.nlpsol(f"{solver.name()}_compiled", "ipopt", str(library), options), hit
 
 
+def block_sources(oracle: ca.Function, options: dict[str, Any], folder: Path
+                  ) -> list[Path]:
+    """The C of a block NLP (see :func:`compiled_block_solver`), written into ``folder``:
+    the problem's own functions (objective, constraints, gradient), then the two derivative
+    functions ``options["jac_g"]`` and ``options["hess_lag"]``. CasADi calls: the caller's
+    thread."""
+    # the problem as expressions: the generated functions are then named nlp_f, nlp_g, ...
+    # as nlpsol looks them up in a library
+    x = ca.MX.sym("x", oracle.size1_in(0))
+    p = ca.MX.sym("p", oracle.size1_in(1))
+    f, g = oracle(x, p)
+    solver = ca.nlpsol("manipulation_plain", "ipopt", {"x": x, "p": p, "f": f, "g": g},
+                       options)
+    return [_generate(solver, "dexroll_nlp", folder),
+            _generate_functions([options["jac_g"], options["hess_lag"]],
+                                "dexroll_derivatives", folder)]
+
+
+def compile_sources(sources: list[Path], key: str, cache_dir: Path,
+                    flags: tuple[str, ...] = ("-O2",), compiler: str = "gcc") -> list[Path]:
+    """The cached shared library of each source (compiled unless the cache has it). No
+    CasADi call: safe in a background thread."""
+    return [_cached_library(source, key, cache_dir, flags, compiler)[0] for source in sources]
+
+
+def load_block_solver(libraries: list[Path], options: dict[str, Any]
+                      ) -> tuple[ca.Function, dict[str, Any]]:
+    """The IPOPT solver of :func:`block_sources`' libraries, and its options with the
+    compiled derivative functions. CasADi calls: the caller's thread."""
+    compiled = {**options, **{k: ca.external(options[k].name(), str(libraries[1]))
+                              for k in ("jac_g", "hess_lag")}}
+    return ca.nlpsol("manipulation_compiled", "ipopt", str(libraries[0]), compiled), compiled
+
+
 def compiled_block_solver(oracle: ca.Function, options: dict[str, Any], key: str,
                           cache_dir: Path, flags: tuple[str, ...] = ("-O2",),
                           compiler: str = "gcc") -> tuple[ca.Function, dict[str, Any]]:
@@ -114,20 +151,69 @@ def compiled_block_solver(oracle: ca.Function, options: dict[str, Any], key: str
     ``cache_dir`` under the hash of its C. Returns (the solver, its options with the
     compiled derivative functions). RuntimeError when the compiler is missing or fails."""
     _check_compiler(compiler, cache_dir)
-    # the problem as expressions: the generated functions are then named nlp_f, nlp_g, ...
-    # as nlpsol looks them up in a library
-    x = ca.MX.sym("x", oracle.size1_in(0))
-    p = ca.MX.sym("p", oracle.size1_in(1))
-    f, g = oracle(x, p)
-    solver = ca.nlpsol("manipulation_plain", "ipopt", {"x": x, "p": p, "f": f, "g": g},
-                       options)
-    derivatives = [options["jac_g"], options["hess_lag"]]
     with tempfile.TemporaryDirectory(dir=cache_dir) as tmp:
-        sources = [_generate(solver, "dexroll_nlp", Path(tmp)),
-                   _generate_functions(derivatives, "dexroll_derivatives", Path(tmp))]
-        libraries = [_cached_library(source, key, cache_dir, flags, compiler)[0]
-                     for source in sources]
-    compiled = {**options, **{k: ca.external(fn.name(), str(libraries[1]))
-                              for k, fn in zip(("jac_g", "hess_lag"), derivatives,
-                                               strict=True)}}
-    return ca.nlpsol("manipulation_compiled", "ipopt", str(libraries[0]), compiled), compiled
+        sources = block_sources(oracle, options, Path(tmp))
+        libraries = compile_sources(sources, key, cache_dir, flags, compiler)
+    return load_block_solver(libraries, options)
+
+
+class BackgroundCompiler:
+    """Compiles block NLPs while their owner keeps solving with the virtual machine.
+
+    :meth:`submit` writes an NLP's C (CasADi, in the caller's thread: ~0.1-0.2 s) and hands
+    the gcc runs (seconds) to a background thread; :meth:`finished` returns, in the
+    caller's thread, the compiled solvers of the compiles that are done, loaded, for the
+    owner to swap in between solves. CasADi is only ever called from the caller's thread.
+    A compile that fails (no compiler, gcc error) is dropped and reported once in
+    :attr:`errors`: the owner goes on with the virtual machine.
+    """
+
+    def __init__(self, cache_dir: Path, flags: tuple[str, ...] = ("-O2",),
+                 compiler: str = "gcc") -> None:
+        self.cache_dir, self.flags, self.compiler = cache_dir, flags, compiler
+        self._executor: ThreadPoolExecutor | None = None
+        self._pending: dict[Any, tuple[Future[list[Path]], dict[str, Any], str]] = {}
+        self.errors: list[str] = []
+
+    def submit(self, key: Any, oracle: ca.Function, options: dict[str, Any],
+               fingerprint: str) -> bool:
+        """Start compiling the NLP ``(oracle, options)`` known to the owner as ``key``;
+        False (and a reason in :attr:`errors`) when there is no compiler."""
+        try:
+            _check_compiler(self.compiler, self.cache_dir)
+        except RuntimeError as exc:
+            self.errors.append(str(exc))
+            return False
+        tmp = tempfile.mkdtemp(dir=self.cache_dir)
+        sources = block_sources(oracle, options, Path(tmp))
+        if self._executor is None:
+            self._executor = ThreadPoolExecutor(max_workers=1,
+                                                thread_name_prefix="dexroll-compile")
+        future = self._executor.submit(compile_sources, sources, fingerprint,
+                                       self.cache_dir, self.flags, self.compiler)
+        self._pending[key] = (future, options, tmp)
+        return True
+
+    @property
+    def pending(self) -> int:
+        return len(self._pending)
+
+    def finished(self, wait: float = 0.0) -> list[tuple[Any, ca.Function, dict[str, Any]]]:
+        """(key, compiled solver, its options) of every compile done (waiting up to ``wait``
+        seconds for the pending ones), loaded in the caller's thread."""
+        if wait > 0 and self._pending:
+            futures_wait([f for f, _, _ in self._pending.values()], timeout=wait)
+        out = []
+        for key, (future, options, tmp) in list(self._pending.items()):
+            if not future.done():
+                continue
+            del self._pending[key]
+            try:
+                libraries = future.result()
+                solver, compiled = load_block_solver(libraries, options)
+                out.append((key, solver, compiled))
+            except (RuntimeError, OSError) as exc:
+                self.errors.append(str(exc))
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+        return out

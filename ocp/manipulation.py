@@ -60,6 +60,7 @@ from .collocation import (
     reintegrate,
     reintegrator,
 )
+from .compiled import BackgroundCompiler
 from .contact import ContactPair
 from .grasp import cone_cosine, grasp_angles_numeric
 from .ipopt import IPOPT_WARM_OPTIONS
@@ -860,11 +861,17 @@ def _fingerprint(key: tuple[Any, ...], m: _Model) -> str:
 class ManipulationPlanner:
     """Direct-collocation planner for any grasp (NLPs cached per structure)."""
 
-    def __init__(self, compile_dir: Path | None = None) -> None:
+    def __init__(self, compile_dir: Path | None = None, background: bool = False) -> None:
         #: When set, each structure's NLP functions are generated as C, compiled with gcc
         #: and cached there (:func:`ocp.compiled.compiled_block_solver`): seconds the first
         #: time, IPOPT about 40 % faster on experiment 1 (docs/performance.md).
         self.compile_dir = compile_dir
+        #: With ``background``, a new structure is solved in the virtual machine at once and
+        #: compiled in a background thread (:class:`ocp.compiled.BackgroundCompiler`); the
+        #: compiled solver replaces it at the first solve after the compile (a service
+        #: worker: no request waits for gcc). Without, the first solve compiles.
+        self.compiler = BackgroundCompiler(compile_dir) if compile_dir is not None \
+            and background else None
         # keyed by the finger objects themselves (identity; the key keeps them alive)
         self._models: dict[tuple[Any, ...], _Model] = {}
         self._nlps: dict[tuple[Any, ...], _NLP] = {}
@@ -895,9 +902,24 @@ class ManipulationPlanner:
         m = self.model(problem)
         nlp = build_manipulation_nlp(m, segments, goal_mask, via_masks, tracking,
                                      FORCE_REGULARISATION, _fingerprint(key, m),
-                                     self.compile_dir)
+                                     None if self.compiler else self.compile_dir)
         self._nlps[key] = nlp
+        if self.compiler is not None:
+            self.compiler.submit(key, nlp.oracle, nlp.options, nlp.fingerprint)
         return nlp, False
+
+    def adopt_compiled(self, wait: float = 0.0) -> int:
+        """Swap in the compiled solvers of the background compiles that are done (waiting
+        up to ``wait`` s for the pending ones); how many. Called before every solve."""
+        if self.compiler is None:
+            return 0
+        done = self.compiler.finished(wait)
+        for key, solver, options in done:
+            nlp = self._nlps.get(key)
+            if nlp is not None:
+                nlp.solver, nlp.options, nlp.compiled = solver, options, True
+                nlp.warm_solver = None  # rebuilt from the compiled options on first use
+        return len(done)
 
     def prepare(self, problem: ManipulationProblem) -> float:
         """Build (and cache) the NLP of this problem's structure and its model's
@@ -975,6 +997,7 @@ class ManipulationPlanner:
         the planner's own guess (within the time limit).
         """
         problem.validate()
+        self.adopt_compiled()
         warm = warm_start.warm_start if isinstance(warm_start, ManipulationSolution) \
             else warm_start
         if warm is not None:

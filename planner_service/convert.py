@@ -119,10 +119,14 @@ class FingerCache:
     which bounds the memory. Thread-safe (one lock for loading and checking).
     """
 
-    def __init__(self, max_fingers: int = 16, compile_dir: Path | None = None) -> None:
+    def __init__(self, max_fingers: int = 16, compile_dir: Path | None = None,
+                 background: bool = False) -> None:
         self.max_fingers = max_fingers
-        #: where the finger planners compile and cache their NLPs (None: not compiled)
+        #: where the finger planners compile and cache their NLPs (None: not compiled), and
+        #: whether in a background thread while the virtual machine solves
+        #: (:class:`ocp.manipulation.ManipulationPlanner`)
         self.compile_dir = compile_dir
+        self.background = background
         self.lock = threading.RLock()
         self._fingers: dict[tuple[Any, ...], FingerModel] = {}
         self._hands: dict[tuple[Any, ...], Hand] = {}
@@ -133,7 +137,8 @@ class FingerCache:
         """The process's one-finger planner (its NLP cache lives as long as the fingers)."""
         with self.lock:
             if self._planner is None:
-                self._planner = OneFingerPlanner(ManipulationPlanner(self.compile_dir))
+                self._planner = OneFingerPlanner(ManipulationPlanner(self.compile_dir,
+                                                                     self.background))
             return self._planner
 
     @property

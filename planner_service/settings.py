@@ -16,11 +16,13 @@
 | DEXROLL_WARMUP | examples | requests whose NLPs a worker builds before it is ready |
 | DEXROLL_COMPILE_DIR | (none) | compile NLPs to C libraries cached here |
 
-``DEXROLL_COMPILE_DIR``: when set, each structure's NLP functions are generated as C,
-compiled with gcc and kept there as shared libraries that every worker and later service
-loads (``ocp.compiled``): a ball-on-palm structure takes tens of seconds the first time
-(IPOPT about a third faster), a finger structure a few seconds (IPOPT ~45 % faster on
-experiment 1).
+``DEXROLL_COMPILE_DIR``: when set, each finger structure's NLP functions are generated as
+C, compiled with gcc and kept there as shared libraries that every worker and later service
+loads (``ocp.compiled``): a few seconds of gcc per structure the first time, in a
+background thread of the worker while the virtual machine solves its requests; the
+compiled solver takes over from the first request after the compile (IPOPT ~40 % faster on
+experiment 1). Without gcc the workers go on with the virtual machine. Ball-on-palm NLPs
+are not compiled by the service.
 
 ``DEXROLL_WARMUP``: comma-separated JSON request files or folders (relative to the working
 directory; missing ones are skipped, see ``planner_service.warmup``); empty: none.

@@ -70,8 +70,12 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
                             format="%(asctime)s %(levelname)s [worker %(process)d] %(name)s: "
                                    "%(message)s")
     compiled = None if compile_dir is None else Path(compile_dir)
-    palm = BallOnPalmPlanner(compile_dir=compiled)
-    fingers = FingerCache(compile_dir=compiled)
+    # The finger NLPs compile in the background (a few seconds of gcc each, the virtual
+    # machine solving meanwhile); the ball-on-palm NLP is not compiled here: it is written
+    # out in SX, its compile takes tens of seconds in the foreground, and since the
+    # closed-form geometry its function evaluations are a small part of its solve.
+    palm = BallOnPalmPlanner()
+    fingers = FingerCache(compile_dir=compiled, background=True)
     if warmup:
         from .warmup import request_files, warm_up
 

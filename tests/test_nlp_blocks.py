@@ -117,3 +117,43 @@ def test_the_compiled_nlp_plans_what_the_virtual_machine_plans(tmp_path: Path) -
     assert again._build(problem)[0].compiled
     assert sorted(p for p in tmp_path.iterdir() if p.is_file()) == libraries
     assert [p.stat().st_mtime_ns for p in libraries] == stamps
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
+def test_a_background_compile_takes_over_between_solves(tmp_path: Path) -> None:
+    """With ``background``, the first plan is solved in the virtual machine at once while
+    gcc runs in a thread; once the compile is done the next solve runs the compiled NLP and
+    plans the same; the libraries are cached like a foreground compile's."""
+    problem = palm_with_via_points()
+    planner = ManipulationPlanner(compile_dir=tmp_path, background=True)
+    first: Any = planner.solve(problem)
+    nlp, _ = planner._build(problem)
+    assert planner.compiler is not None and not planner.compiler.errors
+    assert first.status is Status.SOLVED and not first.certificate_failures
+    structures = 1 + first.refinements  # a refined grid is a structure of its own
+    assert not nlp.compiled  # swapped in only between solves
+    assert planner.adopt_compiled(wait=300.0) == structures
+    assert nlp.compiled and planner.compiler.pending == 0 and not planner.compiler.errors
+    second: Any = planner.solve(problem)
+    assert second.status is Status.SOLVED and not second.certificate_failures
+    assert second.refinements == first.refinements
+    assert_close(second.X, first.X, atol=1e-8)
+    assert {p.suffix for p in tmp_path.iterdir()} == {".so"}  # no temporary folder left
+    assert len(list(tmp_path.iterdir())) == 2 * structures
+    # a foreground planner finds the same libraries in the cache
+    again = ManipulationPlanner(compile_dir=tmp_path)
+    again.prepare(problem)
+    assert again._build(problem)[0].compiled
+    assert len(list(tmp_path.iterdir())) == 2 * structures
+
+
+def test_a_background_compile_without_a_compiler_keeps_the_virtual_machine(
+        tmp_path: Path) -> None:
+    problem = palm_with_via_points()
+    planner = ManipulationPlanner(compile_dir=tmp_path, background=True)
+    assert planner.compiler is not None
+    planner.compiler.compiler = "no-such-cc"
+    sol: Any = planner.solve(problem)
+    assert sol.status is Status.SOLVED and not planner._build(problem)[0].compiled
+    assert planner.compiler.pending == 0
+    assert any("no C compiler" in e for e in planner.compiler.errors)
