@@ -12,6 +12,7 @@ CasADi version and the compiler flags: the next process that needs the structure
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import os
 import shutil
@@ -76,21 +77,36 @@ def _cached_library(source: Path, key: str, cache_dir: Path, flags: tuple[str, .
     """The shared library of ``source`` in ``cache_dir``, named by the hash of the key, the
     CasADi version, the compiler and flags, and the C itself: compiled next to the source
     (a temporary folder) and moved into place unless it is already there. Returns (the
-    library, whether it came from the cache)."""
+    library, whether it came from the cache).
+
+    Processes sharing ``cache_dir`` (a service's workers, warming up the same structures at
+    once) take turns on each library with a lock (``flock`` on ``.locks/<name>.lock``,
+    released by the system if a process dies): the second finds the first's library
+    instead of compiling it again."""
     digest = hashlib.sha256()
     for part in (key, ca.__version__, compiler, *flags):
         digest.update(part.encode())
     digest.update(source.read_bytes())
-    library = cache_dir / f"{digest.hexdigest()[:24]}.so"
+    name = digest.hexdigest()[:24]
+    library = cache_dir / f"{name}.so"
     if library.exists():
         return library, True
-    out = source.with_suffix(".so")
-    proc = subprocess.run([compiler, *flags, "-fPIC", "-shared", str(source), "-o", str(out)],
-                          capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{compiler} failed: {proc.stderr[-2000:]}")
-    os.replace(out, library)  # atomic: concurrent processes never see a partial file
-    return library, False
+    locks = cache_dir / ".locks"
+    locks.mkdir(exist_ok=True)
+    with open(locks / f"{name}.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            if library.exists():
+                return library, True
+            out = source.with_suffix(".so")
+            proc = subprocess.run([compiler, *flags, "-fPIC", "-shared", str(source), "-o",
+                                   str(out)], capture_output=True, text=True, check=False)
+            if proc.returncode != 0:
+                raise RuntimeError(f"{compiler} failed: {proc.stderr[-2000:]}")
+            os.replace(out, library)  # atomic: other processes never see a partial file
+            return library, False
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def compiled_solver(solver: ca.Function, key: str, options: dict[str, Any],

@@ -51,3 +51,21 @@ def test_a_missing_compiler_is_a_clear_error(tmp_path: Path) -> None:
     nlp, _ = BallOnPalmPlanner().nlp_for(small())
     with pytest.raises(RuntimeError, match="no C compiler"):
         compiled_solver(nlp.solver, "k", {}, tmp_path, compiler="no-such-cc")
+
+
+def test_processes_sharing_a_cache_compile_each_library_once(tmp_path: Path) -> None:
+    """Two processes asking for the same library at once (a service's workers warming up
+    the same structures): one compiles it, the other waits on the lock and loads it."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    with ctx.Pool(2) as pool:
+        hits = pool.starmap(_compile_small, [(str(tmp_path),)] * 2)
+    assert sorted(hits) == [False, True]
+    assert len(list(tmp_path.glob("*.so"))) == 1
+
+
+def _compile_small(folder: str) -> bool:
+    nlp, _ = BallOnPalmPlanner().nlp_for(small())
+    opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False}
+    return compiled_solver(nlp.solver, "small", opts, Path(folder))[1]
