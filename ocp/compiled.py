@@ -188,7 +188,7 @@ class BackgroundCompiler:
                  compiler: str = "gcc") -> None:
         self.cache_dir, self.flags, self.compiler = cache_dir, flags, compiler
         self._executor: ThreadPoolExecutor | None = None
-        self._pending: dict[Any, tuple[Future[list[Path]], dict[str, Any], str]] = {}
+        self._pending: dict[Any, tuple[Future[list[Path]], dict[str, Any]]] = {}
         self.errors: list[str] = []
 
     def submit(self, key: Any, oracle: ca.Function, options: dict[str, Any],
@@ -200,15 +200,21 @@ class BackgroundCompiler:
         except RuntimeError as exc:
             self.errors.append(str(exc))
             return False
-        tmp = tempfile.mkdtemp(dir=self.cache_dir)
+        tmp = tempfile.mkdtemp(prefix="build-", dir=self.cache_dir)
         sources = block_sources(oracle, options, Path(tmp))
         if self._executor is None:
             self._executor = ThreadPoolExecutor(max_workers=1,
                                                 thread_name_prefix="dexroll-compile")
-        future = self._executor.submit(compile_sources, sources, fingerprint,
-                                       self.cache_dir, self.flags, self.compiler)
-        self._pending[key] = (future, options, tmp)
+        future = self._executor.submit(self._compile, sources, fingerprint, tmp)
+        self._pending[key] = (future, options)
         return True
+
+    def _compile(self, sources: list[Path], fingerprint: str, tmp: str) -> list[Path]:
+        try:
+            return compile_sources(sources, fingerprint, self.cache_dir, self.flags,
+                                   self.compiler)
+        finally:  # the C is not needed once compiled (or failed)
+            shutil.rmtree(tmp, ignore_errors=True)
 
     @property
     def pending(self) -> int:
@@ -218,18 +224,15 @@ class BackgroundCompiler:
         """(key, compiled solver, its options) of every compile done (waiting up to ``wait``
         seconds for the pending ones), loaded in the caller's thread."""
         if wait > 0 and self._pending:
-            futures_wait([f for f, _, _ in self._pending.values()], timeout=wait)
+            futures_wait([f for f, _ in self._pending.values()], timeout=wait)
         out = []
-        for key, (future, options, tmp) in list(self._pending.items()):
+        for key, (future, options) in list(self._pending.items()):
             if not future.done():
                 continue
             del self._pending[key]
             try:
-                libraries = future.result()
-                solver, compiled = load_block_solver(libraries, options)
+                solver, compiled = load_block_solver(future.result(), options)
                 out.append((key, solver, compiled))
             except (RuntimeError, OSError) as exc:
                 self.errors.append(str(exc))
-            finally:
-                shutil.rmtree(tmp, ignore_errors=True)
         return out
