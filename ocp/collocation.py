@@ -20,6 +20,7 @@ with scale vectors that may depend on parameters (e.g. the object radius).
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -327,20 +328,27 @@ def reintegrator(dynamics: ca.Function, nx: int, nu: int, n_params: int, n_sub: 
                                                   "max_num_steps": 100_000})
 
 
-#: Chained re-integrators: (id of the interval integrator, intervals) -> (integrator, chain).
-_CHAINS: dict[tuple[int, int], tuple[ca.Function, ca.Function]] = {}
+#: Chained re-integrators, most recently used last: (id of the interval integrator,
+#: intervals) -> (the integrator, kept alive so that its id is not reused; the chain).
+_CHAINS: OrderedDict[tuple[int, int], tuple[ca.Function, ca.Function]] = OrderedDict()
+#: At most this many chains are kept (planners come and go in a long-running service).
+_MAX_CHAINS = 64
 
 
 def _chain(F: ca.Function, n: int) -> ca.Function:
     """``F`` over n consecutive intervals as one CasADi call (``mapaccum``: each interval
     starts where the previous one ended): (x0, q (nq x n)) -> (node states 1..n, samples)."""
     key = (id(F), n)
-    if key not in _CHAINS:
+    if key in _CHAINS:
+        _CHAINS.move_to_end(key)
+    else:
         x = ca.MX.sym("x", F.size1_in("x0"))
         q = ca.MX.sym("q", F.size1_in("p"))
         xs = F(x0=x, p=q)["xf"]
         step = ca.Function("reintegrate_step", [x, q], [xs[:, -1], xs])
         _CHAINS[key] = (F, step.mapaccum("reintegrate_chain", n, [0], [0]))
+        while len(_CHAINS) > _MAX_CHAINS:
+            _CHAINS.popitem(last=False)
     return _CHAINS[key][1]
 
 

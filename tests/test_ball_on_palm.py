@@ -297,3 +297,32 @@ def test_certificate_of_a_non_finite_plan_fails_instead_of_crashing() -> None:
     U = np.zeros((n, 2))
     cert = certify(problem, model_for("sphere"), t, X, U, U, U, [0, 10, 20, 30], 4)
     assert not cert.passed
+
+
+def test_reintegration_over_the_horizon_is_the_intervals_chained() -> None:
+    """The certificate's re-integration (one CasADi call over the horizon) is CVODES over
+    each interval started where the previous one ended, never reset to the NLP's states:
+    the same numbers as integrating interval by interval from Python."""
+    from ocp.ball_on_palm import model_for
+    from ocp.collocation import quadratic_input, reintegrate
+
+    rng = np.random.default_rng(3)
+    n, n_sub = 7, 4
+    t_nodes = np.cumsum(np.r_[0.0, rng.uniform(0.1, 0.3, n)])
+    U0, Um, U1 = (rng.normal(scale=0.02, size=(n, 2)) for _ in range(3))
+    x0 = np.array([0.0, 0.0, 0.2, 0.1, 0.3])
+    params = np.array([0.03])
+    F = model_for("sphere").reintegrator(n_sub)
+    nodes, samples, inputs = reintegrate(F, x0, t_nodes, U0, Um, U1, params, n_sub)
+    x, ref_nodes, ref_samples, ref_inputs = x0, [x0], [x0], [U0[0]]
+    s = np.linspace(0.0, 1.0, n_sub + 1)[1:]
+    for k in range(n):
+        q = np.r_[U0[k], Um[k], U1[k], t_nodes[k + 1] - t_nodes[k], params]
+        xs = np.asarray(F(x0=x, p=q)["xf"]).T
+        ref_samples += list(xs)
+        ref_inputs += [quadratic_input(sj, U0[k], Um[k], U1[k]) for sj in s]
+        x = xs[-1]
+        ref_nodes.append(x)
+    assert_close(nodes, np.array(ref_nodes), atol=0.0)
+    assert_close(samples, np.array(ref_samples), atol=0.0)
+    assert_close(inputs, np.array(ref_inputs), atol=1e-18)
