@@ -152,7 +152,9 @@ def _eq3_scale(pair: ContactPair, eta, rates, params_a, params_b) -> np.ndarray:
     a_scale = speed / np.diag(ga["M"])
     b_scale = speed / np.diag(gb["M"])
     psi_scale = speed * (np.sum(np.abs(ga["T"])) + np.sum(np.abs(gb["T"])))
-    return np.concatenate([a_scale, b_scale, [psi_scale]])
+    # + a floor far below any physical rate: near a zero torsion (latitude 1e-323 rad, which
+    # Hypothesis finds) the rates are subnormal numbers, with few significant bits
+    return np.concatenate([a_scale, b_scale, [psi_scale]]) + 1e-200
 
 
 @SETTINGS
