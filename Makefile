@@ -51,8 +51,9 @@ lint: $(DEV)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 
+# one BLAS thread, as the service's workers and the bench runners use (docs/performance.md)
 bench: $(INSTALLED)
-	$(BIN)/python benchmarks/ball_on_palm.py
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/ball_on_palm.py
 
 # the quick benchmark suite (docs/benchmarks.md): report in bench-results/quick-<time>/
 bench-quick: $(DEV)
