@@ -21,6 +21,7 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .surfaces import safe_norm
 
@@ -45,11 +46,16 @@ def grasp_cosines(p1: Sym, n1: Sym, p2: Sym, n2: Sym) -> tuple[Sym, Sym, Sym]:
     return -ca.dot(n1, d), ca.dot(n2, d), dist
 
 
-def grasp_angles_numeric(p1: np.ndarray, n1: np.ndarray, p2: np.ndarray, n2: np.ndarray
-                         ) -> tuple[float, float]:
-    """(Phi_1, Phi_2) [rad] for reporting (numpy, acos clipped)."""
-    d = np.asarray(p2, dtype=float) - np.asarray(p1, dtype=float)
-    dist = float(np.linalg.norm(d))
-    c1 = float(np.clip(-np.dot(n1, d) / dist, -1.0, 1.0))
-    c2 = float(np.clip(np.dot(n2, d) / dist, -1.0, 1.0))
-    return math.acos(c1), math.acos(c2)
+def grasp_angles_numeric(p1: ArrayLike, n1: ArrayLike, p2: ArrayLike, n2: ArrayLike
+                         ) -> Any:
+    """(Phi_1, Phi_2) [rad] for reporting (numpy, acos clipped): a pair of floats for one
+    grasp, or an array (k, 2) for k grasps given as rows (k, 3) of points and normals."""
+    p1, n1, p2, n2 = (np.asarray(a, dtype=float) for a in (p1, n1, p2, n2))
+    d = p2 - p1
+    dist = np.sqrt(np.sum(d * d, axis=-1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c1 = np.clip(-np.sum(n1 * d, axis=-1) / dist, -1.0, 1.0)
+        c2 = np.clip(np.sum(n2 * d, axis=-1) / dist, -1.0, 1.0)
+    if d.ndim == 1:
+        return math.acos(float(c1)), math.acos(float(c2))
+    return np.stack([np.arccos(c1), np.arccos(c2)], axis=-1)

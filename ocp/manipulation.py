@@ -750,6 +750,7 @@ class _Model:
         self.dynamics = ca.Function("manipulation_dynamics", [x, u, prm], [xdot],
                                     ["x", "u", "params"], ["x_dot"])
         self._reintegrators: dict[int, ca.Function] = {}
+        self._mapped: dict[tuple[str, int], ca.Function] = {}
         P = ca.horzcat(*points)  # object frame, 3 x n
         N = ca.horzcat(*normals)
         cl = ca.vertcat(*closure) if closure else ca.SX(0, 1)
@@ -802,6 +803,13 @@ class _Model:
         return np.concatenate([np.asarray(shape, dtype=float),
                                *[np.asarray(R).ravel(order="F") for R in charts]])
 
+    def mapped(self, name: str, k: int) -> ca.Function:
+        """The model's function ``name`` (cartesian, dynamics, laws) over k points, built
+        once per size."""
+        if (name, k) not in self._mapped:
+            self._mapped[(name, k)] = getattr(self, name).map(k)
+        return self._mapped[(name, k)]
+
     def reintegrator(self, n_sub: int) -> ca.Function:
         if n_sub not in self._reintegrators:
             self._reintegrators[n_sub] = reintegrator(self.dynamics, self.nx, self.nu,
@@ -816,10 +824,9 @@ def force_angles(points: FloatArray, normals: FloatArray
     """(Phi* (k,), per-contact force angles (k, n), grasp map onto (k,)) for contacts
     (k, n, 3) with the object's outward normals. Two contacts: the paper's grasp angles
     in closed form; three or more: :func:`ocp.force_closure.grasp_qualities`."""
-    k, n = points.shape[0], points.shape[1]
+    n = points.shape[1]
     if n == 2:
-        ang = np.array([grasp_angles_numeric(points[i, 0], normals[i, 0], points[i, 1],
-                                             normals[i, 1]) for i in range(k)])
+        ang = grasp_angles_numeric(points[:, 0], normals[:, 0], points[:, 1], normals[:, 1])
         onto = np.linalg.norm(points[:, 1] - points[:, 0], axis=1) > 0
         return ang.max(axis=1), ang, onto
     from .force_closure import grasp_qualities
@@ -1175,7 +1182,7 @@ class ManipulationPlanner:
                   prm: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Grasp epigraph values and internal-force guesses at the given states."""
         k = len(Xall)
-        out = m.cartesian.map(k)(Xall.T, prm)
+        out = m.mapped("cartesian", k)(Xall.T, prm)
         nc = m.n_contacts
         pts = np.asarray(out[4]).T.reshape(k, nc, 3)
         nrm = np.asarray(out[5]).T.reshape(k, nc, 3)
@@ -1273,7 +1280,7 @@ class ManipulationPlanner:
                            Rc: FloatArray = Rc) -> FloatArray:
                 R, _ = pose(t)
                 pts = np.einsum("kji,j->ki", R, offset)  # R^T offset
-                return np.array([m.surface.inverse(Rc.T @ p_, shape) for p_ in pts])
+                return np.asarray(m.surface.inverse(pts @ Rc, shape))  # rows Rc^T p
 
             alpha = ball_point(ts)
             rate = (ball_point(ts + dt) - ball_point(ts - dt)) / (2 * dt)
@@ -1291,7 +1298,7 @@ class ManipulationPlanner:
         # joints (one batched evaluation); one batched IK from the initial grasp's joints,
         # and a sequential one from the previous point's where that does not converge
         X[0] = x0
-        out = m.cartesian.map(len(ts))(X.T, prm)
+        out = m.mapped("cartesian", len(ts))(X.T, prm)
         R_all = np.asarray(out[2]).reshape(3, len(ts), -1, 3)  # (3, k, finger, 3)
         p_all = np.asarray(out[3]).reshape(3, len(ts), -1)  # (3, k, finger)
         for i, c in enumerate(problem.fingers):
@@ -1324,8 +1331,8 @@ class ManipulationPlanner:
         Xg = np.vstack([X, Xm])[order]
         Ug = np.vstack([np.vstack([U0, U1[-1:]]), Um])[order]
         k = len(t)
-        xdot = np.asarray(m.dynamics.map(k)(Xg.T, Ug.T, prm)).T
-        cart = m.cartesian.map(k)(Xg.T, prm)
+        xdot = np.asarray(m.mapped("dynamics", k)(Xg.T, Ug.T, prm)).T
+        cart = m.mapped("cartesian", k)(Xg.T, prm)
         nc, nf = m.n_contacts, len(problem.fingers)
         R_po = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
         p_po = np.asarray(cart[1]).T
@@ -1334,7 +1341,7 @@ class ManipulationPlanner:
         p_pf = np.asarray(cart[3]).T.reshape(k, nf, 3)
         pts = np.asarray(cart[4]).T.reshape(k, nc, 3)
         nrm = np.asarray(cart[5]).T.reshape(k, nc, 3)
-        laws = m.laws.map(k)(Xg.T, xdot.T, prm)
+        laws = m.mapped("laws", k)(Xg.T, xdot.T, prm)
         v_obj, w_obj = np.asarray(laws[0]).T, np.asarray(laws[1]).T
         phi, angles, _ = force_angles(pts, nrm)
         margin = math.atan(problem.mu) - phi
@@ -1392,10 +1399,10 @@ class ManipulationPlanner:
         except RuntimeError as exc:  # CVODES gave up: the plan is not a smooth motion
             return {}, (f"re-integration failed: {str(exc).splitlines()[-1]}",)
         n = len(sx)
-        xd = np.asarray(m.dynamics.map(n)(sx.T, su.T, prm))
+        xd = np.asarray(m.mapped("dynamics", n)(sx.T, su.T, prm))
         laws = dict(zip(m.laws.name_out(), (np.asarray(a).T for a in
-                                            m.laws.map(n)(sx.T, xd, prm)), strict=True))
-        cart = m.cartesian.map(n)(sx.T, prm)
+                                            m.mapped("laws", n)(sx.T, xd, prm)), strict=True))
+        cart = m.mapped("cartesian", n)(sx.T, prm)
         nc, nf = m.n_contacts, len(problem.fingers)
         R_pf = np.asarray(cart[2]).T.reshape(n, nf, 3, 3).transpose(0, 1, 3, 2) \
             if nf else np.zeros((n, 0, 3, 3))

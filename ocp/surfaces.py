@@ -176,7 +176,8 @@ class Surface:
         )
 
     def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
-        """Chart coordinates (u, v) of a point of the surface given in the patch frame."""
+        """Chart coordinates (u, v) of a point of the surface given in the patch frame; of
+        every row for points (k, 3), as (k, 2)."""
         raise NotImplementedError(f"{self.name} has no inverse chart")
 
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
@@ -272,7 +273,7 @@ class _Plane(Surface):
 
     def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
         p = np.asarray(point, dtype=float)
-        return np.array([p[0], p[1]])
+        return np.stack([p[..., 0], p[..., 1]], axis=-1)
 
 
 class _Sphere(Surface):
@@ -290,8 +291,9 @@ class _Sphere(Surface):
 
     def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
         p = np.asarray(point, dtype=float)
-        r = float(np.linalg.norm(p))
-        return np.array([np.arcsin(np.clip(p[2] / r, -1.0, 1.0)), np.arctan2(-p[1], p[0])])
+        r = np.sqrt(np.sum(p * p, axis=-1))
+        return np.stack([np.arcsin(np.clip(p[..., 2] / r, -1.0, 1.0)),
+                         np.arctan2(-p[..., 1], p[..., 0])], axis=-1)
 
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
         return float(np.asarray(params, dtype=float)[0])
@@ -326,8 +328,8 @@ class _Ellipsoid(Surface):
     def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
         p = np.asarray(point, dtype=float)
         a, c = np.asarray(params, dtype=float)
-        return np.array([np.arctan2(p[2] / c, np.hypot(p[0], p[1]) / a),
-                         np.arctan2(-p[1], p[0])])
+        return np.stack([np.arctan2(p[..., 2] / c, np.hypot(p[..., 0], p[..., 1]) / a),
+                         np.arctan2(-p[..., 1], p[..., 0])], axis=-1)
 
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
         n = np.asarray(normal, dtype=float)

@@ -490,3 +490,16 @@ def test_input_validation():
     with pytest.raises(ValueError):
         grasp_qualities(np.zeros((2, 3, 3)), np.ones((2, 2, 3)))
     assert grasp_qualities(np.zeros((0, 3, 3)), np.ones((0, 3, 3))) == []
+
+
+def test_grasp_angles_of_rows_are_the_grasp_angles_of_each_grasp() -> None:
+    """The grasp angles of k grasps at once (the planners' reports and guesses) are those of
+    each grasp alone."""
+    rng = np.random.default_rng(5)
+    P1, P2 = rng.normal(size=(8, 3)), rng.normal(size=(8, 3))
+    N1, N2 = (a / np.linalg.norm(a, axis=1)[:, None] for a in rng.normal(size=(2, 8, 3)))
+    rows = grasp_angles_numeric(P1, N1, P2, N2)
+    assert rows.shape == (8, 2)
+    for i in range(8):
+        assert_close(rows[i], np.array(grasp_angles_numeric(P1[i], N1[i], P2[i], N2[i])),
+                     atol=1e-15)

@@ -497,3 +497,21 @@ def test_support_heights_are_support_height_row_by_row(a: float, c: float, seed:
         assert_close(surface.support_heights(n, params),
                      np.array([surface.support_height(row, params) for row in n]),
                      atol=1e-15, err_msg=surface.name)
+
+
+@SETTINGS
+@given(u=lat, v=lon, a=semi_axis, c=semi_axis, seed=st.integers(0, 2**16))
+def test_inverse_of_rows_is_the_inverse_of_each_point(u: float, v: float, a: float, c: float,
+                                                      seed: int) -> None:
+    """Inverse charts take points row by row (the finger guess inverts a whole path at
+    once) and give what they give each point alone, which is the chart's preimage."""
+    rng = np.random.default_rng(seed)
+    alphas = np.column_stack([rng.uniform(-1.3, 1.3, 6), rng.uniform(-3.1, 3.1, 6)])
+    alphas[0] = (u, v)
+    for surface, params in ((Sphere, [a]), (Ellipsoid, [a, c]), (Plane, [])):
+        pts = np.array([np.asarray(surface.geometry(al, params)[0], dtype=float).ravel()
+                        for al in alphas])
+        rows = surface.inverse(pts, params)
+        assert rows.shape == (6, 2)
+        assert_close(rows, np.array([surface.inverse(p, params) for p in pts]), atol=0.0)
+        assert_close(rows, alphas, atol=1e-9, err_msg=surface.name)
