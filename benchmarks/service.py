@@ -9,7 +9,9 @@ measures, for a fresh service with and without the warm-up (``DEXROLL_WARMUP``):
   the client), and the plan's own NLP build time (0 when it came from the cache);
 * the HTTP round trip against the solve: for experiment 1 (``--repeat`` requests after
   the first), the client's wall clock per plan against the same request planned in-process
-  by the library with its caches warm (median of each); the ratio is the overhead;
+  by the library with its caches warm, the two interleaved (one request, one in-process
+  plan, ...) so that the machine's drift affects both alike (median of each); the ratio
+  is the overhead. The in-process plans run with one BLAS thread, as the workers do;
 * peak RSS (VmHWM) of each worker process at the end, from /proc.
 
     .venv/bin/python benchmarks/service.py [--repeat 5] [--out benchmarks/results]
@@ -73,6 +75,7 @@ def post(url: str, body: dict[str, Any]) -> tuple[float, dict[str, Any]]:
 
 
 def run_service(warmup: str, repeat: int) -> dict[str, Any]:
+    library = _library_experiment1()
     port = _port()
     data = Path(tempfile.mkdtemp(prefix="dexroll-bench-"))
     env = {**os.environ, "DEXROLL_PORT": str(port), "DEXROLL_DATA_DIR": str(data),
@@ -101,7 +104,7 @@ def run_service(warmup: str, repeat: int) -> dict[str, Any]:
                            "solve_s": stats["solve_time"]}
             pids.add(int(job["worker_pid"]))
         request = experiment1_request()
-        walls, solves = [], []
+        walls, solves, in_process = [], [], []
         post(url, request)  # builds or warms this structure in one worker
         post(url, request)  # and in the other (two workers, jobs alternate when idle)
         for _ in range(repeat):
@@ -109,27 +112,33 @@ def run_service(warmup: str, repeat: int) -> dict[str, Any]:
             walls.append(wall)
             solves.append(job["result"]["stats"]["solve_time"])
             pids.add(int(job["worker_pid"]))
+            in_process.append(library())
+        http, lib = statistics.median(walls), statistics.median(in_process)
         return {"warmup": warmup or "(none)", "ready_s": ready, "first_plans": first,
-                "experiment1_http_wall_median_s": statistics.median(walls),
+                "experiment1_http_wall_median_s": http,
                 "experiment1_ipopt_median_s": statistics.median(solves),
+                "library_experiment1_wall_median_s": lib,
+                "experiment1_http_overhead": http / lib - 1.0,
                 "worker_peak_rss_mb": {str(p): _vm_hwm_mb(p) for p in sorted(pids)}}
     finally:
         proc.terminate()
         proc.wait(timeout=30)
 
 
-def library_experiment1(repeat: int) -> float:
-    """Median wall clock of the same request planned in-process, caches warm."""
+def _library_experiment1() -> Any:
+    """A function planning experiment 1 in-process (caches warm after a first plan) and
+    returning its wall clock [s]."""
     from planner_service.convert import REQUEST, solve
 
     request = REQUEST.validate_python(experiment1_request())
     solve(request)
-    walls = []
-    for _ in range(repeat):
+
+    def plan() -> float:
         t0 = time.perf_counter()
         solve(request)
-        walls.append(time.perf_counter() - t0)
-    return statistics.median(walls)
+        return time.perf_counter() - t0
+
+    return plan
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -137,13 +146,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     args = parser.parse_args(argv)
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")  # before the library loads CasADi: as the workers
     report: dict[str, Any] = {"cold": run_service("", args.repeat),
-              "warm": run_service(str(EXAMPLES), args.repeat),
-              "library_experiment1_wall_median_s": library_experiment1(args.repeat)}
-    lib = report["library_experiment1_wall_median_s"]
-    for key in ("cold", "warm"):
-        report[key]["experiment1_http_overhead"] = \
-            report[key]["experiment1_http_wall_median_s"] / lib - 1.0
+                              "warm": run_service(str(EXAMPLES), args.repeat)}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "service.json").write_text(json.dumps(report, indent=2) + "\n")
     print(json.dumps(report, indent=2))
