@@ -1433,8 +1433,7 @@ class ManipulationPlanner:
                                                                       axis=1)))
             cert["max_spin_rate_palm"] = float(np.max(np.abs(laws["spin_palm"])))
             # the object touches the palm: support function of its shape along -z (no chart)
-            heights = np.array([m.surface.support_height(R.T @ [0.0, 0.0, -1.0], shape)
-                                for R in R_po])
+            heights = m.surface.support_heights(-R_po[:, 2, :], shape)  # rows R^T (-e_z)
             cert["max_height_error_palm"] = float(np.max(np.abs(p_po[:, 2] - heights)))
             tol["max_slip_speed_palm"] = 1e-8 * max(speed, 1e-3)
             tol["max_spin_rate_palm"] = 1e-8 * max(speed / L, 1e-3)
@@ -1443,16 +1442,15 @@ class ManipulationPlanner:
         for i, c in enumerate(problem.fingers):
             name = c.name or f"finger{i}"
             q_i = sx[:, lay.x_q(i)]
-            for j in range(n):
-                R_pin, p_pin = c.finger.fingertip_pose_pin(q_i[j])
-                pos_err = max(pos_err, float(np.linalg.norm(p_pin - p_pf[j, i])))
-                E = R_pin.T @ R_pf[j, i]
-                rot_err = max(rot_err, float(np.arccos(np.clip((np.trace(E) - 1) / 2,
-                                                               -1, 1))))
+            poses = [c.finger.fingertip_pose_pin(q) for q in q_i]  # Pinocchio, point by point
+            R_pin = np.array([pose[0] for pose in poses])
+            p_pin = np.array([pose[1] for pose in poses])
+            pos_err = max(pos_err, float(np.max(np.linalg.norm(p_pin - p_pf[:, i], axis=1))))
+            tr = np.einsum("kji,kji->k", R_pin, R_pf[:, i])  # trace(R_pin^T R_pf)
+            rot_err = max(rot_err, float(np.max(np.arccos(np.clip((tr - 1) / 2, -1, 1)))))
             # the pad's plane is tangent to the object: support function along the pad normal
             pad_n = laws[f"pad_normal_{i}"]
-            h = np.array([m.surface.support_height(R_po[j].T @ (-pad_n[j]), shape)
-                          for j in range(n)])
+            h = m.surface.support_heights(np.einsum("kji,kj->ki", R_po, -pad_n), shape)
             gap = laws[f"centre_above_pad_{i}"].ravel() - h
             cert[f"max_slip_speed_{name}"] = float(np.max(np.linalg.norm(laws[f"slip_{i}"],
                                                                          axis=1)))
