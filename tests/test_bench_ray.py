@@ -20,6 +20,11 @@ LIMIT = 2  # problems per family: every family and method, 2 of each
 #: the machine was heavily loaded, where one three-finger plan's certificate values differed
 #: in the 9th digit under Ray (docs/benchmarks.md).
 REL = 1e-6
+#: Drake's IPOPT (SPRAL) is not reproducible to the bit between processes: on the quick
+#: suite its reorientation-001 plan's certificate angle defect came out 1.2235661e-3 under
+#: Ray and 1.2235682e-3 in the pool (relative 1.7e-6) in two of seven local runs (session 4;
+#: CI has no Drake, its rows are "unavailable" there). Its numbers are compared this loosely.
+REL_DRAKE = 1e-4
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +48,8 @@ def test_ray_gives_the_same_rows_as_the_process_pool(local_ray: Any, tmp_path: P
     assert [(r["problem_id"], r["method"]) for r in on_ray["rows"]] == [
         (r["problem_id"], r["method"]) for r in pooled["rows"]]
     for a, b in zip(on_ray["rows"], pooled["rows"], strict=True):
-        assert differences(a, b, rel=REL) == {}, (a["problem_id"], a["method"])
+        rel = REL_DRAKE if a["method"] == "drake" else REL
+        assert differences(a, b, rel=rel) == {}, (a["problem_id"], a["method"])
     assert {(r["family"], r["method"]) for r in on_ray["rows"]} == {
         (s["family"], s["method"]) for s in pooled["summary"]}
     # the actors are processes of their own, each planning several units
