@@ -258,6 +258,11 @@ def test_row_differences_leave_out_run_dependent_fields() -> None:
     assert differences(a, b) == {"certificate.max_slip_speed": (1e-6, 1.0000001e-6)}
     assert differences(a, b, rel=1e-6) == {}
     assert differences(a, dict(b, iterations=8), rel=1e-6) == {"iterations": (7, 8)}
+    # an absolute floor for residuals at round-off, and only for them
+    c = dict(b, certificate={"max_slip_speed": 1.0e-6 + 1e-12, "n": 2.0})
+    assert differences(a, c, rel=1e-9) != {}
+    assert differences(a, c, rel=1e-9, floor=1e-11) == {}
+    assert differences(a, dict(b, iterations=8), floor=10.0) == {"iterations": (7, 8)}
 
 
 def test_missing_peers_are_skipped_and_reported(monkeypatch: pytest.MonkeyPatch,

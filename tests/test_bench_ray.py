@@ -25,6 +25,10 @@ REL = 1e-6
 #: Ray and 1.2235682e-3 in the pool (relative 1.7e-6) in two of seven local runs (session 4;
 #: CI has no Drake, its rows are "unavailable" there). Its numbers are compared this loosely.
 REL_DRAKE = 1e-4
+#: Certificate residuals at round-off are compared absolutely: a two-finger plan's joint
+#: defect came out 1.77253767e-11 under Ray and 1.77221571e-11 in the pool (relative 1.8e-4,
+#: absolute 3e-15) in a fresh-venv run of session 5; its tolerance is 1e-5 rad.
+FLOOR = 1e-9
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +53,7 @@ def test_ray_gives_the_same_rows_as_the_process_pool(local_ray: Any, tmp_path: P
         (r["problem_id"], r["method"]) for r in pooled["rows"]]
     for a, b in zip(on_ray["rows"], pooled["rows"], strict=True):
         rel = REL_DRAKE if a["method"] == "drake" else REL
-        assert differences(a, b, rel=rel) == {}, (a["problem_id"], a["method"])
+        assert differences(a, b, rel=rel, floor=FLOOR) == {}, (a["problem_id"], a["method"])
     assert {(r["family"], r["method"]) for r in on_ray["rows"]} == {
         (s["family"], s["method"]) for s in pooled["summary"]}
     # the actors are processes of their own, each planning several units

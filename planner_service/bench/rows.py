@@ -155,13 +155,14 @@ def comparable(row: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in row.items() if k not in VOLATILE}
 
 
-def differences(a: Mapping[str, Any], b: Mapping[str, Any], rel: float = 0.0
-                ) -> dict[str, tuple[Any, Any]]:
+def differences(a: Mapping[str, Any], b: Mapping[str, Any], rel: float = 0.0,
+                floor: float = 0.0) -> dict[str, tuple[Any, Any]]:
     """The fields (``certificate.<key>`` for its values) in which two rows of the same
-    unit differ, ``VOLATILE`` ones left out; numbers within ``rel`` (relative) agree."""
+    unit differ, ``VOLATILE`` ones left out; numbers within ``rel`` (relative) agree, and
+    so do numbers that differ by at most ``floor`` (absolute: residuals at round-off)."""
     def same(x: Any, y: Any) -> bool:
         if isinstance(x, float) and isinstance(y, float):
-            return x == y or abs(x - y) <= rel * max(abs(x), abs(y))
+            return x == y or abs(x - y) <= max(rel * max(abs(x), abs(y)), floor)
         return bool(x == y)
 
     out: dict[str, tuple[Any, Any]] = {}
