@@ -46,9 +46,9 @@ from ocp.manipulation import (
     ObjectPose,
     Tracking,
     hand_fingertips,
-    rotation_angle_between,
 )
 from ocp.problem import ObjectSpec
+from ocp.rotations import rotation_angle_between
 
 FloatArray = NDArray[np.float64]
 

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 __all__ = ["HermiteSimpson", "NlpPoint", "WarmStart", "hermite_sample",
            "hermite_simpson_defects", "left_input_columns", "node_inputs", "node_times",
-           "quadratic_input", "reintegrate", "reintegrator", "target_residuals"]
+           "quadratic_input", "reintegrate", "reintegrator", "rk4_step", "target_residuals"]
 
 
 def left_input_columns(segments: tuple[int, ...]) -> list[int]:
@@ -52,6 +52,16 @@ def node_inputs(u_of_t: Any, t_nodes: NDArray[np.float64], left_cols: list[int],
     U[left_cols] = left
     U[right_cols] = u_of_t(t_nodes[1:] - eps)
     return U
+
+
+def rk4_step(f: Any, x: Any, u0: Any, um: Any, u1: Any, h: Any) -> Any:
+    """One classic Runge-Kutta step of x' = f(x, u) over h, the input u0 at the start, um
+    at the midpoint, u1 at the end (symbolic or numeric)."""
+    k1 = f(x, u0)
+    k2 = f(x + h / 2 * k1, um)
+    k3 = f(x + h / 2 * k2, um)
+    k4 = f(x + h * k3, u1)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 def hermite_simpson_defects(xk: Any, xm: Any, xk1: Any, f0: Any, fm: Any, f1: Any,

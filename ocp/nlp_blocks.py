@@ -107,15 +107,14 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
                            via_masks: tuple[tuple[bool, ...], ...], tracking: bool,
                            force_regularisation: float, fingerprint: str,
                            compile_dir: Path | None = None) -> NLP:
-    """The NLP of one grasp structure (``m``: the structure's model, ``ocp.manipulation``'s
-    ``_Model``): variables ``w = (X, Xm, U, Um, S, Sm, F)`` (scaled states and inputs at
+    """The NLP of one grasp structure (``m``: its :class:`ocp.grasp_model.GraspModel`):
+    variables ``w = (X, Xm, U, Um, S, Sm, F)`` (scaled states and inputs at
     nodes and midpoints, grasp epigraph at every point, internal forces of 3+ contacts),
     parameters ``p = (shape, seg_T, goal, vias, charts, weights, cone cosine, tracking
     tolerances, desired positions, desired rotations)``; constraints: the defects of every
     interval, every point's path constraints (node 0, the given initial grasp, without its
     closure and tracking bounds), the goal and via-point targets."""
     t0 = time.perf_counter()
-    lay = m.layout
     nc = m.n_contacts
     nf = len(m.fingers)
     hs = HermiteSimpson(m.nx, m.nu, segments)
@@ -137,7 +136,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     q = ca.vertcat(shape_q, charts_q, ccone_q, tol_q, wtr_q)
     L = ca.mmax(shape_q)
     prm = ca.vertcat(shape_q, charts_q)
-    x_scale = ca.vertcat(*lay.x_scale(L))
+    x_scale = ca.vertcat(*m.x_scale(L))
     sig = ca.SX.sym("sigma")  # the objective's factor in the Lagrangian
 
     # -- point block: z = (x~, s, f) at one collocation point -----------------------------
@@ -214,19 +213,15 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     hq = ca.SX.sym("h")  # the interval's length [s]
     Tq = ca.SX.sym("T")
     wq = ca.SX.sym("w", 4)  # effort weights (object, contacts, joints) and grasp weight
-    u_scale = ca.vertcat(*lay.u_scale(L, Tq))
+    u_scale = ca.vertcat(*m.u_scale(L, Tq))
 
     def fdyn(x_: Any, u_: Any) -> Any:
         return m.dynamics(x_scale * x_, u_scale * u_, prm) / x_scale
 
     D = hermite_simpson_defects(xk, xm, xk1, fdyn(xk, u0), fdyn(xm, um), fdyn(xk1, u1), hq)
-    groups = ([list(range(lay.n_obj_u))],
-              [list(range(lay.u_w(i).start, lay.u_w(i).stop)) for i in range(nf)],
-              [list(range(lay.u_qd(i).start, lay.u_qd(i).stop)) for i in range(nf)])
     hn = hq / Tq
     cost_i: Any = wq[3] * hn / 6 * (sk + 4 * sm + sk1)
-    for i, group in enumerate(groups):
-        idx = [j for grp in group for j in grp]
+    for i, idx in enumerate(m.effort_groups()):
         if idx:
             cost_i += wq[i] * hn / 6 * (ca.sumsqr(u0[idx]) + 4 * ca.sumsqr(um[idx])
                                         + ca.sumsqr(u1[idx]))

@@ -197,7 +197,7 @@ class OneFingerPlanner:
             x0 = self.general.initial_state(general)
         except ProblemError as exc:
             raise _renamed(exc) from None
-        return np.asarray(x0[self.general.model(general).layout.x_q(0)], dtype=float)
+        return np.asarray(x0[self.general.model(general).fingertips[0].q_cols], dtype=float)
 
     def solve(self, problem: OneFingerProblem,
               warm_start: WarmStart | OneFingerSolution | None = None) -> OneFingerSolution:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -841,7 +841,7 @@ def _rows(a: Any) -> list[Any]:
     return out
 
 
-def _certificate_parts(certificate: dict[str, float]
+def _certificate_parts(certificate: Mapping[str, float]
                        ) -> tuple[dict[str, float], dict[str, float]]:
     """(values, tolerances) of a core certificate dict (its ``tol_<key>`` entries are the
     tolerances), finite entries only."""

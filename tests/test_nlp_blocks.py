@@ -72,7 +72,7 @@ def test_block_jacobian_and_hessian_are_the_nlps_own(name: str) -> None:
     x0 = planner.initial_state(problem)
     rng = np.random.default_rng(7)
     m = planner.model(problem)
-    scale = np.asarray(m.layout.x_scale(problem.object.length_scale), dtype=float)
+    scale = np.asarray(m.x_scale(problem.object.length_scale), dtype=float)
     n_x, n_xm = nlp.hs.X.numel(), nlp.hs.Xm.numel()
     for _ in range(2):
         w0 = 0.1 * rng.normal(size=nw)

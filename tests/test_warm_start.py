@@ -251,12 +251,12 @@ def test_manipulation_columns_follow_the_planners_layout() -> None:
                           "object.orientation.y", "object.orientation.z"]
     assert inputs[3:6] == ["object.angular_velocity_body.x", "object.angular_velocity_body.y",
                            "object.angular_velocity_body.z"]
-    lay = model.layout
-    for i, tip in enumerate(problem.fingers):
-        assert states[lay.x_eta(i)] == [f"{tip.name}.{k}" for k in ("x", "y", "u", "v", "psi")]
-        assert states[lay.x_q(i)] == [f"{tip.name}.q.{j}" for j in tip.finger.joint_names]
-        assert inputs[lay.u_w(i)] == [f"{tip.name}.w_u", f"{tip.name}.w_v"]
-        assert inputs[lay.u_qd(i)] == [f"{tip.name}.q_dot.{j}" for j in tip.finger.joint_names]
+    for tip, c in zip(problem.fingers, model.fingertips, strict=True):
+        joints = tip.finger.joint_names
+        assert states[c.eta_cols] == [f"{tip.name}.{k}" for k in ("x", "y", "u", "v", "psi")]
+        assert states[c.q_cols] == [f"{tip.name}.q.{j}" for j in joints]
+        assert inputs[c.w_cols] == [f"{tip.name}.w_u", f"{tip.name}.w_v"]
+        assert inputs[c.qd_cols] == [f"{tip.name}.q_dot.{j}" for j in joints]
     assert len(set(states)) == len(states) and len(set(inputs)) == len(inputs)
 
 

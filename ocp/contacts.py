@@ -1,0 +1,515 @@
+"""Contacts as model objects: a grasp is an object block and a list of fingertip contacts.
+
+Each kind of contact is one class that owns everything about it (learnt from Crocoddyl's
+``ContactModelMultiple.addContact``): its slice of the states and inputs and their scales,
+its rolling equations, its contact point and normal (for force closure), its path rows
+(closure), its laws for the certificate, its bounds and its initial state. The grasp model
+(:class:`ocp.grasp_model.GraspModel`) and the planner only loop over the contacts.
+
+* :class:`SupportContact`: the object resting on a fixed flat surface (the palm); its
+  contact coordinates eta_p = (x, y, u, v, psi) fix the object's pose; input w_p = d/dt
+  (x, y).
+* :class:`FreeObject`: the object's pose as a state when nothing fixes it: position p [m]
+  (palm frame) and quaternion (w, x, y, z) (rotation R(q / |q|)); input its twist (v [m/s]
+  palm frame, omega [rad/s] object frame).
+* :class:`FingertipContact`: a flat pad on a finger link rolling on the object: eta_i =
+  (x_i, y_i, u_i, v_i, psi_i) and the finger's joints q_i; inputs w_i = d/dt (u_i, v_i)
+  and q_dot_i.
+
+The support and the free object are *object blocks* (:class:`ObjectBlock`): exactly one of
+them comes first in a grasp and says where the object is; the fingertips follow.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from .contact import ContactPair
+from .problem import MAX_POSITION
+from .rotations import quaternion_rate_sym, quaternion_rotation_sym, vee, vee_skew
+from .surfaces import Plane, Surface
+
+if TYPE_CHECKING:
+    from .certificate import Check
+    from .manipulation import Fingertip, ManipulationProblem
+
+__all__ = ["Contact", "FingertipContact", "FreeObject", "ObjectBlock", "SupportContact",
+           "SymbolicGrasp"]
+
+FloatArray = NDArray[np.float64]
+#: The object's pose at times t: (R (k, 3, 3), p (k, 3)), palm frame.
+PoseOfTime = Callable[[FloatArray], tuple[FloatArray, FloatArray]]
+#: A block's input at times t, rows.
+InputOfTime = Callable[[FloatArray], FloatArray]
+
+#: Joint limits are imposed this far inside [rad or m] at the collocation points.
+JOINT_LIMIT_MARGIN = 1e-4
+
+
+@dataclass
+class SymbolicGrasp:
+    """What the contacts of one grasp share while their CasADi expressions are built: the
+    object's surface and shape parameters, the object's pose (set by the object block) and,
+    for the certificate's laws, the state's time derivative ``xd`` along which
+    :meth:`dot` differentiates."""
+
+    surface: Surface
+    shape: Any
+    x: Any
+    xd: Any
+    R_po: Any = None
+    p_po: Any = None
+    none: Any = field(default_factory=lambda: ca.SX(0, 1))
+    eye: Any = field(default_factory=lambda: ca.SX.eye(3))
+
+    def dot(self, expr: Any) -> Any:
+        """d/dt of an expression of the state, along ``xd``."""
+        return ca.reshape(ca.jtimes(ca.vec(expr), self.x, self.xd), expr.size1(),
+                          expr.size2())
+
+    def point_normal(self, uv: Any, chart: Any) -> tuple[Any, Any]:
+        """The object's point at chart coordinates uv and its outward normal (object
+        frame) in a contact's chart patch rotated by ``chart``."""
+        pc, Rg, _, _, _ = self.surface.geometry(uv, self.shape)
+        return chart @ pc, chart @ Rg[:, 2]
+
+
+@dataclass(frozen=True)
+class CertificateContext:
+    """The certificate's samples (along the re-integrated motion) that every contact's
+    checks read: the law outputs by name, the object's pose, the fingertips' poses from
+    the contact coordinates, the states and the scales of the tolerances."""
+
+    laws: dict[str, FloatArray]
+    R_po: FloatArray  # (n, 3, 3)
+    p_po: FloatArray  # (n, 3)
+    R_pf: FloatArray  # (n, fingers, 3, 3)
+    p_pf: FloatArray  # (n, fingers, 3)
+    states: FloatArray  # (n, nx)
+    shape: FloatArray
+    L: float
+    speed: float  # a motion speed scale [m/s]
+
+
+class Contact(ABC):
+    """One block of a grasp's states and inputs: see the module's doc."""
+
+    #: states and inputs of the block
+    nx: int = 0
+    nu: int = 0
+    #: whether it touches the object at a point (a row of the force-closure contacts)
+    has_point: bool = True
+    #: block columns by kind: lengths [m] (scaled by the object's size), angles [rad] and
+    #: joints, for the certificate's re-integration defects
+    length_columns: tuple[int, ...] = ()
+    angle_columns: tuple[int, ...] = ()
+    joint_columns: tuple[int, ...] = ()
+    #: input columns by the objective's effort group: 0 the object's own motion, 1 the
+    #: fingertips' motion over the object, 2 the joint rates
+    effort_groups: tuple[tuple[int, ...], tuple[int, ...], tuple[int, ...]] = ((), (), ())
+
+    def __init__(self, name: str, surface: Surface) -> None:
+        self.name = name
+        self.surface = surface
+        self.x0 = 0  # where the block starts in the grasp's state vector
+        self.u0 = 0  # ... and in its input vector
+
+    #: what touches the object ("palm", "finger"; "object" for the free object)
+    body: str = "object"
+
+    @property
+    def xs(self) -> slice:
+        return slice(self.x0, self.x0 + self.nx)
+
+    @property
+    def us(self) -> slice:
+        return slice(self.u0, self.u0 + self.nu)
+
+    @property
+    def eta_cols(self) -> slice:
+        """Its contact coordinates' columns in the grasp's state vector."""
+        return self.xs
+
+    @property
+    def w_cols(self) -> slice:
+        """Its contact inputs' columns in the grasp's input vector."""
+        return self.us
+
+    def label(self, problem: ManipulationProblem) -> str:
+        """Its name in plans and certificates."""
+        return self.name
+
+    @abstractmethod
+    def x_scale(self, L: Any) -> list[Any]:
+        """Scale of each state (L: the object's length scale)."""
+
+    @abstractmethod
+    def u_scale(self, L: Any, T: Any) -> list[Any]:
+        """Scale of each input (T: the horizon)."""
+
+    @abstractmethod
+    def rates(self, g: SymbolicGrasp, x: Any, u: Any, chart: Any) -> Any:
+        """d/dt of the block's states (its rolling equations)."""
+
+    def point_normal(self, g: SymbolicGrasp, x: Any, chart: Any) -> tuple[Any, Any]:
+        """Contact point and the object's outward normal there, object frame."""
+        raise NotImplementedError(f"{type(self).__name__} has no contact point")
+
+    def laws(self, g: SymbolicGrasp, x: Any, chart: Any) -> list[tuple[str, Any]]:
+        """Named expressions of (x, x_dot) the certificate checks."""
+        return []
+
+    @abstractmethod
+    def bounds(self, problem: ManipulationProblem) -> tuple[list[float], list[float],
+                                                          list[float]]:
+        """(state lower, state upper, input magnitude) bounds, physical units."""
+
+    def checks(self, problem: ManipulationProblem, k: int, c: CertificateContext
+               ) -> list[Check]:
+        """The certificate's checks of this contact (k: its index among the point
+        contacts)."""
+        return []
+
+
+class ObjectBlock(Contact):
+    """A contact that says where the object is (first in a grasp)."""
+
+    @abstractmethod
+    def pose(self, g: SymbolicGrasp, x: Any, chart: Any) -> tuple[Any, Any]:
+        """(R_po, p_po): the object's pose in the palm frame."""
+
+    @abstractmethod
+    def initial(self, problem: ManipulationProblem) -> FloatArray:
+        """The block's state at t = 0."""
+
+    @abstractmethod
+    def guess(self, problem: ManipulationProblem, x0: FloatArray, ts: FloatArray,
+              R0: FloatArray, p0: FloatArray, palm_planner: Any
+              ) -> tuple[FloatArray, FloatArray, PoseOfTime, InputOfTime | None]:
+        """The initial guess's object motion: the block's states and inputs at times ts
+        (from its state x0 at t = 0, the object's pose (R0, p0) then), the object's pose
+        as a function of time, and the block's input as one when it jumps (at via-points:
+        the guess then takes both sides), else None."""
+
+
+class SupportContact(ObjectBlock):
+    """The object on a fixed flat surface (the palm, z = 0 of the palm frame)."""
+
+    nx, nu = 5, 2
+    body = "palm"
+    length_columns = (0, 1)
+    angle_columns = (2, 3, 4)
+    effort_groups = ((0, 1), (), ())
+
+    def __init__(self, surface: Surface, name: str = "palm") -> None:
+        super().__init__(name, surface)
+        self.pair = ContactPair(Plane, surface)  # A = palm, B = object
+
+    def x_scale(self, L: Any) -> list[Any]:
+        return [L, L, 1, 1, 1]
+
+    def u_scale(self, L: Any, T: Any) -> list[Any]:
+        return [L / T, L / T]
+
+    def pose(self, g: SymbolicGrasp, x: Any, chart: Any) -> tuple[Any, Any]:
+        return self.pair.pose(x, g.none, g.shape, g.eye, chart)
+
+    def rates(self, g: SymbolicGrasp, x: Any, u: Any, chart: Any) -> Any:
+        return self.pair.rates_driven_by_a(x, u, g.none, g.shape)
+
+    def point_normal(self, g: SymbolicGrasp, x: Any, chart: Any) -> tuple[Any, Any]:
+        return g.point_normal(x[2:4], chart)
+
+    def laws(self, g: SymbolicGrasp, x: Any, chart: Any) -> list[tuple[str, Any]]:
+        point, normal = self.point_normal(g, x, chart)
+        R_dot, p_dot = g.dot(g.R_po), g.dot(g.p_po)
+        omega = vee(R_dot @ g.R_po.T)
+        return [(f"slip_{self.name}", R_dot @ point + p_dot),
+                (f"spin_{self.name}", ca.dot(omega, g.R_po @ normal))]
+
+    def initial(self, problem: ManipulationProblem) -> FloatArray:
+        assert problem.palm is not None
+        return np.asarray(problem.palm.initial, dtype=float)
+
+    def guess(self, problem: ManipulationProblem, x0: FloatArray, ts: FloatArray,
+              R0: FloatArray, p0: FloatArray, palm_planner: Any
+              ) -> tuple[FloatArray, FloatArray, PoseOfTime, InputOfTime | None]:
+        """The ball-on-palm plan of the support contact's goal and via-points (its loop
+        guesses for pure reorientations, closed-form geometry and gauge bound included;
+        not certified: a guess), or the object at rest when the support has no goal."""
+        T = problem.duration
+        base = problem.palm_problem()
+        if base.goal or base.via_points:
+            plan = palm_planner.solve(base, certify=False)  # a guess: no certificate
+
+            def pose(t: FloatArray) -> tuple[FloatArray, FloatArray]:
+                tr = plan.sample(np.clip(t, 0.0, T))
+                return tr.object_rotation, tr.object_position
+
+            def palm_w(t: FloatArray) -> FloatArray:
+                return np.asarray(plan.sample(t).w)
+
+            smp = plan.sample(ts)
+            return smp.eta, smp.w, pose, palm_w
+
+        def still(t: FloatArray) -> tuple[FloatArray, FloatArray]:
+            t = np.atleast_1d(t)
+            return np.tile(R0, (len(t), 1, 1)), np.tile(p0, (len(t), 1))
+
+        return np.tile(x0, (len(ts), 1)), np.zeros((len(ts), 2)), still, None
+
+    def bounds(self, problem: ManipulationProblem) -> tuple[list[float], list[float],
+                                                          list[float]]:
+        assert problem.palm is not None
+        u_lim = math.pi / 2 - problem.pole_margin
+        ext = problem.palm.palm_half_extent
+        hi = [ext, ext, u_lim, math.inf, math.inf]
+        return [-h for h in hi], hi, [problem.palm.max_contact_speed] * 2
+
+    def checks(self, problem: ManipulationProblem, k: int, c: CertificateContext
+               ) -> list[Check]:
+        from .certificate import Check, CheckKind
+
+        n = self.name
+        # the object touches the palm: support function of its shape along -z (no chart)
+        heights = self.surface.support_heights(-c.R_po[:, 2, :], c.shape)  # rows R^T (-e_z)
+        return [
+            Check(f"max_slip_speed_{n}", float(np.max(np.linalg.norm(c.laws[f"slip_{n}"],
+                                                                     axis=1))),
+                  1e-8 * max(c.speed, 1e-3), CheckKind.DISCRETISATION),
+            Check(f"max_spin_rate_{n}", float(np.max(np.abs(c.laws[f"spin_{n}"]))),
+                  1e-8 * max(c.speed / c.L, 1e-3), CheckKind.DISCRETISATION),
+            Check(f"max_height_error_{n}", float(np.max(np.abs(c.p_po[:, 2] - heights))),
+                  1e-9, CheckKind.PHYSICS),
+        ]
+
+
+class FreeObject(ObjectBlock):
+    """The object's pose as a state (nothing fixes it): held by the fingertips alone."""
+
+    nx, nu = 7, 6
+    has_point = False
+    length_columns = (0, 1, 2)
+    angle_columns = (3, 4, 5, 6)
+    effort_groups = ((0, 1, 2, 3, 4, 5), (), ())
+
+    def __init__(self, surface: Surface, name: str = "object") -> None:
+        super().__init__(name, surface)
+
+    def x_scale(self, L: Any) -> list[Any]:
+        return [L, L, L, 1, 1, 1, 1]
+
+    def u_scale(self, L: Any, T: Any) -> list[Any]:
+        return [L / T] * 3 + [1 / T] * 3
+
+    def pose(self, g: SymbolicGrasp, x: Any, chart: Any) -> tuple[Any, Any]:
+        return quaternion_rotation_sym(x[3:7]), x[0:3]
+
+    def rates(self, g: SymbolicGrasp, x: Any, u: Any, chart: Any) -> Any:
+        return ca.vertcat(u[0:3], quaternion_rate_sym(x[3:7], u[3:6]))
+
+    def initial(self, problem: ManipulationProblem) -> FloatArray:
+        assert problem.initial_pose is not None
+        q = np.asarray(problem.initial_pose.orientation, dtype=float)
+        return np.concatenate([problem.initial_pose.position, q / np.linalg.norm(q)])
+
+    def guess(self, problem: ManipulationProblem, x0: FloatArray, ts: FloatArray,
+              R0: FloatArray, p0: FloatArray, palm_planner: Any
+              ) -> tuple[FloatArray, FloatArray, PoseOfTime, InputOfTime | None]:
+        """The desired motion itself: its poses, its twist by central differences."""
+        from .solution import quaternion_wxyz
+
+        T = problem.duration
+        assert problem.motion is not None
+        motion = problem.motion
+        R, pos = motion.at(ts)
+        quats = quaternion_wxyz(R)
+        for i in range(1, len(quats)):  # sign continuity
+            if np.dot(quats[i], quats[i - 1]) < 0:
+                quats[i] = -quats[i]
+        if np.dot(quats[0], x0[3:7]) < 0:
+            quats = -quats
+        dt = 1e-5 * T
+        Rp, pp = motion.at(ts + dt)
+        Rn, pn = motion.at(ts - dt)
+        tp, tn = np.clip(ts + dt, 0, T), np.clip(ts - dt, 0, T)
+        span = (tp - tn)[:, None]
+        v = (pp - pn) / span
+        Wb = np.einsum("kji,kjl->kil", R, Rp - Rn) / span[:, :, None]  # R^T dR/dt
+        omega = np.stack([Wb[:, 2, 1] - Wb[:, 1, 2], Wb[:, 0, 2] - Wb[:, 2, 0],
+                          Wb[:, 1, 0] - Wb[:, 0, 1]], axis=1) / 2
+        return np.hstack([pos, quats]), np.hstack([v, omega]), motion.at, None
+
+    def bounds(self, problem: ManipulationProblem) -> tuple[list[float], list[float],
+                                                          list[float]]:
+        hi = [MAX_POSITION] * 3 + [1.5] * 4  # the quaternion's components: not unit-bound
+        return ([-h for h in hi], hi,
+                [problem.max_object_speed] * 3 + [problem.max_object_rate] * 3)
+
+
+class FingertipContact(Contact):
+    """A flat pad (the z = 0 plane of a finger's tip frame, +z its outward normal) rolling
+    on the object; ``index`` is the finger's place in the problem's ``fingers``."""
+
+    body = "finger"
+    length_columns = (0, 1)
+    angle_columns = (2, 3, 4)
+
+    def __init__(self, surface: Surface, finger: Any, index: int) -> None:
+        super().__init__(f"finger{index}", surface)
+        self.finger = finger
+        self.index = index
+        nq = int(finger.nq)
+        self.nx, self.nu = 5 + nq, 2 + nq
+        self.joint_columns = tuple(range(5, 5 + nq))
+        self.effort_groups = ((), (0, 1), tuple(range(2, 2 + nq)))
+        self.pair = ContactPair(surface, Plane)  # A = object (this contact's patch), B = pad
+
+    @property
+    def eta_cols(self) -> slice:
+        """Its contact coordinates' columns in the grasp's state vector."""
+        return slice(self.x0, self.x0 + 5)
+
+    @property
+    def q_cols(self) -> slice:
+        """Its joints' columns in the grasp's state vector."""
+        return slice(self.x0 + 5, self.x0 + self.nx)
+
+    @property
+    def w_cols(self) -> slice:
+        """Its contact inputs' columns in the grasp's input vector."""
+        return slice(self.u0, self.u0 + 2)
+
+    @property
+    def qd_cols(self) -> slice:
+        """Its joint rates' columns in the grasp's input vector."""
+        return slice(self.u0 + 2, self.u0 + self.nu)
+
+    def spec(self, problem: ManipulationProblem) -> Fingertip:
+        return problem.fingers[self.index]
+
+    def label(self, problem: ManipulationProblem) -> str:
+        """The name in plans and certificates: the fingertip's own, else finger<i>."""
+        return self.spec(problem).name or self.name
+
+    def x_scale(self, L: Any) -> list[Any]:
+        return [L, L, 1, 1, 1] + [1] * int(self.finger.nq)
+
+    def u_scale(self, L: Any, T: Any) -> list[Any]:
+        return [1 / T, 1 / T] + [1 / T] * int(self.finger.nq)
+
+    @staticmethod
+    def pair_rates(surface: Surface, e: Any, w: Any, shape: Any) -> Any:
+        """The rolling equations in the pair's order (u, v, x, y, psi), driven by the
+        object point's rate w: the initial guess's pad roll."""
+        return ContactPair(surface, Plane).rates_driven_by_a(e, w, shape, ca.SX(0, 1))
+
+    @staticmethod
+    def _pair_order(eta: Any) -> Any:
+        return ca.vertcat(eta[2:4], eta[0:2], eta[4])  # the pair's order (u, v, x, y, psi)
+
+    def rates(self, g: SymbolicGrasp, x: Any, u: Any, chart: Any) -> Any:
+        ed = self.pair.rates_driven_by_a(self._pair_order(x[0:5]), u[0:2], g.shape, g.none)
+        return ca.vertcat(ed[2:4], ed[0:2], ed[4], u[2:])
+
+    def pad_pose(self, g: SymbolicGrasp, x: Any, chart: Any) -> tuple[Any, Any]:
+        """The pad's pose in the palm frame from the object's pose and the contact
+        coordinates (eq. 6's right-hand side)."""
+        R_of, p_of = self.pair.pose(self._pair_order(x[0:5]), g.shape, g.none, chart, g.eye)
+        return g.R_po @ R_of, g.p_po + g.R_po @ p_of
+
+    def closure(self, g: SymbolicGrasp, x: Any, chart: Any) -> Any:
+        """Eq. 6: the pad's pose from the joints (FK) equals its pose from the contact."""
+        R_pf, p_pf = self.pad_pose(g, x, chart)
+        R_fk, p_fk = self.finger.fk(x[5:])
+        return ca.vertcat(p_pf - p_fk, vee_skew(R_fk.T @ R_pf))
+
+    def point_normal(self, g: SymbolicGrasp, x: Any, chart: Any) -> tuple[Any, Any]:
+        return g.point_normal(x[2:4], chart)
+
+    def laws(self, g: SymbolicGrasp, x: Any, chart: Any) -> list[tuple[str, Any]]:
+        """The finger moves by its joints (FK), the object by its pose: material points of
+        both bodies at the contact, the pad's height over the object's centre."""
+        point, normal = self.point_normal(g, x, chart)
+        R_fk, p_fk = self.finger.fk(x[5:])
+        R_dot, p_dot = g.dot(g.R_po), g.dot(g.p_po)
+        c_pt = g.p_po + g.R_po @ point
+        on_pad = R_fk.T @ (c_pt - p_fk)
+        v_pad = g.dot(R_fk) @ on_pad + g.dot(p_fk)
+        v_obj = R_dot @ point + p_dot
+        omega_rel = vee(g.dot(R_fk) @ R_fk.T - R_dot @ g.R_po.T)
+        i = self.index
+        return [(f"slip_{i}", v_pad - v_obj),
+                (f"spin_{i}", ca.dot(omega_rel, g.R_po @ normal)),
+                (f"centre_above_pad_{i}", ca.dot(R_fk[:, 2], g.p_po - p_fk)),
+                (f"pad_normal_{i}", R_fk[:, 2]), (f"pad_point_{i}", on_pad)]
+
+    def bounds(self, problem: ManipulationProblem) -> tuple[list[float], list[float],
+                                                          list[float]]:
+        u_lim = math.pi / 2 - problem.pole_margin
+        inf = math.inf
+        pad = float(self.finger.pad_half_size) - problem.pad_margin
+        # joint limits backed off at the collocation points, so that the motion between
+        # them (checked by the certificate) stays inside the limits themselves
+        lower, upper = np.asarray(self.finger.lower), np.asarray(self.finger.upper)
+        back = np.minimum(JOINT_LIMIT_MARGIN, 0.01 * (upper - lower))
+        return ([-pad, -pad, -u_lim, -inf, -inf, *(lower + back)],
+                [pad, pad, u_lim, inf, inf, *(upper - back)],
+                [100.0, 100.0, *np.asarray(self.finger.velocity_limit)])
+
+    def checks(self, problem: ManipulationProblem, k: int, c: CertificateContext
+               ) -> list[Check]:
+        """Slip, spin, gap, pad, joint limits and closure (Pinocchio's forward kinematics
+        point by point, independent of the NLP's CasADi kinematics)."""
+        from .certificate import Check, CheckKind
+
+        i, f, name = self.index, self.finger, self.label(problem)
+        q_i = c.states[:, self.q_cols]
+        poses = [f.fingertip_pose_pin(q) for q in q_i]  # Pinocchio, point by point
+        R_pin = np.array([pose[0] for pose in poses])
+        p_pin = np.array([pose[1] for pose in poses])
+        pos_err = float(np.max(np.linalg.norm(p_pin - c.p_pf[:, i], axis=1)))
+        tr = np.einsum("kji,kji->k", R_pin, c.R_pf[:, i])  # trace(R_pin^T R_pf)
+        rot_err = float(np.max(np.arccos(np.clip((tr - 1) / 2, -1, 1))))
+        # the pad's plane is tangent to the object: support function along the pad normal
+        pad_n = c.laws[f"pad_normal_{i}"]
+        h = self.surface.support_heights(np.einsum("kji,kj->ki", c.R_po, -pad_n), c.shape)
+        gap = c.laws[f"centre_above_pad_{i}"].ravel() - h
+        D = CheckKind.DISCRETISATION
+        return [
+            Check(f"max_slip_speed_{name}", float(np.max(np.linalg.norm(
+                c.laws[f"slip_{i}"], axis=1))), 1e-2 * max(c.speed, 1e-3), D),
+            Check(f"max_spin_rate_{name}", float(np.max(np.abs(c.laws[f"spin_{i}"]))),
+                  1e-2 * max(c.speed / c.L, 1e-3), D),
+            Check(f"max_gap_error_{name}", float(np.max(np.abs(gap))), 1e-4, D),
+            Check(f"max_pad_excursion_{name}", float(np.max(np.abs(
+                c.laws[f"pad_point_{i}"][:, 0:2]))), float(f.pad_half_size),
+                CheckKind.LIMITS),
+            Check(f"max_joint_limit_violation_{name}", float(max(
+                np.max(q_i - f.upper), np.max(f.lower - q_i), 0.0)), 1e-6, D),
+            Check("max_closure_position_error", pos_err, 1e-4, D),
+            Check("max_closure_orientation_error", rot_err, 1e-3, D),
+        ]
+
+
+def grasp_contacts(shape_surface: Surface, palm: bool, fingers: tuple[Any, ...]
+                   ) -> tuple[Contact, ...]:
+    """The contacts of a grasp structure, offsets set: the object block, then each
+    fingertip."""
+    obj: Contact = SupportContact(shape_surface) if palm else FreeObject(shape_surface)
+    out: list[Contact] = [obj, *(FingertipContact(shape_surface, f, i)
+                                 for i, f in enumerate(fingers))]
+    x0 = u0 = 0
+    for c in out:
+        c.x0, c.u0 = x0, u0
+        x0, u0 = x0 + c.nx, u0 + c.nu
+    return tuple(out)
+

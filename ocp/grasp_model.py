@@ -1,0 +1,173 @@
+"""The CasADi functions of one grasp structure, assembled from its contacts.
+
+A grasp structure is the object's shape, its object block (a support, or the free object)
+and its fingers (:mod:`ocp.contacts`). :class:`GraspModel` builds, by looping over the
+contacts (no case for any kind of contact here):
+
+* ``dynamics(x, u, params) -> x_dot``: every contact's rolling equations;
+* ``path(x, params) -> (closure, points, normals, R_po, p_po)``: the path rows' inputs;
+* ``cartesian(x, params)``: the object's and the pads' poses, contact points and normals
+  in the palm frame;
+* ``laws(x, x_dot, params)``: the certificate's law outputs (the object's twist, then each
+  contact's own).
+
+``params = (shape, vec(R_c) of every point contact's chart)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from .ball_on_palm import model_for
+from .collocation import reintegrator, rk4_step
+from .contacts import (
+    Contact,
+    FingertipContact,
+    ObjectBlock,
+    SymbolicGrasp,
+    grasp_contacts,
+)
+from .rotations import vee
+
+__all__ = ["GraspModel"]
+
+FloatArray = NDArray[np.float64]
+
+
+def _cat(parts: Sequence[Any], rows: int) -> Any:
+    return ca.horzcat(*parts) if parts else ca.SX(rows, 0)
+
+
+class GraspModel:
+    """CasADi functions of one grasp structure (object shape, palm or not, the fingers)."""
+
+    def __init__(self, shape: str, palm: bool, fingers: tuple[Any, ...]) -> None:
+        surface = model_for(shape).surface
+        self.surface = surface
+        self.fingers = fingers
+        self.contacts: tuple[Contact, ...] = grasp_contacts(surface, palm, fingers)
+        obj = self.contacts[0]
+        assert isinstance(obj, ObjectBlock)
+        self.object: ObjectBlock = obj
+        self.fingertips: tuple[FingertipContact, ...] = tuple(
+            c for c in self.contacts if isinstance(c, FingertipContact))
+        self.point_contacts: tuple[Contact, ...] = tuple(c for c in self.contacts
+                                                         if c.has_point)
+        self.nx = sum(c.nx for c in self.contacts)
+        self.nu = sum(c.nu for c in self.contacts)
+        self.n_contacts = len(self.point_contacts)
+        x = ca.SX.sym("x", self.nx)
+        u = ca.SX.sym("u", self.nu)
+        shape_p = ca.SX.sym("shape", surface.n_params)
+        charts = [ca.SX.sym(f"Rc{i}", 3, 3) for i in range(self.n_contacts)]
+        prm = ca.vertcat(shape_p, *[ca.vec(R) for R in charts])
+        self.n_params = int(prm.numel())
+        xd = ca.SX.sym("xd", self.nx)
+        g = SymbolicGrasp(surface, shape_p, x, xd)
+        chart_of = {id(c): charts[k] for k, c in enumerate(self.point_contacts)}
+        chart_of[id(obj)] = chart_of.get(id(obj), g.eye)
+
+        def block(c: Contact) -> tuple[Any, Any, Any]:
+            return x[c.xs], u[c.us], chart_of.get(id(c), g.eye)
+
+        g.R_po, g.p_po = obj.pose(g, x[obj.xs], chart_of[id(obj)])
+        xdot = ca.vertcat(*[c.rates(g, *block(c)) for c in self.contacts])
+        points, normals = [], []  # object frame
+        for c in self.point_contacts:
+            p, n = c.point_normal(g, x[c.xs], chart_of[id(c)])
+            points.append(p)
+            normals.append(n)
+        closure, tip_R, tip_p = [], [], []
+        for c in self.fingertips:
+            xb, _, chart = block(c)
+            closure.append(c.closure(g, xb, chart))
+            R_pf, p_pf = c.pad_pose(g, xb, chart)
+            tip_R.append(R_pf)
+            tip_p.append(p_pf)
+        self.dynamics = ca.Function("manipulation_dynamics", [x, u, prm], [xdot],
+                                    ["x", "u", "params"], ["x_dot"])
+        P, N = _cat(points, 3), _cat(normals, 3)
+        R_po, p_po = g.R_po, g.p_po
+        cl = ca.vertcat(*closure) if closure else ca.SX(0, 1)
+        self.path = ca.Function("manipulation_path", [x, prm], [cl, P, N, R_po, p_po],
+                                ["x", "params"], ["closure", "points", "normals", "R_po",
+                                                  "p_po"])
+        self.cartesian = ca.Function(
+            "manipulation_cartesian", [x, prm],
+            [R_po, p_po, _cat(tip_R, 3), _cat(tip_p, 3), p_po + R_po @ P, R_po @ N],
+            ["x", "params"], ["R_po", "p_po", "R_pf", "p_pf", "points", "normals"])
+        laws = [("v_obj", g.dot(p_po)), ("omega_obj", vee(g.dot(R_po) @ R_po.T))]
+        for c in self.contacts:
+            xb, _, chart = block(c)
+            laws += c.laws(g, xb, chart)
+        self.laws = ca.Function("manipulation_laws", [x, xd, prm], [e for _, e in laws],
+                                ["x", "x_dot", "params"], [n for n, _ in laws])
+        # one RK4 step of a fingertip's pad point and angle (x, y, psi) while its object
+        # point goes from a (rate w0) to the next (rate w1) in time h: the initial guess
+        e_, w_ = ca.SX.sym("e", 5), ca.SX.sym("w", 2)
+        self.tip_rates = ca.Function("tip_rates", [e_, w_, shape_p], [
+            FingertipContact.pair_rates(surface, e_, w_, shape_p)])
+        c_, a_ = ca.SX.sym("c", 3), ca.SX.sym("a", 2)
+        w0_, w1_, h_ = ca.SX.sym("w0", 2), ca.SX.sym("w1", 2), ca.SX.sym("h")
+        e1 = rk4_step(lambda e, w: self.tip_rates(e, w, shape_p), ca.vertcat(a_, c_),
+                      w0_, (w0_ + w1_) / 2, w1_, h_)
+        self._roll_step = ca.Function("roll_step", [c_, a_, w0_, w1_, h_, shape_p],
+                                      [e1[2:5]])
+        self._rolls: dict[int, ca.Function] = {}
+        self._reintegrators: dict[int, ca.Function] = {}
+        self._mapped: dict[tuple[str, int], ca.Function] = {}
+
+    # -- columns of the state and input vectors, by kind ----------------------------------
+    def _columns(self, attr: str) -> list[int]:
+        return [c.x0 + j for c in self.contacts for j in getattr(c, attr)]
+
+    def length_columns(self) -> list[int]:
+        return self._columns("length_columns")
+
+    def angle_columns(self) -> list[int]:
+        return self._columns("angle_columns")
+
+    def joint_columns(self) -> list[int]:
+        return self._columns("joint_columns")
+
+    def effort_groups(self) -> tuple[list[int], list[int], list[int]]:
+        """Input columns of the objective's three effort terms (the object's own motion,
+        the fingertips' motion over the object, the joint rates)."""
+        return tuple(  # type: ignore[return-value]
+            [c.u0 + j for c in self.contacts for j in c.effort_groups[k]] for k in range(3))
+
+    def x_scale(self, L: Any) -> list[Any]:
+        return [s for c in self.contacts for s in c.x_scale(L)]
+
+    def u_scale(self, L: Any, T: Any) -> list[Any]:
+        return [s for c in self.contacts for s in c.u_scale(L, T)]
+
+    # -- functions over many points --------------------------------------------------------
+    def roll(self, steps: int) -> ca.Function:
+        """``steps`` RK4 steps of a pad point and angle (:attr:`_roll_step` accumulated):
+        (c0, a (2 x k), w0 (2 x k), w1 (2 x k), h (1 x k), shape (. x k)) -> c (3 x k)."""
+        if steps not in self._rolls:
+            self._rolls[steps] = self._roll_step.mapaccum("roll", steps)
+        return self._rolls[steps]
+
+    def params(self, shape: FloatArray, charts: Sequence[FloatArray]) -> FloatArray:
+        return np.concatenate([np.asarray(shape, dtype=float),
+                               *[np.asarray(R).ravel(order="F") for R in charts]])
+
+    def mapped(self, name: str, k: int) -> ca.Function:
+        """The model's function ``name`` (cartesian, dynamics, laws) over k points, built
+        once per size."""
+        if (name, k) not in self._mapped:
+            self._mapped[(name, k)] = getattr(self, name).map(k)
+        return self._mapped[(name, k)]
+
+    def reintegrator(self, n_sub: int) -> ca.Function:
+        if n_sub not in self._reintegrators:
+            self._reintegrators[n_sub] = reintegrator(self.dynamics, self.nx, self.nu,
+                                                      self.n_params, n_sub)
+        return self._reintegrators[n_sub]
