@@ -1,0 +1,691 @@
+"""The wire contract's requests: one model per planner (``planner`` tells them apart),
+their parts, and warm starts.
+
+Import from :mod:`dexroll_client.models` (it re-exports everything).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
+
+from dexroll_client.common import (
+    MAX_DURATION,
+    MAX_FINGER_JOINTS,
+    MAX_FINGERS,
+    MAX_INTERVALS,
+    MAX_MOTION_KNOTS,
+    MAX_POSITION,
+    MAX_SAMPLES,
+    MAX_URDF_CHARS,
+    MAX_VIA_POINTS,
+    MAX_WARM_START_COLUMNS,
+    NlpPointModel,
+    _planner_of,
+    _Request,
+)
+from dexroll_client.results import (
+    CollocationModel,
+    FingerPlanResult,
+    ManipulationResult,
+    PlanResult,
+)
+
+__all__ = [
+    "BallOnPalmRequest",
+    "ContactCoordinates",
+    "FingerContactCoordinates",
+    "FingerContactModel",
+    "FingerModelSpec",
+    "FingertipModel",
+    "HandModel",
+    "ManipulationRequest",
+    "MotionModel",
+    "MotionSamplesModel",
+    "MotionStepModel",
+    "MotionStepsModel",
+    "MountModel",
+    "ObjectModel",
+    "ObjectPoseModel",
+    "OneFingerRequest",
+    "PalmModel",
+    "PartialContactCoordinates",
+    "PlanRequest",
+    "SolverModel",
+    "TrackingModel",
+    "ViaPointModel",
+    "WarmStartModel",
+]
+
+Position = Annotated[float, Field(ge=-MAX_POSITION, le=MAX_POSITION)]
+Angle = Annotated[float, Field(ge=-100.0, le=100.0)]
+
+
+# -- requests -------------------------------------------------------------------------------
+
+class PartialContactCoordinates(_Request):
+    """Any subset of the palm/object contact coordinates eta_p = (x, y, u, v, psi)."""
+
+    x: Position | None = Field(default=None, description="palm contact point x [m]")
+    y: Position | None = Field(default=None, description="palm contact point y [m]")
+    u: Angle | None = Field(default=None, description="object chart latitude u [rad]")
+    v: Angle | None = Field(default=None, description="object chart longitude v [rad]")
+    psi: Angle | None = Field(default=None, description="contact angle psi [rad]")
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in self.model_dump().items() if v is not None}
+
+
+class ContactCoordinates(_Request):
+    """All five palm/object contact coordinates eta_p = (x, y, u, v, psi)."""
+
+    x: Position = Field(description="palm contact point x [m]")
+    y: Position = Field(description="palm contact point y [m]")
+    u: Angle = Field(description="object chart latitude u [rad]")
+    v: Angle = Field(description="object chart longitude v [rad]")
+    psi: Angle = Field(description="contact angle psi [rad]")
+
+    def as_tuple(self) -> tuple[float, float, float, float, float]:
+        return (self.x, self.y, self.u, self.v, self.psi)
+
+
+class ObjectModel(_Request):
+    """The rolled object and the chart its contact coordinates are measured in."""
+
+    shape: Literal["sphere", "ellipsoid"] = Field(
+        default="sphere",
+        description="'sphere' or 'ellipsoid' (of revolution about its z axis)")
+    dimensions: list[Annotated[float, Field(gt=0.0, le=1.0)]] = Field(
+        default_factory=lambda: [0.025], min_length=1, max_length=2,
+        description="sphere: [radius] [m]; ellipsoid: [equatorial semi-axis, polar "
+                    "semi-axis] [m]")
+    chart_rotation: list[Annotated[float, Field(ge=-2 * math.pi, le=2 * math.pi)]] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
+        description="rotation vector [rad] of the object's chart patch in the object frame")
+
+
+class ViaPointModel(_Request):
+    time: float = Field(gt=0.0, le=MAX_DURATION, description="time of the via-point [s]")
+    coords: PartialContactCoordinates = Field(description="coordinates to pass through")
+
+
+class SolverModel(_Request):
+    max_iter: int = Field(default=1000, ge=1, le=100_000,
+                          description="IPOPT iteration limit, all initial guesses together")
+    time_limit: float = Field(default=60.0, gt=0.0, le=3600.0,
+                              description="wall-clock limit of the solve [s] (the service "
+                                          "caps it at its own maximum)")
+    cert_position_tol: float = Field(default=1e-6, gt=0.0, le=1e-2, description=(
+        "certificate tolerance on the re-integration defect of x, y [m]"))
+    cert_angle_tol: float = Field(default=1e-4, gt=0.0, le=1e-1, description=(
+        "certificate tolerance on the re-integration defect of u, v, psi [rad]"))
+
+
+# -- warm starts -----------------------------------------------------------------------------
+
+WarmValue = Annotated[float, Field(ge=-1e6, le=1e6)]
+WarmRows = list[Annotated[list[WarmValue], Field(min_length=1,
+                                                  max_length=MAX_WARM_START_COLUMNS)]]
+ColumnNames = list[Annotated[str, Field(min_length=1, max_length=200)]]
+
+
+class WarmStartModel(_Request):
+    """A previous plan as the initial guess of this one: either ``job_id`` (a finished job
+    of this service, with the same planner, whose result has a ``collocation`` block) or
+    the plan itself, ``t``, ``x``, ``u`` (a result's ``collocation`` block, passed as it
+    is: its ``state_names`` and ``input_names`` are optional and, when given, must be this
+    request's columns, which catches a plan of another hand or finger).
+
+    The service replaces ``job_id`` by that job's ``t``, ``x``, ``u`` at submission. A plan
+    of another duration is stretched in time to this request's (its inputs, all rates,
+    scaled by the inverse ratio), interpolated onto this request's grid, and its first state
+    replaced by this request's initial state. IPOPT starts from it; if it does not converge
+    from there, the planner falls back to its own initial guesses (within the time limit).
+    The layout of the columns is the result's ``collocation`` block's (see
+    :class:`CollocationModel`)."""
+
+    job_id: str | None = Field(
+        default=None, min_length=1, max_length=200, pattern=r"^[A-Za-z0-9_.\-]+$",
+        description="the `id` of a finished job of this service with the same planner, "
+                    "whose result has a `collocation` block (give this, or `t`, `x`, `u`)")
+    t: list[Annotated[float, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
+        default=None, min_length=2, max_length=MAX_SAMPLES,
+        description="the plan's sample times [s], from 0, strictly increasing (a result's "
+                    "`collocation.t`)")
+    x: WarmRows | None = Field(
+        default=None, max_length=MAX_SAMPLES,
+        description="the plan's states, one row per time in `t`, columns as a result's "
+                    "`collocation.state_names` (SI units: m, rad)")
+    u: WarmRows | None = Field(
+        default=None, max_length=MAX_SAMPLES,
+        description="the plan's inputs, one row per time in `t`, columns as a result's "
+                    "`collocation.input_names` (SI units: m/s, rad/s)")
+    state_names: ColumnNames | None = Field(
+        default=None, max_length=MAX_WARM_START_COLUMNS,
+        description="optional: the names of the columns of `x` (a result's "
+                    "`collocation.state_names`); when given they must be this request's")
+    input_names: ColumnNames | None = Field(
+        default=None, max_length=MAX_WARM_START_COLUMNS,
+        description="optional: the names of the columns of `u` (a result's "
+                    "`collocation.input_names`); when given they must be this request's")
+    nlp_point: NlpPointModel | None = Field(
+        default=None, description="optional: IPOPT's primal-dual point at that plan (a "
+                                  "result's `collocation.nlp_point`), used when this "
+                                  "request has the same NLP")
+
+    @field_validator("t")
+    @classmethod
+    def _times(cls, value: list[float] | None) -> list[float] | None:
+        if value is None:
+            return value
+        if value[0] > 1e-12 * max(1.0, value[-1]):
+            raise ValueError(f"must start at 0 (the plan's start), got {value[0]}")
+        for i in range(1, len(value)):
+            if value[i] <= value[i - 1]:
+                raise ValueError(f"must increase strictly: t[{i}] = {value[i]} follows "
+                                 f"t[{i - 1}] = {value[i - 1]}")
+        return value
+
+    @field_validator("x", "u")
+    @classmethod
+    def _rows(cls, value: list[list[float]] | None, info: ValidationInfo
+              ) -> list[list[float]] | None:
+        if value is None:
+            return value
+        widths = sorted({len(row) for row in value})
+        if len(widths) > 1:
+            raise ValueError(f"every row must have the same number of columns, got rows of "
+                             f"{', '.join(map(str, widths))} columns")
+        t = info.data.get("t")
+        if t is not None and len(value) != len(t):
+            raise ValueError(f"must have one row per time in `t` ({len(t)} rows), got "
+                             f"{len(value)}")
+        return value
+
+    @field_validator("state_names", "input_names")
+    @classmethod
+    def _names(cls, value: list[str] | None, info: ValidationInfo) -> list[str] | None:
+        if value is None:
+            return value
+        key = "x" if info.field_name == "state_names" else "u"
+        rows = info.data.get(key)
+        if rows and len(value) != len(rows[0]):
+            raise ValueError(f"must name every column of `{key}` ({len(rows[0])}), got "
+                             f"{len(value)} names")
+        if len(set(value)) != len(value):
+            raise ValueError("names must be unique")
+        return value
+
+    @model_validator(mode="after")
+    def _one_form(self) -> WarmStartModel:
+        inline = [k for k in ("t", "x", "u") if getattr(self, k) is not None]
+        named = self.state_names is not None or self.input_names is not None \
+            or self.nlp_point is not None
+        if self.job_id is not None:
+            if inline or named:
+                raise ValueError("give either `job_id` or the plan's `t`, `x`, `u`, not both")
+            return self
+        if not inline:
+            raise ValueError("give `job_id` (a finished job of this service) or a plan's "
+                             "`t`, `x` and `u` (a result's `collocation` block)")
+        missing = [k for k in ("t", "x", "u") if k not in inline]
+        if missing:
+            raise ValueError(f"{', '.join(f'`{k}`' for k in missing)} missing: give the "
+                             "plan's `t`, `x` and `u` together")
+        return self
+
+    @classmethod
+    def from_result(cls, result: PlanResult | FingerPlanResult | ManipulationResult
+                    | CollocationModel) -> WarmStartModel:
+        """The inline warm start of a result (its ``collocation`` block, names included),
+        or of a ``collocation`` block itself; ValueError when the result has none (an
+        invalid request, a greedy plan, a diverged last iterate)."""
+        c = result if isinstance(result, CollocationModel) else result.collocation
+        if c is None:
+            status = getattr(result, "status", None)
+            raise ValueError("the result has no `collocation` block to warm-start from"
+                             + (f" (its status: {status})" if status is not None else ""))
+        return cls(t=c.t, x=c.x, u=c.u, state_names=c.state_names,
+                   input_names=c.input_names, nlp_point=c.nlp_point)
+
+
+WARM_START_DESCRIPTION = (
+    "optional: a previous plan as IPOPT's initial guess (a finished job's id, or a "
+    "result's `collocation` block); stretched to this duration; the planner falls back to "
+    "its own guesses when IPOPT does not converge from it")
+
+
+class _PalmRequest(_Request):
+    """What every planner shares: the object, its palm contact, goals, grid and limits.
+
+    Each planner's request narrows ``planner`` to its own name and adds its own fields."""
+
+    planner: str = Field(description="which planner")
+    object: ObjectModel = Field(default_factory=ObjectModel)
+    initial: ContactCoordinates = Field(description="contact coordinates at t = 0")
+    goal: PartialContactCoordinates = Field(
+        default_factory=PartialContactCoordinates,
+        description="coordinates required at t = duration (any subset)")
+    via_points: list[ViaPointModel] = Field(default_factory=list, max_length=MAX_VIA_POINTS)
+    duration: float = Field(gt=0.0, le=MAX_DURATION, description="planning horizon [s]")
+    n_intervals: int = Field(default=50, ge=1, le=MAX_INTERVALS,
+                             description="collocation intervals over the horizon")
+    pole_margin: float = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
+                               description="keep |u| <= pi/2 - pole_margin [rad]")
+    max_contact_speed: float = Field(default=1.0, gt=0.0, le=100.0,
+                                     description="bound on each palm contact velocity "
+                                                 "component [m/s]")
+    palm_half_extent: float = Field(default=0.5, gt=0.0, le=MAX_POSITION,
+                                    description="palm coordinates stay in [-e, e] [m]")
+    max_refinements: int = Field(default=2, ge=0, le=5,
+                                 description="grid doublings allowed when the certificate "
+                                             "finds the grid too coarse")
+    solver: SolverModel = Field(default_factory=SolverModel)
+    sample_times: list[Annotated[float, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
+        default=None, max_length=MAX_SAMPLES,
+        description="extra times [s] at which to sample the plan (collocation polynomials)")
+    warm_start: WarmStartModel | None = Field(default=None,
+                                              description=WARM_START_DESCRIPTION)
+
+    @field_validator("sample_times")
+    @classmethod
+    def _samples_inside_horizon(cls, value: list[float] | None, info: ValidationInfo
+                                ) -> list[float] | None:
+        duration = info.data.get("duration")
+        if value and duration is not None and max(value) > duration:
+            raise ValueError(f"sample times must lie in [0, duration = {duration} s], "
+                             f"got {max(value)}")
+        return value
+
+
+class BallOnPalmRequest(_PalmRequest):
+    """Roll an object on the flat palm between contact configurations (paper, section 3)."""
+
+    planner: Literal["ball_on_palm"] = Field(default="ball_on_palm",
+                                             description="which planner")
+
+
+RotationVector = list[Annotated[float, Field(ge=-2 * math.pi, le=2 * math.pi)]]
+
+
+class FingerModelSpec(_Request):
+    """The finger: a built-in one (``{"builtin": "k3s"}``, the default) or one's own URDF
+    (``{"urdf": "<robot ...>...</robot>", "tip_frame": "..."}``), and its mount on the palm.
+
+    The finger is a serial chain of revolute and prismatic joints; its tip frame is the
+    flat square pad's frame: origin at the centre of the pad surface, +z the pad's outward
+    normal (docs/conventions.md)."""
+
+    builtin: Literal["k3s"] | None = Field(
+        default=None, description="a built-in finger (GET /v1/models lists them); the "
+                                  "default when `urdf` is not given")
+    urdf: str | None = Field(
+        default=None, min_length=1, max_length=MAX_URDF_CHARS,
+        description="the finger's URDF document, as XML text (not a path); lengths in m, "
+                    "angles in rad")
+    tip_frame: str = Field(default="fingertip", min_length=1, max_length=200,
+                           description="the URDF frame (link or joint) of the pad")
+    base_position: list[Position] | None = Field(
+        default=None, min_length=3, max_length=3,
+        description="origin of the finger's base (the URDF root) in the palm frame [m]; "
+                    "default: a built-in finger's own mount (GET /v1/models), the palm "
+                    "origin for a URDF")
+    base_rotation: RotationVector | None = Field(
+        default=None, min_length=3, max_length=3,
+        description="rotation vector [rad] of the finger's base in the palm frame; "
+                    "default: a built-in finger's own mount (GET /v1/models), none (base "
+                    "axes parallel to the palm's) for a URDF")
+    pad_half_size: float | None = Field(
+        default=None, gt=0.0, le=0.5,
+        description="half the side of the square pad [m]; default: the built-in "
+                    "finger's (GET /v1/models)")
+
+    @field_validator("urdf")
+    @classmethod
+    def _urdf_is_text(cls, value: str | None) -> str | None:
+        if value is not None and not value.lstrip().startswith("<"):
+            raise ValueError("must be the URDF document itself (XML text starting with "
+                             "'<'), not a file name")
+        return value
+
+    @model_validator(mode="after")
+    def _one_source(self) -> FingerModelSpec:
+        if self.builtin is not None and self.urdf is not None:
+            raise ValueError("give either `builtin` or `urdf`, not both")
+        return self
+
+
+class FingerContactCoordinates(_Request):
+    """The fingertip/ball contact coordinates eta_f = (x_f, y_f, u_f, v_f, psi_f)."""
+
+    x_f: Position = Field(description="contact point on the pad, x in the pad frame [m]")
+    y_f: Position = Field(description="contact point on the pad, y in the pad frame [m]")
+    u_f: Angle = Field(description="ball chart latitude in the finger contact's chart "
+                                   "patch [rad]")
+    v_f: Angle = Field(description="ball chart longitude in the finger contact's chart "
+                                   "patch [rad]")
+    psi_f: Angle = Field(description="contact angle psi_f [rad]")
+
+    def as_tuple(self) -> tuple[float, float, float, float, float]:
+        return (self.x_f, self.y_f, self.u_f, self.v_f, self.psi_f)
+
+
+class FingerContactModel(_Request):
+    """Where the fingertip touches the ball at t = 0, and the ball chart patch its
+    coordinates are measured in."""
+
+    initial: FingerContactCoordinates = Field(description="finger contact coordinates at "
+                                                          "t = 0")
+    chart_rotation: RotationVector = Field(
+        default_factory=lambda: [0.0, 0.0, math.pi], min_length=3, max_length=3,
+        description="rotation vector [rad] of the finger contact's chart patch in the "
+                    "object frame. The default [0, 0, pi] puts patch point (u_f, v_f) = "
+                    "(0, 0) at the antipode of the object chart's (0, 0): with the default "
+                    "object.chart_rotation and the palm contact starting at u = v = 0, that "
+                    "is the ball's top at t = 0")
+    q_seed: list[Angle] | None = Field(
+        default=None, min_length=1, max_length=MAX_FINGER_JOINTS,
+        description="joint angles [rad; m for a prismatic joint] from which the inverse "
+                    "kinematics of the initial grasp starts, one per joint; default: the "
+                    "paper's (0, -22.68, -12.34, 0, 47.65, 0) deg")
+
+
+class OneFingerRequest(_PalmRequest):
+    """Roll a ball on the palm with one flat fingertip pressing on it, keeping the grasp
+    inside the friction cone (paper, section 3). The plan holds the palm contact, the
+    finger contact and the finger's joint angles. ``sample_times`` is not supported (the
+    plan is returned at the collocation points)."""
+
+    planner: Literal["one_finger"] = Field(
+        default="one_finger",
+        description="which planner (a request body must say 'one_finger': a body without "
+                    "`planner` is a ball_on_palm request)")
+    finger: FingerModelSpec = Field(default_factory=FingerModelSpec)
+    finger_contact: FingerContactModel = Field(description="the fingertip/ball contact")
+    mu: float = Field(default=0.5, gt=0.0, le=10.0,
+                      description="friction coefficient at both contacts (dimensionless); "
+                                  "the friction cone's half-angle is atan(mu) [rad]")
+    grasp_weight: float = Field(
+        default=100.0, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the grasp-angle term, the time "
+                    "average of 1 - cos of the larger grasp angle (0 for an antipodal grasp)")
+    finger_effort_weight: float = Field(
+        default=0.01, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the finger contact's velocity "
+                    "over the ball |w_f|^2 [rad^2/s^2], relative to the palm contact's")
+    joint_effort_weight: float = Field(
+        default=0.01, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the joint rates |q_dot|^2 "
+                    "[rad^2/s^2]")
+    pad_margin: float = Field(default=0.002, ge=0.0, le=0.1,
+                              description="distance kept between the finger contact and "
+                                          "the pad's edge [m]")
+    method: Literal["collocation", "greedy"] = Field(
+        default="collocation",
+        description="'collocation': the direct-collocation NLP (effort plus grasp quality "
+                    "over the whole horizon); 'greedy': the paper's own method (section 3): "
+                    "the finger contact velocity chosen step by step by a grid search in the "
+                    "ellipse bounding the rolling angle, joint rates from the Jacobian's "
+                    "pseudo-inverse (200 steps); the weights do not apply to it")
+
+    @field_validator("sample_times")
+    @classmethod
+    def _no_sample_times(cls, value: list[float] | None) -> list[float] | None:
+        if value:
+            raise ValueError("not supported by the one_finger planner: its plan is "
+                             "returned at the collocation points (result.trajectory)")
+        return value
+
+
+# -- manipulation: any grasp (an optional palm, one or more fingertips) ----------------------
+
+Quaternion = list[Annotated[float, Field(ge=-2.0, le=2.0)]]
+
+
+class MountModel(_Request):
+    """Where a hand's finger is mounted: the pose of its base in the palm frame."""
+
+    position: list[Position] = Field(min_length=3, max_length=3,
+                                     description="origin of the finger's base in the palm "
+                                                 "frame [m]")
+    rotation: RotationVector = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
+        description="rotation vector [rad] of the finger's base in the palm frame")
+
+
+class HandModel(_Request):
+    """A built-in hand (``GET /v1/models`` lists them): its fingers, mounted on the palm,
+    to be used by ``fingers[].hand_finger``."""
+
+    builtin: Literal["two_finger", "three_finger"] = Field(
+        description="the built-in hand: 'two_finger' or 'three_finger'")
+    mounts: list[MountModel] | None = Field(
+        default=None, min_length=1, max_length=MAX_FINGERS,
+        description="the fingers' mounts on the palm, one per finger of the hand in its "
+                    "order; default: the hand's own (GET /v1/models)")
+
+
+class FingertipModel(_Request):
+    """One fingertip touching the object: which finger (``finger``: a finger model, or
+    ``hand_finger``: the index of a finger of ``hand``; exactly one of the two), where its
+    flat pad touches the object at t = 0, and the object chart patch its contact
+    coordinates are measured in."""
+
+    finger: FingerModelSpec | None = Field(
+        default=None, description="the finger (a built-in one or a URDF, and its mount); "
+                                  "give this or `hand_finger`")
+    hand_finger: int | None = Field(
+        default=None, ge=0, lt=MAX_FINGERS, validate_default=True,
+        description="index of a finger of the request's `hand` (0-based, in the hand's "
+                    "order); give this or `finger`")
+    name: str | None = Field(
+        default=None, min_length=1, max_length=40, pattern=r"^[A-Za-z][A-Za-z0-9_\-]*$",
+        description="a name for this contact in the result (unique, not 'palm'); default: "
+                    "the hand's name of the finger, else 'finger<i>'")
+    initial: FingerContactCoordinates = Field(
+        description="the contact coordinates at t = 0: (x_f, y_f) on the pad [m], "
+                    "(u_f, v_f) on the object in this contact's chart patch [rad], psi_f [rad]")
+    chart_rotation: RotationVector = Field(
+        min_length=3, max_length=3,
+        description="rotation vector [rad] of this contact's chart patch in the object "
+                    "frame: patch point (u_f, v_f) = (0, 0) is where the rotated x axis "
+                    "leaves the object (keep the contact near it, away from the patch's "
+                    "poles at u_f = +-pi/2)")
+    q_seed: list[Angle] | None = Field(
+        default=None, min_length=1, max_length=MAX_FINGER_JOINTS,
+        description="joint angles [rad; m for a prismatic joint] from which the inverse "
+                    "kinematics of the initial grasp starts, one per joint; default: a hand "
+                    "finger's nominal grasp angles (GET /v1/models), else the paper's "
+                    "(0, -22.68, -12.34, 0, 47.65, 0) deg")
+
+    @field_validator("hand_finger")
+    @classmethod
+    def _one_finger_source(cls, value: int | None, info: ValidationInfo) -> int | None:
+        if "finger" not in info.data:  # `finger` itself is invalid: reported there
+            return value
+        if value is not None and info.data["finger"] is not None:
+            raise ValueError("give either `finger` or `hand_finger`, not both")
+        if value is None and info.data["finger"] is None:
+            raise ValueError("give `finger` (a finger model) or `hand_finger` (the index of "
+                             "a finger of `hand`)")
+        return value
+
+
+class PalmModel(_Request):
+    """A flat palm (the palm frame's z = 0 plane) carrying the object, and the palm
+    contact's coordinates eta_p = (x, y, u, v, psi) in the object's chart
+    (``object.chart_rotation``)."""
+
+    initial: ContactCoordinates = Field(description="palm contact coordinates at t = 0")
+    goal: PartialContactCoordinates = Field(
+        default_factory=PartialContactCoordinates,
+        description="palm contact coordinates required at t = duration (any subset)")
+    via_points: list[ViaPointModel] = Field(default_factory=list, max_length=MAX_VIA_POINTS)
+    palm_half_extent: float = Field(default=0.5, gt=0.0, le=MAX_POSITION,
+                                    description="palm coordinates stay in [-e, e] [m]")
+    max_contact_speed: float = Field(default=1.0, gt=0.0, le=100.0,
+                                     description="bound on each palm contact velocity "
+                                                 "component [m/s]")
+
+
+class ObjectPoseModel(_Request):
+    """A pose of the object in the palm frame."""
+
+    orientation_wxyz: Quaternion = Field(
+        default_factory=lambda: [1.0, 0.0, 0.0, 0.0], min_length=4, max_length=4,
+        description="orientation, unit quaternion (w, x, y, z)")
+    position: list[Position] = Field(min_length=3, max_length=3,
+                                     description="the object's centre [m]")
+
+
+class MotionStepModel(_Request):
+    """Over ``duration``, rotate the object by ``angle`` about ``axis`` (through its
+    centre) and translate its centre by ``translation``."""
+
+    duration: float = Field(gt=0.0, le=MAX_DURATION, description="duration of the step [s]")
+    axis: list[Annotated[float, Field(ge=-1e3, le=1e3)]] = Field(
+        default_factory=lambda: [0.0, 0.0, 1.0], min_length=3, max_length=3,
+        description="rotation axis, a direction in the palm frame (any length but zero)")
+    angle: Angle = Field(default=0.0, description="rotation angle about `axis` [rad] "
+                                                  "(right hand)")
+    translation: list[Position] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
+        description="displacement of the object's centre, palm frame [m]")
+
+
+class MotionStepsModel(_Request):
+    """A desired motion as steps one after the other from the initial pose (the paper's
+    'rotate about Z by 20 deg, then about Y by 20 deg, ...'); the steps' durations add up
+    to the request's duration."""
+
+    kind: Literal["steps"] = Field(description="'steps'")
+    steps: list[MotionStepModel] = Field(min_length=1, max_length=MAX_MOTION_KNOTS - 1)
+    smooth: bool = Field(default=True, description="ease in and out of every step (zero "
+                                                   "velocity between steps); else constant "
+                                                   "rate")
+
+
+class MotionSamplesModel(_Request):
+    """A desired motion as poses at knot times (from 0 to the request's duration),
+    interpolated on SE(3): the geodesic between orientations, the straight line between
+    positions."""
+
+    kind: Literal["samples"] = Field(description="'samples'")
+    times: list[Annotated[float, Field(ge=0.0, le=MAX_DURATION)]] = Field(
+        min_length=2, max_length=MAX_MOTION_KNOTS,
+        description="knot times [s], from 0 to the duration, increasing")
+    orientations_wxyz: list[Annotated[Quaternion, Field(min_length=4, max_length=4)]] = Field(
+        min_length=2, max_length=MAX_MOTION_KNOTS,
+        description="the object's orientation at each knot, unit quaternion (w, x, y, z)")
+    positions: list[Annotated[list[Position], Field(min_length=3, max_length=3)]] = Field(
+        min_length=2, max_length=MAX_MOTION_KNOTS,
+        description="the object's centre at each knot, palm frame [m]")
+    smooth: bool = Field(default=True, description="ease in and out of every knot (zero "
+                                                   "velocity at knots); else constant rate")
+
+
+#: A desired object motion, told apart by its ``kind``.
+MotionModel = Annotated[MotionStepsModel | MotionSamplesModel, Field(discriminator="kind")]
+
+
+class TrackingModel(_Request):
+    """How hard the object follows ``motion``: weights of the tracking terms of the
+    objective, and optional hard bounds on the tracking errors at every instant."""
+
+    position_weight: float = Field(
+        default=1e4, ge=0.0, le=1e8,
+        description="weight (dimensionless) of the time average of |p - p_d|^2 / L^2 (L: "
+                    "the object's largest semi-axis)")
+    orientation_weight: float = Field(
+        default=1e4, ge=0.0, le=1e8,
+        description="weight (dimensionless) of the time average of 1 - cos(angle between "
+                    "the object's orientation and the desired one)")
+    position_tolerance: float | None = Field(
+        default=None, gt=0.0, le=MAX_POSITION,
+        description="bound on |p - p_d| at every instant [m] (checked by the certificate); "
+                    "null: none")
+    orientation_tolerance: float | None = Field(
+        default=None, gt=0.0, le=math.pi,
+        description="bound on the angle between the object's orientation and the desired "
+                    "one at every instant [rad]; null: none")
+
+
+class ManipulationRequest(_Request):
+    """Manipulate an object with any grasp: an optional flat palm carrying it and one or
+    more flat fingertips rolling on it (paper, sections 3 and 4, and beyond). Without a
+    palm the object starts at ``initial_pose`` and follows ``motion``; with one, its pose
+    comes from the palm contact, driven to the palm's goal/via-points and/or ``motion``.
+    The plan is returned at the collocation points (no ``sample_times``)."""
+
+    planner: Literal["manipulation"] = Field(description="which planner")
+    object: ObjectModel = Field(default_factory=ObjectModel)
+    hand: HandModel | None = Field(
+        default=None, description="a built-in hand whose fingers `fingers[].hand_finger` "
+                                  "picks")
+    fingers: list[FingertipModel] = Field(min_length=1, max_length=MAX_FINGERS,
+                                          description="the fingertips touching the object")
+    palm: PalmModel | None = Field(default=None, description="the palm carrying the object; "
+                                                             "null: held by the fingers alone")
+    initial_pose: ObjectPoseModel | None = Field(
+        default=None, description="the object's pose at t = 0 (required without a palm; "
+                                  "with one, the palm contact fixes it)")
+    motion: MotionModel | None = Field(default=None,
+                                       description="the desired object motion (required "
+                                                   "without a palm)")
+    tracking: TrackingModel = Field(default_factory=TrackingModel)
+    duration: float = Field(gt=0.0, le=MAX_DURATION, description="planning horizon [s]")
+    mu: float = Field(default=0.5, gt=0.0, le=10.0,
+                      description="friction coefficient at every contact (dimensionless); "
+                                  "the friction cone's half-angle is atan(mu) [rad]")
+    object_effort_weight: float = Field(
+        default=1.0, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the object's own motion: the palm "
+                    "contact velocity, or the free object's twist (scaled by the object's "
+                    "size and the duration)")
+    finger_effort_weight: float = Field(
+        default=0.01, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the fingertip contacts' motion "
+                    "over the object |w_i|^2 [rad^2/s^2]")
+    joint_effort_weight: float = Field(
+        default=0.01, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the joint rates |q_dot|^2 "
+                    "[rad^2/s^2]")
+    grasp_weight: float = Field(
+        default=100.0, ge=0.0, le=1e6,
+        description="objective weight (dimensionless) of the grasp-quality term, the time "
+                    "average of 1 - cos of the largest force angle (0: every contact pushes "
+                    "along its normal)")
+    pad_margin: float = Field(default=0.002, ge=0.0, le=0.1,
+                              description="distance kept between each contact and its "
+                                          "pad's edge [m]")
+    n_intervals: int = Field(default=50, ge=1, le=MAX_INTERVALS,
+                             description="collocation intervals over the horizon")
+    pole_margin: float = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
+                               description="keep |u| <= pi/2 - pole_margin on every contact's "
+                                           "chart patch [rad]")
+    max_object_speed: float = Field(default=1.0, gt=0.0, le=100.0,
+                                    description="bound on each component of a free object's "
+                                                "velocity [m/s]")
+    max_object_rate: float = Field(default=20.0, gt=0.0, le=1000.0,
+                                   description="bound on each component of a free object's "
+                                               "angular velocity [rad/s]")
+    max_refinements: int = Field(default=2, ge=0, le=5,
+                                 description="grid doublings allowed when the certificate "
+                                             "finds the grid too coarse")
+    solver: SolverModel = Field(default_factory=SolverModel)
+    warm_start: WarmStartModel | None = Field(default=None,
+                                              description=WARM_START_DESCRIPTION)
+
+
+#: Every planning request, told apart by its ``planner`` field ("ball_on_palm" when the
+#: field is absent). Later planners join this union (one endpoint serves them all).
+PlanRequest = Annotated[
+    Annotated[BallOnPalmRequest, Tag("ball_on_palm")]
+    | Annotated[OneFingerRequest, Tag("one_finger")]
+    | Annotated[ManipulationRequest, Tag("manipulation")],
+    Discriminator(_planner_of, custom_error_type="invalid_planner",
+                  custom_error_message="planner must be one of 'ball_on_palm', "
+                                       "'one_finger', 'manipulation'"),
+]

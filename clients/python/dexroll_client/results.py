@@ -1,0 +1,373 @@
+"""The wire contract's results: one model per planner (``planner`` tells them apart),
+their trajectories, certificates and statistics, and the ``collocation`` block a later
+request's ``warm_start`` takes.
+
+Import from :mod:`dexroll_client.models` (it re-exports everything).
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Annotated, Literal
+
+from pydantic import Discriminator, Field, Tag
+
+from dexroll_client.common import NlpPointModel, _planner_of, _Response
+
+__all__ = [
+    "AnyPlanResult",
+    "CertificateModel",
+    "CollocationModel",
+    "ContactTrajectoryModel",
+    "FieldError",
+    "FingerCertificateModel",
+    "FingerJointsModel",
+    "FingerPlanResult",
+    "FingerStatsModel",
+    "FingerTrajectoryModel",
+    "ManipulationCertificateModel",
+    "ManipulationResult",
+    "ManipulationStatsModel",
+    "ManipulationTrajectoryModel",
+    "PlanResult",
+    "PlanStatus",
+    "StatsModel",
+    "TrajectoryModel",
+]
+
+class PlanStatus(StrEnum):
+    """Outcome of a plan (same values as ``ocp.solution.Status``)."""
+
+    SOLVED = "solved"
+    INACCURATE = "inaccurate"
+    INFEASIBLE = "infeasible"
+    ITERATION_LIMIT = "iteration_limit"
+    TIME_LIMIT = "time_limit"
+    NUMERICAL_ERROR = "numerical_error"
+    INVALID_INPUT = "invalid_input"
+    ERROR = "error"
+
+
+Rows = list[list[float]]
+
+
+class TrajectoryModel(_Response):
+    """A plan sampled at times t; rows are samples. Palm frame, SI units."""
+
+    t: list[float] = Field(description="sample times [s]")
+    eta: Rows = Field(description="contact coordinates (x [m], y [m], u [rad], v [rad], "
+                                  "psi [rad])")
+    eta_dot: Rows = Field(description="rates of the contact coordinates ([m/s], [rad/s])")
+    w: Rows = Field(description="palm contact velocity d/dt (x, y), the input [m/s]")
+    rolling_velocity: Rows = Field(description="(omega_x, omega_y) of the palm relative to "
+                                               "the object, palm contact frame [rad/s]")
+    object_position: Rows = Field(description="object centre in the palm frame [m]")
+    object_orientation_wxyz: Rows = Field(description="object orientation in the palm frame,"
+                                                      " unit quaternion (w, x, y, z), w >= 0")
+    contact_point: Rows = Field(description="contact point in the palm frame [m]")
+    contact_normal: Rows = Field(description="palm outward normal at the contact (unit)")
+
+
+class CertificateModel(_Response):
+    """Physical validity, computed independently of the NLP by re-integrating the inputs."""
+
+    passed: bool
+    max_position_defect: float | None = Field(
+        description="worst re-integration defect of x, y [m] (null: not computed)")
+    max_angle_defect: float | None = Field(
+        description="worst re-integration defect of u, v, psi [rad]")
+    max_slip_speed: float | None = Field(
+        description="worst speed of the object's contact point relative to the palm [m/s]")
+    max_spin_rate: float | None = Field(
+        description="worst object angular velocity about the contact normal [rad/s]")
+    max_height_error: float | None = Field(
+        description="worst gap/penetration between object and palm [m]")
+    max_goal_error: float | None = Field(
+        description="worst goal or via-point error of the re-integrated motion [m or rad]")
+    n_samples: int = Field(description="samples checked along the re-integrated motion")
+    tolerances: dict[str, float] = Field(description="tolerance of each check (units as "
+                                                     "the checked quantity)")
+    failures: list[str] = Field(description="checks that failed, with values")
+
+
+class StatsModel(_Response):
+    raw_status: str = Field(description="IPOPT's return status")
+    iterations: int = Field(description="IPOPT iterations, all attempts and refinements")
+    attempts: int = Field(description="initial guesses tried")
+    build_time: float = Field(description="NLP construction time [s] (0 when cached)")
+    solve_time: float = Field(description="IPOPT and initial-guess time [s]")
+    certificate_time: float = Field(description="certificate time [s]")
+    objective: float = Field(description="control effort integral |w|^2 dt [m^2/s]")
+    cache_hit: bool = Field(description="the NLP came from the structure cache")
+    refinements: int = Field(description="grid doublings after the first solve")
+    n_intervals: int = Field(description="collocation intervals of the returned plan")
+    ipopt_time: float = Field(default=0.0, description="the IPOPT calls alone [s] (part of "
+                                                       "`solve_time`)")
+
+
+class FieldError(_Response):
+    field: str = Field(description="dotted path of the offending field")
+    reason: str
+
+
+class CollocationModel(_Response):
+    """A plan's states and inputs at its collocation points (nodes and midpoints), in the
+    planner's own layout: what a later request's ``warm_start`` takes (pass this block as
+    it is). Rows are samples; every column is named (SI units: m, rad; inputs m/s, rad/s).
+
+    Column names, by planner:
+
+    * ball_on_palm: states ``x, y, u, v, psi`` (the contact coordinates, as in ``initial``);
+      inputs ``w_x, w_y`` (the palm contact velocity d/dt (x, y)).
+    * one_finger (a palm and a fingertip named ``finger``): states ``palm.x, palm.y,
+      palm.u, palm.v, palm.psi``, ``finger.x, finger.y, finger.u, finger.v, finger.psi``
+      (the finger contact's (x_f, y_f, u_f, v_f, psi_f)), ``finger.q.<joint>`` for each
+      joint; inputs ``palm.w_x, palm.w_y``, ``finger.w_u, finger.w_v`` (d/dt (u_f, v_f):
+      the contact's motion over the ball), ``finger.q_dot.<joint>``.
+    * manipulation: the object first: with a palm, ``palm.x ... palm.psi`` / inputs
+      ``palm.w_x, palm.w_y``; without one, ``object.position.x, .y, .z`` (palm frame [m]),
+      ``object.orientation.w, .x, .y, .z`` (quaternion, object to palm frame) / inputs
+      ``object.velocity.x, .y, .z`` (d/dt position, palm frame [m/s]),
+      ``object.angular_velocity_body.x, .y, .z`` (the object's angular velocity in the
+      object's own frame [rad/s], unlike `trajectory.object_angular_velocity`, which is in
+      the palm frame); then each fingertip in request order, by its contact name:
+      ``<name>.x, <name>.y, <name>.u, <name>.v, <name>.psi``, ``<name>.q.<joint>`` /
+      inputs ``<name>.w_u, <name>.w_v``, ``<name>.q_dot.<joint>``."""
+
+    t: list[float] = Field(description="the collocation points' times [s], from 0, "
+                                       "increasing")
+    x: Rows = Field(description="the states, one row per time, columns `state_names` "
+                                "[m, rad]")
+    u: Rows = Field(description="the inputs, one row per time, columns `input_names` "
+                                "[m/s, rad/s]")
+    state_names: list[str] = Field(description="the name of each column of `x` (see the "
+                                               "model's description for the layout)")
+    input_names: list[str] = Field(description="the name of each column of `u`")
+    nlp_point: NlpPointModel | None = Field(
+        default=None, description="IPOPT's primal-dual point at this plan (null for the "
+                                  "ball-on-palm planner, whose few iterations it would not "
+                                  "shorten): a warm start of a request with the same NLP "
+                                  "starts from it")
+
+
+COLLOCATION_DESCRIPTION = (
+    "the plan's states and inputs at its collocation points, every column named: pass it "
+    "as a later request's `warm_start` (null: no plan, a greedy plan, or a non-finite last "
+    "iterate)")
+
+
+class PlanResult(_Response):
+    """A ball-on-palm plan, or why there is none. ``grid``: the collocation points (nodes
+    and midpoints); ``samples``: the request's ``sample_times``."""
+
+    planner: Literal["ball_on_palm"] = Field(default="ball_on_palm",
+                                             description="the planner of the request")
+    status: PlanStatus
+    message: str
+    errors: list[FieldError] = Field(default_factory=list)
+    stats: StatsModel | None = None
+    goal_error: dict[str, float] | None = Field(
+        default=None, description="error of each goal/via-point coordinate [m or rad]")
+    certificate: CertificateModel | None = None
+    grid: TrajectoryModel | None = None
+    samples: TrajectoryModel | None = None
+    collocation: CollocationModel | None = Field(default=None,
+                                                 description=COLLOCATION_DESCRIPTION)
+
+
+class FingerTrajectoryModel(_Response):
+    """A one-finger plan at the collocation points (nodes and midpoints); rows are samples.
+    Palm frame, SI units."""
+
+    t: list[float] = Field(description="sample times [s]")
+    eta_p: Rows = Field(description="palm contact coordinates (x [m], y [m], u [rad], "
+                                    "v [rad], psi [rad])")
+    eta_f: Rows = Field(description="finger contact coordinates (x_f [m], y_f [m], "
+                                    "u_f [rad], v_f [rad], psi_f [rad])")
+    eta_p_dot: Rows = Field(description="rates of the palm contact coordinates ([m/s], "
+                                        "[rad/s])")
+    eta_f_dot: Rows = Field(description="rates of the finger contact coordinates ([m/s], "
+                                        "[rad/s])")
+    q: Rows = Field(description="joint angles, in the order of `joint_names` [rad; m for a "
+                                "prismatic joint]")
+    q_dot: Rows = Field(description="joint rates [rad/s; m/s for a prismatic joint]")
+    w_p: Rows = Field(description="palm contact velocity d/dt (x, y), an input [m/s]")
+    w_f: Rows = Field(description="finger contact velocity over the ball d/dt (u_f, v_f), "
+                                  "an input [rad/s]")
+    object_position: Rows = Field(description="object centre in the palm frame [m]")
+    object_orientation_wxyz: Rows = Field(description="object orientation in the palm "
+                                                      "frame, unit quaternion (w, x, y, z), "
+                                                      "w >= 0")
+    fingertip_position: Rows = Field(description="origin of the fingertip (pad) frame in "
+                                                 "the palm frame [m]")
+    fingertip_orientation_wxyz: Rows = Field(description="fingertip (pad) frame orientation "
+                                                         "in the palm frame, unit quaternion "
+                                                         "(w, x, y, z), w >= 0")
+    palm_contact_point: Rows = Field(description="palm/object contact point in the palm "
+                                                 "frame [m]")
+    finger_contact_point: Rows = Field(description="finger/object contact point in the "
+                                                   "palm frame [m]")
+    finger_contact_normal: Rows = Field(description="the object's outward normal at the "
+                                                    "finger contact, palm frame (unit)")
+    grasp_angles: Rows = Field(description="grasp angles (Phi_p, Phi_f) at the palm and "
+                                           "finger contacts: angle between the object's "
+                                           "normal there and the line joining the two "
+                                           "contacts, 0 for an antipodal grasp [rad]")
+    cone_margin: list[float] = Field(description="atan(mu) - max(Phi_p, Phi_f): positive "
+                                                 "inside the friction cone [rad]")
+
+
+class FingerCertificateModel(_Response):
+    """Physical validity of a one-finger plan, computed independently of the NLP: the
+    inputs re-integrated, the finger placed by Pinocchio's forward kinematics."""
+
+    passed: bool
+    values: dict[str, float] = Field(description="worst value of each check along the "
+                                                 "re-integrated motion (units as the "
+                                                 "quantity: m, rad, m/s, rad/s)")
+    tolerances: dict[str, float] = Field(description="tolerance of each check (units as "
+                                                     "the checked quantity)")
+    failures: list[str] = Field(description="checks that failed, with values")
+
+
+class FingerStatsModel(_Response):
+    raw_status: str = Field(description="IPOPT's return status")
+    iterations: int = Field(description="IPOPT iterations")
+    build_time: float = Field(description="NLP construction time [s] (0 when cached)")
+    solve_time: float = Field(description="IPOPT time [s]")
+    refinements: int = Field(default=0, description="grid doublings after the first solve "
+                                                    "(the certificate found the grid coarse)")
+
+
+class FingerPlanResult(_Response):
+    """A one-finger plan, or why there is none. ``trajectory``: the collocation points
+    (nodes and midpoints)."""
+
+    planner: Literal["one_finger"] = Field(default="one_finger",
+                                           description="the planner of the request")
+    status: PlanStatus
+    message: str
+    errors: list[FieldError] = Field(default_factory=list)
+    stats: FingerStatsModel | None = None
+    goal_error: dict[str, float] | None = Field(
+        default=None, description="error of each goal/via-point coordinate [m or rad]")
+    certificate: FingerCertificateModel | None = None
+    joint_names: list[str] = Field(default_factory=list,
+                                   description="the finger's joints, in the order of `q`")
+    trajectory: FingerTrajectoryModel | None = None
+    collocation: CollocationModel | None = Field(default=None,
+                                                 description=COLLOCATION_DESCRIPTION)
+
+
+class ContactTrajectoryModel(_Response):
+    """One contact of a manipulation plan over time; rows are samples. Palm frame, SI
+    units."""
+
+    name: str = Field(description="'palm', or the fingertip's name")
+    body: Literal["palm", "finger"] = Field(description="the body touching the object")
+    eta: Rows = Field(description="contact coordinates: the body's point (x, y) [m] (palm: "
+                                  "palm plane; finger: pad frame), the object's point "
+                                  "(u, v) [rad] in this contact's chart patch, the contact "
+                                  "angle psi [rad]")
+    eta_dot: Rows = Field(description="rates of the contact coordinates ([m/s], [rad/s])")
+    w: Rows = Field(description="the contact's input: palm d/dt (x, y) [m/s]; fingertip "
+                                "d/dt (u, v) [rad/s] (its motion over the object)")
+    point: Rows = Field(description="the contact point [m]")
+    normal: Rows = Field(description="the object's outward normal at the contact (unit)")
+    force_angle: list[float] = Field(
+        description="angle between the contact's push (-normal) and the internal force of "
+                    "the grasp that certifies force closure [rad] (two contacts: the "
+                    "paper's grasp angle)")
+
+
+class FingerJointsModel(_Response):
+    """One finger of a manipulation plan over time; rows are samples."""
+
+    name: str = Field(description="the fingertip's name (as in `contacts`)")
+    joint_names: list[str] = Field(description="the finger's joints, in the order of `q`")
+    q: Rows = Field(description="joint angles [rad; m for a prismatic joint]")
+    q_dot: Rows = Field(description="joint rates [rad/s; m/s for a prismatic joint]")
+    tip_position: Rows = Field(description="origin of the fingertip (pad) frame in the palm "
+                                           "frame [m]")
+    tip_orientation_wxyz: Rows = Field(description="fingertip (pad) frame orientation in "
+                                                   "the palm frame, unit quaternion "
+                                                   "(w, x, y, z), w >= 0")
+
+
+class ManipulationTrajectoryModel(_Response):
+    """A manipulation plan at the collocation points (nodes and midpoints); rows are
+    samples. Palm frame, SI units."""
+
+    t: list[float] = Field(description="sample times [s]")
+    object_position: Rows = Field(description="object centre [m]")
+    object_orientation_wxyz: Rows = Field(description="object orientation, unit quaternion "
+                                                      "(w, x, y, z), w >= 0")
+    object_velocity: Rows = Field(description="velocity of the object's centre [m/s]")
+    object_angular_velocity: Rows = Field(description="the object's angular velocity, palm "
+                                                      "frame [rad/s]")
+    contacts: list[ContactTrajectoryModel] = Field(description="every contact: the palm's "
+                                                               "first (if any), then the "
+                                                               "fingertips' in request order")
+    fingers: list[FingerJointsModel] = Field(description="every finger, in request order")
+    grasp_angle: list[float] = Field(description="the largest force angle over the "
+                                                 "contacts [rad]")
+    cone_margin: list[float] = Field(description="atan(mu) - grasp_angle: positive inside "
+                                                 "every friction cone [rad]")
+    desired_position: Rows | None = Field(default=None, description="the desired object "
+                                                                    "centre [m] (null "
+                                                                    "without `motion`)")
+    desired_orientation_wxyz: Rows | None = Field(
+        default=None, description="the desired object orientation, unit quaternion "
+                                  "(w, x, y, z), w >= 0 (null without `motion`)")
+    tracking_position_error: list[float] | None = Field(
+        default=None, description="|p - p_d| [m] (null without `motion`)")
+    tracking_angle_error: list[float] | None = Field(
+        default=None, description="angle between the object's orientation and the desired "
+                                  "one [rad] (null without `motion`)")
+
+
+class ManipulationCertificateModel(FingerCertificateModel):
+    """Physical validity of a manipulation plan, computed independently of the NLP: the
+    inputs re-integrated (CVODES), every finger placed by Pinocchio's forward kinematics,
+    the laws checked along that motion (no slip or spin at any contact, pads tangent to
+    the object, closure, joint limits, force closure, tracking between collocation
+    points)."""
+
+    values: dict[str, float] = Field(description="worst value of each check along the "
+                                                 "re-integrated motion (units as the "
+                                                 "quantity: m, rad, m/s, rad/s); keys name "
+                                                 "the contact, e.g. max_slip_speed_<name>")
+
+
+class ManipulationStatsModel(FingerStatsModel):
+    iterations: int = Field(description="IPOPT iterations, refinements included")
+    n_intervals: int = Field(description="collocation intervals of the returned plan")
+
+
+class ManipulationResult(_Response):
+    """A manipulation plan, or why there is none. ``trajectory``: the collocation points
+    (nodes and midpoints)."""
+
+    planner: Literal["manipulation"] = Field(default="manipulation",
+                                             description="the planner of the request")
+    status: PlanStatus
+    message: str
+    errors: list[FieldError] = Field(default_factory=list)
+    stats: ManipulationStatsModel | None = None
+    goal_error: dict[str, float] | None = Field(
+        default=None, description="error of each palm goal/via-point coordinate [m or "
+                                  "rad], e.g. 'palm.x'")
+    certificate: ManipulationCertificateModel | None = None
+    trajectory: ManipulationTrajectoryModel | None = None
+    collocation: CollocationModel | None = Field(default=None,
+                                                 description=COLLOCATION_DESCRIPTION)
+
+
+#: A plan of any planner, told apart by its ``planner`` field (results stored before it
+#: existed are ball-on-palm plans).
+AnyPlanResult = Annotated[
+    Annotated[PlanResult, Tag("ball_on_palm")]
+    | Annotated[FingerPlanResult, Tag("one_finger")]
+    | Annotated[ManipulationResult, Tag("manipulation")],
+    Discriminator(_planner_of),
+]
