@@ -58,6 +58,7 @@ from .nlp_blocks import NLP as _NLP
 from .nlp_blocks import build_manipulation_nlp
 from .problem import (
     CONTACT_COORDS,
+    DEFAULT_FINGER_CHART_ROTATION,
     MAX_INTERVALS,
     MAX_POSITION,
     BallOnPalmProblem,
@@ -131,7 +132,7 @@ class Fingertip:
 
     finger: Any  # ocp.finger.FingerModel
     initial: tuple[float, float, float, float, float]
-    chart_rotation: tuple[float, float, float] = (math.pi / 2, 0.0, 0.0)
+    chart_rotation: tuple[float, float, float] = DEFAULT_FINGER_CHART_ROTATION
     q_seed: tuple[float, ...] | None = None
     name: str = ""
 

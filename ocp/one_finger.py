@@ -36,7 +36,7 @@ from .manipulation import (
     Palm,
     fingertip_errors,
 )
-from .problem import BallOnPalmProblem, ProblemError
+from .problem import DEFAULT_FINGER_CHART_ROTATION, BallOnPalmProblem, ProblemError
 from .solution import Status
 
 __all__ = ["FingerContact", "OneFingerPlanner", "OneFingerProblem", "OneFingerSolution"]
@@ -56,7 +56,7 @@ class FingerContact:
     """
 
     initial: tuple[float, float, float, float, float]
-    chart_rotation: tuple[float, float, float] = (math.pi / 2, 0.0, 0.0)
+    chart_rotation: tuple[float, float, float] = DEFAULT_FINGER_CHART_ROTATION
     q_seed: tuple[float, ...] | None = None
 
 

@@ -32,6 +32,11 @@ PERIODIC: tuple[bool, ...] = (False, False, False, True, True)
 MAX_INTERVALS = 2000
 MAX_VIA_POINTS = 50
 MAX_POSITION = 10.0  # m, any palm coordinate
+#: The default chart patch of a fingertip contact (rotation vector [rad] in the object
+#: frame), the library's and the wire's: patch point (0, 0) at the antipode of the object
+#: chart's (0, 0), which with the default object chart and the palm contact at u = v = 0 is
+#: the ball's top.
+DEFAULT_FINGER_CHART_ROTATION: tuple[float, float, float] = (0.0, 0.0, math.pi)
 MAX_DURATION = 3600.0  # s
 
 

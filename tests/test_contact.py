@@ -3,7 +3,7 @@
 The central test integrates the contact coordinates with the rate equations and checks the
 physics on the rebuilt poses by finite differences in time, independently of the planner:
 no slip, no separation, no spin, and the two surfaces touch with opposite normals.
-Conventions: shared/notes/rolling-contact-math.md.
+Conventions: docs/conventions.md.
 """
 
 from __future__ import annotations

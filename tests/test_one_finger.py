@@ -162,3 +162,17 @@ def test_a_grid_too_coarse_for_a_fast_regrasp_is_refined_until_certified() -> No
     assert len(refined.t) == 2 * 20 * 2**refined.refinements + 1
     assert refined.certificate["max_slip_speed_finger"] < coarse.certificate[
         "max_slip_speed_finger"]
+
+
+def test_the_finger_chart_has_one_default_in_the_library_and_on_the_wire() -> None:
+    """A request that leaves out the finger contact's chart gets the library's default."""
+    from dexroll_client.models import FingerContactModel
+
+    from ocp.manipulation import Fingertip
+    from ocp.problem import DEFAULT_FINGER_CHART_ROTATION
+
+    wire = FingerContactModel.model_validate({"initial": {"x_f": 0.0, "y_f": 0.0, "u_f": 0.0,
+                                                          "v_f": 0.0, "psi_f": 0.0}})
+    assert tuple(wire.chart_rotation) == DEFAULT_FINGER_CHART_ROTATION
+    assert FingerContact(initial=(0.0,) * 5).chart_rotation == DEFAULT_FINGER_CHART_ROTATION
+    assert Fingertip(None, (0.0,) * 5).chart_rotation == DEFAULT_FINGER_CHART_ROTATION

@@ -1,7 +1,7 @@
 """Laws of the parameterised surfaces (ocp/surfaces.py).
 
 Every expected value is a closed form or an independent numpy computation from the chart,
-never a number copied from a run. Conventions: shared/notes/rolling-contact-math.md.
+never a number copied from a run. Conventions: docs/conventions.md.
 """
 
 from __future__ import annotations
