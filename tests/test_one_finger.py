@@ -167,7 +167,6 @@ def test_a_grid_too_coarse_for_a_fast_regrasp_is_refined_until_certified() -> No
 def test_the_finger_chart_has_one_default_in_the_library_and_on_the_wire() -> None:
     """A request that leaves out the finger contact's chart gets the library's default."""
     from dexroll_client.models import FingerContactModel
-
     from ocp.manipulation import Fingertip
     from ocp.problem import DEFAULT_FINGER_CHART_ROTATION
 
