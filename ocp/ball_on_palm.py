@@ -38,6 +38,7 @@ from .collocation import (
 )
 from .contact import ContactPair
 from .ipopt import IPOPT_OPTIONS, StopCallback
+from .parameters import Parameters
 from .problem import (
     CONTACT_COORDS,
     MAX_INTERVALS,
@@ -203,7 +204,7 @@ class _NLP:
     stop: StopCallback
     unpack: ca.Function
     pack: ca.Function
-    params: ca.Function  # (shape_params, seg_durations, goal, vias) -> p
+    params: Parameters  # shape, seg_T, goal, vias
     left_cols: list[int]  # input column at the start of each interval
     right_cols: list[int]  # input column at the end of each interval
     n_g: int
@@ -216,11 +217,11 @@ def _build(st: Structure, compile_dir: Path | None = None) -> _NLP:
     n_seg = len(st.segments)
     n_via = len(st.via_masks)
     hs = HermiteSimpson(NX, NU, st.segments)
-    shape_p = ca.SX.sym("shape", model.surface.n_params)
-    seg_T = ca.SX.sym("seg_T", n_seg)
-    goal = ca.SX.sym("goal", NX)
-    vias = ca.SX.sym("vias", NX, n_via)
-    p = ca.vertcat(shape_p, seg_T, goal, ca.vec(vias))
+    decl = Parameters.of(shape=(model.surface.n_params, 1), seg_T=(n_seg, 1), goal=(NX, 1),
+                         vias=(NX, n_via))
+    p = ca.SX.sym("p", decl.size)
+    prm = decl.unpack(p)
+    shape_p, seg_T, goal, vias = prm["shape"], prm["seg_T"], prm["goal"], prm["vias"]
     L = ca.mmax(shape_p)  # length scale [m]
     T = ca.sum1(seg_T)
     x_scale = ca.vertcat(L, L, 1, 1, 1)
@@ -254,9 +255,7 @@ def _build(st: Structure, compile_dir: Path | None = None) -> _NLP:
         from .compiled import compiled_solver
 
         solver, _ = compiled_solver(solver, repr(st), opts, compile_dir)
-    params = ca.Function("params", [shape_p, seg_T, goal, vias], [p],
-                         ["shape", "seg_T", "goal", "vias"], ["p"])
-    return _NLP(st, solver, stop, hs.unpack(), hs.pack(), params, hs.left_cols,
+    return _NLP(st, solver, stop, hs.unpack(), hs.pack(), decl, hs.left_cols,
                 hs.right_cols, g_all.numel(),
                 time.perf_counter() - t0)
 
@@ -450,7 +449,7 @@ class BallOnPalmPlanner:
         goal = np.array([problem.goal.get(c, 0.0) for c in CONTACT_COORDS])
         vias = np.array([[vp.coords.get(c, 0.0) for c in CONTACT_COORDS]
                          for vp in problem.via_points]).T.reshape(NX, -1)
-        p = nlp.params(problem.object.dimensions, seg_T, goal, vias)
+        p = nlp.params.pack(shape=problem.object.dimensions, seg_T=seg_T, goal=goal, vias=vias)
         lbx, ubx = self._bounds(problem, nlp, x_scale, u_scale)
 
         t_nodes = self._node_times(problem, nlp.structure)

@@ -447,18 +447,49 @@ def _goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[int]
     return {f"palm.{k}": v for k, v in out.items()}
 
 
-def _fingerprint(key: tuple[Any, ...], m: GraspModel) -> str:
-    """A structure key as a string that another process computes alike: the fingers by
-    their models (URDF, tip frame, mount), not by identity."""
-    import hashlib
+@dataclass(frozen=True)
+class GraspStructure:
+    """What fixes the shape of a grasp's NLP (everything else is a parameter or a bound):
+    the NLPs are cached by it. The fingers are compared by identity (the key keeps them
+    alive); :meth:`fingerprint` names the same structure alike in another process."""
 
-    shape, palm, segments, goal_mask, via_masks, fingers, tracking = key
-    parts = [repr((shape, palm, segments, goal_mask, via_masks, tracking, m.nx, m.nu))]
-    for f in fingers:
-        parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
-                  repr(np.asarray(f.base_rotation).round(12).tolist()),
-                  repr(np.asarray(f.base_position).round(12).tolist())]
-    return hashlib.sha256("|".join(parts).encode()).hexdigest()[:32]
+    shape: str
+    palm: bool
+    segments: tuple[int, ...]
+    goal_mask: tuple[bool, ...]
+    via_masks: tuple[tuple[bool, ...], ...]
+    fingers: tuple[Any, ...]
+    tracking: bool
+
+    @staticmethod
+    def of(problem: ManipulationProblem) -> GraspStructure:
+        segments, _ = problem.segments()
+        goal_mask: tuple[bool, ...] = (False,) * 5
+        via_masks: tuple[tuple[bool, ...], ...] = ()
+        if problem.palm is not None:
+            st = Structure.of(problem.palm_problem())
+            goal_mask, via_masks = st.goal_mask, st.via_masks
+        return GraspStructure(problem.object.shape, problem.palm is not None, segments,
+                              goal_mask, via_masks, tuple(c.finger for c in problem.fingers),
+                              problem.motion is not None)
+
+    @property
+    def model_key(self) -> tuple[Any, ...]:
+        """The part that fixes the grasp model (:class:`GraspModel`'s arguments)."""
+        return (self.shape, self.palm, self.fingers)
+
+    def fingerprint(self, m: GraspModel) -> str:
+        """The structure as a string that another process computes alike: the fingers by
+        their models (URDF, tip frame, mount), not by identity."""
+        import hashlib
+
+        parts = [repr((self.shape, self.palm, self.segments, self.goal_mask, self.via_masks,
+                       self.tracking, m.nx, m.nu))]
+        for f in self.fingers:
+            parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
+                      repr(np.asarray(f.base_rotation).round(12).tolist()),
+                      repr(np.asarray(f.base_position).round(12).tolist())]
+        return hashlib.sha256("|".join(parts).encode()).hexdigest()[:32]
 
 
 class ManipulationPlanner:
@@ -477,7 +508,7 @@ class ManipulationPlanner:
             and background else None
         # keyed by the finger objects themselves (identity; the key keeps them alive)
         self._models: dict[tuple[Any, ...], GraspModel] = {}
-        self._nlps: dict[tuple[Any, ...], _NLP] = {}
+        self._nlps: dict[GraspStructure, _NLP] = {}
         self._palm = BallOnPalmPlanner()
 
     def model(self, problem: ManipulationProblem) -> GraspModel:
@@ -487,24 +518,14 @@ class ManipulationPlanner:
             self._models[key] = GraspModel(*key)
         return self._models[key]
 
-    def _structure(self, problem: ManipulationProblem) -> tuple[Any, ...]:
-        segments, _ = problem.segments()
-        masks: tuple[Any, ...] = ((False,) * 5, ())
-        if problem.palm is not None:
-            st = Structure.of(problem.palm_problem())
-            masks = (st.goal_mask, st.via_masks)
-        return (problem.object.shape, problem.palm is not None, segments, *masks,
-                tuple(c.finger for c in problem.fingers), problem.motion is not None)
-
     # ...................................................................................
     def _build(self, problem: ManipulationProblem) -> tuple[_NLP, bool]:
-        key = self._structure(problem)
+        key = GraspStructure.of(problem)
         if key in self._nlps:
             return self._nlps[key], True
-        _, _, segments, goal_mask, via_masks, _, tracking = key
         m = self.model(problem)
-        nlp = build_manipulation_nlp(m, segments, goal_mask, via_masks, tracking,
-                                     FORCE_REGULARISATION, _fingerprint(key, m),
+        nlp = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
+                                     key.tracking, FORCE_REGULARISATION, key.fingerprint(m),
                                      None if self.compiler else self.compile_dir)
         self._nlps[key] = nlp
         if self.compiler is not None:
@@ -662,9 +683,10 @@ class ManipulationPlanner:
             Pd_, Rd_ = Pd.T, Rd.transpose(0, 2, 1).reshape(-1, 9).T  # column-major vec
         else:
             Pd_, Rd_ = np.zeros((3, 0)), np.zeros((9, 0))
-        return np.asarray(nlp.params(shape, np.diff(tb), goal, vias, np.concatenate(
-            [R.ravel(order="F") for R in charts]), weights, cone_cosine(problem.mu), tol,
-            Pd_, Rd_)).ravel()
+        return nlp.params.pack(
+            shape=shape, seg_T=np.diff(tb), goal=goal, vias=vias,
+            charts=np.concatenate([R.ravel(order="F") for R in charts]), weights=weights,
+            ccone=[cone_cosine(problem.mu)], tol=tol, Pd=Pd_, Rd=Rd_)
 
     def _solve_once(self, problem: ManipulationProblem, x0: FloatArray,
                     warm: WarmStart | None, deadline: float

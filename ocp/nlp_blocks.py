@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from .collocation import HermiteSimpson, hermite_simpson_defects, target_residuals
 from .grasp import grasp_cosines
 from .ipopt import IPOPT_OPTIONS, StopCallback
+from .parameters import Parameters
 from .problem import PERIODIC
 
 __all__ = ["NLP", "BlockAssembler", "build_manipulation_nlp"]
@@ -51,7 +52,8 @@ class NLP:
     hs: HermiteSimpson  # SX symbols of the grid: columns, pack/unpack of the states/inputs
     unpack: ca.Function
     pack: ca.Function
-    params: ca.Function
+    #: the parameter vector's declaration, by name (:class:`ocp.parameters.Parameters`)
+    params: Parameters
     lbg: FloatArray
     ubg: FloatArray
     build_time: float
@@ -308,14 +310,16 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
 
     # -- the NLP in MX: mapped blocks ------------------------------------------------------
     w = ca.MX.sym("w", nw)
-    sizes = [ns, nseg, 5, 5 * nv, 9 * nc, 6, 1, 2, 3 * npts if tracking else 0,
-             9 * npts if tracking else 0]
-    p = ca.MX.sym("p", sum(sizes))
-    offs = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
-    shape_p, seg_T, goal, vias_v, charts, weights, ccone, tol, Pd_v, Rd_v = (
-        p[int(offs[i]):int(offs[i + 1])] for i in range(len(sizes)))
-    Pd = ca.reshape(Pd_v, 3 if tracking else 0, npts if tracking else 0)
-    Rd = ca.reshape(Rd_v, 9 if tracking else 0, npts if tracking else 0)
+    n_track = npts if tracking else 0
+    decl = Parameters.of(shape=(ns, 1), seg_T=(nseg, 1), goal=(5, 1), vias=(5, nv),
+                         charts=(9 * nc, 1), weights=(6, 1), ccone=(1, 1), tol=(2, 1),
+                         Pd=(3, n_track), Rd=(9, n_track))
+    p = ca.MX.sym("p", decl.size)
+    prm_ = decl.unpack(p)
+    shape_p, seg_T, goal, charts, weights, ccone, tol, Pd, Rd = (
+        prm_[k] for k in ("shape", "seg_T", "goal", "charts", "weights", "ccone", "tol",
+                          "Pd", "Rd"))
+    vias_v = ca.vec(prm_["vias"])
     T = ca.sum1(seg_T)
     h = ca.horzcat(*[ca.repmat(seg_T[j] / segments[j], 1, segments[j])
                      for j in range(nseg)])  # 1 x n [s]
@@ -375,12 +379,6 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
             compiled = True
         except RuntimeError:  # no compiler, or it failed: the virtual machine solves
             pass
-    syms = [ca.SX.sym("shape", ns), ca.SX.sym("seg_T", nseg), ca.SX.sym("goal", 5),
-            ca.SX.sym("vias", 5, nv), ca.SX.sym("charts", 9 * nc), ca.SX.sym("weights", 6),
-            ca.SX.sym("ccone"), ca.SX.sym("tol", 2),
-            ca.SX.sym("Pd", 3, npts if tracking else 0),
-            ca.SX.sym("Rd", 9, npts if tracking else 0)]
-    params = ca.Function("params", syms, [ca.vertcat(*[ca.vec(a) for a in syms])])
-    return NLP(solver, stop, hs, unpack, pack, params, np.array(lbg), np.array(ubg),
+    return NLP(solver, stop, hs, unpack, pack, decl, np.array(lbg), np.array(ubg),
                time.perf_counter() - t0, n_force, oracle, options, fingerprint,
                compiled=compiled)
