@@ -73,10 +73,12 @@ class Certificate(Mapping[str, float]):
     checks: tuple[Check, ...] = ()
     #: Values reported without a check (e.g. the largest grasp angle).
     reported: tuple[tuple[str, float], ...] = ()
+    #: Samples of the re-integrated motion the laws were checked at.
+    n_samples: int = 0
 
     @staticmethod
-    def of(checks: Iterable[Check], reported: Mapping[str, float] | None = None
-           ) -> Certificate:
+    def of(checks: Iterable[Check], reported: Mapping[str, float] | None = None,
+           n_samples: int = 0) -> Certificate:
         """Checks of the same name merged (the worst value kept: several fingers' closure
         errors are one check)."""
         merged: dict[str, Check] = {}
@@ -84,7 +86,7 @@ class Certificate(Mapping[str, float]):
             old = merged.get(c.name)
             if old is None or _worse(c, old):
                 merged[c.name] = c
-        return Certificate(tuple(merged.values()), tuple((reported or {}).items()))
+        return Certificate(tuple(merged.values()), tuple((reported or {}).items()), n_samples)
 
     @staticmethod
     def failed(reason: str) -> Certificate:

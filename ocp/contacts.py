@@ -39,6 +39,7 @@ from .surfaces import Plane, Surface
 
 if TYPE_CHECKING:
     from .certificate import Check
+    from .certify import TolerancePolicy
     from .manipulation import Fingertip, ManipulationProblem
 
 __all__ = ["Contact", "FingertipContact", "FreeObject", "ObjectBlock", "SupportContact",
@@ -94,9 +95,11 @@ class CertificateContext:
     R_pf: FloatArray  # (n, fingers, 3, 3)
     p_pf: FloatArray  # (n, fingers, 3)
     states: FloatArray  # (n, nx)
+    inputs: FloatArray  # (n, nu)
     shape: FloatArray
     L: float
-    speed: float  # a motion speed scale [m/s]
+    speed: float  # the motion's speed scale [m/s]
+    policy: TolerancePolicy
 
 
 class Contact(ABC):
@@ -112,6 +115,8 @@ class Contact(ABC):
     length_columns: tuple[int, ...] = ()
     angle_columns: tuple[int, ...] = ()
     joint_columns: tuple[int, ...] = ()
+    #: angle columns defined modulo 2 pi (their defects are wrapped)
+    periodic_columns: tuple[int, ...] = ()
     #: input columns by the objective's effort group: 0 the object's own motion, 1 the
     #: fingertips' motion over the object, 2 the joint rates
     effort_groups: tuple[tuple[int, ...], tuple[int, ...], tuple[int, ...]] = ((), (), ())
@@ -207,6 +212,7 @@ class SupportContact(ObjectBlock):
     body = "palm"
     length_columns = (0, 1)
     angle_columns = (2, 3, 4)
+    periodic_columns = (3, 4)
     effort_groups = ((0, 1), (), ())
 
     def __init__(self, surface: Surface, name: str = "palm") -> None:
@@ -278,17 +284,23 @@ class SupportContact(ObjectBlock):
                ) -> list[Check]:
         from .certificate import Check, CheckKind
 
-        n = self.name
+        n, pol = self.name, c.policy
+        if pol.support_speed == "input":  # its own input's speed, the object's turn rate
+            v_scale = float(np.max(np.linalg.norm(c.inputs[:, self.us], axis=1)))
+            w_scale = float(np.max(np.linalg.norm(c.laws["omega_obj"], axis=1)))
+        else:  # the grasp's motion
+            v_scale, w_scale = c.speed, c.speed / c.L
         # the object touches the palm: support function of its shape along -z (no chart)
         heights = self.surface.support_heights(-c.R_po[:, 2, :], c.shape)  # rows R^T (-e_z)
         return [
             Check(f"max_slip_speed_{n}", float(np.max(np.linalg.norm(c.laws[f"slip_{n}"],
                                                                      axis=1))),
-                  1e-8 * max(c.speed, 1e-3), CheckKind.DISCRETISATION),
+                  pol.support_slip * max(v_scale, 1e-3), CheckKind.DISCRETISATION),
             Check(f"max_spin_rate_{n}", float(np.max(np.abs(c.laws[f"spin_{n}"]))),
-                  1e-8 * max(c.speed / c.L, 1e-3), CheckKind.DISCRETISATION),
+                  pol.support_spin * max(w_scale, 1e-3), CheckKind.DISCRETISATION),
             Check(f"max_height_error_{n}", float(np.max(np.abs(c.p_po[:, 2] - heights))),
-                  1e-9, CheckKind.PHYSICS),
+                  pol.support_height * (c.L if pol.height_relative else 1.0),
+                  CheckKind.PHYSICS),
         ]
 
 
@@ -362,6 +374,7 @@ class FingertipContact(Contact):
     body = "finger"
     length_columns = (0, 1)
     angle_columns = (2, 3, 4)
+    periodic_columns = (3, 4)
 
     def __init__(self, surface: Surface, finger: Any, index: int) -> None:
         super().__init__(f"finger{index}", surface)

@@ -21,13 +21,14 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .surfaces import safe_norm
 
-__all__ = ["cone_cosine", "grasp_angles_numeric", "grasp_cosines"]
+__all__ = ["cone_cosine", "force_angles", "grasp_angles_numeric", "grasp_cosines"]
 
 Sym = Any
+FloatArray = NDArray[np.float64]
 
 
 def cone_cosine(mu: float) -> float:
@@ -59,3 +60,24 @@ def grasp_angles_numeric(p1: ArrayLike, n1: ArrayLike, p2: ArrayLike, n2: ArrayL
     if d.ndim == 1:
         return math.acos(float(c1)), math.acos(float(c2))
     return np.stack([np.arccos(c1), np.arccos(c2)], axis=-1)
+
+
+def force_angles(points: FloatArray, normals: FloatArray
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(Phi* (k,), per-contact force angles (k, n), grasp map onto (k,)) for contacts
+    (k, n, 3) with the object's outward normals. Two contacts: the paper's grasp angles
+    in closed form; three or more: :func:`ocp.force_closure.grasp_qualities`; one (the object
+    on the palm alone, no grasp): NaN angles, no force closure to certify."""
+    n = points.shape[1]
+    if n < 2:
+        k = points.shape[0]
+        return np.full(k, np.nan), np.full((k, n), np.nan), np.ones(k, dtype=bool)
+    if n == 2:
+        ang = grasp_angles_numeric(points[:, 0], normals[:, 0], points[:, 1], normals[:, 1])
+        onto = np.linalg.norm(points[:, 1] - points[:, 0], axis=1) > 0
+        return ang.max(axis=1), ang, onto
+    from .force_closure import grasp_qualities  # (it imports this module)
+
+    qs = grasp_qualities(points, normals)
+    return (np.array([q.angle for q in qs]), np.array([q.contact_angles for q in qs]),
+            np.array([q.rank_ok for q in qs]))

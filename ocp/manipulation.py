@@ -46,11 +46,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .ball_on_palm import BallOnPalmPlanner, Structure, goal_errors
-from .certificate import Certificate, Check, CheckKind
-from .collocation import NlpPoint, WarmStart, node_inputs, node_times, reintegrate
+from .certificate import Certificate, CheckKind
+from .certify import GRASP_TOLERANCES, TolerancePolicy, certify_grasp
+from .collocation import NlpPoint, WarmStart, node_inputs, node_times
 from .compiled import BackgroundCompiler
-from .contacts import CertificateContext
-from .grasp import cone_cosine, grasp_angles_numeric
+from .grasp import cone_cosine, force_angles
 from .grasp_model import GraspModel
 from .ipopt import IPOPT_WARM_OPTIONS
 from .motion import DesiredMotion, MotionStep, ObjectPose, Tracking
@@ -199,6 +199,8 @@ class ManipulationProblem:
     max_object_rate: float = 20.0  # rad/s, each component of a free object's angular rate
     max_refinements: int = 2
     options: SolverOptions = field(default_factory=SolverOptions)
+    #: How strictly the certificate checks the plan (:mod:`ocp.certify`).
+    tolerances: TolerancePolicy = GRASP_TOLERANCES
 
     @property
     def n_contacts(self) -> int:
@@ -252,9 +254,9 @@ class ManipulationProblem:
                                        "should the object do?"))
         if self.motion is not None:
             errs += self.motion.errors("motion", self.duration)
-        if self.n_contacts < 2:
-            errs.append(("fingers", "a grasp needs at least two contacts (a palm and a "
-                                    f"finger, or two fingers); got {self.n_contacts}"))
+        if self.palm is None and self.n_contacts < 2:
+            errs.append(("fingers", "without a palm, a grasp needs at least two contacts "
+                                    f"(two fingers); got {self.n_contacts}"))
         if not (math.isfinite(self.mu) and 0.0 < self.mu <= 10.0):
             errs.append(("mu", f"must be in (0, 10], got {self.mu}"))
         for name in ("object_effort_weight", "finger_effort_weight", "joint_effort_weight",
@@ -413,25 +415,6 @@ class ManipulationSolution:
         return WarmStart(self.t, self.X, self.U, self.nlp_point)
 
 
-# -- force closure ---------------------------------------------------------------------------
-
-def force_angles(points: FloatArray, normals: FloatArray
-                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """(Phi* (k,), per-contact force angles (k, n), grasp map onto (k,)) for contacts
-    (k, n, 3) with the object's outward normals. Two contacts: the paper's grasp angles
-    in closed form; three or more: :func:`ocp.force_closure.grasp_qualities`."""
-    n = points.shape[1]
-    if n == 2:
-        ang = grasp_angles_numeric(points[:, 0], normals[:, 0], points[:, 1], normals[:, 1])
-        onto = np.linalg.norm(points[:, 1] - points[:, 0], axis=1) > 0
-        return ang.max(axis=1), ang, onto
-    from .force_closure import grasp_qualities
-
-    qs = grasp_qualities(points, normals)
-    return (np.array([q.angle for q in qs]), np.array([q.contact_angles for q in qs]),
-            np.array([q.rank_ok for q in qs]))
-
-
 # -- the planner -----------------------------------------------------------------------------
 
 def _charts(problem: ManipulationProblem) -> list[FloatArray]:
@@ -439,8 +422,10 @@ def _charts(problem: ManipulationProblem) -> list[FloatArray]:
     return out + [rotation_from_vector(c.chart_rotation) for c in problem.fingers]
 
 
-def _goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[int]
-                 ) -> dict[str, float]:
+def support_goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[int]
+                        ) -> dict[str, float]:
+    """Error of every goal and via-point coordinate of the support contact (``palm.goal.x``,
+    ...) at the segment end nodes ``ends`` of the states X (m or wrapped rad)."""
     if problem.palm is None:
         return {}
     out = goal_errors(problem.palm_problem(), X, ends)
@@ -587,7 +572,7 @@ class ManipulationPlanner:
         pts, nrm = np.asarray(out[4]).T[None], np.asarray(out[5]).T[None]
         phi, _, onto = force_angles(pts, nrm)
         cone = math.atan(problem.mu)
-        if not (phi[0] < cone and onto[0]):
+        if m.n_contacts >= 2 and not (phi[0] < cone and onto[0]):
             errs.append(("fingers", f"the initial grasp is outside the friction cone (not in "
                                     f"force closure): grasp angle "
                                     f"{math.degrees(phi[0]):.2f} deg >= atan(mu) = "
@@ -711,7 +696,7 @@ class ManipulationPlanner:
             X[0] = x0  # the fixed initial state, exactly
         Sg, Fg = self._epigraph(problem, m, np.vstack([X, Xm]), prm)
         w0 = nlp.pack((X / x_scale).T, (Xm / x_scale).T, (U / u_scale).T, (Um / u_scale).T,
-                      Sg[None, : n + 1], Sg[None, n + 1:], Fg)
+                      Sg[:, : n + 1], Sg[:, n + 1:], Fg)
         w0 = np.clip(np.asarray(w0).ravel(), lbx, ubx)
         solver, duals = nlp.solver, {}
         mult = warm.nlp_point_for(nlp.fingerprint, len(lbx), len(nlp.lbg)) \
@@ -765,7 +750,8 @@ class ManipulationPlanner:
         ub_in = np.array(uhi) / u_scale
         lo_u, hi_u = np.tile(-ub_in, (n + n_seg, 1)), np.tile(ub_in, (n + n_seg, 1))
         lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
-        zeros_s, twos_s = np.zeros((1, n + 1)), 2 * np.ones((1, n + 1))
+        ns = nlp.n_epigraph
+        zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))
         big = 1e3 * np.ones((3 * nlp.n_force, 2 * n + 1))
         lbx = nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n], -big)
         ubx = nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n], big)
@@ -774,19 +760,22 @@ class ManipulationPlanner:
     @staticmethod
     def _epigraph(problem: ManipulationProblem, m: GraspModel, Xall: FloatArray,
                   prm: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Grasp epigraph values and internal-force guesses at the given states."""
+        """Grasp epigraph values (1 x k; 0 x k for one contact) and internal-force guesses
+        at the given states."""
         k = len(Xall)
+        if m.n_contacts < 2:  # no force closure to certify: neither
+            return np.zeros((0, k)), np.zeros((0, k))
         out = m.mapped("cartesian", k)(Xall.T, prm)
         nc = m.n_contacts
         pts = np.asarray(out[4]).T.reshape(k, nc, 3)
         nrm = np.asarray(out[5]).T.reshape(k, nc, 3)
         if nc == 2:
             phi, _, _ = force_angles(pts, nrm)
-            return np.clip(1 - np.cos(phi), 0.0, 2.0), np.zeros((0, k))
+            return np.clip(1 - np.cos(phi), 0.0, 2.0)[None], np.zeros((0, k))
         # a pushing guess: each contact pushes along its inward normal (scaled so that the
         # pushes sum to nc); IPOPT restores equilibrium
         F = -nrm.reshape(k, 3 * nc).T
-        return np.full(k, 0.5), F
+        return np.full((1, k), 0.5), F
 
     def _guess(self, problem: ManipulationProblem, m: GraspModel, nlp: _NLP, x0: FloatArray,
                t_nodes: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -901,8 +890,8 @@ class ManipulationPlanner:
             ea = rotation_angle_between(Rd, R_po)
         segments, _ = problem.segments()
         ends = [0, *np.cumsum(segments).tolist()]
-        goal_error = _goal_errors(problem, X, ends)
-        cert = self._certify(problem, m, t_nodes, X, U0, Um, U1, prm)
+        goal_error = support_goal_errors(problem, X, ends)
+        cert = certify_grasp(problem, m, t_nodes, X, U0, Um, U1, prm, problem.tolerances)
         failures = cert.failures
         if status is Status.SOLVED and failures:
             status = Status.INACCURATE
@@ -918,79 +907,3 @@ class ManipulationPlanner:
             cone_margin=margin, desired_position=Pd, desired_rotation=Rd,
             tracking_position_error=ep, tracking_angle_error=ea, goal_error=goal_error,
             certificate=cert, certificate_failures=failures, X=Xg, U=Ug)
-
-    def _certify(self, problem: ManipulationProblem, m: GraspModel, t_nodes: FloatArray,
-                 X: FloatArray, U0: FloatArray, Um: FloatArray, U1: FloatArray,
-                 prm: FloatArray) -> Certificate:
-        """Re-integrate the inputs (CVODES) and check the laws along that motion (each
-        contact's own checks: :meth:`ocp.contacts.Contact.checks`), each finger placed by
-        Pinocchio's forward kinematics of its re-integrated joints."""
-        if not all(np.all(np.isfinite(a)) for a in (X, U0, Um, U1)):
-            return Certificate.failed("the plan has non-finite states or inputs")
-        F = m.reintegrator(4)
-        try:
-            Xr, sx, su = reintegrate(F, X[0], t_nodes, U0, Um, U1, prm, 4)
-        except RuntimeError as exc:  # CVODES gave up: the plan is not a smooth motion
-            return Certificate.failed(f"re-integration failed: {str(exc).splitlines()[-1]}")
-        n = len(sx)
-        xd = np.asarray(m.mapped("dynamics", n)(sx.T, su.T, prm))
-        laws = dict(zip(m.laws.name_out(), (np.asarray(a).T for a in
-                                            m.mapped("laws", n)(sx.T, xd, prm)), strict=True))
-        cart = m.mapped("cartesian", n)(sx.T, prm)
-        nc, nf = m.n_contacts, len(m.fingertips)
-        R_po = np.asarray(cart[0]).T.reshape(n, 3, 3).transpose(0, 2, 1)
-        p_po = np.asarray(cart[1]).T
-        pts = np.asarray(cart[4]).T.reshape(n, nc, 3)
-        nrm = np.asarray(cart[5]).T.reshape(n, nc, 3)
-        L = problem.object.length_scale
-        o = problem.options
-        d = Xr - X
-        speed = float(np.max(np.abs(laws["v_obj"]))) + L * float(
-            np.max(np.abs(laws["omega_obj"]))) + L * float(np.max(np.abs(su)))
-        ctx = CertificateContext(
-            laws=laws, R_po=R_po, p_po=p_po,
-            R_pf=np.asarray(cart[2]).T.reshape(n, nf, 3, 3).transpose(0, 1, 3, 2)
-            if nf else np.zeros((n, 0, 3, 3)),
-            p_pf=np.asarray(cart[3]).T.reshape(n, nf, 3), states=sx,
-            shape=np.asarray(problem.object.dimensions, dtype=float), L=L, speed=speed)
-        D = CheckKind.DISCRETISATION
-        checks = [
-            Check("max_length_defect", float(np.max(np.abs(d[:, m.length_columns()]))),
-                  max(o.cert_position_tol, 1e-5), D),
-            Check("max_angle_defect", float(np.max(np.abs(d[:, m.angle_columns()]))),
-                  o.cert_angle_tol * 10, D),
-        ]
-        if nf:
-            checks.append(Check("max_joint_defect", float(np.max(np.abs(
-                d[:, m.joint_columns()]))), o.cert_angle_tol * 10, D))
-        for k, c in enumerate(m.contacts):
-            checks += c.checks(problem, k, ctx)
-        reported: dict[str, float] = {}
-        if problem.motion is not None:
-            ts = np.concatenate([[t_nodes[0]], np.concatenate([
-                t_nodes[k] + (t_nodes[k + 1] - t_nodes[k]) * np.linspace(0, 1, 5)[1:]
-                for k in range(len(t_nodes) - 1)])])
-            Rd, Pd = problem.motion.at(ts)
-            tr = problem.tracking
-            for name, value, tol in (
-                    ("max_tracking_position_error",
-                     float(np.max(np.linalg.norm(p_po - Pd, axis=1))), tr.position_tolerance),
-                    ("max_tracking_angle_error",
-                     float(np.max(rotation_angle_between(Rd, R_po))),
-                     tr.orientation_tolerance)):
-                if tol is None:
-                    reported[name] = value
-                else:
-                    checks.append(Check(name, value, tol, D))
-        phi, _, onto = force_angles(pts, nrm)
-        margin = float(np.min(math.atan(problem.mu) - phi))
-        checks.append(Check("min_cone_margin", margin, -1e-6, CheckKind.PHYSICS,
-                            lower_bound=True, report_tolerance=False,
-                            reason=f"min_cone_margin {margin:.3g} < 0 (force closure lost)"))
-        reported["max_grasp_angle"] = float(np.max(phi))
-        if not np.all(onto):
-            checks.append(Check("grasp_map_onto", 0.0, 1.0, CheckKind.PHYSICS,
-                                lower_bound=True, report_tolerance=False, report_value=False,
-                                reason="the grasp map is not onto at some sample (force "
-                                       "closure lost)"))
-        return Certificate.of(checks, reported)

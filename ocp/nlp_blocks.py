@@ -58,6 +58,7 @@ class NLP:
     ubg: FloatArray
     build_time: float
     n_force: int  # contacts with internal-force variables (0 for two contacts)
+    n_epigraph: int  # grasp-angle epigraph variables per point (0 for one contact)
     #: the problem as a function (w, p) -> (f, g), and the options of ``solver`` (with the
     #: block derivatives): what the warm-start solver is built from, on first use
     oracle: ca.Function
@@ -124,6 +125,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     nseg = len(segments)
     npts = 2 * n + 1
     n_force = nc if nc >= 3 else 0
+    n_s = 1 if nc >= 2 else 0  # the grasp-angle epigraph: force closure needs 2+ contacts
     nx, nu = m.nx, m.nu
     ns = m.surface.n_params
     nv = len(via_masks)
@@ -143,7 +145,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
 
     # -- point block: z = (x~, s, f) at one collocation point -----------------------------
     xs = ca.SX.sym("xs", nx)
-    s = ca.SX.sym("s")
+    s = ca.SX.sym("s", n_s)
     fcol = ca.SX.sym("f", 3 * n_force)
     zp = ca.vertcat(xs, s, fcol)
     pd = ca.SX.sym("pd", 3 if tracking else 0)
@@ -170,7 +172,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         c1, c2, dist = grasp_cosines(P[:, 0], N[:, 0], P[:, 1], N[:, 1])
         add(ca.vertcat(c1 - dist * ccone_q, c2 - dist * ccone_q) / L, 0.0, math.inf)
         add(ca.vertcat(s - (1 - c1 / dist), s - (1 - c2 / dist)), 0.0, math.inf)
-    else:
+    elif nc >= 3:
         from .force_closure import PUSH_FLOOR, internal_force_residuals
 
         eq, push, norms = internal_force_residuals(P, N, ca.reshape(fcol, 3, nc), L)
@@ -210,7 +212,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     # -- interval block: z = (x_k, x_m, x_k+1, u_0, u_m, u_1, s_k, s_m, s_k+1) ------------
     xk, xm, xk1 = (ca.SX.sym(name, nx) for name in ("xk", "xm", "xk1"))
     u0, um, u1 = (ca.SX.sym(name, nu) for name in ("u0", "um", "u1"))
-    sk, sm, sk1 = ca.SX.sym("sk"), ca.SX.sym("sm"), ca.SX.sym("sk1")
+    sk, sm, sk1 = ca.SX.sym("sk", n_s), ca.SX.sym("sm", n_s), ca.SX.sym("sk1", n_s)
     zi = ca.vertcat(xk, xm, xk1, u0, um, u1, sk, sm, sk1)
     hq = ca.SX.sym("h")  # the interval's length [s]
     Tq = ca.SX.sym("T")
@@ -222,7 +224,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
 
     D = hermite_simpson_defects(xk, xm, xk1, fdyn(xk, u0), fdyn(xm, um), fdyn(xk1, u1), hq)
     hn = hq / Tq
-    cost_i: Any = wq[3] * hn / 6 * (sk + 4 * sm + sk1)
+    cost_i: Any = wq[3] * hn / 6 * (sk + 4 * sm + sk1) if n_s else ca.SX(0)
     for i, idx in enumerate(m.effort_groups()):
         if idx:
             cost_i += wq[i] * hn / 6 * (ca.sumsqr(u0[idx]) + 4 * ca.sumsqr(um[idx])
@@ -256,21 +258,21 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     tg_hess = ca.Function("targets_hess", [*tin, lam_t], [_nz(Ht)])
 
     # -- where every block entry sits in w and g ------------------------------------------
-    nw = int(hs.w.numel()) + (n + 1) + n + 3 * n_force * npts
-    S_sx, Sm_sx = ca.SX.sym("S", 1, n + 1), ca.SX.sym("Sm", 1, n)
+    nw = int(hs.w.numel()) + n_s * (n + 1) + n_s * n + 3 * n_force * npts
+    S_sx, Sm_sx = ca.SX.sym("S", n_s, n + 1), ca.SX.sym("Sm", n_s, n)
     F_sx = ca.SX.sym("F", 3 * n_force, npts)
-    w_sx = ca.vertcat(hs.w, S_sx.T, Sm_sx.T, ca.vec(F_sx))
+    w_sx = ca.vertcat(hs.w, ca.vec(S_sx), ca.vec(Sm_sx), ca.vec(F_sx))
     unpack = ca.Function("unpack", [w_sx], [hs.X, hs.Xm, hs.U, hs.Um, S_sx, Sm_sx, F_sx])
     pack = ca.Function("pack", [hs.X, hs.Xm, hs.U, hs.Um, S_sx, Sm_sx, F_sx], [w_sx])
     Xi, Xmi, Ui, Umi, Si, Smi, Fi = (np.asarray(a).round().astype(np.int64)
                                      for a in unpack(np.arange(nw, dtype=float)))
     Fi = Fi.reshape(3 * n_force, npts)
     XA = np.hstack([Xi, Xmi])  # nodes, then midpoints: the points' order in the NLP
-    SA = np.hstack([Si, Smi]).ravel()
-    Si, Smi = Si.ravel(), Smi.ravel()
-    zp_idx = np.array([np.concatenate([XA[:, c], [SA[c]], Fi[:, c]]) for c in range(npts)])
+    Si, Smi = Si.reshape(n_s, n + 1), Smi.reshape(n_s, n)
+    SA = np.hstack([Si, Smi])
+    zp_idx = np.array([np.concatenate([XA[:, c], SA[:, c], Fi[:, c]]) for c in range(npts)])
     zi_idx = np.array([np.concatenate([Xi[:, k], Xmi[:, k], Xi[:, k + 1], Ui[:, lc[k]],
-                                       Umi[:, k], Ui[:, rc[k]], [Si[k], Smi[k], Si[k + 1]]])
+                                       Umi[:, k], Ui[:, rc[k]], Si[:, k], Smi[:, k], Si[:, k + 1]])
                        for k in range(n)])
     ze_idx = np.concatenate([Xi[:, e] for e in ends])
     n_def = 2 * nx * n
@@ -363,11 +365,15 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     hess_lag = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess_asm(Hnz)],
                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
 
+    oracle = ca.Function("manipulation_nlp", [w, p], [f, g_all], ["x", "p"], ["f", "g"])
+    if nc < 2:
+        # a small grasp (the object on the palm alone): the mapped blocks expanded into
+        # one SX graph each, whose calls cost less than the MX maps' at this size
+        oracle, jac_g, hess_lag = oracle.expand(), jac_g.expand(), hess_lag.expand()
     stop = StopCallback(nw, ng, int(p.numel()))
     options = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
                "ipopt.max_iter": 100_000, **IPOPT_OPTIONS, "iteration_callback": stop,
                "error_on_fail": False, "jac_g": jac_g, "hess_lag": hess_lag}
-    oracle = ca.Function("manipulation_nlp", [w, p], [f, g_all], ["x", "p"], ["f", "g"])
     solver = ca.nlpsol("manipulation", "ipopt", oracle, options)
     compiled = False
     if compile_dir is not None:
@@ -380,5 +386,5 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         except RuntimeError:  # no compiler, or it failed: the virtual machine solves
             pass
     return NLP(solver, stop, hs, unpack, pack, decl, np.array(lbg), np.array(ubg),
-               time.perf_counter() - t0, n_force, oracle, options, fingerprint,
+               time.perf_counter() - t0, n_force, n_s, oracle, options, fingerprint,
                compiled=compiled)
