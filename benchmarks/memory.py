@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser.add_argument("--requests", default="triangle.json")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     args = parser.parse_args(argv)
-    from planner_service.convert import REQUEST, solve
+    from planner_service.planners import REQUEST, solve
 
     requests = [REQUEST.validate_python(json.loads((ROOT / "examples" / n).read_text()))
                 for n in args.requests.split(",")]

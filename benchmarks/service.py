@@ -128,7 +128,7 @@ def run_service(warmup: str, repeat: int) -> dict[str, Any]:
 def _library_experiment1() -> Any:
     """A function planning experiment 1 in-process (caches warm after a first plan) and
     returning its wall clock [s]."""
-    from planner_service.convert import REQUEST, solve
+    from planner_service.planners import REQUEST, solve
 
     request = REQUEST.validate_python(experiment1_request())
     solve(request)

@@ -33,36 +33,19 @@ from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from dexroll_client.models import (
-    BUILTIN_FINGERS,
-    BUILTIN_HANDS,
-    PLANNERS,
     AnyPlanResult,
     ErrorBody,
     FieldError,
-    FingerInfo,
-    FingerModelSpec,
-    HandFingerInfo,
-    HandInfo,
-    HandModel,
     Job,
     JobList,
     JobState,
     ModelCatalog,
-    ObjectInfo,
     PlanRequest,
     WarmStartModel,
 )
-from ocp.manipulation import hand_fingertips
-from ocp.surfaces import SURFACES
 
-from .convert import (
-    FINGERS,
-    RESULT,
-    hand_finger_name,
-    request_errors,
-    rotation_vector,
-    wire_field,
-)
+from .planners import FINGERS, RESULT, request_errors, wire_field
+from .planners.catalog import model_catalog
 from .settings import Settings
 from .store import IdempotencyConflictError, JobRow, Store
 from .workers import Dispatcher
@@ -237,7 +220,7 @@ def submission_errors(body: PlanRequest, store: Store
                       ) -> tuple[PlanRequest, list[tuple[str, str]]]:
     """What ``POST /v1/plans`` checks before storing a job: the request with its warm
     start's job id resolved (:func:`resolve_warm_start`), and every error of it as
-    (field, reason) pairs (:func:`~planner_service.convert.request_errors`; those of a plan
+    (field, reason) pairs (:func:`~planner_service.planners.request_errors`; those of a plan
     that came from a job named ``warm_start.job_id``). StoreUnavailableError when the store
     cannot be read."""
     job_id = body.warm_start.job_id if body.warm_start is not None else None
@@ -421,36 +404,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @app.get("/v1/models", response_model=ModelCatalog)
     def models() -> ModelCatalog:
         """Built-in objects, fingers (with their URDFs), hands and planners."""
-        objects = [ObjectInfo(shape=name, parameters=list(s.param_names),
-                              description=(s.__doc__ or name).strip().splitlines()[0])
-                   for name, s in SURFACES.items() if s.singular_u is not None]
-        fingers = []
-        for name in BUILTIN_FINGERS:
-            f = FINGERS.finger(FingerModelSpec(builtin=name))
-            fingers.append(FingerInfo(
-                name=name, tip_frame=f.tip_frame, n_joints=f.nq,
-                joint_names=list(f.joint_names), pad_half_size=f.pad_half_size,
-                base_position=[float(x) for x in f.base_position],
-                base_rotation=rotation_vector(f.base_rotation), urdf=f.urdf_text))
-        hands = []
-        for name in BUILTIN_HANDS:
-            with FINGERS.lock:
-                hand = FINGERS.hand(HandModel(builtin=name))
-            nominal = hand_fingertips(hand)
-            hands.append(HandInfo(
-                name=name, n_fingers=hand.n_fingers,
-                fingers=[HandFingerInfo(
-                    name=hand_finger_name(hand, k), tip_frame=f.tip_frame, n_joints=f.nq,
-                    joint_names=list(f.joint_names), pad_half_size=f.pad_half_size,
-                    base_position=[float(x) for x in hand.mounts[k][1]],
-                    base_rotation=rotation_vector(hand.mounts[k][0]),
-                    nominal_q=None if hand.nominal_q is None else list(hand.nominal_q[k]),
-                    nominal_chart_rotation=list(nominal[k].chart_rotation))
-                    for k, f in enumerate(hand.fingers)],
-                nominal_object_position=list(hand.nominal_object_position),
-                nominal_radius=hand.nominal_radius, urdf=hand.urdf_text))
-        return ModelCatalog(planners=list(PLANNERS), objects=objects, fingers=fingers,
-                            hands=hands)
+        return model_catalog(FINGERS)
 
     @app.get("/healthz")
     def healthz() -> dict[str, str]:

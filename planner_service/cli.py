@@ -15,35 +15,28 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import sys
 from pathlib import Path
 
 from pydantic import ValidationError
 
-from dexroll_client.models import (
-    AnyPlanResult,
-    FingerPlanResult,
-    ManipulationResult,
-    PlanStatus,
-)
-from ocp.problem import ProblemError
-from ocp.solution import Solution
+from dexroll_client.models import AnyPlanResult, PlanStatus
 
 from .bench import command as bench_command
-from .convert import (
+from .planners import (
     REQUEST,
     RESULT,
+    Planners,
+    ProblemError,
+    adapter_for,
     error_result,
     invalid_result,
     planner_of,
     request_errors,
-    solve,
     validation_errors,
 )
 
-__all__ = ["finger_summary", "main", "manipulation_summary", "plan_request",
-           "with_warm_start"]
+__all__ = ["main", "plan_request", "with_warm_start"]
 
 EXIT_SOLVED, EXIT_NOT_SOLVED, EXIT_INVALID = 0, 1, 2
 log = logging.getLogger("dexroll")
@@ -61,8 +54,9 @@ def plan_request(raw: object) -> tuple[AnyPlanResult, str]:
     if errors:
         result = invalid_result(errors, planner)
         return result, _invalid_summary(result)
+    adapter = adapter_for(request)
     try:
-        result, solution = solve(request)
+        result, solution = adapter.solve(request, Planners())
     except ProblemError as exc:
         result = invalid_result(exc.errors, planner)
         return result, _invalid_summary(result)
@@ -70,84 +64,7 @@ def plan_request(raw: object) -> tuple[AnyPlanResult, str]:
         log.exception("planner failed")
         result = error_result(f"planner failed: {exc!r}", planner)
         return result, f"status       error\nmessage      {result.message}"
-    if isinstance(solution, Solution):
-        return result, solution.summary()
-    if isinstance(result, ManipulationResult):
-        return result, manipulation_summary(result)
-    assert isinstance(result, FingerPlanResult)
-    return result, finger_summary(result)
-
-
-def finger_summary(result: FingerPlanResult) -> str:
-    """One screen on a one-finger plan."""
-    lines = [f"status       {result.status.value}"
-             + (f"  (IPOPT: {result.stats.raw_status})" if result.stats else ""),
-             f"message      {result.message}"]
-    if result.stats is not None:
-        s = result.stats
-        lines += [f"iterations   {s.iterations}",
-                  f"time         build {s.build_time * 1e3:.1f} ms, solve "
-                  f"{s.solve_time * 1e3:.1f} ms"]
-    if result.goal_error:
-        worst_goal = max(result.goal_error.values())
-        lines.append(f"goal error   {worst_goal:.3g} (worst of {len(result.goal_error)} "
-                     "targets)")
-    c = result.certificate
-    if c is not None:
-        lines.append("certificate  " + ("PASSED" if c.passed else "FAILED"))
-        lines += [f"  {f}" for f in c.failures[:6]]
-    t = result.trajectory
-    if t is not None and t.grasp_angles:
-        worst = [max(row) for row in t.grasp_angles]
-        lines.append(f"grasp angle  {math.degrees(worst[0]):.2f} deg at start, "
-                     f"{math.degrees(worst[-1]):.2f} at end, {math.degrees(max(worst)):.2f} "
-                     "max (larger of palm/finger)")
-        lines.append(f"cone margin  {math.degrees(min(t.cone_margin)):.2f} deg minimum "
-                     "(> 0: inside the friction cone)")
-    return "\n".join(lines)
-
-
-def manipulation_summary(result: ManipulationResult) -> str:
-    """One screen on a manipulation plan."""
-    lines = [f"status       {result.status.value}"
-             + (f"  (IPOPT: {result.stats.raw_status})" if result.stats else ""),
-             f"message      {result.message}"]
-    if result.stats is not None:
-        s = result.stats
-        lines += [f"iterations   {s.iterations}, N = {s.n_intervals}, {s.refinements} "
-                  "refinement(s)",
-                  f"time         build {s.build_time * 1e3:.1f} ms, solve "
-                  f"{s.solve_time * 1e3:.1f} ms"]
-    t = result.trajectory
-    if t is not None:
-        lines.append("contacts     " + ", ".join(c.name for c in t.contacts))
-    if result.goal_error:
-        worst_goal = max(result.goal_error.values())
-        lines.append(f"goal error   {worst_goal:.3g} (worst of {len(result.goal_error)} "
-                     "palm targets)")
-    c = result.certificate
-    if t is not None and t.tracking_position_error and t.tracking_angle_error:
-        tol = c.tolerances if c is not None else {}
-        bounds = ""
-        if "max_tracking_position_error" in tol and "max_tracking_angle_error" in tol:
-            bounds = (f" (tolerances {tol['max_tracking_position_error'] * 1e3:.3g} mm, "
-                      f"{math.degrees(tol['max_tracking_angle_error']):.3g} deg)")
-        lines.append(f"tracking     {max(t.tracking_position_error) * 1e3:.3g} mm, "
-                     f"{math.degrees(max(t.tracking_angle_error)):.3g} deg worst{bounds}")
-    if c is not None:
-        lines.append("certificate  " + ("PASSED" if c.passed else "FAILED"))
-        slips = [v for k, v in c.values.items() if k.startswith("max_slip_speed_")]
-        if slips:
-            lines.append(f"  slip       {max(slips):.3g} m/s worst over "
-                         f"{len(slips)} contact(s)")
-        lines += [f"  {f}" for f in c.failures[:6]]
-    if t is not None and t.grasp_angle:
-        lines.append(f"grasp angle  {math.degrees(t.grasp_angle[0]):.2f} deg at start, "
-                     f"{math.degrees(t.grasp_angle[-1]):.2f} at end, "
-                     f"{math.degrees(max(t.grasp_angle)):.2f} max (largest force angle)")
-        lines.append(f"cone margin  {math.degrees(min(t.cone_margin)):.2f} deg minimum "
-                     "(> 0: force closure inside the friction cones)")
-    return "\n".join(lines)
+    return result, adapter.summary(result, solution)
 
 
 def _invalid_summary(result: AnyPlanResult) -> str:

@@ -12,19 +12,22 @@ from __future__ import annotations
 
 import json
 import logging
-import time
 from collections.abc import Iterable
 from pathlib import Path
 
 from pydantic import ValidationError
 
-from dexroll_client.models import BallOnPalmRequest, ManipulationRequest, OneFingerRequest
-from ocp.ball_on_palm import BallOnPalmPlanner
-from ocp.manipulation import ManipulationProblem
-from ocp.one_finger import OneFingerPlanner, OneFingerProblem
-from ocp.problem import BallOnPalmProblem, ProblemError
+from dexroll_client.models import PlanRequest
 
-from .convert import REQUEST, FingerCache, request_errors, to_problem
+from .planners import (
+    REQUEST,
+    BallOnPalmPlanner,
+    FingerCache,
+    Planners,
+    ProblemError,
+    adapter_for,
+    request_errors,
+)
 
 __all__ = ["request_files", "warm", "warm_up"]
 
@@ -48,24 +51,11 @@ def request_files(spec: str) -> list[Path]:
     return out
 
 
-def warm(request: object, palm: BallOnPalmPlanner, fingers: FingerCache) -> float:
+def warm(request: PlanRequest, palm: BallOnPalmPlanner, fingers: FingerCache) -> float:
     """Build the NLP of one request's structure in this process's planners (no solve).
-    Returns the build time [s] (0 when it was cached already)."""
-    if isinstance(request, OneFingerRequest) and request.method == "greedy":
-        return 0.0  # the greedy method builds no NLP
-    if not isinstance(request, BallOnPalmRequest | OneFingerRequest | ManipulationRequest):
-        return 0.0
-    with fingers.lock:
-        problem = to_problem(request, fingers)
-        general = fingers.manipulation
-    if isinstance(problem, BallOnPalmProblem):
-        t0 = time.perf_counter()
-        _, hit = palm.nlp_for(problem)
-        return 0.0 if hit else time.perf_counter() - t0
-    if isinstance(problem, OneFingerProblem):
-        return general.prepare(OneFingerPlanner.manipulation_problem(problem))
-    assert isinstance(problem, ManipulationProblem)
-    return general.prepare(problem)
+    Returns the build time [s] (0 when it was cached already, or the planner builds
+    none)."""
+    return adapter_for(request).prepare(request, Planners(palm, fingers))
 
 
 def warm_up(files: Iterable[Path], palm: BallOnPalmPlanner, fingers: FingerCache

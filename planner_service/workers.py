@@ -60,10 +60,15 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
     Before it reports ready it builds the NLPs of the warm-up requests (``warmup``: files
     or folders, see :mod:`planner_service.warmup`)."""
     # Imports happen in the child: the parent's modules are not inherited under spawn.
-    from ocp.ball_on_palm import BallOnPalmPlanner
-    from ocp.problem import ProblemError
-
-    from .convert import REQUEST, FingerCache, error_result, invalid_result, solve
+    from .planners import (
+        REQUEST,
+        BallOnPalmPlanner,
+        FingerCache,
+        ProblemError,
+        error_result,
+        invalid_result,
+        solve,
+    )
 
     if not logging.getLogger().handlers:  # spawned: the service's logging is not inherited
         logging.basicConfig(level=logging.INFO,

@@ -44,7 +44,7 @@ from planner_service.bench.suite import (
     load_suite,
     units,
 )
-from planner_service.convert import REQUEST, request_errors, to_problem
+from planner_service.planners import REQUEST, request_errors, to_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 OURS = ("collocation", "greedy")  # the project's methods (the peers are compared, not judged)

@@ -338,7 +338,7 @@ def test_a_diverged_plan_is_a_typed_result_without_nan() -> None:
     no trajectory (JSON has no NaN), never an error of the service."""
     from ocp.manipulation import ContactTrajectory, FingerTrajectory, ManipulationSolution
     from ocp.solution import Status
-    from planner_service.convert import result_from_manipulation_solution
+    from planner_service.planners.manipulation import result_from_manipulation_solution
 
     k = 3
     bad = np.full((k, 3), np.nan)

@@ -23,7 +23,7 @@ from ocp.ball_on_palm import BallOnPalmPlanner, wrap_difference
 from ocp.problem import BallOnPalmProblem
 from ocp.solution import Solution, Status
 from planner_service.bench import peers
-from planner_service.convert import to_problem
+from planner_service.planners import to_problem
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 TRIANGLE = "triangle.json"  # the paper's triangle: two via-points, N = 60

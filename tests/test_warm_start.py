@@ -41,9 +41,9 @@ from ocp.collocation import NlpPoint, WarmStart
 from ocp.manipulation import ManipulationProblem
 from planner_service.app import resolve_warm_start, submission_errors
 from planner_service.cli import main as cli_main
-from planner_service.convert import (
+from planner_service.planners import (
     FingerCache,
-    collocation_names,
+    adapter_for,
     request_errors,
     solve,
     to_problem,
@@ -132,7 +132,7 @@ def test_a_result_without_a_plan_gives_no_warm_start() -> None:
         WarmStartModel.from_result(empty)
 
 
-# -- the library conversion (convert.py), in process -------------------------------------------
+# -- the planners' adapters (planner_service.planners), in process --------------------------------
 
 def test_a_ball_on_palm_collocation_block_is_the_plan_at_its_grid_and_warm_starts_it() -> None:
     result, _ = solve(REQUEST.validate_python(TRIANGLE))
@@ -243,7 +243,7 @@ def test_manipulation_columns_follow_the_planners_layout() -> None:
     cache = FingerCache()
     problem = to_problem(REQUEST.validate_python(EXP2), cache)
     assert isinstance(problem, ManipulationProblem)
-    states, inputs = collocation_names(problem)
+    states, inputs = adapter_for(REQUEST.validate_python(EXP2)).collocation_names(problem)
     model = cache.manipulation.model(problem)
     assert (len(states), len(inputs)) == (model.nx, model.nu)
     assert states[:7] == ["object.position.x", "object.position.y", "object.position.z",

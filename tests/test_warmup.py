@@ -12,7 +12,7 @@ import httpx
 from conftest import Server
 
 from ocp.ball_on_palm import BallOnPalmPlanner
-from planner_service.convert import FingerCache
+from planner_service.planners import FingerCache
 from planner_service.warmup import request_files, warm_up
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,0 +1,382 @@
+"""The manipulation planner: any grasp, an optional palm and one or more fingertips
+(``ocp.manipulation``), following a desired object motion and/or the palm's goals."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from dexroll_client.models import (
+    ContactTrajectoryModel,
+    FingerJointsModel,
+    ManipulationCertificateModel,
+    ManipulationRequest,
+    ManipulationResult,
+    ManipulationStatsModel,
+    ManipulationTrajectoryModel,
+    MotionSamplesModel,
+    PlanStatus,
+)
+from ocp.ball_on_palm import object_pose
+from ocp.finger import FingerModel
+from ocp.hands import Hand
+from ocp.manipulation import (
+    DesiredMotion,
+    Fingertip,
+    ManipulationProblem,
+    ManipulationSolution,
+    MotionStep,
+    ObjectPose,
+    Palm,
+    Tracking,
+)
+from ocp.problem import ObjectSpec, ProblemError, ViaPoint
+from ocp.solution import quaternion_wxyz
+from ocp.surfaces import SURFACES
+
+from .base import SOLVER_FIELDS, PlannerAdapter
+from .cache import FingerCache, Planners, hand_finger_name
+from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
+from .common import all_finite, object_spec, rows, solver_options
+from .fields import FieldErrors, FieldMap, Rule
+
+__all__ = [
+    "ManipulationAdapter",
+    "manipulation_problem",
+    "manipulation_summary",
+    "result_from_manipulation_solution",
+]
+
+_POSE_FIELDS = FieldMap(Rule("initial_pose.orientation", "initial_pose.orientation_wxyz"))
+#: The core's names of a manipulation problem -> the request's, for a motion given as
+#: steps: the core's motion is the steps' knots (``motion.times``, ``motion[i]``), which
+#: the request does not have; they are its ``motion.steps``.
+MANIPULATION_FIELDS = SOLVER_FIELDS + _POSE_FIELDS + FieldMap(
+    Rule("motion[{i}]", "motion.steps", keep_rest=False),
+    Rule("motion.{*}", "motion.steps", keep_rest=False))
+#: ... for a motion given as samples: the core's knot ``motion[i]`` is the request's i-th
+#: orientation and position.
+MANIPULATION_SAMPLES_FIELDS = SOLVER_FIELDS + _POSE_FIELDS + FieldMap(
+    Rule("motion[{i}].orientation", "motion.orientations_wxyz[{i}]"),
+    Rule("motion[{i}].position", "motion.positions[{i}]"))
+
+
+def _motion(request: ManipulationRequest, start: ObjectPose | None
+            ) -> tuple[DesiredMotion | None, list[tuple[str, str]]]:
+    """The desired motion of a request from the object's pose ``start`` at t = 0, or the
+    reasons it has none (wire names)."""
+    m = request.motion
+    if m is None:
+        return None, []
+    if isinstance(m, MotionSamplesModel):  # the core checks the knots
+        return DesiredMotion(tuple(m.times),
+                             tuple(tuple(q) for q in m.orientations_wxyz),  # type: ignore[misc]
+                             tuple(tuple(p) for p in m.positions),  # type: ignore[misc]
+                             m.smooth), []
+    errors = [(f"motion.steps[{i}].axis", "must not be zero: a rotation needs an axis")
+              for i, s in enumerate(m.steps) if math.hypot(*s.axis) < 1e-12]
+    total = math.fsum(s.duration for s in m.steps)
+    if abs(total - request.duration) > 1e-9 * max(1.0, request.duration):
+        errors.append(("motion.steps", f"the steps' durations add up to {total:.6g} s, not "
+                                       f"the duration {request.duration} s"))
+    if errors:
+        return None, errors
+    if start is None:  # the request is invalid (its errors name why): any start will do
+        start = ObjectPose()
+    steps = [MotionStep(s.duration, (s.axis[0], s.axis[1], s.axis[2]), s.angle,
+                        (s.translation[0], s.translation[1], s.translation[2]))
+             for s in m.steps]
+    return DesiredMotion.from_steps(start, steps, m.smooth), []
+
+
+def _palm_pose(obj: ObjectSpec, palm: Palm) -> ObjectPose | None:
+    """The object's pose on the palm at t = 0 (None when the object's data cannot give
+    one: the core's checks name the field)."""
+    if obj.shape not in SURFACES or obj.surface.validate_params(obj.dimensions):
+        return None
+    try:
+        R, p = object_pose(obj, palm.initial)
+    except Exception:  # invalid data the core's checks report by name
+        return None
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(p))):
+        return None
+    w, x, y, z = (float(c) for c in quaternion_wxyz(R))
+    return ObjectPose((w, x, y, z), (float(p[0]), float(p[1]), float(p[2])))
+
+
+def manipulation_problem(request: ManipulationRequest, cache: FingerCache
+                         ) -> ManipulationProblem:
+    """The core's problem of a manipulation request; ProblemError naming the wire fields
+    the core cannot even be given (a finger that does not load, a hand finger that does
+    not exist, duplicate names, a motion step without an axis)."""
+    errors: list[tuple[str, str]] = []
+    hand: Hand | None = None
+    if request.hand is not None:
+        try:
+            hand = cache.hand(request.hand)
+        except ProblemError as exc:
+            errors += exc.errors
+    tips: list[Fingertip] = []
+    names: dict[str, int] = {}
+    for i, f in enumerate(request.fingers):
+        where = f"fingers[{i}]"
+        model: FingerModel | None = None
+        default_name = f"finger{i}"
+        default_seed: tuple[float, ...] | None = None
+        if f.finger is not None:
+            try:
+                model = cache.finger(f.finger, f"{where}.finger")
+            except ProblemError as exc:
+                errors += exc.errors
+        elif f.hand_finger is not None:
+            if request.hand is None:
+                errors.append((f"{where}.hand_finger", "no `hand` in the request to pick a "
+                                                       "finger from"))
+            elif hand is not None:
+                n = len(hand.fingers)
+                if f.hand_finger >= n:
+                    errors.append((f"{where}.hand_finger",
+                                   f"the {request.hand.builtin} hand has {n} fingers "
+                                   f"(indices 0 to {n - 1}), got {f.hand_finger}"))
+                else:
+                    model = hand.fingers[f.hand_finger]
+                    default_name = hand_finger_name(hand, f.hand_finger)
+                    if hand.nominal_q is not None:
+                        default_seed = hand.nominal_q[f.hand_finger]
+        name = f.name or default_name
+        if name == "palm":
+            errors.append((f"{where}.name", "'palm' names the palm contact; choose another"))
+        elif name in names:
+            errors.append((f"{where}.name", f"{name!r} is also the name of "
+                                            f"fingers[{names[name]}]; names must be unique"))
+        names.setdefault(name, i)
+        if model is not None:
+            rv = f.chart_rotation
+            tips.append(Fingertip(model, f.initial.as_tuple(), (rv[0], rv[1], rv[2]),
+                                  default_seed if f.q_seed is None else tuple(f.q_seed),
+                                  name))
+    obj = object_spec(request.object)
+    start = motion_start = None
+    if request.initial_pose is not None:
+        q, p = request.initial_pose.orientation_wxyz, request.initial_pose.position
+        start = motion_start = ObjectPose((q[0], q[1], q[2], q[3]), (p[0], p[1], p[2]))
+    palm = None
+    if request.palm is not None:
+        pm = request.palm
+        palm = Palm(pm.initial.as_tuple(), pm.goal.as_dict(),
+                    tuple(ViaPoint(vp.time, vp.coords.as_dict()) for vp in pm.via_points),
+                    pm.palm_half_extent, pm.max_contact_speed)
+        if start is not None:
+            errors.append(("initial_pose", "not used with a palm: the palm contact "
+                                           "(palm.initial) fixes the object's pose at t = 0"))
+        motion_start = _palm_pose(obj, palm)
+    motion, motion_errors = _motion(request, motion_start)
+    errors += motion_errors
+    if errors:
+        raise ProblemError(errors)
+    tr = request.tracking
+    return ManipulationProblem(
+        object=obj, fingers=tuple(tips), duration=request.duration, palm=palm,
+        initial_pose=start,
+        motion=motion,
+        tracking=Tracking(tr.position_weight, tr.orientation_weight, tr.position_tolerance,
+                          tr.orientation_tolerance),
+        mu=request.mu, object_effort_weight=request.object_effort_weight,
+        finger_effort_weight=request.finger_effort_weight,
+        joint_effort_weight=request.joint_effort_weight, grasp_weight=request.grasp_weight,
+        pad_margin=request.pad_margin, n_intervals=request.n_intervals,
+        pole_margin=request.pole_margin, max_object_speed=request.max_object_speed,
+        max_object_rate=request.max_object_rate, max_refinements=request.max_refinements,
+        options=solver_options(request.solver))
+
+
+class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProblem,
+                                           ManipulationSolution, ManipulationResult]):
+    planner = "manipulation"
+    result_type = ManipulationResult
+
+    def fields(self, request: ManipulationRequest) -> FieldMap:
+        if request.motion is not None and request.motion.kind == "samples":
+            return MANIPULATION_SAMPLES_FIELDS
+        return MANIPULATION_FIELDS
+
+    def to_problem(self, request: ManipulationRequest, fingers: FingerCache
+                   ) -> ManipulationProblem:
+        """ProblemError naming the wire fields the core cannot be given (e.g.
+        ``fingers[1].hand_finger``, ``motion.steps[2].axis``)."""
+        return manipulation_problem(request, fingers)
+
+    def problem_errors(self, request: ManipulationRequest, problem: ManipulationProblem,
+                       fingers: FingerCache) -> FieldErrors:
+        errors = list(problem.errors())
+        if not errors:
+            try:
+                fingers.manipulation.initial_state(problem)
+            except ProblemError as exc:
+                errors += exc.errors
+        return errors
+
+    def collocation_names(self, problem: ManipulationProblem) -> ColumnNames:
+        return grasp_names(problem.palm is not None,
+                           [(tip.name or f"finger{i}", tuple(tip.finger.joint_names))
+                            for i, tip in enumerate(problem.fingers)])
+
+    def solve(self, request: ManipulationRequest, planners: Planners
+              ) -> tuple[ManipulationResult, ManipulationSolution]:
+        warm = warm_start_of(request)
+        fingers, fields = planners.fingers, self.fields(request)
+        with fingers.lock:  # the hand and fingers, by the cache's rules
+            problem = manipulation_problem(request, fingers)
+            planner = fingers.manipulation
+        errors = fields.errors(problem.errors())
+        if errors:
+            raise ProblemError(errors)
+        try:
+            sol = planner.solve(problem, warm)
+        except ProblemError as exc:
+            raise ProblemError(fields.errors(exc.errors)) from exc
+        return self.to_result(request, problem, sol), sol
+
+    def to_result(self, request: ManipulationRequest, problem: ManipulationProblem,
+                  solution: ManipulationSolution) -> ManipulationResult:
+        return result_from_manipulation_solution(solution)
+
+    def prepare(self, request: ManipulationRequest, planners: Planners) -> float:
+        fingers = planners.fingers
+        with fingers.lock:
+            problem = manipulation_problem(request, fingers)
+            general = fingers.manipulation
+        return general.prepare(problem)
+
+    def summary(self, result: ManipulationResult, solution: ManipulationSolution) -> str:
+        return manipulation_summary(result)
+
+
+def certificate_parts(certificate: Mapping[str, float]
+                       ) -> tuple[dict[str, float], dict[str, float]]:
+    """(values, tolerances) of a core certificate dict (its ``tol_<key>`` entries are the
+    tolerances), finite entries only."""
+    values = {k: float(v) for k, v in certificate.items()
+              if not k.startswith("tol_") and math.isfinite(v)}
+    tolerances = {k.removeprefix("tol_"): float(v) for k, v in certificate.items()
+                  if k.startswith("tol_") and math.isfinite(v)}
+    return values, tolerances
+
+
+def _manipulation_trajectory(sol: ManipulationSolution) -> ManipulationTrajectoryModel | None:
+    arrays: dict[str, Any] = {
+        "t": sol.t, "object_position": sol.object_position,
+        "object_rotation": sol.object_rotation, "object_velocity": sol.object_velocity,
+        "object_angular_velocity": sol.object_angular_velocity,
+        "grasp_angle": sol.grasp_angle, "cone_margin": sol.cone_margin}
+    optional = {"desired_position": sol.desired_position,
+                "desired_rotation": sol.desired_rotation,
+                "tracking_position_error": sol.tracking_position_error,
+                "tracking_angle_error": sol.tracking_angle_error}
+    arrays.update({k: v for k, v in optional.items() if v is not None})
+    for c in sol.contacts:
+        arrays.update({f"{c.name}.{k}": getattr(c, k) for k in
+                       ("eta", "eta_dot", "w", "point", "normal", "force_angle")})
+    for f in sol.fingers:
+        arrays.update({f"{f.name}.{k}": getattr(f, k) for k in
+                       ("q", "q_dot", "tip_position", "tip_rotation")})
+    if not all_finite(arrays):
+        return None  # JSON has no NaN; a diverged last iterate is reported by its status
+    return ManipulationTrajectoryModel(
+        t=rows(sol.t), object_position=rows(sol.object_position),
+        object_orientation_wxyz=rows(quaternion_wxyz(sol.object_rotation)),
+        object_velocity=rows(sol.object_velocity),
+        object_angular_velocity=rows(sol.object_angular_velocity),
+        contacts=[ContactTrajectoryModel(
+            name=c.name, body="palm" if c.body == "palm" else "finger", eta=rows(c.eta),
+            eta_dot=rows(c.eta_dot), w=rows(c.w), point=rows(c.point),
+            normal=rows(c.normal), force_angle=rows(c.force_angle))
+            for c in sol.contacts],
+        fingers=[FingerJointsModel(
+            name=f.name, joint_names=list(f.joint_names), q=rows(f.q), q_dot=rows(f.q_dot),
+            tip_position=rows(f.tip_position),
+            tip_orientation_wxyz=rows(quaternion_wxyz(f.tip_rotation)))
+            for f in sol.fingers],
+        grasp_angle=rows(sol.grasp_angle), cone_margin=rows(sol.cone_margin),
+        desired_position=None if sol.desired_position is None else
+        rows(sol.desired_position),
+        desired_orientation_wxyz=None if sol.desired_rotation is None else
+        rows(quaternion_wxyz(sol.desired_rotation)),
+        tracking_position_error=None if sol.tracking_position_error is None else
+        rows(sol.tracking_position_error),
+        tracking_angle_error=None if sol.tracking_angle_error is None else
+        rows(sol.tracking_angle_error))
+
+
+def result_from_manipulation_solution(sol: ManipulationSolution) -> ManipulationResult:
+    """The wire result of a manipulation plan. A plan with non-finite values (a diverged
+    last iterate) keeps its status and drops its trajectory (JSON has no NaN)."""
+    values, tolerances = certificate_parts(sol.certificate)
+    failures = list(sol.certificate_failures)
+    cert = ManipulationCertificateModel(passed=bool(values) and not failures, values=values,
+                                        tolerances=tolerances, failures=failures)
+    trajectory = _manipulation_trajectory(sol)
+    message = sol.message if trajectory is not None else \
+        sol.message + " (non-finite iterate omitted)"
+    status = PlanStatus(sol.status.value)
+    if trajectory is None and status is PlanStatus.SOLVED:  # pragma: no cover - defensive
+        status = PlanStatus.NUMERICAL_ERROR
+    timing = [sol.build_time, sol.solve_time]
+    collocation = None if trajectory is None else collocation_block(
+        sol.warm_start, grasp_names(any(c.body == "palm" for c in sol.contacts),
+                                     [(f.name, tuple(f.joint_names)) for f in sol.fingers]))
+    return ManipulationResult(
+        status=status, message=message,
+        stats=ManipulationStatsModel(
+            raw_status=sol.raw_status, iterations=sol.iterations,
+            build_time=timing[0] if math.isfinite(timing[0]) else 0.0,
+            solve_time=timing[1] if math.isfinite(timing[1]) else 0.0,
+            refinements=sol.refinements, n_intervals=max((len(sol.t) - 1) // 2, 0)),
+        goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
+        certificate=cert, trajectory=trajectory, collocation=collocation)
+
+
+def manipulation_summary(result: ManipulationResult) -> str:
+    """One screen on a manipulation plan."""
+    lines = [f"status       {result.status.value}"
+             + (f"  (IPOPT: {result.stats.raw_status})" if result.stats else ""),
+             f"message      {result.message}"]
+    if result.stats is not None:
+        s = result.stats
+        lines += [f"iterations   {s.iterations}, N = {s.n_intervals}, {s.refinements} "
+                  "refinement(s)",
+                  f"time         build {s.build_time * 1e3:.1f} ms, solve "
+                  f"{s.solve_time * 1e3:.1f} ms"]
+    t = result.trajectory
+    if t is not None:
+        lines.append("contacts     " + ", ".join(c.name for c in t.contacts))
+    if result.goal_error:
+        worst_goal = max(result.goal_error.values())
+        lines.append(f"goal error   {worst_goal:.3g} (worst of {len(result.goal_error)} "
+                     "palm targets)")
+    c = result.certificate
+    if t is not None and t.tracking_position_error and t.tracking_angle_error:
+        tol = c.tolerances if c is not None else {}
+        bounds = ""
+        if "max_tracking_position_error" in tol and "max_tracking_angle_error" in tol:
+            bounds = (f" (tolerances {tol['max_tracking_position_error'] * 1e3:.3g} mm, "
+                      f"{math.degrees(tol['max_tracking_angle_error']):.3g} deg)")
+        lines.append(f"tracking     {max(t.tracking_position_error) * 1e3:.3g} mm, "
+                     f"{math.degrees(max(t.tracking_angle_error)):.3g} deg worst{bounds}")
+    if c is not None:
+        lines.append("certificate  " + ("PASSED" if c.passed else "FAILED"))
+        slips = [v for k, v in c.values.items() if k.startswith("max_slip_speed_")]
+        if slips:
+            lines.append(f"  slip       {max(slips):.3g} m/s worst over "
+                         f"{len(slips)} contact(s)")
+        lines += [f"  {f}" for f in c.failures[:6]]
+    if t is not None and t.grasp_angle:
+        lines.append(f"grasp angle  {math.degrees(t.grasp_angle[0]):.2f} deg at start, "
+                     f"{math.degrees(t.grasp_angle[-1]):.2f} at end, "
+                     f"{math.degrees(max(t.grasp_angle)):.2f} max (largest force angle)")
+        lines.append(f"cone margin  {math.degrees(min(t.cone_margin)):.2f} deg minimum "
+                     "(> 0: force closure inside the friction cones)")
+    return "\n".join(lines)
