@@ -147,7 +147,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from .app import create_app
+    from .api.app import create_app
     from .settings import Settings
 
     overrides = {k: v for k, v in (("host", args.host), ("port", args.port),
@@ -164,7 +164,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
 
 def _cmd_openapi(args: argparse.Namespace) -> int:
-    from .app import create_app
+    from .api.app import create_app
     from .settings import Settings
 
     print(json.dumps(create_app(Settings()).openapi(), indent=1, sort_keys=True))

@@ -14,9 +14,9 @@ import httpx
 import pytest
 from conftest import Server
 
-from planner_service.app import create_app
+from planner_service.api.app import create_app
+from planner_service.jobs.store import Store
 from planner_service.settings import Settings
-from planner_service.store import Store
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIANGLE: dict[str, Any] = json.loads((ROOT / "examples" / "triangle.json").read_text())

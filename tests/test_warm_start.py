@@ -39,8 +39,9 @@ from dexroll_client import (
 )
 from ocp.collocation import NlpPoint, WarmStart
 from ocp.manipulation import ManipulationProblem
-from planner_service.app import resolve_warm_start, submission_errors
+from planner_service.api.submission import resolve_warm_start, submission_errors
 from planner_service.cli import main as cli_main
+from planner_service.jobs.store import Store
 from planner_service.planners import (
     FingerCache,
     adapter_for,
@@ -49,7 +50,6 @@ from planner_service.planners import (
     to_problem,
 )
 from planner_service.settings import Settings
-from planner_service.store import Store
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIANGLE_FILE = ROOT / "examples" / "triangle.json"

@@ -60,7 +60,7 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
     Before it reports ready it builds the NLPs of the warm-up requests (``warmup``: files
     or folders, see :mod:`planner_service.warmup`)."""
     # Imports happen in the child: the parent's modules are not inherited under spawn.
-    from .planners import (
+    from ..planners import (
         REQUEST,
         BallOnPalmPlanner,
         FingerCache,
@@ -82,7 +82,7 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
     palm = BallOnPalmPlanner()
     fingers = FingerCache(compile_dir=compiled, background=True)
     if warmup:
-        from .warmup import request_files, warm_up
+        from ..warmup import request_files, warm_up
 
         t0 = time.perf_counter()
         built = warm_up(request_files(warmup), palm, fingers)
@@ -158,10 +158,6 @@ class Dispatcher(threading.Thread):
     @property
     def ready_workers(self) -> int:
         return sum(1 for s in self._slots if s.ready and s.process.is_alive())
-
-    def worker_pids(self) -> dict[str, int]:
-        """Pid of the worker running each job (for operators, and for tests)."""
-        return {s.job.id: s.process.pid for s in list(self._slots) if s.job is not None}
 
     # -- the dispatcher thread -----------------------------------------------------------------
     def _spawn(self) -> _Slot:

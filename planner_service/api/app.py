@@ -1,0 +1,101 @@
+"""The HTTP API (FastAPI), versioned under /v1. OpenAPI docs at /docs.
+
+POST /v1/plans           submit a planning request; 201 + the finished job when it ends
+                         within ?wait= seconds, else 202 + Location to poll
+GET  /v1/plans/{id}      a job (with its plan once finished)
+GET  /v1/plans           jobs, newest first, paginated (?limit=&offset=)
+DELETE /v1/plans/{id}    cancel a queued or running job
+GET  /v1/models          built-in objects, fingers (with URDFs), hands and planners
+GET  /healthz, /readyz   liveness; readiness (store reachable, a worker ready)
+
+Every error is an ``ErrorBody`` (no traceback ever leaves the service); an invalid request
+is a 422 naming each bad field; a failed solve is a finished job with its typed status.
+
+A request's ``warm_start.job_id`` is resolved at submission: the job's plan (its result's
+``collocation`` block) replaces it before the new job is stored, so that every stored job
+is self-contained (a worker never looks another job up).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator, Awaitable, Callable, MutableMapping
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import FastAPI
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from ..jobs.store import Store
+from ..jobs.workers import Dispatcher
+from ..settings import Settings
+from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
+from .routes import health, models, plans
+
+__all__ = ["BodyLimit", "create_app"]
+
+log = logging.getLogger("dexroll.service")
+
+
+class BodyLimit:
+    """ASGI middleware: request bodies over ``limit`` bytes get 413 before being parsed."""
+
+    def __init__(self, app: Callable[..., Awaitable[None]], limit: int) -> None:
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope: MutableMapping[str, Any], receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        headers = dict(scope.get("headers") or [])
+        length = headers.get(b"content-length")
+        too_large = error_response(413, "payload_too_large",
+                                   f"request bodies are limited to {self.limit} bytes")
+        if length is not None and length.isdigit() and int(length) > self.limit:
+            await too_large(scope, receive, send)
+            return
+        received = 0
+
+        async def limited_receive() -> Any:
+            nonlocal received
+            message = await receive()
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > self.limit:  # FastAPI re-raises HTTPException from body reads
+                    raise StarletteHTTPException(
+                        413, f"request bodies are limited to {self.limit} bytes")
+            return message
+
+        await self.app(scope, limited_receive, send)
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The service: job store, worker pool and API, configured by ``settings``."""
+    settings = settings or Settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        store = Store(settings.db_path)
+        requeued, failed = store.recover()
+        if requeued or failed:
+            log.info("recovered the job store: %d re-queued, %d failed", requeued, failed)
+        notifier: Notifier = app.state.notifier
+        dispatcher = Dispatcher(
+            store, settings.workers, settings.kill_grace, notifier.notify, settings.warmup,
+            None if settings.compile_dir is None else str(settings.compile_dir.resolve()))
+        dispatcher.start()
+        app.state.store, app.state.dispatcher = store, dispatcher
+        try:
+            yield
+        finally:
+            dispatcher.stop()
+            store.close()
+
+    app = FastAPI(title="dexroll", version="0.1.0", lifespan=lifespan,
+                  description=__doc__, responses=ERROR_RESPONSES)
+    app.state.settings, app.state.notifier = settings, Notifier()
+    add_error_handlers(app)
+    for routes in (plans, models, health):
+        app.include_router(routes.router)
+    app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    return app

@@ -1,0 +1,164 @@
+"""What the routes depend on: the service's settings, job store, dispatcher and job-end
+notifier (``Annotated`` dependencies, kept on ``app.state`` by :func:`.app.create_app`),
+and the errors they answer with (every one an ``ErrorBody``; no traceback ever leaves
+the service)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+from typing import Annotated, Any
+
+from fastapi import Depends, FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from dexroll_client.models import ErrorBody, FieldError
+
+from ..jobs.store import Store
+from ..jobs.workers import Dispatcher
+from ..planners.fields import wire_field
+from ..settings import Settings
+
+__all__ = [
+    "ERROR_RESPONSES",
+    "DispatcherDep",
+    "Notifier",
+    "NotifierDep",
+    "ServiceError",
+    "SettingsDep",
+    "StoreDep",
+    "add_error_handlers",
+    "error_response",
+]
+
+log = logging.getLogger("dexroll.service")
+
+
+# -- dependencies ----------------------------------------------------------------------------
+
+class Notifier:
+    """Lets request handlers await the end of a job that the dispatcher thread reports."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._waiters: dict[str, list[tuple[asyncio.AbstractEventLoop, asyncio.Event]]] = {}
+
+    def register(self, job_id: str) -> asyncio.Event:
+        event = asyncio.Event()
+        with self._lock:
+            self._waiters.setdefault(job_id, []).append((asyncio.get_running_loop(), event))
+        return event
+
+    def unregister(self, job_id: str, event: asyncio.Event) -> None:
+        with self._lock:
+            waiters = [w for w in self._waiters.get(job_id, []) if w[1] is not event]
+            if waiters:
+                self._waiters[job_id] = waiters
+            else:
+                self._waiters.pop(job_id, None)
+
+    def notify(self, job_id: str) -> None:
+        with self._lock:
+            waiters = list(self._waiters.get(job_id, []))
+        for loop, event in waiters:
+            loop.call_soon_threadsafe(event.set)
+
+
+async def get_settings(request: Request) -> Settings:
+    settings: Settings = request.app.state.settings
+    return settings
+
+
+async def get_store(request: Request) -> Store:
+    """The job store (opened when the service starts)."""
+    store: Store = request.app.state.store
+    return store
+
+
+async def get_dispatcher(request: Request) -> Dispatcher:
+    """The dispatcher of the worker processes (started with the service)."""
+    dispatcher: Dispatcher = request.app.state.dispatcher
+    return dispatcher
+
+
+async def get_notifier(request: Request) -> Notifier:
+    notifier: Notifier = request.app.state.notifier
+    return notifier
+
+
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+StoreDep = Annotated[Store, Depends(get_store)]
+DispatcherDep = Annotated[Dispatcher, Depends(get_dispatcher)]
+NotifierDep = Annotated[Notifier, Depends(get_notifier)]
+
+
+# -- errors ----------------------------------------------------------------------------------
+
+#: The error responses every route may give (in the OpenAPI document).
+ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    code: {"model": ErrorBody, "description": text} for code, text in [
+        (404, "no such job"), (409, "conflict (idempotency key reuse, job already finished)"),
+        (413, "request body too large"), (422, "invalid request: each bad field named"),
+        (503, "queue full, not ready, or the job store unavailable; retry after "
+               "Retry-After seconds")]}
+
+
+class ServiceError(Exception):
+    """An error answered with an ErrorBody."""
+
+    def __init__(self, status: int, error: str, message: str,
+                 detail: list[FieldError] | None = None,
+                 headers: dict[str, str] | None = None) -> None:
+        super().__init__(message)
+        self.status, self.error, self.message = status, error, message
+        self.detail = detail or []
+        self.headers = headers
+
+
+def error_response(status: int, error: str, message: str,
+                   detail: list[FieldError] | None = None,
+                   headers: dict[str, str] | None = None) -> JSONResponse:
+    body = ErrorBody(error=error, message=message, detail=detail or [])
+    return JSONResponse(body.model_dump(mode="json"), status_code=status, headers=headers)
+
+
+def add_error_handlers(app: FastAPI) -> None:
+    """Answer every error with an ErrorBody: the service's own, an invalid request (422,
+    each field named as the wire names it), HTTP errors, and anything unexpected (500)."""
+
+    @app.exception_handler(ServiceError)
+    async def _service_error(request: Request, exc: ServiceError) -> JSONResponse:
+        return error_response(exc.status, exc.error, exc.message, exc.detail, exc.headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
+        detail = []
+        for e in exc.errors():
+            loc = [str(p) for p in e.get("loc", ())]
+            where = loc[0] if loc and loc[0] in ("body", "query", "header", "path") else None
+            if where is not None:
+                loc = loc[1:]
+            field = (wire_field(loc) if where == "body" else ".".join(loc)) or "body"
+            reason = str(e.get("msg", "invalid"))
+            if e.get("type") == "invalid_planner":
+                field = "planner"
+            if e.get("type") == "json_invalid":
+                field, reason = "body", f"not valid JSON: {e.get('ctx', {}).get('error', '')}"
+            detail.append(FieldError(field=field, reason=reason))
+        message = "; ".join(f"{d.field}: {d.reason}" for d in detail)
+        return error_response(422, "invalid_request", message, detail)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        name = {404: "not_found", 405: "method_not_allowed",
+                413: "payload_too_large"}.get(exc.status_code, "http_error")
+        return error_response(exc.status_code, name, str(exc.detail))
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
+        log.exception("unexpected error on %s %s", request.method, request.url.path)
+        return error_response(500, "internal_error",
+                              f"unexpected {type(exc).__name__}; see the service log")

@@ -1,0 +1,35 @@
+"""``/healthz`` (liveness) and ``/readyz`` (readiness)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter
+
+from dexroll_client.models import ErrorBody
+
+from ..deps import DispatcherDep, StoreDep, error_response
+
+__all__ = ["router"]
+
+router = APIRouter()
+
+
+@router.get("/healthz")
+def healthz() -> dict[str, str]:
+    """Liveness: the process answers."""
+    return {"status": "ok"}
+
+
+@router.get("/readyz", responses={503: {"model": ErrorBody}})
+def readyz(store: StoreDep, dispatcher: DispatcherDep) -> Any:
+    """Readiness: the job store answers and at least one worker is ready."""
+    try:
+        queued = store.count("queued")
+    except Exception as exc:  # the store is the service's memory: not ready without it
+        return error_response(503, "not_ready", f"job store unavailable: {exc}")
+    workers = dispatcher.ready_workers
+    if workers < 1:
+        return error_response(503, "not_ready", "no solver worker is ready yet",
+                              headers={"Retry-After": "1"})
+    return {"status": "ready", "workers": workers, "queued": queued}

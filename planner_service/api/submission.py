@@ -1,0 +1,96 @@
+"""What ``POST /v1/plans`` checks before it stores a job: the request's every error, and
+its ``warm_start.job_id`` resolved (the job's plan, its result's ``collocation`` block,
+replaces it, so that every stored job is self-contained: a worker never looks another job
+up)."""
+
+from __future__ import annotations
+
+import logging
+
+from pydantic import ValidationError
+
+from dexroll_client.models import AnyPlanResult, JobState, PlanRequest, WarmStartModel
+
+from ..jobs.store import Store
+from ..planners import RESULT, request_errors
+
+__all__ = ["StoreUnavailableError", "resolve_warm_start", "submission_errors"]
+
+log = logging.getLogger("dexroll.service")
+
+
+class StoreUnavailableError(Exception):
+    """The job store could not be read."""
+
+
+def resolve_warm_start(body: PlanRequest, store: Store
+                       ) -> tuple[PlanRequest, list[tuple[str, str]]]:
+    """The request with its ``warm_start.job_id`` replaced by that job's plan (``t``, ``x``,
+    ``u`` and the column names of its result's ``collocation`` block), or the reasons, all
+    under ``warm_start.job_id``, why the job cannot be used (unknown, not finished, another
+    planner, no plan). A request without a job id is returned as it is.
+    StoreUnavailableError when the store cannot be read."""
+    ws = body.warm_start
+    if ws is None or ws.job_id is None:
+        return body, []
+    job_id = ws.job_id
+
+    def refused(reason: str) -> tuple[PlanRequest, list[tuple[str, str]]]:
+        return body, [("warm_start.job_id", reason)]
+
+    try:
+        row = store.get(job_id)
+    except Exception as exc:  # sqlite errors: the store is unavailable, not the request bad
+        raise StoreUnavailableError(str(exc)) from exc
+    if row is None:
+        return refused(f"no job {job_id!r} in this service")
+    if not JobState(row.state).terminal:
+        return refused(f"job {job_id} is still {row.state}: warm-start from it once it has "
+                       "finished")
+    if row.planner != body.planner:
+        return refused(f"job {job_id} is a {row.planner} plan; this request is for the "
+                       f"{body.planner} planner")
+    result: AnyPlanResult | None = None
+    if row.result:
+        try:
+            result = RESULT.validate_json(row.result)
+        except ValidationError:
+            log.warning("job %s: its stored result does not parse", job_id, exc_info=True)
+    if result is None or result.collocation is None:
+        return refused(f"job {job_id} ended {row.state} ({row.code}) without a plan at its "
+                       "collocation points to start from")
+    try:
+        inline = WarmStartModel.from_result(result)
+    except (ValidationError, ValueError) as exc:
+        reason = exc.errors()[0]["msg"] if isinstance(exc, ValidationError) else str(exc)
+        return refused(f"job {job_id}'s plan cannot be used as a warm start: {reason}")
+    return body.model_copy(update={"warm_start": inline}), []
+
+
+def _from_job(job_id: str, errors: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """Errors of a warm start resolved from a job, renamed to ``warm_start.job_id`` (the
+    field the client gave) with the inline field in the reason."""
+    out = []
+    for field, reason in errors:
+        if field == "warm_start" or field.startswith("warm_start."):
+            sub = field.removeprefix("warm_start").lstrip(".")
+            reason = f"job {job_id}'s plan does not fit this request: " + \
+                (f"{sub}: {reason}" if sub else reason)
+            field = "warm_start.job_id"
+        out.append((field, reason))
+    return out
+
+
+def submission_errors(body: PlanRequest, store: Store
+                      ) -> tuple[PlanRequest, list[tuple[str, str]]]:
+    """What ``POST /v1/plans`` checks before storing a job: the request with its warm
+    start's job id resolved (:func:`resolve_warm_start`), and every error of it as
+    (field, reason) pairs (:func:`~planner_service.planners.request_errors`; those of a plan
+    that came from a job named ``warm_start.job_id``). StoreUnavailableError when the store
+    cannot be read."""
+    job_id = body.warm_start.job_id if body.warm_start is not None else None
+    body, errors = resolve_warm_start(body, store)
+    if errors:  # check the rest of the request too: every bad field at once
+        body = body.model_copy(update={"warm_start": None})
+    more = request_errors(body)
+    return body, errors + (_from_job(job_id, more) if job_id is not None else more)
