@@ -46,9 +46,9 @@ class Rule:
     """``core`` (a path) is called ``wire`` in a request. The rule matches the field
     ``core`` and every field under it (``core.x``, ``core[3]``); in ``core``, ``[{i}]``
     matches any index (which ``{i}`` in ``wire`` repeats) and ``{*}`` any one name.
-    What follows the match is kept
-    after ``wire`` unless ``keep_rest`` is false (every field under ``core`` is then
-    reported as ``wire`` itself: a wire field the core's fields are derived from)."""
+    What follows the match is kept after ``wire`` unless ``keep_rest`` is false (every
+    field under ``core`` is then reported as ``wire`` itself: a wire field the core's
+    fields are derived from)."""
 
     core: str
     wire: str
