@@ -23,6 +23,7 @@ import math
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
 
 __all__ = ["Certificate", "Check", "CheckKind"]
 
@@ -49,6 +50,9 @@ class Check:
     #: Whether the mapping view has a ``tol_<name>`` entry for it, and a ``<name>`` one.
     report_tolerance: bool = True
     report_value: bool = True
+    #: The tolerance's key in :meth:`Certificate.tolerances` and in the failure's text
+    #: (default: the name).
+    tolerance_key: str = ""
 
     @property
     def passed(self) -> bool:
@@ -61,7 +65,7 @@ class Check:
         if self.reason:
             return self.reason
         op = "<" if self.lower_bound else ">"
-        return f"{self.name} {self.value:.3g} {op} {self.tolerance:.3g}"
+        return f"{self.tolerance_key or self.name} {self.value:.3g} {op} {self.tolerance:.3g}"
 
 
 @dataclass(frozen=True)
@@ -110,6 +114,19 @@ class Certificate(Mapping[str, float]):
         """Failed, and only by discretisation checks: a finer grid may pass."""
         kinds = self.failed_kinds()
         return bool(kinds) and kinds <= {CheckKind.DISCRETISATION}
+
+    def tolerances(self) -> dict[str, float]:
+        """Every check's tolerance by its tolerance key."""
+        return {c.tolerance_key or c.name: c.tolerance for c in self.checks
+                if c.kind is not CheckKind.NUMERICS}
+
+    def to_dict(self) -> dict[str, Any]:
+        """``passed``, every value, ``n_samples``, ``tolerances`` and ``failures``."""
+        values = {c.name: c.value for c in self.checks
+                  if c.kind is not CheckKind.NUMERICS and c.report_value}
+        return {"passed": self.passed, **values, **dict(self.reported),
+                "n_samples": self.n_samples, "tolerances": self.tolerances(),
+                "failures": list(self.failures)}
 
     def check(self, name: str) -> Check:
         for c in self.checks:

@@ -3,11 +3,13 @@
 An IPOPT solver built from CasADi expressions evaluates its functions (constraints, their
 Jacobian, the Hessian of the Lagrangian) in CasADi's virtual machine. For a structure that
 is solved many times the same functions can be generated as C, compiled once into a shared
-library and loaded with ``nlpsol(name, "ipopt", library)``: on the ball-on-palm triangle at
-N = 50 IPOPT's time drops by about a third (docs/performance.md). The compile is slow
-(tens of seconds for N = 50 at ``-O1``), so it is an option, and the library is kept in
-``cache_dir`` under a name made from the structure's key, the generated code's hash, the
-CasADi version and the compiler flags: the next process that needs the structure loads it.
+library and loaded with ``nlpsol(name, "ipopt", library)``: for the block NLPs of
+:mod:`ocp.nlp_blocks` (every grasp, the object on the palm alone included) the problem's
+functions and the block derivatives each make a library (IPOPT ~40 % faster on experiment
+1, docs/performance.md). The compile takes seconds, so it is an option, and the libraries
+are kept in ``cache_dir`` under names made from the structure's key, the generated code's
+hash, the CasADi version and the compiler flags: the next process that needs the
+structure loads them.
 """
 
 from __future__ import annotations
@@ -28,11 +30,16 @@ from typing import Any
 
 import casadi as ca
 
-__all__ = ["BackgroundCompiler", "block_sources", "compile_sources", "compiled_block_solver",
-           "compiled_solver", "load_block_solver"]
+__all__ = [
+    "BackgroundCompiler",
+    "block_libraries",
+    "block_sources",
+    "compile_sources",
+    "compiled_block_solver",
+    "load_block_solver",
+]
 
 _CWD_LOCK = threading.Lock()
-DEFAULT_FLAGS = ("-O1",)
 
 
 @contextmanager
@@ -109,18 +116,17 @@ def _cached_library(source: Path, key: str, cache_dir: Path, flags: tuple[str, .
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
-def compiled_solver(solver: ca.Function, key: str, options: dict[str, Any],
-                    cache_dir: Path, flags: tuple[str, ...] = DEFAULT_FLAGS,
-                    compiler: str = "gcc") -> tuple[ca.Function, bool]:
-    """An IPOPT solver with ``solver``'s problem, its functions compiled to a shared library
-    cached in ``cache_dir``; ``options`` are nlpsol's (the same as ``solver``'s). Returns
-    (the solver, whether the library came from the cache). Raises RuntimeError when the
-    compiler is missing or fails (the caller keeps ``solver``)."""
+def block_libraries(oracle: ca.Function, options: dict[str, Any], key: str,
+                    cache_dir: Path, flags: tuple[str, ...] = ("-O2",),
+                    compiler: str = "gcc") -> tuple[list[Path], list[bool]]:
+    """The cached shared libraries of a block NLP (:func:`block_sources`), each compiled
+    unless the cache has it, and whether the cache had each. RuntimeError when the compiler
+    is missing or fails."""
     _check_compiler(compiler, cache_dir)
     with tempfile.TemporaryDirectory(dir=cache_dir) as tmp:
-        source = _generate(solver, "dexroll_nlp", Path(tmp))
-        library, hit = _cached_library(source, key, cache_dir, flags, compiler)
-    return ca.nlpsol(f"{solver.name()}_compiled", "ipopt", str(library), options), hit
+        sources = block_sources(oracle, options, Path(tmp))
+        out = [_cached_library(source, key, cache_dir, flags, compiler) for source in sources]
+    return [lib for lib, _ in out], [hit for _, hit in out]
 
 
 def block_sources(oracle: ca.Function, options: dict[str, Any], folder: Path
@@ -166,10 +172,7 @@ def compiled_block_solver(oracle: ca.Function, options: dict[str, Any], key: str
     constraints, gradient) and the two derivative functions, each a shared library cached in
     ``cache_dir`` under the hash of its C. Returns (the solver, its options with the
     compiled derivative functions). RuntimeError when the compiler is missing or fails."""
-    _check_compiler(compiler, cache_dir)
-    with tempfile.TemporaryDirectory(dir=cache_dir) as tmp:
-        sources = block_sources(oracle, options, Path(tmp))
-        libraries = compile_sources(sources, key, cache_dir, flags, compiler)
+    libraries, _ = block_libraries(oracle, options, key, cache_dir, flags, compiler)
     return load_block_solver(libraries, options)
 
 

@@ -40,7 +40,7 @@ from .surfaces import Plane, Surface
 if TYPE_CHECKING:
     from .certificate import Check
     from .certify import TolerancePolicy
-    from .manipulation import Fingertip, ManipulationProblem
+    from .grasp_spec import Fingertip, ManipulationProblem
 
 __all__ = ["Contact", "FingertipContact", "FreeObject", "ObjectBlock", "SupportContact",
            "SymbolicGrasp"]
@@ -248,23 +248,23 @@ class SupportContact(ObjectBlock):
     def guess(self, problem: ManipulationProblem, x0: FloatArray, ts: FloatArray,
               R0: FloatArray, p0: FloatArray, palm_planner: Any
               ) -> tuple[FloatArray, FloatArray, PoseOfTime, InputOfTime | None]:
-        """The ball-on-palm plan of the support contact's goal and via-points (its loop
-        guesses for pure reorientations, closed-form geometry and gauge bound included;
-        not certified: a guess), or the object at rest when the support has no goal."""
+        """The plan of the object on the palm alone to the support's goal and via-points
+        (the palm's strategies: loop guesses for pure reorientations, gauge bound; not
+        certified: a guess), or the object at rest when the support has no goal."""
         T = problem.duration
-        base = problem.palm_problem()
-        if base.goal or base.via_points:
-            plan = palm_planner.solve(base, certify=False)  # a guess: no certificate
+        assert problem.palm is not None
+        if problem.palm.goal or problem.palm.via_points:
+            plan = palm_planner.solve(problem.palm_only(), certify=False)
 
             def pose(t: FloatArray) -> tuple[FloatArray, FloatArray]:
                 tr = plan.sample(np.clip(t, 0.0, T))
                 return tr.object_rotation, tr.object_position
 
             def palm_w(t: FloatArray) -> FloatArray:
-                return np.asarray(plan.sample(t).w)
+                return np.asarray(plan.sample(t).u)
 
             smp = plan.sample(ts)
-            return smp.eta, smp.w, pose, palm_w
+            return smp.x, smp.u, pose, palm_w
 
         def still(t: FloatArray) -> tuple[FloatArray, FloatArray]:
             t = np.atleast_1d(t)

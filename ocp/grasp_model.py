@@ -23,7 +23,6 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from .ball_on_palm import model_for
 from .collocation import reintegrator, rk4_step
 from .contacts import (
     Contact,
@@ -32,6 +31,7 @@ from .contacts import (
     SymbolicGrasp,
     grasp_contacts,
 )
+from .palm import model_for
 from .rotations import vee
 
 __all__ = ["GraspModel"]

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from .collocation import NlpPoint, WarmStart
 from .manipulation import (
     Fingertip,
+    GraspSample,
     ManipulationPlanner,
     ManipulationProblem,
     ManipulationSolution,
@@ -129,10 +130,20 @@ class OneFingerSolution:
     refinements: int = 0
     #: IPOPT's primal-dual point at this plan, for a warm start of the same NLP.
     nlp_point: NlpPoint | None = field(default=None, repr=False)
+    #: The grasp pipeline's own plan (its collocation values and polynomials).
+    plan: ManipulationSolution | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
         return self.status is Status.SOLVED
+
+    def sample(self, t: FloatArray | list[float]) -> GraspSample:
+        """The plan at any times in [0, duration] from the collocation polynomials: states
+        (eta_p, eta_f, q) and inputs (w_p, w_f, q_dot) in the grasp's layout, the object's
+        pose (:meth:`ocp.manipulation.ManipulationSolution.sample`)."""
+        if self.plan is None:
+            raise ValueError("this plan has no collocation polynomials")
+        return self.plan.sample(t)
 
     @property
     def warm_start(self) -> WarmStart:
@@ -240,4 +251,4 @@ class OneFingerPlanner:
             goal_error={k.removeprefix("palm."): v for k, v in sol.goal_error.items()},
             certificate=cert,
             certificate_failures=tuple(_rename(f) for f in sol.certificate_failures),
-            refinements=sol.refinements, nlp_point=sol.nlp_point)
+            refinements=sol.refinements, nlp_point=sol.nlp_point, plan=sol)

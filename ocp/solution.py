@@ -4,15 +4,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .certificate import Certificate
 from .collocation import WarmStart
 
-__all__ = ["Certificate", "Solution", "SolverStats", "Status", "Trajectory",
-           "quaternion_wxyz", "status_from_ipopt"]
+if TYPE_CHECKING:
+    from .grasp_solution import ManipulationSolution
+
+__all__ = ["Solution", "SolverStats", "Status", "Trajectory", "quaternion_wxyz",
+           "status_from_ipopt"]
 
 FloatArray = NDArray[np.float64]
 
@@ -113,53 +117,6 @@ class Trajectory:
 
 
 @dataclass(frozen=True)
-class Certificate:
-    """Physical validity of a plan, computed independently of the NLP.
-
-    The inputs are re-integrated from the initial state with CVODES (tight tolerances) and
-    the re-integrated motion is checked against the laws of rolling contact:
-
-    max_position_defect [m] / max_angle_defect [rad]: worst difference between the
-        re-integrated contact coordinates and the NLP's at the nodes;
-    max_slip_speed [m/s]: worst speed of the object's material point at the contact
-        relative to the palm (tangential and normal), from the time derivative of the
-        object's pose;
-    max_spin_rate [rad/s]: worst angular velocity of the object about the contact normal;
-    max_height_error [m]: worst gap or penetration between object and palm, from the
-        object's pose and the closed-form support function of its shape (no charts);
-    max_goal_error: worst goal/via-point error of the re-integrated motion (m or rad).
-    """
-
-    max_position_defect: float
-    max_angle_defect: float
-    max_slip_speed: float
-    max_spin_rate: float
-    max_height_error: float
-    max_goal_error: float
-    n_samples: int
-    tolerances: dict[str, float]
-    failures: tuple[str, ...]
-
-    @property
-    def passed(self) -> bool:
-        return not self.failures
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "passed": self.passed,
-            "max_position_defect": self.max_position_defect,
-            "max_angle_defect": self.max_angle_defect,
-            "max_slip_speed": self.max_slip_speed,
-            "max_spin_rate": self.max_spin_rate,
-            "max_height_error": self.max_height_error,
-            "max_goal_error": self.max_goal_error,
-            "n_samples": self.n_samples,
-            "tolerances": dict(self.tolerances),
-            "failures": list(self.failures),
-        }
-
-
-@dataclass(frozen=True)
 class SolverStats:
     """Solver statistics: raw IPOPT status, iterations, and times [s] measured apart."""
 
@@ -197,6 +154,8 @@ class Solution:
     #: Per goal/via-point coordinate error [m or rad] ("goal.x", "via_points[0].y", ...).
     goal_error: dict[str, float]
     _sampler: Any = field(repr=False, compare=False)
+    #: The grasp pipeline's own plan (its collocation values, IPOPT's primal-dual point).
+    plan: ManipulationSolution | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -213,7 +172,7 @@ class Solution:
         return self._sampler(np.asarray(t, dtype=float))
 
     def summary(self) -> str:
-        c = self.certificate
+        c, nan = self.certificate, float("nan")
         worst_goal = max(self.goal_error.values(), default=0.0)
         lines = [
             f"status       {self.status.value}  (IPOPT: {self.stats.raw_status})",
@@ -227,9 +186,11 @@ class Solution:
             f"objective    {self.stats.objective:.6g}",
             f"goal error   {worst_goal:.3g} (worst of {len(self.goal_error)} targets)",
             f"certificate  {'PASSED' if c.passed else 'FAILED: ' + '; '.join(c.failures)}",
-            f"  defect     {c.max_position_defect:.3g} m, {c.max_angle_defect:.3g} rad",
-            f"  slip/spin  {c.max_slip_speed:.3g} m/s, {c.max_spin_rate:.3g} rad/s",
-            f"  height     {c.max_height_error:.3g} m",
+            f"  defect     {c.get('max_position_defect', nan):.3g} m, "
+            f"{c.get('max_angle_defect', nan):.3g} rad",
+            f"  slip/spin  {c.get('max_slip_speed', nan):.3g} m/s, "
+            f"{c.get('max_spin_rate', nan):.3g} rad/s",
+            f"  height     {c.get('max_height_error', nan):.3g} m",
         ]
         return "\n".join(lines)
 

@@ -11,7 +11,7 @@ import pytest
 from helpers import assert_close
 
 from ocp.ball_on_palm import BallOnPalmPlanner
-from ocp.compiled import compiled_solver
+from ocp.compiled import block_libraries
 from ocp.problem import BallOnPalmProblem, ObjectSpec
 from ocp.solution import Status
 
@@ -32,40 +32,44 @@ def test_compiled_planner_gives_the_same_plan(tmp_path: Path) -> None:
     assert plain.status is Status.SOLVED and compiled.status is Status.SOLVED
     assert compiled.certificate.passed
     assert_close(compiled.nodes.eta, plain.nodes.eta, atol=1e-9)
-    assert len(list(tmp_path.glob("*.so"))) == 1
+    # one structure: its NLP's functions and its derivative blocks, a library each
+    assert len(list(tmp_path.glob("*.so"))) == 2
+    again = BallOnPalmPlanner(compile_dir=tmp_path).solve(small())  # from the cache
+    assert_close(again.nodes.eta, compiled.nodes.eta, atol=0)
+    assert len(list(tmp_path.glob("*.so"))) == 2
 
 
 def test_library_is_compiled_once_per_structure(tmp_path: Path) -> None:
     planner = BallOnPalmPlanner()
     nlp, _ = planner.nlp_for(small())
-    opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False}
-    _, hit = compiled_solver(nlp.solver, "small", opts, tmp_path)
-    assert not hit
-    _, hit = compiled_solver(nlp.solver, "small", opts, tmp_path)
-    assert hit and len(list(tmp_path.glob("*.so"))) == 1
-    _, hit = compiled_solver(nlp.solver, "another key", opts, tmp_path)
-    assert not hit and len(list(tmp_path.glob("*.so"))) == 2
+    _, hits = block_libraries(nlp.oracle, nlp.options, "small", tmp_path)
+    assert hits == [False, False]  # the NLP's functions, its derivative blocks
+    _, hits = block_libraries(nlp.oracle, nlp.options, "small", tmp_path)
+    assert hits == [True, True] and len(list(tmp_path.glob("*.so"))) == 2
+    _, hits = block_libraries(nlp.oracle, nlp.options, "another key", tmp_path)
+    assert hits == [False, False] and len(list(tmp_path.glob("*.so"))) == 4
 
 
 def test_a_missing_compiler_is_a_clear_error(tmp_path: Path) -> None:
     nlp, _ = BallOnPalmPlanner().nlp_for(small())
     with pytest.raises(RuntimeError, match="no C compiler"):
-        compiled_solver(nlp.solver, "k", {}, tmp_path, compiler="no-such-cc")
+        block_libraries(nlp.oracle, nlp.options, "k", tmp_path, compiler="no-such-cc")
 
 
 def test_processes_sharing_a_cache_compile_each_library_once(tmp_path: Path) -> None:
     """Two processes asking for the same library at once (a service's workers warming up
-    the same structures): one compiles it, the other waits on the lock and loads it."""
+    the same structures): one compiles each library, the other waits on its lock and loads
+    it (which process compiles which library is a race)."""
     import multiprocessing as mp
 
     ctx = mp.get_context("spawn")
     with ctx.Pool(2) as pool:
         hits = pool.starmap(_compile_small, [(str(tmp_path),)] * 2)
-    assert sorted(hits) == [False, True]
-    assert len(list(tmp_path.glob("*.so"))) == 1
+    for library in zip(*hits, strict=True):
+        assert sorted(library) == [False, True]
+    assert len(list(tmp_path.glob("*.so"))) == 2
 
 
-def _compile_small(folder: str) -> bool:
+def _compile_small(folder: str) -> list[bool]:
     nlp, _ = BallOnPalmPlanner().nlp_for(small())
-    opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False}
-    return compiled_solver(nlp.solver, "small", opts, Path(folder))[1]
+    return block_libraries(nlp.oracle, nlp.options, "small", Path(folder))[1]

@@ -247,13 +247,12 @@ def test_one_finger_on_palm_is_unchanged_by_the_generalisation(
     IPOPT's barrier strategy of that time (adaptive from IPOPT's default mu; the project
     now starts a monotone barrier at 1e-3, which converges to the same optimum within
     IPOPT's tolerance but not to these digits)."""
-    import ocp.ball_on_palm
     import ocp.nlp_blocks
 
+    # one transcription for every grasp: the palm plan that seeds the guess too
     then = {k: v for k, v in ocp.nlp_blocks.IPOPT_OPTIONS.items() if k != "ipopt.mu_init"}
     then["ipopt.mu_strategy"] = "adaptive"
     monkeypatch.setattr(ocp.nlp_blocks, "IPOPT_OPTIONS", then)
-    monkeypatch.setattr(ocp.ball_on_palm, "IPOPT_OPTIONS", then)
     planner = ManipulationPlanner()
     ref = np.load(DATA / "one_finger_roll_30c6ac4.npz")
     problem = one_finger_roll()

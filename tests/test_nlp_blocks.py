@@ -106,11 +106,14 @@ def test_the_compiled_nlp_plans_what_the_virtual_machine_plans(tmp_path: Path) -
     assert not compiled.certificate_failures
     assert_close(compiled.X, plain.X, atol=1e-8)
     # two libraries per structure (problem functions, block derivatives; a refined grid
-    # is another structure) are cached on disk, and a second planner (another process,
-    # say) loads them instead of compiling again
+    # is another structure, and so is the palm alone whose plan seeds the guess) are
+    # cached on disk, and a second planner (another process, say) loads them instead of
+    # compiling again
     libraries = sorted(p for p in tmp_path.iterdir() if p.is_file())
     assert {p.suffix for p in libraries} == {".so"}
-    assert len(libraries) == 2 * (1 + compiled.refinements)
+    structures = 1 + compiled.refinements + 1
+    assert len(compiled_planner._nlps) == structures
+    assert len(libraries) == 2 * structures
     stamps = [p.stat().st_mtime_ns for p in libraries]
     again = ManipulationPlanner(compile_dir=tmp_path)
     again.prepare(problem)
@@ -130,7 +133,9 @@ def test_a_background_compile_takes_over_between_solves(tmp_path: Path) -> None:
     nlp, _ = planner._build(problem)
     assert planner.compiler is not None and not planner.compiler.errors
     assert first.status is Status.SOLVED and not first.certificate_failures
-    structures = 1 + first.refinements  # a refined grid is a structure of its own
+    # a refined grid is a structure of its own, and so is the palm alone (the guess)
+    structures = 1 + first.refinements + 1
+    assert len(planner._nlps) == structures
     assert not nlp.compiled  # swapped in only between solves
     assert planner.adopt_compiled(wait=300.0) == structures
     assert nlp.compiled and planner.compiler.pending == 0 and not planner.compiler.errors

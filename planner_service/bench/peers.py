@@ -89,7 +89,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -100,16 +100,17 @@ from ocp.ball_on_palm import (
     NX,
     BallOnPalmPlanner,
     Structure,
-    _guesses,
-    _rotation_symmetric,
     certify,
     goal_errors,
     model_for,
 )
+from ocp.certificate import Certificate
 from ocp.collocation import left_input_columns, node_times
 from ocp.ipopt import IPOPT_OPTIONS
+from ocp.palm import guess_loops, reference_input, simulate_guess
+from ocp.palm import rotation_symmetric as _rotation_symmetric
 from ocp.problem import CONTACT_COORDS, PERIODIC, BallOnPalmProblem
-from ocp.solution import Certificate, Status, status_from_ipopt
+from ocp.solution import Status, status_from_ipopt
 from planner_service.convert import to_problem
 
 __all__ = ["GOAL_TOLERANCE", "PEER_METHODS", "PeerOutcome", "available", "compare"]
@@ -196,7 +197,9 @@ def _first_guess(problem: BallOnPalmProblem, grid: _Grid
     via-point node); only the grid layout of the NLP is read by the guess functions.
     """
     model = model_for(problem.object.shape)
-    return next(_guesses(model, problem, grid.t_nodes, cast(Any, grid), None))
+    return simulate_guess(model, problem, grid.t_nodes,
+                          reference_input(problem, guess_loops(problem)[0]), grid.left_cols,
+                          grid.right_cols, len(grid.t_nodes) - 1 + len(grid.structure.segments))
 
 
 def _scales(problem: BallOnPalmProblem) -> tuple[float, FloatArray, float]:
@@ -207,21 +210,17 @@ def _scales(problem: BallOnPalmProblem) -> tuple[float, FloatArray, float]:
 def _assess(problem: BallOnPalmProblem, grid: _Grid, X: FloatArray, U0: FloatArray,
             Um: FloatArray, U1: FloatArray) -> tuple[float, Certificate, float]:
     """(worst goal error, certificate, effort integral) of a plan at the nodes."""
-    model = model_for(problem.object.shape)
     errs = goal_errors(problem, X, grid.ends)
-    cert = certify(problem, model, grid.t_nodes, X, U0, Um, U1, grid.ends, CERT_SUBSTEPS)
+    cert = certify(problem, grid.t_nodes, X, U0, Um, U1, CERT_SUBSTEPS)
     sq = [np.sum(np.square(a), axis=1) for a in (U0, Um, U1)]
     effort = float(np.sum(grid.h / 6 * (sq[0] + 4 * sq[1] + sq[2])))
     return float(max(errs.values(), default=0.0)), cert, effort
 
 
 def _certificate_dict(cert: Certificate) -> dict[str, float]:
-    values = {"max_position_defect": cert.max_position_defect,
-              "max_angle_defect": cert.max_angle_defect,
-              "max_slip_speed": cert.max_slip_speed,
-              "max_spin_rate": cert.max_spin_rate,
-              "max_height_error": cert.max_height_error,
-              "max_goal_error": cert.max_goal_error}
+    values = {k: cert.get(k, math.nan) for k in (
+        "max_position_defect", "max_angle_defect", "max_slip_speed", "max_spin_rate",
+        "max_height_error", "max_goal_error")}
     return {"passed": 1.0 if cert.passed else 0.0, **{k: float(v) for k, v in values.items()}}
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -106,14 +107,16 @@ def result_from_solution(sol: Solution, sample_times: list[float] | None = None
                          ) -> PlanResult:
     """The wire result of a ball-on-palm plan (``sample_times``: the request's)."""
     c = sol.certificate
+
+    def value(name: str) -> float | None:
+        return finite_or_none(c.get(name, math.nan))
+
     cert = CertificateModel(
-        passed=c.passed, max_position_defect=finite_or_none(c.max_position_defect),
-        max_angle_defect=finite_or_none(c.max_angle_defect),
-        max_slip_speed=finite_or_none(c.max_slip_speed),
-        max_spin_rate=finite_or_none(c.max_spin_rate),
-        max_height_error=finite_or_none(c.max_height_error),
-        max_goal_error=finite_or_none(c.max_goal_error), n_samples=c.n_samples,
-        tolerances=dict(c.tolerances), failures=list(c.failures))
+        passed=c.passed, max_position_defect=value("max_position_defect"),
+        max_angle_defect=value("max_angle_defect"), max_slip_speed=value("max_slip_speed"),
+        max_spin_rate=value("max_spin_rate"), max_height_error=value("max_height_error"),
+        max_goal_error=value("max_goal_error"), n_samples=c.n_samples,
+        tolerances=c.tolerances(), failures=list(c.failures))
     stats: dict[str, Any] = sol.stats.to_dict()
     if not np.isfinite(stats["objective"]):
         stats["objective"] = -1.0

@@ -1,0 +1,289 @@
+"""A grasp as data: the object, an optional flat palm it rests on (:class:`Palm`), the
+flat fingertips holding it (:class:`Fingertip`), the horizon and what to achieve
+(:class:`ManipulationProblem`). The paper's ball on the palm (the palm alone), its
+section 3 (one finger pressing the ball on the palm), its section 4 (two fingers holding
+the ball in the air) and three or more fingers are the same type with different data.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .certify import GRASP_TOLERANCES, PALM_TOLERANCES, TolerancePolicy
+from .motion import DesiredMotion, ObjectPose, Tracking
+from .palm import goal_errors
+from .problem import (
+    DEFAULT_FINGER_CHART_ROTATION,
+    MAX_POSITION,
+    BallOnPalmProblem,
+    ObjectSpec,
+    ProblemError,
+    SolverOptions,
+    ViaPoint,
+)
+from .rotations import log_rotation
+from .surfaces import SURFACES, rotation_from_vector
+
+__all__ = ["Fingertip", "ManipulationProblem", "Palm", "contact_chart_for_pad",
+           "contact_charts", "fingertip_errors", "hand_fingertips", "support_goal_errors"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Palm:
+    """A flat palm (the z = 0 plane of the palm frame) carrying the object.
+
+    ``initial`` are the palm contact coordinates (x, y, u, v, psi) at t = 0 in the
+    object's chart (``ObjectSpec.chart_rotation``); ``goal`` and ``via_points`` fix any
+    subsets of them at the end and at interior times (as in the ball-on-palm problem).
+    """
+
+    initial: tuple[float, float, float, float, float]
+    goal: Mapping[str, float] = field(default_factory=dict)
+    via_points: tuple[ViaPoint, ...] = ()
+    palm_half_extent: float = 0.5
+    max_contact_speed: float = 1.0
+
+
+@dataclass(frozen=True)
+class Fingertip:
+    """A finger whose flat pad touches the object.
+
+    ``initial`` = (x_f, y_f, u_f, v_f, psi_f) at t = 0: pad point [m], object point [rad]
+    in this contact's chart patch (rotated in the object frame by ``chart_rotation``, a
+    rotation vector [rad]; choose it so that the contact stays away from the patch's
+    poles), contact angle [rad]. ``q_seed`` seeds the inverse kinematics of the initial
+    grasp (default: the paper's initial angles).
+    """
+
+    finger: Any  # ocp.finger.FingerModel
+    initial: tuple[float, float, float, float, float]
+    chart_rotation: tuple[float, float, float] = DEFAULT_FINGER_CHART_ROTATION
+    q_seed: tuple[float, ...] | None = None
+    name: str = ""
+
+
+def fingertip_errors(name: str, tip: Fingertip, obj: ObjectSpec, pad_margin: float,
+                     pole_margin: float) -> list[tuple[str, str]]:
+    """Why a fingertip's initial contact is invalid, as (field, reason) under ``name``:
+    its chart patch, its coordinates, the pad (less ``pad_margin``) and the patch's poles."""
+    errs: list[tuple[str, str]] = []
+    if obj.shape in SURFACES and len(tip.chart_rotation) == 3 and \
+            all(map(math.isfinite, tip.chart_rotation)):
+        bad = obj.surface.chart_rotation_error(rotation_from_vector(tip.chart_rotation))
+        if bad is not None:
+            errs.append((f"{name}.chart_rotation", bad))
+    else:
+        errs.append((f"{name}.chart_rotation", "must be 3 finite numbers "
+                                               "(rotation vector, rad)"))
+    if len(tip.initial) != 5 or not all(map(math.isfinite, tip.initial)):
+        return [*errs, (f"{name}.initial", "must be 5 finite numbers "
+                                           "(x_f, y_f, u_f, v_f, psi_f)")]
+    half = float(tip.finger.pad_half_size) - pad_margin
+    for k, coord in ((0, "x_f"), (1, "y_f")):
+        if abs(tip.initial[k]) > half:
+            errs.append((f"{name}.initial.{coord}",
+                         f"|{coord}| = {abs(tip.initial[k]):.4g} m leaves the pad "
+                         f"(half size {tip.finger.pad_half_size} m less {pad_margin} m "
+                         f"margin) by {abs(tip.initial[k]) - half:.4g} m"))
+    u_lim = math.pi / 2 - pole_margin
+    if abs(tip.initial[2]) > u_lim:
+        errs.append((f"{name}.initial.u_f",
+                     f"|u_f| = {abs(tip.initial[2]):.4f} rad is beyond the chart pole "
+                     f"limit {u_lim:.4f} rad; rotate {name}.chart_rotation"))
+    return errs
+
+
+@dataclass(frozen=True)
+class ManipulationProblem:
+    """A grasp (object, optional palm, fingertips), a horizon and what to achieve.
+
+    Without a palm the object's pose at t = 0 is ``initial_pose`` and what it should do is
+    ``motion`` (tracked with ``tracking``). With a palm the object's pose comes from the
+    palm contact; the palm's goal and via-points and/or a ``motion`` say where it goes.
+    """
+
+    object: ObjectSpec
+    fingers: tuple[Fingertip, ...]
+    duration: float
+    palm: Palm | None = None
+    initial_pose: ObjectPose | None = None
+    motion: DesiredMotion | None = None
+    tracking: Tracking = field(default_factory=Tracking)
+    mu: float = 0.5
+    #: Weights of the objective terms (dimensionless, scaled): the object's own motion
+    #: (the palm contact velocity, or the free object's twist), the fingertip contacts'
+    #: motion over the object, the joint rates, and the grasp-angle epigraph.
+    object_effort_weight: float = 1.0
+    finger_effort_weight: float = 0.01
+    joint_effort_weight: float = 0.01
+    grasp_weight: float = 100.0
+    pad_margin: float = 0.002  # m kept between a contact and its pad's edge
+    n_intervals: int = 50
+    pole_margin: float = math.radians(15.0)
+    max_object_speed: float = 1.0  # m/s, each component of a free object's velocity
+    max_object_rate: float = 20.0  # rad/s, each component of a free object's angular rate
+    max_refinements: int = 2
+    options: SolverOptions = field(default_factory=SolverOptions)
+    #: How strictly the certificate checks the plan (:mod:`ocp.certify`).
+    tolerances: TolerancePolicy = GRASP_TOLERANCES
+
+    @property
+    def n_contacts(self) -> int:
+        return len(self.fingers) + (self.palm is not None)
+
+    def palm_problem(self) -> BallOnPalmProblem:
+        """The ball-on-palm problem of the palm contact (its grid, goals, limits)."""
+        assert self.palm is not None
+        pm = self.palm
+        return BallOnPalmProblem(
+            object=self.object, initial=pm.initial, goal=pm.goal, duration=self.duration,
+            via_points=pm.via_points, n_intervals=self.n_intervals,
+            pole_margin=self.pole_margin, max_contact_speed=pm.max_contact_speed,
+            palm_half_extent=pm.palm_half_extent, max_refinements=self.max_refinements,
+            options=self.options)
+
+    def segments(self) -> tuple[tuple[int, ...], FloatArray]:
+        """(intervals per segment, segment boundary times): via-points split the grid."""
+        if self.palm is not None:
+            base = self.palm_problem()
+            return base.segment_intervals(), base.segment_times
+        return (self.n_intervals,), np.array([0.0, self.duration])
+
+    def with_intervals(self, n: int) -> ManipulationProblem:
+        return replace(self, n_intervals=n)
+
+    def palm_only(self) -> ManipulationProblem:
+        """The object on this problem's palm alone (its grid, goals, limits and solver
+        options; the palm's tolerances): its plan seeds a finger grasp's initial guess."""
+        return replace(self, fingers=(), motion=None, tracking=Tracking(),
+                       object_effort_weight=1.0, tolerances=PALM_TOLERANCES)
+
+    def errors(self) -> list[tuple[str, str]]:
+        """Every reason the problem is invalid, as (field, reason)."""
+        errs: list[tuple[str, str]] = []
+        palm_fields = ("initial", "goal", "via_points", "palm_half_extent",
+                       "max_contact_speed")
+        if self.palm is not None:
+            for name, why in self.palm_problem().errors():
+                if name == "goal" and self.motion is not None and "nothing to plan" in why:
+                    continue  # the motion says what to do
+                head = name.split(".")[0].split("[")[0]
+                errs.append((f"palm.{name}" if head in palm_fields else name, why))
+        else:
+            # the object, grid and solver fields, checked by the palm problem's own rules
+            errs += BallOnPalmProblem(self.object, (0.0, 0.0, 0.0, 0.0, 0.0), {"x": 0.0},
+                                      self.duration, n_intervals=self.n_intervals,
+                                      pole_margin=self.pole_margin,
+                                      max_refinements=self.max_refinements,
+                                      options=self.options).errors()
+            if self.initial_pose is None:
+                errs.append(("initial_pose", "required when no palm carries the object"))
+            else:
+                errs += self.initial_pose.errors("initial_pose")
+            if self.motion is None:
+                errs.append(("motion", "required when no palm carries the object: what "
+                                       "should the object do?"))
+        if self.motion is not None:
+            errs += self.motion.errors("motion", self.duration)
+        if self.palm is None and self.n_contacts < 2:
+            errs.append(("fingers", "without a palm, a grasp needs at least two contacts "
+                                    f"(two fingers); got {self.n_contacts}"))
+        if not (math.isfinite(self.mu) and 0.0 < self.mu <= 10.0):
+            errs.append(("mu", f"must be in (0, 10], got {self.mu}"))
+        for name in ("object_effort_weight", "finger_effort_weight", "joint_effort_weight",
+                     "grasp_weight"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 1e6):
+                errs.append((name, f"must be in [0, 1e6], got {value}"))
+        tr = self.tracking
+        for name in ("position_weight", "orientation_weight"):
+            value = getattr(tr, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 1e8):
+                errs.append((f"tracking.{name}", f"must be in [0, 1e8], got {value}"))
+        for name, hi in (("position_tolerance", MAX_POSITION),
+                         ("orientation_tolerance", math.pi)):
+            value = getattr(tr, name)
+            if value is not None and not (math.isfinite(value) and 0.0 < value <= hi):
+                errs.append((f"tracking.{name}", f"must be in (0, {hi:.4g}], got {value}"))
+        if (tr.position_tolerance is not None or tr.orientation_tolerance is not None) \
+                and self.motion is None:
+            errs.append(("tracking", "tolerances given but no motion to track"))
+        for name in ("max_object_speed", "max_object_rate"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                errs.append((name, f"must be > 0, got {value}"))
+        for i, c in enumerate(self.fingers):
+            name = f"fingers[{i}]"
+            errs += fingertip_errors(name, c, self.object, self.pad_margin, self.pole_margin)
+            if c.q_seed is not None and len(c.q_seed) != c.finger.nq:
+                errs.append((f"{name}.q_seed",
+                             f"must have {c.finger.nq} joint angles, got {len(c.q_seed)}"))
+        return errs
+
+    def validate(self) -> None:
+        errs = self.errors()
+        if errs:
+            raise ProblemError(errs)
+
+
+def contact_chart_for_pad(obj: ObjectSpec, pose: ObjectPose, pad_rotation: ArrayLike
+                          ) -> tuple[float, float, float]:
+    """The chart rotation (rotation vector [rad]) of a fingertip contact's patch that puts
+    patch point (u, v) = (0, 0) with psi = 0 under a pad of rotation ``pad_rotation`` (palm
+    frame; its +z is the pad's outward normal, facing the object).
+
+    With it, the fingertip's initial contact coordinates (0, 0, 0, 0, 0) mean "the pad's
+    centre touches the object where the pad's normal points, the pad turned as given": the
+    usual way to state a grasp from the fingers' pad poses. The contact then sits on the
+    patch's equator, as far from its poles as it can be.
+    """
+    from .contact import R_contact
+
+    shape = np.asarray(obj.dimensions, dtype=float)
+    _, Rg, _, _, _ = obj.surface.geometry([0.0, 0.0], shape)
+    R_of = pose.rotation.T @ np.asarray(pad_rotation, dtype=float)
+    Rc = R_of @ np.asarray(R_contact(0.0)).T @ np.asarray(Rg).T
+    return tuple(float(c) for c in log_rotation(Rc))  # type: ignore[return-value]
+
+
+def hand_fingertips(hand: Any, pose: ObjectPose | None = None,
+                    obj: ObjectSpec | None = None) -> tuple[Fingertip, ...]:
+    """Fingertips of a built-in hand (:func:`ocp.hands.load_hand`) in its nominal grasp of a
+    ball at ``pose`` (default: unrotated, at the hand's nominal position): each pad's centre
+    on the ball where the pad's normal points (contact coordinates all zero, charts from
+    :func:`contact_chart_for_pad`), the IK seeded with the hand's nominal joint angles."""
+    from .hands import grasp_poses
+
+    pose = pose or ObjectPose(position=tuple(hand.nominal_object_position))
+    obj = obj or ObjectSpec("sphere", (hand.nominal_radius,))
+    pads = grasp_poses(hand, pose.position, float(max(obj.dimensions)), pose.rotation)
+    seeds = hand.nominal_q or (None,) * hand.n_fingers
+    return tuple(
+        Fingertip(finger, (0.0, 0.0, 0.0, 0.0, 0.0), contact_chart_for_pad(obj, pose, R),
+                  q_seed=seed, name=f"f{k + 1}")
+        for k, (finger, (R, _), seed) in enumerate(zip(hand.fingers, pads, seeds,
+                                                       strict=True)))
+
+
+def contact_charts(problem: ManipulationProblem) -> list[FloatArray]:
+    """The chart rotation of every point contact (the palm first, then each fingertip)."""
+    out = [rotation_from_vector(problem.object.chart_rotation)] if problem.palm else []
+    return out + [rotation_from_vector(c.chart_rotation) for c in problem.fingers]
+
+
+def support_goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[int]
+                        ) -> dict[str, float]:
+    """Error of every goal and via-point coordinate of the support contact (``palm.goal.x``,
+    ...) at the segment end nodes ``ends`` of the states X (m or wrapped rad)."""
+    if problem.palm is None:
+        return {}
+    out = goal_errors(problem.palm_problem(), X, ends)
+    return {f"palm.{k}": v for k, v in out.items()}

@@ -1,0 +1,239 @@
+"""Initial guesses and solve strategies of the grasp pipeline.
+
+A :class:`Strategy` says how the pipeline (:class:`ocp.manipulation.ManipulationPlanner`)
+starts IPOPT for a kind of grasp: which initial guesses it tries in turn, how it budgets
+IPOPT's iterations over them and over grid refinements, how a previous plan seeds a new
+one, and which bounds it adds. Two exist:
+
+* :class:`GraspStrategy` (fingers): one consistent guess (:func:`grasp_guess`: the
+  object's motion, the fingertips' contacts rolled along it, the joints by inverse
+  kinematics), the whole budget for it, a previous plan interpolated (and IPOPT's
+  primal-dual point of the same NLP taken as it is);
+* :class:`PalmStrategy` (the object on the palm alone, the paper's ball on palm):
+  forward simulations of reference palm paths, with loops first when the orientation is a
+  target (rolling is nonholonomic: a pure reorientation needs a loop), each with at most
+  ``max_iter_per_guess`` iterations out of one budget; a previous plan of the same duration
+  sampled with its collocation polynomials; the gauge bound of the symmetric vertical
+  reorientation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .collocation import WarmStart, node_inputs
+from .grasp_spec import contact_charts
+from .palm import guess_loops, model_for, reference_input, rotation_symmetric, simulate_guess
+
+if TYPE_CHECKING:
+    from .grasp_model import GraspModel
+    from .grasp_solution import ManipulationSolution
+    from .grasp_spec import ManipulationProblem
+    from .nlp_blocks import NLP
+
+__all__ = [
+    "GraspStrategy",
+    "Guess",
+    "PalmStrategy",
+    "Strategy",
+    "epigraph_guess",
+    "grasp_guess",
+    "strategy_for",
+]
+
+FloatArray = NDArray[np.float64]
+#: An initial guess: node states, midpoint states, node input columns, midpoint inputs
+#: (physical units, rows).
+Guess = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+
+#: Pose tolerance of the inverse kinematics along the initial guess [m, rad], the initial
+#: grasp's own. (A guess closed to 1e-8 only sent IPOPT down another path on experiment 1:
+#: the same 14 iterations, one with an inertia correction, 30 % more time.)
+IK_GUESS_TOL = 1e-10
+
+
+class Strategy:
+    """How the pipeline starts and budgets IPOPT for a kind of grasp (see the module)."""
+
+    #: IPOPT iterations per initial guess (None: the whole budget)
+    max_iter_per_guess: int | None = None
+    #: whether later guesses and grid refinements draw on what earlier ones left of
+    #: ``options.max_iter`` (else each solve has the whole budget)
+    shared_budget: bool = False
+    #: whether a previous plan's IPOPT primal-dual point seeds a solve of the same NLP
+    use_nlp_point: bool = True
+
+    def own_guesses(self, planner: Any, problem: ManipulationProblem, m: GraspModel,
+                    nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Iterator[Guess]:
+        raise NotImplementedError
+
+    def warm_guess(self, warm: WarmStart | ManipulationSolution, problem: ManipulationProblem,
+                   nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Guess:
+        """A previous plan (or a warm start) on this grid."""
+        ws = warm if isinstance(warm, WarmStart) else warm.warm_start
+        n = len(t_nodes) - 1
+        X, Xm, U, Um = ws.on_grid(t_nodes, nlp.hs.left_cols, nlp.hs.right_cols,
+                                  n + len(nlp.hs.segments))
+        X[0] = x0  # the fixed initial state, exactly
+        return X, Xm, U, Um
+
+    def adjust_bounds(self, problem: ManipulationProblem, nlp: NLP, lbx: FloatArray,
+                      ubx: FloatArray) -> None:
+        """Bounds a kind of grasp adds (in place, scaled NLP variables)."""
+
+
+class GraspStrategy(Strategy):
+    """Grasps with fingers."""
+
+    def own_guesses(self, planner: Any, problem: ManipulationProblem, m: GraspModel,
+                    nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Iterator[Guess]:
+        yield grasp_guess(planner, problem, m, nlp, x0, t_nodes)
+
+
+class PalmStrategy(Strategy):
+    """The object on the palm alone (the ball-on-palm planner's strategies)."""
+
+    max_iter_per_guess: int | None = 300
+    shared_budget = True
+    use_nlp_point = False
+
+    def own_guesses(self, planner: Any, problem: ManipulationProblem, m: GraspModel,
+                    nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Iterator[Guess]:
+        base = problem.palm_problem()
+        model = model_for(problem.object.shape)
+        n_cols = len(t_nodes) - 1 + len(nlp.hs.segments)
+        for loop in guess_loops(base):
+            yield simulate_guess(model, base, t_nodes, reference_input(base, loop),
+                                 nlp.hs.left_cols, nlp.hs.right_cols, n_cols)
+
+    def warm_guess(self, warm: WarmStart | ManipulationSolution, problem: ManipulationProblem,
+                   nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Guess:
+        """A previous plan of the same duration sampled with its collocation polynomials;
+        anything else interpolated."""
+        if isinstance(warm, WarmStart) or warm.collocation is None or \
+                abs(warm.duration - problem.duration) >= 1e-9:
+            return super().warm_guess(warm, problem, nlp, x0, t_nodes)
+        n = len(t_nodes) - 1
+        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+        U = node_inputs(lambda ts: warm.sample(ts).u, t_nodes, nlp.hs.left_cols,
+                        nlp.hs.right_cols, n + len(nlp.hs.segments))
+        sm = warm.sample(tm)
+        return warm.sample(t_nodes).x, sm.x, U, sm.u
+
+    def adjust_bounds(self, problem: ManipulationProblem, nlp: NLP, lbx: FloatArray,
+                      ubx: FloatArray) -> None:
+        if rotation_symmetric(problem.palm_problem()):
+            # Gauge: the plan's rotation about the contact normal is free; depart along +x.
+            _, _, Ui, _, _, _, _ = nlp.unpack(np.arange(len(lbx), dtype=float))
+            c0 = nlp.hs.left_cols[0]
+            i_x, i_y = (round(float(Ui[j, c0])) for j in (0, 1))
+            lbx[i_x] = 0.0
+            lbx[i_y] = ubx[i_y] = 0.0
+
+
+def strategy_for(problem: ManipulationProblem) -> Strategy:
+    """The palm's strategies for the object on the palm alone, else the grasp's."""
+    if problem.palm is not None and not problem.fingers and problem.motion is None:
+        return PalmStrategy()
+    return GraspStrategy()
+
+
+def epigraph_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray
+                   ) -> tuple[FloatArray, FloatArray]:
+    """Grasp epigraph values (1 x k; 0 x k for one contact) and internal-force guesses
+    at the given states."""
+    from .grasp import force_angles
+
+    k = len(Xall)
+    if m.n_contacts < 2:  # no force closure to certify: neither
+        return np.zeros((0, k)), np.zeros((0, k))
+    out = m.mapped("cartesian", k)(Xall.T, prm)
+    nc = m.n_contacts
+    pts = np.asarray(out[4]).T.reshape(k, nc, 3)
+    nrm = np.asarray(out[5]).T.reshape(k, nc, 3)
+    if nc == 2:
+        phi, _, _ = force_angles(pts, nrm)
+        return np.clip(1 - np.cos(phi), 0.0, 2.0)[None], np.zeros((0, k))
+    # a pushing guess: each contact pushes along its inward normal (scaled so that the
+    # pushes sum to nc); IPOPT restores equilibrium
+    F = -nrm.reshape(k, 3 * nc).T
+    return np.full((1, k), 0.5), F
+
+
+def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: NLP,
+                x0: FloatArray, t_nodes: FloatArray) -> Guess:
+    """A consistent initial guess: the object's motion (the ball-on-palm plan, or the
+    desired motion); each fingertip's contact point kept where it started relative to
+    the object's centre (palm frame), its contact coordinates integrated with the
+    rolling equations; the joints by inverse kinematics along the way (closure holds);
+    joint rates by finite differences."""
+    from .finger import inverse_kinematics, inverse_kinematics_batch
+
+    charts = contact_charts(problem)
+    shape = np.asarray(problem.object.dimensions, dtype=float)
+    prm = m.params(shape, charts)
+    n = len(t_nodes) - 1
+    tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+    ts = np.sort(np.concatenate([t_nodes, tm]))  # node, mid, node, ...
+    cart0 = m.cartesian(x0, prm)
+    obj = m.object
+    Xo, Wo, pose, obj_w = obj.guess(problem, x0[obj.xs], ts, np.asarray(cart0[0]),
+                                    np.asarray(cart0[1]).ravel(), planner)
+    p_obj0 = np.asarray(cart0[1]).ravel()
+    pts0 = np.asarray(cart0[4])
+    X = np.zeros((len(ts), m.nx))
+    W = np.zeros((len(ts), m.nu))
+    X[:, obj.xs], W[:, obj.us] = Xo, Wo
+    X[0, obj.xs] = x0[obj.xs]
+    dt = 1e-4 * problem.duration
+    for tip in m.fingertips:
+        k = m.point_contacts.index(tip)
+        offset = pts0[:, k] - p_obj0
+        Rc = charts[k]
+
+        def ball_point(t: FloatArray, offset: FloatArray = offset,
+                       Rc: FloatArray = Rc) -> FloatArray:
+            R, _ = pose(t)
+            pts = np.einsum("kji,j->ki", R, offset)  # R^T offset
+            return np.asarray(m.surface.inverse(pts @ Rc, shape))  # rows Rc^T p
+
+        alpha = ball_point(ts)
+        rate = (ball_point(ts + dt) - ball_point(ts - dt)) / (2 * dt)
+        rate[:, 1] = ((rate[:, 1] * 2 * dt + np.pi) % (2 * np.pi) - np.pi) / (2 * dt)
+        ef = np.zeros((len(ts), 5))
+        ef[:, 2:4] = alpha
+        ef[0] = tip.spec(problem).initial
+        pad = np.asarray(m.roll(len(ts) - 1)(  # the pad point and angle, RK4 steps
+            ef[0, [0, 1, 4]], alpha[:-1].T, rate[:-1].T, rate[1:].T, np.diff(ts)[None],
+            np.tile(shape[:, None], (1, len(ts) - 1)))).T
+        ef[1:, 0:2], ef[1:, 4] = pad[:, 0:2], pad[:, 2]
+        X[:, tip.eta_cols] = ef
+        W[:, tip.w_cols] = rate
+    # joints by IK along the way, every finger: the pads' poses do not depend on the
+    # joints (one batched evaluation); one batched IK from the initial grasp's joints,
+    # and a sequential one from the previous point's where that does not converge
+    X[0] = x0
+    out = m.mapped("cartesian", len(ts))(X.T, prm)
+    R_all = np.asarray(out[2]).reshape(3, len(ts), -1, 3)  # (3, k, finger, 3)
+    p_all = np.asarray(out[3]).reshape(3, len(ts), -1)  # (3, k, finger)
+    for i, tip in enumerate(m.fingertips):
+        q0 = x0[tip.q_cols]
+        R_i, p_i = R_all[:, :, i, :].transpose(1, 0, 2), p_all[:, :, i].T
+        qs, ok = inverse_kinematics_batch(tip.finger, R_i, p_i, q0, tol=IK_GUESS_TOL)
+        qs[0] = q0
+        for j in (np.flatnonzero(~ok[1:]) + 1).tolist():  # from a neighbour instead
+            qs[j] = inverse_kinematics(tip.finger, R_i[j], p_i[j], qs[j - 1],
+                                       tol=IK_GUESS_TOL).q
+        X[:, tip.q_cols] = qs
+        W[:, tip.qd_cols] = np.gradient(qs, ts, axis=0)
+    Ucols = np.zeros((n + len(nlp.hs.segments), m.nu))
+    Ucols[nlp.hs.left_cols] = W[0:-1:2]
+    Ucols[nlp.hs.right_cols] = W[2::2]
+    if obj_w is not None:  # the palm plan's inputs jump at via-points: both sides
+        Ucols[:, obj.us] = node_inputs(obj_w, t_nodes, nlp.hs.left_cols,
+                                       nlp.hs.right_cols, len(Ucols))
+    return X[0::2], X[1::2], Ucols, W[1::2]
