@@ -47,10 +47,10 @@ from ocp.ball_on_palm import (
     model_for,
     object_pose,
 )
-from ocp.ipopt import IPOPT_OPTIONS
-from ocp.problem import CONTACT_COORDS, BallOnPalmProblem, ObjectSpec, ViaPoint
+from ocp.geometry.surfaces import rotation_from_vector
 from ocp.solution import Solution
-from ocp.surfaces import rotation_from_vector
+from ocp.solve.ipopt import IPOPT_OPTIONS
+from ocp.spec.problem import CONTACT_COORDS, BallOnPalmProblem, ObjectSpec, ViaPoint
 
 OBJECT = ObjectSpec("sphere", (0.025,))
 REST: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)

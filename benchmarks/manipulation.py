@@ -35,9 +35,10 @@ from typing import Any
 
 import casadi as ca
 
-import ocp.nlp_blocks as nlp_blocks
-from ocp.hands import load_hand
-from ocp.manipulation import (
+import ocp.transcription.nlp_blocks as nlp_blocks
+from ocp.one_finger import OneFingerPlanner
+from ocp.robots.hands import load_hand
+from ocp.solve.planner import (
     DesiredMotion,
     ManipulationPlanner,
     ManipulationProblem,
@@ -46,8 +47,7 @@ from ocp.manipulation import (
     Tracking,
     hand_fingertips,
 )
-from ocp.one_finger import OneFingerPlanner
-from ocp.problem import ObjectSpec, SolverOptions
+from ocp.spec.problem import ObjectSpec, SolverOptions
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parents[1]

@@ -33,8 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from manipulation import _experiment, _three
 
 from ocp.ball_on_palm import BallOnPalmPlanner
-from ocp.manipulation import ManipulationPlanner, ManipulationProblem
-from ocp.problem import BallOnPalmProblem, ObjectSpec
+from ocp.solve.planner import ManipulationPlanner, ManipulationProblem
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec
 
 DEFAULT_OUT = Path(__file__).resolve().parent / "results"
 RHO = 0.025
@@ -43,7 +43,7 @@ RHO = 0.025
 def _triangle(dx: float = 0.0, duration: float = 6.0) -> BallOnPalmProblem:
     """The paper's triangle (experiment 1's palm plan), N = 50; ``dx`` moves the via-points
     and the goal along x [m]."""
-    from ocp.problem import ViaPoint
+    from ocp.spec.problem import ViaPoint
 
     return BallOnPalmProblem(
         object=ObjectSpec("sphere", (RHO,)), initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2),

@@ -4,7 +4,7 @@ Builds the experiment as this project sets it up (docs/experiments.md), plans it
 methods of the library:
 
 * ``nlp``: the direct-collocation NLP, :class:`ocp.one_finger.OneFingerPlanner`;
-* ``greedy``: the paper's own step-by-step method, :func:`ocp.greedy.greedy_plan`;
+* ``greedy``: the paper's own step-by-step method, :func:`ocp.methods.greedy.greedy_plan`;
 
 and writes to ``--out`` (default ``docs/figures/``):
 
@@ -38,10 +38,10 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from ocp.finger import PAPER_SEED_DEG, FingerModel, load_finger
-from ocp.greedy import GreedyResult, greedy_plan
+from ocp.methods.greedy import GreedyResult, greedy_plan
 from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem, OneFingerSolution
-from ocp.problem import BallOnPalmProblem, ObjectSpec, ViaPoint
+from ocp.robots.finger import PAPER_SEED_DEG, FingerModel, load_finger
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ViaPoint
 
 FloatArray = NDArray[np.float64]
 

@@ -2,9 +2,9 @@
 
 The desired motion is the paper's: rotate the ball about the palm's Z axis by 20 deg, then
 about Y by 20 deg, then about Z by -20 deg, then about Y by -20 deg (1 s each here; the paper
-gives no times), held in the air by the built-in two-finger hand (:mod:`ocp.hands`: two
+gives no times), held in the air by the built-in two-finger hand (:mod:`ocp.robots.hands`: two
 K3S-like fingers on opposite sides, pads pressing on the ball's +x and -x sides). The plan
-comes from the general planner (:class:`ocp.manipulation.ManipulationPlanner`), which tracks
+comes from the general planner (:class:`ocp.solve.planner.ManipulationPlanner`), which tracks
 the motion on SE(3) within 1 mm and 1 deg while keeping the grasp near antipodal.
 
 Writes to ``--out`` (default ``docs/figures/``):
@@ -36,8 +36,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from ocp.hands import Hand, load_hand
-from ocp.manipulation import (
+from ocp.geometry.rotations import rotation_angle_between
+from ocp.robots.hands import Hand, load_hand
+from ocp.solve.planner import (
     DesiredMotion,
     ManipulationPlanner,
     ManipulationProblem,
@@ -47,8 +48,7 @@ from ocp.manipulation import (
     Tracking,
     hand_fingertips,
 )
-from ocp.problem import ObjectSpec
-from ocp.rotations import rotation_angle_between
+from ocp.spec.problem import ObjectSpec
 
 FloatArray = NDArray[np.float64]
 

@@ -4,12 +4,12 @@ object on the palm alone, in the ball-on-palm planner's terms.
 State: the palm/object contact coordinates eta_p = (x, y, u, v, psi); input: the palm
 contact velocity w = d/dt (x, y) [m/s]; objective: the control effort integral |w|^2 dt;
 goals and via-points: equality constraints on any subset of eta. This is a one-contact
-grasp (a :class:`~ocp.contacts.SupportContact` and no fingers) of the one formulation in
-:mod:`ocp.manipulation`: the same transcription (its blocks expanded to SX at this size),
+grasp (a :class:`~ocp.spec.contacts.SupportContact` and no fingers) of the one formulation in
+:mod:`ocp.solve.planner`: the same transcription (its blocks expanded to SX at this size),
 the same solve loop with the palm's strategies (simulated reference paths with loops for
-pure reorientations, the gauge bound of the symmetric vertical case: :mod:`ocp.guesses`,
-:mod:`ocp.palm`), the same certificate (:func:`ocp.certify.certify_grasp`) with the palm's
-tolerances. :class:`BallOnPalmPlanner` poses a :class:`~ocp.problem.BallOnPalmProblem` as
+pure reorientations, the gauge bound of the symmetric vertical case: :mod:`ocp.solve.guesses`,
+:mod:`ocp.palm`), the same certificate (:func:`ocp.certify.laws.certify_grasp`) with the palm's
+tolerances. :class:`BallOnPalmPlanner` poses a :class:`~ocp.spec.problem.BallOnPalmProblem` as
 that grasp and returns its plan as a :class:`~ocp.solution.Solution` (the contact
 coordinates' trajectory, sampled on any grid, with the certificate under the
 ball-on-palm names).
@@ -24,26 +24,21 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .certificate import Certificate
-from .certify import PALM_TOLERANCES, certify_grasp
-from .collocation import WarmStart, hermite_sample
-from .grasp_solution import ManipulationSolution
-from .manipulation import ManipulationPlanner, ManipulationProblem, Palm
-from .palm import (
-    NU,
-    NX,
-    BallOnPalmModel,
+from ocp.certify.certificate import PALM_TOLERANCES, Certificate
+from ocp.certify.laws import certify_grasp
+from ocp.geometry.surfaces import rotation_from_vector
+from ocp.solution import ManipulationSolution, Solution, SolverStats, Status, Trajectory
+from ocp.solve.planner import ManipulationPlanner, ManipulationProblem, Palm
+from ocp.spec.palm import NU, NX, BallOnPalmModel, contact_coordinates, model_for, object_pose
+from ocp.spec.problem import (
+    BallOnPalmProblem,
+    ProblemError,
     Structure,
-    contact_coordinates,
     coordinate_error,
     goal_errors,
-    model_for,
-    object_pose,
     wrap_difference,
 )
-from .problem import BallOnPalmProblem, ProblemError
-from .solution import Solution, SolverStats, Status, Trajectory
-from .surfaces import rotation_from_vector
+from ocp.transcription.collocation import WarmStart, hermite_sample
 
 __all__ = [
     "NU",
@@ -119,13 +114,13 @@ def certify(problem: BallOnPalmProblem, t_nodes: FloatArray, X: FloatArray, U0: 
 
 class BallOnPalmPlanner:
     """Plans an object rolled on the palm with the grasp pipeline (NLPs cached per
-    structure in its :class:`~ocp.manipulation.ManipulationPlanner`)."""
+    structure in its :class:`~ocp.solve.planner.ManipulationPlanner`)."""
 
     def __init__(self, n_reintegration_substeps: int = 8, max_iter_per_guess: int = 300,
                  compile_dir: Path | None = None,
                  general: ManipulationPlanner | None = None) -> None:
         #: The pipeline; with ``compile_dir`` its NLPs are compiled with gcc and cached
-        #: there (:mod:`ocp.compiled`): slower to build the first time, faster to solve.
+        #: there (:mod:`ocp.solve.compiled`): slower to build the first time, faster to solve.
         self.general = general or ManipulationPlanner(compile_dir,
                                                       max_iter_per_guess=max_iter_per_guess)
         self.n_sub = n_reintegration_substeps
@@ -240,6 +235,11 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
 
 
 _DEFAULT = BallOnPalmPlanner()
+
+
+def default_planner() -> BallOnPalmPlanner:
+    """The process-wide planner (its pipeline's NLP cache serves every kind of grasp)."""
+    return _DEFAULT
 
 
 def plan(problem: BallOnPalmProblem, warm_start: Solution | WarmStart | None = None

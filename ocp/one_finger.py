@@ -1,7 +1,7 @@
 """One flat fingertip rolling a ball on the palm: the paper's section 3.
 
 This is the paper's first case in its own vocabulary (a ball-on-palm problem ``base`` and
-one finger contact); the planning is :class:`~ocp.manipulation.ManipulationPlanner`'s, with
+one finger contact); the planning is :class:`~ocp.solve.planner.ManipulationPlanner`'s, with
 a palm and one fingertip as data.
 
 States: palm contact coordinates eta_p = (x, y, u_p, v_p, psi_p), fingertip contact
@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .collocation import NlpPoint, WarmStart
-from .manipulation import (
+from ocp.solution import Status
+from ocp.solve.planner import (
     Fingertip,
     GraspSample,
     ManipulationPlanner,
@@ -37,8 +37,8 @@ from .manipulation import (
     Palm,
     fingertip_errors,
 )
-from .problem import DEFAULT_FINGER_CHART_ROTATION, BallOnPalmProblem, ProblemError
-from .solution import Status
+from ocp.spec.problem import DEFAULT_FINGER_CHART_ROTATION, BallOnPalmProblem, ProblemError
+from ocp.transcription.collocation import NlpPoint, WarmStart
 
 __all__ = ["FingerContact", "OneFingerPlanner", "OneFingerProblem", "OneFingerSolution"]
 
@@ -67,7 +67,7 @@ class OneFingerProblem:
     finger pressing on the ball."""
 
     base: BallOnPalmProblem
-    finger: Any  # ocp.finger.FingerModel
+    finger: Any  # ocp.robots.finger.FingerModel
     contact: FingerContact
     mu: float = 0.5
     #: Weights of the objective (scaled, dimensionless terms): palm contact effort has
@@ -140,7 +140,7 @@ class OneFingerSolution:
     def sample(self, t: FloatArray | list[float]) -> GraspSample:
         """The plan at any times in [0, duration] from the collocation polynomials: states
         (eta_p, eta_f, q) and inputs (w_p, w_f, q_dot) in the grasp's layout, the object's
-        pose (:meth:`ocp.manipulation.ManipulationSolution.sample`)."""
+        pose (:meth:`ocp.solve.planner.ManipulationSolution.sample`)."""
         if self.plan is None:
             raise ValueError("this plan has no collocation polynomials")
         return self.plan.sample(t)
@@ -176,7 +176,7 @@ def _rename(text: str) -> str:
 
 class OneFingerPlanner:
     """Direct-collocation planner for a palm + one finger grasp (the general
-    :class:`~ocp.manipulation.ManipulationPlanner` with that data; NLPs cached per
+    :class:`~ocp.solve.planner.ManipulationPlanner` with that data; NLPs cached per
     structure)."""
 
     def __init__(self, general: ManipulationPlanner | None = None) -> None:

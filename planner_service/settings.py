@@ -18,7 +18,7 @@
 
 ``DEXROLL_COMPILE_DIR``: when set, each finger structure's NLP functions are generated as
 C, compiled with gcc and kept there as shared libraries that every worker and later service
-loads (``ocp.compiled``): a few seconds of gcc per structure the first time, in a
+loads (``ocp.solve.compiled``): a few seconds of gcc per structure the first time, in a
 background thread of the worker while the virtual machine solves its requests; the
 compiled solver takes over from the first request after the compile (IPOPT ~40 % faster on
 experiment 1). Without gcc the workers go on with the virtual machine. Ball-on-palm NLPs

@@ -16,15 +16,15 @@ from ocp.ball_on_palm import (
     model_for,
     object_pose,
 )
-from ocp.problem import (
+from ocp.geometry.surfaces import rotation_from_vector
+from ocp.solution import Solution, Status, Trajectory
+from ocp.spec.problem import (
     CONTACT_COORDS,
     BallOnPalmProblem,
     ObjectSpec,
     SolverOptions,
     ViaPoint,
 )
-from ocp.solution import Solution, Status, Trajectory
-from ocp.surfaces import rotation_from_vector
 
 RHO = 0.025
 SPHERE = ObjectSpec("sphere", (RHO,))
@@ -302,7 +302,7 @@ def test_reintegration_over_the_horizon_is_the_intervals_chained() -> None:
     """The certificate's re-integration (one CasADi call over the horizon) is CVODES over
     each interval started where the previous one ended, never reset to the NLP's states:
     the same numbers as integrating interval by interval from Python."""
-    from ocp.collocation import quadratic_input, reintegrate
+    from ocp.transcription.collocation import quadratic_input, reintegrate, reintegrator
 
     rng = np.random.default_rng(3)
     n, n_sub = 7, 4
@@ -310,7 +310,7 @@ def test_reintegration_over_the_horizon_is_the_intervals_chained() -> None:
     U0, Um, U1 = (rng.normal(scale=0.02, size=(n, 2)) for _ in range(3))
     x0 = np.array([0.0, 0.0, 0.2, 0.1, 0.3])
     params = np.array([0.03])
-    F = model_for("sphere").reintegrator(n_sub)
+    F = reintegrator(model_for("sphere").dynamics, 5, 2, 1, n_sub)
     nodes, samples, inputs = reintegrate(F, x0, t_nodes, U0, Um, U1, params, n_sub)
     x, ref_nodes, ref_samples, ref_inputs = x0, [x0], [x0], [U0[0]]
     s = np.linspace(0.0, 1.0, n_sub + 1)[1:]

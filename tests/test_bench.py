@@ -19,7 +19,7 @@ from conftest import Server
 
 from dexroll_client.models import OneFingerRequest
 from ocp.ball_on_palm import object_pose
-from ocp.problem import ObjectSpec
+from ocp.spec.problem import ObjectSpec
 from planner_service import cli
 from planner_service.bench.command import run_bench
 from planner_service.bench.generators import GENERATORS

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from ocp.certificate import Certificate, Check, CheckKind
+from ocp.certify.certificate import Certificate, Check, CheckKind
 
 D, P = CheckKind.DISCRETISATION, CheckKind.PHYSICS
 

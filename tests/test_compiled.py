@@ -1,4 +1,4 @@
-"""Compiled NLP solvers (ocp.compiled): the same plans as CasADi's virtual machine, the
+"""Compiled NLP solvers (ocp.solve.compiled): the same plans as CasADi's virtual machine, the
 library compiled once per structure and found on disk by the next planner."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import pytest
 from helpers import assert_close
 
 from ocp.ball_on_palm import BallOnPalmPlanner
-from ocp.compiled import block_libraries
-from ocp.problem import BallOnPalmProblem, ObjectSpec
 from ocp.solution import Status
+from ocp.solve.compiled import block_libraries
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="no gcc")
 

@@ -1,4 +1,4 @@
-"""Laws of the rolling-contact kinematics (ocp/contact.py).
+"""Laws of the rolling-contact kinematics (ocp/geometry/contact.py).
 
 The central test integrates the contact coordinates with the rate equations and checks the
 physics on the rebuilt poses by finite differences in time, independently of the planner:
@@ -18,8 +18,8 @@ from helpers import assert_close
 from hypothesis import Phase, given, settings
 from hypothesis import strategies as st
 
-from ocp.contact import ContactPair, R_contact, R_psi, ball_on_plane_eq8, montana_eq3
-from ocp.surfaces import Ellipsoid, Plane, Sphere, Surface, rotation_from_vector
+from ocp.geometry.contact import ContactPair, R_contact, R_psi, ball_on_plane_eq8, montana_eq3
+from ocp.geometry.surfaces import Ellipsoid, Plane, Sphere, Surface, rotation_from_vector
 
 SETTINGS = settings(max_examples=50, deadline=None)
 #: For the integrated motions: no shrinking. A failing motion is reported as found (its

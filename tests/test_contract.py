@@ -28,10 +28,11 @@ import pytest
 from helpers import assert_close
 
 from ocp.ball_on_palm import BallOnPalmPlanner
-from ocp.certificate import CheckKind
-from ocp.grasp_solution import ManipulationSolution
-from ocp.hands import load_hand
-from ocp.manipulation import (
+from ocp.certify.certificate import CheckKind
+from ocp.one_finger import OneFingerPlanner
+from ocp.robots.hands import load_hand
+from ocp.solution import ManipulationSolution, Status
+from ocp.solve.planner import (
     DesiredMotion,
     ManipulationPlanner,
     ManipulationProblem,
@@ -40,9 +41,7 @@ from ocp.manipulation import (
     Tracking,
     hand_fingertips,
 )
-from ocp.one_finger import OneFingerPlanner
-from ocp.problem import BallOnPalmProblem, ObjectSpec, ViaPoint
-from ocp.solution import Status
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ViaPoint
 
 GENERAL = ManipulationPlanner()
 RHO = 0.025
@@ -127,7 +126,7 @@ def test_no_slip_and_no_spin_on_the_returned_trajectory(
     p = smp.object_position.reshape(k, 2, 3)
     omega_o, v_o = _twist(R, p, dt)
     mid = slice(1, None, 2)  # the grid's midpoints (nodes and midpoints alternate)
-    # the certificate's speed scale (ocp.certify), here from the returned grid
+    # the certificate's speed scale (ocp.certify.laws), here from the returned grid
     speed = max(float(np.max(np.abs(plan.object_velocity))) + RHO * float(
         np.max(np.abs(plan.object_angular_velocity))) + RHO * float(np.max(np.abs(plan.U))),
         1e-3)

@@ -11,7 +11,7 @@ import pinocchio as pin
 import pytest
 from helpers import assert_close
 
-from ocp.finger import (
+from ocp.robots.finger import (
     PAD_HALF_SIZE,
     PAPER_SEED,
     FingerModel,

@@ -33,8 +33,8 @@ from dexroll_client import (
     PlanStatus,
 )
 from dexroll_client.models import MAX_FINGER_JOINTS
-from ocp.finger import load_finger
 from ocp.one_finger import OneFingerProblem
+from ocp.robots.finger import load_finger
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE_FILE = ROOT / "examples" / "one_finger_roll.json"

@@ -1,9 +1,9 @@
-"""Laws of the generalised grasp angle and force closure (ocp/force_closure.py).
+"""Laws of the generalised grasp angle and force closure (ocp/geometry/force_closure.py).
 
 Force closure (Murray, Li & Sastry 1994, ch. 5, sections 5.2-5.3): G onto and an internal
 force strictly inside the friction cones. Phi* = min over internal forces of the largest
 angle between a contact force and the inward normal; force closure iff G onto and
-Phi* < atan(mu). Two contacts: Phi* = max(Phi_1, Phi_2) of the paper (ocp/grasp.py).
+Phi* < atan(mu). Two contacts: Phi* = max(Phi_1, Phi_2) of the paper (ocp/geometry/grasp.py).
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from helpers import assert_close
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import ocp.force_closure as fc
-from ocp.force_closure import (
+import ocp.geometry.force_closure as fc
+from ocp.geometry.force_closure import (
     PUSH_FLOOR,
     GraspQuality,
     grasp_matrix,
@@ -26,7 +26,7 @@ from ocp.force_closure import (
     grasp_quality,
     internal_force_residuals,
 )
-from ocp.grasp import grasp_angles_numeric
+from ocp.geometry.grasp import grasp_angles_numeric
 
 SETTINGS = settings(max_examples=40, deadline=None)
 

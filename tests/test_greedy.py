@@ -1,4 +1,4 @@
-"""Laws of the paper's own method (section 3) for one flat finger on a ball (ocp/greedy.py).
+"""Laws of the paper's own method (section 3) for one flat finger on a ball (ocp/methods/greedy.py).
 
 The test problem: the built-in finger with a 50 mm half-size pad, a 25 mm ball rolled
 10 mm along the palm's x in 2 s, the finger contact started 0.2 rad (11.5 deg) from the
@@ -20,10 +20,10 @@ import pytest
 from helpers import assert_close
 
 from ocp.ball_on_palm import BallOnPalmPlanner
-from ocp.contact import ContactPair
-from ocp.finger import load_finger
-from ocp.grasp import grasp_angles_numeric
-from ocp.greedy import (
+from ocp.geometry.contact import ContactPair
+from ocp.geometry.grasp import grasp_angles_numeric
+from ocp.geometry.surfaces import Plane, Sphere, rotation_from_vector
+from ocp.methods.greedy import (
     CLOSURE_TOL,
     DEFAULT_ROLLING_RATE,
     GreedyResult,
@@ -33,9 +33,9 @@ from ocp.greedy import (
     rotation_ellipse,
 )
 from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
-from ocp.problem import BallOnPalmProblem, ObjectSpec, ProblemError, ViaPoint
+from ocp.robots.finger import load_finger
 from ocp.solution import Solution
-from ocp.surfaces import Plane, Sphere, rotation_from_vector
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ProblemError, ViaPoint
 
 RHO = 0.025  # ball radius [m]
 U_F0 = 0.2  # initial tilt of the finger contact from the top of the ball [rad]

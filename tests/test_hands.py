@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 from helpers import assert_close
 
-from ocp.finger import (
+from ocp.robots.finger import (
     PAD_HALF_SIZE,
     FingerModel,
     _reduce_to_tip_chain,
@@ -18,7 +18,7 @@ from ocp.finger import (
     inverse_kinematics,
     load_finger,
 )
-from ocp.hands import (
+from ocp.robots.hands import (
     HAND_NAMES,
     NOMINAL_SEED,
     Hand,
@@ -230,7 +230,7 @@ def test_grasp_poses_move_rigidly_with_the_ball(hand: Hand) -> None:
 
 
 def test_every_finger_reaches_the_sweep_of_rotated_and_moved_balls(hand: Hand) -> None:
-    """The design claim of ocp.hands: +-30 deg about any axis, +-10 mm, all in reach."""
+    """The design claim of ocp.robots.hands: +-30 deg about any axis, +-10 mm, all in reach."""
     sweeps = reach_sweep(hand)
     assert len(sweeps) == hand.n_fingers
     for s in sweeps:

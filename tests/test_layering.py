@@ -25,7 +25,8 @@ def test_ocp_sources_never_import_planner_service() -> None:
 
 
 def test_importing_ocp_loads_no_service_module() -> None:
-    code = ("import sys, ocp.ball_on_palm, ocp.contact, ocp.surfaces, ocp.collocation;"
+    code = ("import sys, ocp.ball_on_palm, ocp.geometry.contact, ocp.geometry.surfaces, "
+            "ocp.transcription.collocation;"
             "bad = [m for m in sys.modules if m.split('.')[0] in "
             "('planner_service', 'fastapi', 'uvicorn')]; print(bad); sys.exit(bool(bad))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -37,7 +38,7 @@ def test_wire_statuses_and_limits_match_the_core() -> None:
     """The core and the wire contract cannot import each other; their shared vocabulary
     (plan statuses, request limits) is pinned here instead."""
     import dexroll_client.models as wire
-    import ocp.problem as core
+    import ocp.spec.problem as core
     from ocp.solution import Status
 
     assert {s.value for s in Status} == {s.value for s in wire.PlanStatus}
@@ -101,3 +102,70 @@ def test_only_the_planners_touch_the_core() -> None:
     offenders = _offenders("api", ("ocp",)) + _offenders("jobs", ("ocp",)) \
         + _offenders("", ("ocp",))
     assert not offenders
+
+
+# -- the core's own layers -------------------------------------------------------------------
+#
+# The data flow in the folder names: geometry (surfaces, contact kinematics, rotations,
+# grasp geometry) and robots (fingers, hands) at the bottom; spec (the object, its contacts,
+# the motion, the problems) on them; transcription (collocation, parameters, the grasp
+# model, the NLP from blocks); certify (the certificate's laws; its types,
+# certify.certificate, are a leaf that every layer may use and that imports nothing of the
+# core); the solution; solve (IPOPT, guesses and strategies, the pipeline); the front ends
+# (ball_on_palm, one_finger) on the pipeline; methods (greedy) on everything. Each layer
+# imports only the layers listed for it (and itself).
+
+CORE_LAYERS: dict[str, set[str]] = {
+    "geometry": set(),
+    "robots": {"geometry"},
+    "spec": {"geometry", "robots", "certify.certificate"},
+    "transcription": {"geometry", "robots", "spec", "certify.certificate"},
+    "certify": {"geometry", "robots", "spec", "transcription"},
+    "solution": {"geometry", "spec", "transcription", "certify.certificate"},
+    "solve": {"geometry", "robots", "spec", "transcription", "certify", "solution"},
+    "ball_on_palm": {"geometry", "spec", "transcription", "certify", "solution", "solve"},
+    "one_finger": {"geometry", "robots", "spec", "transcription", "solution", "solve"},
+    "methods": {"geometry", "robots", "spec", "transcription", "certify", "solution", "solve",
+                "ball_on_palm", "one_finger"},
+}
+
+
+def _layer(module: str) -> str:
+    """The layer of an ``ocp`` module: its subpackage, or the top-level module's name;
+    ``certify.certificate`` (the certificate's types) is a layer of its own."""
+    parts = module.split(".")[1:]
+    if parts[:2] == ["certify", "certificate"]:
+        return "certify.certificate"
+    return parts[0] if parts else ""
+
+
+def test_the_core_imports_only_down_its_layers() -> None:
+    offenders = []
+    for path in OCP.rglob("*.py"):
+        module = ".".join(path.relative_to(OCP.parent).with_suffix("").parts)
+        layer = _layer(module.removesuffix(".__init__"))
+        if layer in ("", "__init__"):
+            continue  # the package's public API re-exports every layer
+        # the certificate's types: a leaf that every layer may use
+        allowed = CORE_LAYERS.get(layer, set()) | {layer}
+        if layer != "certify.certificate":
+            allowed |= {"certify.certificate"}
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                assert node.level == 0, f"{module}: relative import of {node.module}"
+                names = [node.module]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            for name in names:
+                if name.split(".")[0] == "ocp" and name != "ocp" and \
+                        _layer(name) not in allowed:
+                    offenders.append(f"{module} ({layer}) imports {name}")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_every_core_module_is_in_a_layer() -> None:
+    layers = {_layer(".".join(p.relative_to(OCP.parent).with_suffix("").parts))
+              for p in OCP.rglob("*.py") if p.name != "__init__.py" or p.parent != OCP}
+    assert layers - {"", "__init__"} <= set(CORE_LAYERS) | {"certify.certificate"}, layers

@@ -16,9 +16,22 @@ import pytest
 from helpers import assert_close
 
 from ocp.ball_on_palm import object_pose
-from ocp.finger import DEFAULT_BASE_POSITION, load_finger
-from ocp.grasp import grasp_angles_numeric
-from ocp.manipulation import (
+from ocp.geometry.grasp import grasp_angles_numeric
+from ocp.geometry.rotations import (
+    log_rotation as _log_rotation,
+)
+from ocp.geometry.rotations import (
+    quaternion_matrix,
+    quaternion_rate_sym,
+    quaternion_rotation_sym,
+    quaternion_wxyz,
+    rotation_angle_between,
+)
+from ocp.geometry.surfaces import rotation_from_vector
+from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
+from ocp.robots.finger import DEFAULT_BASE_POSITION, load_finger
+from ocp.solution import Status
+from ocp.solve.planner import (
     DesiredMotion,
     Fingertip,
     ManipulationPlanner,
@@ -29,19 +42,7 @@ from ocp.manipulation import (
     Palm,
     Tracking,
 )
-from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
-from ocp.problem import BallOnPalmProblem, ObjectSpec, ProblemError
-from ocp.rotations import (
-    log_rotation as _log_rotation,
-)
-from ocp.rotations import (
-    quaternion_matrix,
-    quaternion_rate_sym,
-    quaternion_rotation_sym,
-    rotation_angle_between,
-)
-from ocp.solution import Status, quaternion_wxyz
-from ocp.surfaces import rotation_from_vector
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ProblemError
 
 RHO = 0.025
 OBJ = ObjectSpec("sphere", (RHO,))
@@ -247,12 +248,12 @@ def test_one_finger_on_palm_is_unchanged_by_the_generalisation(
     IPOPT's barrier strategy of that time (adaptive from IPOPT's default mu; the project
     now starts a monotone barrier at 1e-3, which converges to the same optimum within
     IPOPT's tolerance but not to these digits)."""
-    import ocp.nlp_blocks
+    import ocp.solve.ipopt
 
     # one transcription for every grasp: the palm plan that seeds the guess too
-    then = {k: v for k, v in ocp.nlp_blocks.IPOPT_OPTIONS.items() if k != "ipopt.mu_init"}
+    then = {k: v for k, v in ocp.solve.ipopt.IPOPT_OPTIONS.items() if k != "ipopt.mu_init"}
     then["ipopt.mu_strategy"] = "adaptive"
-    monkeypatch.setattr(ocp.nlp_blocks, "IPOPT_OPTIONS", then)
+    monkeypatch.setattr(ocp.solve.ipopt, "IPOPT_OPTIONS", then)
     planner = ManipulationPlanner()
     ref = np.load(DATA / "one_finger_roll_30c6ac4.npz")
     problem = one_finger_roll()
@@ -306,8 +307,8 @@ def test_palm_fields_are_named_under_palm() -> None:
 
 @pytest.fixture(scope="module")
 def three() -> tuple[ManipulationProblem, ManipulationSolution]:
-    from ocp.hands import load_hand
-    from ocp.manipulation import hand_fingertips
+    from ocp.robots.hands import load_hand
+    from ocp.solve.planner import hand_fingertips
 
     hand = load_hand("three_finger")
     start = ObjectPose(position=hand.nominal_object_position)
@@ -327,7 +328,7 @@ def test_three_fingers_turn_the_ball_in_force_closure(
     the motion tracked within the tolerances; and force closure at every sample by the
     generalised grasp angle recomputed from the returned contacts (grasp map onto, a
     pushing internal force strictly inside every cone)."""
-    from ocp.force_closure import grasp_qualities
+    from ocp.geometry.force_closure import grasp_qualities
 
     problem, plan = three
     assert plan.status is Status.SOLVED, plan.message

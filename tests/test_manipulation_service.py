@@ -34,9 +34,9 @@ from dexroll_client import (
     PlanRequest,
     PlanStatus,
 )
-from ocp.hands import load_hand
-from ocp.manipulation import ManipulationProblem
-from ocp.surfaces import rotation_from_vector
+from ocp.geometry.surfaces import rotation_from_vector
+from ocp.robots.hands import load_hand
+from ocp.solve.planner import ManipulationProblem
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE_FILE = ROOT / "examples" / "experiment2_two_fingers.json"
@@ -110,7 +110,7 @@ def test_wire_defaults_are_the_cores() -> None:
                  "pole_margin", "max_object_speed", "max_object_rate", "max_refinements"):
         assert ManipulationRequest.model_fields[name].default == core[name].default, name
     from dexroll_client.models import TrackingModel
-    from ocp.manipulation import Tracking
+    from ocp.solve.planner import Tracking
 
     for name, f in Tracking.__dataclass_fields__.items():
         assert TrackingModel.model_fields[name].default == f.default, name
@@ -336,8 +336,8 @@ def test_cli_names_the_bad_field_and_exits_2(tmp_path: Path) -> None:
 def test_a_diverged_plan_is_a_typed_result_without_nan() -> None:
     """A last iterate with NaN (IPOPT diverged) becomes a result with its typed status and
     no trajectory (JSON has no NaN), never an error of the service."""
-    from ocp.manipulation import ContactTrajectory, FingerTrajectory, ManipulationSolution
     from ocp.solution import Status
+    from ocp.solve.planner import ContactTrajectory, FingerTrajectory, ManipulationSolution
     from planner_service.planners.manipulation import result_from_manipulation_solution
 
     k = 3

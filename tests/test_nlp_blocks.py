@@ -1,8 +1,8 @@
-"""The block-assembled derivatives of the manipulation NLP (ocp.nlp_blocks) are the NLP's
-own: its constraint Jacobian and the Hessian of its Lagrangian equal CasADi's derivatives
-of the same (f, g) at random points, for every kind of grasp (a palm with via-points and a
-finger; two fingers tracking a motion; three fingers with internal forces), and the
-compiled NLP gives the same plan as the virtual machine's."""
+"""The block-assembled derivatives of the manipulation NLP (ocp.transcription.nlp_blocks)
+are the NLP's own: its constraint Jacobian and the Hessian of its Lagrangian equal
+CasADi's derivatives of the same (f, g) at random points, for every kind of grasp (a palm
+with via-points and a finger; two fingers tracking a motion; three fingers with internal
+forces), and the compiled NLP gives the same plan as the virtual machine's."""
 
 from __future__ import annotations
 
@@ -18,8 +18,10 @@ import pytest
 from helpers import assert_close
 from test_manipulation import OBJ, one_finger_roll, two_fingers
 
-from ocp.hands import load_hand
-from ocp.manipulation import (
+from ocp.one_finger import OneFingerPlanner
+from ocp.robots.hands import load_hand
+from ocp.solution import Status
+from ocp.solve.planner import (
     DesiredMotion,
     ManipulationPlanner,
     ManipulationProblem,
@@ -28,9 +30,7 @@ from ocp.manipulation import (
     Tracking,
     hand_fingertips,
 )
-from ocp.one_finger import OneFingerPlanner
-from ocp.problem import ViaPoint
-from ocp.solution import Status
+from ocp.spec.problem import ViaPoint
 
 
 def palm_with_via_points() -> ManipulationProblem:

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from helpers import assert_close
 
-from ocp.finger import load_finger
 from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem, OneFingerSolution
-from ocp.problem import BallOnPalmProblem, ObjectSpec, ProblemError
+from ocp.robots.finger import load_finger
 from ocp.solution import Status
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ProblemError
 
 RHO = 0.025
 FINGER = load_finger()
@@ -167,8 +167,8 @@ def test_a_grid_too_coarse_for_a_fast_regrasp_is_refined_until_certified() -> No
 def test_the_finger_chart_has_one_default_in_the_library_and_on_the_wire() -> None:
     """A request that leaves out the finger contact's chart gets the library's default."""
     from dexroll_client.models import FingerContactModel
-    from ocp.manipulation import Fingertip
-    from ocp.problem import DEFAULT_FINGER_CHART_ROTATION
+    from ocp.solve.planner import Fingertip
+    from ocp.spec.problem import DEFAULT_FINGER_CHART_ROTATION
 
     wire = FingerContactModel.model_validate({"initial": {"x_f": 0.0, "y_f": 0.0, "u_f": 0.0,
                                                           "v_f": 0.0, "psi_f": 0.0}})

@@ -7,7 +7,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from ocp.parameters import Parameters
+from ocp.transcription.parameters import Parameters
 
 DECL = Parameters.of(shape=(2, 1), goal=(5, 1), vias=(5, 3), Pd=(3, 0))
 

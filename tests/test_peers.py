@@ -20,8 +20,8 @@ from helpers import assert_close
 
 from dexroll_client.models import BallOnPalmRequest
 from ocp.ball_on_palm import BallOnPalmPlanner, wrap_difference
-from ocp.problem import BallOnPalmProblem
 from ocp.solution import Solution, Status
+from ocp.spec.problem import BallOnPalmProblem
 from planner_service.bench import peers
 from planner_service.planners import to_problem
 

@@ -1,4 +1,4 @@
-"""Laws of the parameterised surfaces (ocp/surfaces.py).
+"""Laws of the parameterised surfaces (ocp/geometry/surfaces.py).
 
 Every expected value is a closed form or an independent numpy computation from the chart,
 never a number copied from a run. Conventions: docs/conventions.md.
@@ -13,7 +13,7 @@ from helpers import assert_close
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ocp.surfaces import (
+from ocp.geometry.surfaces import (
     Chart,
     Ellipsoid,
     Plane,
@@ -398,7 +398,7 @@ def test_ellipsoid_chart_rotated_off_its_axis_is_rejected() -> None:
         Chart.of(Ellipsoid, [0.03, 0.05], [np.pi / 2, 0.0, 0.0])
     with pytest.raises(ValueError, match="normal"):
         Chart.of(Plane, [], [0.3, 0.0, 0.0])
-    from ocp.problem import BallOnPalmProblem, ObjectSpec
+    from ocp.spec.problem import BallOnPalmProblem, ObjectSpec
 
     bad = BallOnPalmProblem(object=ObjectSpec("ellipsoid", (0.03, 0.05), (np.pi / 2, 0, 0)),
                             initial=(0, 0, 0, 0, 0), goal={"x": 0.01}, duration=1.0)

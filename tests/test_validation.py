@@ -11,7 +11,7 @@ from pydantic import ValidationError
 
 from dexroll_client.models import BallOnPalmRequest
 from ocp.ball_on_palm import BallOnPalmPlanner
-from ocp.problem import BallOnPalmProblem, ObjectSpec, ProblemError, ViaPoint
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ProblemError, ViaPoint
 from planner_service.planners import to_problem, validation_errors
 
 GOOD = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)), initial=(0, 0, 0, 0, 0),

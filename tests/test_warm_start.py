@@ -37,8 +37,8 @@ from dexroll_client import (
     PlanStatus,
     WarmStartModel,
 )
-from ocp.collocation import NlpPoint, WarmStart
-from ocp.manipulation import ManipulationProblem
+from ocp.solve.planner import ManipulationProblem
+from ocp.transcription.collocation import NlpPoint, WarmStart
 from planner_service.api.submission import resolve_warm_start, submission_errors
 from planner_service.cli import main as cli_main
 from planner_service.jobs.store import Store

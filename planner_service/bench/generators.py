@@ -39,8 +39,8 @@ from typing import Any
 import numpy as np
 
 from ocp.ball_on_palm import contact_coordinates, object_pose
-from ocp.problem import CONTACT_COORDS, ObjectSpec
-from ocp.surfaces import rotation_from_vector
+from ocp.geometry.surfaces import rotation_from_vector
+from ocp.spec.problem import CONTACT_COORDS, ObjectSpec
 
 __all__ = ["GENERATORS", "Draw", "GeneratorError", "random_rotation"]
 

@@ -26,7 +26,7 @@ with CVODES from the initial state, the rolling laws checked along that motion:
 
 ``drake``
     pydrake's ``DirectCollocation`` with Drake's ``IpoptSolver``, for the sphere (the
-    paper's eq. 8, :func:`ocp.contact.ball_on_plane_eq8`, typed in ``pydrake.symbolic`` as
+    paper's eq. 8, :func:`ocp.geometry.contact.ball_on_plane_eq8`, typed in ``pydrake.symbolic`` as
     a ``SymbolicVectorSystem``). The system is written in the project's scaled variables
     (state eta / (L, L, 1, 1, 1), input w / (L / T), time in s), so that IPOPT's tolerances
     mean the same. Mapping:
@@ -104,13 +104,13 @@ from ocp.ball_on_palm import (
     goal_errors,
     model_for,
 )
-from ocp.certificate import Certificate
-from ocp.collocation import left_input_columns, node_times
-from ocp.ipopt import IPOPT_OPTIONS
-from ocp.palm import guess_loops, reference_input, simulate_guess
-from ocp.palm import rotation_symmetric as _rotation_symmetric
-from ocp.problem import CONTACT_COORDS, PERIODIC, BallOnPalmProblem
+from ocp.certify.certificate import Certificate
 from ocp.solution import Status, status_from_ipopt
+from ocp.solve.guesses import guess_loops, reference_input, simulate_guess
+from ocp.solve.guesses import rotation_symmetric as _rotation_symmetric
+from ocp.solve.ipopt import IPOPT_OPTIONS
+from ocp.spec.problem import CONTACT_COORDS, PERIODIC, BallOnPalmProblem
+from ocp.transcription.collocation import left_input_columns, node_times
 from planner_service.convert import to_problem
 
 __all__ = ["GOAL_TOLERANCE", "PEER_METHODS", "PeerOutcome", "available", "compare"]
@@ -196,8 +196,7 @@ def _first_guess(problem: BallOnPalmProblem, grid: _Grid
     ``U`` has the project's input columns (an incoming and an outgoing column at each
     via-point node); only the grid layout of the NLP is read by the guess functions.
     """
-    model = model_for(problem.object.shape)
-    return simulate_guess(model, problem, grid.t_nodes,
+    return simulate_guess(problem, grid.t_nodes,
                           reference_input(problem, guess_loops(problem)[0]), grid.left_cols,
                           grid.right_cols, len(grid.t_nodes) - 1 + len(grid.structure.segments))
 
@@ -412,7 +411,7 @@ def drake(request: BallOnPalmRequest) -> PeerOutcome:
     u, psi = s[2], s[4]
     w1, w2 = u_scale * q[0], u_scale * q[1]
     c, sn = cos(psi), sin(psi)
-    # eq. 8 (ocp.contact.ball_on_plane_eq8), divided by the state scale
+    # eq. 8 (ocp.geometry.contact.ball_on_plane_eq8), divided by the state scale
     eta_dot = [w1, w2, (c * w1 - sn * w2) / rho, -(sn * w1 + c * w2) / (rho * cos(u)),
                tan(u) * (sn * w1 + c * w2) / rho]
     system = SymbolicVectorSystem(state=s, input=q,

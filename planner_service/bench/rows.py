@@ -212,7 +212,7 @@ def run_unit(unit: Unit) -> dict[str, Any]:
     peer; the row. Never raises: a failure is a row with status ``error``."""
     from pydantic import ValidationError
 
-    from ocp.problem import ProblemError
+    from ocp.spec.problem import ProblemError
     from planner_service.convert import REQUEST, request_errors, solve, validation_errors
 
     t0 = time.perf_counter()

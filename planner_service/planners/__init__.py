@@ -19,7 +19,7 @@ from pydantic import TypeAdapter
 
 from dexroll_client.models import AnyPlanResult, PlanRequest
 from ocp.ball_on_palm import BallOnPalmPlanner
-from ocp.problem import ProblemError
+from ocp.spec.problem import ProblemError
 
 from .ball_on_palm import BallOnPalmAdapter
 from .base import PlannerAdapter

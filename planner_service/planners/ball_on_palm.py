@@ -18,8 +18,8 @@ from dexroll_client.models import (
     TrajectoryModel,
 )
 from ocp.ball_on_palm import plan
-from ocp.problem import BallOnPalmProblem, ProblemError, ViaPoint
 from ocp.solution import Solution, Trajectory
+from ocp.spec.problem import BallOnPalmProblem, ProblemError, ViaPoint
 
 from .base import PlannerAdapter
 from .cache import FingerCache, Planners

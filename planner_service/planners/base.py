@@ -22,7 +22,7 @@ from dexroll_client.models import (
     PlanResult,
     PlanStatus,
 )
-from ocp.problem import ProblemError
+from ocp.spec.problem import ProblemError
 
 from .cache import FingerCache, Planners
 from .columns import ColumnNames, warm_start_errors

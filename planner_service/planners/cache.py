@@ -12,12 +12,12 @@ import numpy as np
 
 from dexroll_client.models import MAX_FINGER_JOINTS, FingerModelSpec, HandModel
 from ocp.ball_on_palm import BallOnPalmPlanner
-from ocp.finger import FingerModel, load_finger
-from ocp.hands import Hand, load_hand
-from ocp.manipulation import ManipulationPlanner
+from ocp.geometry.surfaces import rotation_from_vector
 from ocp.one_finger import OneFingerPlanner
-from ocp.problem import ProblemError
-from ocp.surfaces import rotation_from_vector
+from ocp.robots.finger import FingerModel, load_finger
+from ocp.robots.hands import Hand, load_hand
+from ocp.solve.planner import ManipulationPlanner
+from ocp.spec.problem import ProblemError
 
 __all__ = ["FINGERS", "FingerCache", "Planners", "hand_finger_name"]
 
@@ -26,7 +26,7 @@ class FingerCache:
     """A process's finger models, hands and finger planners, kept together.
 
     The planners cache their NLPs per finger object, so the same request finger (or hand)
-    must map to the same :class:`~ocp.finger.FingerModel` objects from job to job (cached
+    must map to the same :class:`~ocp.robots.finger.FingerModel` objects from job to job (cached
     here by URDF text, tip frame, mount and pad size; hands by name and mounts) for its NLP
     to be reused. The one-finger planner and the manipulation planner share one NLP cache
     (the one-finger planner is the general one with one finger's data). With more than
@@ -40,7 +40,7 @@ class FingerCache:
         self.max_fingers = max_fingers
         #: where the finger planners compile and cache their NLPs (None: not compiled), and
         #: whether in a background thread while the virtual machine solves
-        #: (:class:`ocp.manipulation.ManipulationPlanner`)
+        #: (:class:`ocp.solve.planner.ManipulationPlanner`)
         self.compile_dir = compile_dir
         self.background = background
         self.lock = threading.RLock()

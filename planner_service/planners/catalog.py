@@ -20,9 +20,9 @@ from dexroll_client.models import (
     ModelCatalog,
     ObjectInfo,
 )
-from ocp.manipulation import hand_fingertips
-from ocp.solution import quaternion_wxyz
-from ocp.surfaces import SURFACES
+from ocp.geometry.rotations import quaternion_wxyz
+from ocp.geometry.surfaces import SURFACES
+from ocp.solve.planner import hand_fingertips
 
 from .cache import FingerCache, hand_finger_name
 

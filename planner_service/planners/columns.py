@@ -3,7 +3,7 @@
 A result's ``collocation`` block is the core solution's ``warm_start`` (states and inputs
 at the collocation points) with every column named (each adapter's
 ``collocation_names``); a request's inline ``warm_start`` becomes an
-:class:`ocp.collocation.WarmStart` for the planner (a ``job_id`` is the service's to
+:class:`ocp.transcription.collocation.WarmStart` for the planner (a ``job_id`` is the service's to
 resolve before the request gets here).
 """
 
@@ -14,8 +14,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from dexroll_client.models import CollocationModel, NlpPointModel, PlanRequest
-from ocp.collocation import NlpPoint, WarmStart
-from ocp.problem import ProblemError
+from ocp.spec.problem import ProblemError
+from ocp.transcription.collocation import NlpPoint, WarmStart
 
 from .common import rows
 from .fields import FieldErrors
@@ -37,7 +37,7 @@ ColumnNames = tuple[list[str], list[str]]
 BALL_ON_PALM_STATES = ("x", "y", "u", "v", "psi")
 BALL_ON_PALM_INPUTS = ("w_x", "w_y")
 #: Columns of a free object (no palm): position and quaternion (w, x, y, z); velocity (palm
-#: frame) and angular velocity in the object's own frame (ocp.manipulation._quat_rate_sym).
+#: frame) and angular velocity in the object's own frame (ocp.solve.planner._quat_rate_sym).
 _FREE_OBJECT_STATES = ("object.position.x", "object.position.y", "object.position.z",
                        "object.orientation.w", "object.orientation.x",
                        "object.orientation.y", "object.orientation.z")
@@ -47,7 +47,7 @@ _FREE_OBJECT_INPUTS = ("object.velocity.x", "object.velocity.y", "object.velocit
 
 
 def grasp_names(palm: bool, fingers: Sequence[tuple[str, Sequence[str]]]) -> ColumnNames:
-    """(state names, input names) of the general planner's layout (``ocp.manipulation``):
+    """(state names, input names) of the general planner's layout (``ocp.solve.planner``):
     the object block (the palm contact, or the free object's pose), then per fingertip
     (its contact name, its joint names) the contact coordinates and the joints."""
     if palm:

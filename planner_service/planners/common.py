@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from dexroll_client.models import ObjectModel, SolverModel
-from ocp.problem import ObjectSpec, SolverOptions
+from ocp.spec.problem import ObjectSpec, SolverOptions
 
 __all__ = ["all_finite", "finite_or_none", "object_spec", "rows", "solver_options"]
 

@@ -1,4 +1,4 @@
-"""The one-finger planner's greedy method: the paper's own (section 3, ``ocp.greedy``),
+"""The one-finger planner's greedy method: the paper's own (section 3, ``ocp.methods.greedy``),
 step by step, with no NLP and no initial guess."""
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ from dexroll_client.models import (
     OneFingerRequest,
     PlanStatus,
 )
-from ocp.collocation import WarmStart
-from ocp.greedy import GreedyResult, greedy_plan
+from ocp.methods.greedy import GreedyResult, greedy_plan
 from ocp.one_finger import OneFingerProblem
-from ocp.problem import ProblemError
+from ocp.spec.problem import ProblemError
+from ocp.transcription.collocation import WarmStart
 
 from .cache import FingerCache, Planners
 from .fields import FieldErrors

@@ -1,5 +1,5 @@
 """The manipulation planner: any grasp, an optional palm and one or more fingertips
-(``ocp.manipulation``), following a desired object motion and/or the palm's goals."""
+(``ocp.solve.planner``), following a desired object motion and/or the palm's goals."""
 
 from __future__ import annotations
 
@@ -21,9 +21,11 @@ from dexroll_client.models import (
     PlanStatus,
 )
 from ocp.ball_on_palm import object_pose
-from ocp.finger import FingerModel
-from ocp.hands import Hand
-from ocp.manipulation import (
+from ocp.geometry.rotations import quaternion_wxyz
+from ocp.geometry.surfaces import SURFACES
+from ocp.robots.finger import FingerModel
+from ocp.robots.hands import Hand
+from ocp.solve.planner import (
     DesiredMotion,
     Fingertip,
     ManipulationProblem,
@@ -33,9 +35,7 @@ from ocp.manipulation import (
     Palm,
     Tracking,
 )
-from ocp.problem import ObjectSpec, ProblemError, ViaPoint
-from ocp.solution import quaternion_wxyz
-from ocp.surfaces import SURFACES
+from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
 
 from .base import SOLVER_FIELDS, PlannerAdapter
 from .cache import FingerCache, Planners, hand_finger_name

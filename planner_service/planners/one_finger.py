@@ -1,6 +1,6 @@
 """The one-finger planner: a ball rolled on the palm with one fingertip pressing on it
 (``ocp.one_finger``), by direct collocation: the general planner
-(``ocp.manipulation``) with a palm and one fingertip named ``finger``.
+(``ocp.solve.planner``) with a palm and one fingertip named ``finger``.
 
 :class:`FingerAdapter` is what both of the one-finger planner's methods share (the
 request, the problem, its checks, the wire result); the greedy method is
@@ -24,11 +24,11 @@ from dexroll_client.models import (
     OneFingerRequest,
     PlanStatus,
 )
-from ocp.collocation import WarmStart
-from ocp.greedy import GreedyResult
+from ocp.geometry.rotations import quaternion_wxyz
+from ocp.methods.greedy import GreedyResult
 from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem, OneFingerSolution
-from ocp.problem import ProblemError
-from ocp.solution import quaternion_wxyz
+from ocp.spec.problem import ProblemError
+from ocp.transcription.collocation import WarmStart
 
 from .ball_on_palm import ball_on_palm_problem
 from .base import SOLVER_FIELDS, PlannerAdapter

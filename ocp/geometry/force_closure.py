@@ -5,7 +5,7 @@ Condition (Murray, Li & Sastry, *A Mathematical Introduction to Robotic Manipula
 closure if and only if the grasp map ``G`` is onto (surjective) and there is an *internal
 force* ``f`` (``G f = 0``) strictly inside the friction cones. For two soft-finger contacts
 this is Nguyen's (1988) condition that the segment between the contacts lies inside both
-cones, i.e. the paper's ``max(Phi_1, Phi_2) < atan(mu)`` (``ocp/grasp.py``).
+cones, i.e. the paper's ``max(Phi_1, Phi_2) < atan(mu)`` (``ocp/geometry/grasp.py``).
 
 Definitions (contacts ``i = 1..n``: points ``p_i``, *outward* unit object normals ``n_i``,
 one frame; a finger pushes along ``-n_i``, so its force ``f_i`` on the object must satisfy
@@ -59,8 +59,8 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .grasp import grasp_angles_numeric
-from .surfaces import safe_norm
+from ocp.geometry.grasp import grasp_angles_numeric
+from ocp.geometry.surfaces import safe_norm
 
 __all__ = [
     "PUSH_FLOOR",

@@ -1,6 +1,6 @@
 """The manipulation NLP from small blocks: per-point and per-interval CasADi functions.
 
-A grasp's direct-collocation NLP (:mod:`ocp.manipulation`) has the same few functions at
+A grasp's direct-collocation NLP (:mod:`ocp.solve.planner`) has the same few functions at
 every collocation point (closure, force closure, tracking: the finger's forward kinematics
 and the contact geometry) and in every interval (the Hermite-Simpson defects of the rolling
 equations, the effort and grasp terms of the objective). Written out in SX at every point,
@@ -25,49 +25,44 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from .collocation import HermiteSimpson, hermite_simpson_defects, target_residuals
-from .grasp import grasp_cosines
-from .ipopt import IPOPT_OPTIONS, StopCallback
-from .parameters import Parameters
-from .problem import PERIODIC
+from ocp.geometry.grasp import grasp_cosines
+from ocp.spec.problem import PERIODIC
+from ocp.transcription.collocation import HermiteSimpson, hermite_simpson_defects, target_residuals
+from ocp.transcription.parameters import Parameters
 
-__all__ = ["NLP", "BlockAssembler", "build_manipulation_nlp"]
+__all__ = ["BlockAssembler", "BlockNLP", "build_manipulation_nlp"]
 
 FloatArray = NDArray[np.float64]
 
 
 @dataclass
-class NLP:
-    """One grasp structure's NLP: the IPOPT solver and what the planner needs around it."""
+class BlockNLP:
+    """One grasp structure's NLP as functions: its variables' layout, parameters,
+    constraint bounds, and the problem with its block-assembled derivatives (the solver is
+    made from them by :func:`ocp.solve.ipopt.ipopt_solver`)."""
 
-    solver: ca.Function
-    stop: StopCallback
     hs: HermiteSimpson  # SX symbols of the grid: columns, pack/unpack of the states/inputs
     unpack: ca.Function
     pack: ca.Function
-    #: the parameter vector's declaration, by name (:class:`ocp.parameters.Parameters`)
+    #: the parameter vector's declaration, by name
+    #: (:class:`~ocp.transcription.parameters.Parameters`)
     params: Parameters
     lbg: FloatArray
     ubg: FloatArray
     build_time: float
     n_force: int  # contacts with internal-force variables (0 for two contacts)
     n_epigraph: int  # grasp-angle epigraph variables per point (0 for one contact)
-    #: the problem as a function (w, p) -> (f, g), and the options of ``solver`` (with the
-    #: block derivatives): what the warm-start solver is built from, on first use
+    #: the problem as a function (w, p) -> (f, g), its constraints' Jacobian and the
+    #: Hessian of its Lagrangian (upper triangle), assembled from the blocks
     oracle: ca.Function
-    options: dict[str, Any]
-    #: fingerprint of this NLP (structure, grid, fingers' models), for warm starts
-    fingerprint: str
-    warm_solver: ca.Function | None = None
-    #: whether ``solver`` runs compiled code (``compile_dir``)
-    compiled: bool = False
+    jac_g: ca.Function
+    hess_lag: ca.Function
 
 
 def _nz(M: Any) -> Any:
@@ -108,9 +103,9 @@ def _triplets(sp: ca.Sparsity) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
 
 def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, ...],
                            via_masks: tuple[tuple[bool, ...], ...], tracking: bool,
-                           force_regularisation: float, fingerprint: str,
-                           compile_dir: Path | None = None) -> NLP:
-    """The NLP of one grasp structure (``m``: its :class:`ocp.grasp_model.GraspModel`):
+                           force_regularisation: float) -> BlockNLP:
+    """The NLP of one grasp structure (``m``: its
+    :class:`~ocp.transcription.grasp_model.GraspModel`):
     variables ``w = (X, Xm, U, Um, S, Sm, F)`` (scaled states and inputs at
     nodes and midpoints, grasp epigraph at every point, internal forces of 3+ contacts),
     parameters ``p = (shape, seg_T, goal, vias, charts, weights, cone cosine, tracking
@@ -173,7 +168,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         add(ca.vertcat(c1 - dist * ccone_q, c2 - dist * ccone_q) / L, 0.0, math.inf)
         add(ca.vertcat(s - (1 - c1 / dist), s - (1 - c2 / dist)), 0.0, math.inf)
     elif nc >= 3:
-        from .force_closure import PUSH_FLOOR, internal_force_residuals
+        from ocp.geometry.force_closure import PUSH_FLOOR, internal_force_residuals
 
         eq, push, norms = internal_force_residuals(P, N, ca.reshape(fcol, 3, nc), L)
         add(eq, 0.0, 0.0)
@@ -370,21 +365,5 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         # a small grasp (the object on the palm alone): the mapped blocks expanded into
         # one SX graph each, whose calls cost less than the MX maps' at this size
         oracle, jac_g, hess_lag = oracle.expand(), jac_g.expand(), hess_lag.expand()
-    stop = StopCallback(nw, ng, int(p.numel()))
-    options = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
-               "ipopt.max_iter": 100_000, **IPOPT_OPTIONS, "iteration_callback": stop,
-               "error_on_fail": False, "jac_g": jac_g, "hess_lag": hess_lag}
-    solver = ca.nlpsol("manipulation", "ipopt", oracle, options)
-    compiled = False
-    if compile_dir is not None:
-        from .compiled import compiled_block_solver
-
-        try:
-            solver, options = compiled_block_solver(oracle, options, fingerprint,
-                                                    compile_dir)
-            compiled = True
-        except RuntimeError:  # no compiler, or it failed: the virtual machine solves
-            pass
-    return NLP(solver, stop, hs, unpack, pack, decl, np.array(lbg), np.array(ubg),
-               time.perf_counter() - t0, n_force, n_s, oracle, options, fingerprint,
-               compiled=compiled)
+    return BlockNLP(hs, unpack, pack, decl, np.array(lbg), np.array(ubg),
+                    time.perf_counter() - t0, n_force, n_s, oracle, jac_g, hess_lag)

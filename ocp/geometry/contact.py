@@ -19,7 +19,7 @@ from typing import Any
 
 import casadi as ca
 
-from .surfaces import Surface
+from ocp.geometry.surfaces import Surface
 
 __all__ = [
     "ContactPair",

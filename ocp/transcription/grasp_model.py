@@ -1,7 +1,7 @@
 """The CasADi functions of one grasp structure, assembled from its contacts.
 
 A grasp structure is the object's shape, its object block (a support, or the free object)
-and its fingers (:mod:`ocp.contacts`). :class:`GraspModel` builds, by looping over the
+and its fingers (:mod:`ocp.spec.contacts`). :class:`GraspModel` builds, by looping over the
 contacts (no case for any kind of contact here):
 
 * ``dynamics(x, u, params) -> x_dot``: every contact's rolling equations;
@@ -23,16 +23,16 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from .collocation import reintegrator, rk4_step
-from .contacts import (
+from ocp.geometry.rotations import vee
+from ocp.spec.contacts import (
     Contact,
     FingertipContact,
     ObjectBlock,
     SymbolicGrasp,
     grasp_contacts,
 )
-from .palm import model_for
-from .rotations import vee
+from ocp.spec.palm import model_for
+from ocp.transcription.collocation import reintegrator, rk4_step
 
 __all__ = ["GraspModel"]
 

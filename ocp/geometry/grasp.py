@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .surfaces import safe_norm
+from ocp.geometry.surfaces import safe_norm
 
 __all__ = ["cone_cosine", "force_angles", "grasp_angles_numeric", "grasp_cosines"]
 
@@ -66,7 +66,8 @@ def force_angles(points: FloatArray, normals: FloatArray
                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(Phi* (k,), per-contact force angles (k, n), grasp map onto (k,)) for contacts
     (k, n, 3) with the object's outward normals. Two contacts: the paper's grasp angles
-    in closed form; three or more: :func:`ocp.force_closure.grasp_qualities`; one (the object
+    in closed form; three or more: :func:`~ocp.geometry.force_closure.grasp_qualities`;
+    one (the object
     on the palm alone, no grasp): NaN angles, no force closure to certify."""
     n = points.shape[1]
     if n < 2:
@@ -76,7 +77,7 @@ def force_angles(points: FloatArray, normals: FloatArray
         ang = grasp_angles_numeric(points[:, 0], normals[:, 0], points[:, 1], normals[:, 1])
         onto = np.linalg.norm(points[:, 1] - points[:, 0], axis=1) > 0
         return ang.max(axis=1), ang, onto
-    from .force_closure import grasp_qualities  # (it imports this module)
+    from ocp.geometry.force_closure import grasp_qualities  # (it imports this module)
 
     qs = grasp_qualities(points, normals)
     return (np.array([q.angle for q in qs]), np.array([q.contact_angles for q in qs]),

@@ -9,13 +9,16 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, fields
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
 
-from .solution import Status
+from ocp.solution import Status
+from ocp.transcription.nlp_blocks import BlockNLP
 
-__all__ = ["IPOPT_OPTIONS", "IPOPT_WARM_OPTIONS", "StopCallback"]
+__all__ = ["IPOPT_OPTIONS", "IPOPT_WARM_OPTIONS", "NLP", "StopCallback", "ipopt_solver"]
 
 #: IPOPT settings shared by every structure. Constraint violation (goals, dynamics, in
 #: scaled units) must be tight; the optimality (dual) tolerance is looser because a pure
@@ -49,7 +52,7 @@ IPOPT_OPTIONS: dict[str, Any] = {
 }
 
 #: Added to :data:`IPOPT_OPTIONS` for a solve started from a previous primal-dual point
-#: (a warm start with :class:`~ocp.collocation.NlpPoint`): take the given multipliers,
+#: (a warm start with :class:`~ocp.transcription.collocation.NlpPoint`): take the given multipliers,
 #: start the barrier near the previous solution's, and do not push the point away from
 #: its active bounds. Measured on experiment 1 with its goal moved 2 mm: 6 iterations
 #: instead of 14 (docs/performance.md).
@@ -104,3 +107,46 @@ class StopCallback(ca.Callback):
             self.reason = Status.ITERATION_LIMIT
             return [1]
         return [0]
+
+
+@dataclass(kw_only=True)
+class NLP(BlockNLP):
+    """One grasp structure's NLP with its IPOPT solver: what the planner solves."""
+
+    solver: ca.Function
+    stop: StopCallback
+    #: the options of ``solver`` (with the block derivatives): what the warm-start solver
+    #: is built from, on first use
+    options: dict[str, Any]
+    #: fingerprint of this NLP (structure, grid, fingers' models), for warm starts
+    fingerprint: str
+    warm_solver: ca.Function | None = None
+    #: whether ``solver`` runs compiled code (``compile_dir``)
+    compiled: bool = False
+
+
+def ipopt_solver(block: BlockNLP, fingerprint: str, compile_dir: Path | None = None) -> NLP:
+    """IPOPT (:data:`IPOPT_OPTIONS`, a :class:`StopCallback`) on a block NLP, its functions
+    compiled and cached in ``compile_dir`` when given (:mod:`ocp.solve.compiled`; the virtual
+    machine when there is no compiler)."""
+    t0 = time.perf_counter()
+    nw, ng = block.pack.nnz_out(0), len(block.lbg)
+    stop = StopCallback(nw, ng, block.params.size)
+    options = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+               "ipopt.max_iter": 100_000, **IPOPT_OPTIONS, "iteration_callback": stop,
+               "error_on_fail": False, "jac_g": block.jac_g, "hess_lag": block.hess_lag}
+    solver = ca.nlpsol("manipulation", "ipopt", block.oracle, options)
+    compiled = False
+    if compile_dir is not None:
+        from ocp.solve.compiled import compiled_block_solver
+
+        try:
+            solver, options = compiled_block_solver(block.oracle, options, fingerprint,
+                                                    compile_dir)
+            compiled = True
+        except RuntimeError:  # no compiler, or it failed: the virtual machine solves
+            pass
+    parts = {f.name: getattr(block, f.name) for f in fields(BlockNLP)}
+    parts["build_time"] = block.build_time + time.perf_counter() - t0
+    return NLP(**parts, solver=solver, stop=stop, options=options, fingerprint=fingerprint,
+               compiled=compiled)

@@ -11,10 +11,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .problem import MAX_POSITION
-from .rotations import axis_angle_rotation, log_rotation, quaternion_matrix
-from .solution import quaternion_wxyz
-from .surfaces import rotation_from_vector
+from ocp.geometry.rotations import (
+    axis_angle_rotation,
+    log_rotation,
+    quaternion_matrix,
+    quaternion_wxyz,
+)
+from ocp.geometry.surfaces import rotation_from_vector
+from ocp.spec.problem import MAX_POSITION
 
 __all__ = ["DesiredMotion", "MotionStep", "ObjectPose", "Tracking"]
 

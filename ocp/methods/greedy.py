@@ -34,7 +34,7 @@ paper step by step over the time grid t_k = k dt, dt = duration / n_steps.
    velocity over the step, V_pf, is its numerical derivative: the secant twist from
    g_pf(t_k) to g_pf(t_k+1) (linear velocity of the frame's origin and angular velocity,
    both in palm coordinates, the row convention of
-   :meth:`~ocp.finger.FingerModel.frame_jacobian_pin`). Then
+   :meth:`~ocp.robots.finger.FingerModel.frame_jacobian_pin`). Then
    q_dot = pinv(J(q_k)) (V_pf + c e_k / dt) and q_k+1 = q_k + q_dot dt, with e_k the closure
    error at t_k (position; rotation vector, palm frame) between the contact-derived pose
    and Pinocchio's forward kinematics of q_k. The **closure correction** c
@@ -71,13 +71,13 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from .ball_on_palm import BallOnPalmPlanner, coordinate_error
-from .contact import ContactPair
-from .grasp import grasp_cosines
-from .one_finger import OneFingerPlanner, OneFingerProblem
-from .problem import CONTACT_COORDS, ProblemError
-from .solution import Solution
-from .surfaces import SURFACES, Plane, Surface, rotation_from_vector
+from ocp.ball_on_palm import BallOnPalmPlanner, coordinate_error
+from ocp.geometry.contact import ContactPair
+from ocp.geometry.grasp import grasp_cosines
+from ocp.geometry.surfaces import SURFACES, Plane, Surface, rotation_from_vector
+from ocp.one_finger import OneFingerPlanner, OneFingerProblem
+from ocp.solution import Solution
+from ocp.spec.problem import CONTACT_COORDS, ProblemError
 
 __all__ = [
     "CLOSURE_TOL",
@@ -422,7 +422,7 @@ def greedy_plan(
     pseudo-inverse, as in the paper). ``palm_plan`` reuses a ball-on-palm plan of
     ``problem.base``; ``planner`` supplies the initial grasp (IK, ``initial_grasp``).
 
-    Raises :class:`~ocp.problem.ProblemError` for an invalid problem or settings, an
+    Raises :class:`~ocp.spec.problem.ProblemError` for an invalid problem or settings, an
     initial grasp that is impossible, or a palm plan that failed.
     """
     t_start = time.perf_counter()

@@ -3,85 +3,37 @@
 The plan's inputs are re-integrated from its initial state with CVODES over the whole
 horizon (never reset to the NLP's states), and the re-integrated motion is checked at
 ``samples_per_interval`` points per interval: the re-integration defects at the nodes, the
-goals and via-points it reaches, each contact's own laws (:meth:`ocp.contacts.Contact.checks`:
+goals and via-points it reaches, each contact's own laws (:meth:`ocp.spec.contacts.Contact.checks`:
 slip, spin, touching, pads, joint limits, closure by Pinocchio), the tracking tolerances
-and force closure. The result is one :class:`~ocp.certificate.Certificate`.
+and force closure. The result is one :class:`~ocp.certify.certificate.Certificate`.
 
-How strict it is comes from a :class:`TolerancePolicy` (docs/conventions.md states both):
-:data:`GRASP_TOLERANCES` for grasps with fingers, :data:`PALM_TOLERANCES` for the object
-on the palm alone (the ball-on-palm planner's, tighter: its plans have no joints and its
-paths are checked at twice the density).
+How strict it is comes from the problem's :class:`~ocp.certify.certificate.TolerancePolicy`
+(docs/conventions.md states both): ``GRASP_TOLERANCES`` for grasps with fingers,
+``PALM_TOLERANCES`` for the object on the palm alone (the ball-on-palm planner's,
+tighter: its plans have no joints and its paths are checked at twice the density).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .certificate import Certificate, Check, CheckKind
-from .collocation import reintegrate
-from .contacts import CertificateContext
-from .grasp import force_angles
-from .rotations import rotation_angle_between
+from ocp.certify.certificate import Certificate, Check, CheckKind, TolerancePolicy
+from ocp.geometry.grasp import force_angles
+from ocp.geometry.rotations import rotation_angle_between
+from ocp.spec.contacts import CertificateContext
+from ocp.transcription.collocation import reintegrate
 
 if TYPE_CHECKING:
-    from .grasp_model import GraspModel
-    from .manipulation import ManipulationProblem
-    from .problem import SolverOptions
+    from ocp.spec.grasp import ManipulationProblem
+    from ocp.transcription.grasp_model import GraspModel
 
-__all__ = ["GRASP_TOLERANCES", "PALM_TOLERANCES", "TolerancePolicy", "certify_grasp"]
+__all__ = ["certify_grasp"]
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class TolerancePolicy:
-    """How strictly a plan is certified.
-
-    Re-integration defects: lengths max(``cert_position_tol``, ``length_defect_floor``) m,
-    angles and joints ``angle_defect_factor`` x ``cert_angle_tol`` rad; the goals of the
-    re-integrated motion the larger of the two. The support contact's slip and spin are
-    relative to a speed: ``support_speed = "motion"`` takes the grasp's motion speed scale
-    (max |v_obj| + L max |omega_obj| + L max |input|, and that over L for spin),
-    ``"input"`` the support contact's own input speed max |w| and the object's largest
-    angular speed max |omega_obj|; its height error is absolute (``support_height`` m) or,
-    with ``height_relative``, relative to the object's size.
-    """
-
-    name: str
-    samples_per_interval: int
-    length_defect_floor: float
-    angle_defect_factor: float
-    support_slip: float
-    support_spin: float
-    support_speed: str  # "motion" or "input"
-    support_height: float
-    height_relative: bool
-
-    def length_defect(self, o: SolverOptions) -> float:
-        return max(o.cert_position_tol, self.length_defect_floor)
-
-    def angle_defect(self, o: SolverOptions) -> float:
-        return self.angle_defect_factor * o.cert_angle_tol
-
-    def goal(self, o: SolverOptions) -> float:
-        return max(self.length_defect(o), self.angle_defect(o))
-
-
-#: Grasps with fingers (the general planner's tolerances).
-GRASP_TOLERANCES = TolerancePolicy("grasp", samples_per_interval=4, length_defect_floor=1e-5,
-                                   angle_defect_factor=10.0, support_slip=1e-8,
-                                   support_spin=1e-8, support_speed="motion",
-                                   support_height=1e-9, height_relative=False)
-#: The object on the palm alone (the ball-on-palm planner's tolerances).
-PALM_TOLERANCES = TolerancePolicy("palm", samples_per_interval=8, length_defect_floor=0.0,
-                                  angle_defect_factor=1.0, support_slip=1e-9,
-                                  support_spin=1e-9, support_speed="input",
-                                  support_height=1e-9, height_relative=True)
 
 
 def _wrapped(d: FloatArray, periodic: list[bool]) -> FloatArray:
@@ -99,7 +51,7 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, t_nodes: FloatArr
                   prm: FloatArray, policy: TolerancePolicy) -> Certificate:
     """The certificate of a plan given by its node states X and each interval's inputs
     (U0 at its start, Um at its midpoint, U1 at its end): see the module's doc."""
-    from .manipulation import support_goal_errors
+    from ocp.spec.grasp import support_goal_errors
 
     if not all(np.all(np.isfinite(a)) for a in (X, U0, Um, U1)):
         return Certificate.failed("the plan has non-finite states or inputs")

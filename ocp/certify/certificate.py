@@ -13,7 +13,7 @@ failure it reports, and the planners decide by kind (never by message text):
 * ``goal``: a goal or via-point missed.
 * ``numerics``: the plan could not be checked (non-finite values, CVODES gave up).
 
-Tolerances are set where each check is made (:mod:`ocp.contacts` for the contacts' laws,
+Tolerances are set where each check is made (:mod:`ocp.spec.contacts` for the contacts' laws,
 the planners for defects, goals and cones) and stated in docs/conventions.md.
 """
 
@@ -23,9 +23,21 @@ import math
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any
+from typing import Any, Protocol
 
-__all__ = ["Certificate", "Check", "CheckKind"]
+
+class SolverOptions(Protocol):
+    """The certificate's tolerances a problem's solver options carry
+    (:class:`ocp.spec.problem.SolverOptions`)."""
+
+    @property
+    def cert_position_tol(self) -> float: ...
+
+    @property
+    def cert_angle_tol(self) -> float: ...
+
+__all__ = ["GRASP_TOLERANCES", "PALM_TOLERANCES", "Certificate", "Check", "CheckKind",
+           "TolerancePolicy"]
 
 
 class CheckKind(StrEnum):
@@ -159,3 +171,49 @@ def _worse(a: Check, b: Check) -> bool:
     if a.lower_bound:
         return not a.value >= b.value
     return not a.value <= b.value
+
+
+@dataclass(frozen=True)
+class TolerancePolicy:
+    """How strictly a plan is certified.
+
+    Re-integration defects: lengths max(``cert_position_tol``, ``length_defect_floor``) m,
+    angles and joints ``angle_defect_factor`` x ``cert_angle_tol`` rad; the goals of the
+    re-integrated motion the larger of the two. The support contact's slip and spin are
+    relative to a speed: ``support_speed = "motion"`` takes the grasp's motion speed scale
+    (max |v_obj| + L max |omega_obj| + L max |input|, and that over L for spin),
+    ``"input"`` the support contact's own input speed max |w| and the object's largest
+    angular speed max |omega_obj|; its height error is absolute (``support_height`` m) or,
+    with ``height_relative``, relative to the object's size.
+    """
+
+    name: str
+    samples_per_interval: int
+    length_defect_floor: float
+    angle_defect_factor: float
+    support_slip: float
+    support_spin: float
+    support_speed: str  # "motion" or "input"
+    support_height: float
+    height_relative: bool
+
+    def length_defect(self, o: SolverOptions) -> float:
+        return max(o.cert_position_tol, self.length_defect_floor)
+
+    def angle_defect(self, o: SolverOptions) -> float:
+        return self.angle_defect_factor * o.cert_angle_tol
+
+    def goal(self, o: SolverOptions) -> float:
+        return max(self.length_defect(o), self.angle_defect(o))
+
+
+#: Grasps with fingers (the general planner's tolerances).
+GRASP_TOLERANCES = TolerancePolicy("grasp", samples_per_interval=4, length_defect_floor=1e-5,
+                                   angle_defect_factor=10.0, support_slip=1e-8,
+                                   support_spin=1e-8, support_speed="motion",
+                                   support_height=1e-9, height_relative=False)
+#: The object on the palm alone (the ball-on-palm planner's tolerances).
+PALM_TOLERANCES = TolerancePolicy("palm", samples_per_interval=8, length_defect_floor=0.0,
+                                  angle_defect_factor=1.0, support_slip=1e-9,
+                                  support_spin=1e-9, support_speed="input",
+                                  support_height=1e-9, height_relative=True)

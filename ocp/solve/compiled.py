@@ -4,7 +4,8 @@ An IPOPT solver built from CasADi expressions evaluates its functions (constrain
 Jacobian, the Hessian of the Lagrangian) in CasADi's virtual machine. For a structure that
 is solved many times the same functions can be generated as C, compiled once into a shared
 library and loaded with ``nlpsol(name, "ipopt", library)``: for the block NLPs of
-:mod:`ocp.nlp_blocks` (every grasp, the object on the palm alone included) the problem's
+:mod:`ocp.transcription.nlp_blocks` (every grasp, the object on the palm alone included)
+the problem's
 functions and the block derivatives each make a library (IPOPT ~40 % faster on experiment
 1, docs/performance.md). The compile takes seconds, so it is an option, and the libraries
 are kept in ``cache_dir`` under names made from the structure's key, the generated code's
@@ -168,7 +169,8 @@ def compiled_block_solver(oracle: ca.Function, options: dict[str, Any], key: str
                           compiler: str = "gcc") -> tuple[ca.Function, dict[str, Any]]:
     """An IPOPT solver of the problem ``oracle`` ((x, p) -> (f, g)) whose derivatives are
     the functions ``options["jac_g"]`` and ``options["hess_lag"]`` (the block-assembled ones
-    of :mod:`ocp.nlp_blocks`), everything compiled: the problem's own functions (objective,
+    of :mod:`ocp.transcription.nlp_blocks`), everything compiled: the problem's own functions
+    (objective,
     constraints, gradient) and the two derivative functions, each a shared library cached in
     ``cache_dir`` under the hash of its C. Returns (the solver, its options with the
     compiled derivative functions). RuntimeError when the compiler is missing or fails."""

@@ -8,10 +8,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
-from .surfaces import SURFACES, Surface, rotation_from_vector
+from ocp.geometry.surfaces import SURFACES, Surface, rotation_from_vector
+
+FloatArray = NDArray[np.float64]
 
 __all__ = [
     "CONTACT_COORDS",
@@ -19,7 +23,11 @@ __all__ = [
     "ObjectSpec",
     "ProblemError",
     "SolverOptions",
+    "Structure",
     "ViaPoint",
+    "coordinate_error",
+    "goal_errors",
+    "wrap_difference",
 ]
 
 #: Names of the palm/object contact coordinates eta_p = (x, y, u, v, psi):
@@ -87,7 +95,7 @@ class SolverOptions:
     max_iter: int = 1000
     time_limit: float = 60.0  # s, wall clock for the whole plan (all initial guesses)
     tol: float = 1e-8
-    #: Tolerances of the physical certificate (see ocp.certificate).
+    #: Tolerances of the physical certificate (see ocp.certify.certificate).
     cert_position_tol: float = 1e-6  # m: re-integration defect of the palm coordinates
     cert_angle_tol: float = 1e-4  # rad: re-integration defect of the angles
 
@@ -237,3 +245,49 @@ class BallOnPalmProblem:
             counts[i] -= 1
         assert len(counts) == n_seg
         return tuple(int(c) for c in counts)
+
+
+# -- palm targets: which coordinates a goal or via-point fixes, and how far a plan is --
+
+def wrap_difference(a: FloatArray | float, b: FloatArray | float) -> FloatArray:
+    """a - b wrapped into [-pi, pi)."""
+    return np.asarray((np.asarray(a) - np.asarray(b) + np.pi) % (2 * np.pi) - np.pi)
+
+
+def coordinate_error(coord: str, value: float, target: float) -> float:
+    """|value - target| in m or rad, modulo 2 pi for the periodic coordinates."""
+    i = CONTACT_COORDS.index(coord)
+    d = float(wrap_difference(value, target)) if PERIODIC[i] else value - target
+    return abs(d)
+
+
+@dataclass(frozen=True)
+class Structure:
+    """What fixes the shape of the NLP; everything else is a parameter or a bound."""
+
+    shape: str
+    segments: tuple[int, ...]
+    goal_mask: tuple[bool, ...]
+    via_masks: tuple[tuple[bool, ...], ...]
+
+    @staticmethod
+    def of(problem: BallOnPalmProblem) -> Structure:
+        def mask(coords: Any) -> tuple[bool, ...]:
+            return tuple(c in coords for c in CONTACT_COORDS)
+
+        return Structure(problem.object.shape, problem.segment_intervals(),
+                         mask(problem.goal), tuple(mask(vp.coords) for vp in problem.via_points))
+
+
+def goal_errors(problem: BallOnPalmProblem, X: FloatArray, ends: list[int]
+                ) -> dict[str, float]:
+    """Error of every goal and via-point coordinate (m or wrapped rad) of the palm contact
+    coordinates ``X[:, 0:5]`` at the segment end nodes ``ends`` (0 first)."""
+    out: dict[str, float] = {}
+    for j, vp in enumerate(problem.via_points):
+        for c, val in vp.coords.items():
+            out[f"via_points[{j}].{c}"] = coordinate_error(
+                c, X[ends[j + 1], CONTACT_COORDS.index(c)], val)
+    for c, val in problem.goal.items():
+        out[f"goal.{c}"] = coordinate_error(c, X[ends[-1], CONTACT_COORDS.index(c)], val)
+    return out

@@ -2,9 +2,9 @@
 
 The finger is a serial chain of revolute and prismatic joints read from a URDF by Pinocchio:
 the whole URDF, or one finger of a hand's URDF (the branch of its tree that carries the tip
-frame, :mod:`ocp.hands`). Its fingertip frame (``"fingertip"`` in the built-in model) is the
+frame, :mod:`ocp.robots.hands`). Its fingertip frame (``"fingertip"`` in the built-in model) is the
 frame of the flat pad: its origin is the centre of the pad surface and its +z axis the pad's
-outward normal, so the pad is the :data:`~ocp.surfaces.Plane` chart ``f(x, y) = (x, y, 0)``
+outward normal, so the pad is the :data:`~ocp.geometry.surfaces.Plane` chart ``f(x, y) = (x, y, 0)``
 in that frame (docs/conventions.md). The finger's base is mounted in the palm frame P by a
 fixed pose ``g_pb = (base_rotation, base_position)``; every pose and Jacobian here is in the
 palm frame.
@@ -18,7 +18,7 @@ palm frame.
 * :func:`inverse_kinematics` is damped least squares (Levenberg-Marquardt) on the 6-D pose
   error within the joint limits.
 
-The built-in finger (``ocp/models/k3s_finger.urdf``) is a 6-revolute finger in the spirit of
+The built-in finger (``ocp/robots/models/k3s_finger.urdf``) is a 6-revolute finger in the spirit of
 the HKUST hand's modified Motoman K3S fingers (waist yaw, shoulder pitch, elbow pitch, wrist
 roll, wrist pitch, wrist roll), scaled to finger size, with a 100 mm x 100 mm flat pad. Its
 default mount (:data:`DEFAULT_BASE_POSITION`) lets the pad press on the top of a 25 mm ball
@@ -61,7 +61,7 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: File name of the built-in finger in the package ``ocp.models``.
+#: File name of the built-in finger in the package ``ocp.robots.models``.
 BUILTIN_URDF = "k3s_finger.urdf"
 
 #: Half the side of the built-in finger's square pad [m] (a 100 mm x 100 mm pad). In the
@@ -104,7 +104,7 @@ _JOINT_TYPES: dict[str, tuple[str, tuple[float, float, float] | None]] = {
 
 
 def builtin_urdf_text() -> str:
-    """The text of the built-in finger's URDF (shipped as package data of ``ocp.models``)."""
+    """The text of the built-in finger's URDF (shipped as package data of ``ocp.robots.models``)."""
     return resources.files(_models).joinpath(BUILTIN_URDF).read_text(encoding="utf-8")
 
 

@@ -1,6 +1,6 @@
 """Initial guesses and solve strategies of the grasp pipeline.
 
-A :class:`Strategy` says how the pipeline (:class:`ocp.manipulation.ManipulationPlanner`)
+A :class:`Strategy` says how the pipeline (:class:`ocp.solve.planner.ManipulationPlanner`)
 starts IPOPT for a kind of grasp: which initial guesses it tries in turn, how it budgets
 IPOPT's iterations over them and over grid refinements, how a previous plan seeds a new
 one, and which bounds it adds. Two exist:
@@ -19,21 +19,25 @@ one, and which bounds it adds. Two exist:
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import math
+from collections.abc import Callable, Iterator
+from functools import cache
 from typing import TYPE_CHECKING, Any
 
+import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from .collocation import WarmStart, node_inputs
-from .grasp_spec import contact_charts
-from .palm import guess_loops, model_for, reference_input, rotation_symmetric, simulate_guess
+from ocp.spec.grasp import contact_charts
+from ocp.spec.palm import NU, NX, model_for
+from ocp.spec.problem import CONTACT_COORDS, BallOnPalmProblem
+from ocp.transcription.collocation import WarmStart, node_inputs, rk4_step
 
 if TYPE_CHECKING:
-    from .grasp_model import GraspModel
-    from .grasp_solution import ManipulationSolution
-    from .grasp_spec import ManipulationProblem
-    from .nlp_blocks import NLP
+    from ocp.solution import ManipulationSolution
+    from ocp.solve.ipopt import NLP
+    from ocp.spec.grasp import ManipulationProblem
+    from ocp.transcription.grasp_model import GraspModel
 
 __all__ = [
     "GraspStrategy",
@@ -54,6 +58,7 @@ Guess = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 #: grasp's own. (A guess closed to 1e-8 only sent IPOPT down another path on experiment 1:
 #: the same 14 iterations, one with an inertia correction, 30 % more time.)
 IK_GUESS_TOL = 1e-10
+_GUESS_SUBSTEPS = 2  # RK4 steps per half interval in the palm's guess simulation
 
 
 class Strategy:
@@ -104,10 +109,9 @@ class PalmStrategy(Strategy):
     def own_guesses(self, planner: Any, problem: ManipulationProblem, m: GraspModel,
                     nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Iterator[Guess]:
         base = problem.palm_problem()
-        model = model_for(problem.object.shape)
         n_cols = len(t_nodes) - 1 + len(nlp.hs.segments)
         for loop in guess_loops(base):
-            yield simulate_guess(model, base, t_nodes, reference_input(base, loop),
+            yield simulate_guess(base, t_nodes, reference_input(base, loop),
                                  nlp.hs.left_cols, nlp.hs.right_cols, n_cols)
 
     def warm_guess(self, warm: WarmStart | ManipulationSolution, problem: ManipulationProblem,
@@ -146,7 +150,7 @@ def epigraph_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray
                    ) -> tuple[FloatArray, FloatArray]:
     """Grasp epigraph values (1 x k; 0 x k for one contact) and internal-force guesses
     at the given states."""
-    from .grasp import force_angles
+    from ocp.geometry.grasp import force_angles
 
     k = len(Xall)
     if m.n_contacts < 2:  # no force closure to certify: neither
@@ -171,7 +175,7 @@ def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: 
     the object's centre (palm frame), its contact coordinates integrated with the
     rolling equations; the joints by inverse kinematics along the way (closure holds);
     joint rates by finite differences."""
-    from .finger import inverse_kinematics, inverse_kinematics_batch
+    from ocp.robots.finger import inverse_kinematics, inverse_kinematics_batch
 
     charts = contact_charts(problem)
     shape = np.asarray(problem.object.dimensions, dtype=float)
@@ -237,3 +241,123 @@ def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: 
         Ucols[:, obj.us] = node_inputs(obj_w, t_nodes, nlp.hs.left_cols,
                                        nlp.hs.right_cols, len(Ucols))
     return X[0::2], X[1::2], Ucols, W[1::2]
+
+
+# -- the palm's guesses: reference palm paths, simulated ----------------------------------
+
+def palm_anchors(problem: BallOnPalmProblem) -> FloatArray:
+    """Palm points the reference path passes at the segment boundaries (2 x n_seg+1)."""
+    pts = [np.array(problem.initial[:2], dtype=float)]
+    for coords in [*(vp.coords for vp in problem.via_points), problem.goal]:
+        q = pts[-1].copy()
+        for i, c in enumerate(("x", "y")):
+            if c in coords:
+                q[i] = coords[c]
+        pts.append(q)
+    return np.array(pts).T
+
+
+def reference_input(problem: BallOnPalmProblem, loop: float) -> Callable[[FloatArray],
+                                                                         FloatArray]:
+    """w(t) of a reference palm path: straight lines between anchors plus a closed loop.
+
+    The system is nonholonomic: a straight-line guess cannot change the object's
+    orientation without moving it, and IPOPT started there can stall and report the
+    problem infeasible. A loop of signed size ``loop`` (fraction of the object size),
+    superposed over the whole horizon, gives the guess the net rotation a pure
+    reorientation needs (the holonomy of rolling around a closed path).
+    """
+    anchors = palm_anchors(problem)
+    tb = problem.segment_times
+    T = problem.duration
+    r = abs(loop) * problem.object.length_scale
+    sgn = 1.0 if loop >= 0 else -1.0
+
+    def w(t: FloatArray) -> FloatArray:
+        seg = np.clip(np.searchsorted(tb, t, side="right") - 1, 0, len(tb) - 2)
+        lin = (anchors[:, seg + 1] - anchors[:, seg]) / (tb[seg + 1] - tb[seg])
+        ph = 2 * np.pi * t / T
+        loop_v = (2 * np.pi / T) * r * np.vstack([-np.sin(ph), sgn * np.cos(ph)])
+        return np.asarray(lin + loop_v)
+
+    return w
+
+
+def simulate_guess(problem: BallOnPalmProblem, t_nodes: FloatArray,
+                   w_of_t: Callable[[FloatArray], FloatArray], left_cols: list[int],
+                   right_cols: list[int], n_cols: int
+                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Forward-simulate the reference input (RK4): a dynamically consistent initial guess."""
+    n = len(t_nodes) - 1
+    h = np.diff(t_nodes)
+    frac = np.arange(_GUESS_SUBSTEPS * 2 + 1) / (_GUESS_SUBSTEPS * 2)
+    times = (t_nodes[:-1, None] + h[:, None] * frac[None, :]).ravel()
+    W = w_of_t(times)  # nu x (n * (2 substeps + 1))
+    u_lim = math.pi / 2 - problem.pole_margin
+    Xn, Xm = guess_simulator(problem.object.shape, n)(
+        np.asarray(problem.initial, dtype=float), W, h, list(problem.object.dimensions), u_lim)
+    X = np.vstack([np.asarray(problem.initial, dtype=float), np.asarray(Xn).T])
+    tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+    # node inputs per segment: evaluated just inside the interval they belong to
+    U = node_inputs(lambda ts: w_of_t(ts).T, t_nodes, left_cols, right_cols, n_cols)
+    return X, np.asarray(Xm).T, U, w_of_t(tm).T
+
+
+def rotation_symmetric(problem: BallOnPalmProblem) -> bool:
+    """True for a pure reorientation about the palm normal with no via-points.
+
+    The goal fixes the palm point and the object point to their initial values, so the net
+    motion is a rotation about the vertical through the contact. Rotating a whole plan about
+    that vertical leaves both its cost and its final pose unchanged: the optima form a
+    continuum, on which IPOPT's convergence stalls unless one member is picked (the gauge
+    bound in the planner's input bounds).
+    """
+    if problem.via_points or "psi" not in problem.goal:
+        return False
+    return all(c in problem.goal and abs(problem.goal[c] - problem.initial[i]) < 1e-12
+               for i, c in enumerate(CONTACT_COORDS[:4]))
+
+
+def guess_loops(problem: BallOnPalmProblem) -> list[float]:
+    """Loop sizes to try, in order: loops first when the object's orientation is a target."""
+    orient = any(c in problem.goal for c in ("u", "v", "psi")) or any(
+        c in vp.coords for vp in problem.via_points for c in ("u", "v", "psi"))
+    return [0.5, -0.5, 0.0, 1.0, -1.0] if orient else [0.0, 0.5, -0.5]
+
+
+@cache
+def guess_simulator(shape: str, n: int) -> ca.Function:
+    """RK4 of the palm contact's rolling equations for an object ``shape`` over n
+    intervals: (x0, W, h, params, u_lim) -> (X nodes 1..n, X midpoints).
+
+    W holds the input at 2 * _GUESS_SUBSTEPS + 1 equally spaced times per interval
+    (columns interval-major). The latitude is clipped to the chart's allowed band.
+    """
+    model = model_for(shape)
+    m = _GUESS_SUBSTEPS
+    x = ca.SX.sym("x", NX)
+    Wk = ca.SX.sym("W", NU, 2 * m + 1)
+    h = ca.SX.sym("h")
+    params = ca.SX.sym("params", model.surface.n_params)
+    u_lim = ca.SX.sym("u_lim")
+    dt = h / (2 * m)
+
+    def f(xx: ca.SX, j: int) -> ca.SX:  # input at sub-time j/2 (half steps use averages)
+        w = Wk[:, j // 2] if j % 2 == 0 else (Wk[:, j // 2] + Wk[:, j // 2 + 1]) / 2
+        return model.dynamics(xx, w, params)
+
+    xs = x
+    mid = x
+    for i in range(2 * m):
+        xs = rk4_step(f, xs, 2 * i, 2 * i + 1, 2 * i + 2, dt)
+        xs = ca.vertcat(xs[0:2], ca.fmin(ca.fmax(xs[2], -u_lim), u_lim), xs[3:])
+        if i == m - 1:
+            mid = xs
+    step = ca.Function("guess_step", [x, Wk, h, params, u_lim], [xs, mid])
+    sim = step.mapaccum("guess_sim", n, [0], [0])
+    Wall = ca.SX.sym("Wall", NU, n * (2 * m + 1))
+    hs = ca.SX.sym("hs", 1, n)
+    Wsplit = ca.horzsplit(Wall, list(range(0, n * (2 * m + 1) + 1, 2 * m + 1)))
+    Xn, Xm = sim(x, ca.horzcat(*Wsplit), hs, ca.repmat(params, 1, n), ca.repmat(u_lim, 1, n))
+    return ca.Function("guess_simulator", [x, Wall, hs, params, u_lim], [Xn, Xm],
+                       ["x0", "W", "h", "params", "u_lim"], ["X", "Xm"])

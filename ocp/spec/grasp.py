@@ -15,10 +15,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .certify import GRASP_TOLERANCES, PALM_TOLERANCES, TolerancePolicy
-from .motion import DesiredMotion, ObjectPose, Tracking
-from .palm import goal_errors
-from .problem import (
+from ocp.certify.certificate import GRASP_TOLERANCES, PALM_TOLERANCES, TolerancePolicy
+from ocp.geometry.rotations import log_rotation
+from ocp.geometry.surfaces import SURFACES, rotation_from_vector
+from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
+from ocp.spec.problem import (
     DEFAULT_FINGER_CHART_ROTATION,
     MAX_POSITION,
     BallOnPalmProblem,
@@ -26,9 +27,8 @@ from .problem import (
     ProblemError,
     SolverOptions,
     ViaPoint,
+    goal_errors,
 )
-from .rotations import log_rotation
-from .surfaces import SURFACES, rotation_from_vector
 
 __all__ = ["Fingertip", "ManipulationProblem", "Palm", "contact_chart_for_pad",
            "contact_charts", "fingertip_errors", "hand_fingertips", "support_goal_errors"]
@@ -63,7 +63,7 @@ class Fingertip:
     grasp (default: the paper's initial angles).
     """
 
-    finger: Any  # ocp.finger.FingerModel
+    finger: Any  # ocp.robots.finger.FingerModel
     initial: tuple[float, float, float, float, float]
     chart_rotation: tuple[float, float, float] = DEFAULT_FINGER_CHART_ROTATION
     q_seed: tuple[float, ...] | None = None
@@ -132,7 +132,7 @@ class ManipulationProblem:
     max_object_rate: float = 20.0  # rad/s, each component of a free object's angular rate
     max_refinements: int = 2
     options: SolverOptions = field(default_factory=SolverOptions)
-    #: How strictly the certificate checks the plan (:mod:`ocp.certify`).
+    #: How strictly the certificate checks the plan (:mod:`ocp.certify.laws`).
     tolerances: TolerancePolicy = GRASP_TOLERANCES
 
     @property
@@ -245,7 +245,7 @@ def contact_chart_for_pad(obj: ObjectSpec, pose: ObjectPose, pad_rotation: Array
     usual way to state a grasp from the fingers' pad poses. The contact then sits on the
     patch's equator, as far from its poles as it can be.
     """
-    from .contact import R_contact
+    from ocp.geometry.contact import R_contact
 
     shape = np.asarray(obj.dimensions, dtype=float)
     _, Rg, _, _, _ = obj.surface.geometry([0.0, 0.0], shape)
@@ -256,11 +256,11 @@ def contact_chart_for_pad(obj: ObjectSpec, pose: ObjectPose, pad_rotation: Array
 
 def hand_fingertips(hand: Any, pose: ObjectPose | None = None,
                     obj: ObjectSpec | None = None) -> tuple[Fingertip, ...]:
-    """Fingertips of a built-in hand (:func:`ocp.hands.load_hand`) in its nominal grasp of a
+    """Fingertips of a built-in hand (:func:`ocp.robots.hands.load_hand`) in its nominal grasp of a
     ball at ``pose`` (default: unrotated, at the hand's nominal position): each pad's centre
     on the ball where the pad's normal points (contact coordinates all zero, charts from
     :func:`contact_chart_for_pad`), the IK seeded with the hand's nominal joint angles."""
-    from .hands import grasp_poses
+    from ocp.robots.hands import grasp_poses
 
     pose = pose or ObjectPose(position=tuple(hand.nominal_object_position))
     obj = obj or ObjectSpec("sphere", (hand.nominal_radius,))

@@ -1,19 +1,20 @@
 """The planning pipeline of every grasp: problem -> transcription -> solve -> solution ->
 certificate.
 
-A grasp (:class:`~ocp.grasp_spec.ManipulationProblem`) is a list of contacts
-(:mod:`ocp.contacts`): an object block (the palm carrying the object, or the object's pose
+A grasp (:class:`~ocp.spec.grasp.ManipulationProblem`) is a list of contacts
+(:mod:`ocp.spec.contacts`): an object block (the palm carrying the object, or the object's pose
 when fingers alone hold it) and the fingertips. :class:`ManipulationPlanner`
 
-1. builds the grasp's model from its contacts (:class:`~ocp.grasp_model.GraspModel`) and
+1. builds the grasp's model from its contacts
+   (:class:`~ocp.transcription.grasp_model.GraspModel`) and
    the NLP of its structure (:class:`GraspStructure`, cached): direct collocation
-   (Hermite-Simpson) from blocks (:func:`~ocp.nlp_blocks.build_manipulation_nlp`), its
-   parameters declared by name (:class:`~ocp.parameters.Parameters`);
+   (Hermite-Simpson) from blocks (:func:`~ocp.transcription.nlp_blocks.build_manipulation_nlp`), its
+   parameters declared by name (:class:`~ocp.transcription.parameters.Parameters`);
 2. solves it with IPOPT from the initial guesses of the grasp's strategy
-   (:mod:`ocp.guesses`: the fingers' consistent guess, or the palm's simulated reference
+   (:mod:`ocp.solve.guesses`: the fingers' consistent guess, or the palm's simulated reference
    paths with loops), in turn, within the request's time and iteration limits;
-3. assembles the plan (:func:`~ocp.grasp_solution.assemble_solution`);
-4. certifies it independently (:func:`~ocp.certify.certify_grasp`), and when only
+3. assembles the plan (:func:`~ocp.solution.assemble_solution`);
+4. certifies it independently (:func:`~ocp.certify.laws.certify_grasp`), and when only
    discretisation checks fail solves again on a grid twice as fine, warm-started.
 
 The object on the palm alone (the paper's ball on palm, :mod:`ocp.ball_on_palm`), one
@@ -21,10 +22,10 @@ finger pressing the ball on the palm (its section 3), two fingers holding it in 
 (its section 4) and three or more fingers are the same pipeline with different data.
 
 States (scaled for IPOPT; docs/conventions.md): each contact's block in turn (see
-:mod:`ocp.contacts`). Dynamics: the rolling equations at every contact (eq. 3 via
-:class:`~ocp.contact.ContactPair`). Path constraints at every collocation point: each
+:mod:`ocp.spec.contacts`). Dynamics: the rolling equations at every contact (eq. 3 via
+:class:`~ocp.geometry.contact.ContactPair`). Path constraints at every collocation point: each
 finger's closure (eq. 6), force closure with a margin (friction cones;
-:mod:`ocp.force_closure` for 3+ contacts), contacts inside the pads, joint and joint-rate
+:mod:`ocp.geometry.force_closure` for 3+ contacts), contacts inside the pads, joint and joint-rate
 limits, chart pole margins, and, when the request asks, hard bounds on the tracking error.
 Objective (over normalised time): effort of every input, a weight times the grasp-angle
 epigraph s >= 1 - cos Phi_i, and a weighted tracking error on SE(3) between the object's
@@ -44,21 +45,25 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from .certificate import Certificate, CheckKind
-from .certify import certify_grasp
-from .collocation import NlpPoint, WarmStart, node_times
-from .compiled import BackgroundCompiler
-from .grasp import cone_cosine, force_angles
-from .grasp_model import GraspModel
-from .grasp_solution import (
+from ocp.certify.certificate import Certificate, CheckKind
+from ocp.certify.laws import certify_grasp
+from ocp.geometry.grasp import cone_cosine, force_angles
+from ocp.solution import (
     Collocation,
     ContactTrajectory,
     FingerTrajectory,
     GraspSample,
     ManipulationSolution,
+    SolverStats,
+    Status,
     assemble_solution,
+    status_from_ipopt,
 )
-from .grasp_spec import (
+from ocp.solve.compiled import BackgroundCompiler
+from ocp.solve.guesses import Guess, Strategy, epigraph_guess, strategy_for
+from ocp.solve.ipopt import IPOPT_WARM_OPTIONS, ipopt_solver
+from ocp.solve.ipopt import NLP as _NLP
+from ocp.spec.grasp import (
     Fingertip,
     ManipulationProblem,
     Palm,
@@ -68,14 +73,11 @@ from .grasp_spec import (
     hand_fingertips,
     support_goal_errors,
 )
-from .guesses import Guess, Strategy, epigraph_guess, strategy_for
-from .ipopt import IPOPT_WARM_OPTIONS
-from .motion import DesiredMotion, MotionStep, ObjectPose, Tracking
-from .nlp_blocks import NLP as _NLP
-from .nlp_blocks import build_manipulation_nlp
-from .palm import Structure
-from .problem import CONTACT_COORDS, MAX_INTERVALS, ProblemError
-from .solution import SolverStats, Status, status_from_ipopt
+from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
+from ocp.spec.problem import CONTACT_COORDS, MAX_INTERVALS, ProblemError, Structure
+from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
+from ocp.transcription.grasp_model import GraspModel
+from ocp.transcription.nlp_blocks import build_manipulation_nlp
 
 __all__ = [
     "ContactTrajectory",
@@ -180,11 +182,11 @@ class ManipulationPlanner:
     def __init__(self, compile_dir: Path | None = None, background: bool = False,
                  max_iter_per_guess: int = 300) -> None:
         #: When set, each structure's NLP functions are generated as C, compiled with gcc
-        #: and cached there (:func:`ocp.compiled.compiled_block_solver`): seconds the first
+        #: and cached there (:func:`ocp.solve.compiled.compiled_block_solver`): seconds the first
         #: time, IPOPT about 40 % faster on experiment 1 (docs/performance.md).
         self.compile_dir = compile_dir
         #: With ``background``, a new structure is solved in the virtual machine at once and
-        #: compiled in a background thread (:class:`ocp.compiled.BackgroundCompiler`); the
+        #: compiled in a background thread (:class:`ocp.solve.compiled.BackgroundCompiler`); the
         #: compiled solver replaces it at the first solve after the compile (a service
         #: worker: no request waits for gcc). Without, the first solve compiles.
         self.compiler = BackgroundCompiler(compile_dir) if compile_dir is not None \
@@ -207,9 +209,9 @@ class ManipulationPlanner:
         if key in self._nlps:
             return self._nlps[key], True
         m = self.model(problem)
-        nlp = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
-                                     key.tracking, FORCE_REGULARISATION, key.fingerprint(m),
-                                     None if self.compiler else self.compile_dir)
+        block = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
+                                       key.tracking, FORCE_REGULARISATION)
+        nlp = ipopt_solver(block, key.fingerprint(m), None if self.compiler else self.compile_dir)
         self._nlps[key] = nlp
         if self.compiler is not None:
             self.compiler.submit(key, nlp.oracle, nlp.options, nlp.fingerprint)
@@ -233,14 +235,14 @@ class ManipulationPlanner:
         re-integrator, without solving: a service's warm-up. Returns the build time [s]
         (0 when already cached)."""
         nlp, hit = self._build(problem)
-        self.model(problem).reintegrator(4)
+        self.model(problem).reintegrator(problem.tolerances.samples_per_interval)
         return 0.0 if hit else nlp.build_time
 
     def initial_state(self, problem: ManipulationProblem) -> FloatArray:
         """The state at t = 0, the fingers' joints by inverse kinematics; ProblemError
         saying why the initial grasp is impossible (unreachable, outside the joint limits,
         not in force closure)."""
-        from .finger import PAPER_SEED, inverse_kinematics
+        from ocp.robots.finger import PAPER_SEED, inverse_kinematics
 
         m = self.model(problem)
         x = np.zeros(m.nx)

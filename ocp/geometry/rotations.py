@@ -10,7 +10,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .surfaces import rotation_from_vector
+from ocp.geometry.surfaces import rotation_from_vector
 
 __all__ = [
     "axis_angle_rotation",
@@ -18,6 +18,7 @@ __all__ = [
     "quaternion_matrix",
     "quaternion_rate_sym",
     "quaternion_rotation_sym",
+    "quaternion_wxyz",
     "rotation_angle_between",
     "vee",
     "vee_skew",
@@ -87,3 +88,28 @@ def vee_skew(E: Any) -> Any:
 def vee(W: Any) -> Any:
     """The vector of a skew-symmetric matrix W = [w]x."""
     return ca.vertcat(W[2, 1], W[0, 2], W[1, 0])
+
+
+def quaternion_wxyz(R: FloatArray) -> FloatArray:
+    """Unit quaternion (w, x, y, z), w >= 0, of rotation matrices R (..., 3, 3)."""
+    R = np.asarray(R, dtype=float)
+    flat = R.reshape(-1, 3, 3)
+    out = np.empty((flat.shape[0], 4))
+    for i, m in enumerate(flat):
+        tr = np.trace(m)
+        if tr > 0:
+            s = 2.0 * np.sqrt(tr + 1.0)
+            q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s,
+                 (m[1, 0] - m[0, 1]) / s]
+        else:
+            j = int(np.argmax(np.diag(m)))
+            a, b = (j + 1) % 3, (j + 2) % 3
+            s = 2.0 * np.sqrt(1.0 + m[j, j] - m[a, a] - m[b, b])
+            q = [0.0] * 4
+            q[0] = (m[b, a] - m[a, b]) / s
+            q[1 + j] = 0.25 * s
+            q[1 + a] = (m[a, j] + m[j, a]) / s
+            q[1 + b] = (m[b, j] + m[j, b]) / s
+        qa = np.array(q)
+        out[i] = qa if qa[0] >= 0 else -qa
+    return out.reshape((*R.shape[:-2], 4))

@@ -4,7 +4,7 @@ Each kind of contact is one class that owns everything about it (learnt from Cro
 ``ContactModelMultiple.addContact``): its slice of the states and inputs and their scales,
 its rolling equations, its contact point and normal (for force closure), its path rows
 (closure), its laws for the certificate, its bounds and its initial state. The grasp model
-(:class:`ocp.grasp_model.GraspModel`) and the planner only loop over the contacts.
+(:class:`ocp.transcription.grasp_model.GraspModel`) and the planner only loop over the contacts.
 
 * :class:`SupportContact`: the object resting on a fixed flat surface (the palm); its
   contact coordinates eta_p = (x, y, u, v, psi) fix the object's pose; input w_p = d/dt
@@ -32,15 +32,14 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from .contact import ContactPair
-from .problem import MAX_POSITION
-from .rotations import quaternion_rate_sym, quaternion_rotation_sym, vee, vee_skew
-from .surfaces import Plane, Surface
+from ocp.geometry.contact import ContactPair
+from ocp.geometry.rotations import quaternion_rate_sym, quaternion_rotation_sym, vee, vee_skew
+from ocp.geometry.surfaces import Plane, Surface
+from ocp.spec.problem import MAX_POSITION
 
 if TYPE_CHECKING:
-    from .certificate import Check
-    from .certify import TolerancePolicy
-    from .grasp_spec import Fingertip, ManipulationProblem
+    from ocp.certify.certificate import Check, TolerancePolicy
+    from ocp.spec.grasp import Fingertip, ManipulationProblem
 
 __all__ = ["Contact", "FingertipContact", "FreeObject", "ObjectBlock", "SupportContact",
            "SymbolicGrasp"]
@@ -282,7 +281,7 @@ class SupportContact(ObjectBlock):
 
     def checks(self, problem: ManipulationProblem, k: int, c: CertificateContext
                ) -> list[Check]:
-        from .certificate import Check, CheckKind
+        from ocp.certify.certificate import Check, CheckKind
 
         n, pol = self.name, c.policy
         if pol.support_speed == "input":  # its own input's speed, the object's turn rate
@@ -337,7 +336,7 @@ class FreeObject(ObjectBlock):
               R0: FloatArray, p0: FloatArray, palm_planner: Any
               ) -> tuple[FloatArray, FloatArray, PoseOfTime, InputOfTime | None]:
         """The desired motion itself: its poses, its twist by central differences."""
-        from .solution import quaternion_wxyz
+        from ocp.geometry.rotations import quaternion_wxyz
 
         T = problem.duration
         assert problem.motion is not None
@@ -482,7 +481,7 @@ class FingertipContact(Contact):
                ) -> list[Check]:
         """Slip, spin, gap, pad, joint limits and closure (Pinocchio's forward kinematics
         point by point, independent of the NLP's CasADi kinematics)."""
-        from .certificate import Check, CheckKind
+        from ocp.certify.certificate import Check, CheckKind
 
         i, f, name = self.index, self.finger, self.label(problem)
         q_i = c.states[:, self.q_cols]

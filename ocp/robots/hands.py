@@ -1,18 +1,19 @@
 """Built-in multi-finger hands: K3S-like fingers around a palm, holding a ball in the air.
 
 The paper's HKUST hand had three 6R K3S fingers on reconfigurable bases around a palm. The
-built-in hands here are URDF trees (package data of ``ocp.models``) whose root link
+built-in hands here are URDF trees (package data of ``ocp.robots.models``) whose root link
 ``palm`` is the palm frame P (origin on the palm's upper surface, z up) and whose fingers
 are copies of the built-in finger (``k3s_finger.urdf``: the same links, joints, dimensions
 and limits, every name prefixed ``f1_``, ``f2_``, ...), each hung from the palm by a fixed
-joint ``fN_mount``. Each finger is a :class:`~ocp.finger.FingerModel` loaded from the
-hand's URDF with :func:`~ocp.finger.load_finger` (the branch of the tree carrying its tip
+joint ``fN_mount``. Each finger is a :class:`~ocp.robots.finger.FingerModel` loaded from the
+hand's URDF with :func:`~ocp.robots.finger.load_finger` (the branch of the tree carrying its tip
 frame ``fN_fingertip``; base identity, since the URDF root is the palm frame), so its
-``fk``, Jacobian and :func:`~ocp.finger.inverse_kinematics` work as for a single finger.
+``fk``, Jacobian and :func:`~ocp.robots.finger.inverse_kinematics` work as for a single finger.
 
 =================  ==========================================================================
 ``two_finger``     fingers f1, f2 on opposite sides: pads pressing on the ball at +x and -x,
-                   an antipodal grasp; 100 mm x 100 mm pads (:data:`~ocp.finger.PAD_HALF_SIZE`)
+                   an antipodal grasp; 100 mm x 100 mm pads
+                   (:data:`~ocp.robots.finger.PAD_HALF_SIZE`)
 ``three_finger``   fingers f1, f2, f3 at azimuths 0, 120, 240 deg about the palm's z axis,
                    pads on the ball's equator; 60 mm x 60 mm pads
                    (:data:`THREE_FINGER_PAD_HALF_SIZE`)
@@ -77,8 +78,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from . import models as _models
-from .finger import (
+from ocp.robots.finger import (
     PAD_HALF_SIZE,
     FingerModel,
     IKResult,
@@ -87,6 +87,8 @@ from .finger import (
     inverse_kinematics,
     load_finger,
 )
+
+from . import models as _models
 
 __all__ = [
     "HAND_NAMES",
@@ -130,7 +132,7 @@ NOMINAL_SEED_DEG: tuple[float, ...] = (0.0, -45.0, 5.0, 0.0, -50.0, 0.0)
 NOMINAL_SEED: FloatArray = np.deg2rad(np.array(NOMINAL_SEED_DEG))
 NOMINAL_SEED.setflags(write=False)
 
-#: name -> (URDF file in ocp.models, contact azimuths [deg], pad half size [m])
+#: name -> (URDF file in ocp.robots.models, contact azimuths [deg], pad half size [m])
 _HANDS: dict[str, tuple[str, tuple[float, ...], float]] = {
     "two_finger": ("two_finger_hand.urdf", (0.0, 180.0), PAD_HALF_SIZE),
     "three_finger": ("three_finger_hand.urdf", (0.0, 120.0, 240.0), THREE_FINGER_PAD_HALF_SIZE),
@@ -150,7 +152,7 @@ def _check_name(name: str) -> tuple[str, tuple[float, ...], float]:
 
 
 def builtin_hand_urdf_text(name: str) -> str:
-    """The text of a built-in hand's URDF (package data of ``ocp.models``)."""
+    """The text of a built-in hand's URDF (package data of ``ocp.robots.models``)."""
     file, _, _ = _check_name(name)
     return resources.files(_models).joinpath(file).read_text(encoding="utf-8")
 
@@ -224,7 +226,7 @@ class Hand:
     name:
         One of :data:`HAND_NAMES`.
     fingers:
-        One :class:`~ocp.finger.FingerModel` per finger (f1, f2, ...), each the branch of
+        One :class:`~ocp.robots.finger.FingerModel` per finger (f1, f2, ...), each the branch of
         the hand's URDF carrying its tip frame; poses in the palm frame.
     tip_frames:
         The fingers' pad frames, ``("f1_fingertip", "f2_fingertip", ...)``.
@@ -279,7 +281,8 @@ def load_hand(name: str = "three_finger",
     root = _parse(text)
     if mounts is not None:
         root.insert(0, ET.Comment(
-            " reconfigured: the fN_mount origins were rewritten by ocp.hands.load_hand(mounts=...);"
+            " reconfigured: the fN_mount origins were rewritten by"
+            " ocp.robots.hands.load_hand(mounts=...);"
             " the mount geometry described above no longer holds "))
         for k, (R, p) in enumerate(_check_mounts(mounts, n, name), start=1):
             origin = _mount_joint(root, k).find("origin")
@@ -347,7 +350,7 @@ def grasp_poses(hand: Hand, object_position: ArrayLike | None = None,
 def grasp_ik(hand: Hand, object_position: ArrayLike | None = None,
              radius: float | None = None, rotation: ArrayLike | None = None,
              seeds: Sequence[ArrayLike] | None = None) -> tuple[IKResult, ...]:
-    """Each finger's :func:`~ocp.finger.inverse_kinematics` of the pad poses of
+    """Each finger's :func:`~ocp.robots.finger.inverse_kinematics` of the pad poses of
     :func:`grasp_poses`, from ``seeds`` (default: :attr:`Hand.nominal_q`, else
     :data:`NOMINAL_SEED`)."""
     poses = grasp_poses(hand, object_position, radius, rotation)

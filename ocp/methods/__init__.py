@@ -1,0 +1,2 @@
+"""Other planning methods: the paper's greedy method.
+"""

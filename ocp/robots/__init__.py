@@ -1,0 +1,2 @@
+"""Robots: fingers from URDF through Pinocchio, the built-in hands, their model files.
+"""
