@@ -96,6 +96,13 @@ class BlockAssembler:
         return ca.MX(self.sparsity, ca.mtimes(self.matrix, nz))
 
 
+def _expanded(fn: ca.Function) -> ca.Function:
+    """``fn`` as one SX function, its common subexpressions merged."""
+    sx = fn.expand()
+    args = sx.sx_in()
+    return ca.Function(fn.name(), args, ca.cse(sx.call(args)), fn.name_in(), fn.name_out())
+
+
 def _triplets(sp: ca.Sparsity) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     r, c = sp.get_triplet()
     return np.asarray(r, dtype=np.int64), np.asarray(c, dtype=np.int64)
@@ -363,7 +370,9 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     oracle = ca.Function("manipulation_nlp", [w, p], [f, g_all], ["x", "p"], ["f", "g"])
     if nc < 2:
         # a small grasp (the object on the palm alone): the mapped blocks expanded into
-        # one SX graph each, whose calls cost less than the MX maps' at this size
-        oracle, jac_g, hess_lag = oracle.expand(), jac_g.expand(), hess_lag.expand()
+        # one SX graph each, whose calls cost less than the MX maps' at this size, with
+        # common subexpressions merged (the rolling equations at a node shared by two
+        # intervals are then evaluated once, as a hand-written SX NLP would)
+        oracle, jac_g, hess_lag = (_expanded(fn) for fn in (oracle, jac_g, hess_lag))
     return BlockNLP(hs, unpack, pack, decl, np.array(lbg), np.array(ubg),
                     time.perf_counter() - t0, n_force, n_s, oracle, jac_g, hess_lag)
