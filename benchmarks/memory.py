@@ -1,7 +1,7 @@
 """Memory of a planning process over many solves: is it flat?
 
 Plans the same requests over and over in one process, as a service worker does (the
-process-wide planners and caches of ``planner_service.convert``), and samples the resident
+process-wide planners and caches of ``planner_service.planners``), and samples the resident
 set size (VmRSS, from /proc) every ``--every`` solves. A leak shows as a steady climb; a
 flat curve after the first solves (caches filled) is what a worker should show.
 

@@ -333,8 +333,8 @@ def _sampler(m: GraspModel, col: Collocation, prm: FloatArray
     def sample(t: FloatArray) -> GraspSample:
         x, u = hermite_sample(col.t_nodes, col.X, F0, F1, col.U0, col.Um, col.U1, t)
         k = len(t)
-        xd = np.asarray(m.dynamics.map(k)(x.T, u.T, prm)).T
-        cart = m.cartesian.map(k)(x.T, prm)
+        xd = np.asarray(m.mapped("dynamics", k)(x.T, u.T, prm)).T
+        cart = m.mapped("cartesian", k)(x.T, prm)
         R = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
         return GraspSample(t, x, u, xd, np.asarray(cart[1]).T, R)
 

@@ -88,7 +88,7 @@ def test_the_import_resolver_sees_relative_imports() -> None:
 def test_planners_import_neither_jobs_nor_the_api() -> None:
     assert not _offenders("planners", ("planner_service.api", "planner_service.jobs",
                                        "planner_service.cli", "planner_service.warmup",
-                                       "planner_service.convert", "fastapi", "starlette"))
+                                       "fastapi", "starlette"))
 
 
 def test_jobs_do_not_import_the_api() -> None:

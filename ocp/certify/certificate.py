@@ -196,6 +196,17 @@ class TolerancePolicy:
     support_speed: str  # "motion" or "input"
     support_height: float
     height_relative: bool
+    #: a fingertip's slip and spin, relative to the motion's speed scale (and that over L)
+    finger_slip: float = 1e-2
+    finger_spin: float = 1e-2
+    #: a pad's gap to the object [m], a joint's excursion past its limit [rad or m]
+    gap: float = 1e-4
+    joint_limit: float = 1e-6
+    #: each fingertip where its joints put it (Pinocchio) [m], [rad]
+    closure_position: float = 1e-4
+    closure_orientation: float = 1e-3
+    #: the smallest margin to the friction cones [rad] (force closure: two or more contacts)
+    cone_margin: float = -1e-6
 
     def length_defect(self, o: SolverOptions) -> float:
         return max(o.cert_position_tol, self.length_defect_floor)

@@ -125,7 +125,7 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, t_nodes: FloatArr
     if nc >= 2:  # force closure (the object on the palm alone has no grasp to certify)
         phi, _, onto = force_angles(pts, nrm)
         margin = float(np.min(math.atan(problem.mu) - phi))
-        checks.append(Check("min_cone_margin", margin, -1e-6, CheckKind.PHYSICS,
+        checks.append(Check("min_cone_margin", margin, policy.cone_margin, CheckKind.PHYSICS,
                             lower_bound=True, report_tolerance=False,
                             reason=f"min_cone_margin {margin:.3g} < 0 (force closure lost)"))
         reported["max_grasp_angle"] = float(np.max(phi))

@@ -78,6 +78,7 @@ from ocp.geometry.surfaces import SURFACES, Plane, Surface, rotation_from_vector
 from ocp.one_finger import OneFingerPlanner, OneFingerProblem
 from ocp.solution import Solution
 from ocp.spec.problem import CONTACT_COORDS, ProblemError
+from ocp.transcription.collocation import rk4_step
 
 __all__ = [
     "CLOSURE_TOL",
@@ -305,12 +306,9 @@ class _Kinematics:
             d = tip.rates_driven_by_a(pair_order(e), w, shape, none)
             return pair_order(d)
 
-        k1 = tip_rates(ef)
-        k2 = tip_rates(ef + h / 2 * k1)
-        k3 = tip_rates(ef + h / 2 * k2)
-        k4 = tip_rates(ef + h * k3)
-        self.tip_step = ca.Function("tip_rk4", [ef, w, shape, h],
-                                    [ef + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+        # w is held over the step: the input argument of the RK4 step is unused
+        step = rk4_step(lambda e, _u: tip_rates(e), ef, None, None, None, h)
+        self.tip_step = ca.Function("tip_rk4", [ef, w, shape, h], [step])
         self._tip_step_maps: dict[int, ca.Function] = {}
 
         # grasp angles from the two contact points on the ball (ball frame)
@@ -380,13 +378,8 @@ def _integrate_palm(kin: _Kinematics, plan: Solution, eta0: FloatArray, knots: F
     eta[0] = eta0
     f = kin.palm_rates
     for i in range(n):
-        h = b[i] - a[i]
-        x = eta[i]
-        k1 = np.asarray(f(x, w0[i], shape)).ravel()
-        k2 = np.asarray(f(x + h / 2 * k1, wm[i], shape)).ravel()
-        k3 = np.asarray(f(x + h / 2 * k2, wm[i], shape)).ravel()
-        k4 = np.asarray(f(x + h * k3, w1[i], shape)).ravel()
-        eta[i + 1] = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        eta[i + 1] = rk4_step(lambda x, u: np.asarray(f(x, u, shape)).ravel(), eta[i],
+                              w0[i], wm[i], w1[i], b[i] - a[i])
     return eta
 
 

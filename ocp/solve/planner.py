@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate, CheckKind
 from ocp.certify.laws import certify_grasp
-from ocp.geometry.grasp import cone_cosine, force_angles
+from ocp.geometry.grasp import force_angles
 from ocp.solution import (
     Collocation,
     ContactTrajectory,
@@ -74,10 +74,12 @@ from ocp.spec.grasp import (
     support_goal_errors,
 )
 from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
-from ocp.spec.problem import CONTACT_COORDS, MAX_INTERVALS, ProblemError, Structure
+from ocp.spec.problem import MAX_INTERVALS, ProblemError, Structure
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.nlp_blocks import build_manipulation_nlp
+from ocp.transcription.values import bounds, scales
+from ocp.transcription.values import parameters as nlp_parameters
 
 __all__ = [
     "ContactTrajectory",
@@ -100,9 +102,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: Tracking bounds are imposed in the NLP at this fraction of the requested tolerance, so
-#: that the motion between collocation points stays inside the tolerance itself.
-TRACKING_BOUND_SHRINK = 0.95
 #: Weight of the size of the internal-force variables (3+ contacts) in the objective.
 FORCE_REGULARISATION = 1e-3
 
@@ -334,46 +333,10 @@ class ManipulationPlanner:
         return replace(sol, build_time=totals.build, solve_time=totals.ipopt,
                        iterations=totals.iterations, refinements=refinements, stats=stats)
 
-    def _scales(self, problem: ManipulationProblem, m: GraspModel
-                ) -> tuple[FloatArray, FloatArray]:
-        L, T = problem.object.length_scale, problem.duration
-        return (np.asarray(m.x_scale(L), dtype=float),
-                np.asarray(m.u_scale(L, T), dtype=float))
-
     @staticmethod
     def parameters(problem: ManipulationProblem, nlp: _NLP) -> FloatArray:
-        """The NLP parameter vector of a problem (its structure's NLP ``nlp``): object,
-        segment durations, palm goal and via-points, charts, weights, cone, tracking
-        tolerances and the desired poses at every collocation point."""
-        segments, tb = problem.segments()
-        t_nodes = node_times(segments, tb)
-        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
-        charts = contact_charts(problem)
-        shape = np.asarray(problem.object.dimensions, dtype=float)
-        L = problem.object.length_scale
-        goal = np.zeros(5)
-        vias = np.zeros((5, 0))
-        if problem.palm is not None:
-            goal = np.array([problem.palm.goal.get(c, 0.0) for c in CONTACT_COORDS])
-            vias = np.array([[vp.coords.get(c, 0.0) for c in CONTACT_COORDS]
-                             for vp in problem.palm.via_points]).T.reshape(5, -1)
-        tr = problem.tracking
-        weights = [problem.object_effort_weight, problem.finger_effort_weight,
-                   problem.joint_effort_weight, problem.grasp_weight, tr.position_weight,
-                   tr.orientation_weight]
-        tol = [1e6 if tr.position_tolerance is None else
-               (TRACKING_BOUND_SHRINK * tr.position_tolerance / L) ** 2,
-               1e6 if tr.orientation_tolerance is None else
-               1 - math.cos(TRACKING_BOUND_SHRINK * tr.orientation_tolerance)]
-        if problem.motion is not None:
-            Rd, Pd = problem.motion.at(np.concatenate([t_nodes, tm]))
-            Pd_, Rd_ = Pd.T, Rd.transpose(0, 2, 1).reshape(-1, 9).T  # column-major vec
-        else:
-            Pd_, Rd_ = np.zeros((3, 0)), np.zeros((9, 0))
-        return nlp.params.pack(
-            shape=shape, seg_T=np.diff(tb), goal=goal, vias=vias,
-            charts=np.concatenate([R.ravel(order="F") for R in charts]), weights=weights,
-            ccone=[cone_cosine(problem.mu)], tol=tol, Pd=Pd_, Rd=Rd_)
+        """The NLP parameter vector of a problem (:func:`~ocp.transcription.values.parameters`)."""
+        return nlp_parameters(problem, nlp)
 
     def _guesses(self, problem: ManipulationProblem, strategy: Strategy, m: GraspModel,
                  nlp: _NLP, x0: FloatArray, t_nodes: FloatArray,
@@ -396,14 +359,14 @@ class ManipulationPlanner:
         nlp, hit = self._build(problem)
         build_time = 0.0 if hit else nlp.build_time
         m = self.model(problem)
-        x_scale, u_scale = self._scales(problem, m)
+        x_scale, u_scale = scales(problem, m)
         segments, tb = problem.segments()
         t_nodes = node_times(segments, tb)
         n = len(t_nodes) - 1
         prm = m.params(np.asarray(problem.object.dimensions, dtype=float),
                        contact_charts(problem))
         p = self.parameters(problem, nlp)
-        lbx, ubx = self._bounds(problem, nlp, m, x0, x_scale, u_scale)
+        lbx, ubx = bounds(problem, nlp, m, x0, x_scale, u_scale)
         strategy.adjust_bounds(problem, nlp, lbx, ubx)
         cap = strategy.max_iter_per_guess
         if cap is not None:
@@ -481,28 +444,3 @@ class ManipulationPlanner:
                             cache_hit=hit, n_intervals=n, ipopt_time=ipopt_time)
         return replace(sol, iterations=iterations, build_time=build_time,
                        solve_time=ipopt_time, stats=stats, nlp_point=best.point)
-
-    @staticmethod
-    def _bounds(problem: ManipulationProblem, nlp: _NLP, m: GraspModel, x0: FloatArray,
-                x_scale: FloatArray, u_scale: FloatArray) -> tuple[FloatArray, FloatArray]:
-        n = nlp.hs.n_intervals
-        n_seg = len(nlp.hs.segments)
-        lo: list[float] = []
-        hi: list[float] = []
-        uhi: list[float] = []
-        for c in m.contacts:  # physical bounds, scaled as the states and inputs
-            lo_c, hi_c, uhi_c = c.bounds(problem)
-            lo, hi, uhi = lo + lo_c, hi + hi_c, uhi + uhi_c
-        xb_hi, xb_lo = np.array(hi) / x_scale, np.array(lo) / x_scale
-        lo_x, hi_x = np.tile(xb_lo, (n + 1, 1)), np.tile(xb_hi, (n + 1, 1))
-        lo_x[0] = hi_x[0] = x0 / x_scale
-        lo_xm, hi_xm = np.tile(xb_lo, (n, 1)), np.tile(xb_hi, (n, 1))
-        ub_in = np.array(uhi) / u_scale
-        lo_u, hi_u = np.tile(-ub_in, (n + n_seg, 1)), np.tile(ub_in, (n + n_seg, 1))
-        lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
-        ns = nlp.n_epigraph
-        zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))
-        big = 1e3 * np.ones((3 * nlp.n_force, 2 * n + 1))
-        lbx = nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n], -big)
-        ubx = nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n], big)
-        return np.asarray(lbx).ravel(), np.asarray(ubx).ravel()

@@ -483,7 +483,7 @@ class FingertipContact(Contact):
         point by point, independent of the NLP's CasADi kinematics)."""
         from ocp.certify.certificate import Check, CheckKind
 
-        i, f, name = self.index, self.finger, self.label(problem)
+        i, f, name, pol = self.index, self.finger, self.label(problem), c.policy
         q_i = c.states[:, self.q_cols]
         poses = [f.fingertip_pose_pin(q) for q in q_i]  # Pinocchio, point by point
         R_pin = np.array([pose[0] for pose in poses])
@@ -498,17 +498,17 @@ class FingertipContact(Contact):
         D = CheckKind.DISCRETISATION
         return [
             Check(f"max_slip_speed_{name}", float(np.max(np.linalg.norm(
-                c.laws[f"slip_{i}"], axis=1))), 1e-2 * max(c.speed, 1e-3), D),
+                c.laws[f"slip_{i}"], axis=1))), pol.finger_slip * max(c.speed, 1e-3), D),
             Check(f"max_spin_rate_{name}", float(np.max(np.abs(c.laws[f"spin_{i}"]))),
-                  1e-2 * max(c.speed / c.L, 1e-3), D),
-            Check(f"max_gap_error_{name}", float(np.max(np.abs(gap))), 1e-4, D),
+                  pol.finger_spin * max(c.speed / c.L, 1e-3), D),
+            Check(f"max_gap_error_{name}", float(np.max(np.abs(gap))), pol.gap, D),
             Check(f"max_pad_excursion_{name}", float(np.max(np.abs(
                 c.laws[f"pad_point_{i}"][:, 0:2]))), float(f.pad_half_size),
                 CheckKind.LIMITS),
             Check(f"max_joint_limit_violation_{name}", float(max(
-                np.max(q_i - f.upper), np.max(f.lower - q_i), 0.0)), 1e-6, D),
-            Check("max_closure_position_error", pos_err, 1e-4, D),
-            Check("max_closure_orientation_error", rot_err, 1e-3, D),
+                np.max(q_i - f.upper), np.max(f.lower - q_i), 0.0)), pol.joint_limit, D),
+            Check("max_closure_position_error", pos_err, pol.closure_position, D),
+            Check("max_closure_orientation_error", rot_err, pol.closure_orientation, D),
         ]
 
 

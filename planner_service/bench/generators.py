@@ -234,7 +234,7 @@ def one_finger_grasp(rng: np.random.Generator, params: dict[str, Any]) -> Draw:
     drawn at an angle theta from that point (area-uniform in the cap allowed by
     ``cone_fraction``) and a uniform azimuth, which for a sphere on the palm's (0, 0) chart
     point gives grasp angles theta / 2."""
-    from planner_service.convert import REQUEST, request_errors
+    from planner_service.planners import REQUEST, request_errors
 
     template = _template(params)
     mu = float(template.get("mu", 0.5))

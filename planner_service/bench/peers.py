@@ -111,7 +111,7 @@ from ocp.solve.guesses import rotation_symmetric as _rotation_symmetric
 from ocp.solve.ipopt import IPOPT_OPTIONS
 from ocp.spec.problem import CONTACT_COORDS, PERIODIC, BallOnPalmProblem
 from ocp.transcription.collocation import left_input_columns, node_times
-from planner_service.convert import to_problem
+from planner_service.planners import to_problem
 
 __all__ = ["GOAL_TOLERANCE", "PEER_METHODS", "PeerOutcome", "available", "compare"]
 

@@ -213,7 +213,7 @@ def run_unit(unit: Unit) -> dict[str, Any]:
     from pydantic import ValidationError
 
     from ocp.spec.problem import ProblemError
-    from planner_service.convert import REQUEST, request_errors, solve, validation_errors
+    from planner_service.planners import REQUEST, request_errors, solve, validation_errors
 
     t0 = time.perf_counter()
     pid = os.getpid()

@@ -1,0 +1,92 @@
+"""A problem's values in its NLP: the variables' scales and bounds, the parameter vector
+(the structure's NLP, :mod:`ocp.transcription.nlp_blocks`, has only symbols)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ocp.geometry.grasp import cone_cosine
+from ocp.spec.grasp import ManipulationProblem, contact_charts
+from ocp.spec.problem import CONTACT_COORDS
+from ocp.transcription.collocation import node_times
+from ocp.transcription.grasp_model import GraspModel
+from ocp.transcription.nlp_blocks import BlockNLP
+
+__all__ = ["TRACKING_BOUND_SHRINK", "bounds", "parameters", "scales"]
+
+FloatArray = NDArray[np.float64]
+
+#: Tracking bounds are imposed in the NLP at this fraction of the requested tolerance, so
+#: that the motion between collocation points stays inside the tolerance itself.
+TRACKING_BOUND_SHRINK = 0.95
+
+
+def scales(problem: ManipulationProblem, m: GraspModel) -> tuple[FloatArray, FloatArray]:
+    """Scales of the states and inputs (the object's size, the horizon)."""
+    L, T = problem.object.length_scale, problem.duration
+    return (np.asarray(m.x_scale(L), dtype=float),
+            np.asarray(m.u_scale(L, T), dtype=float))
+
+def parameters(problem: ManipulationProblem, nlp: BlockNLP) -> FloatArray:
+    """The NLP parameter vector of a problem (its structure's NLP ``nlp``): object,
+    segment durations, palm goal and via-points, charts, weights, cone, tracking
+    tolerances and the desired poses at every collocation point."""
+    segments, tb = problem.segments()
+    t_nodes = node_times(segments, tb)
+    tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+    charts = contact_charts(problem)
+    shape = np.asarray(problem.object.dimensions, dtype=float)
+    L = problem.object.length_scale
+    goal = np.zeros(5)
+    vias = np.zeros((5, 0))
+    if problem.palm is not None:
+        goal = np.array([problem.palm.goal.get(c, 0.0) for c in CONTACT_COORDS])
+        vias = np.array([[vp.coords.get(c, 0.0) for c in CONTACT_COORDS]
+                         for vp in problem.palm.via_points]).T.reshape(5, -1)
+    tr = problem.tracking
+    weights = [problem.object_effort_weight, problem.finger_effort_weight,
+               problem.joint_effort_weight, problem.grasp_weight, tr.position_weight,
+               tr.orientation_weight]
+    tol = [1e6 if tr.position_tolerance is None else
+           (TRACKING_BOUND_SHRINK * tr.position_tolerance / L) ** 2,
+           1e6 if tr.orientation_tolerance is None else
+           1 - math.cos(TRACKING_BOUND_SHRINK * tr.orientation_tolerance)]
+    if problem.motion is not None:
+        Rd, Pd = problem.motion.at(np.concatenate([t_nodes, tm]))
+        Pd_, Rd_ = Pd.T, Rd.transpose(0, 2, 1).reshape(-1, 9).T  # column-major vec
+    else:
+        Pd_, Rd_ = np.zeros((3, 0)), np.zeros((9, 0))
+    return nlp.params.pack(
+        shape=shape, seg_T=np.diff(tb), goal=goal, vias=vias,
+        charts=np.concatenate([R.ravel(order="F") for R in charts]), weights=weights,
+        ccone=[cone_cosine(problem.mu)], tol=tol, Pd=Pd_, Rd=Rd_)
+
+
+def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: FloatArray,
+           x_scale: FloatArray, u_scale: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(lower, upper) bounds of the NLP's variables: every contact's own (physical,
+    scaled here), the fixed initial state, the epigraph in [0, 2], the internal forces."""
+    n = nlp.hs.n_intervals
+    n_seg = len(nlp.hs.segments)
+    lo: list[float] = []
+    hi: list[float] = []
+    uhi: list[float] = []
+    for c in m.contacts:  # physical bounds, scaled as the states and inputs
+        lo_c, hi_c, uhi_c = c.bounds(problem)
+        lo, hi, uhi = lo + lo_c, hi + hi_c, uhi + uhi_c
+    xb_hi, xb_lo = np.array(hi) / x_scale, np.array(lo) / x_scale
+    lo_x, hi_x = np.tile(xb_lo, (n + 1, 1)), np.tile(xb_hi, (n + 1, 1))
+    lo_x[0] = hi_x[0] = x0 / x_scale
+    lo_xm, hi_xm = np.tile(xb_lo, (n, 1)), np.tile(xb_hi, (n, 1))
+    ub_in = np.array(uhi) / u_scale
+    lo_u, hi_u = np.tile(-ub_in, (n + n_seg, 1)), np.tile(ub_in, (n + n_seg, 1))
+    lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
+    ns = nlp.n_epigraph
+    zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))
+    big = 1e3 * np.ones((3 * nlp.n_force, 2 * n + 1))
+    lbx = nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n], -big)
+    ubx = nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n], big)
+    return np.asarray(lbx).ravel(), np.asarray(ubx).ravel()
