@@ -96,11 +96,58 @@ class BlockAssembler:
         return ca.MX(self.sparsity, ca.mtimes(self.matrix, nz))
 
 
-def _expanded(fn: ca.Function) -> ca.Function:
-    """``fn`` as one SX function, its common subexpressions merged."""
-    sx = fn.expand()
-    args = sx.sx_in()
-    return ca.Function(fn.name(), args, ca.cse(sx.call(args)), fn.name_in(), fn.name_out())
+def _declaration(m: Any, nseg: int, nv: int, npts: int, tracking: bool) -> Parameters:
+    """The NLP's parameters, by name (every structure's, whatever it uses)."""
+    n_track = npts if tracking else 0
+    return Parameters.of(shape=(m.surface.n_params, 1), seg_T=(nseg, 1), goal=(5, 1),
+                         vias=(5, nv), charts=(9 * m.n_contacts, 1), weights=(6, 1),
+                         ccone=(1, 1), tol=(2, 1), Pd=(3, n_track), Rd=(9, n_track))
+
+
+def _small_grasp_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, ...],
+                     via_masks: tuple[tuple[bool, ...], ...], t0: float) -> BlockNLP:
+    """The same NLP for a grasp without path rows (one contact, no tracking: the object
+    on the palm alone), written out in SX: at this size one SX graph is cheaper to call
+    than mapped blocks, and the rolling equations at a node shared by two intervals are
+    evaluated once. Same variables, constraints, order and objective as the blocks'."""
+    hs = HermiteSimpson(m.nx, m.nu, segments)
+    n, nseg = hs.n_intervals, len(segments)
+    decl = _declaration(m, nseg, len(via_masks), 2 * n + 1, False)
+    p = ca.SX.sym("p", decl.size)
+    prm = decl.unpack(p)
+    shape_p, seg_T, goal, vias = prm["shape"], prm["seg_T"], prm["goal"], prm["vias"]
+    L, T = ca.mmax(shape_p), ca.sum1(prm["seg_T"])
+    x_scale = ca.vertcat(*m.x_scale(L))
+    u_scale = ca.vertcat(*m.u_scale(L, T))
+    params = ca.vertcat(shape_p, prm["charts"])
+    g = [hs.defects(m.dynamics, params, x_scale, u_scale, seg_T)]
+    ends = hs.segment_end_nodes
+    for j, vmask in enumerate(via_masks):
+        g += target_residuals(hs.X[:, ends[j]], vias[:, j], vmask, x_scale, PERIODIC)
+    g += target_residuals(hs.X[:, ends[-1]], goal, goal_mask, x_scale, PERIODIC)
+    g_all = ca.vertcat(*g)
+    xs, us, wq = ca.SX.sym("xs", m.nx), ca.SX.sym("us", m.nu), ca.SX.sym("wq", 3)
+    effort: Any = ca.SX(0)
+    for k, idx in enumerate(m.effort_groups()):
+        if idx:
+            effort += wq[k] * ca.sumsqr(us[idx])
+    effort_fn = ca.Function("effort", [xs, us, wq], [effort])
+    weights = prm["weights"][0:3]
+    f = hs.simpson(lambda x, u: effort_fn(x, u, weights), seg_T / T)
+    w = hs.w
+    empty = [ca.SX(0, n + 1), ca.SX(0, n), ca.SX(0, 2 * n + 1)]
+    unpack = ca.Function("unpack", [w], [hs.X, hs.Xm, hs.U, hs.Um, *empty])
+    pack = ca.Function("pack", [hs.X, hs.Xm, hs.U, hs.Um, *empty], [w])
+    lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", g_all.numel())
+    oracle = ca.Function("manipulation_nlp", [w, p], [f, g_all], ["x", "p"], ["f", "g"])
+    jac_g = ca.Function("nlp_jac_g", [w, p], [g_all, ca.jacobian(g_all, w)], ["x", "p"],
+                        ["g", "jac_g_x"])
+    hess = ca.triu(ca.hessian(lam_f * f + ca.dot(lam_g, g_all), w)[0])
+    hess_lag = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess],
+                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+    zeros = np.zeros(g_all.numel())
+    return BlockNLP(hs, unpack, pack, decl, zeros, zeros.copy(), time.perf_counter() - t0,
+                    0, 0, oracle, jac_g, hess_lag)
 
 
 def _triplets(sp: ca.Sparsity) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -121,6 +168,8 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     closure and tracking bounds), the goal and via-point targets."""
     t0 = time.perf_counter()
     nc = m.n_contacts
+    if nc < 2 and not tracking:
+        return _small_grasp_nlp(m, segments, goal_mask, via_masks, t0)
     nf = len(m.fingers)
     hs = HermiteSimpson(m.nx, m.nu, segments)
     n = hs.n_intervals
@@ -314,10 +363,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
 
     # -- the NLP in MX: mapped blocks ------------------------------------------------------
     w = ca.MX.sym("w", nw)
-    n_track = npts if tracking else 0
-    decl = Parameters.of(shape=(ns, 1), seg_T=(nseg, 1), goal=(5, 1), vias=(5, nv),
-                         charts=(9 * nc, 1), weights=(6, 1), ccone=(1, 1), tol=(2, 1),
-                         Pd=(3, n_track), Rd=(9, n_track))
+    decl = _declaration(m, nseg, nv, npts, tracking)
     p = ca.MX.sym("p", decl.size)
     prm_ = decl.unpack(p)
     shape_p, seg_T, goal, charts, weights, ccone, tol, Pd, Rd = (
@@ -368,11 +414,5 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
 
     oracle = ca.Function("manipulation_nlp", [w, p], [f, g_all], ["x", "p"], ["f", "g"])
-    if nc < 2:
-        # a small grasp (the object on the palm alone): the mapped blocks expanded into
-        # one SX graph each, whose calls cost less than the MX maps' at this size, with
-        # common subexpressions merged (the rolling equations at a node shared by two
-        # intervals are then evaluated once, as a hand-written SX NLP would)
-        oracle, jac_g, hess_lag = (_expanded(fn) for fn in (oracle, jac_g, hess_lag))
     return BlockNLP(hs, unpack, pack, decl, np.array(lbg), np.array(ubg),
                     time.perf_counter() - t0, n_force, n_s, oracle, jac_g, hess_lag)
