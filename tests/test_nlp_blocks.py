@@ -164,3 +164,38 @@ def test_a_background_compile_without_a_compiler_keeps_the_virtual_machine(
     assert sol.status is Status.SOLVED and not planner._build(problem)[0].compiled
     assert planner.compiler.pending == 0
     assert any("no C compiler" in e for e in planner.compiler.errors)
+
+
+def test_the_small_sx_form_is_the_block_nlp() -> None:
+    """The object on the palm alone is written out in SX (cheaper at this size): the same
+    objective, constraints and derivatives as the blocks' at random points, with via-points
+    (the input jumps there)."""
+    from ocp.ball_on_palm import grasp_problem
+    from ocp.solve.planner import FORCE_REGULARISATION, GraspStructure
+    from ocp.spec.problem import BallOnPalmProblem, ObjectSpec
+    from ocp.transcription.nlp_blocks import build_manipulation_nlp
+
+    problem = grasp_problem(BallOnPalmProblem(
+        object=ObjectSpec("ellipsoid", (0.025, 0.035)), initial=(0.0, 0.0, 0.1, 0.2, 0.3),
+        goal={"x": 0.01, "psi": 0.4}, duration=2.0, n_intervals=8,
+        via_points=(ViaPoint(0.7, {"y": 0.01, "v": 0.1}),)))
+    m = ManipulationPlanner().model(problem)
+    key = GraspStructure.of(problem)
+    args = (m, key.segments, key.goal_mask, key.via_masks, key.tracking, FORCE_REGULARISATION)
+    small = build_manipulation_nlp(*args)
+    blocks = build_manipulation_nlp(*args, small=False)
+    assert small.params == blocks.params and small.pack.nnz_out(0) == blocks.pack.nnz_out(0)
+    assert_close(small.lbg, blocks.lbg, atol=0) and len(small.ubg) == len(blocks.ubg)
+    rng = np.random.default_rng(5)
+    p = ManipulationPlanner.parameters(problem, small)
+    for _ in range(3):
+        w = 0.2 * rng.normal(size=small.pack.nnz_out(0))
+        lam = rng.normal(size=len(small.lbg))
+        for a, b in zip(small.oracle(w, p), blocks.oracle(w, p), strict=True):
+            assert_close(np.asarray(a), np.asarray(b), atol=1e-12, rtol=1e-12)
+        assert_close(np.asarray(small.jac_g(w, p)[1]), np.asarray(blocks.jac_g(w, p)[1]),
+                     atol=1e-12, rtol=1e-12)
+        assert_close(np.asarray(small.hess_lag(w, p, 0.7, lam)),
+                     np.asarray(blocks.hess_lag(w, p, 0.7, lam)), atol=1e-10, rtol=1e-10)
+    with pytest.raises(ValueError, match="without path rows"):
+        build_manipulation_nlp(*args[:4], True, FORCE_REGULARISATION, small=True)

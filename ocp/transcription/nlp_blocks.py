@@ -157,7 +157,8 @@ def _triplets(sp: ca.Sparsity) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
 
 def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, ...],
                            via_masks: tuple[tuple[bool, ...], ...], tracking: bool,
-                           force_regularisation: float) -> BlockNLP:
+                           force_regularisation: float, small: bool | None = None
+                           ) -> BlockNLP:
     """The NLP of one grasp structure (``m``: its
     :class:`~ocp.transcription.grasp_model.GraspModel`):
     variables ``w = (X, Xm, U, Um, S, Sm, F)`` (scaled states and inputs at
@@ -165,10 +166,16 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     parameters ``p = (shape, seg_T, goal, vias, charts, weights, cone cosine, tracking
     tolerances, desired positions, desired rotations)``; constraints: the defects of every
     interval, every point's path constraints (node 0, the given initial grasp, without its
-    closure and tracking bounds), the goal and via-point targets."""
+    closure and tracking bounds), the goal and via-point targets. ``small`` (default: for
+    one contact without tracking) writes the same NLP out in SX instead of from blocks."""
     t0 = time.perf_counter()
     nc = m.n_contacts
-    if nc < 2 and not tracking:
+    if small is None:
+        small = nc < 2 and not tracking
+    if small:
+        if nc >= 2 or tracking:
+            raise ValueError("only a grasp without path rows (one contact, no tracking) "
+                             "has the small SX form")
         return _small_grasp_nlp(m, segments, goal_mask, via_masks, t0)
     nf = len(m.fingers)
     hs = HermiteSimpson(m.nx, m.nu, segments)
