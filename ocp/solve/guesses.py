@@ -54,10 +54,6 @@ FloatArray = NDArray[np.float64]
 #: (physical units, rows).
 Guess = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 
-#: Pose tolerance of the inverse kinematics along the initial guess [m, rad], the initial
-#: grasp's own. (A guess closed to 1e-8 only sent IPOPT down another path on experiment 1:
-#: the same 14 iterations, one with an inertia correction, 30 % more time.)
-IK_GUESS_TOL = 1e-10
 _GUESS_SUBSTEPS = 2  # RK4 steps per half interval in the palm's guess simulation
 
 
@@ -174,9 +170,8 @@ def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: 
     desired motion); each fingertip's contact point kept where it started relative to
     the object's centre (palm frame), its contact coordinates integrated with the
     rolling equations; the joints by inverse kinematics along the way (closure holds);
-    joint rates by finite differences."""
-    from ocp.robots.finger import inverse_kinematics, inverse_kinematics_batch
-
+    joint rates by finite differences (each fingertip's part:
+    :meth:`~ocp.spec.contacts.FingertipContact.guess_contact` and ``guess_joints``)."""
     charts = contact_charts(problem)
     shape = np.asarray(problem.object.dimensions, dtype=float)
     prm = m.params(shape, charts)
@@ -193,30 +188,10 @@ def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: 
     W = np.zeros((len(ts), m.nu))
     X[:, obj.xs], W[:, obj.us] = Xo, Wo
     X[0, obj.xs] = x0[obj.xs]
-    dt = 1e-4 * problem.duration
     for tip in m.fingertips:
         k = m.point_contacts.index(tip)
-        offset = pts0[:, k] - p_obj0
-        Rc = charts[k]
-
-        def ball_point(t: FloatArray, offset: FloatArray = offset,
-                       Rc: FloatArray = Rc) -> FloatArray:
-            R, _ = pose(t)
-            pts = np.einsum("kji,j->ki", R, offset)  # R^T offset
-            return np.asarray(m.surface.inverse(pts @ Rc, shape))  # rows Rc^T p
-
-        alpha = ball_point(ts)
-        rate = (ball_point(ts + dt) - ball_point(ts - dt)) / (2 * dt)
-        rate[:, 1] = ((rate[:, 1] * 2 * dt + np.pi) % (2 * np.pi) - np.pi) / (2 * dt)
-        ef = np.zeros((len(ts), 5))
-        ef[:, 2:4] = alpha
-        ef[0] = tip.spec(problem).initial
-        pad = np.asarray(m.roll(len(ts) - 1)(  # the pad point and angle, RK4 steps
-            ef[0, [0, 1, 4]], alpha[:-1].T, rate[:-1].T, rate[1:].T, np.diff(ts)[None],
-            np.tile(shape[:, None], (1, len(ts) - 1)))).T
-        ef[1:, 0:2], ef[1:, 4] = pad[:, 0:2], pad[:, 2]
-        X[:, tip.eta_cols] = ef
-        W[:, tip.w_cols] = rate
+        X[:, tip.eta_cols], W[:, tip.w_cols] = tip.guess_contact(
+            problem, pose, ts, pts0[:, k] - p_obj0, charts[k], shape, m.roll(len(ts) - 1))
     # joints by IK along the way, every finger: the pads' poses do not depend on the
     # joints (one batched evaluation); one batched IK from the initial grasp's joints,
     # and a sequential one from the previous point's where that does not converge
@@ -225,15 +200,8 @@ def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: 
     R_all = np.asarray(out[2]).reshape(3, len(ts), -1, 3)  # (3, k, finger, 3)
     p_all = np.asarray(out[3]).reshape(3, len(ts), -1)  # (3, k, finger)
     for i, tip in enumerate(m.fingertips):
-        q0 = x0[tip.q_cols]
-        R_i, p_i = R_all[:, :, i, :].transpose(1, 0, 2), p_all[:, :, i].T
-        qs, ok = inverse_kinematics_batch(tip.finger, R_i, p_i, q0, tol=IK_GUESS_TOL)
-        qs[0] = q0
-        for j in (np.flatnonzero(~ok[1:]) + 1).tolist():  # from a neighbour instead
-            qs[j] = inverse_kinematics(tip.finger, R_i[j], p_i[j], qs[j - 1],
-                                       tol=IK_GUESS_TOL).q
-        X[:, tip.q_cols] = qs
-        W[:, tip.qd_cols] = np.gradient(qs, ts, axis=0)
+        X[:, tip.q_cols], W[:, tip.qd_cols] = tip.guess_joints(
+            R_all[:, :, i, :].transpose(1, 0, 2), p_all[:, :, i].T, x0[tip.q_cols], ts)
     Ucols = np.zeros((n + len(nlp.hs.segments), m.nu))
     Ucols[nlp.hs.left_cols] = W[0:-1:2]
     Ucols[nlp.hs.right_cols] = W[2::2]

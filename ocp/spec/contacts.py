@@ -52,6 +52,10 @@ InputOfTime = Callable[[FloatArray], FloatArray]
 
 #: Joint limits are imposed this far inside [rad or m] at the collocation points.
 JOINT_LIMIT_MARGIN = 1e-4
+#: Pose tolerance of the inverse kinematics along the initial guess [m, rad], the initial
+#: grasp's own. (A guess closed to 1e-8 only sent IPOPT down another path on experiment 1:
+#: the same 14 iterations, one with an inertia correction, 30 % more time.)
+IK_GUESS_TOL = 1e-10
 
 
 @dataclass
@@ -476,6 +480,48 @@ class FingertipContact(Contact):
         return ([-pad, -pad, -u_lim, -inf, -inf, *(lower + back)],
                 [pad, pad, u_lim, inf, inf, *(upper - back)],
                 [100.0, 100.0, *np.asarray(self.finger.velocity_limit)])
+
+    def guess_contact(self, problem: ManipulationProblem, pose: PoseOfTime, ts: FloatArray,
+                      offset: FloatArray, chart: FloatArray, shape: FloatArray,
+                      roll: Any) -> tuple[FloatArray, FloatArray]:
+        """The initial guess's contact coordinates and inputs at times ts: the contact point
+        kept where it started relative to the object's centre (``offset``, palm frame) while
+        the object moves by ``pose``; its object point by the inverse chart, its rate by
+        central differences, the pad point and angle rolled along (``roll``: the grasp
+        model's RK4 of the rolling equations)."""
+        dt = 1e-4 * problem.duration
+
+        def ball_point(t: FloatArray) -> FloatArray:
+            R, _ = pose(t)
+            pts = np.einsum("kji,j->ki", R, offset)  # R^T offset
+            return np.asarray(self.surface.inverse(pts @ chart, shape))  # rows Rc^T p
+
+        alpha = ball_point(ts)
+        rate = (ball_point(ts + dt) - ball_point(ts - dt)) / (2 * dt)
+        rate[:, 1] = ((rate[:, 1] * 2 * dt + np.pi) % (2 * np.pi) - np.pi) / (2 * dt)
+        ef = np.zeros((len(ts), 5))
+        ef[:, 2:4] = alpha
+        ef[0] = self.spec(problem).initial
+        pad = np.asarray(roll(  # the pad point and angle, RK4 steps
+            ef[0, [0, 1, 4]], alpha[:-1].T, rate[:-1].T, rate[1:].T, np.diff(ts)[None],
+            np.tile(shape[:, None], (1, len(ts) - 1)))).T
+        ef[1:, 0:2], ef[1:, 4] = pad[:, 0:2], pad[:, 2]
+        return ef, rate
+
+    def guess_joints(self, R: FloatArray, p: FloatArray, q0: FloatArray, ts: FloatArray
+                     ) -> tuple[FloatArray, FloatArray]:
+        """The joints (and their rates, by differences) that put the pad at the poses
+        (R (k, 3, 3), p (k, 3)) at times ts: one batched inverse kinematics from the initial
+        grasp's joints q0, and a sequential one from the previous point's where that does
+        not converge."""
+        from ocp.robots.finger import inverse_kinematics, inverse_kinematics_batch
+
+        qs, ok = inverse_kinematics_batch(self.finger, R, p, q0, tol=IK_GUESS_TOL)
+        qs[0] = q0
+        for j in (np.flatnonzero(~ok[1:]) + 1).tolist():  # from a neighbour instead
+            qs[j] = inverse_kinematics(self.finger, R[j], p[j], qs[j - 1],
+                                       tol=IK_GUESS_TOL).q
+        return qs, np.gradient(qs, ts, axis=0)
 
     def checks(self, problem: ManipulationProblem, k: int, c: CertificateContext
                ) -> list[Check]:
