@@ -5,10 +5,10 @@ State: the palm/object contact coordinates eta_p = (x, y, u, v, psi); input: the
 contact velocity w = d/dt (x, y) [m/s]; objective: the control effort integral |w|^2 dt;
 goals and via-points: equality constraints on any subset of eta. This is a one-contact
 grasp (a :class:`~ocp.spec.contacts.SupportContact` and no fingers) of the one formulation in
-:mod:`ocp.solve.planner`: the same transcription (its blocks expanded to SX at this size),
-the same solve loop with the palm's strategies (simulated reference paths with loops for
-pure reorientations, the gauge bound of the symmetric vertical case: :mod:`ocp.solve.guesses`,
-:mod:`ocp.palm`), the same certificate (:func:`ocp.certify.laws.certify_grasp`) with the palm's
+:mod:`ocp.solve.planner`: the same transcription (written out in SX at this size), the
+same solve loop with the palm's strategies (simulated reference paths with loops for pure
+reorientations, the gauge bound of the symmetric vertical case: :mod:`ocp.solve.guesses`),
+the same certificate (:func:`ocp.certify.laws.certify_grasp`) with the palm's
 tolerances. :class:`BallOnPalmPlanner` poses a :class:`~ocp.spec.problem.BallOnPalmProblem` as
 that grasp and returns its plan as a :class:`~ocp.solution.Solution` (the contact
 coordinates' trajectory, sampled on any grid, with the certificate under the
@@ -38,7 +38,7 @@ from ocp.spec.problem import (
     goal_errors,
     wrap_difference,
 )
-from ocp.transcription.collocation import WarmStart, hermite_sample
+from ocp.transcription.collocation import WarmStart
 
 __all__ = [
     "NU",
@@ -174,12 +174,6 @@ def _trajectory(model: BallOnPalmModel, params: FloatArray, chart: FloatArray,
                       contact_point=np.asarray(cp).T, contact_normal=np.asarray(cn).T)
 
 
-_MESSAGES = {
-    Status.INFEASIBLE: "IPOPT reports the goals locally infeasible from every initial guess "
-                       "tried; the last iterate is returned",
-}
-
-
 def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Solution:
     """The pipeline's plan of the object on the palm alone as a ball-on-palm
     :class:`~ocp.solution.Solution`."""
@@ -191,18 +185,14 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
     t_nodes, X, Xm, U0, Um, U1 = col.t_nodes, col.X, col.Xm, col.U0, col.Um, col.U1
     U = np.vstack([U0, U1[-1:]])  # node inputs, outgoing at via-points
     n = len(U0)
-    F0 = np.asarray(model.dynamics.map(n)(X[:-1].T, U0.T, params)).T
-    F1 = np.asarray(model.dynamics.map(n)(X[1:].T, U1.T, params)).T
     t_mid = (t_nodes[:-1] + t_nodes[1:]) / 2
     order = np.argsort(np.concatenate([t_nodes, t_mid]), kind="stable")
     grid = _trajectory(model, params, chart, np.concatenate([t_nodes, t_mid])[order],
                        np.vstack([X, Xm])[order], np.vstack([U, Um])[order])
     nodes = _trajectory(model, params, chart, t_nodes, X, U)
 
-    def sampler(t: FloatArray) -> Trajectory:
-        if np.any((t < -1e-12) | (t > problem.duration + 1e-12)):
-            raise ValueError(f"sample times must lie in [0, {problem.duration}] s")
-        x, u = hermite_sample(t_nodes, X, F0, F1, U0, Um, U1, np.clip(t, 0, problem.duration))
+    def sampler(t: FloatArray) -> Trajectory:  # the pipeline's polynomials
+        x, u = plan.interpolate(t)
         return _trajectory(model, params, chart, t, x, u)
 
     cert = palm_certificate(plan.certificate)
@@ -212,7 +202,8 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
         Status.SOLVED: "converged; certificate passed",
         Status.INACCURATE: "converged, but the certificate failed: "
                            + "; ".join(cert.failures) + " (refine n_intervals)",
-        Status.INFEASIBLE: _MESSAGES[Status.INFEASIBLE],
+        Status.INFEASIBLE: "IPOPT reports the goals locally infeasible from every initial "
+                           "guess tried; the last iterate is returned",
         Status.ITERATION_LIMIT: f"iteration limit {o.max_iter} reached; the last iterate is "
                                 "returned",
         Status.TIME_LIMIT: f"time limit {o.time_limit} s reached; the last iterate is "
@@ -227,8 +218,7 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
                         objective=s.objective * problem.object.length_scale ** 2
                         / problem.duration, cache_hit=s.cache_hit, refinements=s.refinements,
                         n_intervals=s.n_intervals, ipopt_time=s.ipopt_time)
-    segments = Structure.of(replace(problem, n_intervals=n)).segments
-    ends = [0, *np.cumsum(segments).tolist()]
+    ends = [0, *np.cumsum(replace(problem, n_intervals=n).segment_intervals()).tolist()]
     return Solution(status=status, message=message, stats=stats, grid=grid, nodes=nodes,
                     certificate=cert, goal_error=goal_errors(problem, X, ends),
                     _sampler=sampler, plan=plan)

@@ -11,7 +11,6 @@ planner's terms (its contact coordinates' :class:`Trajectory`, sampled on any gr
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any
@@ -295,8 +294,7 @@ class ManipulationSolution:
     stats: SolverStats | None = None
     #: The NLP's own values (for sampling and for the ball-on-palm's view).
     collocation: Collocation | None = field(default=None, repr=False)
-    _sampler: Callable[[FloatArray], GraspSample] | None = field(
-        default=None, repr=False, compare=False)
+    _interpolant: _Interpolant | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -312,33 +310,46 @@ class ManipulationSolution:
     def duration(self) -> float:
         return float(self.t[-1])
 
-    def sample(self, t: FloatArray | list[float]) -> GraspSample:
-        """The plan at any times in [0, duration], from the collocation polynomials (the
-        states' cubic Hermite polynomial and the inputs' quadratic of each interval; a time
-        on a via-point node gets the outgoing input)."""
-        if self._sampler is None:
+    def interpolate(self, t: FloatArray | list[float]) -> tuple[FloatArray, FloatArray]:
+        """(states, inputs) at any times in [0, duration], rows, from the collocation
+        polynomials: each interval's cubic Hermite polynomial of the states and quadratic
+        of the inputs (a time on a via-point node gets the outgoing input)."""
+        if self._interpolant is None:
             raise ValueError("this plan has no collocation polynomials (non-finite values)")
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if np.any((t < -1e-12) | (t > self.duration + 1e-12)):
             raise ValueError(f"sample times must lie in [0, {self.duration}] s")
-        return self._sampler(np.clip(t, 0.0, self.duration))
+        return self._interpolant(np.clip(t, 0.0, self.duration))
+
+    def sample(self, t: FloatArray | list[float]) -> GraspSample:
+        """The plan at any times in [0, duration] (:meth:`interpolate`), with the states'
+        rates and the object's pose."""
+        x, u = self.interpolate(t)
+        assert self._interpolant is not None
+        return self._interpolant.describe(np.clip(np.atleast_1d(np.asarray(t, dtype=float)),
+                                                  0.0, self.duration), x, u)
 
 
-def _sampler(m: GraspModel, col: Collocation, prm: FloatArray
-             ) -> Callable[[FloatArray], GraspSample]:
-    n = len(col.U0)
-    F0 = np.asarray(m.mapped("dynamics", n)(col.X[:-1].T, col.U0.T, prm)).T
-    F1 = np.asarray(m.mapped("dynamics", n)(col.X[1:].T, col.U1.T, prm)).T
+class _Interpolant:
+    """A plan's collocation polynomials (see :meth:`ManipulationSolution.interpolate`)."""
 
-    def sample(t: FloatArray) -> GraspSample:
-        x, u = hermite_sample(col.t_nodes, col.X, F0, F1, col.U0, col.Um, col.U1, t)
-        k = len(t)
+    def __init__(self, m: GraspModel, col: Collocation, prm: FloatArray) -> None:
+        n = len(col.U0)
+        self.m, self.col, self.prm = m, col, prm
+        self.F0 = np.asarray(m.mapped("dynamics", n)(col.X[:-1].T, col.U0.T, prm)).T
+        self.F1 = np.asarray(m.mapped("dynamics", n)(col.X[1:].T, col.U1.T, prm)).T
+
+    def __call__(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+        c = self.col
+        return hermite_sample(c.t_nodes, c.X, self.F0, self.F1, c.U0, c.Um, c.U1, t)
+
+    def describe(self, t: FloatArray, x: FloatArray, u: FloatArray) -> GraspSample:
+        """States x and inputs u at times t with their rates and the object's pose."""
+        k, m, prm = len(t), self.m, self.prm
         xd = np.asarray(m.mapped("dynamics", k)(x.T, u.T, prm)).T
         cart = m.mapped("cartesian", k)(x.T, prm)
         R = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
         return GraspSample(t, x, u, xd, np.asarray(cart[1]).T, R)
-
-    return sample
 
 
 def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Status, raw: str,
@@ -395,4 +406,4 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
         fingers=tuple(fingers), grasp_angle=phi, cone_margin=margin, desired_position=Pd,
         desired_rotation=Rd, tracking_position_error=ep, tracking_angle_error=ea,
         goal_error=goal_error, certificate=cert, certificate_failures=failures, X=Xg, U=Ug,
-        collocation=col, _sampler=_sampler(m, col, prm) if finite else None)
+        collocation=col, _interpolant=_Interpolant(m, col, prm) if finite else None)

@@ -60,8 +60,9 @@ _GUESS_SUBSTEPS = 2  # RK4 steps per half interval in the palm's guess simulatio
 class Strategy:
     """How the pipeline starts and budgets IPOPT for a kind of grasp (see the module)."""
 
-    #: IPOPT iterations per initial guess (None: the whole budget)
-    max_iter_per_guess: int | None = None
+    #: whether each initial guess gets at most the planner's ``max_iter_per_guess``
+    #: iterations (else the whole budget)
+    caps_guesses: bool = False
     #: whether later guesses and grid refinements draw on what earlier ones left of
     #: ``options.max_iter`` (else each solve has the whole budget)
     shared_budget: bool = False
@@ -98,7 +99,7 @@ class GraspStrategy(Strategy):
 class PalmStrategy(Strategy):
     """The object on the palm alone (the ball-on-palm planner's strategies)."""
 
-    max_iter_per_guess: int | None = 300
+    caps_guesses = True
     shared_budget = True
     use_nlp_point = False
 

@@ -45,7 +45,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from ocp.certify.certificate import Certificate, CheckKind
+from ocp.certify.certificate import Certificate
 from ocp.certify.laws import certify_grasp
 from ocp.geometry.grasp import force_angles
 from ocp.solution import (
@@ -131,11 +131,6 @@ class GraspStructure:
         return GraspStructure(problem.object.shape, problem.palm is not None, segments,
                               goal_mask, via_masks, tuple(c.finger for c in problem.fingers),
                               problem.motion is not None)
-
-    @property
-    def model_key(self) -> tuple[Any, ...]:
-        """The part that fixes the grasp model (:class:`GraspModel`'s arguments)."""
-        return (self.shape, self.palm, self.fingers)
 
     def fingerprint(self, m: GraspModel) -> str:
         """The structure as a string that another process computes alike: the fingers by
@@ -315,11 +310,11 @@ class ManipulationPlanner:
                                certify)
         refinements = 0
         # only failures that shrink with the grid (what happens between collocation
-        # points), decided by the checks' kind
+        # points), decided by the checks' kind (an inaccurate plan has failed checks)
         while (certify and sol.status is Status.INACCURATE
                and refinements < problem.max_refinements
                and 2 * problem.n_intervals <= MAX_INTERVALS
-               and sol.certificate.failed_kinds() <= {CheckKind.DISCRETISATION}
+               and sol.certificate.refinable
                and time.perf_counter() < deadline):
             refinements += 1
             problem = problem.with_intervals(2 * problem.n_intervals)
@@ -368,9 +363,7 @@ class ManipulationPlanner:
         p = self.parameters(problem, nlp)
         lbx, ubx = bounds(problem, nlp, m, x0, x_scale, u_scale)
         strategy.adjust_bounds(problem, nlp, lbx, ubx)
-        cap = strategy.max_iter_per_guess
-        if cap is not None:
-            cap = self.max_iter_per_guess
+        cap = self.max_iter_per_guess if strategy.caps_guesses else None
         attempts: list[_Attempt] = []
         ipopt_time = 0.0
         t_loop = time.perf_counter()
