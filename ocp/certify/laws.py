@@ -25,10 +25,10 @@ from ocp.certify.certificate import Certificate, Check, CheckKind, TolerancePoli
 from ocp.geometry.grasp import force_angles
 from ocp.geometry.rotations import rotation_angle_between
 from ocp.spec.contacts import CertificateContext
+from ocp.spec.grasp import ManipulationProblem, support_goal_errors
 from ocp.transcription.collocation import reintegrate
 
 if TYPE_CHECKING:
-    from ocp.spec.grasp import ManipulationProblem
     from ocp.transcription.grasp_model import GraspModel
 
 __all__ = ["certify_grasp"]
@@ -51,8 +51,6 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, t_nodes: FloatArr
                   prm: FloatArray, policy: TolerancePolicy) -> Certificate:
     """The certificate of a plan given by its node states X and each interval's inputs
     (U0 at its start, Um at its midpoint, U1 at its end): see the module's doc."""
-    from ocp.spec.grasp import support_goal_errors
-
     if not all(np.all(np.isfinite(a)) for a in (X, U0, Um, U1)):
         return Certificate.failed("the plan has non-finite states or inputs")
     n_sub = policy.samples_per_interval
