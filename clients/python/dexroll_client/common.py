@@ -7,7 +7,9 @@ Import from :mod:`dexroll_client.models` (it re-exports everything).
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, Strict, model_validator
 
 __all__ = [
     "BUILTIN_FINGERS",
@@ -23,8 +25,12 @@ __all__ = [
     "MAX_URDF_CHARS",
     "MAX_VIA_POINTS",
     "MAX_WARM_START_COLUMNS",
+    "MIN_DURATION",
+    "MIN_SIZE",
     "PLANNERS",
+    "Count",
     "NlpPointModel",
+    "Real",
 ]
 
 #: Limits of a request (the service's core enforces the same ones; a test checks).
@@ -32,6 +38,11 @@ MAX_INTERVALS = 2000
 MAX_VIA_POINTS = 50
 MAX_POSITION = 10.0  # m
 MAX_DURATION = 3600.0  # s
+#: The shortest horizon (and motion step) a request may ask for [s], and the smallest
+#: length of an object or a pad [m]: below them the NLP's scaling breaks down (a 5e-324 s
+#: horizon ended `numerical_error`), so they are refused at the door (422).
+MIN_DURATION = 1e-3
+MIN_SIZE = 1e-4
 MAX_SAMPLES = 10_000
 #: Limits of a finger: joints of a URDF's chain, characters of a URDF document.
 MAX_FINGER_JOINTS = 16
@@ -49,6 +60,13 @@ MAX_MOTION_KNOTS = 1000
 #: Columns a warm start's states (or inputs) may have: the largest plan's (a free object's
 #: 7 states and five fingertips of 5 contact coordinates and MAX_FINGER_JOINTS joints each).
 MAX_WARM_START_COLUMNS = 7 + MAX_FINGERS * (5 + MAX_FINGER_JOINTS)
+
+
+#: A request's real number: a JSON number, never a boolean (pydantic's lax mode would read
+#: ``false`` as 0; strict floats take integers, not booleans or strings), and its integer
+#: count (strict: not a boolean, not 2.0).
+Real = Annotated[float, Strict()]
+Count = Annotated[int, Strict()]
 
 
 class _Request(BaseModel):
@@ -73,10 +91,10 @@ class NlpPointModel(_Request):
     pass it back as it came."""
 
     nlp: str = Field(min_length=1, max_length=200, description="fingerprint of the NLP")
-    w: list[float] = Field(max_length=MAX_NLP_POINT, description="decision variables")
-    lam_x: list[float] = Field(max_length=MAX_NLP_POINT,
+    w: list[Real] = Field(max_length=MAX_NLP_POINT, description="decision variables")
+    lam_x: list[Real] = Field(max_length=MAX_NLP_POINT,
                                description="multipliers of the variable bounds")
-    lam_g: list[float] = Field(max_length=MAX_NLP_POINT,
+    lam_g: list[Real] = Field(max_length=MAX_NLP_POINT,
                                description="multipliers of the constraints")
 
     @model_validator(mode="after")

@@ -22,7 +22,11 @@ from dexroll_client.common import (
     MAX_URDF_CHARS,
     MAX_VIA_POINTS,
     MAX_WARM_START_COLUMNS,
+    MIN_DURATION,
+    MIN_SIZE,
+    Count,
     NlpPointModel,
+    Real,
     _planner_of,
     _Request,
 )
@@ -59,8 +63,8 @@ __all__ = [
     "WarmStartModel",
 ]
 
-Position = Annotated[float, Field(ge=-MAX_POSITION, le=MAX_POSITION)]
-Angle = Annotated[float, Field(ge=-100.0, le=100.0)]
+Position = Annotated[Real, Field(ge=-MAX_POSITION, le=MAX_POSITION)]
+Angle = Annotated[Real, Field(ge=-100.0, le=100.0)]
 
 
 # -- requests -------------------------------------------------------------------------------
@@ -97,35 +101,35 @@ class ObjectModel(_Request):
     shape: Literal["sphere", "ellipsoid"] = Field(
         default="sphere",
         description="'sphere' or 'ellipsoid' (of revolution about its z axis)")
-    dimensions: list[Annotated[float, Field(gt=0.0, le=1.0)]] = Field(
+    dimensions: list[Annotated[Real, Field(ge=MIN_SIZE, le=1.0)]] = Field(
         default_factory=lambda: [0.025], min_length=1, max_length=2,
         description="sphere: [radius] [m]; ellipsoid: [equatorial semi-axis, polar "
                     "semi-axis] [m]")
-    chart_rotation: list[Annotated[float, Field(ge=-2 * math.pi, le=2 * math.pi)]] = Field(
+    chart_rotation: list[Annotated[Real, Field(ge=-2 * math.pi, le=2 * math.pi)]] = Field(
         default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
         description="rotation vector [rad] of the object's chart patch in the object frame")
 
 
 class ViaPointModel(_Request):
-    time: float = Field(gt=0.0, le=MAX_DURATION, description="time of the via-point [s]")
+    time: Real = Field(gt=0.0, le=MAX_DURATION, description="time of the via-point [s]")
     coords: PartialContactCoordinates = Field(description="coordinates to pass through")
 
 
 class SolverModel(_Request):
-    max_iter: int = Field(default=1000, ge=1, le=100_000,
+    max_iter: Count = Field(default=1000, ge=1, le=100_000,
                           description="IPOPT iteration limit, all initial guesses together")
-    time_limit: float = Field(default=60.0, gt=0.0, le=3600.0,
+    time_limit: Real = Field(default=60.0, gt=0.0, le=3600.0,
                               description="wall-clock limit of the solve [s] (the service "
                                           "caps it at its own maximum)")
-    cert_position_tol: float = Field(default=1e-6, gt=0.0, le=1e-2, description=(
+    cert_position_tol: Real = Field(default=1e-6, gt=0.0, le=1e-2, description=(
         "certificate tolerance on the re-integration defect of x, y [m]"))
-    cert_angle_tol: float = Field(default=1e-4, gt=0.0, le=1e-1, description=(
+    cert_angle_tol: Real = Field(default=1e-4, gt=0.0, le=1e-1, description=(
         "certificate tolerance on the re-integration defect of u, v, psi [rad]"))
 
 
 # -- warm starts -----------------------------------------------------------------------------
 
-WarmValue = Annotated[float, Field(ge=-1e6, le=1e6)]
+WarmValue = Annotated[Real, Field(ge=-1e6, le=1e6)]
 WarmRows = list[Annotated[list[WarmValue], Field(min_length=1,
                                                   max_length=MAX_WARM_START_COLUMNS)]]
 ColumnNames = list[Annotated[str, Field(min_length=1, max_length=200)]]
@@ -150,7 +154,7 @@ class WarmStartModel(_Request):
         default=None, min_length=1, max_length=200, pattern=r"^[A-Za-z0-9_.\-]+$",
         description="the `id` of a finished job of this service with the same planner, "
                     "whose result has a `collocation` block (give this, or `t`, `x`, `u`)")
-    t: list[Annotated[float, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
+    t: list[Annotated[Real, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
         default=None, min_length=2, max_length=MAX_SAMPLES,
         description="the plan's sample times [s], from 0, strictly increasing (a result's "
                     "`collocation.t`)")
@@ -269,21 +273,21 @@ class _PalmRequest(_Request):
         default_factory=PartialContactCoordinates,
         description="coordinates required at t = duration (any subset)")
     via_points: list[ViaPointModel] = Field(default_factory=list, max_length=MAX_VIA_POINTS)
-    duration: float = Field(gt=0.0, le=MAX_DURATION, description="planning horizon [s]")
-    n_intervals: int = Field(default=50, ge=1, le=MAX_INTERVALS,
+    duration: Real = Field(ge=MIN_DURATION, le=MAX_DURATION, description="planning horizon [s]")
+    n_intervals: Count = Field(default=50, ge=1, le=MAX_INTERVALS,
                              description="collocation intervals over the horizon")
-    pole_margin: float = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
+    pole_margin: Real = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
                                description="keep |u| <= pi/2 - pole_margin [rad]")
-    max_contact_speed: float = Field(default=1.0, gt=0.0, le=100.0,
+    max_contact_speed: Real = Field(default=1.0, gt=0.0, le=100.0,
                                      description="bound on each palm contact velocity "
                                                  "component [m/s]")
-    palm_half_extent: float = Field(default=0.5, gt=0.0, le=MAX_POSITION,
+    palm_half_extent: Real = Field(default=0.5, gt=0.0, le=MAX_POSITION,
                                     description="palm coordinates stay in [-e, e] [m]")
-    max_refinements: int = Field(default=2, ge=0, le=5,
+    max_refinements: Count = Field(default=2, ge=0, le=5,
                                  description="grid doublings allowed when the certificate "
                                              "finds the grid too coarse")
     solver: SolverModel = Field(default_factory=SolverModel)
-    sample_times: list[Annotated[float, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
+    sample_times: list[Annotated[Real, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
         default=None, max_length=MAX_SAMPLES,
         description="extra times [s] at which to sample the plan (collocation polynomials)")
     warm_start: WarmStartModel | None = Field(default=None,
@@ -307,7 +311,7 @@ class BallOnPalmRequest(_PalmRequest):
                                              description="which planner")
 
 
-RotationVector = list[Annotated[float, Field(ge=-2 * math.pi, le=2 * math.pi)]]
+RotationVector = list[Annotated[Real, Field(ge=-2 * math.pi, le=2 * math.pi)]]
 
 
 class FingerModelSpec(_Request):
@@ -337,8 +341,8 @@ class FingerModelSpec(_Request):
         description="rotation vector [rad] of the finger's base in the palm frame; "
                     "default: a built-in finger's own mount (GET /v1/models), none (base "
                     "axes parallel to the palm's) for a URDF")
-    pad_half_size: float | None = Field(
-        default=None, gt=0.0, le=0.5,
+    pad_half_size: Real | None = Field(
+        default=None, ge=MIN_SIZE, le=0.5,
         description="half the side of the square pad [m]; default: the built-in "
                     "finger's (GET /v1/models)")
 
@@ -404,22 +408,22 @@ class OneFingerRequest(_PalmRequest):
                     "`planner` is a ball_on_palm request)")
     finger: FingerModelSpec = Field(default_factory=FingerModelSpec)
     finger_contact: FingerContactModel = Field(description="the fingertip/ball contact")
-    mu: float = Field(default=0.5, gt=0.0, le=10.0,
+    mu: Real = Field(default=0.5, gt=0.0, le=10.0,
                       description="friction coefficient at both contacts (dimensionless); "
                                   "the friction cone's half-angle is atan(mu) [rad]")
-    grasp_weight: float = Field(
+    grasp_weight: Real = Field(
         default=100.0, ge=0.0, le=1e6,
         description="objective weight (dimensionless) of the grasp-angle term, the time "
                     "average of 1 - cos of the larger grasp angle (0 for an antipodal grasp)")
-    finger_effort_weight: float = Field(
+    finger_effort_weight: Real = Field(
         default=0.01, ge=0.0, le=1e6,
         description="objective weight (dimensionless) of the finger contact's velocity "
                     "over the ball |w_f|^2 [rad^2/s^2], relative to the palm contact's")
-    joint_effort_weight: float = Field(
+    joint_effort_weight: Real = Field(
         default=0.01, ge=0.0, le=1e6,
         description="objective weight (dimensionless) of the joint rates |q_dot|^2 "
                     "[rad^2/s^2]")
-    pad_margin: float = Field(default=0.002, ge=0.0, le=0.1,
+    pad_margin: Real = Field(default=0.002, ge=0.0, le=0.1,
                               description="distance kept between the finger contact and "
                                           "the pad's edge [m]")
     method: Literal["collocation", "greedy"] = Field(
@@ -441,7 +445,7 @@ class OneFingerRequest(_PalmRequest):
 
 # -- manipulation: any grasp (an optional palm, one or more fingertips) ----------------------
 
-Quaternion = list[Annotated[float, Field(ge=-2.0, le=2.0)]]
+Quaternion = list[Annotated[Real, Field(ge=-2.0, le=2.0)]]
 
 
 class MountModel(_Request):
@@ -476,10 +480,10 @@ class FingertipModel(_Request):
     finger: FingerModelSpec | None = Field(
         default=None, description="the finger (a built-in one or a URDF, and its mount); "
                                   "give this or `hand_finger`")
-    hand_finger: int | None = Field(
+    hand_finger: Count | None = Field(
         default=None, ge=0, lt=MAX_FINGERS, validate_default=True,
         description="index of a finger of the request's `hand` (0-based, in the hand's "
-                    "order); give this or `finger`")
+                    "order; requires `hand`); give this or `finger`")
     name: str | None = Field(
         default=None, min_length=1, max_length=40, pattern=r"^[A-Za-z][A-Za-z0-9_\-]*$",
         description="a name for this contact in the result (unique, not 'palm'); default: "
@@ -523,9 +527,9 @@ class PalmModel(_Request):
         default_factory=PartialContactCoordinates,
         description="palm contact coordinates required at t = duration (any subset)")
     via_points: list[ViaPointModel] = Field(default_factory=list, max_length=MAX_VIA_POINTS)
-    palm_half_extent: float = Field(default=0.5, gt=0.0, le=MAX_POSITION,
+    palm_half_extent: Real = Field(default=0.5, gt=0.0, le=MAX_POSITION,
                                     description="palm coordinates stay in [-e, e] [m]")
-    max_contact_speed: float = Field(default=1.0, gt=0.0, le=100.0,
+    max_contact_speed: Real = Field(default=1.0, gt=0.0, le=100.0,
                                      description="bound on each palm contact velocity "
                                                  "component [m/s]")
 
@@ -544,8 +548,9 @@ class MotionStepModel(_Request):
     """Over ``duration``, rotate the object by ``angle`` about ``axis`` (through its
     centre) and translate its centre by ``translation``."""
 
-    duration: float = Field(gt=0.0, le=MAX_DURATION, description="duration of the step [s]")
-    axis: list[Annotated[float, Field(ge=-1e3, le=1e3)]] = Field(
+    duration: Real = Field(ge=MIN_DURATION, le=MAX_DURATION,
+                           description="duration of the step [s]")
+    axis: list[Annotated[Real, Field(ge=-1e3, le=1e3)]] = Field(
         default_factory=lambda: [0.0, 0.0, 1.0], min_length=3, max_length=3,
         description="rotation axis, a direction in the palm frame (any length but zero)")
     angle: Angle = Field(default=0.0, description="rotation angle about `axis` [rad] "
@@ -573,7 +578,7 @@ class MotionSamplesModel(_Request):
     positions."""
 
     kind: Literal["samples"] = Field(description="'samples'")
-    times: list[Annotated[float, Field(ge=0.0, le=MAX_DURATION)]] = Field(
+    times: list[Annotated[Real, Field(ge=0.0, le=MAX_DURATION)]] = Field(
         min_length=2, max_length=MAX_MOTION_KNOTS,
         description="knot times [s], from 0 to the duration, increasing")
     orientations_wxyz: list[Annotated[Quaternion, Field(min_length=4, max_length=4)]] = Field(
@@ -594,19 +599,19 @@ class TrackingModel(_Request):
     """How hard the object follows ``motion``: weights of the tracking terms of the
     objective, and optional hard bounds on the tracking errors at every instant."""
 
-    position_weight: float = Field(
+    position_weight: Real = Field(
         default=1e4, ge=0.0, le=1e8,
         description="weight (dimensionless) of the time average of |p - p_d|^2 / L^2 (L: "
                     "the object's largest semi-axis)")
-    orientation_weight: float = Field(
+    orientation_weight: Real = Field(
         default=1e4, ge=0.0, le=1e8,
         description="weight (dimensionless) of the time average of 1 - cos(angle between "
                     "the object's orientation and the desired one)")
-    position_tolerance: float | None = Field(
+    position_tolerance: Real | None = Field(
         default=None, gt=0.0, le=MAX_POSITION,
         description="bound on |p - p_d| at every instant [m] (checked by the certificate); "
                     "null: none")
-    orientation_tolerance: float | None = Field(
+    orientation_tolerance: Real | None = Field(
         default=None, gt=0.0, le=math.pi,
         description="bound on the angle between the object's orientation and the desired "
                     "one at every instant [rad]; null: none")
@@ -623,7 +628,8 @@ class ManipulationRequest(_Request):
     object: ObjectModel = Field(default_factory=ObjectModel)
     hand: HandModel | None = Field(
         default=None, description="a built-in hand whose fingers `fingers[].hand_finger` "
-                                  "picks")
+                                  "picks; required when a fingertip gives `hand_finger` "
+                                  "(else 422 naming `fingers[i].hand_finger`)")
     fingers: list[FingertipModel] = Field(min_length=1, max_length=MAX_FINGERS,
                                           description="the fingertips touching the object")
     palm: PalmModel | None = Field(default=None, description="the palm carrying the object; "
@@ -635,43 +641,43 @@ class ManipulationRequest(_Request):
                                        description="the desired object motion (required "
                                                    "without a palm)")
     tracking: TrackingModel = Field(default_factory=TrackingModel)
-    duration: float = Field(gt=0.0, le=MAX_DURATION, description="planning horizon [s]")
-    mu: float = Field(default=0.5, gt=0.0, le=10.0,
+    duration: Real = Field(ge=MIN_DURATION, le=MAX_DURATION, description="planning horizon [s]")
+    mu: Real = Field(default=0.5, gt=0.0, le=10.0,
                       description="friction coefficient at every contact (dimensionless); "
                                   "the friction cone's half-angle is atan(mu) [rad]")
-    object_effort_weight: float = Field(
+    object_effort_weight: Real = Field(
         default=1.0, ge=0.0, le=1e6,
         description="objective weight (dimensionless) of the object's own motion: the palm "
                     "contact velocity, or the free object's twist (scaled by the object's "
                     "size and the duration)")
-    finger_effort_weight: float = Field(
+    finger_effort_weight: Real = Field(
         default=0.01, ge=0.0, le=1e6,
         description="objective weight (dimensionless) of the fingertip contacts' motion "
                     "over the object |w_i|^2 [rad^2/s^2]")
-    joint_effort_weight: float = Field(
+    joint_effort_weight: Real = Field(
         default=0.01, ge=0.0, le=1e6,
         description="objective weight (dimensionless) of the joint rates |q_dot|^2 "
                     "[rad^2/s^2]")
-    grasp_weight: float = Field(
+    grasp_weight: Real = Field(
         default=100.0, ge=0.0, le=1e6,
         description="objective weight (dimensionless) of the grasp-quality term, the time "
                     "average of 1 - cos of the largest force angle (0: every contact pushes "
                     "along its normal)")
-    pad_margin: float = Field(default=0.002, ge=0.0, le=0.1,
+    pad_margin: Real = Field(default=0.002, ge=0.0, le=0.1,
                               description="distance kept between each contact and its "
                                           "pad's edge [m]")
-    n_intervals: int = Field(default=50, ge=1, le=MAX_INTERVALS,
+    n_intervals: Count = Field(default=50, ge=1, le=MAX_INTERVALS,
                              description="collocation intervals over the horizon")
-    pole_margin: float = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
+    pole_margin: Real = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
                                description="keep |u| <= pi/2 - pole_margin on every contact's "
                                            "chart patch [rad]")
-    max_object_speed: float = Field(default=1.0, gt=0.0, le=100.0,
+    max_object_speed: Real = Field(default=1.0, gt=0.0, le=100.0,
                                     description="bound on each component of a free object's "
                                                 "velocity [m/s]")
-    max_object_rate: float = Field(default=20.0, gt=0.0, le=1000.0,
+    max_object_rate: Real = Field(default=20.0, gt=0.0, le=1000.0,
                                    description="bound on each component of a free object's "
                                                "angular velocity [rad/s]")
-    max_refinements: int = Field(default=2, ge=0, le=5,
+    max_refinements: Count = Field(default=2, ge=0, le=5,
                                  description="grid doublings allowed when the certificate "
                                              "finds the grid too coarse")
     solver: SolverModel = Field(default_factory=SolverModel)
