@@ -1,0 +1,78 @@
+"""The plan viewer: an animated 3D view of a plan in the browser (docs/viewer.md).
+
+:func:`view_html` turns a plan's wire result (and, when at hand, its request) into one
+self-contained HTML page: the palm, the object turning and rolling, the fingers' links from
+their own models, the pads, the contact points and their traces, the friction cones, and a
+timeline. The service serves it at ``GET /v1/plans/{id}/view``; ``dexroll view
+RESULT.json -o plan.html`` writes it to a file.
+
+* :mod:`.tracks`: the plan's arrays in one shape, whatever its planner;
+* :mod:`.models`: the object, palm and fingers to draw it with (the request's, or inferred);
+* :mod:`.robot`: a finger's link shapes and their poses, by Pinocchio;
+* :mod:`.scene`: every pose at every sample, as JSON for the page;
+* :mod:`.page`: the HTML (three.js and ``static/viewer.js`` inlined).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from dexroll_client.models import AnyPlanResult, PlanRequest
+
+from .models import SceneModels, infer_models, models_from_request
+from .page import THREE_VERSION, page_html
+from .scene import build_scene
+from .tracks import NoPlanError, PlanTracks, tracks_of
+
+__all__ = [
+    "THREE_VERSION",
+    "NoPlanError",
+    "PlanTracks",
+    "SceneModels",
+    "build_scene",
+    "page_html",
+    "read_result",
+    "scene_of",
+    "tracks_of",
+    "view_html",
+]
+
+
+def scene_of(result: AnyPlanResult, request: PlanRequest | None = None, title: str = ""
+             ) -> dict[str, Any]:
+    """The scene of a plan (:func:`~.scene.build_scene`), drawn with its request's object
+    and fingers when ``request`` is given, inferred from the result otherwise.
+    :class:`NoPlanError` when the result holds no plan."""
+    tracks = tracks_of(result)
+    models = infer_models(tracks) if request is None else models_from_request(request, tracks)
+    return build_scene(tracks, models, title)
+
+
+def view_html(result: AnyPlanResult, request: PlanRequest | None = None, title: str = ""
+              ) -> str:
+    """The standalone page of a plan (see :func:`scene_of`)."""
+    return page_html(scene_of(result, request, title))
+
+
+def read_result(path: Path) -> tuple[AnyPlanResult, str | None]:
+    """A plan's result from a file: a result as ``dexroll plan`` writes it, or a job as
+    ``GET /v1/plans/{id}`` answers it (its ``result``); and the job's id (None for a
+    result file). ValueError saying why the file is neither."""
+    from ..planners import RESULT
+
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"cannot read {path}: {exc}") from exc
+    job_id = None
+    if isinstance(raw, dict) and "result" in raw and "state" in raw:
+        job_id = str(raw.get("id")) if raw.get("id") is not None else None
+        raw = raw["result"]
+        if raw is None:
+            raise ValueError(f"{path} is a job without a result (not finished?)")
+    try:
+        return RESULT.validate_python(raw), job_id
+    except Exception as exc:
+        raise ValueError(f"{path} is not a plan result: {exc}") from exc

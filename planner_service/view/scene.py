@@ -1,0 +1,128 @@
+"""The scene of a plan: every pose the viewer draws at every sample, computed here so that
+the page only draws (``static/viewer.js``).
+
+A scene is plain JSON (:func:`build_scene`), palm frame, metres, quaternions (x, y, z, w)
+as three.js takes them, arrays flattened row by row:
+
+* ``t`` [s], ``grasp_angle`` [rad] (null: the planner has none), ``cone_half_angle``
+  atan(mu) [rad] (null: unknown);
+* ``object``: its ``shape`` (a tagged record: ``{"kind": "ellipsoid", "semi_axes":
+  [a, b, c]}``; a ball has three equal semi-axes) and ``pose`` (``p``, ``q`` per sample);
+* ``palm``: the plane z = 0 drawn ``half_extent`` either side (null: no palm contact);
+* ``contacts``: each contact's ``point`` and the object's outward ``normal`` per sample,
+  and its ``trace`` on the object (the contact points in the object's frame);
+* ``fingertips``: each pad's ``shape`` (a tagged record: ``{"kind": "pad", "half_size",
+  "thickness"}`` today; round tips will be other kinds), its ``pose`` per sample and the
+  trace of its contact on it (pad frame);
+* ``bodies``: the fingers' link shapes (:mod:`.robot`), each with its ``pose`` per sample
+  (one sample: fixed).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .models import SceneModels, quaternion_matrices
+from .robot import finger_bodies, pad_thickness
+from .tracks import PlanTracks
+
+__all__ = ["SCENE_VERSION", "build_scene"]
+
+SCENE_VERSION = 1
+#: Contact colours, in order (the palm's first when there is one).
+PALETTE = ("#e4572e", "#17bebb", "#ffc914", "#76b041", "#a05195", "#2e86ab")
+#: Half side of a pad whose model is unknown [m].
+DEFAULT_PAD_HALF_SIZE = 0.05
+
+
+def _flat(a: np.ndarray, digits: int = 6) -> list[float]:
+    out: list[float] = np.round(np.asarray(a, dtype=float), digits).reshape(-1).tolist()
+    return out
+
+
+def _pose(position: np.ndarray, wxyz: np.ndarray) -> dict[str, list[float]]:
+    """A pose track: positions and quaternions (x, y, z, w) with a continuous sign."""
+    q = np.asarray(wxyz, dtype=float).reshape(-1, 4)[:, [1, 2, 3, 0]].copy()
+    for k in range(1, len(q)):  # the nearer of q and -q to the previous sample
+        if float(q[k] @ q[k - 1]) < 0.0:
+            q[k] = -q[k]
+    return {"p": _flat(position), "q": _flat(q)}
+
+
+def _semi_axes(shape: str, dims: tuple[float, ...]) -> list[float]:
+    if shape == "ellipsoid" and len(dims) >= 2:
+        return [dims[0], dims[0], dims[1]]
+    r = dims[0] if dims else 0.025
+    return [r, r, r]
+
+
+def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "") -> dict[str, Any]:
+    """The scene of a plan drawn with ``models`` (see the module for its layout)."""
+    R_obj = quaternion_matrices(tracks.object_wxyz)
+    c = tracks.object_position
+    semi = _semi_axes(models.shape, models.dimensions)
+    contacts: list[dict[str, Any]] = []
+    fingertips: list[dict[str, Any]] = []
+    bodies: list[dict[str, Any]] = []
+    colors = {ct.name: PALETTE[i % len(PALETTE)] for i, ct in enumerate(tracks.contacts)}
+    for ct in tracks.contacts:
+        on_object = np.einsum("kji,kj->ki", R_obj, ct.point - c)
+        contacts.append({"name": ct.name, "body": ct.body, "color": colors[ct.name],
+                         "point": _flat(ct.point), "normal": _flat(ct.normal, 5),
+                         "trace": _flat(on_object)})
+    points = [c + s * max(semi) for s in (-1.0, 1.0)]
+    for i, (f, model) in enumerate(zip(tracks.fingers, models.fingers, strict=True)):
+        R_tip = quaternion_matrices(f.tip_wxyz)
+        contact = next((ct for ct in tracks.contacts if ct.name == f.name), None)
+        trace = None if contact is None else \
+            np.einsum("kji,kj->ki", R_tip, contact.point - f.tip_position)
+        half = DEFAULT_PAD_HALF_SIZE if model is None else float(model.pad_half_size)
+        thick = 0.004 if model is None else pad_thickness(model)
+        fingertips.append({
+            "name": f.name, "color": colors.get(f.name, PALETTE[i % len(PALETTE)]),
+            "shape": {"kind": "pad", "half_size": half, "thickness": thick},
+            "pose": _pose(f.tip_position, f.tip_wxyz),
+            "trace": None if trace is None else _flat(trace)})
+        points.append(f.tip_position)
+        if model is None:
+            continue
+        for b in finger_bodies(model, f.q, f"{f.name}/"):
+            if b.static and any(o["static_name"] == b.name.split("/", 1)[1]
+                                for o in bodies if o["static"]):
+                continue  # a fixed link of the hand, drawn once
+            bodies.append({"name": b.name, "static": b.static,
+                           "static_name": b.name.split("/", 1)[1],
+                           "shape": b.shape, "color": list(b.color),
+                           "pose": _pose(b.position, b.wxyz)})
+            points.append(b.position)
+    pts = np.concatenate([np.asarray(p).reshape(-1, 3) for p in points])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    palm = None
+    if models.palm_half_extent is not None:
+        reach = 1.3 * max(float(np.max(np.abs(lo[:2]))), float(np.max(np.abs(hi[:2]))), 0.05)
+        palm = {"half_extent": min(float(models.palm_half_extent), reach)}
+        lo, hi = np.minimum(lo, [-reach, -reach, 0.0]), np.maximum(hi, [reach, reach, 0.0])
+    grasp = tracks.grasp_angle
+    return {
+        "version": SCENE_VERSION,
+        "title": title,
+        "planner": tracks.planner,
+        "status": tracks.status,
+        "message": tracks.message,
+        "notes": list(models.notes),
+        "t": _flat(tracks.t),
+        "grasp_angle": None if grasp is None else _flat(grasp),
+        "cone_half_angle": tracks.cone_half_angle,
+        "bounds": {"center": _flat((lo + hi) / 2),
+                   "radius": max(float(np.linalg.norm(hi - lo)) / 2, 0.02)},
+        "object": {"shape": {"kind": "ellipsoid", "semi_axes": semi,
+                             "object": models.shape},
+                   "pose": _pose(c, tracks.object_wxyz)},
+        "palm": palm,
+        "contacts": contacts,
+        "fingertips": fingertips,
+        "bodies": [{k: v for k, v in b.items() if k != "static_name"} for b in bodies],
+        "units": {"length": "m", "angle": "rad", "time": "s"},
+    }
