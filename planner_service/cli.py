@@ -1,5 +1,5 @@
 """Command line: ``dexroll serve``, ``dexroll plan request.json``, ``dexroll demo [folder]``,
-``dexroll bench SUITE`` (docs/benchmarks.md).
+``dexroll bench SUITE`` (docs/benchmarks.md), ``dexroll view RESULT.json`` (docs/viewer.md).
 
 A request file is any planner's request (its ``planner`` field: ``ball_on_palm``, the
 default, ``one_finger`` or ``manipulation``), the same JSON as ``POST /v1/plans`` takes.
@@ -35,6 +35,7 @@ from .planners import (
     request_errors,
     validation_errors,
 )
+from .view import command as view_command
 
 __all__ = ["main", "plan_request", "with_warm_start"]
 
@@ -200,6 +201,10 @@ def main(argv: list[str] | None = None) -> int:
                                      "and write a report (docs/benchmarks.md)")
     bench_command.add_arguments(b)
     b.set_defaults(func=bench_command.main)
+    w = sub.add_parser("view", help="write a plan's animated 3D view as one standalone "
+                                    "HTML file (docs/viewer.md)")
+    view_command.add_arguments(w)
+    w.set_defaults(func=view_command.main)
     args = parser.parse_args(argv)
     return int(args.func(args))
 
