@@ -30,7 +30,7 @@ from ..jobs.store import Store
 from ..jobs.workers import Dispatcher
 from ..settings import Settings
 from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
-from .routes import health, models, plans
+from .routes import health, models, plans, view
 
 __all__ = ["BodyLimit", "create_app"]
 
@@ -95,7 +95,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   description=__doc__, responses=ERROR_RESPONSES)
     app.state.settings, app.state.notifier = settings, Notifier()
     add_error_handlers(app)
-    for routes in (plans, models, health):
+    for routes in (plans, models, health, view):
         app.include_router(routes.router)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     return app

@@ -24,7 +24,7 @@ from dexroll_client.models import AnyPlanResult, PlanRequest
 from .models import SceneModels, infer_models, models_from_request
 from .page import THREE_VERSION, page_html
 from .scene import build_scene
-from .tracks import NoPlanError, PlanTracks, tracks_of
+from .tracks import NoPlanError, PlanTracks, has_plan, tracks_of
 
 __all__ = [
     "THREE_VERSION",
@@ -32,6 +32,7 @@ __all__ = [
     "PlanTracks",
     "SceneModels",
     "build_scene",
+    "has_plan",
     "page_html",
     "read_result",
     "scene_of",

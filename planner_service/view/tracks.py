@@ -20,7 +20,7 @@ from dexroll_client.models import (
     PlanResult,
 )
 
-__all__ = ["ContactTrack", "FingerTrack", "NoPlanError", "PlanTracks", "tracks_of"]
+__all__ = ["ContactTrack", "FingerTrack", "NoPlanError", "PlanTracks", "has_plan", "tracks_of"]
 
 FloatArray = NDArray[np.float64]
 
@@ -87,6 +87,13 @@ def _cone(grasp: FloatArray | None, margin: object) -> float | None:
         return None
     value = float(np.median(m + grasp))
     return value if math.isfinite(value) and 0.0 < value < math.pi / 2 else None
+
+
+def has_plan(result: AnyPlanResult) -> bool:
+    """Whether a result holds a plan to show (cheap: :func:`tracks_of` reads it)."""
+    if isinstance(result, PlanResult):
+        return result.grid is not None
+    return getattr(result, "trajectory", None) is not None
 
 
 def tracks_of(result: AnyPlanResult) -> PlanTracks:

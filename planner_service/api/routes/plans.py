@@ -15,6 +15,7 @@ from ...jobs.store import IdempotencyConflictError, JobRow, Store
 from ...planners import RESULT
 from ..deps import DispatcherDep, NotifierDep, ServiceError, SettingsDep, StoreDep
 from ..submission import StoreUnavailableError, submission_errors
+from .view import LinkedJob, with_links
 
 __all__ = ["job_model", "router"]
 
@@ -25,7 +26,12 @@ def _ts(t: float | None) -> datetime | None:
     return datetime.fromtimestamp(t, tz=UTC) if t is not None else None
 
 
-def job_model(row: JobRow) -> Job:
+def job_model(row: JobRow) -> LinkedJob:
+    """The wire job of a stored one, with its links (the plan's view)."""
+    return with_links(_job(row))
+
+
+def _job(row: JobRow) -> Job:
     """The wire job of a stored one."""
     return Job(id=row.id, state=JobState(row.state), code=row.code, message=row.message,
                raw_status=row.raw_status, planner=row.planner,
@@ -42,7 +48,7 @@ def _row(store: Store, job_id: str) -> JobRow:
     return row
 
 
-@router.post("/v1/plans", status_code=201, response_model=Job,
+@router.post("/v1/plans", status_code=201, response_model=LinkedJob,
              responses={202: {"model": Job, "description": "accepted; poll Location"}})
 async def submit_plan(
     body: PlanRequest,
@@ -106,7 +112,7 @@ async def submit_plan(
     return job_model(row)
 
 
-@router.get("/v1/plans/{job_id}", response_model=Job)
+@router.get("/v1/plans/{job_id}", response_model=LinkedJob)
 def get_plan(job_id: str, response: Response, store: StoreDep) -> Job:
     """A job: its state, and its plan once finished."""
     row = _row(store, job_id)
@@ -126,7 +132,7 @@ def list_plans(store: StoreDep,
                    offset=offset, next_offset=nxt)
 
 
-@router.delete("/v1/plans/{job_id}", response_model=Job)
+@router.delete("/v1/plans/{job_id}", response_model=LinkedJob)
 async def cancel_plan(job_id: str, store: StoreDep, dispatcher: DispatcherDep,
                       notifier: NotifierDep) -> Job:
     """Cancel a queued or running job; 409 if it has already finished."""

@@ -1,0 +1,81 @@
+"""``/v1/plans/{id}/view``: a finished job's plan as an animated 3D page (docs/viewer.md),
+and the ``links`` a job's JSON carries to it."""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+
+from fastapi import APIRouter
+from fastapi.responses import HTMLResponse
+from pydantic import BaseModel, Field
+
+from dexroll_client.models import Job, JobState
+
+from ...planners import REQUEST, RESULT, ProblemError
+from ...view import NoPlanError, has_plan, view_html
+from ..deps import ServiceError, StoreDep
+
+__all__ = ["JobLinks", "LinkedJob", "router", "with_links"]
+
+router = APIRouter()
+
+#: Pages kept ready (the last ones asked for), by job id and end time.
+CACHED_PAGES = 8
+_pages: OrderedDict[tuple[str, float | None], str] = OrderedDict()
+_lock = threading.Lock()
+
+
+class JobLinks(BaseModel):
+    view: str | None = Field(default=None, description="the plan's animated 3D view (an "
+                                                       "HTML page; null until the job has "
+                                                       "finished with a plan)")
+
+
+class LinkedJob(Job):
+    links: JobLinks = Field(default_factory=JobLinks,
+                            description="related resources of the job")
+
+
+def with_links(job: Job) -> LinkedJob:
+    """The job with its links (``links.view`` once it has a plan to show)."""
+    view = f"/v1/plans/{job.id}/view" if job.state.terminal and job.result is not None \
+        and has_plan(job.result) else None
+    return LinkedJob(**dict(job), links=JobLinks(view=view))
+
+
+@router.get("/v1/plans/{job_id}/view", response_class=HTMLResponse,
+            responses={200: {"content": {"text/html": {}},
+                             "description": "one self-contained page (no other request)"}})
+def view_plan(job_id: str, store: StoreDep) -> HTMLResponse:
+    """A finished job's plan as an animated 3D page: the palm, the object, the fingers
+    from their own models, the contacts and their traces, a timeline. The page is
+    self-contained (three.js and the plan inlined): save it to view it offline. 409 while
+    the job runs, or when it ended without a plan."""
+    row = store.get(job_id)
+    if row is None:
+        raise ServiceError(404, "not_found", f"no job {job_id!r}")
+    if not JobState(row.state).terminal:
+        raise ServiceError(409, "not_finished", f"job {job_id} is {row.state}: its view is "
+                                                f"ready once it has finished",
+                           headers={"Retry-After": "1"})
+    key = (row.id, row.finished_at)
+    with _lock:
+        page = _pages.get(key)
+        if page is not None:
+            _pages.move_to_end(key)
+    if page is None:
+        if row.result is None:
+            raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without "
+                                               "a plan to show")
+        try:
+            result = RESULT.validate_json(row.result)
+            page = view_html(result, REQUEST.validate_json(row.request), f"job {row.id}")
+        except (NoPlanError, ProblemError) as exc:
+            raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without "
+                                               f"a plan to show: {exc}") from exc
+        with _lock:
+            _pages[key] = page
+            while len(_pages) > CACHED_PAGES:
+                _pages.popitem(last=False)
+    return HTMLResponse(page)
