@@ -8,7 +8,7 @@ DEPS := $(VENV)/.deps
 INSTALLED := $(VENV)/.installed
 DEV := $(VENV)/.dev
 
-.PHONY: deps install run demo openapi test lint bench bench-quick clean
+.PHONY: deps install run demo openapi test lint bench bench-quick viewer-vendor clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -42,7 +42,20 @@ demo: $(INSTALLED)
 openapi: $(INSTALLED)
 	$(BIN)/dexroll openapi > openapi.json
 
-test: $(DEV)
+# the plan viewer's browser tests (tests/test_view_browser.py) drive Debian's headless
+# Chromium (through Playwright, never `playwright install`): installed here when missing
+CHROMIUM := /usr/bin/chromium
+$(CHROMIUM):
+	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing Debian's chromium for the viewer's browser tests"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; \
+	else \
+	    echo "make: $(CHROMIUM) is missing and this is not root: run" \
+	         "'sudo apt-get install -y chromium' (Debian) for the viewer's browser tests;" \
+	         "they are skipped without it" >&2; \
+	fi
+
+test: $(DEV) | $(CHROMIUM)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -q
@@ -58,6 +71,12 @@ bench: $(INSTALLED)
 # the quick benchmark suite (docs/benchmarks.md): report in bench-results/quick-<time>/
 bench-quick: $(DEV)
 	$(BIN)/dexroll bench quick
+
+# rebuild the viewer's bundled three.js (planner_service/view/static/three.min.js, committed)
+# from the npm registry: the versions pinned in planner_service/view/js/package.json
+viewer-vendor:
+	cd planner_service/view/js && npm install --no-audit --no-fund && npm run build
+	cp planner_service/view/js/node_modules/three/LICENSE planner_service/view/static/three.LICENSE
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

@@ -32,6 +32,10 @@ def _script_safe(text: str) -> str:
     return re.sub(r"</(script)", lambda m: "<\\/" + m.group(1), text, flags=re.IGNORECASE)
 
 
+#: The page's icon, inlined (else the browser asks the service for /favicon.ico).
+_ICON = ("data:image/svg+xml,%3Csvg xmlns='http://www.w3.org/2000/svg' viewBox='0 0 16 16'%3E"
+         "%3Ccircle cx='8' cy='8' r='7' fill='%233b5bdb'/%3E%3C/svg%3E")
+
 _CSS = """
 html, body { margin: 0; height: 100%; font: 13px/1.4 system-ui, sans-serif; color: #1d232f; }
 body { display: flex; flex-direction: column; }
@@ -67,6 +71,7 @@ def page_html(scene: dict[str, Any]) -> str:
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <meta name="generator" content="dexroll viewer (three.js {THREE_VERSION})">
 <title>{html.escape(title)} - dexroll</title>
+<link rel="icon" href="{_ICON}">
 <style>{_CSS}</style>
 </head>
 <body>

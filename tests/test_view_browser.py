@@ -1,0 +1,148 @@
+"""The plan viewer in a real browser: Debian's headless Chromium (`make test` installs
+it) driven by Playwright, one browser for the module.
+
+A real service (uvicorn on loopback) plans the one-finger example; its view is drawn from
+the service, then the same page saved as a file is drawn with the service stopped and the
+browser offline, and `dexroll view` of the job's JSON writes the same page."""
+
+from __future__ import annotations
+
+import io
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from conftest import start_server
+
+from planner_service.view.browser import CHROMIUM, launch, open_view
+
+ROOT = Path(__file__).resolve().parents[1]
+
+if not Path(CHROMIUM).exists():
+    pytest.skip(f"no {CHROMIUM}: `make test` installs Debian's chromium (as root)",
+                allow_module_level=True)
+sync_api = pytest.importorskip("playwright.sync_api")
+Image = pytest.importorskip("PIL.Image")
+
+
+@dataclass
+class Visit:
+    """What a page did in the browser: console errors, uncaught exceptions, the URLs it
+    asked for, and screenshots of its canvas at given plan times."""
+
+    errors: list[str] = field(default_factory=list)
+    requests: list[str] = field(default_factory=list)
+    shots: dict[str, np.ndarray] = field(default_factory=dict)
+    duration: float = 0.0
+    failure: str | None = None
+
+
+def visit(context: Any, url: str, times: dict[str, float]) -> Visit:
+    v = Visit()
+    page = context.new_page()
+    page.on("console", lambda m: v.errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: v.errors.append(f"uncaught: {e}"))
+    page.on("request", lambda r: v.requests.append(r.url))
+    open_view(page, url)
+    v.failure = page.evaluate("window.dexroll.error")
+    v.duration = float(page.evaluate("window.dexroll.duration"))
+    canvas = page.locator("#view canvas")
+    for name, frac in times.items():
+        page.evaluate("t => window.dexroll.setTime(t)", frac * v.duration)
+        png = canvas.screenshot()
+        v.shots[name] = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
+    page.close()
+    return v
+
+
+TIMES = {"start": 0.0, "middle": 0.5, "start again": 0.0}
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
+    with sync_api.sync_playwright() as p:
+        context = launch(p, tmp_path_factory.mktemp("chromium-profile"))
+        yield context
+        context.close()
+
+
+@pytest.fixture(scope="module")
+def served(browser: Any, tmp_path_factory: pytest.TempPathFactory
+           ) -> Iterator[tuple[Visit, Path, str]]:
+    """The view as the service serves it, visited while the service runs; then the page
+    and the job saved to files and the service stopped."""
+    folder = tmp_path_factory.mktemp("view")
+    server = start_server(folder / "data", DEXROLL_WORKERS="1")
+    try:
+        raw = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
+        with httpx.Client(base_url=server.url, timeout=300) as http:
+            job = http.post("/v1/plans", params={"wait": 240}, json=raw).json()
+            assert job["state"] == "succeeded", job
+            page = http.get(job["links"]["view"])
+            assert page.status_code == 200
+        seen = visit(browser, server.url + job["links"]["view"], TIMES)
+    finally:
+        server.stop()
+    (folder / "plan.html").write_text(page.text, encoding="utf-8")
+    (folder / "job.json").write_text(json.dumps(job), encoding="utf-8")
+    (folder / "request.json").write_text(json.dumps(raw), encoding="utf-8")
+    yield seen, folder, server.url
+
+
+def differs(a: np.ndarray, b: np.ndarray) -> float:
+    """The fraction of pixels that differ between two screenshots."""
+    assert a.shape == b.shape
+    return float(np.mean(np.any(np.abs(a - b) > 8, axis=2)))
+
+
+def test_the_served_view_draws_without_errors(served: tuple[Visit, Path, str]) -> None:
+    seen = served[0]
+    assert seen.failure is None and seen.errors == []
+    assert seen.duration == pytest.approx(2.0)
+    # the page is the only request: three.js and the plan are inlined
+    assert len(seen.requests) == 1 and seen.requests[0].endswith("/view")
+
+
+def test_the_canvas_is_not_blank(served: tuple[Visit, Path, str]) -> None:
+    shot = served[0].shots["start"]
+    background = np.array([0xF4, 0xF5, 0xF7], dtype=float)
+    drawn = np.mean(np.any(np.abs(shot - background) > 8, axis=2))
+    assert drawn > 0.05, f"only {drawn:.1%} of the canvas differs from the background"
+    assert len(np.unique(shot.reshape(-1, 3), axis=0)) > 200  # shading, not a flat fill
+
+
+def test_the_object_moves_along_the_timeline(served: tuple[Visit, Path, str]) -> None:
+    shots = served[0].shots
+    assert differs(shots["start"], shots["middle"]) > 0.002
+    assert differs(shots["start"], shots["start again"]) < 0.001  # drawn the same each time
+
+
+def test_the_standalone_file_draws_the_same_offline(browser: Any,
+                                                    served: tuple[Visit, Path, str]
+                                                    ) -> None:
+    seen, folder, _ = served  # the service is stopped
+    browser.set_offline(True)
+    try:
+        alone = visit(browser, (folder / "plan.html").as_uri(), TIMES)
+    finally:
+        browser.set_offline(False)
+    assert alone.failure is None and alone.errors == []
+    assert alone.requests == [(folder / "plan.html").as_uri()]
+    for name in TIMES:
+        assert differs(alone.shots[name], seen.shots[name]) < 0.001, name
+
+
+def test_dexroll_view_writes_the_served_page(served: tuple[Visit, Path, str]) -> None:
+    _, folder, _ = served
+    proc = subprocess.run([sys.executable, "-m", "planner_service.cli", "view", "job.json",
+                           "--request", "request.json", "-o", "cli.html"], cwd=folder,
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert (folder / "cli.html").read_text() == (folder / "plan.html").read_text()
