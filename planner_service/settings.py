@@ -15,6 +15,19 @@
 | DEXROLL_LOG_LEVEL | info | log level |
 | DEXROLL_WARMUP | examples | requests whose NLPs a worker builds before it is ready |
 | DEXROLL_COMPILE_DIR | (none) | compile NLPs to C libraries cached here |
+| DEXROLL_MODEL_MAX_BYTES | 500000 | characters of a model (URDF) text in a request |
+| DEXROLL_MODEL_MAX_JOINTS | 64 | joints of a model's XML tree (every kind) |
+| DEXROLL_MODEL_MAX_LINKS | 128 | links (MJCF: bodies) of a model's XML tree |
+| DEXROLL_MODEL_MAX_DEPTH | 32 | joints on the longest chain of a model's tree |
+| DEXROLL_MODEL_CHECK_SECONDS | 5 | time a model may take to parse and load [s] |
+| DEXROLL_MODEL_CHECK_MEMORY_MB | 512 | memory a model may take to load [MB] |
+| DEXROLL_MODEL_CHECKERS | 1 | processes that check models from requests |
+| DEXROLL_RETENTION_DAYS | 30 | finished jobs older than this are purged (0: never) |
+| DEXROLL_MAX_JOBS | 10000 | beyond this many jobs the oldest finished ones are purged |
+| DEXROLL_MAX_RESULT_BYTES | 67108864 | a plan's JSON above this is not stored (job failed) |
+| DEXROLL_API_KEYS | (none) | `owner:key` pairs (or bare keys), comma-separated |
+| DEXROLL_API_KEYS_FILE | (none) | a file of `owner:key` lines, read at start |
+| DEXROLL_ALLOWED_HOSTS | 127.0.0.1,localhost,::1 | Host headers served (`*`: any) |
 
 ``DEXROLL_COMPILE_DIR``: when set, each finger structure's NLP functions are generated as
 C, compiled with gcc and kept there as shared libraries that every worker and later service
@@ -30,11 +43,14 @@ directory; missing ones are skipped, see ``planner_service.warmup``); empty: non
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from .models_check import ModelLimits
 
 __all__ = ["Settings"]
 
@@ -55,6 +71,52 @@ class Settings(BaseSettings):
     log_level: str = "info"
     warmup: str = "examples"
     compile_dir: Path | None = None
+    # model files from requests, checked in isolated processes (planner_service.models_check)
+    model_max_bytes: int = Field(default=500_000, ge=1_000, le=50_000_000)
+    model_max_joints: int = Field(default=64, ge=1, le=10_000)
+    model_max_links: int = Field(default=128, ge=1, le=10_000)
+    model_max_depth: int = Field(default=32, ge=1, le=10_000)
+    model_check_seconds: float = Field(default=5.0, gt=0.0, le=600.0)
+    model_check_memory_mb: int = Field(default=512, ge=64, le=1 << 20)
+    model_checkers: int = Field(default=1, ge=1, le=64)
+    # retention (planner_service.jobs.store.Store.purge) and the size of a stored plan
+    retention_days: float = Field(default=30.0, ge=0.0, le=36_500.0)
+    max_jobs: int = Field(default=10_000, ge=1, le=100_000_000)
+    max_result_bytes: int = Field(default=64 << 20, ge=1 << 16)
+    # who may use the service (planner_service.api.access)
+    api_keys: str = ""
+    api_keys_file: Path | None = None
+    allowed_hosts: str = "127.0.0.1,localhost,::1"
+
+    def model_limits(self) -> ModelLimits:
+        """The limits of a model text from a request."""
+        return ModelLimits(max_bytes=self.model_max_bytes, max_joints=self.model_max_joints,
+                           max_links=self.model_max_links,
+                           max_chain_depth=self.model_max_depth,
+                           time_limit=self.model_check_seconds,
+                           memory_bytes=self.model_check_memory_mb << 20)
+
+    def keys(self) -> dict[str, str]:
+        """The API keys: key -> owner (empty: no keys, every request is the one local
+        user's). ``owner:key`` pairs (a key has no ``:`` and at least 16 characters); a bare
+        key's owner is named by a hash of it."""
+        entries = [e for e in self.api_keys.split(",") if e.strip()]
+        if self.api_keys_file is not None:
+            entries += [line for line in self.api_keys_file.read_text().splitlines()
+                        if line.strip() and not line.lstrip().startswith("#")]
+        out: dict[str, str] = {}
+        for entry in entries:
+            owner, sep, key = entry.strip().rpartition(":")
+            if not sep:
+                owner = "key-" + hashlib.sha256(key.encode()).hexdigest()[:12]
+            if len(key) < 16:
+                raise ValueError("an API key must have at least 16 characters")
+            out[key] = owner.strip() or "key-" + hashlib.sha256(key.encode()).hexdigest()[:12]
+        return out
+
+    def hosts(self) -> list[str]:
+        """The Host names served (lower case, without port); ['*']: any."""
+        return [h.strip().lower() for h in self.allowed_hosts.split(",") if h.strip()]
 
     @property
     def db_path(self) -> Path:

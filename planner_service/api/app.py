@@ -28,6 +28,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from ..jobs.store import Store
 from ..jobs.workers import Dispatcher
+from ..models_check import ModelChecker
 from ..settings import Settings
 from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
 from .routes import health, models, plans, view
@@ -84,10 +85,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             store, settings.workers, settings.kill_grace, notifier.notify, settings.warmup,
             None if settings.compile_dir is None else str(settings.compile_dir.resolve()))
         dispatcher.start()
+        checker = ModelChecker(settings.model_limits(), settings.model_checkers)
         app.state.store, app.state.dispatcher = store, dispatcher
+        app.state.checker = checker
         try:
             yield
         finally:
+            checker.close()
             dispatcher.stop()
             store.close()
 

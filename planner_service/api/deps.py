@@ -14,16 +14,19 @@ from fastapi import Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 from dexroll_client.models import ErrorBody, FieldError
 
 from ..jobs.store import Store
 from ..jobs.workers import Dispatcher
+from ..models_check import ModelChecker
 from ..planners.fields import wire_field
 from ..settings import Settings
 
 __all__ = [
     "ERROR_RESPONSES",
+    "CheckerDep",
     "DispatcherDep",
     "Notifier",
     "NotifierDep",
@@ -84,6 +87,12 @@ async def get_dispatcher(request: Request) -> Dispatcher:
     return dispatcher
 
 
+async def get_checker(request: Request) -> ModelChecker:
+    """The checker of model texts from requests (started with the service)."""
+    checker: ModelChecker = request.app.state.checker
+    return checker
+
+
 async def get_notifier(request: Request) -> Notifier:
     notifier: Notifier = request.app.state.notifier
     return notifier
@@ -93,6 +102,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 StoreDep = Annotated[Store, Depends(get_store)]
 DispatcherDep = Annotated[Dispatcher, Depends(get_dispatcher)]
 NotifierDep = Annotated[Notifier, Depends(get_notifier)]
+CheckerDep = Annotated[ModelChecker, Depends(get_checker)]
 
 
 # -- errors ----------------------------------------------------------------------------------
@@ -100,8 +110,15 @@ NotifierDep = Annotated[Notifier, Depends(get_notifier)]
 #: The error responses every route may give (in the OpenAPI document).
 ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     code: {"model": ErrorBody, "description": text} for code, text in [
-        (404, "no such job"), (409, "conflict (idempotency key reuse, job already finished)"),
+        (400, "a Host header not in the service's allow-list (DEXROLL_ALLOWED_HOSTS)"),
+        (401, "an API key is required (DEXROLL_API_KEYS set) and none or a wrong one was "
+              "given"),
+        (404, "no such job (or not this API key's)"),
+        (405, "method not allowed (the Allow header lists those that are)"),
+        (409, "conflict (idempotency key reuse, job already finished)"),
         (413, "request body too large"), (422, "invalid request: each bad field named"),
+        (500, "an unexpected error in the service (never a failed solve: that is a "
+              "finished job)"),
         (503, "queue full, not ready, or the job store unavailable; retry after "
                "Retry-After seconds")]}
 
@@ -123,6 +140,36 @@ def error_response(status: int, error: str, message: str,
                    headers: dict[str, str] | None = None) -> JSONResponse:
     body = ErrorBody(error=error, message=message, detail=detail or [])
     return JSONResponse(body.model_dump(mode="json"), status_code=status, headers=headers)
+
+
+#: FastAPI's detail when a request body cannot be decoded at all (raised as a 400).
+_BODY_PARSE_ERROR = "There was an error parsing the body"
+
+
+def _body_reason(cause: BaseException | None) -> str:
+    """Why a body could not be decoded, for a 422 naming ``body``."""
+    if isinstance(cause, UnicodeDecodeError):
+        return (f"not valid JSON: the body is not UTF-8 text (byte {cause.start}: "
+                f"{cause.reason})")
+    if isinstance(cause, RecursionError):
+        return "not valid JSON: nested too deeply (arrays and objects within each other)"
+    return f"not valid JSON: {type(cause).__name__ if cause else 'cannot be decoded'}"
+
+
+def _allowed_methods(request: Request) -> set[str]:
+    """The methods of every route of the request's path."""
+    methods: set[str] = set()
+    routes = list(request.app.router.routes)
+    while routes:
+        route = routes.pop()
+        inner = getattr(route, "original_router", None)  # an included router (FastAPI)
+        if inner is not None:
+            routes += list(inner.routes)
+            continue
+        match, _ = route.matches(request.scope)
+        if match is not Match.NONE:
+            methods |= set(getattr(route, "methods", None) or ())
+    return methods
 
 
 def add_error_handlers(app: FastAPI) -> None:
@@ -153,9 +200,18 @@ def add_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        if exc.status_code == 400 and exc.detail == _BODY_PARSE_ERROR:
+            # FastAPI's answer to a body that json.loads cannot even start on: bytes that
+            # are not UTF-8, or JSON nested deeper than the decoder's recursion limit
+            reason = _body_reason(exc.__cause__)
+            return error_response(422, "invalid_request", f"body: {reason}",
+                                  [FieldError(field="body", reason=reason)])
         name = {404: "not_found", 405: "method_not_allowed",
                 413: "payload_too_large"}.get(exc.status_code, "http_error")
-        return error_response(exc.status_code, name, str(exc.detail))
+        headers = dict(exc.headers) if exc.headers else {}
+        if exc.status_code == 405:  # every method of the path (Starlette names one route's)
+            headers["Allow"] = ", ".join(sorted(_allowed_methods(request)))
+        return error_response(exc.status_code, name, str(exc.detail), headers=headers or None)
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:

@@ -12,9 +12,10 @@ from pydantic import ValidationError
 from dexroll_client.models import AnyPlanResult, JobState, PlanRequest, WarmStartModel
 
 from ..jobs.store import Store
+from ..models_check import ModelChecker, request_models
 from ..planners import RESULT, request_errors
 
-__all__ = ["StoreUnavailableError", "resolve_warm_start", "submission_errors"]
+__all__ = ["StoreUnavailableError", "model_errors", "resolve_warm_start", "submission_errors"]
 
 log = logging.getLogger("dexroll.service")
 
@@ -81,13 +82,29 @@ def _from_job(job_id: str, errors: list[tuple[str, str]]) -> list[tuple[str, str
     return out
 
 
-def submission_errors(body: PlanRequest, store: Store
+def model_errors(body: PlanRequest, checker: ModelChecker | None
+                 ) -> list[tuple[str, str]]:
+    """The errors of every model text the request carries (a finger's URDF), each checked
+    in an isolated process by ``checker`` before this process loads any (None: not
+    checked). CheckerBusyError when no checker came free."""
+    if checker is None:
+        return []
+    return [(f"{m.where}.{field}", reason) for m in request_models(body)
+            for field, reason in checker.check(m)]
+
+
+def submission_errors(body: PlanRequest, store: Store, checker: ModelChecker | None = None
                       ) -> tuple[PlanRequest, list[tuple[str, str]]]:
     """What ``POST /v1/plans`` checks before storing a job: the request with its warm
     start's job id resolved (:func:`resolve_warm_start`), and every error of it as
     (field, reason) pairs (:func:`~planner_service.planners.request_errors`; those of a plan
     that came from a job named ``warm_start.job_id``). StoreUnavailableError when the store
-    cannot be read."""
+    cannot be read. With a ``checker``, the request's model texts are checked first, in
+    isolation (:func:`model_errors`); a model that fails ends the checks there (the rest
+    needs it loaded)."""
+    errors = model_errors(body, checker)
+    if errors:
+        return body, errors
     job_id = body.warm_start.job_id if body.warm_start is not None else None
     body, errors = resolve_warm_start(body, store)
     if errors:  # check the rest of the request too: every bad field at once

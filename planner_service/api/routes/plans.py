@@ -12,14 +12,18 @@ from fastapi import APIRouter, Header, Query, Response
 from dexroll_client.models import FieldError, Job, JobList, JobState, PlanRequest
 
 from ...jobs.store import IdempotencyConflictError, JobRow, Store
+from ...models_check import CheckerBusyError
 from ...planners import RESULT
-from ..deps import DispatcherDep, NotifierDep, ServiceError, SettingsDep, StoreDep
+from ..deps import CheckerDep, DispatcherDep, NotifierDep, ServiceError, SettingsDep, StoreDep
 from ..submission import StoreUnavailableError, submission_errors
 from .view import LinkedJob, with_links
 
 __all__ = ["job_model", "router"]
 
 router = APIRouter()
+
+#: The largest ``offset`` of a job listing: SQLite's integers are 64-bit signed.
+MAX_OFFSET = 2**63 - 1
 
 
 def _ts(t: float | None) -> datetime | None:
@@ -57,6 +61,7 @@ async def submit_plan(
     store: StoreDep,
     dispatcher: DispatcherDep,
     notifier: NotifierDep,
+    checker: CheckerDep,
     wait: Annotated[float | None, Query(ge=0.0, le=600.0, description=(
         "seconds to wait for the plan before answering 202 (capped by the service)"))
     ] = None,
@@ -70,7 +75,10 @@ async def submit_plan(
     # of its initial grasp take milliseconds; a warm start's job id is replaced by
     # that job's plan (the new job is self-contained)
     try:
-        body, errors = await asyncio.to_thread(submission_errors, body, store)
+        body, errors = await asyncio.to_thread(submission_errors, body, store, checker)
+    except CheckerBusyError as exc:
+        raise ServiceError(503, "checker_busy", f"the service is checking other model files: "
+                           f"{exc}", headers={"Retry-After": "2"}) from exc
     except StoreUnavailableError as exc:
         raise ServiceError(503, "store_unavailable", f"the job store cannot be read to "
                            f"look up warm_start.job_id: {exc}",
@@ -124,7 +132,7 @@ def get_plan(job_id: str, response: Response, store: StoreDep) -> Job:
 @router.get("/v1/plans", response_model=JobList)
 def list_plans(store: StoreDep,
                limit: Annotated[int, Query(ge=1, le=500)] = 50,
-               offset: Annotated[int, Query(ge=0)] = 0) -> JobList:
+               offset: Annotated[int, Query(ge=0, le=MAX_OFFSET)] = 0) -> JobList:
     """Jobs, newest first, without their plans."""
     rows, total = store.list(limit, offset)
     nxt = offset + len(rows) if offset + len(rows) < total else None

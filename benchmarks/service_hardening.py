@@ -1,0 +1,239 @@
+"""The service's hardening figures (issue 17), each against a real `dexroll serve` on
+loopback: run by hand, print one JSON line per measurement.
+
+    python benchmarks/service_hardening.py healthz     # /healthz while a 400-joint URDF is refused
+    python benchmarks/service_hardening.py deadlines   # 20 jobs with time_limit 1 s: lateness
+    python benchmarks/service_hardening.py results     # 40 concurrent GETs of a large result
+    python benchmarks/service_hardening.py clients     # 200 concurrent clients: lost/dup jobs
+
+``--src DIR`` runs the service from another checkout (``git worktree add /tmp/base <rev>``)
+to measure the code before a change with the same interpreter and packages.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import json
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def chain_urdf(n: int) -> str:
+    """A serial chain of ``n`` revolute joints ending in a ``fingertip`` link."""
+    parts = ['<robot name="chain"><link name="l0"/>']
+    for i in range(n):
+        parts.append(
+            f'<link name="l{i + 1}"/><joint name="j{i}" type="revolute">'
+            f'<parent link="l{i}"/><child link="l{i + 1}"/><origin xyz="0 0 0.001"/>'
+            '<axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>')
+    parts.append(f'<link name="fingertip"/><joint name="tip" type="fixed"><parent link="l{n}"/>'
+                 '<child link="fingertip"/></joint></robot>')
+    return "".join(parts)
+
+
+def finger_request(urdf: str) -> dict[str, Any]:
+    req: dict[str, Any] = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
+    req["finger"] = {"urdf": urdf, "tip_frame": "fingertip"}
+    return req
+
+
+def _port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Service:
+    def __init__(self, src: Path | None, **env: str) -> None:
+        self.data = Path(tempfile.mkdtemp(prefix="dexroll-bench-"))
+        self.port = _port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        environ = {**os.environ, "DEXROLL_PORT": str(self.port), "DEXROLL_DATA_DIR":
+                   str(self.data), "DEXROLL_WORKERS": "2", "DEXROLL_WARMUP": "", **env}
+        if src is not None:
+            environ["PYTHONPATH"] = f"{src}:{src / 'clients' / 'python'}"
+        self.log = (self.data / "server.log").open("wb")
+        self.proc = subprocess.Popen([sys.executable, "-m", "planner_service.cli", "serve"],
+                                     env=environ, stdout=self.log, stderr=subprocess.STDOUT,
+                                     cwd=src or ROOT)
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline:
+            try:
+                if httpx.get(f"{self.url}/readyz", timeout=2).status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            time.sleep(0.2)
+        raise RuntimeError("service not ready")
+
+    def rss_mb(self) -> float:
+        for line in Path(f"/proc/{self.proc.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+        return float("nan")
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        self.proc.wait(30)
+
+
+class Prober(threading.Thread):
+    """Polls /healthz every 20 ms and samples the API's RSS meanwhile."""
+
+    def __init__(self, service: Service) -> None:
+        super().__init__(daemon=True)
+        self.service, self.latencies, self.rss = service, [], []  # type: ignore[var-annotated]
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        with httpx.Client(timeout=60) as http:
+            while not self.stop.is_set():
+                t0 = time.perf_counter()
+                http.get(f"{self.service.url}/healthz")
+                self.latencies.append(time.perf_counter() - t0)
+                self.rss.append(self.service.rss_mb())
+                time.sleep(0.02)
+
+    def summary(self) -> dict[str, float]:
+        return {"healthz_max_s": round(max(self.latencies), 4),
+                "healthz_median_s": round(statistics.median(self.latencies), 4),
+                "api_rss_max_mb": round(max(self.rss), 1)}
+
+
+def bench_healthz(svc: Service, joints: int) -> dict[str, Any]:
+    probe = Prober(svc)
+    probe.start()
+    time.sleep(0.3)
+    t0 = time.perf_counter()
+    r = httpx.post(f"{svc.url}/v1/plans", json=finger_request(chain_urdf(joints)), timeout=300)
+    took = time.perf_counter() - t0
+    time.sleep(0.3)
+    probe.stop.set()
+    probe.join()
+    return {"joints": joints, "bytes": len(chain_urdf(joints)), "status": r.status_code,
+            "post_s": round(took, 3), "reason": r.text[:200], **probe.summary()}
+
+
+def bench_deadlines(svc: Service, n: int) -> dict[str, Any]:
+    base = json.loads((ROOT / "examples" / "three_finger_turn.json").read_text())
+    ids = []
+    for i in range(n):  # a new NLP structure each: its build counts
+        req = {**base, "n_intervals": 30 + 2 * i, "solver": {"time_limit": 1.0}}
+        r = httpx.post(f"{svc.url}/v1/plans", params={"wait": 0}, json=req, timeout=60)
+        ids.append(r.json()["id"])
+    jobs = []
+    for job_id in ids:
+        while True:
+            job = httpx.get(f"{svc.url}/v1/plans/{job_id}", timeout=60).json()
+            if job["state"] not in ("queued", "running"):
+                jobs.append(job)
+                break
+            time.sleep(0.2)
+    from datetime import datetime
+
+    def ts(s: str) -> float:
+        return datetime.fromisoformat(s).timestamp()
+
+    late = [ts(j["finished_at"]) - ts(j["started_at"]) - 1.0 for j in jobs]
+    codes = [j["code"] for j in jobs]
+    return {"jobs": n, "late_median_s": round(statistics.median(late), 3),
+            "late_max_s": round(max(late), 3),
+            "killed": codes.count("killed_at_time_limit"),
+            "with_plan": sum(1 for j in jobs if j["result"] and (
+                j["result"].get("trajectory") or j["result"].get("grid"))),
+            "codes": {c: codes.count(c) for c in sorted(set(codes))}}
+
+
+def bench_results(svc: Service, gets: int) -> dict[str, Any]:
+    req = json.loads((ROOT / "examples" / "triangle.json").read_text())
+    req.update(n_intervals=2000, max_refinements=0, solver={"time_limit": 20.0},
+               sample_times=[6.0 * i / 9999 for i in range(10000)])
+    body = json.dumps(req)
+    r = httpx.post(f"{svc.url}/v1/plans", params={"wait": 0}, content=body,
+                   headers={"content-type": "application/json"}, timeout=60)
+    job_id = r.json()["id"]
+    while httpx.get(f"{svc.url}/v1/plans/{job_id}", timeout=60).json()["state"] in (
+            "queued", "running"):
+        time.sleep(0.5)
+    size = len(httpx.get(f"{svc.url}/v1/plans/{job_id}", timeout=60).content)
+    probe = Prober(svc)
+    probe.start()
+    time.sleep(0.3)
+    t0 = time.perf_counter()
+    with cf.ThreadPoolExecutor(gets) as pool:
+        sizes = list(pool.map(lambda _: len(httpx.get(f"{svc.url}/v1/plans/{job_id}",
+                                                      timeout=300).content), range(gets)))
+    took = time.perf_counter() - t0
+    time.sleep(0.3)
+    probe.stop.set()
+    probe.join()
+    return {"request_bytes": len(body), "result_bytes": size, "gets": gets,
+            "all_complete": all(s == size for s in sizes), "gets_s": round(took, 2),
+            **probe.summary()}
+
+
+def bench_clients(svc: Service, n: int) -> dict[str, Any]:
+    sys.path.insert(0, str(ROOT / "clients" / "python"))
+    from dexroll_client import DexrollClient
+
+    req = json.loads((ROOT / "examples" / "triangle.json").read_text())
+    errors: list[str] = []
+    job_ids: list[str] = []
+    lock = threading.Lock()
+
+    def one(i: int) -> None:
+        try:
+            with DexrollClient.from_url(svc.url) as client:
+                job = client.plan({**req, "duration": 6.0 + 0.001 * i}, timeout=600)
+            with lock:
+                job_ids.append(job.id)
+        except Exception as exc:
+            with lock:
+                errors.append(f"{type(exc).__name__}: {exc}")
+
+    with cf.ThreadPoolExecutor(n) as pool:
+        list(pool.map(one, range(n)))
+    listed = httpx.get(f"{svc.url}/v1/plans", params={"limit": 500}, timeout=60).json()
+    return {"clients": n, "client_errors": len(errors), "errors": errors[:3],
+            "jobs_in_store": listed["total"], "lost": n - len(set(job_ids)) - len(errors),
+            "duplicated": listed["total"] - n}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("what", choices=["healthz", "deadlines", "results", "clients"])
+    parser.add_argument("--src", type=Path)
+    parser.add_argument("--joints", type=int, default=400)
+    parser.add_argument("-n", type=int)
+    args = parser.parse_args()
+    env = {"DEXROLL_MAX_QUEUE": "32"} if args.what == "clients" else {}
+    svc = Service(args.src, **env)
+    try:
+        if args.what == "healthz":
+            out = bench_healthz(svc, args.joints)
+        elif args.what == "deadlines":
+            out = bench_deadlines(svc, args.n or 20)
+        elif args.what == "results":
+            out = bench_results(svc, args.n or 40)
+        else:
+            out = bench_clients(svc, args.n or 200)
+    finally:
+        svc.stop()
+    print(json.dumps({"bench": args.what, "src": str(args.src or ROOT), **out}))
+
+
+if __name__ == "__main__":
+    main()

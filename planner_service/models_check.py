@@ -1,0 +1,440 @@
+"""Model files from requests (a finger's URDF; MJCF later) checked in an isolated process
+before the service loads them.
+
+A request may carry a robot model as XML text. Loading it costs what its author wants it to
+cost: Pinocchio and the finger's CasADi kinematics grow like the cube of the joint count (a
+77 KB chain of 400 joints took 8-11 s in the API process). So the API never loads a model
+it has not seen checked by a :class:`ModelChecker`: a pool of spawned processes, each under
+a memory limit (``RLIMIT_AS``), each check under a time limit (the process is killed and
+replaced past it), that
+
+1. checks the text's size (:attr:`ModelLimits.max_bytes`),
+2. parses it as XML without entities or a DOCTYPE, element by element, stopping as soon as
+   the tree exceeds a limit (elements, nesting depth),
+3. counts the kinematic tree on the parsed XML (joints, links/bodies, chain depth) against
+   :class:`ModelLimits` -- all before Pinocchio sees the text --
+4. and only then loads the model with the loader of its kind (:data:`LOADERS`; for a URDF
+   the service's own :func:`~ocp.robots.finger.load_finger`), which checks the rest (a tip
+   frame that exists, a serial chain, the joint count the planners support).
+
+Every reason comes back as ``(field, reason)`` under the model's own field (``urdf``,
+``tip_frame``), for the caller to prefix with where the model is in the request
+(:func:`request_models`). Generic over model kinds: a kind is a tree counter
+(:data:`COUNTERS`) and a loader (:data:`LOADERS`); MJCF registers both.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import logging
+import multiprocessing as mp
+import os
+import queue
+import threading
+import time
+import xml.etree.ElementTree as ET
+from collections import OrderedDict
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
+from multiprocessing.connection import Connection
+from typing import Any, cast
+
+from pydantic import BaseModel
+
+__all__ = [
+    "COUNTERS",
+    "LOADERS",
+    "CheckerBusyError",
+    "ModelChecker",
+    "ModelLimits",
+    "ModelText",
+    "TreeSize",
+    "check_model",
+    "parse_tree",
+    "request_models",
+]
+
+log = logging.getLogger("dexroll.models")
+
+FieldErrors = list[tuple[str, str]]
+
+
+@dataclass(frozen=True)
+class ModelLimits:
+    """What a model from a request may be (DEXROLL_MODEL_* settings)."""
+
+    #: characters of the text
+    max_bytes: int = 500_000
+    #: XML elements, and their nesting depth
+    max_elements: int = 20_000
+    max_xml_depth: int = 64
+    #: joints (every kind: fixed ones too), links (MJCF: bodies), and the longest chain
+    #: of joints from the root
+    max_joints: int = 64
+    max_links: int = 128
+    max_chain_depth: int = 32
+    #: one check's wall time [s] and the checker process's memory beyond its own [bytes]
+    time_limit: float = 5.0
+    memory_bytes: int = 512 << 20
+
+
+@dataclass(frozen=True)
+class TreeSize:
+    """A model's kinematic tree, counted on the parsed XML."""
+
+    joints: int
+    links: int
+    chain_depth: int
+
+
+@dataclass(frozen=True)
+class ModelText:
+    """A model carried by a request: where (``finger``, ``fingers[1].finger``), its kind
+    (``urdf``), the field holding the text, the text, and what its loader needs."""
+
+    where: str
+    kind: str
+    field: str
+    text: str
+    params: tuple[tuple[str, Any], ...] = ()
+
+    def key(self) -> str:
+        digest = hashlib.sha256(self.text.encode("utf-8", "surrogatepass"))
+        digest.update(repr((self.kind, self.params)).encode())
+        return digest.hexdigest()
+
+
+class TreeError(ValueError):
+    """The XML is not a model this service loads (too large, malformed, not that kind)."""
+
+
+# -- the parsed tree ---------------------------------------------------------------------------
+
+def parse_tree(text: str, limits: ModelLimits, what: str = "model") -> ET.Element:
+    """The XML element tree of ``text``, parsed incrementally: TreeError as soon as it has
+    more than ``max_elements`` elements or is nested deeper than ``max_xml_depth``, or when
+    it declares a DOCTYPE or entities (never expanded)."""
+    if len(text) > limits.max_bytes:
+        raise TreeError(f"the model is {len(text)} characters; at most {limits.max_bytes} "
+                        "are accepted")
+    head = text[:4096].upper()
+    if "<!DOCTYPE" in head or "<!ENTITY" in text.upper():
+        raise TreeError("the model declares a DOCTYPE or entities; plain XML only")
+    parser: Any = ET.XMLPullParser(events=("start", "end"))
+    depth = elements = 0
+    root: ET.Element | None = None
+    try:
+        for start in range(0, len(text), 16_384):
+            parser.feed(text[start:start + 16_384])
+            for event, item in parser.read_events():
+                element = cast(ET.Element, item)
+                if event == "start":
+                    depth += 1
+                    elements += 1
+                    if root is None:
+                        root = element
+                    if depth > limits.max_xml_depth:
+                        raise TreeError(f"the model's XML is nested deeper than "
+                                        f"{limits.max_xml_depth} elements")
+                    if elements > limits.max_elements:
+                        raise TreeError(f"the model has more than {limits.max_elements} XML "
+                                        "elements")
+                else:
+                    depth -= 1
+        parser.close()
+    except ET.ParseError as exc:
+        raise TreeError(f"not a well-formed XML document ({what}): {exc}") from exc
+    if root is None:
+        raise TreeError("no XML element")
+    return root
+
+
+def _urdf_size(root: ET.Element) -> TreeSize:
+    if root.tag != "robot":
+        raise TreeError(f"a URDF's root element is <robot>, got <{root.tag}>")
+    joints = root.findall("joint")
+    links = root.findall("link")
+    children: dict[str, list[str]] = {}
+    has_parent: set[str] = set()
+    for j in joints:
+        parent, child = j.find("parent"), j.find("child")
+        if parent is None or child is None:
+            raise TreeError(f"joint {j.get('name')!r} needs a <parent> and a <child>")
+        p, c = parent.get("link", ""), child.get("link", "")
+        if c in has_parent:
+            raise TreeError(f"link {c!r} is the child of two joints")
+        has_parent.add(c)
+        children.setdefault(p, []).append(c)
+    roots = {link.get("name", "") for link in links} - has_parent
+    if joints and not roots:
+        raise TreeError("the joints form a loop: no root link")
+    depth, seen = 0, 0
+    stack = [(r, 0) for r in roots]
+    while stack:  # iterative: a deep chain does not recurse
+        name, d = stack.pop()
+        seen += 1
+        depth = max(depth, d)
+        stack.extend((c, d + 1) for c in children.get(name, ()))
+    if seen < len(has_parent):
+        raise TreeError("the joints form a loop")
+    return TreeSize(joints=len(joints), links=len(links), chain_depth=depth)
+
+
+def _mjcf_size(root: ET.Element) -> TreeSize:
+    if root.tag != "mujoco":
+        raise TreeError(f"an MJCF model's root element is <mujoco>, got <{root.tag}>")
+    joints = sum(1 for e in root.iter() if e.tag in ("joint", "freejoint"))
+    bodies = sum(1 for _ in root.iter("body"))
+    depth = 0
+    stack = [(b, 1) for b in root.iter("worldbody")]
+    while stack:
+        element, d = stack.pop()
+        for child in element.findall("body"):
+            depth = max(depth, d)
+            stack.append((child, d + 1))
+    return TreeSize(joints=joints, links=bodies, chain_depth=depth)
+
+
+#: How each kind of model's kinematic tree is counted on its XML.
+COUNTERS: dict[str, Callable[[ET.Element], TreeSize]] = {"urdf": _urdf_size,
+                                                         "mjcf": _mjcf_size}
+
+
+def tree_errors(kind: str, text: str, limits: ModelLimits) -> list[str]:
+    """What is wrong with a model's text before anything loads it: the reasons, [] if
+    none."""
+    try:
+        size = COUNTERS[kind](parse_tree(text, limits, kind.upper()))
+    except TreeError as exc:
+        return [str(exc)]
+    out = []
+    if size.joints > limits.max_joints:
+        out.append(f"the model has {size.joints} joints; at most {limits.max_joints} are "
+                   "accepted")
+    if size.links > limits.max_links:
+        out.append(f"the model has {size.links} links; at most {limits.max_links} are "
+                   "accepted")
+    if size.chain_depth > limits.max_chain_depth:
+        out.append(f"the model's kinematic chain is {size.chain_depth} joints deep; at most "
+                   f"{limits.max_chain_depth} are accepted")
+    return out
+
+
+# -- loading (in the checker process) ----------------------------------------------------------
+
+def _load_urdf(text: str, params: dict[str, Any]) -> FieldErrors:
+    from dexroll_client.models import MAX_FINGER_JOINTS
+    from ocp.robots.finger import load_finger
+
+    tip = str(params.get("tip_frame", "fingertip"))
+    try:
+        finger = load_finger(urdf=text, tip_frame=tip)
+    except MemoryError:  # the checker's limit, reported as such
+        raise
+    except Exception as exc:  # whatever the text does to the loader is the text's
+        reason = str(exc) or type(exc).__name__
+        return [("tip_frame" if repr(tip) in reason else "urdf", reason)]
+    if finger.nq > MAX_FINGER_JOINTS:
+        return [("urdf", f"the finger has {finger.nq} joints; at most {MAX_FINGER_JOINTS} "
+                         "are supported")]
+    return []
+
+
+#: Each kind's loader, run in the checker process once the tree passed: (text, params) ->
+#: errors under the model's fields.
+LOADERS: dict[str, Callable[[str, dict[str, Any]], FieldErrors]] = {"urdf": _load_urdf}
+
+
+def check_model(model: ModelText, limits: ModelLimits) -> FieldErrors:
+    """Every check of a model, in this process (the checker process runs it): the tree's
+    limits, then its kind's loader. Errors under the model's own fields."""
+    reasons = tree_errors(model.kind, model.text, limits)
+    if reasons:
+        return [(model.field, r) for r in reasons]
+    return LOADERS[model.kind](model.text, dict(model.params))
+
+
+#: A small valid model of each kind, loaded once before a checker reports ready.
+_WARM_UP = {"urdf": '<robot name="warm-up"><link name="fingertip"/></robot>'}
+
+
+def _checker_main(conn: Connection, limits: dict[str, Any], parent: int) -> None:
+    """Body of a checker process: check each model received, reply with its errors."""
+    from .jobs.lifeline import die_with_parent
+
+    die_with_parent(parent)
+    lim = ModelLimits(**limits)
+    import resource
+
+    for kind in LOADERS:  # import the loaders' libraries before the memory limit
+        with contextlib.suppress(Exception):
+            LOADERS[kind](_WARM_UP.get(kind, ""), {})
+    with contextlib.suppress(ValueError, OSError):
+        size = 0
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmSize:"):
+                    size = int(line.split()[1]) * 1024
+        if size:
+            cap = size + lim.memory_bytes
+            resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+    conn.send("ready")
+    while True:
+        try:
+            model = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        try:
+            errors = check_model(model, lim)
+        except MemoryError:
+            errors = [(model.field, f"loading the model needs more than the "
+                                    f"{lim.memory_bytes >> 20} MB allowed")]
+        except Exception as exc:  # never die on a model
+            errors = [(model.field, f"the model cannot be loaded: {exc!r}")]
+        conn.send(errors)
+
+
+# -- the checker pool (in the API process) ---------------------------------------------------
+
+class CheckerBusyError(Exception):
+    """Every checker process stayed busy for longer than a check may take."""
+
+
+class _Proc:
+    def __init__(self, ctx: Any, limits: ModelLimits) -> None:
+        self.conn, child = ctx.Pipe()
+        self.process = ctx.Process(target=_checker_main, name="dexroll-model-check",
+                                   args=(child, asdict(limits), os.getpid()), daemon=True)
+        self.process.start()
+        child.close()
+        self.ready = False
+
+    def wait_ready(self, timeout: float) -> bool:
+        if not self.ready and self.conn.poll(timeout):
+            try:
+                self.ready = self.conn.recv() == "ready"
+            except (EOFError, OSError):
+                return False
+        return self.ready
+
+    def kill(self) -> None:
+        with contextlib.suppress(Exception):
+            self.process.kill()
+            self.process.join(timeout=5)
+            self.conn.close()
+
+
+class ModelChecker:
+    """A pool of ``processes`` checker processes (spawned, under ``limits``), and a cache
+    of the last verdicts by text. :meth:`check` is thread-safe and blocks the calling
+    thread only (it waits on a pipe: the API's event loop and its other threads run)."""
+
+    #: time a new checker process may take to import its libraries [s]
+    START_TIMEOUT = 60.0
+
+    def __init__(self, limits: ModelLimits | None = None, processes: int = 1,
+                 cache_size: int = 256) -> None:
+        self.limits = limits or ModelLimits()
+        self._ctx = mp.get_context("spawn")
+        self._idle: queue.Queue[_Proc] = queue.Queue()
+        self._all: list[_Proc] = []
+        self._lock = threading.Lock()
+        self._cache: OrderedDict[str, FieldErrors] = OrderedDict()
+        self._cache_size = cache_size
+        self._closed = False
+        for _ in range(processes):
+            self._add()
+
+    def _add(self) -> None:
+        proc = _Proc(self._ctx, self.limits)
+        with self._lock:
+            self._all.append(proc)
+        self._idle.put(proc)
+
+    def _drop(self, proc: _Proc) -> None:
+        proc.kill()
+        with self._lock:
+            if proc in self._all:
+                self._all.remove(proc)
+        if not self._closed:
+            self._add()  # its replacement starts importing now
+
+    def close(self) -> None:
+        self._closed = True
+        with self._lock:
+            procs = list(self._all)
+        for proc in procs:
+            proc.kill()
+
+    def check(self, model: ModelText) -> FieldErrors:
+        """The model's errors (under its own fields, see :func:`check_model`); [] when the
+        service can load it. CheckerBusyError when no checker process came free in time."""
+        reasons = [] if len(model.text) <= self.limits.max_bytes else [
+            (model.field, f"the model is {len(model.text)} characters; at most "
+                          f"{self.limits.max_bytes} are accepted")]
+        if reasons:
+            return reasons
+        key = model.key()
+        with self._lock:
+            if key in self._cache:
+                self._cache.move_to_end(key)
+                return list(self._cache[key])
+        errors = self._run(model)
+        with self._lock:
+            self._cache[key] = errors
+            while len(self._cache) > self._cache_size:
+                self._cache.popitem(last=False)
+        return list(errors)
+
+    def _run(self, model: ModelText) -> FieldErrors:
+        try:
+            proc = self._idle.get(timeout=self.START_TIMEOUT)
+        except queue.Empty as exc:
+            raise CheckerBusyError("every model checker is busy") from exc
+        if not proc.wait_ready(self.START_TIMEOUT):
+            self._drop(proc)
+            raise CheckerBusyError("the model checker did not start")
+        t0 = time.monotonic()
+        try:
+            proc.conn.send(model)
+            if proc.conn.poll(self.limits.time_limit):
+                errors: FieldErrors = proc.conn.recv()
+                self._idle.put(proc)
+                log.info("model %s checked in %.3f s: %s", model.where,
+                         time.monotonic() - t0, "ok" if not errors else errors[0][1])
+                return errors
+            reason = (f"loading the model took longer than the {self.limits.time_limit:g} s "
+                      "allowed")
+        except (EOFError, OSError, BrokenPipeError):
+            reason = (f"the model checker died loading the model (beyond its "
+                      f"{self.limits.memory_bytes >> 20} MB memory limit?)")
+        log.warning("model %s refused: %s", model.where, reason)
+        self._drop(proc)
+        return [(model.field, reason)]
+
+
+# -- the models of a request -------------------------------------------------------------------
+
+def _walk(value: Any, where: str) -> Iterator[tuple[str, BaseModel]]:
+    if isinstance(value, BaseModel):
+        yield where, value
+        for name in type(value).model_fields:
+            yield from _walk(getattr(value, name), f"{where}.{name}" if where else name)
+    elif isinstance(value, list | tuple):
+        for i, item in enumerate(value):
+            yield from _walk(item, f"{where}[{i}]")
+
+
+def request_models(request: BaseModel) -> list[ModelText]:
+    """Every model text a request carries, wherever it is (a one-finger request's
+    ``finger.urdf``, a manipulation request's ``fingers[i].finger.urdf``, ...): any part of
+    the request with a ``urdf`` (or, later, ``mjcf``) text."""
+    out = []
+    for where, part in _walk(request, ""):
+        for kind in LOADERS:
+            text = getattr(part, kind, None)
+            if isinstance(text, str):
+                params = (("tip_frame", getattr(part, "tip_frame", "fingertip")),)
+                out.append(ModelText(where, kind, kind, text, params))
+    return out

@@ -1,0 +1,211 @@
+"""Issue 17: the service hardened against hostile input, each defect reproduced on a real
+service on loopback (uvicorn, worker processes, SQLite; see conftest)."""
+
+from __future__ import annotations
+
+import json
+import threading
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from conftest import Server
+
+from planner_service.models_check import ModelLimits, ModelText, check_model, tree_errors
+
+ROOT = Path(__file__).resolve().parents[1]
+TRIANGLE: dict[str, Any] = json.loads((ROOT / "examples" / "triangle.json").read_text())
+FINGER: dict[str, Any] = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
+
+
+def chain_urdf(n: int, tip: str = "fingertip") -> str:
+    """A serial chain of ``n`` revolute joints ending in the link ``tip``."""
+    parts = ['<robot name="chain"><link name="l0"/>']
+    for i in range(n):
+        parts.append(
+            f'<link name="l{i + 1}"/><joint name="j{i}" type="revolute">'
+            f'<parent link="l{i}"/><child link="l{i + 1}"/><origin xyz="0 0 0.001"/>'
+            '<axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>')
+    parts.append(f'<link name="{tip}"/><joint name="tip" type="fixed"><parent link="l{n}"/>'
+                 f'<child link="{tip}"/></joint></robot>')
+    return "".join(parts)
+
+
+def post(server: Server, body: Any, wait: float = 30.0, **headers: str) -> httpx.Response:
+    content = body if isinstance(body, str | bytes) else json.dumps(body)
+    return httpx.post(f"{server.url}/v1/plans", params={"wait": wait}, content=content,
+                      headers={"content-type": "application/json", **headers}, timeout=120)
+
+
+def fields_of(response: httpx.Response) -> dict[str, str]:
+    body = response.json()
+    assert set(body) == {"error", "message", "detail"}, body
+    out: dict[str, str] = {}
+    for d in body["detail"]:  # a field's reasons joined
+        out[d["field"]] = f"{out[d['field']]} | {d['reason']}" if d["field"] in out \
+            else d["reason"]
+    return out
+
+
+# -- 1. hostile model files ------------------------------------------------------------------
+
+def test_model_tree_limits_are_checked_on_the_parsed_xml() -> None:
+    limits = ModelLimits()
+    assert tree_errors("urdf", chain_urdf(6), limits) == []
+    reasons = tree_errors("urdf", chain_urdf(400), limits)
+    assert any("401 joints; at most 64" in r for r in reasons), reasons
+    assert any("402 links; at most 128" in r for r in reasons), reasons
+    assert any("401 joints deep; at most 32" in r for r in reasons), reasons
+    deep = "<robot>" + "<a>" * 100 + "</a>" * 100 + "</robot>"
+    assert tree_errors("urdf", deep, limits) == ["the model's XML is nested deeper than 64 "
+                                                 "elements"]
+    laughs = '<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaa">]><robot>&a;</robot>'
+    assert "DOCTYPE or entities" in tree_errors("urdf", laughs, limits)[0]
+    broken = tree_errors("urdf", "<robot><link>", limits)[0]
+    assert "not a well-formed XML document (URDF)" in broken
+    assert "root element is <robot>" in tree_errors("urdf", "<mujoco/>", limits)[0]
+    loop = ('<robot><link name="a"/><link name="b"/><joint name="j" type="fixed"><parent '
+            'link="a"/><child link="b"/></joint><joint name="k" type="fixed"><parent link="b"/>'
+            '<child link="a"/></joint></robot>')
+    assert "loop" in tree_errors("urdf", loop, limits)[0]
+    big = chain_urdf(6) + " " * 600_000
+    assert "characters; at most 500000" in tree_errors("urdf", big, limits)[0]
+    mjcf = ('<mujoco><worldbody><body><joint/><body><joint/><body><joint/></body></body>'
+            '</body></worldbody></mujoco>')
+    assert tree_errors("mjcf", mjcf, ModelLimits(max_chain_depth=2)) == [
+        "the model's kinematic chain is 3 joints deep; at most 2 are accepted"]
+
+
+def test_the_loader_runs_only_on_a_tree_within_the_limits() -> None:
+    model = ModelText("finger", "urdf", "urdf", chain_urdf(20), (("tip_frame", "fingertip"),))
+    assert check_model(model, ModelLimits()) == [
+        ("urdf", "the finger has 20 joints; at most 16 are supported")]
+    wrong_tip = ModelText("finger", "urdf", "urdf", chain_urdf(3), (("tip_frame", "pad"),))
+    assert check_model(wrong_tip, ModelLimits())[0][0] == "tip_frame"
+
+
+def test_a_400_joint_urdf_is_refused_without_loading_it(live_server: Server) -> None:
+    r = post(live_server, {**FINGER, "finger": {"urdf": chain_urdf(400)}})
+    assert r.status_code == 422, r.text
+    reason = fields_of(r)["finger.urdf"]
+    assert "401 joints; at most 64 are accepted" in reason
+    # the same joints under a manipulation request's finger: named where they are
+    manip = json.loads((ROOT / "examples" / "three_finger_turn.json").read_text())
+    manip["fingers"][1] = {**manip["fingers"][1], "hand_finger": None,
+                           "finger": {"urdf": chain_urdf(400)}}
+    r = post(live_server, manip)
+    assert r.status_code == 422, r.text
+    assert "401 joints" in fields_of(r)["fingers[1].finger.urdf"]
+
+
+@pytest.mark.parametrize(("limit", "reason"), [
+    ({"DEXROLL_MODEL_CHECK_SECONDS": "1", "DEXROLL_MODEL_CHECK_MEMORY_MB": "8192"},
+     "took longer than the 1 s allowed"),
+    ({"DEXROLL_MODEL_CHECK_SECONDS": "300", "DEXROLL_MODEL_CHECK_MEMORY_MB": "64"},
+     "needs more than the 64 MB allowed")])
+def test_a_model_past_its_time_or_memory_is_refused_while_healthz_answers(
+        server_factory: Any, limit: dict[str, str], reason: str) -> None:
+    # tree limits raised so that a 300-joint chain reaches Pinocchio and the finger's
+    # kinematics (seconds and gigabytes: the cost grows like the cube of the joints)
+    server = server_factory(DEXROLL_MODEL_MAX_JOINTS="1000", DEXROLL_MODEL_MAX_LINKS="1000",
+                            DEXROLL_MODEL_MAX_DEPTH="1000", **limit)
+    answers: list[int] = []
+    done = threading.Event()
+    result: dict[str, httpx.Response] = {}
+
+    def submit() -> None:
+        result["r"] = post(server, {**FINGER, "finger": {"urdf": chain_urdf(300)}})
+        done.set()
+
+    thread = threading.Thread(target=submit)
+    thread.start()
+    while not done.is_set():
+        r = httpx.get(f"{server.url}/healthz", timeout=60)
+        if not done.is_set():
+            answers.append(r.status_code)
+    thread.join()
+    r = result["r"]
+    assert r.status_code == 422, r.text
+    assert reason in fields_of(r)["finger.urdf"]
+    assert set(answers) <= {200}  # whatever /healthz answered meanwhile was 200
+    # the checker was replaced: the next model is checked (and refused for its own reason)
+    again = post(server, {**FINGER, "finger": {"urdf": chain_urdf(20)}})
+    assert again.status_code == 422, again.text
+    assert fields_of(again) == {"finger.urdf": "the finger has 20 joints; at most 16 are "
+                                               "supported"}
+
+
+# -- 5. offsets beyond SQLite's integers ----------------------------------------------------
+
+@pytest.mark.parametrize("offset", ["9223372036854775807", "9223372036854775808",
+                                    "99999999999999999999999"])
+def test_huge_offsets_are_a_422_not_a_500(live_server: Server, offset: str) -> None:
+    r = httpx.get(f"{live_server.url}/v1/plans", params={"offset": offset}, timeout=30)
+    if offset == "9223372036854775807":
+        assert r.status_code == 200 and r.json()["items"] == [], r.text
+    else:
+        assert r.status_code == 422, r.text
+        assert "offset" in fields_of(r)
+
+
+# -- 8. contract gaps ------------------------------------------------------------------------
+
+def test_a_body_that_is_not_utf8_is_a_422_naming_body(live_server: Server) -> None:
+    r = post(live_server, json.dumps(TRIANGLE).encode().replace(b'"x"', b'"\xff"', 1))
+    assert r.status_code == 422, r.text
+    assert "not UTF-8" in fields_of(r)["body"]
+
+
+def test_json_nested_10k_deep_is_a_422_naming_body(live_server: Server) -> None:
+    r = post(live_server, "[" * 10_000 + "]" * 10_000)
+    assert r.status_code == 422, r.text
+    assert "nested too deeply" in fields_of(r)["body"]
+
+
+def test_405_says_which_methods_are_allowed(live_server: Server) -> None:
+    r = httpx.put(f"{live_server.url}/v1/plans", timeout=30)
+    assert r.status_code == 405
+    assert set(r.headers["allow"].replace(" ", "").split(",")) == {"GET", "POST"}
+    assert r.json()["error"] == "method_not_allowed"
+
+
+@pytest.mark.parametrize(("path", "value", "field"), [
+    (("initial", "psi"), False, "initial.psi"),
+    (("duration",), True, "duration"),
+    (("n_intervals",), True, "n_intervals"),
+    (("duration",), 5e-324, "duration"),
+    (("object", "dimensions"), [5e-324], "object.dimensions.0"),
+])
+def test_booleans_and_vanishing_sizes_are_422(live_server: Server, path: tuple[str, ...],
+                                              value: Any, field: str) -> None:
+    body = json.loads(json.dumps(TRIANGLE))
+    target = body
+    for key in path[:-1]:
+        target = target.setdefault(key, {})
+    target[path[-1]] = value
+    r = post(live_server, body)
+    assert r.status_code == 422, r.text
+    assert field in fields_of(r), r.text
+
+
+def test_the_schema_says_hand_finger_needs_a_hand(live_server: Server) -> None:
+    schema = httpx.get(f"{live_server.url}/openapi.json", timeout=30).json()
+    tip = schema["components"]["schemas"]["FingertipModel"]["properties"]["hand_finger"]
+    assert "requires `hand`" in tip["description"]
+    manip = json.loads((ROOT / "examples" / "three_finger_turn.json").read_text())
+    del manip["hand"]
+    r = post(live_server, manip)
+    assert r.status_code == 422
+    assert "no `hand`" in fields_of(r)["fingers[0].hand_finger"]
+
+
+def test_every_status_the_service_answers_is_documented(live_server: Server) -> None:
+    schema = httpx.get(f"{live_server.url}/openapi.json", timeout=30).json()
+    for path, operations in schema["paths"].items():
+        if not path.startswith("/v1/"):
+            continue
+        for method, operation in operations.items():
+            codes = set(operation["responses"])
+            assert {"400", "401", "404", "405", "413", "422", "500", "503"} <= codes, \
+                (path, method, sorted(codes))
