@@ -63,6 +63,7 @@ def page_html(scene: dict[str, Any]) -> str:
     legend = "".join(f'<span><i style="background:{c["color"]}"></i>{html.escape(c["name"])}'
                      f' contact</span>' for c in scene["contacts"])
     notes = "; ".join(scene.get("notes", []))
+    grid = f"; palm grid {scene['palm']['grid'] * 1e3:g} mm" if scene.get("palm") else ""
     data = _json_safe(json.dumps(scene, separators=(",", ":"), allow_nan=False))
     return f"""<!DOCTYPE html>
 <html lang="en">
@@ -80,7 +81,7 @@ def page_html(scene: dict[str, Any]) -> str:
   <h1>{html.escape(title)}</h1>
   <div class="dim">{html.escape(scene['planner'])} planner, status
    <b>{html.escape(scene['status'])}</b>: {html.escape(scene['message'])}</div>
-  <div id="legend">{legend}<span class="dim">object axes: x red, y green, z blue</span></div>
+  <div id="legend">{legend}<span class="dim">object axes: x red, y green, z blue{grid}</span></div>
   <div class="dim">{html.escape(notes)}</div>
   <div id="grasp"></div>
  </div>

@@ -8,7 +8,8 @@ as three.js takes them, arrays flattened row by row:
   atan(mu) [rad] (null: unknown);
 * ``object``: its ``shape`` (a tagged record: ``{"kind": "ellipsoid", "semi_axes":
   [a, b, c]}``; a ball has three equal semi-axes) and ``pose`` (``p``, ``q`` per sample);
-* ``palm``: the plane z = 0 drawn ``half_extent`` either side (null: no palm contact);
+* ``palm``: the plane z = 0, a square of ``half_extent`` about ``center`` under what
+  moves, with a grid of ``grid`` [m] (null: no palm contact);
 * ``contacts``: each contact's ``point`` and the object's outward ``normal`` per sample,
   and its ``trace`` on the object (the contact points in the object's frame);
 * ``fingertips``: each pad's ``shape`` (a tagged record: ``{"kind": "pad", "half_size",
@@ -33,6 +34,8 @@ __all__ = ["SCENE_VERSION", "build_scene"]
 SCENE_VERSION = 1
 #: Contact colours, in order (the palm's first when there is one).
 PALETTE = ("#e4572e", "#17bebb", "#ffc914", "#76b041", "#a05195", "#2e86ab")
+#: The palm's grid spacing [m].
+PALM_GRID = 0.01
 #: Half side of a pad whose model is unknown [m].
 DEFAULT_PAD_HALF_SIZE = 0.05
 
@@ -100,10 +103,12 @@ def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "") -> dic
     pts = np.concatenate([np.asarray(p).reshape(-1, 3) for p in points])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     palm = None
-    if models.palm_half_extent is not None:
-        reach = 1.3 * max(float(np.max(np.abs(lo[:2]))), float(np.max(np.abs(hi[:2]))), 0.05)
-        palm = {"half_extent": min(float(models.palm_half_extent), reach)}
-        lo, hi = np.minimum(lo, [-reach, -reach, 0.0]), np.maximum(hi, [reach, reach, 0.0])
+    if models.palm_half_extent is not None:  # a square of it under what moves
+        declared = float(models.palm_half_extent)
+        centre = np.clip((lo[:2] + hi[:2]) / 2, -declared, declared)
+        half = float(np.max(hi[:2] - lo[:2])) / 2 + 0.02
+        half = min(half, declared - float(np.max(np.abs(centre))))
+        palm = {"center": _flat(centre), "half_extent": half, "grid": PALM_GRID}
     grasp = tracks.grasp_angle
     return {
         "version": SCENE_VERSION,

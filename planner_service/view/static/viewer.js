@@ -47,7 +47,7 @@
   const camera = new T.PerspectiveCamera(35, 1, R / 200, R * 200);
   camera.up.set(0, 0, 1);
   const dir = new T.Vector3(1.1, -1.7, 1.2).normalize();
-  camera.position.copy(centre).addScaledVector(dir, (1.15 * R) / Math.sin((35 / 2) * Math.PI / 180));
+  camera.position.copy(centre).addScaledVector(dir, (0.95 * R) / Math.sin((35 / 2) * Math.PI / 180));
   const controls = new T.OrbitControls(camera, renderer.domElement);
   controls.target.copy(centre);
   controls.update();
@@ -105,13 +105,17 @@
   const palmTraces = [];
   if (data.palm) {
     const h = data.palm.half_extent;
-    const palm = new T.Mesh(new T.PlaneGeometry(2 * h, 2 * h),
-      new T.MeshStandardMaterial({ color: 0xd9dce3, roughness: 0.9, side: T.DoubleSide }));
-    palm.position.z = -1e-4;
+    const palm = new T.Group();
+    palm.position.set(data.palm.center[0], data.palm.center[1], 0);
     scene.add(palm);
-    const grid = new T.GridHelper(2 * h, 20, 0x9aa0ad, 0xbfc4ce);
+    const plate = new T.Mesh(new T.PlaneGeometry(2 * h, 2 * h),
+      new T.MeshStandardMaterial({ color: 0xd9dce3, roughness: 0.9, side: T.DoubleSide }));
+    plate.position.z = -1e-4;
+    palm.add(plate);
+    const grid = new T.GridHelper(2 * h, Math.max(2, Math.round((2 * h) / data.palm.grid)),
+                                  0xaab0bc, 0xbfc4ce);
     grid.rotateX(Math.PI / 2);
-    scene.add(grid);
+    palm.add(grid);
   }
 
   // -- the object: a checkered ellipsoid with its axes -----------------------------------
