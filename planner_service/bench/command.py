@@ -38,6 +38,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--families", help="comma-separated subset of the suite's families")
     p.add_argument("--limit", type=int, help="only the first K problems of each family")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.add_argument("--no-views", action="store_true",
+                   help="no views of each family's best and worst plan beside the report "
+                        "(they are planned again in this process; docs/viewer.md)")
 
 
 def _split(text: str | None) -> list[str] | None:
@@ -47,13 +50,15 @@ def _split(text: str | None) -> list[str] | None:
 def run_bench(suite: str | Path, *, workers: int | None = None, url: str | None = None,
               ray: str | None = None, use_ray: bool = False, out: str | Path | None = None,
               methods: list[str] | None = None, families: list[str] | None = None,
-              limit: int | None = None, progress: bool = True) -> tuple[int, dict[str, Any]]:
+              limit: int | None = None, progress: bool = True, views: bool = False
+              ) -> tuple[int, dict[str, Any]]:
     """Run a suite and write its report; (exit code, the results document).
 
     ``url``: through that service; ``ray`` (an address, ``auto``, ``local``) or
     ``use_ray`` (the Ray instance this process has initialised): on Ray; else a local pool
-    of ``workers`` processes. Raises SuiteError for a suite, family or method that does not
-    exist."""
+    of ``workers`` processes. ``views``: write the views of each family's best and worst
+    plan beside the report (``views/``, linked from it). Raises SuiteError for a suite,
+    family or method that does not exist."""
     from .progress import Progress
     from .report import machine_info, now_utc, versions, write_report
     from .rows import peer_status
@@ -106,7 +111,7 @@ def run_bench(suite: str | Path, *, workers: int | None = None, url: str | None 
             "run": run, "machine": machine_info(), "versions": versions(),
             "skipped_methods": skipped}
     doc = write_report(out_dir, rows, meta, [
-        {**asdict(p), "planner": p.planner} for p in problems])
+        {**asdict(p), "planner": p.planner} for p in problems], views=views)
     doc["out"] = str(out_dir)
     code = EXIT_UNEXPECTED if doc["unexpected_failures"] else EXIT_OK
     return code, doc
@@ -120,7 +125,7 @@ def main(args: argparse.Namespace) -> int:
         code, doc = run_bench(args.suite, workers=args.workers, url=args.url, ray=args.ray,
                               out=args.out, methods=_split(args.methods),
                               families=_split(args.families), limit=args.limit,
-                              progress=not args.no_progress)
+                              progress=not args.no_progress, views=not args.no_views)
     except SuiteError as exc:
         print(f"dexroll bench: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -299,8 +299,10 @@ def _plots(out: Path, rows: Sequence[Row], summary: Sequence[dict[str, Any]]
 
 
 def write_report(out: Path, rows: Sequence[Row], meta: dict[str, Any],
-                 problems: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Write the report's files into ``out``; the results document (results.json's)."""
+                 problems: Sequence[dict[str, Any]], views: bool = False) -> dict[str, Any]:
+    """Write the report's files into ``out``; the results document (results.json's).
+    ``views``: also the views of each family's best and worst plan (:mod:`.views`: they
+    are planned again in this process), linked from the report."""
     out.mkdir(parents=True, exist_ok=True)
     summary = summarise(rows, list(dict.fromkeys(p["family"] for p in problems)))
     unexpected = [r for r in rows if r["expected"] == "solved" and not r["ok"]]
@@ -311,6 +313,10 @@ def write_report(out: Path, rows: Sequence[Row], meta: dict[str, Any],
            "unexpected_failures": [[r["family"], r["problem_id"], r["method"]]
                                    for r in unexpected],
            "plots": plots}
+    if views:
+        from .views import write_views
+
+        doc["views"] = write_views(out, rows, problems)
     (out / "results.json").write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n",
                                       encoding="utf-8")
     _write_csv(out / "results.csv", rows)
@@ -374,6 +380,8 @@ def _markdown(doc: dict[str, Any], summary: Sequence[dict[str, Any]], unexpected
         lines += ["", "## Plots", ""] + [f"![{p}]({p})" for p in plots]
     elif no_plots:
         lines += ["", f"No plots: {no_plots}."]
+    lines += _views_section(doc.get("views"))
+
     def failure_table(title: str, failed: list[Row]) -> list[str]:
         out = ["", f"## {title}", "", "| problem | method | expected | status | why |",
                "|---|---|---|---|---|"]
@@ -409,6 +417,24 @@ def _markdown(doc: dict[str, Any], summary: Sequence[dict[str, Any]], unexpected
         lines += ["", "## Known failures the suite expects", ""]
         lines += [f"- {pid} ({m}): {c}" for pid, m, c in commented]
     return "\n".join(lines) + "\n"
+
+
+def _views_section(views: list[dict[str, Any]] | None) -> list[str]:
+    """The report's links to the views of each family's best and worst plan."""
+    if not views:
+        return []
+    lines = ["", "## Views of the plans", "",
+             "Each family's best run (the fastest that succeeded) and worst (the first that "
+             "did not succeed, else the slowest), as animated 3D views (standalone pages: "
+             "open them in a browser; docs/viewer.md).", "",
+             "| family | which | problem | method | status | solve | view |",
+             "|---|---|---|---|---|---:|---|"]
+    for v in views:
+        link = f"[{v['path']}]({v['path']})" if v["path"] else f"none: {v['error']}"
+        lines.append(f"| {v['family']} | {v['which']} | {v['problem_id']} | {v['method']} | "
+                     f"{v['status']} | {_fmt_time(v['solve_time'])} | "
+                     f"{link.replace('|', '/')[:300]} |")
+    return lines
 
 
 def now_utc() -> str:

@@ -59,9 +59,10 @@ def quaternion_matrices(wxyz: np.ndarray) -> np.ndarray:
 def models_from_request(request: PlanRequest, tracks: PlanTracks) -> SceneModels:
     """The object, palm and fingers of the plan's own request (ProblemError when the
     request's fingers cannot be loaded)."""
-    from ..planners import to_problem  # the planners' conversion: the same models
+    from ..planners import FINGERS, to_problem  # the planners' conversion: the same models
 
-    problem: Any = to_problem(request)
+    with FINGERS.lock:  # the process's finger cache, shared with the request checks
+        problem: Any = to_problem(request, FINGERS)
     if isinstance(problem, BallOnPalmProblem):
         return SceneModels(problem.object.shape, tuple(problem.object.dimensions),
                            problem.palm_half_extent, [], ["object and palm: the request's"])
