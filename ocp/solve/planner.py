@@ -415,10 +415,16 @@ class ManipulationPlanner:
         Ucols = Us.T * u_scale
         col = Collocation(t_nodes, Xs.T * x_scale, Xms.T * x_scale, Ucols[nlp.hs.left_cols],
                           Ums.T * u_scale, Ucols[nlp.hs.right_cols])
+        # one deadline over the whole plan: past it, no certificate either (seconds for a
+        # multi-finger grasp); the plan is the last iterate, stopped by the time limit
+        late = certify and time.perf_counter() >= deadline
+        if late:
+            best = replace(best, status=Status.TIME_LIMIT)
         t_cert = time.perf_counter()
         cert = certify_grasp(problem, m, t_nodes, col.X, col.U0, col.Um, col.U1, prm,
-                             problem.tolerances) if certify else \
-            Certificate.failed("not certified (planned as an initial guess)")
+                             problem.tolerances) if certify and not late else \
+            Certificate.failed("not certified: the time limit was reached first" if late
+                               else "not certified (planned as an initial guess)")
         cert_time = time.perf_counter() - t_cert
         goal_error = support_goal_errors(problem, col.X,
                                          [0, *np.cumsum(segments).tolist()])
