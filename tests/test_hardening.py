@@ -4,7 +4,9 @@ service on loopback (uvicorn, worker processes, SQLite; see conftest)."""
 from __future__ import annotations
 
 import json
+import signal
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -209,3 +211,73 @@ def test_every_status_the_service_answers_is_documented(live_server: Server) -> 
             codes = set(operation["responses"])
             assert {"400", "401", "404", "405", "413", "422", "500", "503"} <= codes, \
                 (path, method, sorted(codes))
+
+
+# -- 2. one deadline per job -----------------------------------------------------------------
+
+#: A request whose NLP takes seconds to build (thousands of intervals).
+SLOW: dict[str, Any] = {**TRIANGLE, "n_intervals": 1800, "max_refinements": 0}
+
+
+def wait_terminal(server: Server, job_id: str, timeout: float = 180.0) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        job: dict[str, Any] = httpx.get(f"{server.url}/v1/plans/{job_id}", timeout=30).json()
+        if job["state"] not in ("queued", "running"):
+            return job
+        time.sleep(0.05)
+    raise AssertionError(f"job {job_id} did not end: {job}")
+
+
+def alive(pid: int) -> bool:
+    """Whether a process exists and is not a zombie."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "\nState:\tZ" not in status
+
+
+def test_a_job_ends_at_its_limit_during_the_build_and_its_worker_is_kept(
+        server_factory: Any) -> None:
+    # kill grace far away: only the job's own deadline can end it; the worker must then
+    # finish its build (cached for the next job of that structure) instead of being killed
+    server = server_factory(DEXROLL_KILL_GRACE="120", DEXROLL_WORKERS="1")
+    job = post(server, {**SLOW, "solver": {"time_limit": 0.5}}, wait=0).json()
+    job = wait_terminal(server, job["id"])
+    assert (job["state"], job["code"]) == ("timed_out", "time_limit"), job
+    assert "before the planner had an iterate" in job["message"]
+    assert alive(job["worker_pid"])
+    again = wait_terminal(server, post(server, {**SLOW, "solver": {"time_limit": 120}},
+                                       wait=0).json()["id"])
+    assert again["worker_pid"] == job["worker_pid"]  # the same worker: not replaced
+    assert again["result"]["stats"]["cache_hit"] is True, again["result"]["stats"]
+    assert "killed" not in server.log_text()
+
+
+# -- 7. workers die with the service ---------------------------------------------------------
+
+def test_workers_and_checkers_die_with_the_service(server_factory: Any) -> None:
+    server = server_factory(DEXROLL_KILL_GRACE="120")
+    job = post(server, {**SLOW, "solver": {"time_limit": 120}}, wait=0).json()
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        job = httpx.get(f"{server.url}/v1/plans/{job['id']}", timeout=30).json()
+        if job["state"] == "running" and job["worker_pid"]:
+            break
+        time.sleep(0.05)
+    # the service's child processes, whichever of its threads started them
+    children = [int(p) for task in Path(f"/proc/{server.process.pid}/task").iterdir()
+                for p in (task / "children").read_text().split()]
+    assert job["worker_pid"] in children and len(children) >= 3  # 2 workers, 1 checker
+    server.process.send_signal(signal.SIGKILL)
+    server.process.wait(timeout=30)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and any(alive(p) for p in children):
+        time.sleep(0.1)
+    assert not any(alive(p) for p in children), [p for p in children if alive(p)]
+    # restarted on the same store: the job runs again, once
+    again = server_factory(server.data_dir, DEXROLL_KILL_GRACE="120")
+    job = wait_terminal(again, job["id"])
+    assert job["state"] in ("succeeded", "failed", "timed_out") and job["worker_pid"] \
+        not in children

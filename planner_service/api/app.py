@@ -83,7 +83,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         notifier: Notifier = app.state.notifier
         dispatcher = Dispatcher(
             store, settings.workers, settings.kill_grace, notifier.notify, settings.warmup,
-            None if settings.compile_dir is None else str(settings.compile_dir.resolve()))
+            None if settings.compile_dir is None else str(settings.compile_dir.resolve()),
+            settings.max_result_bytes)
         dispatcher.start()
         checker = ModelChecker(settings.model_limits(), settings.model_checkers)
         app.state.store, app.state.dispatcher = store, dispatcher

@@ -3,6 +3,12 @@
 Every job is a row; its ``state`` moves queued -> running -> one terminal state, and the
 transitions are single UPDATE statements guarded by the current state, so that a job ends
 exactly once (a late worker reply cannot overwrite a cancellation, for instance).
+
+A job belongs to an ``owner`` (the API key's; ``''``, the one local user, without keys):
+reads and cancels of another owner's job find nothing, and an idempotency key is one
+owner's (stored scoped by the owner). A plan's result is stored as the worker's compact
+JSON and read back in chunks (:meth:`Store.result_chunks`), never parsed. Finished jobs
+are purged by age and count (:meth:`Store.purge`).
 """
 
 from __future__ import annotations
@@ -12,6 +18,7 @@ import sqlite3
 import threading
 import time
 import uuid
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,6 +46,14 @@ CREATE TABLE IF NOT EXISTS jobs (
 );
 CREATE INDEX IF NOT EXISTS jobs_by_state ON jobs(state, created_at);
 """
+#: Columns added since the first schema (an older store file gains them when opened).
+_MIGRATIONS = {"owner": "ALTER TABLE jobs ADD COLUMN owner TEXT NOT NULL DEFAULT ''"}
+_INDEXES = """
+CREATE INDEX IF NOT EXISTS jobs_by_owner ON jobs(owner, created_at);
+CREATE INDEX IF NOT EXISTS jobs_by_finish ON jobs(finished_at);
+"""
+#: Chunks of a stored result served at a time [bytes].
+CHUNK = 1 << 16
 
 ACTIVE = ("queued", "running")
 #: A job interrupted this many times by service restarts is failed instead of re-run.
@@ -64,14 +79,30 @@ class JobRow:
     started_at: float | None
     finished_at: float | None
     worker_pid: int | None
+    #: the stored result's size [bytes] (None: no result)
+    result_bytes: int | None = None
+    owner: str = ""
 
     @staticmethod
     def of(row: sqlite3.Row) -> JobRow:
-        return JobRow(**{k: row[k] for k in JobRow.__dataclass_fields__})
+        keys = row.keys()
+        return JobRow(**{k: row[k] for k in JobRow.__dataclass_fields__ if k in keys})
+
+
+#: The columns of a job without its result (its size instead).
+_HEAD = ("id, planner, '' AS request, time_limit, state, code, message, raw_status, "
+         "NULL AS result, created_at, started_at, finished_at, worker_pid, owner, "
+         "length(CAST(result AS BLOB)) AS result_bytes")
 
 
 def request_hash(body: str) -> str:
     return hashlib.sha256(body.encode()).hexdigest()
+
+
+def scoped_key(owner: str, idempotency_key: str) -> str:
+    """An idempotency key as stored: the owner's own (the local user's as given, so that a
+    store written before owners keeps its keys)."""
+    return idempotency_key if not owner else f"{owner}\x00{idempotency_key}"
 
 
 class Store:
@@ -81,7 +112,13 @@ class Store:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._local = threading.local()
-        self._conn().executescript(_SCHEMA)  # executescript manages its own transaction
+        db = self._conn()
+        db.executescript(_SCHEMA)  # executescript manages its own transaction
+        columns = {r["name"] for r in db.execute("PRAGMA table_info(jobs)")}
+        for column, ddl in _MIGRATIONS.items():
+            if column not in columns:
+                db.execute(ddl)
+        db.executescript(_INDEXES)
 
     # -- connections ----------------------------------------------------------------------
     def _conn(self) -> sqlite3.Connection:
@@ -110,17 +147,19 @@ class Store:
 
     # -- jobs ------------------------------------------------------------------------------
     def create(self, planner: str, request: str, time_limit: float,
-               idempotency_key: str | None) -> tuple[JobRow, bool]:
-        """Insert a queued job; with a known idempotency key return that job instead.
+               idempotency_key: str | None, owner: str = "") -> tuple[JobRow, bool]:
+        """Insert a queued job of ``owner``; with an idempotency key this owner used
+        already, return that job instead.
 
         Returns (job, created). Raises :class:`IdempotencyConflictError` when the key is known
         with a different request.
         """
         digest = request_hash(request)
+        scoped = None if idempotency_key is None else scoped_key(owner, idempotency_key)
         with self._tx() as db:
-            if idempotency_key is not None:
+            if scoped is not None:
                 row = db.execute("SELECT * FROM jobs WHERE idempotency_key = ?",
-                                 (idempotency_key,)).fetchone()
+                                 (scoped,)).fetchone()
                 if row is not None:
                     if row["request_hash"] != digest:
                         raise IdempotencyConflictError(
@@ -130,24 +169,75 @@ class Store:
             job_id = uuid.uuid4().hex
             db.execute(
                 "INSERT INTO jobs (id, idempotency_key, request_hash, planner, request, "
-                "time_limit, state, created_at) VALUES (?, ?, ?, ?, ?, ?, 'queued', ?)",
-                (job_id, idempotency_key, digest, planner, request, time_limit, time.time()))
+                "time_limit, state, created_at, owner) "
+                "VALUES (?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
+                (job_id, scoped, digest, planner, request, time_limit, time.time(), owner))
             row = db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return JobRow.of(row), True
 
-    def get(self, job_id: str) -> JobRow | None:
-        row = self._conn().execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
-        return JobRow.of(row) if row else None
+    def get(self, job_id: str, owner: str | None = None) -> JobRow | None:
+        """A job with its result (None: no such job, or not ``owner``'s when given)."""
+        row = self._conn().execute(
+            "SELECT *, length(CAST(result AS BLOB)) AS result_bytes FROM jobs WHERE id = ?",
+            (job_id,)).fetchone()
+        if row is None or (owner is not None and row["owner"] != owner):
+            return None
+        return JobRow.of(row)
 
-    def list(self, limit: int, offset: int) -> tuple[list[JobRow], int]:
-        """A page of jobs, newest first, without their results; and the total count."""
+    def head(self, job_id: str, owner: str | None = None) -> JobRow | None:
+        """A job without its result (``result_bytes`` says how large it is)."""
+        row = self._conn().execute(
+            f"SELECT {_HEAD} FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        if row is None or (owner is not None and row["owner"] != owner):
+            return None
+        return JobRow.of(row)
+
+    def result_chunks(self, job_id: str) -> Iterator[bytes]:
+        """A job's stored result, as it was stored, in chunks of :data:`CHUNK` bytes, read
+        through a connection of its own (SQLite incremental blob I/O: the whole result is
+        never in memory). Nothing when the job has no result (any more)."""
+        conn = sqlite3.connect(self.path, timeout=30.0, check_same_thread=False)
+        try:
+            row = conn.execute("SELECT rowid FROM jobs WHERE id = ? AND result IS NOT NULL",
+                               (job_id,)).fetchone()
+            if row is None:
+                return
+            with conn.blobopen("jobs", "result", row[0], readonly=True) as blob:
+                while chunk := blob.read(CHUNK):
+                    yield chunk
+        finally:
+            conn.close()
+
+    def list(self, limit: int, offset: int, owner: str | None = None
+             ) -> tuple[list[JobRow], int]:
+        """A page of jobs (``owner``'s when given), newest first, without their results;
+        and the total count."""
         db = self._conn()
+        where, args = ("WHERE owner = ?", (owner,)) if owner is not None else ("", ())
         rows = db.execute(
-            "SELECT id, planner, '' AS request, time_limit, state, code, message, raw_status,"
-            " NULL AS result, created_at, started_at, finished_at, worker_pid FROM jobs "
-            "ORDER BY created_at DESC, rowid DESC LIMIT ? OFFSET ?", (limit, offset)).fetchall()
-        total = db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0]
+            f"SELECT {_HEAD} FROM jobs {where} ORDER BY created_at DESC, rowid DESC "
+            "LIMIT ? OFFSET ?", (*args, limit, offset)).fetchall()
+        total = db.execute(f"SELECT COUNT(*) FROM jobs {where}", args).fetchone()[0]
         return [JobRow.of(r) for r in rows], int(total)
+
+    def purge(self, retention_days: float, max_jobs: int, now: float | None = None) -> int:
+        """Delete finished jobs older than ``retention_days`` (0: no age limit), then the
+        oldest finished ones beyond ``max_jobs`` jobs in all; queued and running jobs are
+        never purged. Returns how many were deleted."""
+        now = time.time() if now is None else now
+        deleted = 0
+        with self._tx() as db:
+            if retention_days > 0:
+                deleted += db.execute(
+                    "DELETE FROM jobs WHERE state NOT IN ('queued', 'running') AND "
+                    "finished_at < ?", (now - retention_days * 86400.0,)).rowcount
+            total = int(db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0])
+            if total > max_jobs:
+                deleted += db.execute(
+                    "DELETE FROM jobs WHERE id IN (SELECT id FROM jobs WHERE state NOT IN "
+                    "('queued', 'running') ORDER BY finished_at, rowid LIMIT ?)",
+                    (total - max_jobs,)).rowcount
+        return int(deleted)
 
     def count(self, state: str) -> int:
         return int(self._conn().execute("SELECT COUNT(*) FROM jobs WHERE state = ?",
@@ -180,7 +270,7 @@ class Store:
                 (state, code, message, raw_status, result, time.time(), job_id))
             return cur.rowcount == 1
 
-    def cancel_queued(self, job_id: str) -> bool:
+    def cancel_queued(self, job_id: str) -> bool:  # the owner is checked by the caller
         """Cancel a job that has not started; False if it is not queued."""
         with self._tx() as db:
             cur = db.execute(

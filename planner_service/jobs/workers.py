@@ -6,8 +6,15 @@ thread of the service process. It hands queued jobs from the store to idle worke
 makes sure every job ends exactly once:
 
 * a worker's reply ends its job with the plan's typed status;
-* a job past its time limit (plus a grace period) gets its worker killed and replaced,
-  and ends ``timed_out`` (IPOPT normally stops itself at the limit before that);
+* one deadline per job, from the moment a worker takes it: the worker's planner gets the
+  time left (IPOPT's stop callback ends it at the deadline, with its last iterate); a job
+  whose worker has not replied :data:`DEADLINE_MARGIN` past its deadline (still building
+  its NLP, in a long first iteration, certifying) ends ``timed_out`` (``time_limit``)
+  there, without a plan; its worker finishes what it was doing (an NLP it builds stays
+  cached for the next job of that structure) and its late reply is dropped;
+* a worker still busy ``kill_grace`` past the deadline is killed and replaced (the last
+  resort: its NLP cache is lost); a replaced worker reports ready at once and builds its
+  warm-up structures between jobs, never ahead of a queued one;
 * a cancelled running job gets its worker killed and replaced, and ends ``cancelled``;
 * a worker that dies mid-solve ends its job ``failed`` with the exit code, and is replaced.
 """
@@ -27,18 +34,20 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
 
-from pydantic import TypeAdapter
-
-from dexroll_client.models import AnyPlanResult, JobState, PlanStatus
+from dexroll_client.models import JobState, PlanStatus
 
 from .store import JobRow, Store
 
-__all__ = ["Dispatcher", "job_outcome"]
+__all__ = ["DEADLINE_MARGIN", "Dispatcher", "job_outcome"]
+
+#: How long past its deadline a job waits for its worker's own time-limit reply (IPOPT's
+#: last iterate) before the dispatcher ends it without a plan [s].
+DEADLINE_MARGIN = 0.3
+#: The worker's planner is given the time left minus this much, for the reply to travel [s].
+_REPLY_TIME = 0.05
 
 log = logging.getLogger("dexroll.workers")
 
-#: Parses a worker's reply: a result of any planner.
-_RESULT: TypeAdapter[AnyPlanResult] = TypeAdapter(AnyPlanResult)
 
 
 def job_outcome(status: PlanStatus) -> JobState:
@@ -50,15 +59,24 @@ def job_outcome(status: PlanStatus) -> JobState:
     }.get(status, JobState.FAILED)
 
 
-def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = None
-                 ) -> None:
+def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = None,
+                 parent: int | None = None, background_warmup: bool = False,
+                 max_result_bytes: int = 1 << 62) -> None:
     """Body of a worker process: plan each request received, reply with the result.
 
     The process keeps one planner per kind, and so their caches of built NLPs, from job to
     job: the ball-on-palm planner, and the finger planners (one-finger and manipulation,
     one NLP cache) with the finger models and hands they were built for (``FingerCache``).
     Before it reports ready it builds the NLPs of the warm-up requests (``warmup``: files
-    or folders, see :mod:`planner_service.warmup`)."""
+    or folders, see :mod:`planner_service.warmup`); with ``background_warmup`` (a
+    replacement worker) it reports ready first and builds them one at a time while no job
+    is waiting. It dies with the service (``parent``: see :mod:`.lifeline`).
+
+    A job comes as (id, request JSON, deadline on the monotonic clock); the reply is
+    ("done", (id, job state, code, message, raw status, result JSON or None))."""
+    from .lifeline import die_with_parent
+
+    die_with_parent(parent)
     # Imports happen in the child: the parent's modules are not inherited under spawn.
     from ..planners import (
         REQUEST,
@@ -81,33 +99,59 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
     # closed-form geometry its function evaluations are a small part of its solve.
     palm = BallOnPalmPlanner()
     fingers = FingerCache(compile_dir=compiled, background=True)
+    pending: list[Path] = []
     if warmup:
         from ..warmup import request_files, warm_up
 
-        t0 = time.perf_counter()
-        built = warm_up(request_files(warmup), palm, fingers)
-        log.info("warm-up: %d structures built in %.1f s (%s)", len(built),
-                 time.perf_counter() - t0, ", ".join(f"{n} {t:.2f} s" for n, t in built))
+        pending = request_files(warmup)
+        if not background_warmup:
+            t0 = time.perf_counter()
+            built = warm_up(pending, palm, fingers)
+            pending = []
+            log.info("warm-up: %d structures built in %.1f s (%s)", len(built),
+                     time.perf_counter() - t0, ", ".join(f"{n} {t:.2f} s" for n, t in built))
     conn.send(("ready", None))
     while True:
+        if pending and not conn.poll(0):  # no job waiting: build one warm-up structure
+            conn.send(("warming", None))  # the dispatcher gives jobs to other workers
+            if not conn.poll(0):
+                warm_up([pending.pop(0)], palm, fingers)
+            conn.send(("ready", None))
+            continue
         try:
             msg = conn.recv()
         except (EOFError, KeyboardInterrupt):
             return
         if msg is None:
             return
-        job_id, request_json = msg
+        job_id, request_json, deadline = msg
         planner = "ball_on_palm"
         try:
             request = REQUEST.validate_json(request_json)
             planner = request.planner
+            # the time left of the job's one deadline (it started when the dispatcher
+            # handed the job over), for the planner's own (build, guesses, IPOPT, ...)
+            left = deadline - time.monotonic() - _REPLY_TIME
+            request = request.model_copy(update={"solver": request.solver.model_copy(
+                update={"time_limit": max(left, 1e-3)})})
             result, _ = solve(request, palm, fingers)
         except ProblemError as exc:  # checked at submission; the store may be older
             result = invalid_result(exc.errors, planner)
         except Exception as exc:  # reply with a typed error, never die on a bad job
             log.exception("job %s failed in the worker", job_id)
             result = error_result(f"planner failed: {exc!r}", planner)
-        conn.send(("done", (job_id, result.model_dump_json())))
+        result_json = result.model_dump_json()
+        raw = result.stats.raw_status if result.stats else None
+        state = job_outcome(result.status).value
+        if len(result_json) > max_result_bytes:
+            conn.send(("done", (job_id, JobState.FAILED.value, "result_too_large",
+                                f"the plan ended {result.status.value}, but its JSON is "
+                                f"{len(result_json)} bytes, over the service's limit of "
+                                f"{max_result_bytes} (DEXROLL_MAX_RESULT_BYTES): ask for "
+                                "fewer intervals or sample times", raw, None)))
+            continue
+        conn.send(("done", (job_id, state, result.status.value, result.message, raw,
+                            result_json)))
 
 
 @dataclass(eq=False)
@@ -116,7 +160,13 @@ class _Slot:
     conn: Connection
     ready: bool = False
     job: JobRow | None = None
+    #: the job's deadline and the kill deadline (+ kill_grace), on the monotonic clock
+    job_deadline: float = float("inf")
     deadline: float = float("inf")
+    #: the job ended at its deadline; the worker has not replied yet
+    draining: bool = False
+    #: the worker is building a warm-up structure (ready, but not taking jobs)
+    warming: bool = False
     started: float = field(default_factory=time.monotonic)
 
 
@@ -125,7 +175,7 @@ class Dispatcher(threading.Thread):
 
     def __init__(self, store: Store, n_workers: int, kill_grace: float,
                  on_finish: Callable[[str], None], warmup: str = "",
-                 compile_dir: str | None = None) -> None:
+                 compile_dir: str | None = None, max_result_bytes: int = 1 << 62) -> None:
         super().__init__(name="dexroll-dispatcher", daemon=True)
         self.store = store
         self.n_workers = n_workers
@@ -133,6 +183,10 @@ class Dispatcher(threading.Thread):
         self.on_finish = on_finish
         self.warmup = warmup
         self.compile_dir = compile_dir
+        self.max_result_bytes = max_result_bytes
+        #: called every minute or so from the dispatcher thread (the store's retention)
+        self.housekeeping: Callable[[], None] | None = None
+        self._housekept = 0.0
         self._ctx = mp.get_context("spawn")
         self._slots: list[_Slot] = []
         self._cancel: queue.SimpleQueue[str] = queue.SimpleQueue()
@@ -160,7 +214,7 @@ class Dispatcher(threading.Thread):
         return sum(1 for s in self._slots if s.ready and s.process.is_alive())
 
     # -- the dispatcher thread -----------------------------------------------------------------
-    def _spawn(self) -> _Slot:
+    def _spawn(self, replacement: bool = False) -> _Slot:
         # One BLAS/OpenMP thread per worker: the workers are the parallelism (one per core
         # by default), and a plan's last digits then do not depend on the machine's thread
         # count (docs/benchmarks.md). Set before the child starts: spawned children inherit
@@ -168,9 +222,9 @@ class Dispatcher(threading.Thread):
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(var, "1")
         parent, child = self._ctx.Pipe()
-        proc = self._ctx.Process(target=_worker_main, args=(child, self.warmup, self.compile_dir),
-                                 name="dexroll-worker",
-                                 daemon=True)
+        proc = self._ctx.Process(target=_worker_main, name="dexroll-worker", daemon=True,
+                                 args=(child, self.warmup, self.compile_dir, os.getpid(),
+                                       replacement, self.max_result_bytes))
         proc.start()
         child.close()
         return _Slot(process=proc, conn=parent)
@@ -180,7 +234,7 @@ class Dispatcher(threading.Thread):
             slot.process.kill()
         slot.process.join(timeout=5)
         slot.conn.close()
-        self._slots[self._slots.index(slot)] = self._spawn()
+        self._slots[self._slots.index(slot)] = self._spawn(replacement=True)
 
     def _end(self, job_id: str, state: JobState, code: str, message: str,
              raw_status: str | None = None, result: str | None = None) -> None:
@@ -208,22 +262,25 @@ class Dispatcher(threading.Thread):
     def _step(self) -> None:
         # hand queued jobs to idle, ready workers
         for slot in self._slots:
-            if slot.ready and slot.job is None:
+            if slot.ready and not slot.warming and slot.job is None:
                 job = self.store.claim_next()
                 if job is None:
                     break
-                slot.job = job
+                slot.job, slot.draining = job, False
                 self.store.set_worker(job.id, slot.process.pid)
                 slot.started = time.monotonic()
-                slot.deadline = slot.started + job.time_limit + self.kill_grace
+                slot.job_deadline = slot.started + job.time_limit
+                slot.deadline = slot.job_deadline + self.kill_grace
                 # if the worker died, its sentinel reports it below
                 with contextlib.suppress(OSError, BrokenPipeError):
-                    slot.conn.send((job.id, job.request))
+                    slot.conn.send((job.id, job.request, slot.job_deadline))
         waitables: list[Any] = [self._wake_r]
         for slot in self._slots:
             waitables += [slot.conn, slot.process.sentinel]
         now = time.monotonic()
-        timeout = min([0.5] + [max(0.0, s.deadline - now) for s in self._slots if s.job])
+        timeout = min([0.5] + [max(0.0, (s.deadline if s.draining else
+                                          s.job_deadline + DEADLINE_MARGIN) - now)
+                               for s in self._slots if s.job])
         ready = wait(waitables, timeout=timeout)
         if self._wake_r in ready:
             while self._wake_r.poll():
@@ -236,25 +293,35 @@ class Dispatcher(threading.Thread):
                 self._died(slot)
         self._cancels()
         self._deadlines()
+        if self.housekeeping is not None and now - self._housekept > 60.0:
+            self._housekept = now
+            try:
+                self.housekeeping()
+            except Exception:  # housekeeping never stops the dispatcher
+                log.exception("housekeeping failed")
 
     def _receive(self, slot: _Slot) -> None:
         try:
             kind, payload = slot.conn.recv()
         except (EOFError, OSError):
             return  # the process is gone; handled by _died
-        if kind == "ready":
-            slot.ready = True
+        if kind in ("ready", "warming"):
+            slot.ready, slot.warming = True, kind == "warming"
             return
-        job_id, result_json = payload
-        result = _RESULT.validate_json(result_json)
-        slot.job, slot.deadline = None, float("inf")
-        raw = result.stats.raw_status if result.stats else None
-        self._end(job_id, job_outcome(result.status), result.status.value, result.message,
-                  raw, result_json)
+        # the worker's verdict as it is: its result is stored, never parsed here
+        job_id, state, code, message, raw, result_json = payload
+        draining = slot.draining
+        slot.job, slot.deadline, slot.draining = None, float("inf"), False
+        slot.job_deadline = float("inf")
+        if draining:  # the job already ended at its deadline
+            log.info("job %s: its worker replied %s after the job ended at its deadline",
+                     job_id, code)
+            return
+        self._end(job_id, JobState(state), code, message, raw, result_json)
 
     def _died(self, slot: _Slot) -> None:
         code = slot.process.exitcode
-        if slot.job is not None:
+        if slot.job is not None and not slot.draining:
             self._end(slot.job.id, JobState.FAILED, "worker_died",
                       f"the worker process (pid {slot.process.pid}) died during the solve "
                       f"(exit code {code}); the service replaced it")
@@ -270,7 +337,7 @@ class Dispatcher(threading.Thread):
             except queue.Empty:
                 return
             for slot in self._slots:
-                if slot.job is not None and slot.job.id == job_id:
+                if slot.job is not None and slot.job.id == job_id and not slot.draining:
                     self._end(job_id, JobState.CANCELLED, "cancelled",
                               "cancelled while running; its worker was stopped and replaced")
                     self._replace(slot)
@@ -281,9 +348,21 @@ class Dispatcher(threading.Thread):
     def _deadlines(self) -> None:
         now = time.monotonic()
         for slot in list(self._slots):
-            if slot.job is not None and now > slot.deadline:
-                self._end(slot.job.id, JobState.TIMED_OUT, "killed_at_time_limit",
+            job = slot.job
+            if job is None:
+                continue
+            if not slot.draining and now > slot.job_deadline + DEADLINE_MARGIN:
+                # the job's time is up; its worker finishes (and caches) what it was doing
+                slot.draining = True
+                self._end(job.id, JobState.TIMED_OUT, "time_limit",
+                          f"the time limit {job.time_limit:g} s was reached before the "
+                          "planner had an iterate to return (building its NLP, in a first "
+                          "iteration or certifying); no plan")
+            if now > slot.deadline:
+                log.warning("job %s: its worker was still busy %g s past the time limit; "
+                            "killed and replaced", job.id, self.kill_grace)
+                self._end(job.id, JobState.TIMED_OUT, "killed_at_time_limit",
                           f"the solve did not return within its time limit "
-                          f"{slot.job.time_limit} s (+{self.kill_grace} s grace); its worker "
+                          f"{job.time_limit} s (+{self.kill_grace} s grace); its worker "
                           "was killed and replaced")
                 self._replace(slot)
