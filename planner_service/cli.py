@@ -159,8 +159,15 @@ def _cmd_serve(args: argparse.Namespace) -> int:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     log.info("dexroll service on http://%s:%d (data in %s, %d workers)", settings.host,
              settings.port, settings.data_dir, settings.workers)
+    if not settings.keys() and settings.host not in ("127.0.0.1", "localhost", "::1"):
+        log.warning("*** NO API KEYS: anyone who reaches %s:%d can plan, read and cancel "
+                    "every job. Set DEXROLL_API_KEYS (or DEXROLL_API_KEYS_FILE), or bind "
+                    "127.0.0.1 (README: Configuration, Docker) ***", settings.host,
+                    settings.port)
+    # idle connections kept 15 s: longer than any Retry-After the service sends (<= 2 s),
+    # so that a client retrying after one does not race the server closing its connection
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
-                log_level=settings.log_level.lower())
+                log_level=settings.log_level.lower(), timeout_keep_alive=15)
     return 0
 
 
