@@ -3,8 +3,11 @@ service on loopback (uvicorn, worker processes, SQLite; see conftest)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
+import socket
+import sqlite3
 import threading
 import time
 from pathlib import Path
@@ -14,6 +17,7 @@ import httpx
 import pytest
 from conftest import Server
 
+from dexroll_client import DexrollClient, TransportError
 from planner_service.models_check import ModelLimits, ModelText, check_model, tree_errors
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -281,3 +285,151 @@ def test_workers_and_checkers_die_with_the_service(server_factory: Any) -> None:
     job = wait_terminal(again, job["id"])
     assert job["state"] in ("succeeded", "failed", "timed_out") and job["worker_pid"] \
         not in children
+
+
+# -- 3. large results served as stored; retention --------------------------------------------
+
+def test_a_result_is_served_as_stored_and_without_it_on_request(live_server: Server) -> None:
+    job = post(live_server, {**TRIANGLE, "sample_times": [0.5, 1.0, 1.5]}).json()
+    assert job["state"] == "succeeded", job["message"]
+    r = httpx.get(f"{live_server.url}/v1/plans/{job['id']}", timeout=30)
+    assert r.status_code == 200 and r.headers["content-type"] == "application/json"
+    assert r.json() == job  # the POST's 201 and the GET: the same bytes' meaning
+    stored = sqlite3.connect(live_server.data_dir / "jobs.sqlite3").execute(
+        "SELECT result FROM jobs WHERE id = ?", (job["id"],)).fetchone()[0]
+    assert stored in r.text  # the worker's JSON, byte for byte, not re-serialised
+    assert job["result_bytes"] == len(stored.encode())
+    head = httpx.get(f"{live_server.url}/v1/plans/{job['id']}", params={"result": "false"},
+                     timeout=30).json()
+    assert head["result"] is None and head["result_bytes"] == job["result_bytes"]
+    assert head["links"] == job["links"] and head["links"]["view"]
+
+
+def test_retention_purges_the_oldest_finished_jobs(server_factory: Any) -> None:
+    server = server_factory(DEXROLL_MAX_JOBS="2")
+    ids = [post(server, TRIANGLE).json()["id"] for _ in range(3)]
+    server.stop()  # the purge runs at start (and every minute)
+    again = server_factory(server.data_dir, DEXROLL_MAX_JOBS="2")
+    listed = httpx.get(f"{again.url}/v1/plans", timeout=30).json()
+    assert [j["id"] for j in listed["items"]] == ids[:0:-1] and listed["total"] == 2
+    assert httpx.get(f"{again.url}/v1/plans/{ids[0]}", timeout=30).status_code == 404
+
+
+def test_a_plan_over_the_result_limit_is_not_stored(server_factory: Any) -> None:
+    server = server_factory(DEXROLL_MAX_RESULT_BYTES="65536")
+    job = post(server, {**TRIANGLE, "sample_times": [6.0 * i / 999 for i in range(1000)]})
+    job = job.json()
+    assert (job["state"], job["code"]) == ("failed", "result_too_large"), job
+    assert "DEXROLL_MAX_RESULT_BYTES" in job["message"] and job["result"] is None
+
+
+# -- 6. ownership: API keys, Host allow-list -----------------------------------------------
+
+KEYS = "alice:alice-key-0123456789,bob:bob-key-0123456789abc"
+
+
+def test_with_api_keys_jobs_and_idempotency_keys_are_the_owners(server_factory: Any) -> None:
+    server = server_factory(DEXROLL_API_KEYS=KEYS)
+    alice = {"Authorization": "Bearer alice-key-0123456789"}
+    bob = {"X-API-Key": "bob-key-0123456789abc"}
+    for headers in ({}, {"Authorization": "Bearer wrong-key-0123456789"}):
+        r = post(server, TRIANGLE, **headers)
+        assert r.status_code == 401 and r.json()["error"] == "unauthorized"
+        assert r.headers["www-authenticate"] == "Bearer"
+        assert httpx.get(f"{server.url}/v1/plans", headers=headers).status_code == 401
+    assert httpx.get(f"{server.url}/healthz").status_code == 200  # probes need no key
+    mine = post(server, TRIANGLE, **alice, **{"Idempotency-Key": "k1"}).json()
+    assert mine["state"] == "succeeded"
+    # bob: alice's job does not exist for him, nor her idempotency key
+    url = f"{server.url}/v1/plans/{mine['id']}"
+    assert httpx.get(url, headers=bob).status_code == 404
+    assert httpx.delete(url, headers=bob).status_code == 404
+    assert httpx.get(f"{server.url}/v1/plans", headers=bob).json()["total"] == 0
+    theirs = post(server, {**TRIANGLE, "duration": 6.5}, **bob,
+                  **{"Idempotency-Key": "k1"}).json()
+    assert theirs["id"] != mine["id"]
+    warm = post(server, {**TRIANGLE, "warm_start": {"job_id": mine["id"]}}, **bob)
+    assert warm.status_code == 422 and "no job" in fields_of(warm)["warm_start.job_id"]
+    # alice: her own job, her key again gives it back
+    assert httpx.get(url, headers=alice).json()["id"] == mine["id"]
+    assert post(server, TRIANGLE, **alice, **{"Idempotency-Key": "k1"}).json()["id"] \
+        == mine["id"]
+    assert [j["id"] for j in httpx.get(f"{server.url}/v1/plans",
+                                       headers=alice).json()["items"]] == [mine["id"]]
+
+
+def test_a_host_not_allowed_is_refused(live_server: Server) -> None:
+    for host in ("evil.example.com", "evil.example.com:80", "127.0.0.1.nip.io"):
+        r = httpx.get(f"{live_server.url}/v1/plans", headers={"Host": host}, timeout=30)
+        assert r.status_code == 400 and r.json()["error"] == "invalid_host", host
+    for host in ("localhost", f"127.0.0.1:{live_server.url.rsplit(':', 1)[1]}", "[::1]:8000"):
+        r = httpx.get(f"{live_server.url}/healthz", headers={"Host": host}, timeout=30)
+        assert r.status_code == 200, host
+
+
+# -- 4. the client retries what is safe to retry ----------------------------------------------
+
+class FlakyProxy(threading.Thread):
+    """A TCP proxy on loopback in front of a service that drops the first ``drops``
+    connections after reading their request, without answering (what a client sees when
+    the server closes a kept-alive connection as the request goes out)."""
+
+    def __init__(self, target: str, drops: int) -> None:
+        super().__init__(daemon=True)
+        self.target = target.removeprefix("http://").split(":")
+        self.drops = drops
+        self.dropped = 0
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.url = f"http://127.0.0.1:{self.listener.getsockname()[1]}"
+
+    def run(self) -> None:
+        while True:
+            try:
+                conn, _ = self.listener.accept()
+            except OSError:
+                return
+            if self.dropped < self.drops:
+                self.dropped += 1
+                conn.recv(65536)
+                conn.close()
+                continue
+            upstream = socket.create_connection((self.target[0], int(self.target[1])))
+            for a, b in ((conn, upstream), (upstream, conn)):
+                threading.Thread(target=self.pipe, args=(a, b), daemon=True).start()
+
+    @staticmethod
+    def pipe(a: socket.socket, b: socket.socket) -> None:
+        try:
+            while data := a.recv(65536):
+                b.sendall(data)
+        except OSError:
+            pass
+        finally:
+            for s in (a, b):
+                with contextlib.suppress(OSError):
+                    s.shutdown(socket.SHUT_RDWR)
+
+    def close(self) -> None:
+        self.listener.close()
+
+
+def test_the_client_retries_idempotent_requests_on_a_dropped_connection(
+        live_server: Server) -> None:
+    proxy = FlakyProxy(live_server.url, drops=2)
+    proxy.start()
+    try:
+        with DexrollClient.from_url(proxy.url) as client:  # a new connection each
+            job = client.plan(TRIANGLE, idempotency_key="retried-once", timeout=120)
+        assert job.state.value == "succeeded" and proxy.dropped == 2
+        proxy.drops += 1  # a POST without a key is not safe to send twice
+        with DexrollClient.from_url(proxy.url) as client, pytest.raises(TransportError):
+            client.submit(TRIANGLE, wait=0)
+        proxy.drops += 1  # a GET is
+        with DexrollClient.from_url(proxy.url) as client:
+            assert client.get(job.id).id == job.id and proxy.dropped == 4
+    finally:
+        proxy.close()
+    # one job for the key, though its POST went out twice
+    with sqlite3.connect(live_server.data_dir / "jobs.sqlite3") as db:
+        assert db.execute("SELECT COUNT(*) FROM jobs WHERE idempotency_key = ?",
+                          ("retried-once",)).fetchone()[0] == 1

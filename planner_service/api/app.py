@@ -30,6 +30,7 @@ from ..jobs.store import Store
 from ..jobs.workers import Dispatcher
 from ..models_check import ModelChecker
 from ..settings import Settings
+from .access import Access
 from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
 from .routes import health, models, plans, view
 
@@ -80,11 +81,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         requeued, failed = store.recover()
         if requeued or failed:
             log.info("recovered the job store: %d re-queued, %d failed", requeued, failed)
+
+        def purge() -> None:  # retention: at start, then every minute (dispatcher thread)
+            purged = store.purge(settings.retention_days, settings.max_jobs)
+            if purged:
+                log.info("retention: %d finished jobs purged (DEXROLL_RETENTION_DAYS=%g, "
+                         "DEXROLL_MAX_JOBS=%d)", purged, settings.retention_days,
+                         settings.max_jobs)
+
+        purge()
         notifier: Notifier = app.state.notifier
         dispatcher = Dispatcher(
             store, settings.workers, settings.kill_grace, notifier.notify, settings.warmup,
             None if settings.compile_dir is None else str(settings.compile_dir.resolve()),
             settings.max_result_bytes)
+        dispatcher.housekeeping = purge
         dispatcher.start()
         checker = ModelChecker(settings.model_limits(), settings.model_checkers)
         app.state.store, app.state.dispatcher = store, dispatcher
@@ -103,4 +114,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for routes in (plans, models, health, view):
         app.include_router(routes.router)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    # outermost: a request from a host not served, or without a key, goes no further
+    app.add_middleware(Access, keys=settings.keys(), hosts=settings.hosts())
     return app

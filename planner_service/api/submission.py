@@ -24,7 +24,7 @@ class StoreUnavailableError(Exception):
     """The job store could not be read."""
 
 
-def resolve_warm_start(body: PlanRequest, store: Store
+def resolve_warm_start(body: PlanRequest, store: Store, owner: str | None = None
                        ) -> tuple[PlanRequest, list[tuple[str, str]]]:
     """The request with its ``warm_start.job_id`` replaced by that job's plan (``t``, ``x``,
     ``u`` and the column names of its result's ``collocation`` block), or the reasons, all
@@ -40,7 +40,7 @@ def resolve_warm_start(body: PlanRequest, store: Store
         return body, [("warm_start.job_id", reason)]
 
     try:
-        row = store.get(job_id)
+        row = store.get(job_id, owner)  # another owner's job is unknown here
     except Exception as exc:  # sqlite errors: the store is unavailable, not the request bad
         raise StoreUnavailableError(str(exc)) from exc
     if row is None:
@@ -93,8 +93,8 @@ def model_errors(body: PlanRequest, checker: ModelChecker | None
             for field, reason in checker.check(m)]
 
 
-def submission_errors(body: PlanRequest, store: Store, checker: ModelChecker | None = None
-                      ) -> tuple[PlanRequest, list[tuple[str, str]]]:
+def submission_errors(body: PlanRequest, store: Store, checker: ModelChecker | None = None,
+                      owner: str | None = None) -> tuple[PlanRequest, list[tuple[str, str]]]:
     """What ``POST /v1/plans`` checks before storing a job: the request with its warm
     start's job id resolved (:func:`resolve_warm_start`), and every error of it as
     (field, reason) pairs (:func:`~planner_service.planners.request_errors`; those of a plan
@@ -106,7 +106,7 @@ def submission_errors(body: PlanRequest, store: Store, checker: ModelChecker | N
     if errors:
         return body, errors
     job_id = body.warm_start.job_id if body.warm_start is not None else None
-    body, errors = resolve_warm_start(body, store)
+    body, errors = resolve_warm_start(body, store, owner)
     if errors:  # check the rest of the request too: every bad field at once
         body = body.model_copy(update={"warm_start": None})
     more = request_errors(body)

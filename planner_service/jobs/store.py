@@ -47,7 +47,8 @@ CREATE TABLE IF NOT EXISTS jobs (
 CREATE INDEX IF NOT EXISTS jobs_by_state ON jobs(state, created_at);
 """
 #: Columns added since the first schema (an older store file gains them when opened).
-_MIGRATIONS = {"owner": "ALTER TABLE jobs ADD COLUMN owner TEXT NOT NULL DEFAULT ''"}
+_MIGRATIONS = {"owner": "ALTER TABLE jobs ADD COLUMN owner TEXT NOT NULL DEFAULT ''",
+               "has_plan": "ALTER TABLE jobs ADD COLUMN has_plan INTEGER"}
 _INDEXES = """
 CREATE INDEX IF NOT EXISTS jobs_by_owner ON jobs(owner, created_at);
 CREATE INDEX IF NOT EXISTS jobs_by_finish ON jobs(finished_at);
@@ -82,6 +83,8 @@ class JobRow:
     #: the stored result's size [bytes] (None: no result)
     result_bytes: int | None = None
     owner: str = ""
+    #: whether the result holds a plan to show (None: not known, a store before it)
+    has_plan: int | None = None
 
     @staticmethod
     def of(row: sqlite3.Row) -> JobRow:
@@ -91,7 +94,7 @@ class JobRow:
 
 #: The columns of a job without its result (its size instead).
 _HEAD = ("id, planner, '' AS request, time_limit, state, code, message, raw_status, "
-         "NULL AS result, created_at, started_at, finished_at, worker_pid, owner, "
+         "NULL AS result, created_at, started_at, finished_at, worker_pid, owner, has_plan, "
          "length(CAST(result AS BLOB)) AS result_bytes")
 
 
@@ -261,13 +264,16 @@ class Store:
             db.execute("UPDATE jobs SET worker_pid = ? WHERE id = ?", (pid, job_id))
 
     def finish(self, job_id: str, state: str, code: str, message: str,
-               raw_status: str | None = None, result: str | None = None) -> bool:
+               raw_status: str | None = None, result: str | None = None,
+               has_plan: bool | None = None) -> bool:
         """End an active job in ``state``; False if it had already ended."""
         with self._tx() as db:
             cur = db.execute(
                 "UPDATE jobs SET state = ?, code = ?, message = ?, raw_status = ?, result = ?,"
-                " finished_at = ? WHERE id = ? AND state IN ('queued', 'running')",
-                (state, code, message, raw_status, result, time.time(), job_id))
+                " finished_at = ?, has_plan = ? WHERE id = ? AND state IN "
+                "('queued', 'running')",
+                (state, code, message, raw_status, result, time.time(),
+                 None if has_plan is None else int(has_plan), job_id))
             return cur.rowcount == 1
 
     def cancel_queued(self, job_id: str) -> bool:  # the owner is checked by the caller

@@ -97,6 +97,8 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
     # machine solving meanwhile); the ball-on-palm NLP is not compiled here: it is written
     # out in SX, its compile takes tens of seconds in the foreground, and since the
     # closed-form geometry its function evaluations are a small part of its solve.
+    from ..view import has_plan
+
     palm = BallOnPalmPlanner()
     fingers = FingerCache(compile_dir=compiled, background=True)
     pending: list[Path] = []
@@ -148,10 +150,10 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
                                 f"the plan ended {result.status.value}, but its JSON is "
                                 f"{len(result_json)} bytes, over the service's limit of "
                                 f"{max_result_bytes} (DEXROLL_MAX_RESULT_BYTES): ask for "
-                                "fewer intervals or sample times", raw, None)))
+                                "fewer intervals or sample times", raw, None, False)))
             continue
         conn.send(("done", (job_id, state, result.status.value, result.message, raw,
-                            result_json)))
+                            result_json, has_plan(result))))
 
 
 @dataclass(eq=False)
@@ -237,8 +239,10 @@ class Dispatcher(threading.Thread):
         self._slots[self._slots.index(slot)] = self._spawn(replacement=True)
 
     def _end(self, job_id: str, state: JobState, code: str, message: str,
-             raw_status: str | None = None, result: str | None = None) -> None:
-        if self.store.finish(job_id, state.value, code, message, raw_status, result):
+             raw_status: str | None = None, result: str | None = None,
+             has_plan: bool | None = None) -> None:
+        if self.store.finish(job_id, state.value, code, message, raw_status, result,
+                             has_plan):
             log.info("job %s ended %s (%s)", job_id, state.value, code)
         self.on_finish(job_id)
 
@@ -309,7 +313,7 @@ class Dispatcher(threading.Thread):
             slot.ready, slot.warming = True, kind == "warming"
             return
         # the worker's verdict as it is: its result is stored, never parsed here
-        job_id, state, code, message, raw, result_json = payload
+        job_id, state, code, message, raw, result_json, plan = payload
         draining = slot.draining
         slot.job, slot.deadline, slot.draining = None, float("inf"), False
         slot.job_deadline = float("inf")
@@ -317,7 +321,7 @@ class Dispatcher(threading.Thread):
             log.info("job %s: its worker replied %s after the job ended at its deadline",
                      job_id, code)
             return
-        self._end(job_id, JobState(state), code, message, raw, result_json)
+        self._end(job_id, JobState(state), code, message, raw, result_json, plan)
 
     def _died(self, slot: _Slot) -> None:
         code = slot.process.exitcode

@@ -27,14 +27,24 @@ this service or its id (the service looks the job up), a ``CollocationModel`` or
 Errors (see :mod:`dexroll_client.errors`)::
 
     DexrollError
-     ├── TransportError            no HTTP response (wraps the httpx exception)
+     ├── TransportError            no HTTP response, after the retries (wraps the httpx
+     │                             exception)
      ├── PlanTimeoutError          plan() gave up waiting (.job_id if a job was created)
      └── APIError                  4xx/5xx: .status_code, .error, .message, .detail, .body
           ├── InvalidRequestError  (422)
           ├── RequestTooLargeError (413)
+          ├── UnauthorizedError    (401)
           ├── NotFoundError        (404)
           ├── ConflictError        (409)
           └── ServiceUnavailableError (503; .retry_after)
+
+Retries: a request that got no response (connection refused or reset, the server closing
+a kept-alive connection as the request went out, a timeout) is sent again, up to
+``retries`` times with exponential backoff and full jitter, when sending it twice is safe:
+GET, DELETE, and a POST with an ``Idempotency-Key`` (``plan()`` always sends one; give
+``idempotency_key`` to ``submit`` for the same). A 503 is retried by ``plan()`` after its
+``Retry-After`` (with jitter). ``api_key``: sent as ``Authorization: Bearer <key>`` to a
+service with API keys.
 
 Design: every operation is written once, as a generator that yields what to do (send an HTTP
 request, sleep) and decodes the responses it is sent back (sans-I/O). The sync client runs
@@ -46,6 +56,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import random
 import time
 import uuid
 from collections.abc import Awaitable, Callable, Generator, Mapping
@@ -76,8 +87,8 @@ from dexroll_client.models import (
     WarmStartModel,
 )
 
-__all__ = ["DEFAULT_TIMEOUT", "MAX_WAIT", "AsyncDexrollClient", "DexrollClient", "RequestLike",
-           "WarmStartLike", "warm_start_model"]
+__all__ = ["DEFAULT_TIMEOUT", "MAX_WAIT", "RETRIES", "AsyncDexrollClient", "DexrollClient",
+           "RequestLike", "WarmStartLike", "warm_start_model"]
 
 #: The service's cap on ``POST /v1/plans?wait=`` [s].
 MAX_WAIT = 30.0
@@ -87,6 +98,11 @@ DEFAULT_TIMEOUT = 30.0
 _WAIT_MARGIN = 10.0
 #: Read time granted to a cancel: the service waits (up to 10 s) for the worker to stop [s].
 _CANCEL_READ_TIMEOUT = 20.0
+
+#: Retries of a request that got no response and is safe to send again (see the module),
+#: and the first backoff [s] (doubled each retry; the pause is drawn in [0, backoff]).
+RETRIES = 3
+RETRY_BACKOFF = 0.25
 
 #: A plan request: the model, or a dict of the same shape (validated before sending).
 RequestLike = PlanRequest | Mapping[str, Any]
@@ -281,7 +297,8 @@ def _plan_op(request: RequestLike, *, timeout: float | None, idempotency_key: st
             raise PlanTimeoutError(
                 f"the service was unavailable{hint}, beyond the {timeout} s timeout: "
                 f"{unavailable.message}", timeout=timeout) from unavailable
-        pause = asked if asked is not None else min(delay, left)
+        # many clients turned away together must not come back together: jitter
+        pause = asked * random.uniform(1.0, 1.25) if asked is not None else min(delay, left)
         delay = min(2.0 * delay, poll_max)
         yield _Sleep(pause)
 
@@ -323,6 +340,30 @@ def _check_base_url(http: httpx.Client | httpx.AsyncClient) -> None:
                          "httpx.Client(base_url='http://127.0.0.1:8000')), or use from_url()")
 
 
+def _idempotent(call: _Call) -> bool:
+    """Whether sending ``call`` twice has the effect of sending it once."""
+    return call.method in ("GET", "HEAD", "DELETE") or (
+        call.method == "POST" and "Idempotency-Key" in call.headers)
+
+
+def _retry_pause(call: _Call, exc: httpx.RequestError, attempt: int, retries: int
+                 ) -> float | None:
+    """How long to wait before sending ``call`` again after ``exc`` (attempt 0 is the
+    first retry); None: do not (not safe, not a transient failure, or no retries left)."""
+    transient = isinstance(exc, httpx.NetworkError | httpx.TimeoutException
+                           | httpx.RemoteProtocolError)
+    if attempt >= retries or not transient or not _idempotent(call):
+        return None
+    return random.uniform(0.0, RETRY_BACKOFF * 2.0 ** attempt)  # full jitter
+
+
+def _bearer(api_key: str | None, headers: Mapping[str, str] | None) -> dict[str, str]:
+    out = dict(headers or {})
+    if api_key is not None:
+        out["Authorization"] = f"Bearer {api_key}"
+    return out
+
+
 def _transport_error(call: _Call, exc: httpx.RequestError) -> TransportError:
     return TransportError(f"{call.method} {call.path} failed: {type(exc).__name__}: {exc}",
                           cause=exc)
@@ -337,17 +378,22 @@ class DexrollClient:
     (use ``from_url`` to let the client own one).
     """
 
-    def __init__(self, http: httpx.Client) -> None:
+    def __init__(self, http: httpx.Client, *, retries: int = RETRIES) -> None:
         _check_base_url(http)
         self._http = http
         self._owns_http = False
         self._sleep: Callable[[float], None] = time.sleep
+        self.retries = retries
 
     @classmethod
     def from_url(cls, base_url: str, *, timeout: float | httpx.Timeout = DEFAULT_TIMEOUT,
-                 headers: Mapping[str, str] | None = None) -> Self:
-        """A client with its own ``httpx.Client`` (closed by ``close()`` / the ``with``)."""
-        client = cls(httpx.Client(base_url=base_url, timeout=timeout, headers=headers))
+                 headers: Mapping[str, str] | None = None, api_key: str | None = None,
+                 retries: int = RETRIES) -> Self:
+        """A client with its own ``httpx.Client`` (closed by ``close()`` / the ``with``);
+        ``api_key`` for a service with API keys; ``retries`` of a request that got no
+        response and is safe to send again."""
+        client = cls(httpx.Client(base_url=base_url, timeout=timeout,
+                                  headers=_bearer(api_key, headers)), retries=retries)
         client._owns_http = True
         return client
 
@@ -372,13 +418,19 @@ class DexrollClient:
         return f"{type(self).__name__}({str(self._http.base_url)!r})"
 
     def _send(self, call: _Call) -> httpx.Response:
-        try:
-            return self._http.request(
-                call.method, call.path, params=call.params or None,
-                headers=call.headers or None, json=call.json,
-                timeout=_request_timeout(self._http.timeout, call))
-        except httpx.RequestError as exc:
-            raise _transport_error(call, exc) from exc
+        attempt = 0
+        while True:
+            try:
+                return self._http.request(
+                    call.method, call.path, params=call.params or None,
+                    headers=call.headers or None, json=call.json,
+                    timeout=_request_timeout(self._http.timeout, call))
+            except httpx.RequestError as exc:
+                pause = _retry_pause(call, exc, attempt, self.retries)
+                if pause is None:
+                    raise _transport_error(call, exc) from exc
+                attempt += 1
+                self._sleep(pause)
 
     def _run(self, op: _Op[_T]) -> _T:
         try:
@@ -464,18 +516,21 @@ class AsyncDexrollClient:
     """Asynchronous client of the dexroll service, wrapping an ``httpx.AsyncClient``; the
     same methods as :class:`DexrollClient`, as coroutines."""
 
-    def __init__(self, http: httpx.AsyncClient) -> None:
+    def __init__(self, http: httpx.AsyncClient, *, retries: int = RETRIES) -> None:
         _check_base_url(http)
         self._http = http
         self._owns_http = False
         self._sleep: Callable[[float], Awaitable[None]] = asyncio.sleep
+        self.retries = retries
 
     @classmethod
     def from_url(cls, base_url: str, *, timeout: float | httpx.Timeout = DEFAULT_TIMEOUT,
-                 headers: Mapping[str, str] | None = None) -> Self:
+                 headers: Mapping[str, str] | None = None, api_key: str | None = None,
+                 retries: int = RETRIES) -> Self:
         """A client with its own ``httpx.AsyncClient`` (closed by ``aclose()`` / the
-        ``async with``)."""
-        client = cls(httpx.AsyncClient(base_url=base_url, timeout=timeout, headers=headers))
+        ``async with``); see :meth:`DexrollClient.from_url`."""
+        client = cls(httpx.AsyncClient(base_url=base_url, timeout=timeout,
+                                       headers=_bearer(api_key, headers)), retries=retries)
         client._owns_http = True
         return client
 
@@ -500,13 +555,19 @@ class AsyncDexrollClient:
         return f"{type(self).__name__}({str(self._http.base_url)!r})"
 
     async def _send(self, call: _Call) -> httpx.Response:
-        try:
-            return await self._http.request(
-                call.method, call.path, params=call.params or None,
-                headers=call.headers or None, json=call.json,
-                timeout=_request_timeout(self._http.timeout, call))
-        except httpx.RequestError as exc:
-            raise _transport_error(call, exc) from exc
+        attempt = 0
+        while True:
+            try:
+                return await self._http.request(
+                    call.method, call.path, params=call.params or None,
+                    headers=call.headers or None, json=call.json,
+                    timeout=_request_timeout(self._http.timeout, call))
+            except httpx.RequestError as exc:
+                pause = _retry_pause(call, exc, attempt, self.retries)
+                if pause is None:
+                    raise _transport_error(call, exc) from exc
+                attempt += 1
+                await self._sleep(pause)
 
     async def _run(self, op: _Op[_T]) -> _T:
         try:

@@ -11,6 +11,7 @@ Every exception the clients raise on purpose derives from :class:`DexrollError`:
           │                        .message, .detail: list[FieldError], .body: ErrorBody | None
           ├── InvalidRequestError  422: the service rejected the request (.detail names fields)
           ├── RequestTooLargeError 413: the request body is too large
+          ├── UnauthorizedError    401: the service needs an API key (none or a wrong one)
           ├── NotFoundError        404: no such job
           ├── ConflictError        409: idempotency key reused with another body, or the job
           │                        is already finished (cancel)
@@ -43,6 +44,7 @@ __all__ = [
     "RequestTooLargeError",
     "ServiceUnavailableError",
     "TransportError",
+    "UnauthorizedError",
     "error_from_response",
     "parse_retry_after",
 ]
@@ -133,6 +135,11 @@ class RequestTooLargeError(APIError):
     """413: the request body exceeds the service's size limit."""
 
 
+class UnauthorizedError(APIError):
+    """401: the service has API keys and the request carried none or a wrong one (give
+    ``api_key`` to ``from_url``)."""
+
+
 class NotFoundError(APIError):
     """404: no job (or route) with that id."""
 
@@ -156,6 +163,7 @@ class ServiceUnavailableError(APIError):
 
 
 _BY_STATUS: dict[int, type[APIError]] = {
+    401: UnauthorizedError,
     404: NotFoundError,
     409: ConflictError,
     413: RequestTooLargeError,

@@ -50,6 +50,9 @@ class Job(_Response):
     finished_at: datetime | None = None
     worker_pid: int | None = Field(default=None, description="process id of the worker that "
                                                              "ran (or runs) the job")
+    result_bytes: int | None = Field(default=None, description=(
+        "size of the stored plan's JSON [bytes] (null: none); `GET /v1/plans/{id}?"
+        "result=false` gives the job without it"))
     result: AnyPlanResult | None = Field(default=None, description="the plan, once finished "
                                                                 "(also after a failure: the "
                                                                 "last iterate)")

@@ -1,22 +1,31 @@
-"""``/v1/plans``: submit a planning request, fetch a job, list jobs, cancel a job."""
+"""``/v1/plans``: submit a planning request, fetch a job, list jobs, cancel a job.
+
+A job's plan is served as the worker stored it (compact JSON, read from SQLite in chunks
+and streamed after the job's own fields): never parsed again, so that many reads of a
+large plan cost the API little memory and no interpreter time. ``?result=false`` serves a
+job without its plan (``result_bytes`` says how large it is). Jobs are their owner's
+(:mod:`..access`): another owner's job is a 404."""
 
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Iterator
 from contextlib import suppress
 from datetime import UTC, datetime
 from typing import Annotated
 
 from fastapi import APIRouter, Header, Query, Response
+from fastapi.responses import StreamingResponse
 
 from dexroll_client.models import FieldError, Job, JobList, JobState, PlanRequest
 
 from ...jobs.store import IdempotencyConflictError, JobRow, Store
 from ...models_check import CheckerBusyError
 from ...planners import RESULT
+from ..access import OwnerDep
 from ..deps import CheckerDep, DispatcherDep, NotifierDep, ServiceError, SettingsDep, StoreDep
 from ..submission import StoreUnavailableError, submission_errors
-from .view import LinkedJob, with_links
+from .view import JobLinks, LinkedJob, with_links
 
 __all__ = ["job_model", "router"]
 
@@ -24,6 +33,10 @@ router = APIRouter()
 
 #: The largest ``offset`` of a job listing: SQLite's integers are 64-bit signed.
 MAX_OFFSET = 2**63 - 1
+#: Retry-After of a full queue [s]: shorter than uvicorn's keep-alive (``dexroll serve``
+#: keeps idle connections 15 s), so that a client's retry does not race the server
+#: closing its connection.
+QUEUE_FULL_RETRY_AFTER = 2
 
 
 def _ts(t: float | None) -> datetime | None:
@@ -32,7 +45,37 @@ def _ts(t: float | None) -> datetime | None:
 
 def job_model(row: JobRow) -> LinkedJob:
     """The wire job of a stored one, with its links (the plan's view)."""
+    if row.result is None and row.has_plan is not None:  # a row read without its result
+        job = _job(row)
+        view = f"/v1/plans/{row.id}/view" if job.state.terminal and row.has_plan else None
+        return LinkedJob(**dict(job), links=JobLinks(view=view))
     return with_links(_job(row))
+
+
+def job_response(row: JobRow, store: Store, status_code: int = 200,
+                 headers: dict[str, str] | None = None, with_result: bool = True
+                 ) -> Response:
+    """A job as JSON, its stored plan streamed as it was stored (``row`` read without it:
+    :meth:`Store.head`)."""
+    body = job_model(row).model_dump_json()
+    if not (with_result and row.result_bytes):
+        return Response(body, status_code, headers, media_type="application/json")
+    at = body.index(_NO_RESULT)  # the top-level field: nothing before it nests
+    head, tail = body[:at + len('"result":')].encode(), body[at + len(_NO_RESULT):].encode()
+
+    def chunks() -> Iterator[bytes]:
+        yield head
+        sent = False
+        for chunk in store.result_chunks(row.id):
+            sent = True
+            yield chunk
+        yield tail if sent else b"null" + tail  # purged meanwhile: no plan
+
+    return StreamingResponse(chunks(), status_code, headers, media_type="application/json")
+
+
+#: How a job without its plan says so in its JSON.
+_NO_RESULT = '"result":null'
 
 
 def _job(row: JobRow) -> Job:
@@ -41,22 +84,23 @@ def _job(row: JobRow) -> Job:
                raw_status=row.raw_status, planner=row.planner,
                created_at=datetime.fromtimestamp(row.created_at, tz=UTC),
                started_at=_ts(row.started_at), finished_at=_ts(row.finished_at),
-               worker_pid=row.worker_pid,
+               worker_pid=row.worker_pid, result_bytes=row.result_bytes,
                result=RESULT.validate_json(row.result) if row.result else None)
 
 
-def _row(store: Store, job_id: str) -> JobRow:
-    row = store.get(job_id)
+def _row(store: Store, job_id: str, owner: str | None) -> JobRow:
+    """A job without its result (``owner``'s; None: anyone's); 404 otherwise."""
+    row = store.head(job_id, owner)
     if row is None:
         raise ServiceError(404, "not_found", f"no job {job_id!r}")
     return row
 
 
 @router.post("/v1/plans", status_code=201, response_model=LinkedJob,
-             responses={202: {"model": Job, "description": "accepted; poll Location"}})
+             responses={202: {"model": LinkedJob, "description": "accepted; poll Location"}})
 async def submit_plan(
     body: PlanRequest,
-    response: Response,
+    owner: OwnerDep,
     settings: SettingsDep,
     store: StoreDep,
     dispatcher: DispatcherDep,
@@ -66,8 +110,9 @@ async def submit_plan(
         "seconds to wait for the plan before answering 202 (capped by the service)"))
     ] = None,
     idempotency_key: Annotated[str | None, Header(max_length=200, description=(
-        "a retried POST with the same key returns the same job"))] = None,
-) -> Job:
+        "a retried POST with the same key returns the same job (the key is its owner's)"))
+    ] = None,
+) -> Response:
     """Submit a planning request (`planner` picks the planner: `ball_on_palm`, the
     default, `one_finger` or `manipulation`): 201 with the finished job, or 202 and a
     Location."""
@@ -75,7 +120,8 @@ async def submit_plan(
     # of its initial grasp take milliseconds; a warm start's job id is replaced by
     # that job's plan (the new job is self-contained)
     try:
-        body, errors = await asyncio.to_thread(submission_errors, body, store, checker)
+        body, errors = await asyncio.to_thread(submission_errors, body, store, checker,
+                                               owner)
     except CheckerBusyError as exc:
         raise ServiceError(503, "checker_busy", f"the service is checking other model files: "
                            f"{exc}", headers={"Retry-After": "2"}) from exc
@@ -93,10 +139,10 @@ async def submit_plan(
     if store.count("queued") >= settings.max_queue:
         raise ServiceError(503, "queue_full",
                            f"{settings.max_queue} jobs are already queued",
-                           headers={"Retry-After": "5"})
+                           headers={"Retry-After": str(QUEUE_FULL_RETRY_AFTER)})
     try:
         row, created = store.create(body.planner, body.model_dump_json(), capped,
-                                    idempotency_key)
+                                    idempotency_key, owner or "")
     except IdempotencyConflictError as exc:
         raise ServiceError(409, "idempotency_conflict", str(exc)) from exc
     if created:
@@ -104,37 +150,39 @@ async def submit_plan(
     if not JobState(row.state).terminal:
         event = notifier.register(row.id)
         try:
-            row = store.get(row.id) or row
+            row = store.head(row.id) or row
             if not JobState(row.state).terminal:
                 timeout = min(settings.default_wait if wait is None else wait,
                               settings.max_wait)
                 with suppress(TimeoutError):
                     await asyncio.wait_for(event.wait(), timeout=timeout)
-                row = store.get(row.id) or row
         finally:
             notifier.unregister(row.id, event)
+    row = store.head(row.id) or row
     if not JobState(row.state).terminal:
-        response.status_code = 202
-        response.headers["Location"] = f"/v1/plans/{row.id}"
-        response.headers["Retry-After"] = "1"
-    return job_model(row)
+        return job_response(row, store, 202, {"Location": f"/v1/plans/{row.id}",
+                                              "Retry-After": "1"})
+    return job_response(row, store, 201)
 
 
 @router.get("/v1/plans/{job_id}", response_model=LinkedJob)
-def get_plan(job_id: str, response: Response, store: StoreDep) -> Job:
-    """A job: its state, and its plan once finished."""
-    row = _row(store, job_id)
-    if not JobState(row.state).terminal:
-        response.headers["Retry-After"] = "1"
-    return job_model(row)
+def get_plan(job_id: str, store: StoreDep, owner: OwnerDep,
+             result: Annotated[bool, Query(description=(
+                 "false: the job without its plan (`result_bytes` says how large it "
+                 "is)"))] = True) -> Response:
+    """A job: its state, and its plan once finished (as stored: the JSON the worker
+    wrote, streamed)."""
+    row = _row(store, job_id, owner)
+    headers = None if JobState(row.state).terminal else {"Retry-After": "1"}
+    return job_response(row, store, 200, headers, with_result=result)
 
 
 @router.get("/v1/plans", response_model=JobList)
-def list_plans(store: StoreDep,
+def list_plans(store: StoreDep, owner: OwnerDep,
                limit: Annotated[int, Query(ge=1, le=500)] = 50,
                offset: Annotated[int, Query(ge=0, le=MAX_OFFSET)] = 0) -> JobList:
-    """Jobs, newest first, without their plans."""
-    rows, total = store.list(limit, offset)
+    """Jobs (the API key's, with keys), newest first, without their plans."""
+    rows, total = store.list(limit, offset, owner)
     nxt = offset + len(rows) if offset + len(rows) < total else None
     return JobList(items=[job_model(r) for r in rows], total=total, limit=limit,
                    offset=offset, next_offset=nxt)
@@ -142,9 +190,9 @@ def list_plans(store: StoreDep,
 
 @router.delete("/v1/plans/{job_id}", response_model=LinkedJob)
 async def cancel_plan(job_id: str, store: StoreDep, dispatcher: DispatcherDep,
-                      notifier: NotifierDep) -> Job:
+                      notifier: NotifierDep, owner: OwnerDep) -> Response:
     """Cancel a queued or running job; 409 if it has already finished."""
-    row = _row(store, job_id)
+    row = _row(store, job_id, owner)
     if JobState(row.state).terminal:
         raise ServiceError(409, "already_finished",
                            f"job {job_id} already ended: {row.state}")
@@ -156,4 +204,4 @@ async def cancel_plan(job_id: str, store: StoreDep, dispatcher: DispatcherDep,
                 await asyncio.wait_for(event.wait(), timeout=10.0)
         finally:
             notifier.unregister(job_id, event)
-    return job_model(_row(store, job_id))
+    return job_response(_row(store, job_id, owner), store)
