@@ -2,6 +2,10 @@
 # quickstart (`make run` = `make install` + `dexroll serve`), which CI exercises.
 FROM python:3.11-slim
 
+# The service listens on all of the container's interfaces; publish it on the host's
+# loopback (docker run -p 127.0.0.1:8000:8000 ...). Without DEXROLL_API_KEYS (or
+# DEXROLL_API_KEYS_FILE) it serves anyone who reaches the port, and says so loudly in its
+# log at start; the Host allow-list (DEXROLL_ALLOWED_HOSTS) defaults to the loopback names.
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     DEXROLL_HOST=0.0.0.0 \
