@@ -72,18 +72,16 @@ CHECK_NAMES = {
 }
 
 
-def grasp_problem(problem: BallOnPalmProblem, n_sub: int = 8) -> ManipulationProblem:
+def grasp_problem(problem: BallOnPalmProblem) -> ManipulationProblem:
     """The ball-on-palm problem as the one-contact grasp of the pipeline (the palm's
-    tolerances, ``n_sub`` certificate samples per interval)."""
-    tolerances = PALM_TOLERANCES if n_sub == PALM_TOLERANCES.samples_per_interval else \
-        replace(PALM_TOLERANCES, samples_per_interval=n_sub)
+    defect tolerances)."""
     return ManipulationProblem(
         problem.object, (), problem.duration,
         palm=Palm(problem.initial, problem.goal, problem.via_points, problem.palm_half_extent,
                   problem.max_contact_speed),
         n_intervals=problem.n_intervals, pole_margin=problem.pole_margin,
         max_refinements=problem.max_refinements, options=problem.options,
-        tolerances=tolerances)
+        tolerances=PALM_TOLERANCES)
 
 
 def palm_certificate(cert: Certificate) -> Certificate:
@@ -98,32 +96,31 @@ def palm_certificate(cert: Certificate) -> Certificate:
 
 
 def certify(problem: BallOnPalmProblem, t_nodes: FloatArray, X: FloatArray, U0: FloatArray,
-            Um: FloatArray, U1: FloatArray, n_sub: int = 8,
+            Um: FloatArray, U1: FloatArray,
             planner: ManipulationPlanner | None = None) -> Certificate:
     """The certificate of any plan of a ball-on-palm problem (node times and states, each
     interval's inputs at its start, midpoint and end): the one the planner gives its own
     plans (the benchmark's peers are checked with it)."""
-    grasp = grasp_problem(problem, n_sub)
+    grasp = grasp_problem(problem)
     general = planner or _DEFAULT.general
     m = general.model(grasp)
     prm = m.params(np.asarray(problem.object.dimensions, dtype=float),
                    [rotation_from_vector(problem.object.chart_rotation)])
-    return palm_certificate(certify_grasp(grasp, m, np.asarray(t_nodes, dtype=float),
-                                          X, U0, Um, U1, prm, grasp.tolerances))
+    traj = m.interpolant(np.asarray(t_nodes, dtype=float), X, U0, Um, U1, prm)
+    return palm_certificate(certify_grasp(grasp, m, traj, prm, grasp.tolerances))
 
 
 class BallOnPalmPlanner:
     """Plans an object rolled on the palm with the grasp pipeline (NLPs cached per
     structure in its :class:`~ocp.solve.planner.ManipulationPlanner`)."""
 
-    def __init__(self, n_reintegration_substeps: int = 8, max_iter_per_guess: int = 300,
+    def __init__(self, max_iter_per_guess: int = 300,
                  compile_dir: Path | None = None,
                  general: ManipulationPlanner | None = None) -> None:
         #: The pipeline; with ``compile_dir`` its NLPs are compiled with gcc and cached
         #: there (:mod:`ocp.solve.compiled`): slower to build the first time, faster to solve.
         self.general = general or ManipulationPlanner(compile_dir,
                                                       max_iter_per_guess=max_iter_per_guess)
-        self.n_sub = n_reintegration_substeps
 
     @property
     def max_iter_per_guess(self) -> int:
@@ -136,7 +133,7 @@ class BallOnPalmPlanner:
 
     def nlp_for(self, problem: BallOnPalmProblem) -> tuple[Any, bool]:
         """The NLP of this problem's structure, and whether it came from the cache."""
-        return self.general._build(grasp_problem(problem, self.n_sub))
+        return self.general._build(grasp_problem(problem))
 
     def solve(self, problem: BallOnPalmProblem,
               warm_start: Solution | WarmStart | None = None, *,
@@ -159,14 +156,16 @@ class BallOnPalmPlanner:
             if errs:
                 raise ProblemError(errs)
         warm = warm_start.plan if isinstance(warm_start, Solution) else warm_start
-        plan = self.general.solve(grasp_problem(problem, self.n_sub), warm, certify=certify)
+        plan = self.general.solve(grasp_problem(problem), warm, certify=certify)
         return palm_solution(problem, plan)
 
 
 def _trajectory(model: BallOnPalmModel, params: FloatArray, chart: FloatArray,
-                t: FloatArray, eta: FloatArray, w: FloatArray) -> Trajectory:
+                t: FloatArray, eta: FloatArray, eta_dot: FloatArray, w: FloatArray
+                ) -> Trajectory:
+    """The returned polynomials' contact coordinates and their rates at times t, the
+    palm contact's velocity w (the NLP's input) and the rolling velocity it implies."""
     m = len(t)
-    eta_dot = np.asarray(model.dynamics.map(m)(eta.T, w.T, params)).T
     R, pos, cp, cn, om = model.kinematics.map(m)(eta.T, w.T, params, np.tile(chart, m))
     return Trajectory(t=t, eta=eta, eta_dot=eta_dot, w=w, rolling_velocity=np.asarray(om).T,
                       object_position=np.asarray(pos).T,
@@ -176,24 +175,24 @@ def _trajectory(model: BallOnPalmModel, params: FloatArray, chart: FloatArray,
 
 def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Solution:
     """The pipeline's plan of the object on the palm alone as a ball-on-palm
-    :class:`~ocp.solution.Solution`."""
+    :class:`~ocp.solution.Solution`: its returned polynomials on the collocation grid, at
+    the nodes, and at any times."""
     col = plan.collocation
     assert col is not None and plan.stats is not None
     model = model_for(problem.object.shape)
     params = np.asarray(problem.object.dimensions, dtype=float)
     chart = rotation_from_vector(problem.object.chart_rotation)
-    t_nodes, X, Xm, U0, Um, U1 = col.t_nodes, col.X, col.Xm, col.U0, col.Um, col.U1
-    U = np.vstack([U0, U1[-1:]])  # node inputs, outgoing at via-points
-    n = len(U0)
-    t_mid = (t_nodes[:-1] + t_nodes[1:]) / 2
-    order = np.argsort(np.concatenate([t_nodes, t_mid]), kind="stable")
-    grid = _trajectory(model, params, chart, np.concatenate([t_nodes, t_mid])[order],
-                       np.vstack([X, Xm])[order], np.vstack([U, Um])[order])
-    nodes = _trajectory(model, params, chart, t_nodes, X, U)
+    t_nodes, X = col.t_nodes, col.X
+    n = len(col.U0)
+    palm = plan.contacts[0]
+    grid = _trajectory(model, params, chart, plan.t, palm.eta, palm.eta_dot, palm.w)
+    node_rows = np.arange(0, len(plan.t), 2)  # nodes and midpoints alternate
+    nodes = _trajectory(model, params, chart, t_nodes, palm.eta[node_rows],
+                        palm.eta_dot[node_rows], palm.w[node_rows])
 
     def sampler(t: FloatArray) -> Trajectory:  # the pipeline's polynomials
-        x, u = plan.interpolate(t)
-        return _trajectory(model, params, chart, t, x, u)
+        smp = plan.sample(t)
+        return _trajectory(model, params, chart, smp.t, smp.x, smp.x_dot, smp.u)
 
     cert = palm_certificate(plan.certificate)
     status = plan.status

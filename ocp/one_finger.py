@@ -125,6 +125,8 @@ class OneFingerSolution:
     goal_error: dict[str, float]
     certificate: dict[str, float]
     certificate_failures: tuple[str, ...] = field(default=())
+    #: The time [s] of each check's worst sample (the certificate's checks along the motion).
+    certificate_times: dict[str, float] = field(default_factory=dict)
     #: Grid doublings after the first solve (the returned plan has 2**refinements times the
     #: requested intervals).
     refinements: int = 0
@@ -250,5 +252,6 @@ class OneFingerPlanner:
             cone_margin=sol.cone_margin,
             goal_error={k.removeprefix("palm."): v for k, v in sol.goal_error.items()},
             certificate=cert,
+            certificate_times={_rename(k): v for k, v in sol.certificate.times().items()},
             certificate_failures=tuple(_rename(f) for f in sol.certificate_failures),
             refinements=sol.refinements, nlp_point=sol.nlp_point, plan=sol)

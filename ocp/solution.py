@@ -21,15 +21,16 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Certificate
 from ocp.geometry.grasp import force_angles
 from ocp.geometry.rotations import quaternion_wxyz, rotation_angle_between
-from ocp.transcription.collocation import NlpPoint, WarmStart, hermite_sample
+from ocp.transcription.collocation import HermiteInterpolant, NlpPoint, WarmStart
 
 if TYPE_CHECKING:
     from ocp.spec.grasp import ManipulationProblem
     from ocp.transcription.grasp_model import GraspModel
 
 __all__ = ["Collocation", "ContactTrajectory", "FingerTrajectory", "GraspSample",
-           "ManipulationSolution", "Solution", "SolverStats", "Status", "Trajectory",
-           "assemble_solution", "status_from_ipopt"]
+           "JointTrajectory", "ManipulationSolution", "RateBreak", "Solution", "SolverStats",
+           "Status", "Trajectory", "assemble_solution", "fixed_rate_times",
+           "status_from_ipopt"]
 
 FloatArray = NDArray[np.float64]
 
@@ -244,15 +245,69 @@ class Collocation:
     U1: FloatArray
 
 
+def fixed_rate_times(duration: float, rate: float) -> FloatArray:
+    """Times [s] at a controller's rate [Hz] from 0 to ``duration``: k / rate for every k
+    with k / rate < duration, then ``duration`` itself (the plan's end, where it stops)."""
+    if not (math.isfinite(rate) and rate > 0):
+        raise ValueError(f"sample rate must be a positive number of Hz, got {rate}")
+    k = np.arange(math.ceil(duration * rate - 1e-9))
+    return np.concatenate([k / rate, [duration]])
+
+
+@dataclass(frozen=True)
+class RateBreak:
+    """A node where the plan's input jumps (a via-point of the paper's piecewise timing):
+    the positions are continuous there, the rates have two one-sided values."""
+
+    t: float
+    velocities_before: FloatArray
+    velocities_after: FloatArray
+
+
+@dataclass(frozen=True)
+class JointTrajectory:
+    """Every finger's joints at given times, shaped like ROS 2's
+    ``trajectory_msgs/JointTrajectory``: positions [rad or m], velocities and accelerations
+    (the returned polynomials' derivatives, so velocities are the time derivative of
+    positions), rows = times. A time on a rate break gets the outgoing rates; ``breaks``
+    gives both sides."""
+
+    joint_names: tuple[str, ...]
+    t: FloatArray
+    positions: FloatArray
+    velocities: FloatArray
+    accelerations: FloatArray
+    breaks: tuple[RateBreak, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ROS 2 message's fields (``time_from_start`` as builtin_interfaces/Duration
+        and, for convenience, in seconds) and the rate breaks."""
+        points = []
+        for i, t in enumerate(self.t.tolist()):
+            sec = math.floor(t)
+            nanosec = min(round((t - sec) * 1e9), 999_999_999)
+            points.append({"positions": self.positions[i].tolist(),
+                           "velocities": self.velocities[i].tolist(),
+                           "accelerations": self.accelerations[i].tolist(),
+                           "time_from_start": {"sec": sec, "nanosec": nanosec},
+                           "t": t})
+        return {"joint_names": list(self.joint_names), "points": points,
+                "rate_breaks": [{"t": b.t, "velocities_before": b.velocities_before.tolist(),
+                                 "velocities_after": b.velocities_after.tolist()}
+                                for b in self.breaks]}
+
+
 @dataclass(frozen=True)
 class GraspSample:
     """A plan at given times (rows): states x and inputs u in the grasp's layout (the
-    contacts' blocks, :mod:`ocp.spec.contacts`), their rates, the object's pose (palm frame)."""
+    contacts' blocks, :mod:`ocp.spec.contacts`), the states' rates and accelerations (the
+    time derivatives of the returned polynomials), the object's pose (palm frame)."""
 
     t: FloatArray
     x: FloatArray
     u: FloatArray
     x_dot: FloatArray
+    x_ddot: FloatArray
     object_position: FloatArray
     object_rotation: FloatArray
 
@@ -310,62 +365,109 @@ class ManipulationSolution:
     def duration(self) -> float:
         return float(self.t[-1])
 
-    def interpolate(self, t: FloatArray | list[float]) -> tuple[FloatArray, FloatArray]:
-        """(states, inputs) at any times in [0, duration], rows, from the collocation
-        polynomials: each interval's cubic Hermite polynomial of the states and quadratic
-        of the inputs (a time on a via-point node gets the outgoing input)."""
+    @property
+    def trajectory(self) -> HermiteInterpolant:
+        """The returned trajectory as polynomials (the one the certificate checked)."""
         if self._interpolant is None:
             raise ValueError("this plan has no collocation polynomials (non-finite values)")
+        return self._interpolant.traj
+
+    def _times(self, t: FloatArray | list[float]) -> FloatArray:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if np.any((t < -1e-12) | (t > self.duration + 1e-12)):
             raise ValueError(f"sample times must lie in [0, {self.duration}] s")
-        return self._interpolant(np.clip(t, 0.0, self.duration))
+        return np.clip(t, 0.0, self.duration)
 
-    def sample(self, t: FloatArray | list[float]) -> GraspSample:
+    def interpolate(self, t: FloatArray | list[float], side: str = "right"
+                    ) -> tuple[FloatArray, FloatArray]:
+        """(states, inputs) at any times in [0, duration], rows, from the returned
+        polynomials (:class:`~ocp.transcription.collocation.HermiteInterpolant`): each
+        interval's cubic Hermite polynomial of the states and quadratic of the inputs. A
+        time on a via-point node gets the outgoing values (``side="left"``: the incoming)."""
+        traj, ts = self.trajectory, self._times(t)
+        return traj(ts, side=side), traj.inputs(ts, side=side)
+
+    def sample(self, t: FloatArray | list[float], side: str = "right") -> GraspSample:
         """The plan at any times in [0, duration] (:meth:`interpolate`), with the states'
-        rates and the object's pose."""
-        x, u = self.interpolate(t)
+        rates and accelerations (the polynomials' derivatives) and the object's pose."""
+        traj, ts = self.trajectory, self._times(t)
         assert self._interpolant is not None
-        return self._interpolant.describe(np.clip(np.atleast_1d(np.asarray(t, dtype=float)),
-                                                  0.0, self.duration), x, u)
+        k, s = traj.locate(ts, side)
+        return self._interpolant.describe(ts, traj.on_intervals(k, s),
+                                          traj.on_intervals(k, s, 1),
+                                          traj.on_intervals(k, s, 2),
+                                          traj.inputs_on_intervals(k, s))
+
+
+    def break_nodes(self) -> list[int]:
+        """The nodes where the input jumps (the rates have two sides): via-point nodes
+        of the paper's piecewise timing."""
+        col = self.collocation
+        if col is None:
+            return []
+        return [k for k in range(1, len(col.U0)) if np.any(col.U1[k - 1] != col.U0[k])]
+
+    def joint_trajectory(self, t: FloatArray | list[float]) -> JointTrajectory:
+        """Every finger's joints at times t (e.g. :func:`fixed_rate_times`) from the returned
+        polynomials, with both one-sided rates at each rate break. Joint names are the
+        model's; where two fingers share a name, prefixed with the finger's
+        (``<finger>/<joint>``)."""
+        smp = self.sample(t)
+        assert self._interpolant is not None
+        m = self._interpolant.m
+        cols = [c for tip in m.fingertips for c in range(tip.q_cols.start, tip.q_cols.stop)]
+        names = [(f.name, j) for f in self.fingers for j in f.joint_names]
+        seen = [j for _, j in names]
+        joint_names = tuple(j if seen.count(j) == 1 else f"{f}/{j}" for f, j in names)
+        breaks = []
+        traj = self.trajectory
+        for k in self.break_nodes():
+            tk = np.array([traj.t_nodes[k]])
+            breaks.append(RateBreak(float(tk[0]), traj(tk, 1, "left")[0, cols],
+                                    traj(tk, 1, "right")[0, cols]))
+        return JointTrajectory(joint_names, smp.t, smp.x[:, cols], smp.x_dot[:, cols],
+                               smp.x_ddot[:, cols], tuple(breaks))
 
 
 class _Interpolant:
-    """A plan's collocation polynomials (see :meth:`ManipulationSolution.interpolate`)."""
+    """A plan's returned polynomials with its model (for the object's pose)."""
 
-    def __init__(self, m: GraspModel, col: Collocation, prm: FloatArray) -> None:
-        n = len(col.U0)
-        self.m, self.col, self.prm = m, col, prm
-        self.F0 = np.asarray(m.mapped("dynamics", n)(col.X[:-1].T, col.U0.T, prm)).T
-        self.F1 = np.asarray(m.mapped("dynamics", n)(col.X[1:].T, col.U1.T, prm)).T
+    def __init__(self, m: GraspModel, traj: HermiteInterpolant, prm: FloatArray) -> None:
+        self.m, self.traj, self.prm = m, traj, prm
 
-    def __call__(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
-        c = self.col
-        return hermite_sample(c.t_nodes, c.X, self.F0, self.F1, c.U0, c.Um, c.U1, t)
-
-    def describe(self, t: FloatArray, x: FloatArray, u: FloatArray) -> GraspSample:
-        """States x and inputs u at times t with their rates and the object's pose."""
-        k, m, prm = len(t), self.m, self.prm
-        xd = np.asarray(m.mapped("dynamics", k)(x.T, u.T, prm)).T
-        cart = m.mapped("cartesian", k)(x.T, prm)
+    def describe(self, t: FloatArray, x: FloatArray, xd: FloatArray, xdd: FloatArray,
+                 u: FloatArray) -> GraspSample:
+        """States x, rates xd, accelerations xdd and inputs u at times t, with the
+        object's pose."""
+        k = len(t)
+        cart = self.m.mapped("cartesian", k)(x.T, self.prm)
         R = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
-        return GraspSample(t, x, u, xd, np.asarray(cart[1]).T, R)
+        return GraspSample(t, x, u, xd, xdd, np.asarray(cart[1]).T, R)
 
 
 def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Status, raw: str,
-                      col: Collocation, prm: FloatArray, cert: Certificate,
-                      goal_error: dict[str, float]) -> ManipulationSolution:
-    """The plan on its collocation grid (nodes and midpoints in time order): every
-    contact's and finger's trajectory, the object's motion, force closure, tracking; the
-    status made ``inaccurate`` when the certificate fails."""
+                      col: Collocation, traj: HermiteInterpolant, prm: FloatArray,
+                      cert: Certificate, goal_error: dict[str, float]
+                      ) -> ManipulationSolution:
+    """The returned trajectory ``traj`` on its collocation grid (nodes and midpoints in time
+    order; at a via-point node the outgoing rates): every contact's and finger's
+    trajectory, the object's motion, force closure, tracking; the status made
+    ``inaccurate`` when the certificate fails."""
     t_nodes, X, Xm, U0, Um, U1 = col.t_nodes, col.X, col.Xm, col.U0, col.Um, col.U1
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
     order = np.argsort(np.concatenate([t_nodes, tm]), kind="stable")
     t = np.concatenate([t_nodes, tm])[order]
-    Xg = np.vstack([X, Xm])[order]
+    finite = all(np.all(np.isfinite(a)) for a in (X, Xm, U0, Um, U1))
+    n_int = len(U0)
+    kk = np.concatenate([np.arange(n_int), [n_int - 1], np.arange(n_int)])[order]
+    ss = np.concatenate([np.zeros(n_int), [1.0], np.full(n_int, 0.5)])[order]
+    if finite:  # the returned polynomials on the grid (the midpoints' states theirs)
+        Xg, xdot = traj.on_intervals(kk, ss), traj.on_intervals(kk, ss, order=1)
+    else:
+        Xg = np.vstack([X, Xm])[order]
+        xdot = np.full_like(Xg, np.nan)
     Ug = np.vstack([np.vstack([U0, U1[-1:]]), Um])[order]
     k = len(t)
-    xdot = np.asarray(m.mapped("dynamics", k)(Xg.T, Ug.T, prm)).T
     cart = m.mapped("cartesian", k)(Xg.T, prm)
     nc, nf = m.n_contacts, len(m.fingertips)
     R_po = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
@@ -384,7 +486,7 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
                                   nrm[:, j], angles[:, j])
                 for j, c in enumerate(m.point_contacts)]
     fingers = [FingerTrajectory(tip.label(problem), tuple(tip.finger.joint_names),
-                                Xg[:, tip.q_cols], Ug[:, tip.qd_cols], p_pf[:, i],
+                                Xg[:, tip.q_cols], xdot[:, tip.q_cols], p_pf[:, i],
                                 R_pf[:, i]) for i, tip in enumerate(m.fingertips)]
     Rd = Pd = ep = ea = None
     if problem.motion is not None:
@@ -398,7 +500,6 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
         Status.SOLVED: "converged; certificate passed",
         Status.INACCURATE: "converged, but the certificate failed: " + "; ".join(failures),
     }.get(status, f"not solved: IPOPT {raw}; the last iterate is returned")
-    finite = all(np.all(np.isfinite(a)) for a in (X, Xm, U0, Um, U1))
     return ManipulationSolution(
         status=status, message=message, raw_status=raw, iterations=0, build_time=0.0,
         solve_time=0.0, t=t, object_position=p_po, object_rotation=R_po,
@@ -406,4 +507,4 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
         fingers=tuple(fingers), grasp_angle=phi, cone_margin=margin, desired_position=Pd,
         desired_rotation=Rd, tracking_position_error=ep, tracking_angle_error=ea,
         goal_error=goal_error, certificate=cert, certificate_failures=failures, X=Xg, U=Ug,
-        collocation=col, _interpolant=_Interpolant(m, col, prm) if finite else None)
+        collocation=col, _interpolant=_Interpolant(m, traj, prm) if finite else None)

@@ -215,9 +215,9 @@ def test_certificate_detects_inputs_that_do_not_produce_the_states() -> None:
     X, U = sol.nodes.eta, sol.nodes.w
     Um = sol.grid.w[1:-1:2]
     t = sol.nodes.t
-    ok = certify(problem, t, X, U[:-1], Um, U[1:], 8)
+    ok = certify(problem, t, X, U[:-1], Um, U[1:])
     assert ok.passed, ok.failures
-    bad = certify(problem, t, X, 1.01 * U[:-1], 1.01 * Um, 1.01 * U[1:], 8)
+    bad = certify(problem, t, X, 1.01 * U[:-1], 1.01 * Um, 1.01 * U[1:])
     assert not bad.passed
     assert any(f.startswith("position_defect") for f in bad.failures)
 
@@ -293,7 +293,7 @@ def test_certificate_of_a_non_finite_plan_fails_instead_of_crashing() -> None:
     X = np.zeros((n + 1, 5))
     X[3, 2] = np.nan
     U = np.zeros((n, 2))
-    cert = certify(problem, t, X, U, U, U, 4)
+    cert = certify(problem, t, X, U, U, U)
     assert not cert.passed and not cert.refinable
     assert cert.failures == ("the plan has non-finite states or inputs",)
 

@@ -59,26 +59,27 @@ def rolling_speed(plan: OneFingerSolution) -> float:
 
 
 def test_no_slip_or_spin_at_either_contact(plan: OneFingerSolution) -> None:
-    """Along the re-integrated motion (finger moved by its joints, ball by the palm
-    contact), the contact points do not slide or spin. At the palm the law holds to
-    round-off; at the finger to the collocation accuracy, because closure is imposed at
-    the collocation points: within 1 % of the rolling speed at this grid."""
+    """Along the returned trajectory (finger moved by its joints, ball by the palm
+    contact), the contact points do not slide or spin: within 1e-3 of the plan's speed
+    scale, which is at most the worst rolling speed computed here from the inputs."""
     c = plan.certificate
-    assert c["max_slip_speed_palm"] < 1e-12
-    assert c["max_spin_rate_palm"] < 1e-12
     speed = rolling_speed(plan)
-    assert c["max_slip_speed_finger"] < 1e-2 * speed
-    assert c["max_spin_rate_finger"] < 1e-2 * speed / RHO
+    assert 0 < c["speed_scale"] <= speed
+    for contact in ("palm", "finger"):
+        assert c[f"max_slip_speed_{contact}"] <= 1e-3 * c["speed_scale"]
+        assert c[f"max_spin_rate_{contact}"] <= 1e-3 * c["rolling_rate_scale"]
+        assert c[f"tol_max_slip_speed_{contact}"] == pytest.approx(1e-3 * c["speed_scale"])
+    assert c["max_slip_speed_finger"] < 1e-3 * speed
 
 
-def test_finger_slip_vanishes_as_the_grid_is_refined(plan: OneFingerSolution) -> None:
-    """The finger's residual slip is discretisation error: a finer grid shrinks it."""
-    fine = PLANNER.solve(roll(80))
-    assert fine.status is Status.SOLVED
-    assert fine.certificate["max_slip_speed_finger"] < 0.5 * plan.certificate[
-        "max_slip_speed_finger"]
-    assert fine.certificate["max_closure_position_error"] < 0.5 * plan.certificate[
-        "max_closure_position_error"]
+def test_finger_slip_vanishes_as_the_grid_is_refined() -> None:
+    """The finger's residual slip is discretisation error: a finer grid shrinks it (the
+    same problem on 40 and 80 intervals, not refined further)."""
+    coarse, fine = (PLANNER.solve(replace(p, base=replace(p.base, max_refinements=0)))
+                    for p in (roll(40), roll(80)))
+    assert coarse.raw_status == fine.raw_status == "Solve_Succeeded"
+    for check in ("max_slip_speed_finger", "max_closure_position_error"):
+        assert fine.certificate[check] < 0.5 * coarse.certificate[check]
 
 
 def test_fingertip_pad_is_tangent_to_the_ball(plan: OneFingerSolution) -> None:
@@ -151,7 +152,8 @@ def test_reported_rates_are_the_rolling_equations_at_both_contacts(plan: OneFing
 def test_a_grid_too_coarse_for_a_fast_regrasp_is_refined_until_certified() -> None:
     """A heavy grasp weight makes the finger re-grasp fast; on 20 intervals the finger then
     slips between collocation points, which the certificate catches. Without refinement the
-    plan says so (inaccurate); with it the grid is doubled until the plan is certified."""
+    plan says so (inaccurate); with it the grid is made 2, 4 or 8 times as fine until the
+    plan is certified."""
     fast = replace(roll(20), grasp_weight=3000.0)
     coarse = PLANNER.solve(replace(fast, base=replace(fast.base, max_refinements=0)))
     assert coarse.status is Status.INACCURATE
@@ -159,7 +161,10 @@ def test_a_grid_too_coarse_for_a_fast_regrasp_is_refined_until_certified() -> No
     refined = PLANNER.solve(fast)
     assert refined.status is Status.SOLVED, refined.message
     assert refined.refinements >= 1 and not refined.certificate_failures
-    assert len(refined.t) == 2 * 20 * 2**refined.refinements + 1
+    n = (len(refined.t) - 1) // 2
+    factor = n // 20
+    assert n == 20 * factor and factor >= 2 and factor & (factor - 1) == 0
+    assert factor <= 8**refined.refinements
     assert refined.certificate["max_slip_speed_finger"] < coarse.certificate[
         "max_slip_speed_finger"]
 

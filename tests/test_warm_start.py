@@ -186,6 +186,8 @@ def test_a_one_finger_plan_warm_starts_a_nearby_one_through_the_conversion() -> 
     goal_x = ROLL["goal"]["x"] + 0.002
     nearby = copy.deepcopy(ROLL)
     nearby["goal"]["x"] = goal_x
+    # on the warm plan's own grid (the certificate refined it): the same NLP
+    nearby["n_intervals"] = (len(c.t) - 1) // 2
     nearby["warm_start"] = c.model_dump()
     request = REQUEST.validate_python(nearby)
     assert request_errors(request, cache) == []

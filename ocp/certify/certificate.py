@@ -36,8 +36,8 @@ class SolverOptions(Protocol):
     @property
     def cert_angle_tol(self) -> float: ...
 
-__all__ = ["GRASP_TOLERANCES", "PALM_TOLERANCES", "Certificate", "Check", "CheckKind",
-           "TolerancePolicy"]
+__all__ = ["CHECK_POINTS", "GRASP_TOLERANCES", "PALM_TOLERANCES", "Certificate", "Check",
+           "CheckKind", "TolerancePolicy"]
 
 
 class CheckKind(StrEnum):
@@ -65,6 +65,8 @@ class Check:
     #: The tolerance's key in :meth:`Certificate.tolerances` and in the failure's text
     #: (default: the name).
     tolerance_key: str = ""
+    #: The time [s] of the worst sample (None: not a check along the motion).
+    time: float | None = None
 
     @property
     def passed(self) -> bool:
@@ -77,7 +79,9 @@ class Check:
         if self.reason:
             return self.reason
         op = "<" if self.lower_bound else ">"
-        return f"{self.tolerance_key or self.name} {self.value:.3g} {op} {self.tolerance:.3g}"
+        at = "" if self.time is None else f" at t = {self.time:.6g} s"
+        return (f"{self.tolerance_key or self.name} {self.value:.3g} {op} "
+                f"{self.tolerance:.3g}{at}")
 
 
 @dataclass(frozen=True)
@@ -127,18 +131,34 @@ class Certificate(Mapping[str, float]):
         kinds = self.failed_kinds()
         return bool(kinds) and kinds <= {CheckKind.DISCRETISATION}
 
+    def refinement_factor(self, order: int = 2, most: int = 8) -> int:
+        """How much finer a grid should make the failed discretisation checks pass: a
+        power of two, at least 2 and at most ``most``, for errors that shrink like h^order
+        (the slowest of the checks: slip and spin at the collocation points), with a 25 %
+        margin."""
+        worst = max((c.value / c.tolerance for c in self.checks
+                     if not c.passed and c.kind is CheckKind.DISCRETISATION
+                     and not c.lower_bound and c.tolerance > 0), default=2.0)
+        need = (1.25 * worst) ** (1.0 / order) if math.isfinite(worst) else most
+        return int(min(most, max(2, 2 ** math.ceil(math.log2(max(need, 1.0))))))
+
     def tolerances(self) -> dict[str, float]:
         """Every check's tolerance by its tolerance key."""
         return {c.tolerance_key or c.name: c.tolerance for c in self.checks
                 if c.kind is not CheckKind.NUMERICS}
 
+    def times(self) -> dict[str, float]:
+        """The time [s] of each check's worst sample, for the checks along the motion."""
+        return {c.name: c.time for c in self.checks if c.time is not None}
+
     def to_dict(self) -> dict[str, Any]:
-        """``passed``, every value, ``n_samples``, ``tolerances`` and ``failures``."""
+        """``passed``, every value, ``n_samples``, ``tolerances``, ``times`` (of each
+        check's worst sample) and ``failures``."""
         values = {c.name: c.value for c in self.checks
                   if c.kind is not CheckKind.NUMERICS and c.report_value}
         return {"passed": self.passed, **values, **dict(self.reported),
                 "n_samples": self.n_samples, "tolerances": self.tolerances(),
-                "failures": list(self.failures)}
+                "times": self.times(), "failures": list(self.failures)}
 
     def check(self, name: str) -> Check:
         for c in self.checks:
@@ -173,38 +193,47 @@ def _worse(a: Check, b: Check) -> bool:
     return not a.value <= b.value
 
 
+#: Normalised times in each interval at which the returned trajectory is checked: eight
+#: equal steps (both ends included, so a node is checked from both sides, and the
+#: midpoint) and the two extrema of the cubic that vanishes at the three collocation points,
+#: s = 1/2 -+ 1/(2 sqrt 3): the leading term of the interpolant's error between collocation
+#: points, so that the check lands on its largest value (docs/conventions.md).
+CHECK_POINTS: tuple[float, ...] = tuple(sorted(
+    [j / 8 for j in range(9)] + [0.5 - 0.5 / math.sqrt(3), 0.5 + 0.5 / math.sqrt(3)]))
+
+
 @dataclass(frozen=True)
 class TolerancePolicy:
-    """How strictly a plan is certified.
+    """How strictly a plan is certified: one policy for every contact (docs/conventions.md).
 
-    Re-integration defects: lengths max(``cert_position_tol``, ``length_defect_floor``) m,
-    angles and joints ``angle_defect_factor`` x ``cert_angle_tol`` rad; the goals of the
-    re-integrated motion the larger of the two. The support contact's slip and spin are
-    relative to a speed: ``support_speed = "motion"`` takes the grasp's motion speed scale
-    (max |v_obj| + L max |omega_obj| + L max |input|, and that over L for spin),
-    ``"input"`` the support contact's own input speed max |w| and the object's largest
-    angular speed max |omega_obj|; its height error is absolute (``support_height`` m) or,
-    with ``height_relative``, relative to the object's size.
+    The returned trajectory is checked at :data:`CHECK_POINTS` of every interval. Slip at
+    every contact is at most ``slip`` x the plan's speed scale (the RMS over time and
+    contacts of the contact points' speed, at least ``speed_floor`` L / T), spin at most
+    ``spin`` x its rate scale (the RMS of the contacts' rolling rates, at least the speed
+    scale over L); closure and gaps are absolute.
+
+    Re-integration defects (nodes and midpoints): lengths max(``cert_position_tol``,
+    ``length_defect_floor``) m, angles and joints ``angle_defect_factor`` x
+    ``cert_angle_tol`` rad; the goals of the re-integrated motion the larger of the two.
+    The object on the palm touches it to ``support_height`` m (x the object's size with
+    ``height_relative``): by construction of its pose, so this is a check of the model.
     """
 
     name: str
-    samples_per_interval: int
     length_defect_floor: float
     angle_defect_factor: float
-    support_slip: float
-    support_spin: float
-    support_speed: str  # "motion" or "input"
     support_height: float
     height_relative: bool
-    #: a fingertip's slip and spin, relative to the motion's speed scale (and that over L)
-    finger_slip: float = 1e-2
-    finger_spin: float = 1e-2
-    #: a pad's gap to the object [m], a joint's excursion past its limit [rad or m]
-    gap: float = 1e-4
+    check_points: tuple[float, ...] = CHECK_POINTS
+    slip: float = 1e-3
+    spin: float = 1e-3
+    speed_floor: float = 1e-2
+    #: a fingertip's gap to the object [m], a joint's excursion past its limit [rad or m]
+    gap: float = 1e-5
     joint_limit: float = 1e-6
     #: each fingertip where its joints put it (Pinocchio) [m], [rad]
-    closure_position: float = 1e-4
-    closure_orientation: float = 1e-3
+    closure_position: float = 1e-5
+    closure_orientation: float = 1e-4
     #: the smallest margin to the friction cones [rad] (force closure: two or more contacts)
     cone_margin: float = -1e-6
 
@@ -218,13 +247,11 @@ class TolerancePolicy:
         return max(self.length_defect(o), self.angle_defect(o))
 
 
-#: Grasps with fingers (the general planner's tolerances).
-GRASP_TOLERANCES = TolerancePolicy("grasp", samples_per_interval=4, length_defect_floor=1e-5,
-                                   angle_defect_factor=10.0, support_slip=1e-8,
-                                   support_spin=1e-8, support_speed="motion",
-                                   support_height=1e-9, height_relative=False)
-#: The object on the palm alone (the ball-on-palm planner's tolerances).
-PALM_TOLERANCES = TolerancePolicy("palm", samples_per_interval=8, length_defect_floor=0.0,
-                                  angle_defect_factor=1.0, support_slip=1e-9,
-                                  support_spin=1e-9, support_speed="input",
+#: Grasps with fingers (the general planner's defect tolerances).
+GRASP_TOLERANCES = TolerancePolicy("grasp", length_defect_floor=1e-5,
+                                   angle_defect_factor=10.0, support_height=1e-9,
+                                   height_relative=False)
+#: The object on the palm alone (the ball-on-palm planner's defect tolerances: its
+#: options' own; the contacts' laws are every grasp's).
+PALM_TOLERANCES = TolerancePolicy("palm", length_defect_floor=0.0, angle_defect_factor=1.0,
                                   support_height=1e-9, height_relative=True)

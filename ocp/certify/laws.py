@@ -1,16 +1,20 @@
-"""The physical certificate of a grasp's plan, computed independently of the NLP.
+"""The physical certificate of a grasp's plan: a statement about the trajectory returned.
 
-The plan's inputs are re-integrated from its initial state with CVODES over the whole
-horizon (never reset to the NLP's states), and the re-integrated motion is checked at
-``samples_per_interval`` points per interval: the re-integration defects at the nodes, the
-goals and via-points it reaches, each contact's own laws (:meth:`ocp.spec.contacts.Contact.checks`:
-slip, spin, touching, pads, joint limits, closure by Pinocchio), the tracking tolerances
-and force closure. The result is one :class:`~ocp.certify.certificate.Certificate`.
+The returned trajectory is the plan's :class:`~ocp.transcription.collocation.HermiteInterpolant`
+(the one ``sample(t)`` gives and the wire documents). It is checked at
+:data:`~ocp.certify.certificate.CHECK_POINTS` of every interval (nodes from both sides,
+midpoints, and between): each contact's laws along the trajectory's own time derivative
+(:meth:`ocp.spec.contacts.Contact.checks`: slip and spin from the returned poses, closure
+and gaps by Pinocchio at the returned joint angles, pads and joint limits), tracking and
+force closure. Independently, the plan's inputs are re-integrated from its initial state
+with CVODES over the whole horizon (never reset): its defects against the returned states
+at the nodes *and* the midpoints, and the goals and via-points it reaches. The result is one
+:class:`~ocp.certify.certificate.Certificate`; every check along the motion names the time
+of its worst sample.
 
 How strict it is comes from the problem's :class:`~ocp.certify.certificate.TolerancePolicy`
-(docs/conventions.md states both): ``GRASP_TOLERANCES`` for grasps with fingers,
-``PALM_TOLERANCES`` for the object on the palm alone (the ball-on-palm planner's,
-tighter: its plans have no joints and its paths are checked at twice the density).
+(docs/conventions.md): the contacts' laws are the same for every grasp; the defects are the
+problem's options'.
 """
 
 from __future__ import annotations
@@ -26,12 +30,12 @@ from ocp.geometry.grasp import force_angles
 from ocp.geometry.rotations import rotation_angle_between
 from ocp.spec.contacts import CertificateContext
 from ocp.spec.grasp import ManipulationProblem, support_goal_errors
-from ocp.transcription.collocation import reintegrate
+from ocp.transcription.collocation import HermiteInterpolant, reintegrate
 
 if TYPE_CHECKING:
     from ocp.transcription.grasp_model import GraspModel
 
-__all__ = ["certify_grasp"]
+__all__ = ["certify_grasp", "check_samples"]
 
 FloatArray = NDArray[np.float64]
 
@@ -46,91 +50,123 @@ def _wrapped(d: FloatArray, periodic: list[bool]) -> FloatArray:
     return out
 
 
-def certify_grasp(problem: ManipulationProblem, m: GraspModel, t_nodes: FloatArray,
-                  X: FloatArray, U0: FloatArray, Um: FloatArray, U1: FloatArray,
+def check_samples(traj: HermiteInterpolant, points: tuple[float, ...]
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Where the returned trajectory is checked: (times, states, their time derivatives,
+    time weights of the RMS scales) at normalised times ``points`` of every interval, in
+    time order (a node twice: as the end of one interval and the start of the next, with
+    each side's rate)."""
+    n, s = len(traj.t_nodes) - 1, np.asarray(points, dtype=float)
+    k = np.repeat(np.arange(n), len(s))
+    ss = np.tile(s, n)
+    h = np.diff(traj.t_nodes)
+    t = traj.t_nodes[k] + h[k] * ss
+    # trapezoid weights over the equal steps (the extra points weigh nothing)
+    uniform = np.isclose(s * 8, np.round(s * 8))
+    w1 = np.where(uniform, 1.0, 0.0)
+    w1[uniform] = np.r_[0.5, np.ones(int(uniform.sum()) - 2), 0.5] / (uniform.sum() - 1)
+    return t, traj.on_intervals(k, ss), traj.on_intervals(k, ss, order=1), \
+        np.tile(w1, n) * h[k]
+
+
+def _rms(values: FloatArray, weights: FloatArray) -> float:
+    total = float(np.sum(weights))
+    return math.sqrt(float(np.sum(weights * values**2)) / total) if total > 0 else 0.0
+
+
+def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInterpolant,
                   prm: FloatArray, policy: TolerancePolicy) -> Certificate:
-    """The certificate of a plan given by its node states X and each interval's inputs
-    (U0 at its start, Um at its midpoint, U1 at its end): see the module's doc."""
-    if not all(np.all(np.isfinite(a)) for a in (X, U0, Um, U1)):
+    """The certificate of a plan as returned (``traj``): see the module's doc."""
+    arrays = (traj.X, traj.F0, traj.F1, traj.U0, traj.Um, traj.U1)
+    if not all(np.all(np.isfinite(a)) for a in arrays):
         return Certificate.failed("the plan has non-finite states or inputs")
-    n_sub = policy.samples_per_interval
+    t_nodes, o = traj.t_nodes, problem.options
+    D = CheckKind.DISCRETISATION
+    # the independent re-integration of the inputs: states at every node and midpoint
     try:
-        Xr, sx, su = reintegrate(m.reintegrator(n_sub), X[0], t_nodes, U0, Um, U1, prm,
-                                 n_sub)
+        Xr, sx, _ = reintegrate(m.reintegrator(2), traj.X[0], t_nodes, traj.U0, traj.Um,
+                                traj.U1, prm, 2)
     except RuntimeError as exc:  # CVODES gave up: the plan is not a smooth motion
         return Certificate.failed(f"re-integration failed: {str(exc).splitlines()[-1]}")
-    n = len(sx)
-    xd = np.asarray(m.mapped("dynamics", n)(sx.T, su.T, prm))
-    laws = dict(zip(m.laws.name_out(), (np.asarray(a).T for a in
-                                        m.mapped("laws", n)(sx.T, xd, prm)), strict=True))
-    cart = m.mapped("cartesian", n)(sx.T, prm)
-    nc, nf = m.n_contacts, len(m.fingertips)
-    R_po = np.asarray(cart[0]).T.reshape(n, 3, 3).transpose(0, 2, 1)
-    p_po = np.asarray(cart[1]).T
-    pts = np.asarray(cart[4]).T.reshape(n, nc, 3)
-    nrm = np.asarray(cart[5]).T.reshape(n, nc, 3)
-    L = problem.object.length_scale
-    o = problem.options
-    speed = float(np.max(np.abs(laws["v_obj"]))) + L * float(
-        np.max(np.abs(laws["omega_obj"]))) + L * float(np.max(np.abs(su)))
-    ctx = CertificateContext(
-        laws=laws, R_po=R_po, p_po=p_po,
-        R_pf=np.asarray(cart[2]).T.reshape(n, nf, 3, 3).transpose(0, 1, 3, 2)
-        if nf else np.zeros((n, 0, 3, 3)),
-        p_pf=np.asarray(cart[3]).T.reshape(n, nf, 3), states=sx, inputs=su,
-        shape=np.asarray(problem.object.dimensions, dtype=float), L=L, speed=speed,
-        policy=policy)
-    D = CheckKind.DISCRETISATION
-    # re-integration defects at the nodes, the periodic angles (v, psi) wrapped
+    n_int = len(t_nodes) - 1
+    mids = np.arange(n_int)
+    t_mid = (t_nodes[:-1] + t_nodes[1:]) / 2
+    Xm = traj.on_intervals(mids, np.full(n_int, 0.5))
     periodic = [False] * m.nx
     for c in m.contacts:
         for j in c.periodic_columns:
             periodic[c.x0 + j] = True
-    d = _wrapped(Xr - X, periodic)
-    checks = [
-        Check("max_length_defect", float(np.max(np.abs(d[:, m.length_columns()]))),
-              policy.length_defect(o), D),
-        Check("max_angle_defect", float(np.max(np.abs(d[:, m.angle_columns()]))),
-              policy.angle_defect(o), D),
-    ]
-    if nf:
-        checks.append(Check("max_joint_defect", float(np.max(np.abs(
-            d[:, m.joint_columns()]))), policy.angle_defect(o), D))
+    d = _wrapped(np.vstack([Xr - traj.X, sx[1::2] - Xm]), periodic)
+    t_d = np.concatenate([t_nodes, t_mid])
+
+    def defect(name: str, cols: list[int], tol: float) -> Check:
+        v = np.max(np.abs(d[:, cols]), axis=1)
+        j = int(np.argmax(v))
+        return Check(name, float(v[j]), tol, D, time=float(t_d[j]))
+
+    checks = [defect("max_length_defect", m.length_columns(), policy.length_defect(o)),
+              defect("max_angle_defect", m.angle_columns(), policy.angle_defect(o))]
+    if m.fingertips:
+        checks.append(defect("max_joint_defect", m.joint_columns(), policy.angle_defect(o)))
     segments, _ = problem.segments()
     goal_err = support_goal_errors(problem, Xr, [0, *np.cumsum(segments).tolist()])
     if goal_err:
         # the goals the re-integrated motion reaches: the NLP meets them to IPOPT's
         # tolerance, so a miss here is drift between collocation points
         checks.append(Check("max_goal_error", max(goal_err.values()), policy.goal(o), D))
+    # the returned trajectory, densely
+    ts, sx, sxd, wts = check_samples(traj, policy.check_points)
+    n = len(ts)
+    laws = dict(zip(m.laws.name_out(), (np.asarray(a).T for a in
+                                        m.mapped("laws", n)(sx.T, sxd.T, prm)), strict=True))
+    cart = m.mapped("cartesian", n)(sx.T, prm)
+    nc, nf = m.n_contacts, len(m.fingertips)
+    R_po = np.asarray(cart[0]).T.reshape(n, 3, 3).transpose(0, 2, 1)
+    p_po = np.asarray(cart[1]).T
+    pts = np.asarray(cart[4]).T.reshape(n, nc, 3)
+    nrm = np.asarray(cart[5]).T.reshape(n, nc, 3)
+    L, T = problem.object.length_scale, float(t_nodes[-1] - t_nodes[0])
+    speeds = [laws[k].ravel() for k in laws if k.startswith("contact_speed_")]
+    rates = [laws[k].ravel() for k in laws if k.startswith("rolling_rate_")]
+    speed = max(_rms(np.concatenate(speeds), np.tile(wts, len(speeds))) if speeds else 0.0,
+                policy.speed_floor * L / T)
+    rate = max(_rms(np.concatenate(rates), np.tile(wts, len(rates))) if rates else 0.0,
+               speed / L)
+    ctx = CertificateContext(
+        times=ts, laws=laws, R_po=R_po, p_po=p_po,
+        R_pf=np.asarray(cart[2]).T.reshape(n, nf, 3, 3).transpose(0, 1, 3, 2)
+        if nf else np.zeros((n, 0, 3, 3)),
+        p_pf=np.asarray(cart[3]).T.reshape(n, nf, 3), states=sx,
+        shape=np.asarray(problem.object.dimensions, dtype=float), L=L, speed=speed,
+        rate=rate, policy=policy)
     for k, c in enumerate(m.contacts):
         checks += c.checks(problem, k, ctx)
-    reported: dict[str, float] = {}
+    reported: dict[str, float] = {"speed_scale": speed, "rolling_rate_scale": rate}
     if problem.motion is not None:
-        ts = np.concatenate([[t_nodes[0]], np.concatenate([
-            t_nodes[k] + (t_nodes[k + 1] - t_nodes[k]) * np.linspace(0, 1, n_sub + 1)[1:]
-            for k in range(len(t_nodes) - 1)])])
         Rd, Pd = problem.motion.at(ts)
         tr = problem.tracking
-        for name, value, tol in (
-                ("max_tracking_position_error",
-                 float(np.max(np.linalg.norm(p_po - Pd, axis=1))), tr.position_tolerance),
-                ("max_tracking_angle_error",
-                 float(np.max(rotation_angle_between(Rd, R_po))), tr.orientation_tolerance)):
+        for name, values, tol in (
+                ("max_tracking_position_error", np.linalg.norm(p_po - Pd, axis=1),
+                 tr.position_tolerance),
+                ("max_tracking_angle_error", rotation_angle_between(Rd, R_po),
+                 tr.orientation_tolerance)):
             if tol is None:
-                reported[name] = value
+                reported[name] = float(np.max(values))
             else:
-                checks.append(Check(name, value, tol, D))
+                checks.append(ctx.check(name, values, tol, D))
     if nc >= 2:  # force closure (the object on the palm alone has no grasp to certify)
         phi, _, onto = force_angles(pts, nrm)
-        margin = float(np.min(math.atan(problem.mu) - phi))
-        checks.append(Check("min_cone_margin", margin, policy.cone_margin, CheckKind.PHYSICS,
-                            lower_bound=True, report_tolerance=False,
-                            reason=f"min_cone_margin {margin:.3g} < 0 (force closure lost)"))
+        margin = math.atan(problem.mu) - phi
+        j = int(np.argmin(margin))
+        checks.append(Check("min_cone_margin", float(margin[j]), policy.cone_margin,
+                            CheckKind.PHYSICS, lower_bound=True, report_tolerance=False,
+                            reason=f"min_cone_margin {margin[j]:.3g} < 0 at t = "
+                                   f"{ts[j]:.6g} s (force closure lost)", time=float(ts[j])))
         reported["max_grasp_angle"] = float(np.max(phi))
         if not np.all(onto):
             checks.append(Check("grasp_map_onto", 0.0, 1.0, CheckKind.PHYSICS,
                                 lower_bound=True, report_tolerance=False, report_value=False,
-                                reason="the grasp map is not onto at some sample (force "
-                                       "closure lost)"))
+                                reason="the grasp map is not onto at t = "
+                                       f"{ts[int(np.argmin(onto))]:.6g} s (force closure "
+                                       "lost)"))
     return Certificate.of(checks, reported, n_samples=n)
-

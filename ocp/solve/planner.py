@@ -229,7 +229,7 @@ class ManipulationPlanner:
         re-integrator, without solving: a service's warm-up. Returns the build time [s]
         (0 when already cached)."""
         nlp, hit = self._build(problem)
-        self.model(problem).reintegrator(problem.tolerances.samples_per_interval)
+        self.model(problem).reintegrator(2)  # the certificate's: nodes and midpoints
         return 0.0 if hit else nlp.build_time
 
     def initial_state(self, problem: ManipulationProblem) -> FloatArray:
@@ -284,7 +284,8 @@ class ManipulationPlanner:
         initial grasp. When IPOPT converges but the certificate finds the grid too coarse
         (only discretisation checks fail: slip between collocation points, closure,
         re-integration defects, tracking between points), the plan is re-solved on a grid
-        twice as fine, warm-started, up to ``max_refinements`` times.
+        2, 4 or 8 times as fine (:meth:`~ocp.certify.certificate.Certificate.refinement_factor`:
+        what the worst failed check needs), warm-started, up to ``max_refinements`` times.
 
         ``warm_start``: a previous plan of a similar problem (a solution, or its
         :attr:`ManipulationSolution.warm_start`), the first initial guess; when IPOPT does
@@ -317,7 +318,10 @@ class ManipulationPlanner:
                and sol.certificate.refinable
                and time.perf_counter() < deadline):
             refinements += 1
-            problem = problem.with_intervals(2 * problem.n_intervals)
+            factor = sol.certificate.refinement_factor()
+            while factor > 2 and factor * problem.n_intervals > MAX_INTERVALS:
+                factor //= 2
+            problem = problem.with_intervals(factor * problem.n_intervals)
             left = budget - totals.iterations if strategy.shared_budget else budget
             sol = self._solve_once(problem, strategy, x0, sol, deadline, left, totals, True)
         assert sol.stats is not None
@@ -421,14 +425,15 @@ class ManipulationPlanner:
         if late:
             best = replace(best, status=Status.TIME_LIMIT)
         t_cert = time.perf_counter()
-        cert = certify_grasp(problem, m, t_nodes, col.X, col.U0, col.Um, col.U1, prm,
-                             problem.tolerances) if certify and not late else \
+        traj = m.interpolant(t_nodes, col.X, col.U0, col.Um, col.U1, prm)
+        cert = certify_grasp(problem, m, traj, prm, problem.tolerances) \
+            if certify and not late else \
             Certificate.failed("not certified: the time limit was reached first" if late
                                else "not certified (planned as an initial guess)")
         cert_time = time.perf_counter() - t_cert
         goal_error = support_goal_errors(problem, col.X,
                                          [0, *np.cumsum(segments).tolist()])
-        sol = assemble_solution(problem, m, best.status, best.raw, col, prm, cert,
+        sol = assemble_solution(problem, m, best.status, best.raw, col, traj, prm, cert,
                                 goal_error)
         iterations = sum(a.iterations for a in attempts)
         totals.build += build_time

@@ -79,6 +79,15 @@ class SymbolicGrasp:
         return ca.reshape(ca.jtimes(ca.vec(expr), self.x, self.xd), expr.size1(),
                           expr.size2())
 
+    def rolling(self, key: str, point: Any, normal: Any, omega_rel: Any
+                ) -> list[tuple[str, Any]]:
+        """The scales of a contact's slip and spin: the speed of the contact point (object
+        frame ``point``) in the palm frame, and the rolling rate (the relative angular
+        velocity's part tangent to the surfaces, palm-frame ``normal``)."""
+        rolling = omega_rel - ca.dot(omega_rel, normal) * normal
+        return [(f"contact_speed_{key}", ca.norm_2(self.dot(self.p_po + self.R_po @ point))),
+                (f"rolling_rate_{key}", ca.norm_2(rolling))]
+
     def point_normal(self, uv: Any, chart: Any) -> tuple[Any, Any]:
         """The object's point at chart coordinates uv and its outward normal (object
         frame) in a contact's chart patch rotated by ``chart``."""
@@ -88,21 +97,37 @@ class SymbolicGrasp:
 
 @dataclass(frozen=True)
 class CertificateContext:
-    """The certificate's samples (along the re-integrated motion) that every contact's
-    checks read: the law outputs by name, the object's pose, the fingertips' poses from
-    the contact coordinates, the states and the scales of the tolerances."""
+    """The certificate's samples of the returned trajectory that every contact's checks
+    read: their times, the law outputs by name (along the trajectory's own time
+    derivative), the object's pose, the fingertips' poses from the contact coordinates, the
+    states, and the scales of the tolerances."""
 
+    times: FloatArray  # (n,)
     laws: dict[str, FloatArray]
     R_po: FloatArray  # (n, 3, 3)
     p_po: FloatArray  # (n, 3)
     R_pf: FloatArray  # (n, fingers, 3, 3)
     p_pf: FloatArray  # (n, fingers, 3)
     states: FloatArray  # (n, nx)
-    inputs: FloatArray  # (n, nu)
     shape: FloatArray
     L: float
-    speed: float  # the motion's speed scale [m/s]
+    speed: float  # the plan's speed scale [m/s] (TolerancePolicy)
+    rate: float  # the plan's rolling-rate scale [rad/s]
     policy: TolerancePolicy
+
+    def worst(self, values: FloatArray) -> tuple[float, float]:
+        """(the largest value, its time) of per-sample values (NaN counts as largest)."""
+        v = np.asarray(values, dtype=float).ravel()
+        j = int(np.argmax(np.where(np.isnan(v), np.inf, v)))
+        return float(v[j]), float(self.times[j])
+
+    def check(self, name: str, values: FloatArray, tolerance: float, kind: Any) -> Check:
+        """The check that the largest of per-sample values is at most ``tolerance``,
+        naming the time of the worst sample."""
+        from ocp.certify.certificate import Check
+
+        value, t = self.worst(values)
+        return Check(name, value, tolerance, kind, time=t)
 
 
 class Contact(ABC):
@@ -242,7 +267,8 @@ class SupportContact(ObjectBlock):
         R_dot, p_dot = g.dot(g.R_po), g.dot(g.p_po)
         omega = vee(R_dot @ g.R_po.T)
         return [(f"slip_{self.name}", R_dot @ point + p_dot),
-                (f"spin_{self.name}", ca.dot(omega, g.R_po @ normal))]
+                (f"spin_{self.name}", ca.dot(omega, g.R_po @ normal)),
+                *g.rolling(self.name, point, g.R_po @ normal, omega)]
 
     def initial(self, problem: ManipulationProblem) -> FloatArray:
         assert problem.palm is not None
@@ -285,25 +311,18 @@ class SupportContact(ObjectBlock):
 
     def checks(self, problem: ManipulationProblem, k: int, c: CertificateContext
                ) -> list[Check]:
-        from ocp.certify.certificate import Check, CheckKind
+        from ocp.certify.certificate import CheckKind
 
-        n, pol = self.name, c.policy
-        if pol.support_speed == "input":  # its own input's speed, the object's turn rate
-            v_scale = float(np.max(np.linalg.norm(c.inputs[:, self.us], axis=1)))
-            w_scale = float(np.max(np.linalg.norm(c.laws["omega_obj"], axis=1)))
-        else:  # the grasp's motion
-            v_scale, w_scale = c.speed, c.speed / c.L
+        n, pol, D = self.name, c.policy, CheckKind.DISCRETISATION
         # the object touches the palm: support function of its shape along -z (no chart)
         heights = self.surface.support_heights(-c.R_po[:, 2, :], c.shape)  # rows R^T (-e_z)
         return [
-            Check(f"max_slip_speed_{n}", float(np.max(np.linalg.norm(c.laws[f"slip_{n}"],
-                                                                     axis=1))),
-                  pol.support_slip * max(v_scale, 1e-3), CheckKind.DISCRETISATION),
-            Check(f"max_spin_rate_{n}", float(np.max(np.abs(c.laws[f"spin_{n}"]))),
-                  pol.support_spin * max(w_scale, 1e-3), CheckKind.DISCRETISATION),
-            Check(f"max_height_error_{n}", float(np.max(np.abs(c.p_po[:, 2] - heights))),
-                  pol.support_height * (c.L if pol.height_relative else 1.0),
-                  CheckKind.PHYSICS),
+            c.check(f"max_slip_speed_{n}", np.linalg.norm(c.laws[f"slip_{n}"], axis=1),
+                    pol.slip * c.speed, D),
+            c.check(f"max_spin_rate_{n}", np.abs(c.laws[f"spin_{n}"]), pol.spin * c.rate, D),
+            c.check(f"max_height_error_{n}", np.abs(c.p_po[:, 2] - heights),
+                    pol.support_height * (c.L if pol.height_relative else 1.0),
+                    CheckKind.PHYSICS),
         ]
 
 
@@ -453,7 +472,7 @@ class FingertipContact(Contact):
 
     def laws(self, g: SymbolicGrasp, x: Any, chart: Any) -> list[tuple[str, Any]]:
         """The finger moves by its joints (FK), the object by its pose: material points of
-        both bodies at the contact, the pad's height over the object's centre."""
+        both bodies at the contact; the contact's point on the object (object frame)."""
         point, normal = self.point_normal(g, x, chart)
         R_fk, p_fk = self.finger.fk(x[5:])
         R_dot, p_dot = g.dot(g.R_po), g.dot(g.p_po)
@@ -465,8 +484,8 @@ class FingertipContact(Contact):
         i = self.index
         return [(f"slip_{i}", v_pad - v_obj),
                 (f"spin_{i}", ca.dot(omega_rel, g.R_po @ normal)),
-                (f"centre_above_pad_{i}", ca.dot(R_fk[:, 2], g.p_po - p_fk)),
-                (f"pad_normal_{i}", R_fk[:, 2]), (f"pad_point_{i}", on_pad)]
+                *g.rolling(str(i), point, g.R_po @ normal, omega_rel),
+                (f"object_point_{i}", point)]
 
     def bounds(self, problem: ManipulationProblem) -> tuple[list[float], list[float],
                                                           list[float]]:
@@ -525,36 +544,43 @@ class FingertipContact(Contact):
 
     def checks(self, problem: ManipulationProblem, k: int, c: CertificateContext
                ) -> list[Check]:
-        """Slip, spin, gap, pad, joint limits and closure (Pinocchio's forward kinematics
-        point by point, independent of the NLP's CasADi kinematics)."""
-        from ocp.certify.certificate import Check, CheckKind
+        """Slip and spin (the laws along the returned trajectory), and from Pinocchio's
+        forward kinematics at the returned joint angles (point by point, independent of the
+        NLP's CasADi kinematics): closure (the pad where the contact coordinates put it)
+        and the gap (the pad's plane tangent to the object); the pad and joint limits."""
+        from ocp.certify.certificate import CheckKind
 
         i, f, name, pol = self.index, self.finger, self.label(problem), c.policy
         q_i = c.states[:, self.q_cols]
         poses = [f.fingertip_pose_pin(q) for q in q_i]  # Pinocchio, point by point
         R_pin = np.array([pose[0] for pose in poses])
         p_pin = np.array([pose[1] for pose in poses])
-        pos_err = float(np.max(np.linalg.norm(p_pin - c.p_pf[:, i], axis=1)))
-        tr = np.einsum("kji,kji->k", R_pin, c.R_pf[:, i])  # trace(R_pin^T R_pf)
-        rot_err = float(np.max(np.arccos(np.clip((tr - 1) / 2, -1, 1))))
-        # the pad's plane is tangent to the object: support function along the pad normal
-        pad_n = c.laws[f"pad_normal_{i}"]
+        # the angle between the two rotations, well conditioned near 0 (an arccos of the
+        # trace would be noise below ~1e-8 rad): |R1 - R2|_F = 2 sqrt 2 sin(angle / 2)
+        diff = np.linalg.norm((R_pin - c.R_pf[:, i]).reshape(len(R_pin), 9), axis=1)
+        angle = 2 * np.arcsin(np.minimum(1.0, diff / (2 * math.sqrt(2))))
+        # the pad's plane is tangent to the object: the object's centre lies its support
+        # height (along the pad's normal) above the pad's plane
+        pad_n = R_pin[:, :, 2]
         h = self.surface.support_heights(np.einsum("kji,kj->ki", c.R_po, -pad_n), c.shape)
-        gap = c.laws[f"centre_above_pad_{i}"].ravel() - h
+        gap = np.einsum("ki,ki->k", pad_n, c.p_po - p_pin) - h
         D = CheckKind.DISCRETISATION
+        pad_point = np.einsum("kji,kj->ki", R_pin, c.p_po + np.einsum(
+            "kij,kj->ki", c.R_po, c.laws[f"object_point_{i}"]) - p_pin)
         return [
-            Check(f"max_slip_speed_{name}", float(np.max(np.linalg.norm(
-                c.laws[f"slip_{i}"], axis=1))), pol.finger_slip * max(c.speed, 1e-3), D),
-            Check(f"max_spin_rate_{name}", float(np.max(np.abs(c.laws[f"spin_{i}"]))),
-                  pol.finger_spin * max(c.speed / c.L, 1e-3), D),
-            Check(f"max_gap_error_{name}", float(np.max(np.abs(gap))), pol.gap, D),
-            Check(f"max_pad_excursion_{name}", float(np.max(np.abs(
-                c.laws[f"pad_point_{i}"][:, 0:2]))), float(f.pad_half_size),
-                CheckKind.LIMITS),
-            Check(f"max_joint_limit_violation_{name}", float(max(
-                np.max(q_i - f.upper), np.max(f.lower - q_i), 0.0)), pol.joint_limit, D),
-            Check("max_closure_position_error", pos_err, pol.closure_position, D),
-            Check("max_closure_orientation_error", rot_err, pol.closure_orientation, D),
+            c.check(f"max_slip_speed_{name}", np.linalg.norm(c.laws[f"slip_{i}"], axis=1),
+                    pol.slip * c.speed, D),
+            c.check(f"max_spin_rate_{name}", np.abs(c.laws[f"spin_{i}"]), pol.spin * c.rate,
+                    D),
+            c.check(f"max_gap_error_{name}", np.abs(gap), pol.gap, D),
+            c.check(f"max_pad_excursion_{name}", np.max(np.abs(pad_point[:, 0:2]), axis=1),
+                    float(f.pad_half_size), CheckKind.LIMITS),
+            c.check(f"max_joint_limit_violation_{name}", np.maximum(np.max(np.maximum(
+                q_i - f.upper, f.lower - q_i), axis=1), 0.0), pol.joint_limit, D),
+            c.check("max_closure_position_error", np.linalg.norm(p_pin - c.p_pf[:, i],
+                                                                  axis=1),
+                    pol.closure_position, D),
+            c.check("max_closure_orientation_error", angle, pol.closure_orientation, D),
         ]
 
 

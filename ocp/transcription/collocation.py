@@ -28,7 +28,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HermiteSimpson", "NlpPoint", "WarmStart", "hermite_sample",
+__all__ = ["HermiteInterpolant", "HermiteSimpson", "NlpPoint", "WarmStart", "hermite_sample",
            "hermite_simpson_defects", "left_input_columns", "node_inputs", "node_times",
            "quadratic_input", "reintegrate", "reintegrator", "rk4_step", "target_residuals"]
 
@@ -279,6 +279,83 @@ def node_times(segments: tuple[int, ...], boundaries: NDArray[np.float64]
     return np.concatenate([*pieces, [boundaries[-1]]])
 
 
+def _basis(s: NDArray[np.float64], h: NDArray[np.float64], order: int
+           ) -> tuple[NDArray[np.float64], ...]:
+    """The cubic Hermite basis (h00, h10 h, h01, h11 h) at normalised times s, or its
+    ``order``-th time derivative (d/dt = d/ds / h)."""
+    if order == 0:
+        return 2 * s**3 - 3 * s**2 + 1, (s**3 - 2 * s**2 + s) * h, -2 * s**3 + 3 * s**2, \
+            (s**3 - s**2) * h
+    if order == 1:
+        return (6 * s**2 - 6 * s) / h, 3 * s**2 - 4 * s + 1, (6 * s - 6 * s**2) / h, \
+            3 * s**2 - 2 * s
+    return (12 * s - 6) / h**2, (6 * s - 4) / h, (6 - 12 * s) / h**2, (6 * s - 2) / h
+
+
+@dataclass(frozen=True)
+class HermiteInterpolant:
+    """A plan as it is returned: the states on each interval the cubic Hermite polynomial
+    through the node states ``X`` with the node rates ``F0`` (interval k's start, from its
+    outgoing input) and ``F1`` (its end, from its incoming input); the inputs the quadratic
+    through (U0, Um, U1) of the interval.
+
+    The states are C1 wherever the input is continuous; at a via-point node, where the
+    incoming and outgoing inputs differ, the state is continuous and its rate has two
+    one-sided values (``side``). The state's rate and acceleration are the polynomial's own
+    derivatives (at the collocation points its rate equals the dynamics to the NLP's
+    tolerance; between them it is what a controller following the samples executes).
+    """
+
+    t_nodes: NDArray[np.float64]
+    X: NDArray[np.float64]
+    F0: NDArray[np.float64]
+    F1: NDArray[np.float64]
+    U0: NDArray[np.float64]
+    Um: NDArray[np.float64]
+    U1: NDArray[np.float64]
+
+    @property
+    def duration(self) -> float:
+        return float(self.t_nodes[-1] - self.t_nodes[0])
+
+    def locate(self, t: NDArray[np.float64], side: str = "right"
+               ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        """(interval, normalised time s in [0, 1]) of each time; a time on a node belongs to
+        the interval after it (``side="right"``) or before it (``"left"``)."""
+        t = np.asarray(t, dtype=float)
+        n = len(self.t_nodes) - 1
+        if side == "right":
+            k = np.clip(np.searchsorted(self.t_nodes, t, side="right") - 1, 0, n - 1)
+        else:
+            k = np.clip(np.searchsorted(self.t_nodes, t, side="left") - 1, 0, n - 1)
+        h = self.t_nodes[k + 1] - self.t_nodes[k]
+        return k, (t - self.t_nodes[k]) / h
+
+    def on_intervals(self, k: NDArray[np.intp], s: NDArray[np.float64], order: int = 0
+                     ) -> NDArray[np.float64]:
+        """The states (``order`` 0), their rates (1) or accelerations (2) at normalised
+        times s of intervals k, rows."""
+        h = (self.t_nodes[k + 1] - self.t_nodes[k])[:, None]
+        b = _basis(np.asarray(s, dtype=float)[:, None], h, order)
+        return b[0] * self.X[k] + b[1] * self.F0[k] + b[2] * self.X[k + 1] + b[3] * self.F1[k]
+
+    def inputs_on_intervals(self, k: NDArray[np.intp], s: NDArray[np.float64]
+                            ) -> NDArray[np.float64]:
+        s = np.asarray(s, dtype=float)[:, None]
+        return quadratic_input(s, self.U0[k], self.Um[k], self.U1[k])
+
+    def __call__(self, t: NDArray[np.float64], order: int = 0, side: str = "right"
+                 ) -> NDArray[np.float64]:
+        """The states (or their ``order``-th time derivative) at times t, rows."""
+        k, s = self.locate(t, side)
+        return self.on_intervals(k, s, order)
+
+    def inputs(self, t: NDArray[np.float64], side: str = "right") -> NDArray[np.float64]:
+        """The inputs at times t, rows."""
+        k, s = self.locate(t, side)
+        return self.inputs_on_intervals(k, s)
+
+
 def hermite_sample(
     t_nodes: NDArray[np.float64],
     X: NDArray[np.float64],
@@ -289,29 +366,12 @@ def hermite_sample(
     U1: NDArray[np.float64],
     t: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """States and inputs at times ``t`` from the collocation polynomials.
-
-    ``X`` are node states (rows = nodes); per interval k, ``F0``/``F1`` are the state's
-    time derivatives at its start/end, ``U0``/``Um``/``U1`` the inputs at its start,
-    midpoint and end. The state is the interval's cubic Hermite polynomial, the input the
-    quadratic through (U0_k, Um_k, U1_k). A time on a via-point node gets the outgoing
-    value. Returns (x(t), u(t)), rows = times.
-    """
-    t = np.asarray(t, dtype=float)
-    k = np.clip(np.searchsorted(t_nodes, t, side="right") - 1, 0, len(t_nodes) - 2)
-    h = t_nodes[k + 1] - t_nodes[k]
-    s = ((t - t_nodes[k]) / h)[:, None]
-    h = h[:, None]
-    h00 = 2 * s**3 - 3 * s**2 + 1
-    h10 = s**3 - 2 * s**2 + s
-    h01 = -2 * s**3 + 3 * s**2
-    h11 = s**3 - s**2
-    x = h00 * X[k] + h10 * h * F0[k] + h01 * X[k + 1] + h11 * h * F1[k]
-    l0 = 2 * (s - 0.5) * (s - 1)
-    lm = -4 * s * (s - 1)
-    l1 = 2 * s * (s - 0.5)
-    u = l0 * U0[k] + lm * Um[k] + l1 * U1[k]
-    return x, u
+    """States and inputs at times ``t`` from the collocation polynomials
+    (:class:`HermiteInterpolant`; a time on a via-point node gets the outgoing value).
+    Returns (x(t), u(t)), rows = times."""
+    f = HermiteInterpolant(t_nodes, X, F0, F1, U0, Um, U1)
+    k, s = f.locate(np.asarray(t, dtype=float))
+    return f.on_intervals(k, s), f.inputs_on_intervals(k, s)
 
 
 def quadratic_input(s: Any, u0: Any, um: Any, u1: Any) -> Any:

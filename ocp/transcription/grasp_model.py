@@ -32,7 +32,7 @@ from ocp.spec.contacts import (
     grasp_contacts,
 )
 from ocp.spec.palm import model_for
-from ocp.transcription.collocation import reintegrator, rk4_step
+from ocp.transcription.collocation import HermiteInterpolant, reintegrator, rk4_step
 
 __all__ = ["GraspModel"]
 
@@ -165,6 +165,15 @@ class GraspModel:
         if (name, k) not in self._mapped:
             self._mapped[(name, k)] = getattr(self, name).map(k)
         return self._mapped[(name, k)]
+
+    def interpolant(self, t_nodes: FloatArray, X: FloatArray, U0: FloatArray,
+                    Um: FloatArray, U1: FloatArray, prm: FloatArray) -> HermiteInterpolant:
+        """A plan's returned trajectory: the collocation polynomials through its node
+        states, with the node rates of the dynamics at each interval's own end inputs."""
+        n = len(U0)
+        F0 = np.asarray(self.mapped("dynamics", n)(X[:-1].T, U0.T, prm)).T
+        F1 = np.asarray(self.mapped("dynamics", n)(X[1:].T, U1.T, prm)).T
+        return HermiteInterpolant(np.asarray(t_nodes, dtype=float), X, F0, F1, U0, Um, U1)
 
     def reintegrator(self, n_sub: int) -> ca.Function:
         if n_sub not in self._reintegrators:

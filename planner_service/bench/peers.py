@@ -119,8 +119,6 @@ FloatArray = NDArray[np.float64]
 NU = 2
 #: Worst goal/via-point error [m or rad] of a plan that counts as solved.
 GOAL_TOLERANCE = 1e-6
-#: Re-integration samples per interval of the certificate (the project's planner's default).
-CERT_SUBSTEPS = 8
 
 
 @dataclass(frozen=True)
@@ -210,7 +208,7 @@ def _assess(problem: BallOnPalmProblem, grid: _Grid, X: FloatArray, U0: FloatArr
             Um: FloatArray, U1: FloatArray) -> tuple[float, Certificate, float]:
     """(worst goal error, certificate, effort integral) of a plan at the nodes."""
     errs = goal_errors(problem, X, grid.ends)
-    cert = certify(problem, grid.t_nodes, X, U0, Um, U1, CERT_SUBSTEPS)
+    cert = certify(problem, grid.t_nodes, X, U0, Um, U1)
     sq = [np.sum(np.square(a), axis=1) for a in (U0, Um, U1)]
     effort = float(np.sum(grid.h / 6 * (sq[0] + 4 * sq[1] + sq[2])))
     return float(max(errs.values(), default=0.0)), cert, effort

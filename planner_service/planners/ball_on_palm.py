@@ -32,6 +32,7 @@ from .columns import (
 )
 from .common import all_finite, finite_or_none, object_spec, solver_options
 from .fields import FieldErrors
+from .samples import requested_times
 
 __all__ = ["BallOnPalmAdapter", "ball_on_palm_problem", "result_from_solution"]
 
@@ -82,7 +83,7 @@ class BallOnPalmAdapter(PlannerAdapter[BallOnPalmRequest, BallOnPalmProblem, Sol
 
     def to_result(self, request: BallOnPalmRequest, problem: BallOnPalmProblem,
                   solution: Solution) -> PlanResult:
-        return result_from_solution(solution, request.sample_times)
+        return result_from_solution(solution, requested_times(request))
 
     def prepare(self, request: BallOnPalmRequest, planners: Planners) -> float:
         if planners.palm is None:  # the core's process-wide planner builds as it solves
@@ -103,9 +104,9 @@ def _trajectory(traj: Trajectory) -> TrajectoryModel | None:
     return TrajectoryModel(**d)
 
 
-def result_from_solution(sol: Solution, sample_times: list[float] | None = None
-                         ) -> PlanResult:
-    """The wire result of a ball-on-palm plan (``sample_times``: the request's)."""
+def result_from_solution(sol: Solution, sample_times: Any = None) -> PlanResult:
+    """The wire result of a ball-on-palm plan (``sample_times``: the request's,
+    :func:`~.samples.requested_times`)."""
     c = sol.certificate
 
     def value(name: str) -> float | None:
@@ -116,12 +117,13 @@ def result_from_solution(sol: Solution, sample_times: list[float] | None = None
         max_angle_defect=value("max_angle_defect"), max_slip_speed=value("max_slip_speed"),
         max_spin_rate=value("max_spin_rate"), max_height_error=value("max_height_error"),
         max_goal_error=value("max_goal_error"), n_samples=c.n_samples,
-        tolerances=c.tolerances(), failures=list(c.failures))
+        tolerances=c.tolerances(), times=c.times(), failures=list(c.failures))
     stats: dict[str, Any] = sol.stats.to_dict()
     if not np.isfinite(stats["objective"]):
         stats["objective"] = -1.0
     grid = _trajectory(sol.grid)
-    samples = _trajectory(sol.sample(sample_times)) if sample_times and grid else None
+    samples = _trajectory(sol.sample(sample_times)) \
+        if sample_times is not None and len(sample_times) and grid else None
     message = sol.message if grid is not None else sol.message + " (non-finite iterate omitted)"
     goal_error = {k: v for k, v in sol.goal_error.items() if np.isfinite(v)}
     collocation = None if grid is None else collocation_block(

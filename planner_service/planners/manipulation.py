@@ -42,6 +42,7 @@ from .cache import FingerCache, Planners, hand_finger_name
 from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
 from .common import all_finite, object_spec, rows, solver_options
 from .fields import FieldErrors, FieldMap, Rule
+from .samples import joint_trajectory_block, requested_times, samples_block
 
 __all__ = [
     "ManipulationAdapter",
@@ -242,7 +243,7 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
 
     def to_result(self, request: ManipulationRequest, problem: ManipulationProblem,
                   solution: ManipulationSolution) -> ManipulationResult:
-        return result_from_manipulation_solution(solution)
+        return result_from_manipulation_solution(solution, requested_times(request))
 
     def prepare(self, request: ManipulationRequest, planners: Planners) -> float:
         fingers = planners.fingers
@@ -311,13 +312,16 @@ def _manipulation_trajectory(sol: ManipulationSolution) -> ManipulationTrajector
         rows(sol.tracking_angle_error))
 
 
-def result_from_manipulation_solution(sol: ManipulationSolution) -> ManipulationResult:
-    """The wire result of a manipulation plan. A plan with non-finite values (a diverged
-    last iterate) keeps its status and drops its trajectory (JSON has no NaN)."""
+def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = None
+                                      ) -> ManipulationResult:
+    """The wire result of a manipulation plan (``times``: the request's sample times,
+    :func:`~.samples.requested_times`). A plan with non-finite values (a diverged last
+    iterate) keeps its status and drops its trajectory (JSON has no NaN)."""
     values, tolerances = certificate_parts(sol.certificate)
     failures = list(sol.certificate_failures)
     cert = ManipulationCertificateModel(passed=bool(values) and not failures, values=values,
-                                        tolerances=tolerances, failures=failures)
+                                        tolerances=tolerances,
+                                        times=sol.certificate.times(), failures=failures)
     trajectory = _manipulation_trajectory(sol)
     message = sol.message if trajectory is not None else \
         sol.message + " (non-finite iterate omitted)"
@@ -336,7 +340,10 @@ def result_from_manipulation_solution(sol: ManipulationSolution) -> Manipulation
             solve_time=timing[1] if math.isfinite(timing[1]) else 0.0,
             refinements=sol.refinements, n_intervals=max((len(sol.t) - 1) // 2, 0)),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
-        certificate=cert, trajectory=trajectory, collocation=collocation)
+        certificate=cert, trajectory=trajectory,
+        samples=samples_block(sol, times) if trajectory else None,
+        joint_trajectory=joint_trajectory_block(sol, times) if trajectory else None,
+        collocation=collocation)
 
 
 def manipulation_summary(result: ManipulationResult) -> str:

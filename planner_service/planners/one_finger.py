@@ -36,6 +36,7 @@ from .cache import FingerCache, Planners
 from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
 from .common import all_finite
 from .fields import FieldErrors, FieldMap, Rule
+from .samples import joint_trajectory_block, requested_times, samples_block
 
 __all__ = [
     "ONE_FINGER_FIELDS",
@@ -152,7 +153,8 @@ class OneFingerAdapter(FingerAdapter[OneFingerSolution]):
 
     def to_result(self, request: OneFingerRequest, problem: OneFingerProblem,
                   solution: OneFingerSolution) -> FingerPlanResult:
-        return result_from_finger_solution(solution, problem.finger.joint_names)
+        return result_from_finger_solution(solution, problem.finger.joint_names,
+                                           requested_times(request))
 
     def prepare(self, request: OneFingerRequest, planners: Planners) -> float:
         fingers = planners.fingers
@@ -184,16 +186,19 @@ def finger_trajectory(sol: OneFingerSolution | GreedyResult, eta_p_dot: Any, eta
                                     for k, v in d.items()})
 
 
-def result_from_finger_solution(sol: OneFingerSolution, joint_names: Sequence[str] = ()
-                                ) -> FingerPlanResult:
-    """The wire result of a one-finger plan (``joint_names``: the finger's, in q order)."""
+def result_from_finger_solution(sol: OneFingerSolution, joint_names: Sequence[str] = (),
+                                times: Any = None) -> FingerPlanResult:
+    """The wire result of a one-finger plan (``joint_names``: the finger's, in q order;
+    ``times``: the request's sample times, :func:`~.samples.requested_times`)."""
     values = {k: float(v) for k, v in sol.certificate.items()
               if not k.startswith("tol_") and math.isfinite(v)}
     tolerances = {k[len("tol_"):]: float(v) for k, v in sol.certificate.items()
                   if k.startswith("tol_") and math.isfinite(v)}
     failures = list(sol.certificate_failures)
     cert = FingerCertificateModel(passed=bool(values) and not failures, values=values,
-                                  tolerances=tolerances, failures=failures)
+                                  tolerances=tolerances,
+                                  times=sol.certificate_times,
+                                  failures=failures)
     trajectory = finger_trajectory(sol, sol.eta_p_dot, sol.eta_f_dot)
     message = sol.message if trajectory is not None else \
         sol.message + " (non-finite iterate omitted)"
@@ -208,6 +213,8 @@ def result_from_finger_solution(sol: OneFingerSolution, joint_names: Sequence[st
                                refinements=sol.refinements),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
         certificate=cert, joint_names=list(joint_names), trajectory=trajectory,
+        samples=samples_block(sol.plan, times) if trajectory else None,
+        joint_trajectory=joint_trajectory_block(sol.plan, times) if trajectory else None,
         collocation=collocation)
 
 

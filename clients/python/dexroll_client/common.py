@@ -22,6 +22,7 @@ __all__ = [
     "MAX_NLP_POINT",
     "MAX_POSITION",
     "MAX_SAMPLES",
+    "MAX_SAMPLE_RATE",
     "MAX_URDF_CHARS",
     "MAX_VIA_POINTS",
     "MAX_WARM_START_COLUMNS",
@@ -44,6 +45,8 @@ MAX_DURATION = 3600.0  # s
 MIN_DURATION = 1e-3
 MIN_SIZE = 1e-4
 MAX_SAMPLES = 10_000
+#: The highest controller rate a plan is sampled at [Hz].
+MAX_SAMPLE_RATE = 10_000.0
 #: Limits of a finger: joints of a URDF's chain, characters of a URDF document.
 MAX_FINGER_JOINTS = 16
 MAX_URDF_CHARS = 500_000

@@ -18,6 +18,7 @@ from dexroll_client.common import (
     MAX_INTERVALS,
     MAX_MOTION_KNOTS,
     MAX_POSITION,
+    MAX_SAMPLE_RATE,
     MAX_SAMPLES,
     MAX_URDF_CHARS,
     MAX_VIA_POINTS,
@@ -261,6 +262,35 @@ WARM_START_DESCRIPTION = (
     "its own guesses when IPOPT does not converge from it")
 
 
+def _times_inside(value: list[float] | None, info: ValidationInfo) -> list[float] | None:
+    duration = info.data.get("duration")
+    if value and duration is not None and max(value) > duration:
+        raise ValueError(f"sample times must lie in [0, duration = {duration} s], "
+                         f"got {max(value)}")
+    return value
+
+
+def _rate_fits(value: float | None, info: ValidationInfo) -> float | None:
+    if value is None:
+        return value
+    if info.data.get("sample_times"):
+        raise ValueError("give either `sample_times` or `sample_rate`, not both")
+    duration = info.data.get("duration")
+    if duration is not None and duration * value + 1 > MAX_SAMPLES:
+        raise ValueError(f"{value} Hz over {duration} s gives more than {MAX_SAMPLES} "
+                         "samples")
+    return value
+
+
+SAMPLE_TIMES_DESCRIPTION = (
+    "times [s] at which to return the plan (its collocation polynomials, the trajectory the "
+    "certificate checked): `samples` and the `joint_trajectory`; null: the collocation "
+    "points")
+SAMPLE_RATE_DESCRIPTION = (
+    "a controller's rate [Hz]: the plan returned at k / rate for every k with k / rate < "
+    "duration, then at duration (instead of `sample_times`)")
+
+
 class _PalmRequest(_Request):
     """What every planner shares: the object, its palm contact, goals, grid and limits.
 
@@ -284,12 +314,14 @@ class _PalmRequest(_Request):
     palm_half_extent: Real = Field(default=0.5, gt=0.0, le=MAX_POSITION,
                                     description="palm coordinates stay in [-e, e] [m]")
     max_refinements: Count = Field(default=2, ge=0, le=5,
-                                 description="grid doublings allowed when the certificate "
-                                             "finds the grid too coarse")
+                                 description="grid refinements allowed when the certificate "
+                                             "finds the grid too coarse (each makes it 2, "
+                                             "4 or 8 times as fine)")
     solver: SolverModel = Field(default_factory=SolverModel)
     sample_times: list[Annotated[Real, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
-        default=None, max_length=MAX_SAMPLES,
-        description="extra times [s] at which to sample the plan (collocation polynomials)")
+        default=None, max_length=MAX_SAMPLES, description=SAMPLE_TIMES_DESCRIPTION)
+    sample_rate: Real | None = Field(default=None, gt=0.0, le=MAX_SAMPLE_RATE,
+                                     description=SAMPLE_RATE_DESCRIPTION)
     warm_start: WarmStartModel | None = Field(default=None,
                                               description=WARM_START_DESCRIPTION)
 
@@ -297,11 +329,13 @@ class _PalmRequest(_Request):
     @classmethod
     def _samples_inside_horizon(cls, value: list[float] | None, info: ValidationInfo
                                 ) -> list[float] | None:
-        duration = info.data.get("duration")
-        if value and duration is not None and max(value) > duration:
-            raise ValueError(f"sample times must lie in [0, duration = {duration} s], "
-                             f"got {max(value)}")
-        return value
+        return _times_inside(value, info)
+
+    @field_validator("sample_rate")
+    @classmethod
+    def _rate_within_limits(cls, value: float | None, info: ValidationInfo
+                            ) -> float | None:
+        return _rate_fits(value, info)
 
 
 class BallOnPalmRequest(_PalmRequest):
@@ -399,8 +433,8 @@ class FingerContactModel(_Request):
 class OneFingerRequest(_PalmRequest):
     """Roll a ball on the palm with one flat fingertip pressing on it, keeping the grasp
     inside the friction cone (paper, section 3). The plan holds the palm contact, the
-    finger contact and the finger's joint angles. ``sample_times`` is not supported (the
-    plan is returned at the collocation points)."""
+    finger contact and the finger's joint angles (at ``sample_times`` or ``sample_rate``
+    too, with its ``joint_trajectory``; not with the greedy method)."""
 
     planner: Literal["one_finger"] = Field(
         default="one_finger",
@@ -434,12 +468,14 @@ class OneFingerRequest(_PalmRequest):
                     "ellipse bounding the rolling angle, joint rates from the Jacobian's "
                     "pseudo-inverse (200 steps); the weights do not apply to it")
 
-    @field_validator("sample_times")
+    @field_validator("method")
     @classmethod
-    def _no_sample_times(cls, value: list[float] | None) -> list[float] | None:
-        if value:
-            raise ValueError("not supported by the one_finger planner: its plan is "
-                             "returned at the collocation points (result.trajectory)")
+    def _greedy_has_no_polynomials(cls, value: str, info: ValidationInfo) -> str:
+        if value == "greedy" and (info.data.get("sample_times")
+                                  or info.data.get("sample_rate") is not None):
+            raise ValueError("the greedy method's plan is its steps (no polynomials to "
+                             "sample): drop `sample_times` / `sample_rate`, or use "
+                             "'collocation'")
         return value
 
 
@@ -622,7 +658,8 @@ class ManipulationRequest(_Request):
     more flat fingertips rolling on it (paper, sections 3 and 4, and beyond). Without a
     palm the object starts at ``initial_pose`` and follows ``motion``; with one, its pose
     comes from the palm contact, driven to the palm's goal/via-points and/or ``motion``.
-    The plan is returned at the collocation points (no ``sample_times``)."""
+    The plan is returned at the collocation points, and at ``sample_times`` or
+    ``sample_rate`` when given (``samples``); ``joint_trajectory`` at the latter."""
 
     planner: Literal["manipulation"] = Field(description="which planner")
     object: ObjectModel = Field(default_factory=ObjectModel)
@@ -678,11 +715,28 @@ class ManipulationRequest(_Request):
                                    description="bound on each component of a free object's "
                                                "angular velocity [rad/s]")
     max_refinements: Count = Field(default=2, ge=0, le=5,
-                                 description="grid doublings allowed when the certificate "
-                                             "finds the grid too coarse")
+                                 description="grid refinements allowed when the certificate "
+                                             "finds the grid too coarse (each makes it 2, "
+                                             "4 or 8 times as fine)")
     solver: SolverModel = Field(default_factory=SolverModel)
+    sample_times: list[Annotated[Real, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
+        default=None, max_length=MAX_SAMPLES, description=SAMPLE_TIMES_DESCRIPTION)
+    sample_rate: Real | None = Field(default=None, gt=0.0, le=MAX_SAMPLE_RATE,
+                                     description=SAMPLE_RATE_DESCRIPTION)
     warm_start: WarmStartModel | None = Field(default=None,
                                               description=WARM_START_DESCRIPTION)
+
+    @field_validator("sample_times")
+    @classmethod
+    def _samples_inside_horizon(cls, value: list[float] | None, info: ValidationInfo
+                                ) -> list[float] | None:
+        return _times_inside(value, info)
+
+    @field_validator("sample_rate")
+    @classmethod
+    def _rate_within_limits(cls, value: float | None, info: ValidationInfo
+                            ) -> float | None:
+        return _rate_fits(value, info)
 
 
 #: Every planning request, told apart by its ``planner`` field ("ball_on_palm" when the

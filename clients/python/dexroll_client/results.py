@@ -18,19 +18,26 @@ __all__ = [
     "AnyPlanResult",
     "CertificateModel",
     "CollocationModel",
+    "ContactSamplesModel",
     "ContactTrajectoryModel",
+    "DurationModel",
     "FieldError",
     "FingerCertificateModel",
     "FingerJointsModel",
     "FingerPlanResult",
+    "FingerSamplesModel",
     "FingerStatsModel",
     "FingerTrajectoryModel",
+    "JointTrajectoryModel",
+    "JointTrajectoryPointModel",
     "ManipulationCertificateModel",
     "ManipulationResult",
     "ManipulationStatsModel",
     "ManipulationTrajectoryModel",
     "PlanResult",
+    "PlanSamplesModel",
     "PlanStatus",
+    "RateBreakModel",
     "StatsModel",
     "TrajectoryModel",
 ]
@@ -68,8 +75,15 @@ class TrajectoryModel(_Response):
     contact_normal: Rows = Field(description="palm outward normal at the contact (unit)")
 
 
+TIMES_DESCRIPTION = ("the time [s] of each check's worst sample (checks along the "
+                     "motion), e.g. where the largest slip is")
+
+
 class CertificateModel(_Response):
-    """Physical validity, computed independently of the NLP by re-integrating the inputs."""
+    """Physical validity of the returned trajectory (the plan's polynomials, as ``samples``
+    gives them), computed independently of the NLP: slip, spin and height checked densely
+    along it, its states compared with a re-integration of the inputs at the nodes and
+    midpoints (docs/conventions.md)."""
 
     passed: bool
     max_position_defect: float | None = Field(
@@ -77,16 +91,18 @@ class CertificateModel(_Response):
     max_angle_defect: float | None = Field(
         description="worst re-integration defect of u, v, psi [rad]")
     max_slip_speed: float | None = Field(
-        description="worst speed of the object's contact point relative to the palm [m/s]")
+        description="worst speed of the object's contact point relative to the palm, along "
+                    "the returned trajectory [m/s]")
     max_spin_rate: float | None = Field(
         description="worst object angular velocity about the contact normal [rad/s]")
     max_height_error: float | None = Field(
         description="worst gap/penetration between object and palm [m]")
     max_goal_error: float | None = Field(
         description="worst goal or via-point error of the re-integrated motion [m or rad]")
-    n_samples: int = Field(description="samples checked along the re-integrated motion")
+    n_samples: int = Field(description="samples checked along the returned trajectory")
     tolerances: dict[str, float] = Field(description="tolerance of each check (units as "
                                                      "the checked quantity)")
+    times: dict[str, float] = Field(default_factory=dict, description=TIMES_DESCRIPTION)
     failures: list[str] = Field(description="checks that failed, with values")
 
 
@@ -99,7 +115,7 @@ class StatsModel(_Response):
     certificate_time: float = Field(description="certificate time [s]")
     objective: float = Field(description="control effort integral |w|^2 dt [m^2/s]")
     cache_hit: bool = Field(description="the NLP came from the structure cache")
-    refinements: int = Field(description="grid doublings after the first solve")
+    refinements: int = Field(description="grid refinements after the first solve")
     n_intervals: int = Field(description="collocation intervals of the returned plan")
     ipopt_time: float = Field(default=0.0, description="the IPOPT calls alone [s] (part of "
                                                        "`solve_time`)")
@@ -218,15 +234,17 @@ class FingerTrajectoryModel(_Response):
 
 
 class FingerCertificateModel(_Response):
-    """Physical validity of a one-finger plan, computed independently of the NLP: the
-    inputs re-integrated, the finger placed by Pinocchio's forward kinematics."""
+    """Physical validity of a one-finger plan's returned trajectory, computed
+    independently of the NLP: checked densely along it, the finger placed by Pinocchio's
+    forward kinematics at the returned joint angles, the inputs re-integrated."""
 
     passed: bool
     values: dict[str, float] = Field(description="worst value of each check along the "
-                                                 "re-integrated motion (units as the "
+                                                 "returned trajectory (units as the "
                                                  "quantity: m, rad, m/s, rad/s)")
     tolerances: dict[str, float] = Field(description="tolerance of each check (units as "
                                                      "the checked quantity)")
+    times: dict[str, float] = Field(default_factory=dict, description=TIMES_DESCRIPTION)
     failures: list[str] = Field(description="checks that failed, with values")
 
 
@@ -235,8 +253,16 @@ class FingerStatsModel(_Response):
     iterations: int = Field(description="IPOPT iterations")
     build_time: float = Field(description="NLP construction time [s] (0 when cached)")
     solve_time: float = Field(description="IPOPT time [s]")
-    refinements: int = Field(default=0, description="grid doublings after the first solve "
+    refinements: int = Field(default=0, description="grid refinements after the first solve "
                                                     "(the certificate found the grid coarse)")
+
+
+SAMPLES_DESCRIPTION = ("the plan at the request's `sample_times` or `sample_rate` (null "
+                       "without them, or without a finite plan)")
+JOINT_TRAJECTORY_DESCRIPTION = (
+    "every finger's joints as a ROS 2 trajectory_msgs/JointTrajectory, at the request's "
+    "`sample_times` or `sample_rate`, else at the collocation points (null without a "
+    "finite plan, and for the greedy method)")
 
 
 class FingerPlanResult(_Response):
@@ -255,6 +281,9 @@ class FingerPlanResult(_Response):
     joint_names: list[str] = Field(default_factory=list,
                                    description="the finger's joints, in the order of `q`")
     trajectory: FingerTrajectoryModel | None = None
+    samples: PlanSamplesModel | None = Field(default=None, description=SAMPLES_DESCRIPTION)
+    joint_trajectory: JointTrajectoryModel | None = Field(
+        default=None, description=JOINT_TRAJECTORY_DESCRIPTION)
     collocation: CollocationModel | None = Field(default=None,
                                                  description=COLLOCATION_DESCRIPTION)
 
@@ -326,15 +355,89 @@ class ManipulationTrajectoryModel(_Response):
                                   "one [rad] (null without `motion`)")
 
 
+class DurationModel(_Response):
+    """ROS 2's ``builtin_interfaces/Duration``."""
+
+    sec: int = Field(description="whole seconds")
+    nanosec: int = Field(ge=0, le=999_999_999, description="nanoseconds")
+
+
+class JointTrajectoryPointModel(_Response):
+    """ROS 2's ``trajectory_msgs/JointTrajectoryPoint`` (``t``: its time in seconds)."""
+
+    positions: list[float] = Field(description="joint positions [rad; m for a prismatic "
+                                               "joint], in the order of `joint_names`")
+    velocities: list[float] = Field(description="their time derivatives [rad/s; m/s]")
+    accelerations: list[float] = Field(description="their second time derivatives "
+                                                   "[rad/s^2; m/s^2]")
+    time_from_start: DurationModel
+    t: float = Field(description="time_from_start in seconds")
+
+
+class RateBreakModel(_Response):
+    """A node where the plan's inputs jump (a via-point of the paper's piecewise timing):
+    positions continuous, two one-sided velocities."""
+
+    t: float = Field(description="time [s]")
+    velocities_before: list[float] = Field(description="joint velocities as the time is "
+                                                       "approached from before")
+    velocities_after: list[float] = Field(description="joint velocities from after (the "
+                                                      "point at this time has these)")
+
+
+class JointTrajectoryModel(_Response):
+    """Every finger's joints shaped like ROS 2's ``trajectory_msgs/JointTrajectory``: hand
+    ``joint_names`` and ``points`` to a joint trajectory controller as they are. From the
+    plan's returned polynomials (the trajectory the certificate checked): velocities are
+    the time derivative of positions, accelerations that of velocities."""
+
+    joint_names: list[str] = Field(description="every finger's joints (`<finger>/<joint>` "
+                                               "where two fingers share a joint name)")
+    points: list[JointTrajectoryPointModel]
+    rate_breaks: list[RateBreakModel] = Field(default_factory=list,
+                                              description="nodes where the velocities jump")
+
+
+class ContactSamplesModel(_Response):
+    """One contact at the sample times; rows are samples."""
+
+    name: str = Field(description="'palm', or the fingertip's name")
+    eta: Rows = Field(description="contact coordinates (as the trajectory's `eta`)")
+    eta_dot: Rows = Field(description="their time derivatives ([m/s], [rad/s])")
+
+
+class FingerSamplesModel(_Response):
+    """One finger at the sample times; rows are samples."""
+
+    name: str = Field(description="the fingertip's name")
+    joint_names: list[str] = Field(description="the finger's joints, in the order of `q`")
+    q: Rows = Field(description="joint angles [rad; m for a prismatic joint]")
+    q_dot: Rows = Field(description="their time derivatives [rad/s; m/s]")
+    q_ddot: Rows = Field(description="their second time derivatives [rad/s^2; m/s^2]")
+
+
+class PlanSamplesModel(_Response):
+    """A plan with fingers at the request's ``sample_times`` (or ``sample_rate``): the
+    returned polynomials (docs/conventions.md); rows are samples. Palm frame, SI units. A
+    time on a rate break gets the outgoing rates."""
+
+    t: list[float] = Field(description="sample times [s]")
+    object_position: Rows = Field(description="object centre [m]")
+    object_orientation_wxyz: Rows = Field(description="object orientation, unit quaternion "
+                                                      "(w, x, y, z), w >= 0")
+    contacts: list[ContactSamplesModel]
+    fingers: list[FingerSamplesModel]
+
+
 class ManipulationCertificateModel(FingerCertificateModel):
-    """Physical validity of a manipulation plan, computed independently of the NLP: the
-    inputs re-integrated (CVODES), every finger placed by Pinocchio's forward kinematics,
-    the laws checked along that motion (no slip or spin at any contact, pads tangent to
-    the object, closure, joint limits, force closure, tracking between collocation
-    points)."""
+    """Physical validity of a manipulation plan's returned trajectory, computed
+    independently of the NLP: the laws checked densely along it (no slip or spin at any
+    contact, pads tangent to the object, closure with every finger placed by Pinocchio's
+    forward kinematics, joint limits, force closure, tracking), its states against a
+    re-integration of the inputs (CVODES) at the nodes and midpoints."""
 
     values: dict[str, float] = Field(description="worst value of each check along the "
-                                                 "re-integrated motion (units as the "
+                                                 "returned trajectory (units as the "
                                                  "quantity: m, rad, m/s, rad/s); keys name "
                                                  "the contact, e.g. max_slip_speed_<name>")
 
@@ -359,6 +462,9 @@ class ManipulationResult(_Response):
                                   "rad], e.g. 'palm.x'")
     certificate: ManipulationCertificateModel | None = None
     trajectory: ManipulationTrajectoryModel | None = None
+    samples: PlanSamplesModel | None = Field(default=None, description=SAMPLES_DESCRIPTION)
+    joint_trajectory: JointTrajectoryModel | None = Field(
+        default=None, description=JOINT_TRAJECTORY_DESCRIPTION)
     collocation: CollocationModel | None = Field(default=None,
                                                  description=COLLOCATION_DESCRIPTION)
 
