@@ -344,6 +344,7 @@ def test_with_api_keys_jobs_and_idempotency_keys_are_the_owners(server_factory: 
     url = f"{server.url}/v1/plans/{mine['id']}"
     assert httpx.get(url, headers=bob).status_code == 404
     assert httpx.delete(url, headers=bob).status_code == 404
+    assert httpx.get(f"{url}/view", headers=bob).status_code == 404
     assert httpx.get(f"{server.url}/v1/plans", headers=bob).json()["total"] == 0
     theirs = post(server, {**TRIANGLE, "duration": 6.5}, **bob,
                   **{"Idempotency-Key": "k1"}).json()

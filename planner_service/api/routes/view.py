@@ -14,6 +14,7 @@ from dexroll_client.models import Job, JobState
 
 from ...planners import REQUEST, RESULT, ProblemError
 from ...view import NoPlanError, has_plan, view_html
+from ..access import OwnerDep
 from ..deps import ServiceError, StoreDep
 
 __all__ = ["JobLinks", "LinkedJob", "router", "with_links"]
@@ -47,12 +48,12 @@ def with_links(job: Job) -> LinkedJob:
 @router.get("/v1/plans/{job_id}/view", response_class=HTMLResponse,
             responses={200: {"content": {"text/html": {}},
                              "description": "one self-contained page (no other request)"}})
-def view_plan(job_id: str, store: StoreDep) -> HTMLResponse:
+def view_plan(job_id: str, store: StoreDep, owner: OwnerDep) -> HTMLResponse:
     """A finished job's plan as an animated 3D page: the palm, the object, the fingers
     from their own models, the contacts and their traces, a timeline. The page is
     self-contained (three.js and the plan inlined): save it to view it offline. 409 while
     the job runs, or when it ended without a plan."""
-    row = store.get(job_id)
+    row = store.get(job_id, owner)  # with API keys, another owner's job is unknown here
     if row is None:
         raise ServiceError(404, "not_found", f"no job {job_id!r}")
     if not JobState(row.state).terminal:
