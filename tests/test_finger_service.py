@@ -100,7 +100,8 @@ def test_wire_defaults_are_the_cores() -> None:
     ({"finger": {"builtin": "k3s", "urdf": "<robot/>"}}, "not both"),
     ({"mu": 0.0}, "greater than 0"),
     ({"mu": float("nan")}, "finite"),
-    ({"sample_times": [0.5]}, "not supported"),
+    ({"sample_times": [0.5], "method": "greedy"}, "no polynomials"),
+    ({"sample_times": [0.5], "sample_rate": 100.0}, "not both"),
     ({"finger_contact": {"initial": {"x_f": 0, "y_f": 0, "u_f": 0.2, "v_f": 0}}}, "psi_f"),
 ])
 def test_bad_finger_requests_fail_in_the_model(patch: dict[str, Any], words: str) -> None:
@@ -231,6 +232,38 @@ def test_invalid_finger_requests_get_422_over_http(live_server: Server, body: di
     r = httpx.post(f"{live_server.url}/v1/plans", params={"wait": 0}, json=body, timeout=30)
     assert r.status_code == 422, r.text
     assert field in {d["field"] for d in r.json()["detail"]}, r.json()
+
+
+def test_the_greedy_method_refuses_sample_times(live_server: Server) -> None:
+    body = roll(method="greedy", sample_rate=100.0)
+    r = httpx.post(f"{live_server.url}/v1/plans", params={"wait": 0}, json=body, timeout=30)
+    assert r.status_code == 422, r.text
+    assert "method" in {d["field"] for d in r.json()["detail"]}, r.json()
+
+
+def test_a_one_finger_plan_at_500_hz(client: DexrollClient) -> None:
+    """The example at a controller's rate: the finger's joint trajectory, ROS 2 shaped,
+    and the samples, from the polynomials the certificate checked."""
+    job = client.plan(roll(sample_rate=500.0), timeout=180)
+    result = job.result
+    assert isinstance(result, FingerPlanResult) and result.status is PlanStatus.SOLVED
+    jt, smp = result.joint_trajectory, result.samples
+    assert jt is not None and smp is not None
+    assert jt.joint_names == result.joint_names
+    n = round(ROLL["duration"] * 500) + 1
+    assert len(jt.points) == n and len(smp.t) == n
+    pos = np.array([p.positions for p in jt.points])
+    vel = np.array([p.velocities for p in jt.points])
+    acc = np.array([p.accelerations for p in jt.points])
+    # central differences over 2 ms: off the derivative by at most dt max |q''| (the
+    # accelerations are piecewise linear and jump at nodes)
+    dt = 1 / 500
+    bound = dt * np.maximum(np.abs(acc[:-2]), np.abs(acc[2:])).max(axis=0)
+    assert np.all(np.abs((pos[2:] - pos[:-2]) / (2 * dt) - vel[1:-1]) <= bound + 1e-12)
+    assert [c.name for c in smp.contacts] == ["palm", "finger"]
+    assert_close(np.array(smp.fingers[0].q), pos, atol=0.0)
+    # the plan's via-point-free grid: no rate break; the last point is the end
+    assert not jt.rate_breaks and jt.points[-1].t == ROLL["duration"]
 
 
 # -- the command line ------------------------------------------------------------------------

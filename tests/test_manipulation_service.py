@@ -70,9 +70,13 @@ def client(live_server: Server) -> Iterator[DexrollClient]:
         yield c
 
 
+#: The controller rate the HTTP plan is asked for [Hz].
+RATE = 100.0
+
+
 @pytest.fixture(scope="module")
 def planned(client: DexrollClient) -> Job:
-    return client.plan(EXP2, timeout=300)
+    return client.plan({**EXP2, "sample_rate": RATE}, timeout=300)
 
 
 @pytest.fixture(scope="module")
@@ -298,6 +302,66 @@ def test_models_lists_the_planner_and_the_hands(client: DexrollClient) -> None:
                      atol=1e-12)
 
 
+def test_the_plan_at_a_controllers_rate_is_the_returned_trajectory(
+        result: ManipulationResult) -> None:
+    """``sample_rate``: every finger's joints at k / rate and at the end, ROS 2 shaped;
+    the velocities agree with the positions' central differences and the accelerations
+    with the velocities' (the cubic's derivatives), the samples with the grid at the times
+    they share; the certificate names where its worst values are."""
+    jt, smp, tr = result.joint_trajectory, result.samples, result.trajectory
+    assert jt is not None and smp is not None and tr is not None
+    T = EXP2["duration"]
+    n = round(T * RATE) + 1
+    assert len(jt.points) == len(smp.t) == n
+    assert [p.t for p in jt.points] == pytest.approx(np.arange(n) / RATE, abs=1e-12)
+    last = jt.points[-1].time_from_start
+    assert (last.sec, last.nanosec) == (4, 0)
+    names = [j for f in tr.fingers for j in f.joint_names]
+    assert len(jt.joint_names) == len(names) and len(set(jt.joint_names)) == len(names)
+    pos = np.array([p.positions for p in jt.points])
+    vel = np.array([p.velocities for p in jt.points])
+    acc = np.array([p.accelerations for p in jt.points])
+    # central differences: off the derivative by at most dt max |q''| (the accelerations
+    # are piecewise linear and jump at nodes)
+    bound = np.maximum(np.abs(acc[:-2]), np.abs(acc[2:])).max(axis=0) / RATE
+    assert np.all(np.abs((pos[2:] - pos[:-2]) * RATE / 2 - vel[1:-1]) <= bound + 1e-12)
+    # accelerations are the derivative of velocities inside an interval (they jump at
+    # nodes, where the cubic's pieces meet)
+    nodes = np.array(tr.t[::2])
+    t = np.arange(n) / RATE
+    inside = [i for i in range(1, n - 1)
+              if not np.any((nodes > t[i - 1] + 1e-12) & (nodes < t[i + 1] - 1e-12))]
+    assert len(inside) > n / 4
+    fd = (vel[2:] - vel[:-2]) * RATE / 2
+    assert_close(fd[np.array(inside) - 1], acc[inside], atol=1e-3)
+    assert not jt.rate_breaks  # the motion's steps are one smooth segment of the NLP
+    # the samples' joints are the joint trajectory's; at the grid's times, the grid's
+    q = np.hstack([np.array(f.q) for f in smp.fingers])
+    assert_close(q, pos, atol=0.0)
+    grid_q = np.hstack([np.array(f.q) for f in tr.fingers])
+    shared = [i for i, t in enumerate(tr.t) if abs(t * RATE - round(t * RATE)) < 1e-9]
+    assert len(shared) >= 5
+    rows = [round(tr.t[i] * RATE) for i in shared]
+    assert_close(q[rows], grid_q[shared], atol=1e-12)
+    c = result.certificate
+    assert c is not None and c.times
+    assert set(c.times) <= set(c.values)
+    assert all(0.0 <= t <= T for t in c.times.values())
+
+
+@pytest.mark.parametrize(("patch", "field"), [
+    ({"sample_times": [0.5, 1.0], "sample_rate": 10.0}, "sample_rate"),
+    ({"sample_rate": 5000.0}, "sample_rate"),  # 20001 samples
+    ({"sample_times": [1.0, 4.5]}, "sample_times"),  # after the end
+])
+def test_bad_sample_times_are_422_naming_the_field(live_server: Server, patch: dict[str, Any],
+                                                   field: str) -> None:
+    r = httpx.post(f"{live_server.url}/v1/plans", params={"wait": 0},
+                   json={**EXP2, **patch}, timeout=30)
+    assert r.status_code == 422, r.text
+    assert field in {d["field"] for d in r.json()["detail"]}, r.json()
+
+
 # -- the command line ------------------------------------------------------------------------
 
 def test_cli_plans_the_example_to_the_same_plan(tmp_path: Path, result: ManipulationResult
@@ -336,6 +400,7 @@ def test_cli_names_the_bad_field_and_exits_2(tmp_path: Path) -> None:
 def test_a_diverged_plan_is_a_typed_result_without_nan() -> None:
     """A last iterate with NaN (IPOPT diverged) becomes a result with its typed status and
     no trajectory (JSON has no NaN), never an error of the service."""
+    from ocp.certify.certificate import Certificate
     from ocp.solution import Status
     from ocp.solve.planner import ContactTrajectory, FingerTrajectory, ManipulationSolution
     from planner_service.planners.manipulation import result_from_manipulation_solution
@@ -354,7 +419,7 @@ def test_a_diverged_plan_is_a_typed_result_without_nan() -> None:
         grasp_angle=np.full(k, np.nan), cone_margin=np.full(k, np.nan),
         desired_position=None, desired_rotation=None, tracking_position_error=None,
         tracking_angle_error=None, goal_error={"palm.x": float("nan")},
-        certificate={"max_slip_speed_f1": float("inf")},
+        certificate=Certificate.failed("the plan has non-finite states or inputs"),
         certificate_failures=("the plan has non-finite states or inputs",))
     result = result_from_manipulation_solution(sol)
     assert result.status is PlanStatus.NUMERICAL_ERROR and result.trajectory is None
