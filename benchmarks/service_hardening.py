@@ -159,7 +159,7 @@ def bench_deadlines(svc: Service, n: int) -> dict[str, Any]:
 
 def bench_results(svc: Service, gets: int) -> dict[str, Any]:
     req = json.loads((ROOT / "examples" / "triangle.json").read_text())
-    req.update(n_intervals=2000, max_refinements=0, solver={"time_limit": 20.0},
+    req.update(n_intervals=2000, max_refinements=0, solver={"time_limit": 120.0},
                sample_times=[6.0 * i / 9999 for i in range(10000)])
     body = json.dumps(req)
     r = httpx.post(f"{svc.url}/v1/plans", params={"wait": 0}, content=body,

@@ -16,8 +16,9 @@ router = APIRouter()
 
 
 @router.get("/healthz")
-def healthz() -> dict[str, str]:
-    """Liveness: the process answers."""
+async def healthz() -> dict[str, str]:
+    """Liveness: the process answers (on the event loop itself, never queued behind the
+    thread pool that the other routes share)."""
     return {"status": "ok"}
 
 
