@@ -185,8 +185,8 @@ def bench_results(svc: Service, gets: int) -> dict[str, Any]:
             **probe.summary()}
 
 
-def bench_clients(svc: Service, n: int) -> dict[str, Any]:
-    sys.path.insert(0, str(ROOT / "clients" / "python"))
+def bench_clients(svc: Service, n: int, src: Path | None) -> dict[str, Any]:
+    sys.path.insert(0, str((src or ROOT) / "clients" / "python"))  # that checkout's client
     from dexroll_client import DexrollClient
 
     req = json.loads((ROOT / "examples" / "triangle.json").read_text())
@@ -229,7 +229,7 @@ def main() -> None:
         elif args.what == "results":
             out = bench_results(svc, args.n or 40)
         else:
-            out = bench_clients(svc, args.n or 200)
+            out = bench_clients(svc, args.n or 200, args.src)
     finally:
         svc.stop()
     print(json.dumps({"bench": args.what, "src": str(args.src or ROOT), **out}))
