@@ -263,7 +263,7 @@ def _checker_main(conn: Connection, limits: dict[str, Any], parent: int) -> None
     """Body of a checker process: check each model received, reply with its errors."""
     from .jobs.lifeline import die_with_parent
 
-    die_with_parent(parent)
+    die_with_parent(parent, pdeathsig=False)  # replacements start from pool threads
     lim = ModelLimits(**limits)
     import resource
 
@@ -387,14 +387,22 @@ class ModelChecker:
                 self._cache.popitem(last=False)
         return list(errors)
 
-    def _run(self, model: ModelText) -> FieldErrors:
-        try:
-            proc = self._idle.get(timeout=self.START_TIMEOUT)
-        except queue.Empty as exc:
-            raise CheckerBusyError("every model checker is busy") from exc
-        if not proc.wait_ready(self.START_TIMEOUT):
+    def _take(self) -> _Proc:
+        """An idle checker process, alive and ready (a dead one is replaced)."""
+        for _ in range(3):
+            try:
+                proc = self._idle.get(timeout=self.START_TIMEOUT)
+            except queue.Empty as exc:
+                raise CheckerBusyError("every model checker is busy") from exc
+            if proc.process.is_alive() and proc.wait_ready(self.START_TIMEOUT):
+                return proc
+            log.warning("model checker %s gone (exit code %s); replacing it",
+                        proc.process.pid, proc.process.exitcode)
             self._drop(proc)
-            raise CheckerBusyError("the model checker did not start")
+        raise CheckerBusyError("the model checkers do not start")
+
+    def _run(self, model: ModelText) -> FieldErrors:
+        proc = self._take()
         t0 = time.monotonic()
         try:
             proc.conn.send(model)

@@ -36,10 +36,14 @@ def _pdeathsig() -> bool:
     return False
 
 
-def die_with_parent(parent_pid: int | None = None) -> None:
-    """Make this (child) process end when its parent process does (see the module)."""
+def die_with_parent(parent_pid: int | None = None, pdeathsig: bool = True) -> None:
+    """Make this (child) process end when its parent process does (see the module).
+    ``pdeathsig=False`` for a child started from a thread that may end before the
+    service does (an API thread-pool thread: Linux would kill the child with it); the
+    watchdog alone then ends it."""
     parent = os.getppid() if parent_pid is None else parent_pid
-    _pdeathsig()
+    if pdeathsig:
+        _pdeathsig()
     if os.getppid() != parent:  # the parent died before the prctl
         os._exit(1)
 

@@ -49,7 +49,6 @@ _REPLY_TIME = 0.05
 log = logging.getLogger("dexroll.workers")
 
 
-
 def job_outcome(status: PlanStatus) -> JobState:
     """The terminal job state for a plan's status."""
     return {
@@ -73,7 +72,9 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
     is waiting. It dies with the service (``parent``: see :mod:`.lifeline`).
 
     A job comes as (id, request JSON, deadline on the monotonic clock); the reply is
-    ("done", (id, job state, code, message, raw status, result JSON or None))."""
+    ("done", (id, job state, code, message, raw status, result JSON or None, whether the
+    result holds a plan to view)); between jobs "ready" and "warming" say whether it
+    takes one."""
     from .lifeline import die_with_parent
 
     die_with_parent(parent)
@@ -87,6 +88,7 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
         invalid_result,
         solve,
     )
+    from ..view import has_plan
 
     if not logging.getLogger().handlers:  # spawned: the service's logging is not inherited
         logging.basicConfig(level=logging.INFO,
@@ -97,8 +99,6 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
     # machine solving meanwhile); the ball-on-palm NLP is not compiled here: it is written
     # out in SX, its compile takes tens of seconds in the foreground, and since the
     # closed-form geometry its function evaluations are a small part of its solve.
-    from ..view import has_plan
-
     palm = BallOnPalmPlanner()
     fingers = FingerCache(compile_dir=compiled, background=True)
     pending: list[Path] = []
