@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
+from typing import Any
 
 from fastapi import APIRouter
 from fastapi.responses import HTMLResponse
@@ -15,7 +16,7 @@ from dexroll_client.models import Job, JobState
 from ...planners import REQUEST, RESULT, ProblemError
 from ...view import NoPlanError, has_plan, view_html
 from ..access import OwnerDep
-from ..deps import ServiceError, StoreDep
+from ..deps import ERROR_RESPONSES, ServiceError, StoreDep
 
 __all__ = ["JobLinks", "LinkedJob", "router", "with_links"]
 
@@ -45,9 +46,20 @@ def with_links(job: Job) -> LinkedJob:
     return LinkedJob(**dict(job), links=JobLinks(view=view))
 
 
+#: The page is HTML, its errors the service's JSON ErrorBody: documented so (a route's
+#: response class would otherwise give the errors its text/html media type).
+_ERROR_JSON = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorBody"}}}
+VIEW_RESPONSES: dict[int | str, dict[str, Any]] = {
+    **{code: {"description": r["description"], "content": _ERROR_JSON}
+       for code, r in ERROR_RESPONSES.items()},
+    200: {"content": {"text/html": {"schema": {"type": "string"}}},
+          "description": "one self-contained page (no other request)"},
+    409: {"description": "the job has not finished, or ended without a plan",
+          "content": _ERROR_JSON}}
+
+
 @router.get("/v1/plans/{job_id}/view", response_class=HTMLResponse,
-            responses={200: {"content": {"text/html": {}},
-                             "description": "one self-contained page (no other request)"}})
+            responses=VIEW_RESPONSES)
 def view_plan(job_id: str, store: StoreDep, owner: OwnerDep) -> HTMLResponse:
     """A finished job's plan as an animated 3D page: the palm, the object, the fingers
     from their own models, the contacts and their traces, a timeline. The page is
