@@ -181,9 +181,9 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
     assert col is not None and plan.stats is not None
     model = model_for(problem.object.shape)
     params = np.asarray(problem.object.dimensions, dtype=float)
-    chart = rotation_from_vector(problem.object.chart_rotation)
-    t_nodes, X = col.t_nodes, col.X
-    n = len(col.U0)
+    patch = plan.object_chart_rotation or problem.object.chart_rotation
+    chart = rotation_from_vector(patch)
+    t_nodes = col.t_nodes
     palm = plan.contacts[0]
     grid = _trajectory(model, params, chart, plan.t, palm.eta, palm.eta_dot, palm.w)
     node_rows = np.arange(0, len(plan.t), 2)  # nodes and midpoints alternate
@@ -217,10 +217,11 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
                         objective=s.objective * problem.object.length_scale ** 2
                         / problem.duration, cache_hit=s.cache_hit, refinements=s.refinements,
                         n_intervals=s.n_intervals, ipopt_time=s.ipopt_time)
-    ends = [0, *np.cumsum(replace(problem, n_intervals=n).segment_intervals()).tolist()]
+    # the goals as the plan met them (in its patch: the same physical goals)
+    goal_error = {k.removeprefix("palm."): v for k, v in plan.goal_error.items()}
     return Solution(status=status, message=message, stats=stats, grid=grid, nodes=nodes,
-                    certificate=cert, goal_error=goal_errors(problem, X, ends),
-                    _sampler=sampler, plan=plan)
+                    certificate=cert, goal_error=goal_error, _sampler=sampler, plan=plan,
+                    chart_rotation=tuple(float(a) for a in patch))
 
 
 _DEFAULT = BallOnPalmPlanner()

@@ -145,6 +145,9 @@ class Solution:
     _sampler: Any = field(repr=False, compare=False)
     #: The grasp pipeline's own plan (its collocation values, IPOPT's primal-dual point).
     plan: ManipulationSolution | None = field(default=None, repr=False, compare=False)
+    #: The object's chart patch (rotation vector [rad]) of the plan's (u, v, psi): the
+    #: problem's, or another when the plan rode the pole bound of the problem's.
+    chart_rotation: tuple[float, ...] = (0.0, 0.0, 0.0)
 
     @property
     def ok(self) -> bool:
@@ -349,6 +352,11 @@ class ManipulationSolution:
     stats: SolverStats | None = None
     #: The NLP's own values (for sampling and for the ball-on-palm's view).
     collocation: Collocation | None = field(default=None, repr=False)
+    #: The object's chart patch (rotation vector [rad]) in which the palm contact's
+    #: coordinates are given: the problem's, or the one the planner chose because the
+    #: plan rode the pole bound of the problem's (:mod:`ocp.spec.patches`); None without
+    #: a palm.
+    object_chart_rotation: tuple[float, ...] | None = None
     _interpolant: _Interpolant | None = field(default=None, repr=False, compare=False)
 
     @property

@@ -186,6 +186,12 @@ def test_goal_subsets_are_met(goal: dict[str, float]) -> None:
 def test_pure_reorientation_returns_to_the_same_palm_point_turned(
         obj: ObjectSpec, rotvec: tuple[float, float, float]) -> None:
     problem, R_goal = reorientation(obj, rotvec)
+    if obj is ELLIPSOID and rotvec[0]:
+        # its optimal loop runs over the pole (the ellipsoid's axis, which no chart patch
+        # moves) and rides the pole bound; at the default 15 deg margin the kink needs 400
+        # intervals and ~45 s to certify slip within 1e-3 of the speed scale
+        # (docs/performance.md), at 10 deg 400 intervals and ~3 s
+        problem = replace(problem, pole_margin=math.radians(10.0))
     sol = PLANNER.solve(problem)
     assert sol.status is Status.SOLVED, sol.message
     final = sol.sample([problem.duration])

@@ -74,6 +74,7 @@ from ocp.spec.grasp import (
     support_goal_errors,
 )
 from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
+from ocp.spec.patches import pole_clear_patch, recharted, rides_pole
 from ocp.spec.problem import MAX_INTERVALS, ProblemError, Structure
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.grasp_model import GraspModel
@@ -187,6 +188,9 @@ class ManipulationPlanner:
             and background else None
         #: IPOPT iterations on one initial guess of the palm's strategy before its next.
         self.max_iter_per_guess = max_iter_per_guess
+        #: Re-plan in another patch of the object's chart when a plan's palm contact rides
+        #: the pole bound of the problem's patch (:meth:`_repatched`; spheres only).
+        self.auto_patch = True
         # keyed by the finger objects themselves (identity; the key keeps them alive)
         self._models: dict[tuple[Any, ...], GraspModel] = {}
         self._nlps: dict[GraspStructure, _NLP] = {}
@@ -309,6 +313,9 @@ class ManipulationPlanner:
         budget = problem.options.max_iter
         sol = self._solve_once(problem, strategy, x0, warm_start, deadline, budget, totals,
                                certify)
+        if self.auto_patch and certify:
+            problem, strategy, x0, sol = self._repatched(problem, strategy, x0, sol, deadline,
+                                                         budget, totals)
         refinements = 0
         # only failures that shrink with the grid (what happens between collocation
         # points), decided by the checks' kind (an inaccurate plan has failed checks)
@@ -330,7 +337,39 @@ class ManipulationPlanner:
                         certificate_time=totals.certificate, ipopt_time=totals.ipopt,
                         refinements=refinements)
         return replace(sol, build_time=totals.build, solve_time=totals.ipopt,
-                       iterations=totals.iterations, refinements=refinements, stats=stats)
+                       iterations=totals.iterations, refinements=refinements, stats=stats,
+                       object_chart_rotation=tuple(problem.object.chart_rotation)
+                       if problem.palm is not None else None)
+
+    def _repatched(self, problem: ManipulationProblem, strategy: Strategy, x0: FloatArray,
+                   sol: ManipulationSolution, deadline: float, budget: int, totals: _Totals
+                   ) -> tuple[ManipulationProblem, Strategy, FloatArray, ManipulationSolution]:
+        """When the palm contact's path rides the pole bound of the object's patch (a
+        bound of the chart, not of the physics), the plan again in a patch whose poles
+        are far from that path (:mod:`ocp.spec.patches`; spheres only), kept when it is
+        solved and clear of the bound, or when the first plan was not solved."""
+        if problem.palm is None or sol.status not in (Status.SOLVED, Status.INACCURATE) \
+                or not sol.contacts or not rides_pole(problem, sol.contacts[0].eta[:, 2]):
+            return problem, strategy, x0, sol
+        palm = sol.contacts[0]
+        path = np.einsum("kji,kj->ki", sol.object_rotation, palm.point - sol.object_position)
+        rotvec = pole_clear_patch(problem, path)
+        alt = recharted(problem, rotvec) if rotvec is not None else None
+        if alt is None or time.perf_counter() >= deadline:
+            return problem, strategy, x0, sol
+        try:
+            alt_x0 = self.initial_state(alt)
+        except ProblemError:
+            return problem, strategy, x0, sol
+        alt_strategy = strategy_for(alt)
+        left = budget - totals.iterations if alt_strategy.shared_budget else budget
+        alt_sol = self._solve_once(alt, alt_strategy, alt_x0, None, deadline, left, totals,
+                                   True)
+        clear = alt_sol.status in (Status.SOLVED, Status.INACCURATE) and not rides_pole(
+            alt, alt_sol.contacts[0].eta[:, 2])
+        if clear or (sol.status is not Status.SOLVED and alt_sol.status is Status.SOLVED):
+            return alt, alt_strategy, alt_x0, alt_sol
+        return problem, strategy, x0, sol
 
     @staticmethod
     def parameters(problem: ManipulationProblem, nlp: _NLP) -> FloatArray:

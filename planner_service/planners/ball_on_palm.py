@@ -130,4 +130,5 @@ def result_from_solution(sol: Solution, sample_times: Any = None) -> PlanResult:
         sol.warm_start, (list(BALL_ON_PALM_STATES), list(BALL_ON_PALM_INPUTS)))
     return PlanResult(status=PlanStatus(sol.status.value), message=message,
                       stats=StatsModel(**stats), goal_error=goal_error, certificate=cert,
-                      grid=grid, samples=samples, collocation=collocation)
+                      grid=grid, samples=samples, collocation=collocation,
+                      chart_rotation=list(sol.chart_rotation) if grid else None)

@@ -341,6 +341,8 @@ def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = No
             refinements=sol.refinements, n_intervals=max((len(sol.t) - 1) // 2, 0)),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
         certificate=cert, trajectory=trajectory,
+        chart_rotation=list(sol.object_chart_rotation)
+        if trajectory and sol.object_chart_rotation else None,
         samples=samples_block(sol, times) if trajectory else None,
         joint_trajectory=joint_trajectory_block(sol, times) if trajectory else None,
         collocation=collocation)

@@ -213,6 +213,8 @@ def result_from_finger_solution(sol: OneFingerSolution, joint_names: Sequence[st
                                refinements=sol.refinements),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
         certificate=cert, joint_names=list(joint_names), trajectory=trajectory,
+        chart_rotation=list(sol.plan.object_chart_rotation)
+        if trajectory and sol.plan and sol.plan.object_chart_rotation else None,
         samples=samples_block(sol.plan, times) if trajectory else None,
         joint_trajectory=joint_trajectory_block(sol.plan, times) if trajectory else None,
         collocation=collocation)

@@ -172,6 +172,13 @@ COLLOCATION_DESCRIPTION = (
     "iterate)")
 
 
+CHART_DESCRIPTION = (
+    "the object's chart patch (rotation vector [rad]) in which this result's palm contact "
+    "coordinates (u, v, psi) are given: the request's `object.chart_rotation`, or another "
+    "that the planner chose because the plan rode the pole bound (`pole_margin`) of the "
+    "request's (the same physical plan, restated; docs/conventions.md); null without a "
+    "palm or a plan")
+
 class PlanResult(_Response):
     """A ball-on-palm plan, or why there is none. ``grid``: the collocation points (nodes
     and midpoints); ``samples``: the request's ``sample_times``."""
@@ -187,6 +194,7 @@ class PlanResult(_Response):
     certificate: CertificateModel | None = None
     grid: TrajectoryModel | None = None
     samples: TrajectoryModel | None = None
+    chart_rotation: list[float] | None = Field(default=None, description=CHART_DESCRIPTION)
     collocation: CollocationModel | None = Field(default=None,
                                                  description=COLLOCATION_DESCRIPTION)
 
@@ -281,6 +289,7 @@ class FingerPlanResult(_Response):
     joint_names: list[str] = Field(default_factory=list,
                                    description="the finger's joints, in the order of `q`")
     trajectory: FingerTrajectoryModel | None = None
+    chart_rotation: list[float] | None = Field(default=None, description=CHART_DESCRIPTION)
     samples: PlanSamplesModel | None = Field(default=None, description=SAMPLES_DESCRIPTION)
     joint_trajectory: JointTrajectoryModel | None = Field(
         default=None, description=JOINT_TRAJECTORY_DESCRIPTION)
@@ -462,6 +471,7 @@ class ManipulationResult(_Response):
                                   "rad], e.g. 'palm.x'")
     certificate: ManipulationCertificateModel | None = None
     trajectory: ManipulationTrajectoryModel | None = None
+    chart_rotation: list[float] | None = Field(default=None, description=CHART_DESCRIPTION)
     samples: PlanSamplesModel | None = Field(default=None, description=SAMPLES_DESCRIPTION)
     joint_trajectory: JointTrajectoryModel | None = Field(
         default=None, description=JOINT_TRAJECTORY_DESCRIPTION)
