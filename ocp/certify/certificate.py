@@ -1,12 +1,14 @@
 """One certificate type: a list of checks, each with its name, value, tolerance and kind.
 
-A plan's certificate is computed independently of the NLP (re-integration with CVODES,
-laws along the re-integrated motion, Pinocchio's kinematics). Each check says what kind of
-failure it reports, and the planners decide by kind (never by message text):
+A plan's certificate is a statement about the trajectory returned, computed independently
+of the NLP (laws along the returned polynomials, Pinocchio's kinematics, a re-integration
+with CVODES). Each check says what kind of failure it reports and the time of its worst
+sample, and the planners decide by kind (never by message text):
 
 * ``discretisation``: what happens between collocation points (slip, spin, closure, gap,
   re-integration defects, tracking and joint limits between points): it shrinks with the
-  grid, so a plan failing only these is refined (solved again on a grid twice as fine).
+  grid, so a plan failing only these is refined (solved again on a finer grid,
+  :meth:`Certificate.refinement_factor`).
 * ``physics``: a law the plan breaks whatever the grid (the object leaves the palm,
   force closure lost).
 * ``limits``: a limit of the hand (a contact off its pad).
@@ -93,7 +95,7 @@ class Certificate(Mapping[str, float]):
     checks: tuple[Check, ...] = ()
     #: Values reported without a check (e.g. the largest grasp angle).
     reported: tuple[tuple[str, float], ...] = ()
-    #: Samples of the re-integrated motion the laws were checked at.
+    #: Samples of the returned trajectory the laws were checked at.
     n_samples: int = 0
 
     @staticmethod
