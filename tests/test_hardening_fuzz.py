@@ -23,8 +23,9 @@ from schemathesis.checks import (  # noqa: E402
     status_code_conformance,
 )
 
-#: Generated cases per operation and mode (4 operations with inputs x 2 modes x 300 > 2,000).
-CASES = 300
+#: Generated cases per operation and mode: 3 operations in both modes and 2 (their only
+#: input a path id: nothing to make invalid) in the positive one, 8 x 260 > 2,000.
+CASES = 260
 CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance,
           response_headers_conformance, response_schema_conformance]
 
@@ -46,9 +47,6 @@ def test_no_server_error_and_no_schema_violation(fuzzed: Server) -> None:
     failures: list[str] = []
     operations = [result.ok() for result in schema.get_all_operations()]
     assert len(operations) >= 8, [op.label for op in operations]
-    # the plan's view (planner_service/api/routes/view.py, another issue's) documents its
-    # errors as text/html while it answers them as JSON: left to its owner
-    operations = [op for op in operations if not op.label.endswith("/view")]
 
     def fuzz(op: Any, mode: GenerationMode) -> None:
         @given(case=op.as_strategy(generation_mode=mode))
