@@ -136,12 +136,13 @@ class Certificate(Mapping[str, float]):
     def refinement_factor(self, order: int = 2, most: int = 8) -> int:
         """How much finer a grid should make the failed discretisation checks pass: a
         power of two, at least 2 and at most ``most``, for errors that shrink like h^order
-        (the slowest of the checks: slip and spin at the collocation points), with a 25 %
-        margin."""
+        (the slowest of the checks: slip and spin at the collocation points) with a margin
+        of 2 on the error (measured on the full bench suite: with 1.25, 13 of 342 plans
+        still failed after two refinements, at 1.1-3.5 times the tolerance)."""
         worst = max((c.value / c.tolerance for c in self.checks
                      if not c.passed and c.kind is CheckKind.DISCRETISATION
                      and not c.lower_bound and c.tolerance > 0), default=2.0)
-        need = (1.25 * worst) ** (1.0 / order) if math.isfinite(worst) else most
+        need = (2.0 * worst) ** (1.0 / order) if math.isfinite(worst) else most
         return int(min(most, max(2, 2 ** math.ceil(math.log2(max(need, 1.0))))))
 
     def tolerances(self) -> dict[str, float]:
