@@ -224,21 +224,9 @@ def tree_errors(kind: str, text: str, limits: ModelLimits) -> list[str]:
 # -- loading (in the checker process) ----------------------------------------------------------
 
 def _load_urdf(text: str, params: dict[str, Any]) -> FieldErrors:
-    from dexroll_client.models import MAX_FINGER_JOINTS
-    from ocp.robots.finger import load_finger
+    from .planners.cache import urdf_errors  # the service's own loader (a finger's)
 
-    tip = str(params.get("tip_frame", "fingertip"))
-    try:
-        finger = load_finger(urdf=text, tip_frame=tip)
-    except MemoryError:  # the checker's limit, reported as such
-        raise
-    except Exception as exc:  # whatever the text does to the loader is the text's
-        reason = str(exc) or type(exc).__name__
-        return [("tip_frame" if repr(tip) in reason else "urdf", reason)]
-    if finger.nq > MAX_FINGER_JOINTS:
-        return [("urdf", f"the finger has {finger.nq} joints; at most {MAX_FINGER_JOINTS} "
-                         "are supported")]
-    return []
+    return urdf_errors(text, str(params.get("tip_frame", "fingertip")))
 
 
 #: Each kind's loader, run in the checker process once the tree passed: (text, params) ->

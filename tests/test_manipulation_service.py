@@ -129,7 +129,7 @@ def test_wire_defaults_are_the_cores() -> None:
     ({"motion": {"kind": "spiral"}}, "motion", "spiral"),
     ({"motion": {**EXP2["motion"], "steps": [{**EXP2["motion"]["steps"][0],
                                               "duration": -1.0}]}},
-     "motion.steps.0.duration", "greater than 0"),
+     "motion.steps.0.duration", "greater than or equal to 0.001"),
     ({"tracking": {"position_tolerance": float("nan")}}, "tracking.position_tolerance",
      "finite"),
     ({"hand": {"builtin": "four_finger"}}, "hand.builtin", "two_finger"),

@@ -19,7 +19,7 @@ from ocp.robots.hands import Hand, load_hand
 from ocp.solve.planner import ManipulationPlanner
 from ocp.spec.problem import ProblemError
 
-__all__ = ["FINGERS", "FingerCache", "Planners", "hand_finger_name"]
+__all__ = ["FINGERS", "FingerCache", "Planners", "hand_finger_name", "urdf_errors"]
 
 
 class FingerCache:
@@ -121,6 +121,8 @@ def _load(spec: FingerModelSpec, where: str) -> FingerModel:
             rotation_from_vector(spec.base_rotation),
             base_position=spec.base_position,
             pad_half_size=spec.pad_half_size)
+    except MemoryError:  # a model checker's memory limit: its own answer
+        raise
     except Exception as exc:  # whatever a user's URDF does to the loader, it is the URDF's
         reason = str(exc) or type(exc).__name__
         field = f"{where}.tip_frame" if repr(spec.tip_frame) in reason else f"{where}.urdf"
@@ -129,6 +131,17 @@ def _load(spec: FingerModelSpec, where: str) -> FingerModel:
         raise ProblemError([(f"{where}.urdf", f"the finger has {finger.nq} joints; at most "
                                               f"{MAX_FINGER_JOINTS} are supported")])
     return finger
+
+
+def urdf_errors(urdf: str, tip_frame: str = "fingertip") -> list[tuple[str, str]]:
+    """What loading a finger from a URDF text finds wrong, under the fields ``urdf`` and
+    ``tip_frame``; [] when it loads (what a model checker process runs once the text's
+    tree passed its limits: :mod:`planner_service.models_check`)."""
+    try:
+        _load(FingerModelSpec(urdf=urdf, tip_frame=tip_frame), "finger")
+    except ProblemError as exc:
+        return [(field.removeprefix("finger."), reason) for field, reason in exc.errors]
+    return []
 
 
 def _load_hand(spec: HandModel) -> Hand:
