@@ -29,6 +29,7 @@ from dexroll_client.errors import (
     RequestTooLargeError,
     ServiceUnavailableError,
     TransportError,
+    UnauthorizedError,
 )
 from dexroll_client.models import (
     AnyPlanResult,
@@ -140,6 +141,7 @@ __all__ = [
     "TrackingModel",
     "TrajectoryModel",
     "TransportError",
+    "UnauthorizedError",
     "ViaPointModel",
     "WarmStartLike",
     "WarmStartModel",
