@@ -28,7 +28,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HermiteInterpolant", "HermiteSimpson", "NlpPoint", "WarmStart", "hermite_sample",
+__all__ = ["HermiteInterpolant", "HermiteSimpson", "NlpPoint", "WarmStart",
            "hermite_simpson_defects", "left_input_columns", "node_inputs", "node_times",
            "quadratic_input", "reintegrate", "reintegrator", "rk4_step", "target_residuals"]
 
@@ -354,24 +354,6 @@ class HermiteInterpolant:
         """The inputs at times t, rows."""
         k, s = self.locate(t, side)
         return self.inputs_on_intervals(k, s)
-
-
-def hermite_sample(
-    t_nodes: NDArray[np.float64],
-    X: NDArray[np.float64],
-    F0: NDArray[np.float64],
-    F1: NDArray[np.float64],
-    U0: NDArray[np.float64],
-    Um: NDArray[np.float64],
-    U1: NDArray[np.float64],
-    t: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """States and inputs at times ``t`` from the collocation polynomials
-    (:class:`HermiteInterpolant`; a time on a via-point node gets the outgoing value).
-    Returns (x(t), u(t)), rows = times."""
-    f = HermiteInterpolant(t_nodes, X, F0, F1, U0, Um, U1)
-    k, s = f.locate(np.asarray(t, dtype=float))
-    return f.on_intervals(k, s), f.inputs_on_intervals(k, s)
 
 
 def quadratic_input(s: Any, u0: Any, um: Any, u1: Any) -> Any:
