@@ -1,0 +1,165 @@
+"""A plan's execution in MuJoCo, as the service's doors reach it (docs/simulation.md).
+
+:func:`execution_plan` turns a wire result (and, when at hand, its request) into the
+simulator's :class:`sim.ExecutionPlan`, with the viewer's readers: the plan's arrays
+(:func:`planner_service.view.tracks_of`) and its models (the request's own object,
+palm and fingers through the planners' conversion, or inferred from the result:
+:mod:`planner_service.view.models`). :func:`simulate_result` runs it and returns the
+report as JSON-ready data.
+
+Plans that carry contact forces or joint torques (issue 15, part 1) are executed with
+them as feed-forward: :func:`plan_forces` is the one place that reads them from a result.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from dexroll_client.models import (
+    AnyPlanResult,
+    FingerPlanResult,
+    ManipulationResult,
+    PlanRequest,
+)
+
+from ..view.models import SceneModels, infer_models, models_from_request
+from ..view.robot import pad_thickness
+from ..view.tracks import NoPlanError, PlanTracks, tracks_of
+
+__all__ = ["NotExecutableError", "execution_plan", "plan_forces", "simulate_result"]
+
+#: Friction coefficient when neither the request nor the result states it.
+DEFAULT_MU = 0.5
+
+
+class NotExecutableError(ValueError):
+    """The result holds no plan that a hand executes (no plan, no fingers, a finger
+    without a model)."""
+
+
+def _q_dot(result: AnyPlanResult) -> list[np.ndarray]:
+    """Each finger's joint rates at the trajectory's times."""
+    if isinstance(result, FingerPlanResult) and result.trajectory is not None:
+        return [np.asarray(result.trajectory.q_dot, dtype=float)]
+    if isinstance(result, ManipulationResult) and result.trajectory is not None:
+        return [np.asarray(f.q_dot, dtype=float) for f in result.trajectory.fingers]
+    return []
+
+
+def plan_forces(result: AnyPlanResult) -> list[tuple[np.ndarray | None, np.ndarray | None]]:
+    """Per finger, (joint torques (times x joints) [N m], the force the fingertip applies
+    to the object in the palm frame (times x 3) [N]) when the result carries them, else
+    (None, None). Read from a manipulation trajectory's ``fingers[i].joint_torques`` and
+    ``contacts[j].force`` (the fingertip's contact), and from a one-finger trajectory's
+    ``joint_torques`` and ``finger_contact_force``; today's results have none."""
+    out: list[tuple[np.ndarray | None, np.ndarray | None]] = []
+
+    def rows(x: object) -> np.ndarray | None:
+        if x is None:
+            return None
+        a = np.asarray(x, dtype=float)
+        return a if a.ndim == 2 and np.all(np.isfinite(a)) else None
+
+    if isinstance(result, FingerPlanResult) and result.trajectory is not None:
+        tr = result.trajectory
+        out.append((rows(getattr(tr, "joint_torques", None)),
+                    rows(getattr(tr, "finger_contact_force", None))))
+    elif isinstance(result, ManipulationResult) and result.trajectory is not None:
+        force_of = {c.name: rows(getattr(c, "force", None))
+                    for c in result.trajectory.contacts}
+        for f in result.trajectory.fingers:
+            out.append((rows(getattr(f, "joint_torques", None)), force_of.get(f.name)))
+    return out
+
+
+def _mu(request: PlanRequest | None, tracks: PlanTracks) -> tuple[float, str | None]:
+    mu = getattr(request, "mu", None) if request is not None else None
+    if isinstance(mu, int | float) and mu > 0:
+        return float(mu), None
+    if tracks.cone_half_angle is not None:
+        return math.tan(tracks.cone_half_angle), "friction: atan(mu) from the plan's cone"
+    return DEFAULT_MU, f"friction: not known, mu = {DEFAULT_MU}"
+
+
+def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
+                   ) -> Any:
+    """The simulator's plan (a :class:`sim.ExecutionPlan`) of a wire result, with its
+    request's models when given (inferred from the result otherwise, as the viewer
+    does). :class:`NotExecutableError` when there is nothing a hand executes;
+    ProblemError when the request's fingers cannot be loaded."""
+    from sim import (
+        DEFAULT_MASS,
+        ContactSpec,
+        ExecutionPlan,
+        FingerReference,
+        FingerSpec,
+        JointSpec,
+        ObjectSpec,
+        TipShape,
+    )
+
+    try:
+        tracks = tracks_of(result)
+    except NoPlanError as exc:
+        raise NotExecutableError(str(exc)) from exc
+    if not tracks.fingers:
+        raise NotExecutableError(f"a {tracks.planner} plan has no fingers: nothing for a "
+                                 "hand to execute")
+    if not np.all(np.isfinite(tracks.object_position)):
+        raise NotExecutableError("the plan is not finite")
+    models: SceneModels = infer_models(tracks) if request is None \
+        else models_from_request(request, tracks)
+    rates = _q_dot(result)
+    forces = plan_forces(result)
+    fingers, refs = [], []
+    for k, (track, model) in enumerate(zip(tracks.fingers, models.fingers, strict=True)):
+        if model is None:
+            raise NotExecutableError(f"finger {track.name}: no model known (give the "
+                                     "plan's request)")
+        joints = tuple(JointSpec(
+            j.name, j.kind, (float(j.axis[0]), float(j.axis[1]), float(j.axis[2])),
+            np.asarray(j.placement_rotation, dtype=float),
+            np.asarray(j.placement_translation, dtype=float),
+            float(model.lower[j.index_q]), float(model.upper[j.index_q]))
+            for j in model.chain)
+        h = float(model.pad_half_size)
+        fingers.append(FingerSpec(
+            track.name, joints, np.asarray(model.base_rotation, dtype=float),
+            np.asarray(model.base_position, dtype=float),
+            np.asarray(model.tip_rotation, dtype=float),
+            np.asarray(model.tip_translation, dtype=float),
+            TipShape("box", (h, h, pad_thickness(model))), track.name))
+        torques, force = forces[k] if k < len(forces) else (None, None)
+        refs.append(FingerReference(track.q, rates[k], torques, force))
+    contacts = tuple(ContactSpec(c.name, c.body, c.name if c.body == "finger" else None,
+                                 c.point, c.normal) for c in tracks.contacts)
+    mu, mu_note = _mu(request, tracks)
+    obj_request = getattr(request, "object", None)
+    mass = getattr(obj_request, "mass", None)
+    gravity = getattr(request, "gravity", None)
+    torsion = getattr(request, "torsional_friction", None)
+    notes = list(models.notes) + ([mu_note] if mu_note else [])
+    if mass is None:
+        notes.append(f"object mass: not in the plan, {DEFAULT_MASS} kg (solid)")
+    plan = ExecutionPlan(
+        tracks.t, ObjectSpec(models.shape, tuple(models.dimensions),
+                             float(mass) if mass is not None else DEFAULT_MASS),
+        tracks.object_position, tracks.object_wxyz, tuple(fingers), tuple(refs), contacts,
+        models.palm_half_extent, mu, None if torsion is None else float(torsion),
+        (0.0, 0.0, -9.81) if gravity is None else
+        (float(gravity[0]), float(gravity[1]), float(gravity[2])), tuple(notes))
+    plan.check()
+    return plan
+
+
+def simulate_result(result: AnyPlanResult, request: PlanRequest | None = None,
+                    options: dict[str, Any] | None = None) -> Any:
+    """Execute a wire result's plan in MuJoCo: the :class:`sim.SimReport`. ``options``:
+    :class:`sim.SimOptions` fields (ValueError naming a bad one)."""
+    from sim import SimOptions, simulate
+
+    sim_options = SimOptions.from_dict(options or {})
+    return simulate(execution_plan(result, request), sim_options)

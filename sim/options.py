@@ -1,0 +1,126 @@
+"""The simulator's settings: the contact model, the controller and its gains, the grip,
+and the tolerances a run passes against (docs/simulation.md states and explains each)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+__all__ = ["MODES", "SimOptions", "Tolerances"]
+
+#: 'servo': every joint follows the plan through a position servo (velocity feed-forward,
+#: the grip's or the plan's torques as torque feed-forward), the object free;
+#: 'kinematic': the joints are set to the plan at every step (a perfect controller), the
+#: object free; 'replay': the joints and the object are both set to the plan (nothing is
+#: simulated: the report's errors are zero by construction, its contact forces those of
+#: the plan's own geometry).
+MODES = ("servo", "kinematic", "replay")
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """A run passes when the object stays within ``position`` [m] and ``angle`` [rad] of
+    the plan at every recorded time of the plan and no planned contact is lost for more
+    than ``contact_loss`` [s] in all after the settling phase."""
+
+    position: float = 1e-3
+    angle: float = math.radians(2.0)
+    contact_loss: float = 0.0
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """How a plan is executed (the defaults are the ones docs/simulation.md measured).
+
+    Contact model: ``condim`` 4 (tangential and torsional friction: a soft finger; 6 adds
+    rolling friction ``rolling_friction`` [m], 3 is a point contact), elliptic friction
+    cones with ``impratio``, ``noslip_iterations`` of MuJoCo's no-slip solver,
+    ``torsional_friction`` [m] (the plan's when it states one), ``solref`` (time constant
+    [s], damping ratio) of every contact, a step of ``timestep`` [s].
+
+    Controller (``mode``, see :data:`MODES`): a joint-space PD servo per joint, stiffness
+    ``kp`` [N m/rad] and damping ``kv`` [N m s/rad] (integrated implicitly), the plan's
+    joint rates as velocity feed-forward; every moving link weighs ``link_mass`` [kg] and
+    each joint has ``armature`` [kg m^2] (the finger models carry no inertias), gravity on
+    the links compensated.
+
+    Grip: the fingertips' references are moved ``squeeze`` [m] into the object along the
+    pad's normal, and each fingertip pushes with ``grip_force`` [N] along its normal as
+    torque feed-forward (``J^T f``); a plan with its own forces or joint torques uses
+    those instead of ``grip_force`` (``use_plan_forces``). The object weighs
+    ``object_mass`` [kg] unless the plan states its mass (None: the plan's or the
+    default); gravity is the plan's.
+
+    Before the plan's t = 0 the hand holds the initial grasp for ``settle`` [s]: the grip
+    ramps up with the object held in place during the first half, then the object is let
+    go. Errors and contact losses count from t = 0. ``record_every`` steps are recorded
+    in the report's time series.
+    """
+
+    mode: str = "servo"
+    timestep: float = 5e-4
+    condim: int = 4
+    impratio: float = 10.0
+    noslip_iterations: int = 3
+    torsional_friction: float | None = None
+    rolling_friction: float = 0.0
+    solref: tuple[float, float] = (0.004, 1.0)
+    kp: float = 200.0
+    kv: float = 2.0
+    link_mass: float = 0.02
+    armature: float = 1e-3
+    squeeze: float = 0.5e-3
+    grip_force: float = 1.0
+    use_plan_forces: bool = True
+    object_mass: float | None = None
+    settle: float = 0.2
+    record_every: int = 10
+    tolerances: Tolerances = Tolerances()
+
+    #: torsional friction [m] when neither the options nor the plan give one: the
+    #: torque about the normal a contact resists per newton of normal force
+    DEFAULT_TORSIONAL = 0.005
+
+    def check(self) -> None:
+        """ValueError naming the first setting out of range."""
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, not {self.mode!r}")
+        if not 1e-5 <= self.timestep <= 1e-2:
+            raise ValueError("timestep must be within [1e-5, 1e-2] s")
+        if self.condim not in (3, 4, 6):
+            raise ValueError("condim must be 3, 4 or 6")
+        for name in ("impratio", "kp"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive")
+        for name in ("kv", "squeeze", "grip_force", "settle", "link_mass", "armature",
+                     "rolling_friction"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0")
+        if self.noslip_iterations < 0 or self.record_every < 1:
+            raise ValueError("noslip_iterations >= 0 and record_every >= 1")
+        if self.solref[0] < 2 * self.timestep:
+            raise ValueError("solref's time constant must be at least two timesteps")
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["solref"] = list(self.solref)
+        return out
+
+    @staticmethod
+    def from_dict(raw: dict[str, Any]) -> SimOptions:
+        """Options from a dict (unknown keys: ValueError; ``tolerances`` a dict)."""
+        known = {f.name for f in fields(SimOptions)}
+        unknown = set(raw) - known
+        if unknown:
+            raise ValueError(f"unknown simulation options: {sorted(unknown)}")
+        values = dict(raw)
+        if isinstance(values.get("tolerances"), dict):
+            values["tolerances"] = Tolerances(**values["tolerances"])
+        if "solref" in values:
+            a, b = values["solref"]
+            values["solref"] = (float(a), float(b))
+        options = SimOptions(**values)
+        options.check()
+        return options

@@ -1,0 +1,311 @@
+"""Executing a plan in MuJoCo: :func:`simulate` builds the scene (:mod:`.scene`), runs
+the controller (:class:`~.options.SimOptions`) over the plan's horizon after a settling
+phase, and measures how closely the object followed the plan (:class:`~.report.SimReport`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from .options import SimOptions
+from .report import ContactReport, ErrorSummary, SimReport
+from .scene import mjcf
+from .spec import ExecutionPlan, FloatArray
+
+__all__ = ["Simulation", "hermite", "simulate", "slerp"]
+
+#: A contact whose normal force is at most this [N] is not touching.
+TOUCH_FORCE = 1e-6
+
+
+def _unique(t: FloatArray) -> np.ndarray:
+    """Indices of the samples kept for interpolation: of repeated times (a rate break
+    listed twice), the last (the outgoing side)."""
+    keep = np.ones(t.size, dtype=bool)
+    keep[:-1] = np.diff(t) > 0
+    return np.flatnonzero(keep)
+
+
+def hermite(t: FloatArray, y: FloatArray, dy: FloatArray, ts: FloatArray
+            ) -> tuple[FloatArray, FloatArray]:
+    """The cubic Hermite interpolant through (t, y, dy) and its derivative at ``ts``
+    (clamped to [t0, tN]); rows of y, dy are samples."""
+    keep = _unique(t)
+    t, y, dy = t[keep], y[keep], dy[keep]
+    ts = np.clip(ts, t[0], t[-1])
+    i = np.clip(np.searchsorted(t, ts, side="right") - 1, 0, t.size - 2)
+    h = (t[i + 1] - t[i])[:, None]
+    s = (ts - t[i])[:, None] / h
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, \
+        s**3 - s**2
+    value = h00 * y[i] + h10 * h * dy[i] + h01 * y[i + 1] + h11 * h * dy[i + 1]
+    d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, -6 * s**2 + 6 * s, \
+        3 * s**2 - 2 * s
+    rate = (d00 * y[i] + d01 * y[i + 1]) / h + d10 * dy[i] + d11 * dy[i + 1]
+    return value, rate
+
+
+def _linear(t: FloatArray, y: FloatArray, ts: FloatArray) -> FloatArray:
+    keep = _unique(t)
+    t, y = t[keep], y[keep]
+    return np.stack([np.interp(ts, t, y[:, j]) for j in range(y.shape[1])], axis=1)
+
+
+def slerp(t: FloatArray, q: FloatArray, ts: FloatArray) -> FloatArray:
+    """Unit quaternions (w, x, y, z) interpolated along the geodesic at ``ts``."""
+    keep = _unique(t)
+    t, q = t[keep], q[keep] / np.linalg.norm(q[keep], axis=1, keepdims=True)
+    ts = np.clip(ts, t[0], t[-1])
+    i = np.clip(np.searchsorted(t, ts, side="right") - 1, 0, t.size - 2)
+    s = ((ts - t[i]) / (t[i + 1] - t[i]))[:, None]
+    q0, q1 = q[i], q[i + 1]
+    dot = np.sum(q0 * q1, axis=1, keepdims=True)
+    q1 = np.where(dot < 0, -q1, q1)
+    dot = np.abs(dot)
+    theta = np.arccos(np.clip(dot, -1.0, 1.0))
+    small = theta < 1e-9
+    sin = np.where(small, 1.0, np.sin(theta))
+    a = np.where(small, 1 - s, np.sin((1 - s) * theta) / sin)
+    b = np.where(small, s, np.sin(s * theta) / sin)
+    out = a * q0 + b * q1
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def _angle_between(qa: FloatArray, qb: FloatArray) -> FloatArray:
+    dot = np.abs(np.sum(qa * qb, axis=1)) / (np.linalg.norm(qa, axis=1)
+                                              * np.linalg.norm(qb, axis=1))
+    return 2.0 * np.arccos(np.clip(dot, -1.0, 1.0))
+
+
+def _damped_pinv(J: FloatArray, damping: float = 1e-8) -> FloatArray:
+    return J.T @ np.linalg.inv(J @ J.T + damping * np.eye(J.shape[0]))
+
+
+@dataclass
+class _FingerIndex:
+    qpos: np.ndarray
+    dofs: np.ndarray
+    actuators: np.ndarray
+    tip_body: int
+    tip_site: int
+
+
+class Simulation:
+    """A plan's scene in MuJoCo, ready to run (:meth:`run`); ``model`` and ``data`` are
+    MuJoCo's, ``xml`` the scene's MJCF."""
+
+    def __init__(self, plan: ExecutionPlan, options: SimOptions | None = None) -> None:
+        plan.check()
+        self.plan, self.options = plan, options or SimOptions()
+        self.options.check()
+        self.xml = mjcf(plan, self.options)
+        self.model = mujoco.MjModel.from_xml_string(self.xml)
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self.object_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "object")
+        self.object_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "object")
+        joint = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "object")
+        self.object_qpos = int(m.jnt_qposadr[joint])
+        self.object_dof = int(m.jnt_dofadr[joint])
+        self.fingers: list[_FingerIndex] = []
+        for f in plan.fingers:
+            ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{f.name}/{j.name}")
+                   for j in f.joints]
+            self.fingers.append(_FingerIndex(
+                np.array([m.jnt_qposadr[i] for i in ids]),
+                np.array([m.jnt_dofadr[i] for i in ids]),
+                np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR,
+                                            f"{f.name}/{j.name}") for j in f.joints]),
+                mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"{f.name}/tip"),
+                mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"{f.name}/tip")))
+        # which planned contact each geom touching the object makes
+        self.contact_of_geom: dict[int, int] = {}
+        for k, c in enumerate(plan.contacts):
+            name = "palm" if c.body == "palm" else f"{c.finger}/pad"
+            gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, name)
+            if gid >= 0:
+                self.contact_of_geom[gid] = k
+
+    # -- the reference, the grip ----------------------------------------------------------
+    def _feedforward(self) -> tuple[list[FloatArray], list[FloatArray], list[str]]:
+        """At the plan's times, per finger: the squeeze's joint offset and the torque
+        feed-forward (the plan's torques or J^T of its contact force when it has them and
+        ``use_plan_forces``; else J^T of the grip force along the pad's normal); and notes
+        on which was used."""
+        plan, o, m = self.plan, self.options, self.model
+        d = mujoco.MjData(m)
+        n = plan.t.size
+        offsets = [np.zeros((n, f.nq)) for f in plan.fingers]
+        torques = [np.zeros((n, f.nq)) for f in plan.fingers]
+        notes: list[str] = []
+        point_of = {c.finger: c.point for c in plan.contacts if c.finger is not None}
+        jacp = np.zeros((3, m.nv))
+        for i in range(n):
+            for idx, ref in zip(self.fingers, plan.references, strict=True):
+                d.qpos[idx.qpos] = ref.q[i]
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            for k, (f, idx, ref) in enumerate(zip(plan.fingers, self.fingers,
+                                                  plan.references, strict=True)):
+                normal = d.site_xmat[idx.tip_site].reshape(3, 3)[:, 2].copy()
+                point = point_of.get(f.name)
+                p = d.site_xpos[idx.tip_site].copy() if point is None else point[i]
+                mujoco.mj_jac(m, d, jacp, None, p, idx.tip_body)
+                J = jacp[:, idx.dofs]
+                offsets[k][i] = _damped_pinv(J) @ (o.squeeze * normal)
+                if o.use_plan_forces and ref.joint_torques is not None:
+                    torques[k][i] = ref.joint_torques[i]
+                elif o.use_plan_forces and ref.contact_force is not None:
+                    torques[k][i] = J.T @ ref.contact_force[i]
+                else:
+                    torques[k][i] = J.T @ (o.grip_force * normal)
+        for f, ref in zip(plan.fingers, plan.references, strict=True):
+            if o.use_plan_forces and ref.joint_torques is not None:
+                notes.append(f"{f.name}: the plan's joint torques as feed-forward")
+            elif o.use_plan_forces and ref.contact_force is not None:
+                notes.append(f"{f.name}: J^T of the plan's contact force as feed-forward")
+            else:
+                notes.append(f"{f.name}: grip {o.grip_force:g} N along the pad's normal "
+                             f"(J^T f) and a squeeze of {o.squeeze * 1e3:g} mm")
+        return offsets, torques, notes
+
+    # -- the run --------------------------------------------------------------------------
+    def run(self) -> SimReport:
+        plan, o, m, d = self.plan, self.options, self.model, self.data
+        start = time.perf_counter()
+        dt = o.timestep
+        t0, T = float(plan.t[0]), plan.duration
+        n_settle = round(o.settle / dt)
+        n_plan = math.ceil(T / dt - 1e-9)
+        # the time of each step's start
+        ts: FloatArray = t0 + dt * np.arange(-n_settle, n_plan + 1, dtype=float)
+        plan_time = ts - t0
+        ramp = np.clip((plan_time + o.settle) / max(o.settle / 2, dt), 0.0, 1.0) \
+            if o.settle > 0 else np.ones_like(ts)
+        pin_object = plan_time < -o.settle / 2
+        offsets, torques, notes = self._feedforward()
+        q_ref, qd_ref, ctrl, tau = [], [], [], []
+        for ref, off, trq in zip(plan.references, offsets, torques, strict=True):
+            q, qd = hermite(plan.t, ref.q, ref.q_dot, ts)
+            qd[plan_time < 0] = 0.0
+            target = q + ramp[:, None] * _linear(plan.t, off, ts)
+            q_ref.append(target)
+            qd_ref.append(qd)
+            ctrl.append(target + (o.kv / o.kp) * qd)
+            tau.append(ramp[:, None] * _linear(plan.t, trq, ts))
+        pos_ref = _linear(plan.t, plan.object_position, ts)
+        quat_ref = slerp(plan.t, plan.object_wxyz, ts)
+        vel_ref = np.gradient(pos_ref, dt, axis=0) if ts.size > 1 else np.zeros_like(pos_ref)
+
+        mujoco.mj_resetData(m, d)
+        for idx, q in zip(self.fingers, q_ref, strict=True):
+            d.qpos[idx.qpos] = q[0]
+        oq, od = self.object_qpos, self.object_dof
+        d.qpos[oq:oq + 3] = pos_ref[0]
+        d.qpos[oq + 3:oq + 7] = quat_ref[0]
+        mujoco.mj_forward(m, d)
+
+        n_steps = ts.size - 1
+        nc = len(plan.contacts)
+        obj_pose = np.zeros((n_steps, 7))
+        normal_force = np.zeros((n_steps, nc))
+        slip_speed = np.zeros((n_steps, nc))
+        jac_a, jac_b = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+        f6 = np.zeros(6)
+        ctrl_rows = [np.ascontiguousarray(c) for c in ctrl]
+        replay = o.mode == "replay"
+        kinematic = o.mode in ("kinematic", "replay")
+        for k in range(n_steps):
+            for idx, c, trq, q, qd in zip(self.fingers, ctrl_rows, tau, q_ref, qd_ref,
+                                          strict=True):
+                d.ctrl[idx.actuators] = c[k]
+                d.qfrc_applied[idx.dofs] = trq[k]
+                if kinematic:
+                    d.qpos[idx.qpos] = q[k]
+                    d.qvel[idx.dofs] = qd[k]
+            if pin_object[k] or replay:
+                d.qpos[oq:oq + 3] = pos_ref[k]
+                d.qpos[oq + 3:oq + 7] = quat_ref[k]
+                d.qvel[od:od + 6] = 0.0
+                if replay:
+                    d.qvel[od:od + 3] = vel_ref[k]
+            if replay:
+                mujoco.mj_forward(m, d)
+                for idx, q in zip(self.fingers, q_ref, strict=True):
+                    d.qpos[idx.qpos] = q[k + 1]
+                d.qpos[oq:oq + 3] = pos_ref[k + 1]
+                d.qpos[oq + 3:oq + 7] = quat_ref[k + 1]
+            else:
+                mujoco.mj_step(m, d)
+            obj_pose[k] = d.qpos[oq:oq + 7]
+            # the contacts of the step (found at its start; velocities at its end, the
+            # ones the step moved the bodies with)
+            for i in range(d.ncon):
+                con = d.contact[i]
+                g1, g2 = int(con.geom1), int(con.geom2)
+                if g1 == self.object_geom:
+                    other = g2
+                elif g2 == self.object_geom:
+                    other = g1
+                else:
+                    continue
+                j = self.contact_of_geom.get(other)
+                if j is None:
+                    continue
+                mujoco.mj_contactForce(m, d, i, f6)
+                if f6[0] <= TOUCH_FORCE:
+                    continue
+                normal_force[k, j] += f6[0]
+                p = con.pos
+                mujoco.mj_jac(m, d, jac_a, None, p, self.object_body)
+                v = jac_a @ d.qvel
+                body = int(m.geom_bodyid[other])
+                if body > 0:
+                    mujoco.mj_jac(m, d, jac_b, None, p, body)
+                    v = v - jac_b @ d.qvel
+                nrm = con.frame[:3]
+                vt = v - float(nrm @ v) * nrm
+                slip_speed[k, j] = max(slip_speed[k, j], float(np.linalg.norm(vt)))
+        wall = time.perf_counter() - start
+        # errors at the end of every step, against the plan at that time
+        t_end = plan_time[1:]
+        pos_err = np.linalg.norm(obj_pose[:, :3] - pos_ref[1:], axis=1)
+        ang_err = _angle_between(obj_pose[:, 3:], quat_ref[1:])
+        during = t_end >= 0
+        contacts = []
+        for j, spec in enumerate(plan.contacts):
+            lost = ~(normal_force[during, j] > TOUCH_FORCE)
+            events = int(np.sum(lost[1:] & ~lost[:-1]) + (1 if lost.size and lost[0] else 0))
+            first = float(t_end[during][np.argmax(lost)]) if lost.any() else None
+            f = normal_force[during, j]
+            contacts.append(ContactReport(
+                spec.name, spec.body, lost_time=float(np.sum(lost) * dt), loss_events=events,
+                first_loss_at=first,
+                slip_distance=float(np.sum(slip_speed[during, j]) * dt),
+                max_slip_speed=float(np.max(slip_speed[during, j], initial=0.0)),
+                normal_force_min=float(np.min(f, initial=math.inf)),
+                normal_force_mean=float(np.mean(f)) if f.size else 0.0,
+                normal_force_max=float(np.max(f, initial=0.0))))
+        rec = np.arange(0, n_steps, o.record_every)
+        if rec[-1] != n_steps - 1:
+            rec = np.append(rec, n_steps - 1)
+        rec = rec[t_end[rec] >= -o.settle]
+        report = SimReport.assess(
+            mode=o.mode, options=o, contacts=contacts,
+            position=ErrorSummary.of(pos_err[during], t_end[during]),
+            angle=ErrorSummary.of(ang_err[during], t_end[during]),
+            series_t=t_end[rec], series_position=pos_err[rec], series_angle=ang_err[rec],
+            series_force=normal_force[rec].T, wall_time=wall, steps=n_steps,
+            duration=T, notes=[*plan.notes, *notes],
+            mujoco_version=mujoco.__version__)
+        return report
+
+
+def simulate(plan: ExecutionPlan, options: SimOptions | None = None) -> SimReport:
+    """Execute ``plan`` in MuJoCo with ``options`` (default :class:`SimOptions`)."""
+    return Simulation(plan, options).run()
