@@ -1,5 +1,6 @@
 """Command line: ``dexroll serve``, ``dexroll plan request.json``, ``dexroll demo [folder]``,
-``dexroll bench SUITE`` (docs/benchmarks.md), ``dexroll view RESULT.json`` (docs/viewer.md).
+``dexroll bench SUITE`` (docs/benchmarks.md), ``dexroll view RESULT.json`` (docs/viewer.md),
+``dexroll simulate RESULT.json`` (the plan executed in MuJoCo: docs/simulation.md).
 
 A request file is any planner's request (its ``planner`` field: ``ball_on_palm``, the
 default, ``one_finger`` or ``manipulation``), the same JSON as ``POST /v1/plans`` takes.
@@ -23,6 +24,7 @@ from pydantic import ValidationError
 from dexroll_client.models import AnyPlanResult, PlanStatus
 
 from .bench import command as bench_command
+from .execution import command as simulate_command
 from .planners import (
     REQUEST,
     RESULT,
@@ -212,6 +214,11 @@ def main(argv: list[str] | None = None) -> int:
                                     "HTML file (docs/viewer.md)")
     view_command.add_arguments(w)
     w.set_defaults(func=view_command.main)
+    s = sub.add_parser("simulate", help="execute a plan in MuJoCo: a JSON report of how "
+                                        "closely the object followed it and a plot "
+                                        "(docs/simulation.md)")
+    simulate_command.add_arguments(s)
+    s.set_defaults(func=simulate_command.main)
     args = parser.parse_args(argv)
     return int(args.func(args))
 

@@ -1,0 +1,126 @@
+"""``dexroll simulate RESULT.json``: execute a plan in MuJoCo, write a JSON report and a
+plot of the object's errors over time (docs/simulation.md).
+
+RESULT.json is a result as ``dexroll plan`` writes it, or a job as ``GET /v1/plans/{id}``
+answers it. ``--request`` names the plan's request: its object, fingers and friction are
+then used; without it they are inferred from the result as the viewer does (built-in
+fingers and hands matched by their pad poses, mu from the plan's friction cone).
+
+Exit codes: 0 the execution passed its tolerances, 1 it failed them, 2 the files cannot
+be read, hold no plan a hand executes, or an option is out of range.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+__all__ = ["add_arguments", "main", "options_of"]
+
+EXIT_PASSED, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("result", help="a result file (dexroll plan) or a job's JSON "
+                                       "(GET /v1/plans/{id})")
+    parser.add_argument("--request", metavar="REQUEST.json",
+                        help="the plan's request: its own object, fingers and friction "
+                             "(default: inferred from the result)")
+    parser.add_argument("-o", "--output",
+                        help="the JSON report (default: ./<result>.sim.json)")
+    parser.add_argument("--plot", help="the errors over time as a PNG (default: "
+                                       "./<result>.sim.png; 'none': no plot)")
+    parser.add_argument("--mode", choices=("servo", "kinematic", "replay"),
+                        help="servo (default): the joints follow the plan through their "
+                             "servos; kinematic: the joints are set to the plan; replay: "
+                             "the object too (nothing simulated)")
+    parser.add_argument("--squeeze", type=float, metavar="MM",
+                        help="how far the fingertips' references go into the object "
+                             "[mm] (default 0.5)")
+    parser.add_argument("--grip-force", type=float, metavar="N",
+                        help="each fingertip's push along its normal as torque "
+                             "feed-forward [N] (default 1)")
+    parser.add_argument("--kp", type=float, help="servo stiffness [N m/rad] (default 200)")
+    parser.add_argument("--kv", type=float, help="servo damping [N m s/rad] (default 2)")
+    parser.add_argument("--mass", type=float, metavar="KG",
+                        help="the object's mass [kg] (default: the plan's, else 0.05)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="any other option of sim.SimOptions (JSON value), e.g. "
+                             "--set condim=6 --set timestep=0.001")
+
+
+def options_of(args: argparse.Namespace) -> dict[str, Any]:
+    """The simulator's options from the command line (ValueError for a bad --set)."""
+    out: dict[str, Any] = {}
+    for item in args.set:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set {item!r}: expected NAME=VALUE")
+        try:
+            out[name.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            out[name.strip()] = value
+    if args.mode:
+        out["mode"] = args.mode
+    if args.squeeze is not None:
+        out["squeeze"] = args.squeeze * 1e-3
+    if args.grip_force is not None:
+        out["grip_force"] = args.grip_force
+    if args.kp is not None:
+        out["kp"] = args.kp
+    if args.kv is not None:
+        out["kv"] = args.kv
+    if args.mass is not None:
+        out["object_mass"] = args.mass
+    return out
+
+
+def main(args: argparse.Namespace) -> int:
+    try:
+        from sim import plot
+    except ImportError as exc:  # mujoco: the sim extra
+        print(f"simulation needs MuJoCo: pip install 'dexroll[sim]' ({exc})", file=sys.stderr)
+        return EXIT_INVALID
+
+    from ..planners import REQUEST, ProblemError, validation_errors
+    from ..view import read_result
+    from . import NotExecutableError, simulate_result
+
+    path = Path(args.result)
+    try:
+        result, _ = read_result(path)
+        request = None
+        if args.request:
+            raw = json.loads(Path(args.request).read_text(encoding="utf-8"))
+            request = REQUEST.validate_python(raw)
+        report = simulate_result(result, request, options_of(args))
+    except ValidationError as exc:
+        reasons = "; ".join(f"{f}: {r}" for f, r in validation_errors(exc)[:5])
+        print(f"{args.request} is not a valid request: {reasons}", file=sys.stderr)
+        return EXIT_INVALID
+    except ProblemError as exc:
+        print(f"the request's models cannot be loaded: {exc.errors}", file=sys.stderr)
+        return EXIT_INVALID
+    except (OSError, ValueError, NotExecutableError) as exc:
+        print(str(exc), file=sys.stderr)
+        return EXIT_INVALID
+    stem = path.name.removesuffix(".json")
+    out = Path(args.output) if args.output else Path(f"{stem}.sim.json")
+    data = report.to_dict()
+    out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    print(report.summary())
+    print(f"report       {out}")
+    if (args.plot or "").lower() != "none":
+        figure = Path(args.plot) if args.plot else Path(f"{stem}.sim.png")
+        try:
+            plot(data, figure, stem)
+            print(f"plot         {figure}")
+        except ImportError:
+            print("plot         not drawn: matplotlib is missing (pip install "
+                  "'dexroll[figures]')", file=sys.stderr)
+    return EXIT_PASSED if report.passed else EXIT_FAILED
