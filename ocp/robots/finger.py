@@ -189,6 +189,16 @@ class FingerModel:
     chain: tuple[ChainJoint, ...] = field(repr=False)
     tip_rotation: FloatArray = field(repr=False)
     tip_translation: FloatArray = field(repr=False)
+    #: The fingertip surface in the tip frame (:class:`~ocp.geometry.tips.TipSurface`);
+    #: None: the flat square pad of :attr:`pad_half_size` (the tip frame the pad's).
+    tip: Any = None
+
+    @property
+    def tip_surface(self) -> Any:
+        """The fingertip surface (:class:`~ocp.geometry.tips.TipSurface`) in the tip frame."""
+        from ocp.geometry.tips import pad_tip
+
+        return self.tip if self.tip is not None else pad_tip(self.pad_half_size)
 
     @property
     def nq(self) -> int:
@@ -388,6 +398,7 @@ def load_finger(
     base_rotation: ArrayLike | None = None,
     base_position: ArrayLike | None = None,
     pad_half_size: float | None = None,
+    tip: Any = None,
 ) -> FingerModel:
     """Load a finger from a URDF (``None``: the built-in K3S-like finger).
 
@@ -399,7 +410,9 @@ def load_finger(
     ``base_rotation`` (3x3) and ``base_position`` [m] mount the URDF's root in the palm
     frame; when None they are the built-in finger's :data:`DEFAULT_BASE_ROTATION`/
     :data:`DEFAULT_BASE_POSITION` for the built-in URDF and the identity/origin for a user
-    URDF. ``pad_half_size`` [m] defaults to :data:`PAD_HALF_SIZE`.
+    URDF. ``pad_half_size`` [m] defaults to :data:`PAD_HALF_SIZE`. ``tip`` is the
+    fingertip surface in the tip frame (:class:`~ocp.geometry.tips.TipSurface`; None: the
+    flat pad of ``pad_half_size``).
 
     Raises ValueError for an unknown tip frame, a finger (the tip's branch) that is not a
     serial chain, a tip frame not on its last joint, or joints other than revolute and
@@ -435,6 +448,11 @@ def load_finger(
         raise ValueError("a joint's lower limit exceeds its upper limit")
     vel = getattr(model, "upperVelocityLimit", None)
     velocity = np.asarray(model.velocityLimit if vel is None else vel, dtype=float)
+    tip_surface = tip
+    if tip_surface is not None:
+        bad = tip_surface.errors("tip")
+        if bad:
+            raise ValueError("; ".join(f"{f}: {r}" for f, r in bad))
     tip = model.frames[tip_id].placement
     return FingerModel(
         model=model,
@@ -452,6 +470,7 @@ def load_finger(
         chain=chain,
         tip_rotation=_readonly(tip.rotation),
         tip_translation=_readonly(tip.translation),
+        tip=tip_surface,
     )
 
 

@@ -135,7 +135,7 @@ class GraspStructure:
 
     def fingerprint(self, m: GraspModel) -> str:
         """The structure as a string that another process computes alike: the fingers by
-        their models (URDF, tip frame, mount), not by identity."""
+        their models (URDF, tip frame, mount, fingertip surface), not by identity."""
         import hashlib
 
         parts = [repr((self.shape, self.palm, self.segments, self.goal_mask, self.via_masks,
@@ -143,7 +143,8 @@ class GraspStructure:
         for f in self.fingers:
             parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
                       repr(np.asarray(f.base_rotation).round(12).tolist()),
-                      repr(np.asarray(f.base_position).round(12).tolist())]
+                      repr(np.asarray(f.base_position).round(12).tolist()),
+                      repr(f.tip_surface)]  # the fingertip surface (issue 14)
         return hashlib.sha256("|".join(parts).encode()).hexdigest()[:32]
 
 

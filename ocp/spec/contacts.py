@@ -390,12 +390,16 @@ class FreeObject(ObjectBlock):
 
 
 class FingertipContact(Contact):
-    """A flat pad (the z = 0 plane of a finger's tip frame, +z its outward normal) rolling
-    on the object; ``index`` is the finger's place in the problem's ``fingers``."""
+    """A fingertip surface (:class:`~ocp.geometry.tips.TipSurface`: the flat pad, a sphere,
+    a spheroid, a capsule's cap) fixed in a finger's tip frame, rolling on the object;
+    ``index`` is the finger's place in the problem's ``fingers``. Its coordinates eta_i =
+    (a_i, b_i, u_i, v_i, psi_i): the point on the tip (the pad's x, y [m]; a round tip's
+    u, v [rad] in the tip's chart), the point on the object, the contact angle. The pair
+    is (object, tip): Montana's equations with both curvatures (a flat pad's is zero)."""
 
     body = "finger"
-    length_columns = (0, 1)
-    angle_columns = (2, 3, 4)
+    length_columns: tuple[int, ...] = (0, 1)
+    angle_columns: tuple[int, ...] = (2, 3, 4)
     periodic_columns = (3, 4)
 
     def __init__(self, surface: Surface, finger: Any, index: int) -> None:
@@ -406,7 +410,21 @@ class FingertipContact(Contact):
         self.nx, self.nu = 5 + nq, 2 + nq
         self.joint_columns = tuple(range(5, 5 + nq))
         self.effort_groups = ((), (0, 1), tuple(range(2, 2 + nq)))
-        self.pair = ContactPair(surface, Plane)  # A = object (this contact's patch), B = pad
+        self.tip = finger.tip_surface
+        if self.tip.round:
+            self.length_columns, self.angle_columns = (), (0, 1, 2, 3, 4)
+        # A = object (this contact's patch), B = the fingertip surface
+        self.pair = ContactPair(surface, self.tip.surface)
+        self._rolls: dict[int, Any] = {}
+
+    def tip_params(self) -> Any:
+        """The tip surface's parameters as CasADi constants (none for the pad's plane)."""
+        prm = self.tip.surface_params
+        return ca.DM(prm) if prm else ca.SX(0, 1)
+
+    def _placed(self) -> bool:
+        """Whether the tip frame differs from the finger's tip (link) frame."""
+        return not (np.allclose(self.tip.R, np.eye(3)) and np.allclose(self.tip.p, 0.0))
 
     @property
     def eta_cols(self) -> slice:
@@ -436,33 +454,46 @@ class FingertipContact(Contact):
         return self.spec(problem).name or self.name
 
     def x_scale(self, L: Any) -> list[Any]:
-        return [L, L, 1, 1, 1] + [1] * int(self.finger.nq)
+        tip = 1 if self.tip.round else L
+        return [tip, tip, 1, 1, 1] + [1] * int(self.finger.nq)
 
     def u_scale(self, L: Any, T: Any) -> list[Any]:
         return [1 / T, 1 / T] + [1 / T] * int(self.finger.nq)
 
     @staticmethod
-    def pair_rates(surface: Surface, e: Any, w: Any, shape: Any) -> Any:
-        """The rolling equations in the pair's order (u, v, x, y, psi), driven by the
-        object point's rate w: the initial guess's pad roll."""
-        return ContactPair(surface, Plane).rates_driven_by_a(e, w, shape, ca.SX(0, 1))
+    def pair_rates(surface: Surface, e: Any, w: Any, shape: Any, tip: Any = None) -> Any:
+        """The rolling equations in the pair's order (u, v, a, b, psi), driven by the
+        object point's rate w: the initial guess's roll of the tip point (``tip``: the
+        :class:`~ocp.geometry.tips.TipSurface`, None: the flat pad)."""
+        if tip is None or not tip.surface_params:
+            return ContactPair(surface, Plane if tip is None else tip.surface
+                               ).rates_driven_by_a(e, w, shape, ca.SX(0, 1))
+        return ContactPair(surface, tip.surface).rates_driven_by_a(
+            e, w, shape, ca.DM(tip.surface_params))
 
     @staticmethod
     def _pair_order(eta: Any) -> Any:
-        return ca.vertcat(eta[2:4], eta[0:2], eta[4])  # the pair's order (u, v, x, y, psi)
+        return ca.vertcat(eta[2:4], eta[0:2], eta[4])  # the pair's order (u, v, a, b, psi)
 
     def rates(self, g: SymbolicGrasp, x: Any, u: Any, chart: Any) -> Any:
-        ed = self.pair.rates_driven_by_a(self._pair_order(x[0:5]), u[0:2], g.shape, g.none)
+        ed = self.pair.rates_driven_by_a(self._pair_order(x[0:5]), u[0:2], g.shape,
+                                         self.tip_params())
         return ca.vertcat(ed[2:4], ed[0:2], ed[4], u[2:])
 
     def pad_pose(self, g: SymbolicGrasp, x: Any, chart: Any) -> tuple[Any, Any]:
-        """The pad's pose in the palm frame from the object's pose and the contact
-        coordinates (eq. 6's right-hand side)."""
-        R_of, p_of = self.pair.pose(self._pair_order(x[0:5]), g.shape, g.none, chart, g.eye)
+        """The tip (link) frame's pose in the palm frame from the object's pose and the
+        contact coordinates (eq. 6's right-hand side): the tip surface's frame from the
+        contact, less the surface's placement in the tip frame."""
+        R_of, p_of = self.pair.pose(self._pair_order(x[0:5]), g.shape, self.tip_params(),
+                                    chart, g.eye)
+        if self._placed():
+            R_of = R_of @ ca.DM(self.tip.R).T
+            p_of = p_of - R_of @ ca.DM(self.tip.p)
         return g.R_po @ R_of, g.p_po + g.R_po @ p_of
 
     def closure(self, g: SymbolicGrasp, x: Any, chart: Any) -> Any:
-        """Eq. 6: the pad's pose from the joints (FK) equals its pose from the contact."""
+        """Eq. 6: the tip frame's pose from the joints (FK) equals its pose from the
+        contact."""
         R_pf, p_pf = self.pad_pose(g, x, chart)
         R_fk, p_fk = self.finger.fk(x[5:])
         return ca.vertcat(p_pf - p_fk, vee_skew(R_fk.T @ R_pf))
@@ -491,14 +522,34 @@ class FingertipContact(Contact):
                                                           list[float]]:
         u_lim = math.pi / 2 - problem.pole_margin
         inf = math.inf
-        pad = float(self.finger.pad_half_size) - problem.pad_margin
+        (a_lo, a_hi), (b_lo, b_hi) = self.tip.bounds(problem.pad_margin, problem.pole_margin)
         # joint limits backed off at the collocation points, so that the motion between
         # them (checked by the certificate) stays inside the limits themselves
         lower, upper = np.asarray(self.finger.lower), np.asarray(self.finger.upper)
         back = np.minimum(JOINT_LIMIT_MARGIN, 0.01 * (upper - lower))
-        return ([-pad, -pad, -u_lim, -inf, -inf, *(lower + back)],
-                [pad, pad, u_lim, inf, inf, *(upper - back)],
+        return ([a_lo, b_lo, -u_lim, -inf, -inf, *(lower + back)],
+                [a_hi, b_hi, u_lim, inf, inf, *(upper - back)],
                 [100.0, 100.0, *np.asarray(self.finger.velocity_limit)])
+
+    def roll(self, steps: int) -> Any:
+        """``steps`` RK4 steps of the tip point and the contact angle (a, b, psi) while the
+        object point goes along given points and rates: (c0 (3), alpha (2 x k), w0 (2 x k),
+        w1 (2 x k), h (1 x k), shape (. x k)) -> c (3 x k); the initial guess's roll."""
+        if steps not in self._rolls:
+            from ocp.transcription.collocation import rk4_step
+
+            np_ = self.surface.n_params
+            shape_p = ca.SX.sym("shape", np_)
+            e_, w_ = ca.SX.sym("e", 5), ca.SX.sym("w", 2)
+            rates = ca.Function("tip_rates", [e_, w_, shape_p], [
+                self.pair_rates(self.surface, e_, w_, shape_p, self.tip)])
+            c_, a_ = ca.SX.sym("c", 3), ca.SX.sym("a", 2)
+            w0_, w1_, h_ = ca.SX.sym("w0", 2), ca.SX.sym("w1", 2), ca.SX.sym("h")
+            e1 = rk4_step(lambda e, w: rates(e, w, shape_p), ca.vertcat(a_, c_),
+                          w0_, (w0_ + w1_) / 2, w1_, h_)
+            step = ca.Function("roll_step", [c_, a_, w0_, w1_, h_, shape_p], [e1[2:5]])
+            self._rolls[steps] = step.mapaccum("roll", steps)
+        return self._rolls[steps]
 
     def guess_contact(self, problem: ManipulationProblem, pose: PoseOfTime, ts: FloatArray,
                       offset: FloatArray, chart: FloatArray, shape: FloatArray,
@@ -506,8 +557,11 @@ class FingertipContact(Contact):
         """The initial guess's contact coordinates and inputs at times ts: the contact point
         kept where it started relative to the object's centre (``offset``, palm frame) while
         the object moves by ``pose``; its object point by the inverse chart, its rate by
-        central differences, the pad point and angle rolled along (``roll``: the grasp
-        model's RK4 of the rolling equations)."""
+        central differences, the tip point and angle rolled along (RK4 of the rolling
+        equations: ``roll``, the grasp model's for a flat pad, else this contact's own
+        :meth:`roll` with its tip's curvature)."""
+        if self.tip.round:
+            roll = self.roll(len(ts) - 1)
         dt = 1e-4 * problem.duration
 
         def ball_point(t: FloatArray) -> FloatArray:
@@ -559,22 +613,45 @@ class FingertipContact(Contact):
         # trace would be noise below ~1e-8 rad): |R1 - R2|_F = 2 sqrt 2 sin(angle / 2)
         diff = np.linalg.norm((R_pin - c.R_pf[:, i]).reshape(len(R_pin), 9), axis=1)
         angle = 2 * np.arcsin(np.minimum(1.0, diff / (2 * math.sqrt(2))))
-        # the pad's plane is tangent to the object: the object's centre lies its support
-        # height (along the pad's normal) above the pad's plane
-        pad_n = R_pin[:, :, 2]
-        h = self.surface.support_heights(np.einsum("kji,kj->ki", c.R_po, -pad_n), c.shape)
-        gap = np.einsum("ki,ki->k", pad_n, c.p_po - p_pin) - h
+        # the tip surface's tangent plane at its contact point (Pinocchio's pose of the tip
+        # frame, the tip's chart at the returned coordinates) is tangent to the object: the
+        # object's centre lies its support height (along the tip's normal) above it; for
+        # the flat pad that plane is the pad's
+        tip, n_s = self.tip, len(R_pin)
+        ab = c.states[:, self.eta_cols][:, 0:2]
+        geo = tip.surface.geometry.map(n_s)(ab.T, np.tile(np.asarray(
+            tip.surface_params, dtype=float).reshape(-1, 1), (1, n_s)))
+        f_t = np.asarray(geo[0]).T  # (n, 3) the tip point, tip surface frame
+        z_t = np.asarray(geo[1]).reshape(3, n_s, 3)[:, :, 2].T  # (n, 3) its normal
+        R_lt = R_pin @ tip.R  # the tip surface's frame in the palm
+        tip_pt = p_pin + np.einsum("kij,kj->ki", R_lt, f_t) + R_pin @ tip.p
+        tip_n = np.einsum("kij,kj->ki", R_lt, z_t)
+        h = self.surface.support_heights(np.einsum("kji,kj->ki", c.R_po, -tip_n), c.shape)
+        gap = np.einsum("ki,ki->k", tip_n, c.p_po - tip_pt) - h
         D = CheckKind.DISCRETISATION
-        pad_point = np.einsum("kji,kj->ki", R_pin, c.p_po + np.einsum(
-            "kij,kj->ki", c.R_po, c.laws[f"object_point_{i}"]) - p_pin)
+        obj_pt = c.p_po + np.einsum("kij,kj->ki", c.R_po, c.laws[f"object_point_{i}"])
+        # the object's contact point in the tip surface's frame
+        on_tip = np.einsum("kji,kj->ki", R_lt, obj_pt - p_pin - R_pin @ tip.p)
+        if tip.kind == "pad":
+            excursion = np.max(np.abs(on_tip[:, 0:2]), axis=1)
+            excursion_name, limit = f"max_pad_excursion_{name}", float(f.pad_half_size)
+        elif tip.kind == "capsule":
+            # how far (as an angle) the contact lies from the cap's end (the tip frame's
+            # -y): the cap is the hemisphere within pi/2 of it, the cylinder beyond
+            d = on_tip / np.maximum(np.linalg.norm(on_tip, axis=1, keepdims=True), 1e-15)
+            excursion = np.arccos(np.clip(-d[:, 1], -1.0, 1.0))
+            excursion_name, limit = f"max_cap_angle_{name}", math.pi / 2
+        else:  # a whole sphere or spheroid: the tip's pole bound, a property of its chart
+            uv = tip.surface.inverse(on_tip, np.asarray(tip.surface_params, dtype=float))
+            excursion = np.abs(uv[:, 0])
+            excursion_name, limit = f"max_tip_latitude_{name}", math.pi / 2
         return [
             c.check(f"max_slip_speed_{name}", np.linalg.norm(c.laws[f"slip_{i}"], axis=1),
                     pol.slip * c.speed, D),
             c.check(f"max_spin_rate_{name}", np.abs(c.laws[f"spin_{i}"]), pol.spin * c.rate,
                     D),
             c.check(f"max_gap_error_{name}", np.abs(gap), pol.gap, D),
-            c.check(f"max_pad_excursion_{name}", np.max(np.abs(pad_point[:, 0:2]), axis=1),
-                    float(f.pad_half_size), CheckKind.LIMITS),
+            c.check(excursion_name, excursion, limit, CheckKind.LIMITS),
             c.check(f"max_joint_limit_violation_{name}", np.maximum(np.max(np.maximum(
                 q_i - f.upper, f.lower - q_i), axis=1), 0.0), pol.joint_limit, D),
             c.check("max_closure_position_error", np.linalg.norm(p_pin - c.p_pf[:, i],

@@ -86,13 +86,27 @@ def fingertip_errors(name: str, tip: Fingertip, obj: ObjectSpec, pad_margin: flo
     if len(tip.initial) != 5 or not all(map(math.isfinite, tip.initial)):
         return [*errs, (f"{name}.initial", "must be 5 finite numbers "
                                            "(x_f, y_f, u_f, v_f, psi_f)")]
-    half = float(tip.finger.pad_half_size) - pad_margin
-    for k, coord in ((0, "x_f"), (1, "y_f")):
-        if abs(tip.initial[k]) > half:
-            errs.append((f"{name}.initial.{coord}",
-                         f"|{coord}| = {abs(tip.initial[k]):.4g} m leaves the pad "
-                         f"(half size {tip.finger.pad_half_size} m less {pad_margin} m "
-                         f"margin) by {abs(tip.initial[k]) - half:.4g} m"))
+    surface = tip.finger.tip_surface
+    if surface.kind == "pad":
+        half = float(tip.finger.pad_half_size) - pad_margin
+        for k, coord in ((0, "x_f"), (1, "y_f")):
+            if abs(tip.initial[k]) > half:
+                errs.append((f"{name}.initial.{coord}",
+                             f"|{coord}| = {abs(tip.initial[k]):.4g} m leaves the pad "
+                             f"(half size {tip.finger.pad_half_size} m less {pad_margin} m "
+                             f"margin) by {abs(tip.initial[k]) - half:.4g} m"))
+    else:
+        bounds = surface.bounds(pad_margin, pole_margin)
+        why = {"capsule": "the capsule's cap (0 <= v <= pi in the tip's chart, less the "
+                          "margin; its cylindrical side is not a contact surface here)",
+               "sphere": "the tip chart's pole limit", "spheroid": "the tip chart's pole limit"}
+        for k, coord in ((0, "x_f"), (1, "y_f")):
+            lo, hi = bounds[k]
+            if not lo <= tip.initial[k] <= hi:
+                errs.append((f"{name}.initial.{coord}",
+                             f"{coord} = {tip.initial[k]:.4f} rad (the {surface.kind} tip's "
+                             f"chart coordinate) is outside [{lo:.4f}, {hi:.4f}]: "
+                             f"{why[surface.kind]}"))
     u_lim = math.pi / 2 - pole_margin
     if abs(tip.initial[2]) > u_lim:
         errs.append((f"{name}.initial.u_f",
