@@ -6,6 +6,7 @@ GET  /v1/plans/{id}      a job (with its plan once finished)
 GET  /v1/plans           jobs, newest first, paginated (?limit=&offset=)
 DELETE /v1/plans/{id}    cancel a queued or running job
 GET  /v1/models          built-in objects, fingers (with URDFs), hands and planners
+POST /v1/plans/{id}/simulation  execute a finished plan in MuJoCo; GET: the stored report
 GET  /healthz, /readyz   liveness; readiness (store reachable, a worker ready)
 
 Every error is an ``ErrorBody`` (no traceback ever leaves the service); an invalid request
@@ -32,7 +33,7 @@ from ..models_check import ModelChecker
 from ..settings import Settings
 from .access import Access
 from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
-from .routes import health, models, plans, view
+from .routes import health, models, plans, simulation, view
 
 __all__ = ["BodyLimit", "create_app"]
 
@@ -111,7 +112,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   description=__doc__, responses=ERROR_RESPONSES)
     app.state.settings, app.state.notifier = settings, Notifier()
     add_error_handlers(app)
-    for routes in (plans, models, health, view):
+    for routes in (plans, models, health, view, simulation):
         app.include_router(routes.router)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     # outermost: a request from a host not served, or without a key, goes no further

@@ -45,6 +45,11 @@ CREATE TABLE IF NOT EXISTS jobs (
     finished_at REAL
 );
 CREATE INDEX IF NOT EXISTS jobs_by_state ON jobs(state, created_at);
+CREATE TABLE IF NOT EXISTS simulations (
+    job_id TEXT PRIMARY KEY,
+    report TEXT NOT NULL,
+    created_at REAL NOT NULL
+);
 """
 #: Columns added since the first schema (an older store file gains them when opened).
 _MIGRATIONS = {"owner": "ALTER TABLE jobs ADD COLUMN owner TEXT NOT NULL DEFAULT ''",
@@ -240,7 +245,22 @@ class Store:
                     "DELETE FROM jobs WHERE id IN (SELECT id FROM jobs WHERE state NOT IN "
                     "('queued', 'running') ORDER BY finished_at, rowid LIMIT ?)",
                     (total - max_jobs,)).rowcount
+            if deleted:  # a plan's simulation report goes with it
+                db.execute("DELETE FROM simulations WHERE job_id NOT IN (SELECT id FROM jobs)")
         return int(deleted)
+
+    # -- simulation reports (docs/simulation.md) -------------------------------------------
+    def put_simulation(self, job_id: str, report: str) -> None:
+        """Store (or replace) a job's latest simulation report (JSON text)."""
+        with self._tx() as db:
+            db.execute("INSERT OR REPLACE INTO simulations (job_id, report, created_at) "
+                       "VALUES (?, ?, ?)", (job_id, report, time.time()))
+
+    def get_simulation(self, job_id: str) -> str | None:
+        """A job's latest simulation report (JSON text; None: never simulated)."""
+        row = self._conn().execute("SELECT report FROM simulations WHERE job_id = ?",
+                                   (job_id,)).fetchone()
+        return None if row is None else str(row["report"])
 
     def count(self, state: str) -> int:
         return int(self._conn().execute("SELECT COUNT(*) FROM jobs WHERE state = ?",

@@ -86,6 +86,7 @@ from dexroll_client.models import (
     PlanResult,
     WarmStartModel,
 )
+from dexroll_client.simulation import SimulationOptions, SimulationReport
 
 __all__ = ["DEFAULT_TIMEOUT", "MAX_WAIT", "RETRIES", "AsyncDexrollClient", "DexrollClient",
            "RequestLike", "WarmStartLike", "warm_start_model"]
@@ -98,6 +99,8 @@ DEFAULT_TIMEOUT = 30.0
 _WAIT_MARGIN = 10.0
 #: Read time granted to a cancel: the service waits (up to 10 s) for the worker to stop [s].
 _CANCEL_READ_TIMEOUT = 20.0
+#: A plan's execution in MuJoCo runs while the request waits [s].
+_SIMULATE_READ_TIMEOUT = 300.0
 
 #: Retries of a request that got no response and is safe to send again (see the module),
 #: and the first backoff [s] (doubled each retry; the pause is drawn in [0, backoff]).
@@ -210,6 +213,19 @@ def _submit_call(request: PlanRequest, wait: float | None,
         body.pop("warm_start", None)
     return _Call("POST", "/v1/plans", params=params, headers=headers, json=body,
                  min_read_timeout=min_read)
+
+
+def _simulate_call(job_id: str, options: SimulationOptions | Mapping[str, Any] | None,
+                   fields: Mapping[str, Any]) -> _Call:
+    if options is None:
+        model = SimulationOptions.model_validate(dict(fields))
+    elif isinstance(options, SimulationOptions):
+        model = options.model_copy(update=dict(fields)) if fields else options
+    else:
+        model = SimulationOptions.model_validate({**options, **fields})
+    return _Call("POST", f"{_job_path(job_id)}/simulation",
+                 json=model.model_dump(mode="json", exclude_none=True),
+                 min_read_timeout=_SIMULATE_READ_TIMEOUT)
 
 
 def _cancel_call(job_id: str) -> _Call:
@@ -477,6 +493,21 @@ class DexrollClient:
         """The planners, objects and fingers the service knows."""
         return self._run(_one(_Call("GET", "/v1/models"), ModelCatalog))
 
+    def simulate(self, job_id: str,
+                 options: SimulationOptions | Mapping[str, Any] | None = None,
+                 **fields: Any) -> SimulationReport:
+        """Execute a finished job's plan in MuJoCo (``POST /v1/plans/{id}/simulation``,
+        docs/simulation.md): the report, also stored as the job's latest. ``options`` (or
+        keyword fields, e.g. ``squeeze=0.0005, mode="kinematic"``): a
+        :class:`~dexroll_client.simulation.SimulationOptions`. ConflictError for a job
+        without a plan a hand executes, NotFoundError for an unknown id."""
+        return self._run(_one(_simulate_call(job_id, options, fields), SimulationReport))
+
+    def simulation(self, job_id: str) -> SimulationReport:
+        """A job's latest simulation report (NotFoundError: none yet)."""
+        return self._run(_one(_Call("GET", f"{_job_path(job_id)}/simulation"),
+                              SimulationReport))
+
     def health(self) -> bool:
         """Whether the service is alive (``/healthz``); TransportError if unreachable."""
         return self._run(_probe_op("/healthz"))
@@ -606,6 +637,18 @@ class AsyncDexrollClient:
     async def models(self) -> ModelCatalog:
         """See :meth:`DexrollClient.models`."""
         return await self._run(_one(_Call("GET", "/v1/models"), ModelCatalog))
+
+    async def simulate(self, job_id: str,
+                       options: SimulationOptions | Mapping[str, Any] | None = None,
+                       **fields: Any) -> SimulationReport:
+        """See :meth:`DexrollClient.simulate`."""
+        return await self._run(_one(_simulate_call(job_id, options, fields),
+                                    SimulationReport))
+
+    async def simulation(self, job_id: str) -> SimulationReport:
+        """See :meth:`DexrollClient.simulation`."""
+        return await self._run(_one(_Call("GET", f"{_job_path(job_id)}/simulation"),
+                                    SimulationReport))
 
     async def health(self) -> bool:
         """See :meth:`DexrollClient.health`."""
