@@ -74,10 +74,10 @@ def _finger(parent: ET.Element, finger: FingerSpec, options: SimOptions) -> None
         joint.set("limited", "false")  # the plan keeps them; the servo must not be clipped
     tip = ET.SubElement(body, "body", name=f"{finger.name}/tip", gravcomp="1")
     _pose(tip, finger.tip_rotation, finger.tip_translation)
-    kind, size, pos = finger.tip.geom()
+    kind, size, pos, rot = finger.tip.geom()
     ET.SubElement(tip, "geom", name=f"{finger.name}/pad", type=kind, size=_v(size),
-                  pos=_v(pos), contype="0", conaffinity="1", mass="0",
-                  rgba="0.15 0.15 0.15 1")
+                  pos=_v(pos), quat=_v(quat_of_matrix(rot)), contype="0", conaffinity="1",
+                  mass="0", rgba="0.15 0.15 0.15 1")
     ET.SubElement(tip, "site", name=f"{finger.name}/tip", pos="0 0 0", size="0.002")
 
 

@@ -91,26 +91,39 @@ class JointSpec:
 
 @dataclass(frozen=True)
 class TipShape:
-    """The fingertip's surface, in the fingertip frame: ``kind`` 'box' (a flat pad:
-    ``size`` (half x, half y, thickness), its top face the plane z = 0 of the frame, the
-    body below it), 'sphere' (``size`` (radius,), centred at (0, 0, -radius): the frame's
-    origin on its surface, +z outward) or 'capsule' (``size`` (radius, half length) along
-    the frame's x, its axis at z = -radius)."""
+    """The fingertip's surface, placed in the fingertip frame (the frame the finger's
+    kinematics gives) by ``rotation`` and ``offset`` [m] (``p_tip = rotation p + offset``),
+    as the planner places its tip surfaces (ocp/geometry/tips.py): ``kind`` 'box' (a flat
+    pad: ``size`` (half x, half y, thickness); its frame's origin the centre of the pad's
+    surface, +z its outward normal, the body below), 'sphere' (``size`` (radius,), its
+    frame's origin the centre), 'ellipsoid' (an ellipsoid of revolution: (a, c), axis z,
+    origin the centre) or 'capsule' (``size`` (radius, half length of the cylinder): its
+    frame's origin the centre of the cap that touches, the capsule's axis pointing out of
+    the cap along the frame's -y, the cylinder on +y)."""
 
     kind: str
     size: tuple[float, ...]
+    rotation: FloatArray = field(default_factory=lambda: np.eye(3))
+    offset: FloatArray = field(default_factory=lambda: np.zeros(3))
 
-    def geom(self) -> tuple[str, FloatArray, FloatArray]:
-        """(MuJoCo geom type, size, position in the fingertip frame)."""
+    def geom(self) -> tuple[str, FloatArray, FloatArray, FloatArray]:
+        """(MuJoCo geom type, size, position, rotation matrix) in the fingertip frame."""
+        R, o = _a(self.rotation), _a(self.offset)
         if self.kind == "box":
             hx, hy, thick = self.size
-            return "box", _a([hx, hy, thick / 2]), _a([0.0, 0.0, -thick / 2])
+            return "box", _a([hx, hy, thick / 2]), o + R @ _a([0.0, 0.0, -thick / 2]), R
         if self.kind == "sphere":
-            r = self.size[0]
-            return "sphere", _a([r]), _a([0.0, 0.0, -r])
+            return "sphere", _a([self.size[0]]), o, R
+        if self.kind == "ellipsoid":
+            a, c = self.size[:2]
+            return "ellipsoid", _a([a, a, c]), o, R
         if self.kind == "capsule":
-            r, half = self.size[:2]
-            return "capsule", _a([r, half]), _a([0.0, 0.0, -r])
+            r, half = self.size[0], self.size[1] if len(self.size) > 1 else 0.0
+            if half <= 0:
+                return "sphere", _a([r]), o, R
+            # MuJoCo's capsule lies along its z: turn it onto the frame's y
+            Rx = _a([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+            return "capsule", _a([r, half]), o + R @ _a([0.0, half, 0.0]), R @ Rx
         raise ValueError(f"unknown fingertip shape {self.kind!r}")
 
 
@@ -223,7 +236,9 @@ class ExecutionPlan:
                     "base_position": f.base_position.tolist(),
                     "tip_rotation": f.tip_rotation.tolist(),
                     "tip_translation": f.tip_translation.tolist(),
-                    "tip": {"kind": f.tip.kind, "size": list(f.tip.size)},
+                    "tip": {"kind": f.tip.kind, "size": list(f.tip.size),
+                            "rotation": _a(f.tip.rotation).tolist(),
+                            "offset": _a(f.tip.offset).tolist()},
                     "q": r.q.tolist(), "q_dot": r.q_dot.tolist(),
                     "joint_torques": None if r.joint_torques is None
                     else r.joint_torques.tolist(),
@@ -260,7 +275,9 @@ class ExecutionPlan:
             fingers.append(FingerSpec(
                 str(f["name"]), tuple(joint(j) for j in f["joints"]), _a(f["base_rotation"]),
                 _a(f["base_position"]), _a(f["tip_rotation"]), _a(f["tip_translation"]),
-                TipShape(str(f["tip"]["kind"]), tuple(float(s) for s in f["tip"]["size"])),
+                TipShape(str(f["tip"]["kind"]), tuple(float(s) for s in f["tip"]["size"]),
+                         _a(f["tip"].get("rotation", np.eye(3))),
+                         _a(f["tip"].get("offset", np.zeros(3)))),
                 str(f["contact"])))
             refs.append(FingerReference(
                 _a(f["q"]), _a(f["q_dot"]),

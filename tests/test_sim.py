@@ -217,19 +217,38 @@ def test_the_scene_is_the_plans(plans: dict[str, tuple[AnyPlanResult, PlanReques
     assert heavy.model.body_mass[heavy.object_body] == pytest.approx(0.2)
 
 
-@pytest.mark.parametrize("tip", [TipShape("sphere", (0.01,)),
-                                 TipShape("capsule", (0.008, 0.01))])
-def test_round_fingertips_touch_at_the_frame(tip: TipShape,
-                                             plans: dict[str, Any]) -> None:
-    """A round fingertip's surface passes through the fingertip frame's origin, its
-    outward normal +z there (the pads' convention)."""
+@pytest.mark.parametrize("kind", ["box", "sphere", "ellipsoid", "capsule"])
+def test_fingertip_shapes_are_placed_as_the_planner_places_them(
+        kind: str, plans: dict[str, Any]) -> None:
+    """ocp/geometry/tips.py's frames: a pad's top face through the frame's origin; a
+    sphere or spheroid centred on it; a capsule's cap centred on it, the cylinder along
+    the frame's +y (its axis points out of the cap along -y)."""
     result, request = plans["experiment2"]
     plan = execution_plan(result, request)
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
+    offset = np.array([0.001, 0.002, -0.003])
+    size = {"box": (0.01, 0.01, 0.004), "sphere": (0.01,), "ellipsoid": (0.01, 0.015),
+            "capsule": (0.008, 0.01)}[kind]
+    tip = TipShape(kind, size, R, offset)
     fingers = tuple(replace(f, tip=tip) for f in plan.fingers)
     sim = Simulation(replace(plan, fingers=fingers))
-    m = sim.model
+    m, d = sim.model, sim.data
     gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{plan.fingers[0].name}/pad")
-    assert m.geom_pos[gid] == pytest.approx([0.0, 0.0, -tip.size[0]])
+    mujoco.mj_kinematics(m, d)
+    site = sim.fingers[0].tip_site
+    Rs, ps = d.site_xmat[site].reshape(3, 3), d.site_xpos[site]
+    centre = Rs.T @ (d.geom_xpos[gid] - ps)  # the geom's centre in the fingertip frame
+    axis = Rs.T @ d.geom_xmat[gid].reshape(3, 3)[:, 2]
+    expected = {"box": offset + R @ [0, 0, -0.002], "sphere": offset,
+                "ellipsoid": offset, "capsule": offset + R @ [0, 0.01, 0]}[kind]
+    assert centre == pytest.approx(expected, abs=1e-12)
+    if kind in ("box", "ellipsoid"):
+        assert axis == pytest.approx(R[:, 2], abs=1e-12)
+    if kind == "capsule":  # along the frame's y (either way: the capsule is symmetric)
+        assert abs(axis @ R[:, 1]) == pytest.approx(1.0, abs=1e-12)
+    # the JSON form keeps the placement
+    again = ExecutionPlan.from_dict(replace(plan, fingers=fingers).to_dict())
+    assert again.fingers[0].tip.offset == pytest.approx(offset)
 
 
 def test_plans_without_fingers_are_not_executed() -> None:

@@ -75,6 +75,26 @@ def plan_forces(result: AnyPlanResult) -> list[tuple[np.ndarray | None, np.ndarr
     return out
 
 
+def _tip_shape(model: Any, tip_shape: Any) -> Any:
+    """The simulator's fingertip (a ``sim.TipShape``) of a finger model: its tip surface
+    (``model.tip``, ocp/geometry/tips.py: pad, sphere, spheroid, capsule cap) placed as
+    the planner places it; a flat pad of the model's half size without one."""
+    tip = getattr(model, "tip", None)
+    kind = getattr(tip, "kind", "pad")
+    R = np.asarray(getattr(tip, "rotation", np.eye(3)), dtype=float)
+    p = np.asarray(getattr(tip, "offset", np.zeros(3)), dtype=float)
+    params = tuple(float(x) for x in getattr(tip, "params", ()))
+    if kind == "sphere":
+        return tip_shape("sphere", params[:1], R, p)
+    if kind == "spheroid":
+        return tip_shape("ellipsoid", params[:2], R, p)
+    if kind == "capsule":
+        extra = tuple(float(x) for x in getattr(tip, "extra", ()))
+        return tip_shape("capsule", (params[0], extra[0] if extra else 0.0), R, p)
+    h = float(params[0]) if params else float(model.pad_half_size)
+    return tip_shape("box", (h, h, pad_thickness(model)), R, p)
+
+
 def _mu(request: PlanRequest | None, tracks: PlanTracks) -> tuple[float, str | None]:
     mu = getattr(request, "mu", None) if request is not None else None
     if isinstance(mu, int | float) and mu > 0:
@@ -125,13 +145,12 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
             np.asarray(j.placement_translation, dtype=float),
             float(model.lower[j.index_q]), float(model.upper[j.index_q]))
             for j in model.chain)
-        h = float(model.pad_half_size)
         fingers.append(FingerSpec(
             track.name, joints, np.asarray(model.base_rotation, dtype=float),
             np.asarray(model.base_position, dtype=float),
             np.asarray(model.tip_rotation, dtype=float),
             np.asarray(model.tip_translation, dtype=float),
-            TipShape("box", (h, h, pad_thickness(model))), track.name))
+            _tip_shape(model, TipShape), track.name))
         torques, force = forces[k] if k < len(forces) else (None, None)
         refs.append(FingerReference(track.q, rates[k], torques, force))
     contacts = tuple(ContactSpec(c.name, c.body, c.name if c.body == "finger" else None,
