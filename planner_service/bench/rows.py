@@ -26,6 +26,7 @@ __all__ = [
     "comparable",
     "differences",
     "error_row",
+    "execute",
     "peer_status",
     "row_from_peer",
     "row_from_result",
@@ -40,10 +41,18 @@ FIELDS: tuple[str, ...] = (
     "n_intervals", "goal_error_max", "cert_slip_speed_max", "cert_spin_rate_max",
     "cert_closure_position_max", "cert_closure_orientation_max", "cert_position_defect_max",
     "cert_angle_defect_max", "cert_cone_margin_min", "failures", "message", "worker_pid",
-    "peak_rss_mb", "certificate")
-#: Fields that depend on the run, not on the problem: left out when rows are compared.
+    "peak_rss_mb", "exec_status", "exec_position_error_max", "exec_angle_error_max",
+    "exec_contacts_lost", "exec_wall_time", "exec_message", "certificate")
+#: Fields that depend on the run, not on the problem: left out when rows are compared. The
+#: execution's numbers are a physics simulation of the plan: round-off differences between
+#: two runs' plans may move them a little (its pass or fail, ``exec_status``, is compared).
 VOLATILE: frozenset[str] = frozenset({"solve_time", "build_time", "wall_time", "worker_pid",
-                                      "peak_rss_mb"})
+                                      "peak_rss_mb", "exec_position_error_max",
+                                      "exec_angle_error_max", "exec_contacts_lost",
+                                      "exec_wall_time", "exec_message"})
+#: Plans of these planners have fingers: a solved one is executed in MuJoCo
+#: (docs/simulation.md) when MuJoCo is installed and ``DEXROLL_BENCH_EXECUTE`` is not "0".
+EXECUTED_PLANNERS = ("one_finger", "manipulation")
 
 #: certificate residual field -> (how to combine, certificate keys it takes, by prefix).
 _RESIDUALS: dict[str, tuple[Callable[..., float], tuple[str, ...]]] = {
@@ -128,7 +137,37 @@ def row_from_result(unit: Unit, result: Any, wall_time: float | None,
                    failures=list(cert.failures))
         row.update(residuals(values))
     row["ok"] = row["status"] == "solved" and row["certificate_passed"]
+    if row["ok"] and unit.planner in EXECUTED_PLANNERS:
+        row.update(execute(unit, result))
     return row
+
+
+def execute(unit: Unit, result: Any) -> dict[str, Any]:
+    """The ``exec_*`` fields of a solved plan executed in MuJoCo with the simulator's
+    defaults (docs/simulation.md): ``exec_status`` 'passed' or 'failed' (its tolerances:
+    1 mm, 2 deg, no contact lost), or 'error' (``exec_message`` says why); none when MuJoCo
+    is not installed or ``DEXROLL_BENCH_EXECUTE=0``. Never raises."""
+    if os.environ.get("DEXROLL_BENCH_EXECUTE", "1") == "0":
+        return {}
+    try:
+        importlib.import_module("mujoco")
+    except ImportError:
+        return {}
+    t0 = time.perf_counter()
+    try:
+        from planner_service.execution import simulate_result
+        from planner_service.planners import REQUEST
+
+        report = simulate_result(result, REQUEST.validate_python(unit.request))
+    except Exception as exc:  # a failure is a row's field, never a crash of the benchmark
+        return {"exec_status": "error", "exec_message": f"{type(exc).__name__}: {exc}",
+                "exec_wall_time": time.perf_counter() - t0}
+    return {"exec_status": "passed" if report.passed else "failed",
+            "exec_position_error_max": report.position_error.max,
+            "exec_angle_error_max": report.angle_error.max,
+            "exec_contacts_lost": report.contacts_lost,
+            "exec_wall_time": time.perf_counter() - t0,
+            "exec_message": "; ".join(report.failures)}
 
 
 def row_from_peer(unit: Unit, outcome: Any, wall_time: float | None, worker_pid: int | None,
