@@ -31,12 +31,13 @@ from sim import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The paper's experiments and the examples whose plans have fingers.
+#: The paper's experiments and every example whose plan has fingers.
 PLANS = {
     "experiment1": ROOT / "docs" / "viewer-experiment1.json",
     "experiment2": ROOT / "examples" / "experiment2_two_fingers.json",
-    "one_finger_roll": ROOT / "examples" / "one_finger_roll.json",
-    "three_finger_turn": ROOT / "examples" / "three_finger_turn.json",
+    **{p.stem: p for p in sorted((ROOT / "examples").glob("*.json"))
+       if json.loads(p.read_text(encoding="utf-8")).get("planner") in
+       ("one_finger", "manipulation") and p.stem != "experiment2_two_fingers"},
 }
 
 
@@ -45,6 +46,10 @@ def _plan(path: Path) -> tuple[AnyPlanResult, PlanRequest]:
     result, summary = plan_request(raw)
     assert result.status is PlanStatus.SOLVED, summary
     return result, REQUEST.validate_python(raw)
+
+
+def test_the_examples_with_fingers_are_all_executed() -> None:
+    assert {"one_finger_roll", "three_finger_turn"} <= set(PLANS)
 
 
 @pytest.fixture(scope="module")
