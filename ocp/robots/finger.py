@@ -429,16 +429,35 @@ def load_finger(
         model = pin.buildModelFromXML(text)
     except (RuntimeError, ValueError) as exc:
         raise ValueError(f"cannot build a model from the URDF ({source}): {exc}") from exc
+    if base_rotation is None:
+        base_rotation = DEFAULT_BASE_ROTATION if builtin else np.eye(3)
+    if base_position is None:
+        base_position = DEFAULT_BASE_POSITION if builtin else np.zeros(3)
+    return finger_from_model(model, text, tip_frame, base_rotation, base_position,
+                             pad_half_size, tip)
+
+
+def finger_from_model(
+    model: Any,
+    text: str,
+    tip_frame: str,
+    base_rotation: ArrayLike,
+    base_position: ArrayLike,
+    pad_half_size: float | None = None,
+    tip: Any = None,
+    default_velocity: float | None = None,
+) -> FingerModel:
+    """The finger of a Pinocchio model (built from ``text``, a URDF or an MJCF) whose tip
+    is the frame ``tip_frame``: the branch of the model's tree carrying it (the other
+    branches' joints locked at their neutral positions), mounted by ``base_rotation``
+    and ``base_position`` in the palm frame; see :func:`load_finger`. Non-finite velocity
+    limits (an MJCF has none) become ``default_velocity`` when it is given."""
     if not model.existFrame(tip_frame):
         names = sorted({str(f.name) for f in model.frames})
         raise ValueError(f"the URDF has no frame {tip_frame!r}; its frames are {names}")
     model = _reduce_to_tip_chain(model, int(model.getFrameId(tip_frame)))
     tip_id = int(model.getFrameId(tip_frame))
     chain = _chain(model, tip_id, tip_frame)
-    if base_rotation is None:
-        base_rotation = DEFAULT_BASE_ROTATION if builtin else np.eye(3)
-    if base_position is None:
-        base_position = DEFAULT_BASE_POSITION if builtin else np.zeros(3)
     half = PAD_HALF_SIZE if pad_half_size is None else float(pad_half_size)
     if not (np.isfinite(half) and half > 0.0):
         raise ValueError(f"pad_half_size must be > 0 m, got {half}")
@@ -448,6 +467,9 @@ def load_finger(
         raise ValueError("a joint's lower limit exceeds its upper limit")
     vel = getattr(model, "upperVelocityLimit", None)
     velocity = np.asarray(model.velocityLimit if vel is None else vel, dtype=float)
+    if default_velocity is not None:
+        velocity = np.where(np.isfinite(velocity) & (velocity > 0), velocity,
+                            default_velocity)
     tip_surface = tip
     if tip_surface is not None:
         bad = tip_surface.errors("tip")

@@ -536,8 +536,6 @@ class FingertipContact(Contact):
         object point goes along given points and rates: (c0 (3), alpha (2 x k), w0 (2 x k),
         w1 (2 x k), h (1 x k), shape (. x k)) -> c (3 x k); the initial guess's roll."""
         if steps not in self._rolls:
-            from ocp.transcription.collocation import rk4_step
-
             np_ = self.surface.n_params
             shape_p = ca.SX.sym("shape", np_)
             e_, w_ = ca.SX.sym("e", 5), ca.SX.sym("w", 2)
@@ -545,8 +543,13 @@ class FingertipContact(Contact):
                 self.pair_rates(self.surface, e_, w_, shape_p, self.tip)])
             c_, a_ = ca.SX.sym("c", 3), ca.SX.sym("a", 2)
             w0_, w1_, h_ = ca.SX.sym("w0", 2), ca.SX.sym("w1", 2), ca.SX.sym("h")
-            e1 = rk4_step(lambda e, w: rates(e, w, shape_p), ca.vertcat(a_, c_),
-                          w0_, (w0_ + w1_) / 2, w1_, h_)
+            # one classic RK4 step (as the grasp model's for the flat pad)
+            x0, wm = ca.vertcat(a_, c_), (w0_ + w1_) / 2
+            k1 = rates(x0, w0_, shape_p)
+            k2 = rates(x0 + h_ / 2 * k1, wm, shape_p)
+            k3 = rates(x0 + h_ / 2 * k2, wm, shape_p)
+            k4 = rates(x0 + h_ * k3, w1_, shape_p)
+            e1 = x0 + h_ / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
             step = ca.Function("roll_step", [c_, a_, w0_, w1_, h_, shape_p], [e1[2:5]])
             self._rolls[steps] = step.mapaccum("roll", steps)
         return self._rolls[steps]

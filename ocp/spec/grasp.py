@@ -31,7 +31,8 @@ from ocp.spec.problem import (
 )
 
 __all__ = ["Fingertip", "ManipulationProblem", "Palm", "contact_chart_for_pad",
-           "contact_charts", "fingertip_errors", "hand_fingertips", "support_goal_errors"]
+           "contact_charts", "contact_from_joints", "fingertip_errors", "fingertips_from_joints",
+           "hand_fingertips", "support_goal_errors"]
 
 FloatArray = NDArray[np.float64]
 
@@ -301,3 +302,114 @@ def support_goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[
         return {}
     out = goal_errors(problem.palm_problem(), X, ends)
     return {f"palm.{k}": v for k, v in out.items()}
+
+
+def contact_from_joints(finger: Any, q: ArrayLike, obj: Any, pose: Any
+                        ) -> tuple[tuple[float, ...], tuple[float, float, float], float]:
+    """The contact coordinates of a round fingertip on a ball where the joints ``q`` put
+    it: (initial (a, b, 0, 0, 0), the object chart patch's rotation vector that puts the
+    contact at (u, v) = (0, 0) with psi = 0, the gap [m]: the tip's distance from the
+    ball at ``q``, negative when they overlap). The contact is where the line of centres
+    meets the tip (:func:`~ocp.spec.grasp.contact_chart_for_pad` gives the patch). A gap
+    within 2 mm is closed first by the least joint motion, so that the coordinates are
+    where joints near ``q`` put the tip exactly (the inverse kinematics of the initial
+    grasp, a 6-D pose, then has a solution for a finger of fewer than 6 joints)."""
+    tip = finger.tip_surface
+    if tip.kind not in ("sphere", "capsule") or obj.shape != "sphere":
+        raise ValueError("contacts from joint angles need a sphere or capsule tip on a ball")
+    r, rho = tip.params[0], float(obj.dimensions[0])
+    c_obj = np.asarray(pose.position, dtype=float)
+    qa = np.asarray(q, dtype=float)
+
+    def centre_of(qq: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        R_l, p_l = finger.fingertip_pose_pin(qq)
+        return R_l, p_l, p_l + R_l @ tip.p
+
+    R_l, _, centre = centre_of(qa)
+    gap0 = float(np.linalg.norm(c_obj - centre)) - r - rho
+    # a small gap is closed by the least joint motion (Gauss-Newton on the distance of
+    # the tip's centre from the ball's): the coordinates then hold with these joints
+    # exactly, which a finger of fewer than 6 joints needs (closure is a 6-D pose)
+    if abs(gap0) <= 2e-3:
+        for _ in range(20):
+            d = c_obj - centre
+            gap = float(np.linalg.norm(d)) - r - rho
+            if abs(gap) <= 1e-13:
+                break
+            J = finger.frame_jacobian_pin(qa)
+            Jc = J[:3] - np.cross(R_l @ tip.p, J[3:].T).T  # the centre's velocity
+            g = -(d / np.linalg.norm(d)) @ Jc  # d gap / dq
+            qa = np.clip(qa - gap * g / max(float(g @ g), 1e-18), finger.lower,
+                         finger.upper)
+            R_l, _, centre = centre_of(qa)
+    R_t = R_l @ tip.R
+    d = c_obj - centre
+    dist = float(np.linalg.norm(d))
+    ab = tip.surface.inverse(R_t.T @ (d / dist), (1.0,))
+    _, G, _, _, _ = tip.surface.geometry(ab, (r,))
+    chart = contact_chart_for_pad(obj, pose, R_t @ np.asarray(G))
+    return (float(ab[0]), float(ab[1]), 0.0, 0.0, 0.0), chart, gap0
+
+
+#: A fingertip this far from the object at the given joint angles is refused [m]; nearer,
+#: the joints are moved the least to close the gap.
+MAX_INITIAL_GAP = 2e-3
+
+
+def fingertips_from_joints(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
+                           pose: ObjectPose, names: tuple[str, ...],
+                           where: tuple[str, ...]) -> tuple[Fingertip, ...]:
+    """Round fingertips on a ball at the joint angles ``qs`` of ``fingers``: their contact
+    coordinates where the joints put them (:func:`contact_from_joints`); ProblemError
+    naming ``where[i]`` (the field of finger i's joints) with the reason: joints outside
+    their limits (which, by how much), a tip too far from the ball or inside it (which
+    finger, how far), a contact off a capsule's cap, two tips overlapping."""
+    errs: list[tuple[str, str]] = []
+    tips: list[Fingertip] = []
+    centres: list[tuple[int, FloatArray, float]] = []
+    for i, (f, q, name) in enumerate(zip(fingers, qs, names, strict=True)):
+        q = np.asarray(q, dtype=float)
+        if q.shape != (f.nq,) or not np.all(np.isfinite(q)):
+            errs.append((where[i], f"must be {f.nq} finite joint angles, got {q.size}"))
+            continue
+        bad = [f"{j} = {v:.4g} is {'below' if v < lo else 'above'} its limit "
+               f"{lo if v < lo else hi:.4g} by {max(lo - v, v - hi):.3g}"
+               for j, v, lo, hi in zip(f.joint_names, q, f.lower, f.upper, strict=True)
+               if not lo <= v <= hi]
+        if bad:
+            errs.append((where[i], f"finger {name!r}: " + "; ".join(bad)))
+            continue
+        try:
+            init, chart, gap = contact_from_joints(f, q, obj, pose)
+        except ValueError as exc:
+            errs.append((where[i], str(exc)))
+            continue
+        if abs(gap) > MAX_INITIAL_GAP:
+            what = "from" if gap > 0 else "inside"
+            errs.append((where[i], f"finger {name!r} cannot reach the initial grasp: its tip "
+                                   f"is {abs(gap) * 1e3:.3g} mm {what} the object at these "
+                                   f"joint angles (at most {MAX_INITIAL_GAP * 1e3:g} mm is "
+                                   "closed by moving the joints)"))
+            continue
+        tip = f.tip_surface
+        (a_lo, a_hi), (b_lo, b_hi) = tip.bounds(0.0, 0.0)
+        if not (a_lo <= init[0] <= a_hi and b_lo <= init[1] <= b_hi):
+            errs.append((where[i], f"finger {name!r} touches the object off its "
+                                   f"{tip.kind}'s usable part (tip coordinates "
+                                   f"{init[0]:.3f}, {init[1]:.3f} rad): "
+                                   + ("on the cylindrical side, not the cap"
+                                      if tip.kind == "capsule" else "at its chart's pole")))
+            continue
+        R, p = f.fingertip_pose_pin(q)
+        centres.append((i, p + R @ tip.p, float(max(tip.params))))
+        tips.append(Fingertip(f, init, chart,  # type: ignore[arg-type]
+                              tuple(float(v) for v in q), name))
+    for (i, ci, ri), (j, cj, rj) in ((a, b) for k, a in enumerate(centres)
+                                     for b in centres[k + 1:]):
+        overlap = ri + rj - float(np.linalg.norm(ci - cj))
+        if overlap > 0:
+            errs.append((where[j], f"fingers {names[i]!r} and {names[j]!r}: their tips "
+                                   f"overlap by {overlap * 1e3:.3g} mm"))
+    if errs:
+        raise ProblemError(errs)
+    return tuple(tips)

@@ -1,0 +1,333 @@
+"""Whole-hand models from one URDF or MJCF text: fingers named by their fingertip links.
+
+A hand comes as one file for the whole hand. :func:`load_whole_hand` builds it with
+Pinocchio (``buildModelFromXML`` for a URDF, ``buildModelFromMJCF`` for an MJCF), and
+makes one :class:`~ocp.robots.finger.FingerModel` per named fingertip: the chain from the
+hand's root to that link (body, or a frame of it; the joints of the other fingers held out
+of it), mounted in the palm frame by the request's mount, its fingertip surface read from
+the link's collision geometry (a sphere or a capsule: its size and offset) or given.
+
+What Pinocchio would not model is refused before it builds anything, naming what and
+where (:class:`HandModelError`, (field, reason) pairs): an MJCF ``<include>`` (a file the
+service would read), joint couplings (MJCF ``<equality>`` and ``<tendon>``, URDF
+``<mimic>``), joint types other than revolute/hinge and prismatic/slide (ball, free,
+planar, floating, continuous without limits).
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ocp.geometry.tips import TipSurface, capsule_tip, sphere_tip
+
+__all__ = ["DEFAULT_VELOCITY", "HandModelError", "TipSpec", "WholeHand", "load_whole_hand",
+           "model_problems", "tip_geometry"]
+
+FloatArray = NDArray[np.float64]
+
+#: Joint velocity limit where a model gives none (an MJCF) [rad/s, m/s].
+DEFAULT_VELOCITY = 6.0
+
+
+class HandModelError(ValueError):
+    """A hand model that cannot be used: ``errors`` are (field, reason) pairs, fields
+    relative to the hand's spec (``model``, ``tips[1].name``, ...)."""
+
+    def __init__(self, errors: list[tuple[str, str]]) -> None:
+        super().__init__("; ".join(f"{f}: {r}" for f, r in errors))
+        self.errors = errors
+
+
+@dataclass(frozen=True)
+class TipSpec:
+    """A fingertip of the hand: the link (URDF), body (MJCF) or frame ``name`` the finger
+    ends at, and its surface (None: read from that link's sphere or capsule collision
+    geometry). ``side``: for a capsule read from the model, the direction (link frame)
+    across its axis the contacts lean to (default: the link's x axis, else y)."""
+
+    name: str
+    surface: TipSurface | None = None
+    side: tuple[float, float, float] | None = None
+
+
+def _floats(text: str | None, n: int, default: Sequence[float]) -> FloatArray:
+    if text is None:
+        return np.asarray(default, dtype=float)
+    vals = [float(v) for v in text.split()]
+    if len(vals) != n:
+        raise ValueError(f"expected {n} numbers, got {text!r}")
+    return np.asarray(vals, dtype=float)
+
+
+def _quat(q: FloatArray) -> FloatArray:
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _rpy(rpy: FloatArray) -> FloatArray:
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p),
+                              math.cos(y), math.sin(y))
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def _side(side: ArrayLike | None, axis: FloatArray) -> FloatArray:
+    if side is not None:
+        return np.asarray(side, dtype=float)
+    for cand in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
+        if np.linalg.norm(cand - np.dot(cand, axis) * axis) > 0.5:
+            return cand
+    return np.array([0.0, 0.0, 1.0])  # pragma: no cover - unreachable
+
+
+def _capsule(r: float, half: float, centre: FloatArray, R: FloatArray,
+             side: ArrayLike | None) -> TipSurface:
+    """The cap of a capsule (axis its frame's z, ``R``, ``centre`` in the link frame)
+    farther from the link's origin (the fingertip's end)."""
+    axis = R[:, 2]
+    ends = [centre + half * axis, centre - half * axis]
+    k = int(np.argmax([np.linalg.norm(e) for e in ends]))
+    out = axis if k == 0 else -axis
+    return capsule_tip(r, ends[k], out, _side(side, out), half)
+
+
+def _mjcf_defaults(root: ET.Element) -> dict[str, dict[str, str]]:
+    """geom attributes of every MJCF default class, inheritance resolved."""
+    out: dict[str, dict[str, str]] = {}
+
+    def walk(el: ET.Element, inherited: dict[str, str]) -> None:
+        name = el.get("class", "main")
+        geom = dict(inherited)
+        for child in el:
+            if child.tag == "geom":
+                geom.update(child.attrib)
+        out[name] = geom
+        for child in el:
+            if child.tag == "default":
+                walk(child, geom)
+
+    for d in root.iter("default"):
+        if d not in [c for p in root.iter("default") for c in p]:  # top-level defaults
+            walk(d, {})
+    return out
+
+
+def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
+                 ) -> TipSurface | str:
+    """The fingertip surface of link/body ``name`` from the model text's collision
+    geometry (the first sphere or capsule on it; URDF ``<collision>``, MJCF ``<geom>``),
+    or why there is none (a string)."""
+    root = ET.fromstring(text)
+    if fmt == "urdf":
+        link = next((ln for ln in root.iter("link") if ln.get("name") == name), None)
+        if link is None:
+            return f"no link {name!r} carries collision geometry in the URDF"
+        kinds = []
+        for col in link.iter("collision"):
+            origin = col.find("origin")
+            p = _floats(None if origin is None else origin.get("xyz"), 3, (0, 0, 0))
+            R = _rpy(_floats(None if origin is None else origin.get("rpy"), 3, (0, 0, 0)))
+            geo = col.find("geometry")
+            for g in [] if geo is None else list(geo):
+                kinds.append(g.tag)
+                if g.tag == "sphere":
+                    return sphere_tip(float(g.get("radius", "nan")), p, R)
+                if g.tag == "capsule":
+                    r, length = float(g.get("radius", "nan")), float(g.get("length", "nan"))
+                    return _capsule(r, length / 2, p, R, side)
+        return (f"link {name!r} has no sphere or capsule collision geometry (it has "
+                f"{kinds or 'none'}): give the fingertip's surface in the request")
+    defaults = _mjcf_defaults(root)
+    parents = {c: p for p in root.iter() for c in p}
+    body = next((b for b in root.iter("body") if b.get("name") == name), None)
+    if body is None:
+        site = next((s for s in root.iter("site") if s.get("name") == name), None)
+        if site is None:
+            return f"no body or site {name!r} in the MJCF"
+        body = parents[site]
+    kinds = []
+    for g in body.findall("geom"):
+        cls = g.get("class")
+        el: ET.Element | None = body
+        while cls is None and el is not None:
+            cls = el.get("childclass")
+            el = parents.get(el)
+        attrs = {**defaults.get("main", {}), **defaults.get(cls or "main", {}), **g.attrib}
+        kind = attrs.get("type", "sphere")
+        kinds.append(kind)
+        if kind not in ("sphere", "capsule"):
+            continue
+        if any(k in attrs for k in ("euler", "axisangle", "xyaxes", "zaxis")):
+            return (f"geom of {name!r}: its orientation is given by "
+                    f"{[k for k in ('euler', 'axisangle', 'xyaxes', 'zaxis') if k in attrs]}"
+                    "; only pos, quat or fromto are read: give the fingertip's surface in "
+                    "the request")
+        size = _floats(attrs.get("size"), len(attrs.get("size", "").split()) or 1, (0,))
+        if "fromto" in attrs:
+            ft = _floats(attrs["fromto"], 6, (0,) * 6)
+            a, b = ft[:3], ft[3:]
+            z = (b - a) / np.linalg.norm(b - a)
+            x = np.cross(z, [1.0, 0, 0] if abs(z[0]) < 0.9 else [0, 1.0, 0])
+            x /= np.linalg.norm(x)
+            R = np.column_stack([x, np.cross(z, x), z])
+            p, half = (a + b) / 2, float(np.linalg.norm(b - a)) / 2
+        else:
+            p = _floats(attrs.get("pos"), 3, (0, 0, 0))
+            R = _quat(_floats(attrs.get("quat"), 4, (1, 0, 0, 0)))
+            half = float(size[1]) if len(size) > 1 else 0.0
+        if kind == "sphere":
+            return sphere_tip(float(size[0]), p, R)
+        return _capsule(float(size[0]), half, p, R, side)
+    return (f"body {name!r} has no sphere or capsule geom (it has {kinds or 'none'}): give "
+            "the fingertip's surface in the request")
+
+
+def model_problems(text: str, fmt: str) -> list[tuple[str, str]]:
+    """What Pinocchio would not model faithfully in the model text, as ("model", reason):
+    includes, couplings, unsupported joint types; [] when none."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        return [("model", f"not well-formed XML: {exc}")]
+    errs: list[tuple[str, str]] = []
+    if fmt == "mjcf":
+        if root.tag != "mujoco":
+            return [("model", f"an MJCF's root element is <mujoco>, got <{root.tag}>")]
+        for inc in root.iter("include"):
+            errs.append(("model", f"<include file={inc.get('file')!r}>: included files are "
+                                  "not read; send the whole model as one text"))
+        for tag in ("equality", "tendon"):
+            for el in root.iter(tag):
+                for child in el:
+                    what = ", ".join(f"{k}={v!r}" for k, v in child.attrib.items()
+                                     if k in ("name", "joint1", "joint2", "joint", "body1"))
+                    errs.append(("model", f"<{tag}><{child.tag} {what}>: a joint coupling; "
+                                          "coupled joints are not modelled, so this hand "
+                                          "is refused"))
+        for j in root.iter("freejoint"):
+            errs.append(("model", f"<freejoint name={j.get('name')!r}>: a free joint; only "
+                                  "hinge and slide joints are supported"))
+        for j in root.iter("joint"):
+            kind = j.get("type", "hinge")
+            if kind not in ("hinge", "slide"):
+                errs.append(("model", f"joint {j.get('name')!r} is a {kind!r} joint; only "
+                                      "hinge and slide joints are supported"))
+    else:
+        if root.tag != "robot":
+            return [("model", f"a URDF's root element is <robot>, got <{root.tag}>")]
+        for j in root.iter("joint"):
+            kind_u = j.get("type")
+            if j.find("mimic") is not None:
+                errs.append(("model", f"joint {j.get('name')!r} mimics "
+                                      f"{j.find('mimic').get('joint')!r}: a joint "  # type: ignore[union-attr]
+                                      "coupling; coupled joints are not modelled, so this "
+                                      "hand is refused"))
+            if kind_u not in ("revolute", "prismatic", "fixed"):
+                errs.append(("model", f"joint {j.get('name')!r} is a {kind_u!r} joint; only "
+                                      "revolute, prismatic and fixed joints are supported"))
+    return errs
+
+
+def _build(text: str, fmt: str) -> Any:
+    import pinocchio as pin
+
+    if fmt == "urdf":
+        return pin.buildModelFromXML(text)
+    with tempfile.TemporaryDirectory(prefix="dexroll-mjcf-") as tmp:
+        path = Path(tmp) / "hand.xml"
+        path.write_text(text, encoding="utf-8")
+        return pin.buildModelFromMJCF(str(path))
+
+
+@dataclass(frozen=True, eq=False)
+class WholeHand:
+    """A hand from one model text: one finger per fingertip (in the order of ``tips``)."""
+
+    name: str
+    format: str
+    text: str
+    tips: tuple[TipSpec, ...]
+    fingers: tuple[Any, ...]  # FingerModel
+    mount: tuple[FloatArray, FloatArray]
+
+    @property
+    def n_fingers(self) -> int:
+        return len(self.fingers)
+
+    @property
+    def tip_names(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.tips)
+
+
+def load_whole_hand(text: str, fmt: str, tips: Sequence[TipSpec],
+                    mount_rotation: ArrayLike | None = None,
+                    mount_position: ArrayLike | None = None, name: str = "hand"
+                    ) -> WholeHand:
+    """The hand of a URDF (``fmt`` "urdf") or MJCF ("mjcf") text with fingers ending at
+    ``tips``, its root mounted at (``mount_rotation``, ``mount_position``) in the palm
+    frame (default: the palm frame itself). Raises :class:`HandModelError` naming
+    ``model``, ``tips[i].name`` or ``tips[i].surface``."""
+    from ocp.robots.finger import finger_from_model
+
+    if fmt not in ("urdf", "mjcf"):
+        raise HandModelError([("format", f"must be 'urdf' or 'mjcf', got {fmt!r}")])
+    errs = model_problems(text, fmt)
+    if errs:
+        raise HandModelError(errs)
+    if not tips:
+        raise HandModelError([("tips", "name at least one fingertip link")])
+    try:
+        model = _build(text, fmt)
+    except MemoryError:
+        raise
+    except Exception as exc:
+        raise HandModelError([("model", f"Pinocchio cannot build the {fmt.upper()}: "
+                                        f"{str(exc)[:300]}")]) from exc
+    frames = sorted({str(f.name) for f in model.frames} - {"universe"})
+    R = np.eye(3) if mount_rotation is None else np.asarray(mount_rotation, dtype=float)
+    p = np.zeros(3) if mount_position is None else np.asarray(mount_position, dtype=float)
+    fingers: list[Any] = []
+    seen: dict[str, int] = {}
+    for i, tip in enumerate(tips):
+        where = f"tips[{i}]"
+        if tip.name in seen:
+            errs.append((f"{where}.name", f"{tip.name!r} is also tips[{seen[tip.name]}]"))
+            continue
+        seen[tip.name] = i
+        if not model.existFrame(tip.name):
+            shown = ", ".join(frames[:40]) + (" ..." if len(frames) > 40 else "")
+            errs.append((f"{where}.name", f"{tip.name!r} is not a link, body or frame of "
+                                          f"the model; it has: {shown}"))
+            continue
+        surface = tip.surface
+        if surface is None:
+            got = tip_geometry(text, fmt, tip.name, tip.side)
+            if isinstance(got, str):
+                errs.append((f"{where}.surface", got))
+                continue
+            surface = got
+        bad = surface.errors(f"{where}.surface")
+        if bad:
+            errs += bad
+            continue
+        try:
+            fingers.append(finger_from_model(model, text, tip.name, R, p, tip=surface,
+                                             default_velocity=DEFAULT_VELOCITY))
+        except ValueError as exc:
+            errs.append((f"{where}.name", str(exc)))
+    if errs:
+        raise HandModelError(errs)
+    return WholeHand(name, fmt, text, tuple(tips), tuple(fingers), (R, p))

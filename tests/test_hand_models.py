@@ -1,0 +1,179 @@
+"""Whole-hand models from URDF and MJCF (issue 14, items 2, 3 and 6): the built-in
+Allegro-class hand written twice by us (the same kinematics from one table), fingertip
+geometry read from the model, the nominal grasp, and every bad input refused naming the
+field and the reason before any NLP is built."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pytest
+from helpers import assert_close
+
+from ocp.robots.allegro import (
+    FINGERS,
+    NOMINAL_OBJECT_POSITION,
+    NOMINAL_Q,
+    NOMINAL_RADIUS,
+    TIP_NAMES,
+    TIP_RADIUS,
+    load_allegro,
+    mjcf_text,
+    urdf_text,
+)
+from ocp.robots.whole_hand import HandModelError, TipSpec, load_whole_hand, tip_geometry
+from ocp.solve.planner import ManipulationPlanner, ManipulationProblem
+from ocp.spec.grasp import fingertips_from_joints
+from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose
+from ocp.spec.problem import ObjectSpec, ProblemError
+
+URDF, MJCF = load_allegro("urdf"), load_allegro("mjcf")
+NAMES = ("index", "middle", "ring", "thumb")
+BALL = ObjectSpec("sphere", (NOMINAL_RADIUS,))
+POSE = ObjectPose(position=NOMINAL_OBJECT_POSITION)
+WHERE = tuple(f"fingers[{i}].initial_q" for i in range(4))
+
+
+def test_the_shipped_files_are_the_table_written_out() -> None:
+    assert URDF.text == urdf_text() and MJCF.text == mjcf_text()
+
+
+def test_urdf_and_mjcf_of_the_hand_have_the_same_kinematics() -> None:
+    rng = np.random.default_rng(14)
+    for fu, fm in zip(URDF.fingers, MJCF.fingers, strict=True):
+        assert fu.joint_names == fm.joint_names and fu.nq == fm.nq == 4
+        assert_close(fu.lower, fm.lower, atol=0)
+        assert_close(fu.upper, fm.upper, atol=0)
+        assert_close(fu.velocity_limit, fm.velocity_limit, atol=0)
+        assert fu.tip_surface == fm.tip_surface
+        for _ in range(5):
+            q = rng.uniform(fu.lower, fu.upper)
+            Ru, pu = fu.fingertip_pose_pin(q)
+            Rm, pm = fm.fingertip_pose_pin(q)
+            assert_close(pu, pm, atol=1e-8)
+            assert_close(Ru, Rm, atol=1e-7)
+            # the CasADi kinematics the NLP uses is Pinocchio's
+            R_ca, p_ca = fu.fk(q)
+            assert_close(np.asarray(R_ca), Ru, atol=1e-12)
+            assert_close(np.asarray(p_ca).ravel(), pu, atol=1e-12)
+
+
+@pytest.mark.parametrize("hand", [URDF, MJCF], ids=["urdf", "mjcf"])
+def test_fingertip_geometry_read_from_the_model_is_what_the_file_says(hand: Any) -> None:
+    """Each tip: the capsule's cap of radius 12 mm, its centre the capsule's centre plus
+    its half length along the distal link's z (29 mm for the fingers, 43 mm for the
+    thumb), its end outwards (+z)."""
+    for row, f in zip(FINGERS, hand.fingers, strict=True):
+        tip = f.tip_surface
+        assert tip.kind == "capsule" and tip.params == (TIP_RADIUS,)
+        assert tip.extra == (row.capsule_half_length,)
+        assert_close(tip.p, [0.0, 0.0, row.capsule_centre + row.capsule_half_length],
+                     atol=1e-12)
+        assert_close(tip.R @ np.array([0.0, -1.0, 0.0]), [0.0, 0.0, 1.0], atol=1e-12)
+
+
+def test_a_sphere_tip_and_an_mjcf_default_class_are_read() -> None:
+    mjcf = """<mujoco><default><default class="tip"><geom type="sphere" size="0.01"
+    pos="0 0 0.03"/></default></default><worldbody><body name="b"><joint name="j"
+    axis="0 1 0" range="-1 1"/><body name="t" childclass="tip"><geom/></body></body>
+    </worldbody></mujoco>"""
+    tip = tip_geometry(mjcf, "mjcf", "t")
+    assert not isinstance(tip, str)
+    assert tip.kind == "sphere" and tip.params == (0.01,)
+    assert_close(tip.p, [0, 0, 0.03], atol=0)
+
+
+def test_the_nominal_grasp_touches_the_ball_in_force_closure() -> None:
+    tips = fingertips_from_joints(URDF.fingers, NOMINAL_Q, BALL, POSE, NAMES, WHERE)
+    problem = ManipulationProblem(
+        BALL, tips, 1.0, initial_pose=POSE,
+        motion=DesiredMotion.from_steps(POSE, [MotionStep(1.0, (0, 0, 1), 0.1)]))
+    assert problem.errors() == []
+    x0 = ManipulationPlanner().initial_state(problem)  # IK of every finger, force closure
+    for tip in tips:  # on the cap (0 < b < pi/2: between the seam and the end), on the
+        # chart's equator (the sides of TIP_SIDES are the nominal contacts')
+        assert tip.initial[0] == pytest.approx(0.0, abs=1e-3)
+        assert 0.3 < tip.initial[1] < math.pi / 2
+    assert np.all(np.isfinite(x0))
+
+
+# -- bad input: each refused naming the field and the reason ---------------------------------
+
+def _errors(call: Callable[[], object]) -> list[tuple[str, str]]:
+    try:
+        call()
+    except (HandModelError, ProblemError) as exc:
+        return exc.errors
+    raise AssertionError("no error")
+
+
+def test_a_tip_name_not_in_the_model() -> None:
+    errs = _errors(lambda: load_whole_hand(URDF.text, "urdf", [TipSpec("index_tip"),
+                                                               TipSpec("pinky_tip")]))
+    assert errs[0][0] == "tips[1].name" and "'pinky_tip' is not a link" in errs[0][1]
+    assert "index_tip" in errs[0][1]  # the names it has
+
+
+def test_a_tip_without_sphere_or_capsule_geometry_and_no_surface() -> None:
+    text = URDF.text.replace("<capsule", "<box size=\"0.01 0.01 0.01\"/><capsule_no")
+    errs = _errors(lambda: load_whole_hand(text, "urdf", [TipSpec("index_tip")]))
+    assert errs[0][0] == "tips[0].surface" and "no sphere or capsule" in errs[0][1]
+    assert "give the fingertip's surface" in errs[0][1]
+
+
+@pytest.mark.parametrize(("patch", "words"), [
+    ("<worldbody>", "<equality><joint joint1=\"index_j2\" joint2=\"index_j3\"/></equality>"
+                    "<worldbody>"),
+    ("<worldbody>", "<tendon><fixed name=\"couple\"/></tendon><worldbody>"),
+    ("<worldbody>", "<include file=\"other.xml\"/><worldbody>"),
+    ('type="hinge" axis="0 0 1"', 'type="ball" axis="0 0 1"'),
+])
+def test_mjcf_couplings_includes_and_unsupported_joints_are_refused(patch: str, words: str
+                                                                     ) -> None:
+    text = MJCF.text.replace(patch, words, 1)
+    errs = _errors(lambda: load_whole_hand(text, "mjcf", [TipSpec("index_tip")]))
+    assert errs[0][0] == "model"
+    what = {"equality": "coupling", "tendon": "coupling", "include": "included files",
+            "ball": "'ball' joint"}
+    assert any(w in errs[0][1] for k, w in what.items() if k in words), errs
+
+
+def test_urdf_mimic_and_continuous_joints_are_refused() -> None:
+    text = URDF.text.replace('<joint name="index_j3" type="revolute">',
+                             '<joint name="index_j3" type="continuous">')
+    errs = _errors(lambda: load_whole_hand(text, "urdf", [TipSpec("index_tip")]))
+    assert errs == [("model", "joint 'index_j3' is a 'continuous' joint; only revolute, "
+                              "prismatic and fixed joints are supported")]
+    text = URDF.text.replace('<child link="index_distal"/>',
+                             '<child link="index_distal"/><mimic joint="index_j2"/>')
+    errs = _errors(lambda: load_whole_hand(text, "urdf", [TipSpec("index_tip")]))
+    assert errs[0][0] == "model" and "mimics 'index_j2'" in errs[0][1]
+
+
+def test_an_unreachable_initial_grasp_names_the_finger_the_distance_and_the_limit() -> None:
+    qs = list(NOMINAL_Q)
+    qs[1] = (0.0, 0.0, 0.0, 0.0)  # the middle finger straight: far from the ball
+    qs[2] = (0.1, 0.3, 2.0, 0.8)  # ring j2 beyond its limit
+    errs = _errors(lambda: fingertips_from_joints(URDF.fingers, tuple(qs), BALL, POSE, NAMES,
+                                                  WHERE))
+    by_field = dict(errs)
+    assert "finger 'middle' cannot reach the initial grasp: its tip is" in \
+        by_field["fingers[1].initial_q"] and "mm from the object" in \
+        by_field["fingers[1].initial_q"]
+    assert "ring_j2 = 2 is above its limit 1.709 by 0.291" in by_field["fingers[2].initial_q"]
+
+
+def test_overlapping_fingertips_are_refused() -> None:
+    # two fingers that are the same finger: their tips coincide
+    fingers = (URDF.fingers[0], URDF.fingers[0])
+    errs = _errors(lambda: fingertips_from_joints(fingers, (NOMINAL_Q[0], NOMINAL_Q[0]), BALL,
+                                                  POSE, ("a", "b"), WHERE[:2]))
+    assert errs == [("fingers[1].initial_q", "fingers 'a' and 'b': their tips overlap by "
+                                             "24 mm")]
+
+
+def test_tip_names_are_the_hands() -> None:
+    assert URDF.tip_names == TIP_NAMES == MJCF.tip_names
