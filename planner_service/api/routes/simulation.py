@@ -16,7 +16,7 @@ from typing import Any
 from fastapi import APIRouter
 from fastapi.responses import Response
 
-from dexroll_client.models import JobState
+from dexroll_client.models import ErrorBody, JobState
 from dexroll_client.simulation import SimulationOptions, SimulationReport
 
 from ...execution import NotExecutableError, simulate_result
@@ -32,8 +32,10 @@ router = APIRouter()
 _running = threading.Lock()
 
 _RESPONSES: dict[int | str, dict[str, Any]] = {
-    409: {"description": "the job has not finished, or has no plan a hand executes"},
-    503: {"description": "this service was installed without MuJoCo (the `sim` extra)"},
+    409: {"model": ErrorBody,
+          "description": "the job has not finished, or has no plan a hand executes"},
+    503: {"model": ErrorBody,
+          "description": "this service was installed without MuJoCo (the `sim` extra)"},
 }
 
 
@@ -84,7 +86,8 @@ def simulate_plan(job_id: str, store: StoreDep, owner: OwnerDep,
 
 
 @router.get("/v1/plans/{job_id}/simulation", response_model=SimulationReport,
-            responses={404: {"description": "no such job, or not simulated yet"}})
+            responses={404: {"model": ErrorBody,
+                             "description": "no such job, or not simulated yet"}})
 def simulation_report(job_id: str, store: StoreDep, owner: OwnerDep) -> Response:
     """The latest simulation report of a job (404 until `POST` has run one)."""
     if store.head(job_id, owner) is None:
