@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -270,3 +272,14 @@ def test_options_are_checked() -> None:
     with pytest.raises(ValueError, match="solref"):
         SimOptions.from_dict({"timestep": 0.005})
     assert SimOptions.from_dict({"tolerances": {"position": 2e-3}}).tolerances.position == 2e-3
+
+
+def test_sim_is_independent_of_the_planner_and_the_service() -> None:
+    """sim/ takes plain data: importing it loads neither the planner (ocp, CasADi,
+    Pinocchio) nor the service."""
+    code = ("import sys, sim; bad = [m for m in sys.modules if m.split('.')[0] in "
+            "('ocp', 'planner_service', 'casadi', 'pinocchio', 'fastapi')]; print(bad); "
+            "sys.exit(bool(bad))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
