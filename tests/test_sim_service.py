@@ -4,6 +4,7 @@ and ``dexroll simulate`` on the job's JSON (docs/simulation.md)."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import subprocess
 import sys
@@ -13,7 +14,7 @@ import httpx
 import pytest
 from conftest import Server
 
-from dexroll_client import DexrollClient
+from dexroll_client import AsyncDexrollClient, DexrollClient
 from dexroll_client.errors import ConflictError, NotFoundError
 from dexroll_client.simulation import SimulationOptions
 from planner_service.cli import main
@@ -52,6 +53,12 @@ def test_a_plan_is_simulated_and_its_report_stored(live_server: Server,
         assert any(c.lost_time > 0 for c in loose.contacts)
         assert loose.options["record_every"] == 50
         assert client.simulation(finger_job) == loose
+
+    async def latest() -> object:
+        async with AsyncDexrollClient.from_url(live_server.url) as client:
+            return await client.simulation(finger_job)
+
+    assert asyncio.run(latest()) == loose
 
 
 def test_the_doors_refuse_what_cannot_be_executed(live_server: Server,
