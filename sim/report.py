@@ -42,7 +42,9 @@ class ContactReport:
     touching (no normal force) in ``loss_events`` separate losses, the first at
     ``first_loss_at`` [s]; ``slip_distance`` [m], the integral of the tangential speed of
     the object's material point relative to the touching body at the contact, and its
-    worst speed [m/s]; the normal force [N] (its sum over the pair's contact points)."""
+    worst speed [m/s]; the normal force [N] (its sum over the pair's contact points) and,
+    when the plan states the contact's force, the planned normal force's mean and the
+    worst difference between the two (None otherwise)."""
 
     name: str
     body: str
@@ -54,6 +56,8 @@ class ContactReport:
     normal_force_min: float
     normal_force_mean: float
     normal_force_max: float
+    planned_normal_force_mean: float | None = None
+    normal_force_error_max: float | None = None
 
 
 @dataclass

@@ -174,6 +174,24 @@ class Simulation:
                              f"(J^T f) and a squeeze of {o.squeeze * 1e3:g} mm")
         return offsets, torques, notes
 
+    def _planned_normal_forces(self, ts: FloatArray) -> dict[int, FloatArray]:
+        """Per contact with a planned force (a fingertip whose reference has
+        ``contact_force``), its planned normal force [N] at the times ``ts``: the push
+        into the object, -f . n (n the object's outward normal there; |f| when the plan
+        does not say n)."""
+        out: dict[int, FloatArray] = {}
+        ref_of = {f.name: r for f, r in zip(self.plan.fingers, self.plan.references,
+                                            strict=True)}
+        for j, c in enumerate(self.plan.contacts):
+            ref = ref_of.get(c.finger) if c.finger is not None else None
+            if ref is None or ref.contact_force is None:
+                continue
+            F = ref.contact_force
+            fn = -np.sum(F * c.normal, axis=1) if c.normal is not None else \
+                np.linalg.norm(F, axis=1)
+            out[j] = _linear(self.plan.t, fn[:, None], ts)[:, 0]
+        return out
+
     # -- the run --------------------------------------------------------------------------
     def run(self) -> SimReport:
         plan, o, m, d = self.plan, self.options, self.model, self.data
@@ -198,6 +216,7 @@ class Simulation:
             qd_ref.append(qd)
             ctrl.append(target + (o.kv / o.kp) * qd)
             tau.append(ramp[:, None] * _linear(plan.t, trq, ts))
+        planned_force = self._planned_normal_forces(ts)
         pos_ref = _linear(plan.t, plan.object_position, ts)
         quat_ref = slerp(plan.t, plan.object_wxyz, ts)
         vel_ref = np.gradient(pos_ref, dt, axis=0) if ts.size > 1 else np.zeros_like(pos_ref)
@@ -283,6 +302,9 @@ class Simulation:
             events = int(np.sum(lost[1:] & ~lost[:-1]) + (1 if lost.size and lost[0] else 0))
             first = float(t_end[during][np.argmax(lost)]) if lost.any() else None
             f = normal_force[during, j]
+            planned = planned_force.get(j)
+            if planned is not None:
+                planned = planned[1:][during]
             contacts.append(ContactReport(
                 spec.name, spec.body, lost_time=float(np.sum(lost) * dt), loss_events=events,
                 first_loss_at=first,
@@ -290,7 +312,11 @@ class Simulation:
                 max_slip_speed=float(np.max(slip_speed[during, j], initial=0.0)),
                 normal_force_min=float(np.min(f, initial=math.inf)),
                 normal_force_mean=float(np.mean(f)) if f.size else 0.0,
-                normal_force_max=float(np.max(f, initial=0.0))))
+                normal_force_max=float(np.max(f, initial=0.0)),
+                planned_normal_force_mean=None if planned is None or not planned.size
+                else float(np.mean(planned)),
+                normal_force_error_max=None if planned is None or not planned.size
+                else float(np.max(np.abs(f - planned)))))
         rec = np.arange(0, n_steps, o.record_every)
         if rec[-1] != n_steps - 1:
             rec = np.append(rec, n_steps - 1)

@@ -283,3 +283,53 @@ def test_sim_is_independent_of_the_planner_and_the_service() -> None:
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def _head(plan: ExecutionPlan, n: int) -> ExecutionPlan:
+    """The plan's first n samples."""
+    return replace(plan, t=plan.t[:n], object_position=plan.object_position[:n],
+                   object_wxyz=plan.object_wxyz[:n],
+                   references=tuple(FingerReference(r.q[:n], r.q_dot[:n])
+                                    for r in plan.references),
+                   contacts=tuple(replace(c, point=c.point[:n],
+                                          normal=None if c.normal is None else c.normal[:n])
+                                  for c in plan.contacts))
+
+
+def test_a_plans_own_forces_replace_the_grip(
+        plans: dict[str, tuple[AnyPlanResult, PlanRequest]]) -> None:
+    """A plan that states its contact forces (issue 15, part 1) is executed with them as
+    feed-forward (J^T f) instead of the grip force; one that states joint torques, with
+    those. A plan pushing 1 N into the object at each fingertip runs as the 1 N grip."""
+    result, request = plans["experiment2"]
+    plan = _head(execution_plan(result, request), 41)
+    assert not plan.has_forces
+    normal_of = {c.finger: c.normal for c in plan.contacts if c.finger is not None}
+    pushing = replace(plan, references=tuple(
+        replace(r, contact_force=-1.0 * normal_of[f.name])
+        for f, r in zip(plan.fingers, plan.references, strict=True)))
+    assert pushing.has_forces
+    gripped = simulate(plan, SimOptions(grip_force=1.0))
+    forced = simulate(pushing, SimOptions(grip_force=0.0))  # the option is not used
+    check_laws(forced)
+    assert any("the plan's contact force" in n for n in forced.notes)
+    assert forced.position_error.max == pytest.approx(gripped.position_error.max, abs=1e-6)
+    for c, g in zip(forced.contacts, gripped.contacts, strict=True):
+        assert c.planned_normal_force_mean == pytest.approx(1.0)
+        # the worst difference is at least the difference of the means
+        assert c.normal_force_error_max >= abs(c.normal_force_mean - 1.0) - 1e-12
+        assert c.normal_force_mean == pytest.approx(g.normal_force_mean, rel=1e-3)
+        assert g.planned_normal_force_mean is None and g.normal_force_error_max is None
+    # the same feed-forward stated as joint torques: the same run, number for number
+    _, torques, _ = Simulation(pushing, SimOptions(grip_force=0.0))._feedforward()
+    with_torques = replace(plan, references=tuple(
+        replace(r, joint_torques=tau) for r, tau in zip(plan.references, torques,
+                                                        strict=True)))
+    torqued = simulate(with_torques, SimOptions(grip_force=0.0))
+    assert any("the plan's joint torques" in n for n in torqued.notes)
+    assert torqued.position_error == forced.position_error
+    assert [c.normal_force_mean for c in torqued.contacts] == \
+        [c.normal_force_mean for c in forced.contacts]
+    # without use_plan_forces the grip option is used again
+    ignored = simulate(pushing, SimOptions(grip_force=1.0, use_plan_forces=False))
+    assert ignored.position_error == gripped.position_error

@@ -103,6 +103,12 @@ class ContactExecutionModel(_Response):
     normal_force_min: float = Field(description="[N]")
     normal_force_mean: float = Field(description="[N]")
     normal_force_max: float = Field(description="[N]")
+    planned_normal_force_mean: float | None = Field(
+        default=None, description="the plan's normal force at this contact, its mean [N] "
+                                  "(null: the plan states no forces)")
+    normal_force_error_max: float | None = Field(
+        default=None, description="worst |simulated - planned| normal force [N] (null: the "
+                                  "plan states no forces)")
 
 
 class SimulationSeriesModel(_Response):
