@@ -18,6 +18,9 @@ import numpy as np
 import pytest
 
 from dexroll_client.models import AnyPlanResult, PlanRequest, PlanStatus
+from planner_service.bench.report import _table, summarise
+from planner_service.bench.rows import FIELDS, VOLATILE, row_from_result
+from planner_service.bench.suite import Unit, expand, load_suite
 from planner_service.cli import plan_request
 from planner_service.execution import NotExecutableError, execution_plan, simulate_result
 from planner_service.planners import REQUEST
@@ -174,12 +177,13 @@ def test_a_pad_that_slides_instead_of_rolling_fails(
 def test_replaying_the_object_has_no_error(
         plans: dict[str, tuple[AnyPlanResult, PlanRequest]]) -> None:
     result, request = plans["experiment2"]
-    report = simulate_result(result, request, {"mode": "replay"})
+    plan = _head(execution_plan(result, request), 81)  # its first second
+    report = simulate(plan, SimOptions(mode="replay"))
     check_laws(report)
     assert report.position_error.max == 0.0 and report.angle_error.max == 0.0
     # the pads, moved 0.5 mm into the object, press on it all along
     assert all(c.lost_time == 0 and c.normal_force_min > 0 for c in report.contacts)
-    kinematic = simulate_result(result, request, {"mode": "kinematic"})
+    kinematic = simulate(plan, SimOptions(mode="kinematic"))
     check_laws(kinematic)
     assert kinematic.passed, kinematic.summary()
 
@@ -333,3 +337,48 @@ def test_a_plans_own_forces_replace_the_grip(
     # without use_plan_forces the grip option is used again
     ignored = simulate(pushing, SimOptions(grip_force=1.0, use_plan_forces=False))
     assert ignored.position_error == gripped.position_error
+
+
+# -- the bench's "executed" column -------------------------------------------------------------
+
+def _unit(name: str, planner: str, request: dict[str, Any]) -> Unit:
+    return Unit("paper", name, "collocation", planner, request, "solved")
+
+
+def test_bench_rows_execute_solved_finger_plans(
+        plans: dict[str, tuple[AnyPlanResult, PlanRequest]],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every row of a solved plan with fingers (the quick suite's experiment 2 is
+    examples/experiment2_two_fingers.json) carries its execution; the report's table an
+    "executed" column per family and method."""
+    (fixed,) = [p for p in expand(load_suite("quick"), families=["paper"])
+                if p.id == "experiment2"]
+    request = json.loads(PLANS["experiment2"].read_text(encoding="utf-8"))
+    assert fixed.request == request
+    result, _ = plans["experiment2"]
+    row = row_from_result(_unit("experiment2", "manipulation", request), result, 1.0, 0, 0.0)
+    assert set(row) == set(FIELDS) and row["ok"]
+    assert row["exec_status"] == "passed", row["exec_message"]
+    assert 0 <= row["exec_position_error_max"] <= 1e-3
+    assert 0 <= row["exec_angle_error_max"] <= math.radians(2.0)
+    assert row["exec_contacts_lost"] == 0 and row["exec_wall_time"] > 0
+    assert "exec_status" not in VOLATILE and "exec_position_error_max" in VOLATILE
+    # a ball on the palm alone: nothing to execute
+    triangle = json.loads((ROOT / "examples" / "triangle.json").read_text())
+    palm_result, _ = plan_request(triangle)
+    palm_row = row_from_result(_unit("triangle", "ball_on_palm", triangle), palm_result, 1.0,
+                               0, 0.0)
+    assert palm_row["ok"] and palm_row["exec_status"] is None
+    # a failed execution is reported as such
+    summary = summarise([row, palm_row, dict(row, problem_id="x", exec_status="failed",
+                                             exec_position_error_max=0.01)], ["paper"])
+    (paper,) = summary
+    assert paper["executed"] == 2 and paper["executed_passed"] == 1
+    assert paper["exec_position_error_max"] == 0.01
+    table = _table(summary)
+    assert table[0].endswith("| executed (worst mm, deg) |")
+    assert "| 1/2 (10.00 mm, " in table[2]
+    # DEXROLL_BENCH_EXECUTE=0 turns it off
+    monkeypatch.setenv("DEXROLL_BENCH_EXECUTE", "0")
+    off = row_from_result(_unit("experiment2", "manipulation", request), result, 1.0, 0, 0.0)
+    assert off["ok"] and off["exec_status"] is None
