@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import httpx
@@ -84,15 +82,11 @@ def test_the_command_line_simulates_a_jobs_json(live_server: Server, finger_job:
     path = tmp_path / "job.json"
     path.write_text(json.dumps(job))
     out, png = tmp_path / "report.json", tmp_path / "errors.png"
-    proc = subprocess.run([sys.executable, "-m", "planner_service.cli", "simulate", str(path),
-                           "-o", str(out), "--plot", str(png)],
-                          capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "PASSED" in proc.stdout
+    assert main(["simulate", str(path), "-o", str(out), "--plot", str(png)]) == 0
+    assert "PASSED" in capsys.readouterr().out
     report = json.loads(out.read_text())
     assert report["passed"] and report["position_error"]["max"] <= 1e-3
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    # in this process: the same command
     assert main(["simulate", str(path), "-o", str(out), "--plot", "none", "--squeeze", "0",
                  "--grip-force", "0"]) == 1
     assert "lost" in capsys.readouterr().out and not json.loads(out.read_text())["passed"]
