@@ -1,5 +1,5 @@
-"""Model files from requests (a finger's URDF; MJCF later) checked in an isolated process
-before the service loads them.
+"""Model files from requests (a finger's URDF, a whole hand's URDF or MJCF) checked in an
+isolated process before the service loads them.
 
 A request may carry a robot model as XML text. Loading it costs what its author wants it to
 cost: Pinocchio and the finger's CasADi kinematics grow like the cube of the joint count (a
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import logging
 import multiprocessing as mp
 import os
@@ -224,14 +225,23 @@ def tree_errors(kind: str, text: str, limits: ModelLimits) -> list[str]:
 # -- loading (in the checker process) ----------------------------------------------------------
 
 def _load_urdf(text: str, params: dict[str, Any]) -> FieldErrors:
-    from .planners.cache import urdf_errors  # the service's own loader (a finger's)
+    from .planners.cache import hand_model_errors, urdf_errors  # the service's own loaders
 
+    if "tips" in params:  # a whole hand's model (its fingertips named)
+        return hand_model_errors(text, "urdf", str(params["tips"]))
     return urdf_errors(text, str(params.get("tip_frame", "fingertip")))
+
+
+def _load_mjcf(text: str, params: dict[str, Any]) -> FieldErrors:
+    from .planners.cache import hand_model_errors  # a whole hand's model
+
+    return hand_model_errors(text, "mjcf", str(params.get("tips", '[{"name": "-"}]')))
 
 
 #: Each kind's loader, run in the checker process once the tree passed: (text, params) ->
 #: errors under the model's fields.
-LOADERS: dict[str, Callable[[str, dict[str, Any]], FieldErrors]] = {"urdf": _load_urdf}
+LOADERS: dict[str, Callable[[str, dict[str, Any]], FieldErrors]] = {"urdf": _load_urdf,
+                                                                     "mjcf": _load_mjcf}
 
 
 def check_model(model: ModelText, limits: ModelLimits) -> FieldErrors:
@@ -431,6 +441,11 @@ def request_models(request: BaseModel) -> list[ModelText]:
         for kind in LOADERS:
             text = getattr(part, kind, None)
             if isinstance(text, str):
-                params = (("tip_frame", getattr(part, "tip_frame", "fingertip")),)
+                params: tuple[tuple[str, Any], ...] = (
+                    ("tip_frame", getattr(part, "tip_frame", "fingertip")),)
+                tips = getattr(part, "tips", None)
+                if tips is not None:  # a whole hand's model
+                    params = (("tips", json.dumps([t.model_dump(mode="json")
+                                                   for t in tips])),)
                 out.append(ModelText(where, kind, kind, text, params))
     return out

@@ -81,8 +81,32 @@ def three_fingers() -> tuple[Any, Any, Callable[[Any], ManipulationSolution]]:
     return GENERAL, problem, lambda sol: sol
 
 
+def round_tips() -> tuple[Any, Any, Callable[[Any], ManipulationSolution]]:
+    """The built-in Allegro-class hand (4 fingers, 16 joints, capsule tips of 12 mm) turning
+    a 60 mm ball in its nominal grasp (issue 14)."""
+    from ocp.robots.allegro import (
+        NOMINAL_OBJECT_POSITION,
+        NOMINAL_Q,
+        NOMINAL_RADIUS,
+        load_allegro,
+    )
+    from ocp.spec.grasp import fingertips_from_joints
+
+    hand = load_allegro()
+    obj = ObjectSpec("sphere", (NOMINAL_RADIUS,))
+    start = ObjectPose(position=NOMINAL_OBJECT_POSITION)
+    names = ("index", "middle", "ring", "thumb")
+    problem = ManipulationProblem(
+        obj, fingertips_from_joints(hand.fingers, NOMINAL_Q, obj, start, names, names), 2.0,
+        initial_pose=start,
+        motion=DesiredMotion.from_steps(start, [MotionStep(2.0, (0.0, 0.0, 1.0), 15 * DEG)]),
+        tracking=Tracking(position_tolerance=1e-3, orientation_tolerance=DEG),
+        n_intervals=16)
+    return GENERAL, problem, lambda sol: sol
+
+
 CASES = {"palm_alone": palm_alone, "one_finger": one_finger, "two_fingers": two_fingers,
-         "three_fingers": three_fingers}
+         "three_fingers": three_fingers, "round_tips": round_tips}
 
 
 @pytest.fixture(scope="module", params=list(CASES))
@@ -179,12 +203,20 @@ def test_each_fingertip_is_where_its_joints_put_it_and_touches_the_object(
             R_pin, p_pin = model.fingertip_pose_pin(f.q[i])
             assert_close(p_pin, f.tip_position[i], atol=1e-6)
             assert_close(R_pin, f.tip_rotation[i], atol=1e-5)
+        tip = model.tip_surface
+        rho = float(problem.object.dimensions[0]) if hasattr(problem, "object") else RHO
+        if tip.round:  # a round tip: its centre rho + r from the ball's
+            centre = f.tip_position + np.einsum("kij,j->ki", f.tip_rotation, tip.p)
+            assert_close(np.linalg.norm(centre - plan.object_position, axis=1),
+                         rho + tip.params[0], atol=1e-6)
+            continue
         # a flat pad tangent to the ball: the centre one radius above the pad's plane
         d = np.einsum("ki,ki->k", plan.object_position - f.tip_position,
                       f.tip_rotation[:, :, 2])
         assert_close(d, RHO, atol=1e-6)
+    rho = float(problem.object.dimensions[0]) if hasattr(problem, "object") else RHO
     for contact in plan.contacts:  # every contact point on the ball
-        assert_close(np.linalg.norm(contact.point - plan.object_position, axis=1), RHO,
+        assert_close(np.linalg.norm(contact.point - plan.object_position, axis=1), rho,
                      atol=1e-9)
 
 

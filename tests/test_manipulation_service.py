@@ -287,7 +287,9 @@ def test_models_lists_the_planner_and_the_hands(client: DexrollClient) -> None:
     catalog = client.models()
     assert "manipulation" in catalog.planners
     hands = {h.name: h for h in catalog.hands}
-    assert set(hands) == {"two_finger", "three_finger"}
+    assert set(hands) == {"two_finger", "three_finger", "allegro"}
+    allegro = hands.pop("allegro")  # round tips: tests/test_hand_service.py
+    assert allegro.n_fingers == 4 and allegro.mjcf and allegro.fingers[0].pad_half_size is None
     for name, info in hands.items():
         hand = load_hand(name)
         assert info.n_fingers == hand.n_fingers == len(info.fingers)

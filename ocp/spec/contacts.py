@@ -416,6 +416,8 @@ class FingertipContact(Contact):
         # A = object (this contact's patch), B = the fingertip surface
         self.pair = ContactPair(surface, self.tip.surface)
         self._rolls: dict[int, Any] = {}
+        self._terms: Any = None
+        self._guess_q: tuple[FloatArray, FloatArray] | None = None
 
     def tip_params(self) -> Any:
         """The tip surface's parameters as CasADi constants (none for the pad's plane)."""
@@ -563,6 +565,8 @@ class FingertipContact(Contact):
         central differences, the tip point and angle rolled along (RK4 of the rolling
         equations: ``roll``, the grasp model's for a flat pad, else this contact's own
         :meth:`roll` with its tip's curvature)."""
+        if self._carries(problem):
+            return self._integrated_guess(problem, pose, ts, chart, shape)
         if self.tip.round:
             roll = self.roll(len(ts) - 1)
         dt = 1e-4 * problem.duration
@@ -584,6 +588,93 @@ class FingertipContact(Contact):
         ef[1:, 0:2], ef[1:, 4] = pad[:, 0:2], pad[:, 2]
         return ef, rate
 
+    def _carries(self, problem: ManipulationProblem) -> bool:
+        """Whether the initial guess is the integrated one (:meth:`_integrated_guess`): a
+        round tip on a finger of fewer than 6 joints, whose joints cannot follow the 6-D
+        poses of a tip rolled along a made-up contact path (closure would break)."""
+        return self.tip.round and int(self.finger.nq) < 6
+
+    def _closure_terms(self) -> Any:
+        """CasADi function (eta, q, R_po, p_po, chart, shape) -> (C, C_eta E, C_q,
+        C_R, C_p): the closure residual, its derivative along the contact inputs w
+        (eta_dot = E w), along the joints, and along vec(R_po) and p_po."""
+        if self._terms is None:
+            nq = int(self.finger.nq)
+            e, q = ca.SX.sym("eta", 5), ca.SX.sym("q", nq)
+            R, p = ca.SX.sym("R", 3, 3), ca.SX.sym("p", 3)
+            chart = ca.SX.sym("chart", 3, 3)
+            shape = ca.SX.sym("shape", self.surface.n_params)
+            w = ca.SX.sym("w", 2)
+            x = ca.vertcat(e, q)
+            g = SymbolicGrasp(self.surface, shape, x, ca.SX.sym("xd", 5 + nq), R_po=R, p_po=p)
+            C = self.closure(g, x, chart)
+            ed = self.rates(g, x, ca.vertcat(w, ca.SX.zeros(nq)), chart)[0:5]
+            E = ca.jacobian(ed, w)
+            self._terms = ca.Function("closure_terms", [e, q, R, p, chart, shape], [
+                C, ca.jacobian(C, e) @ E, ca.jacobian(C, q), ca.jacobian(C, ca.vec(R)),
+                ca.jacobian(C, p), E])
+        return self._terms
+
+    def _integrated_guess(self, problem: ManipulationProblem, pose: PoseOfTime,
+                          ts: FloatArray, chart: FloatArray, shape: FloatArray
+                          ) -> tuple[FloatArray, FloatArray]:
+        """A guess that rolls and closes: from the initial grasp (its joints by inverse
+        kinematics), the contact inputs w and the joint rates that keep closure along the
+        object's motion (d/dt closure = 0, solved at each step for (w, q_dot): six
+        equations in 2 + nq unknowns, the least-norm solution, a feedback on the closure
+        residual), integrated with small steps; the joints are clipped into their limits.
+        The joints are kept for :meth:`guess_joints`."""
+        from ocp.robots.finger import PAPER_SEED, inverse_kinematics
+
+        f, spec = self.finger, self.spec(problem)
+        nq = int(f.nq)
+        terms = self._closure_terms()
+        e = np.asarray(spec.initial, dtype=float)
+        R0, p0 = pose(np.asarray(ts[:1], dtype=float))
+        # the initial grasp's joints: IK of the tip frame where the contact puts it
+        g0 = SymbolicGrasp(self.surface, ca.DM(shape), ca.DM(0, 1), ca.DM(0, 1),
+                           R_po=ca.DM(R0[0]), p_po=ca.DM(p0[0]), none=ca.DM(0, 1),
+                           eye=ca.DM.eye(3))
+        R_l, p_l = (ca.evalf(a) for a in self.pad_pose(g0, ca.DM(e), ca.DM(chart)))
+        seed = np.asarray(spec.q_seed if spec.q_seed is not None else
+                          PAPER_SEED[:nq], dtype=float)
+        q = inverse_kinematics(f, np.asarray(R_l), np.asarray(p_l).ravel(), seed).q.copy()
+        n_sub = 8
+        qs = np.zeros((len(ts), nq))
+        ef = np.zeros((len(ts), 5))
+        W = np.zeros((len(ts), 2))
+        qs[0], ef[0] = q, e
+
+        def inputs(t: float, e: FloatArray, q: FloatArray) -> tuple[FloatArray, FloatArray,
+                                                                    FloatArray]:
+            dt = 1e-5 * problem.duration
+            Rm, pm = pose(np.array([t - dt, t, t + dt]))
+            C, Aw, Aq, CR, Cp, E = (np.asarray(a) for a in terms(
+                e, q, Rm[1], pm[1], chart, shape))
+            Rd = (Rm[2] - Rm[0]) / (2 * dt)
+            pd = (pm[2] - pm[0]) / (2 * dt)
+            rhs = -(CR @ Rd.ravel(order="F") + Cp @ pd) - 10.0 / problem.duration * \
+                C.ravel()
+            A = np.hstack([Aw, Aq])
+            sol = A.T @ np.linalg.solve(A @ A.T + 1e-12 * np.eye(6), rhs)
+            w, qd = sol[:2], sol[2:]
+            return w, (E @ w).ravel(), qd
+
+        for k in range(len(ts) - 1):
+            h = (ts[k + 1] - ts[k]) / n_sub
+            t = float(ts[k])
+            for _ in range(n_sub):  # midpoint steps
+                _, ed, qd = inputs(t, e, q)
+                em, qm = e + h / 2 * ed, np.clip(q + h / 2 * qd, f.lower, f.upper)
+                _, ed, qd = inputs(t + h / 2, em, qm)
+                e, q = e + h * ed, np.clip(q + h * qd, f.lower, f.upper)
+                t += h
+            W[k] = inputs(float(ts[k]), ef[k], qs[k])[0]
+            ef[k + 1], qs[k + 1] = e, q
+        W[-1] = inputs(float(ts[-1]), ef[-1], qs[-1])[0]
+        self._guess_q = (np.asarray(ts, dtype=float).copy(), qs)
+        return ef, W
+
     def guess_joints(self, R: FloatArray, p: FloatArray, q0: FloatArray, ts: FloatArray
                      ) -> tuple[FloatArray, FloatArray]:
         """The joints (and their rates, by differences) that put the pad at the poses
@@ -592,6 +683,12 @@ class FingertipContact(Contact):
         not converge."""
         from ocp.robots.finger import inverse_kinematics, inverse_kinematics_batch
 
+        kept = self._guess_q
+        if kept is not None and kept[0].shape == np.shape(ts) and np.allclose(kept[0], ts):
+            qs = kept[1].copy()
+            qs[0] = q0
+            self._guess_q = None
+            return qs, np.gradient(qs, ts, axis=0)
         qs, ok = inverse_kinematics_batch(self.finger, R, p, q0, tol=IK_GUESS_TOL)
         qs[0] = q0
         for j in (np.flatnonzero(~ok[1:]) + 1).tolist():  # from a neighbour instead

@@ -19,7 +19,8 @@ from ocp.robots.hands import Hand, load_hand
 from ocp.solve.planner import ManipulationPlanner
 from ocp.spec.problem import ProblemError
 
-__all__ = ["FINGERS", "FingerCache", "Planners", "hand_finger_name", "urdf_errors"]
+__all__ = ["FINGERS", "FingerCache", "Planners", "hand_finger_name", "hand_model_errors",
+           "load_hand_model", "urdf_errors"]
 
 
 class FingerCache:
@@ -93,17 +94,23 @@ class FingerCache:
             self._fingers[key] = finger
             return finger
 
-    def hand(self, spec: HandModel) -> Hand:
-        """The built-in hand of a request (its fingers on the request's mounts);
-        ProblemError naming ``hand.mounts`` when they do not fit the hand."""
+    def hand(self, spec: HandModel) -> Any:
+        """The hand of a request: a built-in one (the two_finger and three_finger hands'
+        fingers on the request's mounts: :class:`~ocp.robots.hands.Hand`), or a whole-hand
+        model (the allegro, a URDF or MJCF with its tips:
+        :class:`~ocp.robots.whole_hand.WholeHand`); ProblemError naming ``hand.mounts``,
+        ``hand.urdf``/``hand.mjcf`` or ``hand.tips[i]...`` when it cannot be used."""
         mounts = None if spec.mounts is None else tuple(
             (tuple(m.position), tuple(m.rotation)) for m in spec.mounts)
-        key = (spec.builtin, mounts)
+        key = (spec.builtin, mounts, spec.urdf, spec.mjcf,
+               None if spec.tips is None else spec.model_dump_json(include={"tips"}),
+               None if spec.mount is None else spec.mount.model_dump_json())
         with self.lock:
             cached = self._hands.get(key)
             if cached is not None:
                 return cached
-            hand = _load_hand(spec)
+            hand = _load_hand(spec) if spec.builtin in ("two_finger", "three_finger") \
+                else load_hand_model(spec)
             self._make_room(len(hand.fingers))
             self._hands[key] = hand
             return hand
@@ -149,15 +156,98 @@ def _load_hand(spec: HandModel) -> Hand:
         (rotation_from_vector(m.rotation), np.asarray(m.position, dtype=float))
         for m in spec.mounts]
     try:
-        return load_hand(spec.builtin, mounts=mounts)
+        return load_hand(str(spec.builtin), mounts=mounts)
     except ValueError as exc:  # the mounts do not fit the hand
         raise ProblemError([("hand.mounts" if spec.mounts is not None else "hand.builtin",
                              str(exc))]) from exc
 
 
-def hand_finger_name(hand: Hand, index: int) -> str:
-    """The hand's name of its finger ``index`` (its tip frame's prefix: f1, f2, ...)."""
-    return hand.tip_frames[index].removesuffix("_fingertip")
+def hand_finger_name(hand: Any, index: int) -> str:
+    """The hand's name of its finger ``index`` (its tip frame's prefix: f1, f2, ...; a
+    whole hand's tip link without ``_tip``)."""
+    if hasattr(hand, "tip_frames"):
+        return str(hand.tip_frames[index].removesuffix("_fingertip"))
+    return str(hand.tip_names[index].removesuffix("_tip"))
+
+
+def _tip_surface(model: Any, where: str) -> Any:
+    """The core's tip surface of a request's ``TipSurfaceModel``."""
+    from ocp.geometry.tips import TipSurface, capsule_tip
+
+    dims = tuple(float(d) for d in model.dimensions)
+    if model.kind == "capsule":
+        if model.axis is None:
+            raise ProblemError([(f"{where}.axis", "a capsule needs its axis (out of the cap, "
+                                                  "link frame)")])
+        axis = np.asarray(model.axis, dtype=float)
+        side = None if model.side is None else np.asarray(model.side, dtype=float)
+        if np.linalg.norm(axis) < 1e-9:
+            raise ProblemError([(f"{where}.axis", "must not be zero")])
+        if side is None:
+            side = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 * np.linalg.norm(axis) \
+                else np.array([0.0, 1.0, 0.0])
+        try:
+            return capsule_tip(dims[0], model.position, axis, side,
+                               dims[1] if len(dims) > 1 else 0.0)
+        except ValueError as exc:
+            raise ProblemError([(f"{where}.side", str(exc))]) from exc
+    R = rotation_from_vector(model.rotation)
+    return TipSurface(model.kind, dims, tuple(tuple(float(x) for x in r) for r in R),
+                      (float(model.position[0]), float(model.position[1]),
+                       float(model.position[2])))
+
+
+def load_hand_model(spec: HandModel) -> Any:
+    """The whole hand of a request (the built-in allegro, or a URDF or MJCF with its
+    tips); ProblemError naming ``hand.<field>``."""
+    from ocp.robots.allegro import load_allegro
+    from ocp.robots.whole_hand import HandModelError, TipSpec, load_whole_hand
+
+    if spec.builtin == "allegro":
+        return load_allegro("urdf")
+    fmt = "urdf" if spec.urdf is not None else "mjcf"
+    text = spec.urdf if spec.urdf is not None else spec.mjcf
+    assert text is not None and spec.tips is not None
+    if not text.lstrip().startswith("<"):
+        raise ProblemError([(f"hand.{fmt}", "must be the model document itself (XML text)")])
+    tips = []
+    for i, t in enumerate(spec.tips):
+        surface = None if t.surface is None else _tip_surface(t.surface,
+                                                              f"hand.tips[{i}].surface")
+        tips.append(TipSpec(t.name, surface, None if t.side is None else
+                            (float(t.side[0]), float(t.side[1]), float(t.side[2]))))
+    mount_R = mount_p = None
+    if spec.mount is not None:
+        mount_R = rotation_from_vector(spec.mount.rotation)
+        mount_p = np.asarray(spec.mount.position, dtype=float)
+    try:
+        hand = load_whole_hand(text, fmt, tips, mount_R, mount_p)
+    except MemoryError:
+        raise
+    except HandModelError as exc:
+        raise ProblemError([(f"hand.{fmt}" if f == "model" else f"hand.{f}", r)
+                            for f, r in exc.errors]) from exc
+    except Exception as exc:  # whatever a user's model does to the loader
+        raise ProblemError([(f"hand.{fmt}", str(exc) or type(exc).__name__)]) from exc
+    for i, f in enumerate(hand.fingers):
+        if f.nq > MAX_FINGER_JOINTS:
+            raise ProblemError([(f"hand.tips[{i}].name", f"the finger has {f.nq} joints; at "
+                                                         f"most {MAX_FINGER_JOINTS} are "
+                                                         "supported")])
+    return hand
+
+
+def hand_model_errors(text: str, fmt: str, tips: str) -> list[tuple[str, str]]:
+    """What loading a whole hand's model text with these tips finds wrong, under the
+    fields ``urdf``/``mjcf`` and ``tips[i]...`` (``tips``: the request's, as JSON); []
+    when it loads (a model checker process runs it: :mod:`planner_service.models_check`)."""
+    import json
+
+    try:
+        load_hand_model(HandModel.model_validate({fmt: text, "tips": json.loads(tips)}))
+    except ProblemError as exc:
+        return [(field.removeprefix("hand."), reason) for field, reason in exc.errors]
+    return []
 
 
 #: The fingers (and finger planners) of this process.

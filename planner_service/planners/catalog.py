@@ -55,6 +55,9 @@ def model_catalog(cache: FingerCache) -> ModelCatalog:
             base_rotation=rotation_vector(f.base_rotation), urdf=f.urdf_text))
     hands = []
     for name in BUILTIN_HANDS:
+        if name == "allegro":
+            hands.append(_allegro_info(cache))
+            continue
         with cache.lock:
             hand = cache.hand(HandModel(builtin=name))
         nominal = hand_fingertips(hand)
@@ -72,3 +75,36 @@ def model_catalog(cache: FingerCache) -> ModelCatalog:
             nominal_radius=hand.nominal_radius, urdf=hand.urdf_text))
     return ModelCatalog(planners=list(PLANNERS), objects=objects, fingers=fingers,
                         hands=hands)
+
+
+def _allegro_info(cache: FingerCache) -> HandInfo:
+    """The built-in Allegro-class hand: its round fingertips and nominal grasp."""
+    from ocp.robots.allegro import (
+        NOMINAL_OBJECT_POSITION,
+        NOMINAL_Q,
+        NOMINAL_RADIUS,
+        mjcf_text,
+    )
+    from ocp.spec.grasp import fingertips_from_joints
+    from ocp.spec.motion import ObjectPose
+    from ocp.spec.problem import ObjectSpec
+
+    with cache.lock:
+        hand = cache.hand(HandModel(builtin="allegro"))
+    names = tuple(hand_finger_name(hand, k) for k in range(hand.n_fingers))
+    tips = fingertips_from_joints(hand.fingers, NOMINAL_Q, ObjectSpec("sphere", (NOMINAL_RADIUS,)),
+                                  ObjectPose(position=NOMINAL_OBJECT_POSITION), names, names)
+    R, p = hand.mount
+    return HandInfo(
+        name="allegro", n_fingers=hand.n_fingers,
+        fingers=[HandFingerInfo(
+            name=names[k], tip_frame=f.tip_frame, n_joints=f.nq,
+            joint_names=list(f.joint_names), pad_half_size=None,
+            tip_surface=f.tip_surface.describe(),
+            nominal_initial=list(tips[k].initial),
+            base_position=[float(x) for x in p], base_rotation=rotation_vector(R),
+            nominal_q=list(NOMINAL_Q[k]),
+            nominal_chart_rotation=list(tips[k].chart_rotation))
+            for k, f in enumerate(hand.fingers)],
+        nominal_object_position=list(NOMINAL_OBJECT_POSITION),
+        nominal_radius=NOMINAL_RADIUS, urdf=hand.text, mjcf=mjcf_text())

@@ -35,6 +35,7 @@ from ocp.solve.planner import (
     Palm,
     Tracking,
 )
+from ocp.spec.grasp import fingertips_from_joints
 from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
 
 from .base import SOLVER_FIELDS, PlannerAdapter
@@ -108,19 +109,33 @@ def _palm_pose(obj: ObjectSpec, palm: Palm) -> ObjectPose | None:
     return ObjectPose((w, x, y, z), (float(p[0]), float(p[1]), float(p[2])))
 
 
+def _nominal_q(request: ManipulationRequest, hand: Any
+               ) -> tuple[tuple[float, ...], ...] | None:
+    """The joint angles of a hand's nominal grasp, per finger (None: it has none)."""
+    if isinstance(hand, Hand):
+        return hand.nominal_q
+    if request.hand is not None and request.hand.builtin == "allegro":
+        from ocp.robots.allegro import NOMINAL_Q
+
+        return NOMINAL_Q
+    return None
+
+
 def manipulation_problem(request: ManipulationRequest, cache: FingerCache
                          ) -> ManipulationProblem:
     """The core's problem of a manipulation request; ProblemError naming the wire fields
     the core cannot even be given (a finger that does not load, a hand finger that does
     not exist, duplicate names, a motion step without an axis)."""
     errors: list[tuple[str, str]] = []
-    hand: Hand | None = None
+    hand: Any = None  # Hand (flat pads) or WholeHand
     if request.hand is not None:
         try:
             hand = cache.hand(request.hand)
         except ProblemError as exc:
             errors += exc.errors
-    tips: list[Fingertip] = []
+    tips: list[Fingertip | None] = []
+    #: fingers whose contact comes from joint angles: (place, model, q, name, field)
+    from_joints: list[tuple[int, FingerModel, tuple[float, ...], str, str]] = []
     names: dict[str, int] = {}
     for i, f in enumerate(request.fingers):
         where = f"fingers[{i}]"
@@ -140,13 +155,14 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
                 n = len(hand.fingers)
                 if f.hand_finger >= n:
                     errors.append((f"{where}.hand_finger",
-                                   f"the {request.hand.builtin} hand has {n} fingers "
-                                   f"(indices 0 to {n - 1}), got {f.hand_finger}"))
+                                   f"the {request.hand.builtin or 'request'}'s hand has {n} "
+                                   f"fingers (indices 0 to {n - 1}), got {f.hand_finger}"))
                 else:
                     model = hand.fingers[f.hand_finger]
                     default_name = hand_finger_name(hand, f.hand_finger)
-                    if hand.nominal_q is not None:
-                        default_seed = hand.nominal_q[f.hand_finger]
+                    nominal = _nominal_q(request, hand)
+                    if nominal is not None:
+                        default_seed = nominal[f.hand_finger]
         name = f.name or default_name
         if name == "palm":
             errors.append((f"{where}.name", "'palm' names the palm contact; choose another"))
@@ -154,11 +170,25 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
             errors.append((f"{where}.name", f"{name!r} is also the name of "
                                             f"fingers[{names[name]}]; names must be unique"))
         names.setdefault(name, i)
-        if model is not None:
+        if model is not None and f.initial is not None and f.chart_rotation is not None:
             rv = f.chart_rotation
             tips.append(Fingertip(model, f.initial.as_tuple(), (rv[0], rv[1], rv[2]),
                                   default_seed if f.q_seed is None else tuple(f.q_seed),
                                   name))
+        elif model is not None:  # the contact where the joints put the tip
+            q0 = tuple(f.initial_q) if f.initial_q is not None else default_seed
+            if q0 is None:
+                errors.append((f"{where}.initial", "give `initial` and `chart_rotation`, or "
+                                                   "`initial_q` (this finger has no nominal "
+                                                   "grasp)"))
+            elif not model.tip_surface.round:
+                errors.append((f"{where}.initial", "a flat pad's contact needs `initial` and "
+                                                   "`chart_rotation` (contacts from joint "
+                                                   "angles are for round tips)"))
+            else:
+                from_joints.append((len(tips), model, q0, name, f"{where}.initial_q"
+                                    if f.initial_q is not None else f"{where}.initial"))
+            tips.append(None)
     obj = object_spec(request.object)
     start = motion_start = None
     if request.initial_pose is not None:
@@ -176,11 +206,28 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
         motion_start = _palm_pose(obj, palm)
     motion, motion_errors = _motion(request, motion_start)
     errors += motion_errors
+    if from_joints and not errors:
+        if motion_start is None:
+            errors.append(("initial_pose", "required to place the object among fingertips "
+                                           "given by joint angles"))
+        else:
+            try:
+                found = fingertips_from_joints(
+                    tuple(m for _, m, _, _, _ in from_joints),
+                    tuple(q for _, _, q, _, _ in from_joints), obj, motion_start,
+                    tuple(n for _, _, _, n, _ in from_joints),
+                    tuple(w for _, _, _, _, w in from_joints))
+            except ProblemError as exc:
+                errors += exc.errors
+            else:
+                for (k, _, _, _, _), tip in zip(from_joints, found, strict=True):
+                    tips[k] = tip
     if errors:
         raise ProblemError(errors)
     tr = request.tracking
     return ManipulationProblem(
-        object=obj, fingers=tuple(tips), duration=request.duration, palm=palm,
+        object=obj, fingers=tuple(t for t in tips if t is not None), duration=request.duration,
+        palm=palm,
         initial_pose=start,
         motion=motion,
         tracking=Tracking(tr.position_weight, tr.orientation_weight, tr.position_tolerance,

@@ -6,6 +6,8 @@ Import from :mod:`dexroll_client.models` (it re-exports everything).
 
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import Field
 
 from dexroll_client.common import _Response
@@ -43,7 +45,15 @@ class HandFingerInfo(_Response):
     tip_frame: str = Field(description="the pad frame in the hand's URDF")
     n_joints: int
     joint_names: list[str] = Field(default_factory=list, description="in the order of q")
-    pad_half_size: float = Field(description="half the side of the square pad [m]")
+    pad_half_size: float | None = Field(default=None,
+                                        description="half the side of the square pad [m] "
+                                                    "(None: a round tip)")
+    tip_surface: dict[str, Any] | None = Field(
+        default=None, description="a round tip: its kind, dimensions [m] and the tip frame "
+                                  "(rotation rows, offset [m]) in the tip link's frame")
+    nominal_initial: list[float] | None = Field(
+        default=None, description="a round tip: its contact coordinates in the nominal "
+                                  "grasp (with `nominal_chart_rotation`)")
     base_position: list[float] = Field(description="its default mount: origin of its base "
                                                    "in the palm frame [m]")
     base_rotation: list[float] = Field(description="its default mount: rotation vector of "
@@ -70,6 +80,8 @@ class HandInfo(_Response):
                                                              "the palm frame [m]")
     nominal_radius: float = Field(description="radius of the nominal ball [m]")
     urdf: str = Field(description="the hand's URDF document (root link: the palm frame)")
+    mjcf: str | None = Field(default=None, description="the same hand as an MJCF document, "
+                                                       "when there is one")
 
 
 class ModelCatalog(_Response):

@@ -56,7 +56,7 @@ PLANNERS: tuple[str, ...] = ("ball_on_palm", "one_finger", "manipulation")
 #: The built-in fingers, by the value of ``finger.builtin``.
 BUILTIN_FINGERS: tuple[str, ...] = ("k3s",)
 #: The built-in hands, by the value of ``hand.builtin``.
-BUILTIN_HANDS: tuple[str, ...] = ("two_finger", "three_finger")
+BUILTIN_HANDS: tuple[str, ...] = ("two_finger", "three_finger", "allegro")
 #: Limits of a manipulation request: fingertips, knots of a desired motion.
 MAX_FINGERS = 5
 MAX_MOTION_KNOTS = 1000

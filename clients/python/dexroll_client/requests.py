@@ -46,6 +46,7 @@ __all__ = [
     "FingerModelSpec",
     "FingertipModel",
     "HandModel",
+    "HandTipModel",
     "ManipulationRequest",
     "MotionModel",
     "MotionSamplesModel",
@@ -59,6 +60,7 @@ __all__ = [
     "PartialContactCoordinates",
     "PlanRequest",
     "SolverModel",
+    "TipSurfaceModel",
     "TrackingModel",
     "ViaPointModel",
     "WarmStartModel",
@@ -495,16 +497,91 @@ class MountModel(_Request):
         description="rotation vector [rad] of the finger's base in the palm frame")
 
 
-class HandModel(_Request):
-    """A built-in hand (``GET /v1/models`` lists them): its fingers, mounted on the palm,
-    to be used by ``fingers[].hand_finger``."""
+class TipSurfaceModel(_Request):
+    """A fingertip surface in its link's frame: a sphere, a spheroid, or a capsule (its
+    hemispherical cap: contacts stay on it)."""
 
-    builtin: Literal["two_finger", "three_finger"] = Field(
-        description="the built-in hand: 'two_finger' or 'three_finger'")
+    kind: Literal["sphere", "spheroid", "capsule"] = Field(
+        description="the tip's shape")
+    dimensions: list[Annotated[Real, Field(gt=0.0, le=1.0)]] = Field(
+        min_length=1, max_length=2,
+        description="[m]: sphere [r]; spheroid [a, c] (semi-axes a, a, c about the tip "
+                    "frame's z); capsule [r] or [r, half_length]")
+    position: list[Position] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
+        description="in the link frame [m]: the sphere's or spheroid's centre, the "
+                    "capsule cap's centre")
+    rotation: RotationVector = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
+        description="sphere, spheroid: rotation vector [rad] of the tip frame in the link "
+                    "frame (the chart's poles on its z axis, (0, 0) on its x axis)")
+    axis: list[Real] | None = Field(
+        default=None, min_length=3, max_length=3,
+        description="capsule: its axis out of the cap (link frame); required for a capsule")
+    side: list[Real] | None = Field(
+        default=None, min_length=3, max_length=3,
+        description="capsule: the direction across the axis the contacts lean to (link "
+                    "frame); default the link's x axis (else y)")
+
+
+class HandTipModel(_Request):
+    """A fingertip of a hand model: the link (URDF) or body (MJCF) its finger ends at."""
+
+    name: str = Field(min_length=1, max_length=200,
+                      description="the fingertip's link (URDF), body or site (MJCF), or a "
+                                  "frame of the model")
+    surface: TipSurfaceModel | None = Field(
+        default=None, description="the tip's surface; default: read from the link's sphere "
+                                  "or capsule collision geometry")
+    side: list[Real] | None = Field(
+        default=None, min_length=3, max_length=3,
+        description="for a capsule read from the model: the direction (link frame) across "
+                    "its axis the contacts lean to (the cap's chart puts its poles across "
+                    "both); default the link's x axis")
+
+
+class HandModel(_Request):
+    """A hand: a built-in one (``GET /v1/models`` lists them), or one's own whole-hand
+    model (``urdf`` or ``mjcf`` text with its fingertips named in ``tips``); its fingers
+    are picked by ``fingers[].hand_finger`` (an index into the hand's fingers, or into
+    ``tips``)."""
+
+    builtin: Literal["two_finger", "three_finger", "allegro"] | None = Field(
+        default=None, description="a built-in hand: 'two_finger', 'three_finger' (flat "
+                                  "pads) or 'allegro' (4 fingers, 16 joints, capsule tips)")
+    urdf: str | None = Field(default=None, min_length=1,
+                             description="a whole hand's URDF document (XML text)")
+    mjcf: str | None = Field(default=None, min_length=1,
+                             description="a whole hand's MJCF document (XML text, one file: "
+                                         "no <include>)")
+    tips: list[HandTipModel] | None = Field(
+        default=None, min_length=1, max_length=MAX_FINGERS,
+        description="with `urdf` or `mjcf`: the fingertips, one finger each (the chain "
+                    "from the model's root to the tip)")
+    mount: MountModel | None = Field(
+        default=None, description="with `urdf` or `mjcf`: the pose of the model's root in "
+                                  "the palm frame; default the palm frame itself")
     mounts: list[MountModel] | None = Field(
         default=None, min_length=1, max_length=MAX_FINGERS,
-        description="the fingers' mounts on the palm, one per finger of the hand in its "
-                    "order; default: the hand's own (GET /v1/models)")
+        description="two_finger, three_finger: the fingers' mounts on the palm, one per "
+                    "finger of the hand in its order; default: the hand's own "
+                    "(GET /v1/models)")
+
+    @model_validator(mode="after")
+    def _one_source(self) -> HandModel:
+        given = [k for k in ("builtin", "urdf", "mjcf") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of `builtin`, `urdf` or `mjcf`")
+        if self.builtin is None and not self.tips:
+            raise ValueError("a hand model (`urdf` or `mjcf`) needs `tips`: its fingertip "
+                             "links")
+        if self.builtin is not None and self.tips is not None:
+            raise ValueError("`tips` are for a hand model (`urdf` or `mjcf`); a built-in "
+                             "hand has its own")
+        if self.mounts is not None and self.builtin not in ("two_finger", "three_finger"):
+            raise ValueError("`mounts` reconfigure the two_finger and three_finger hands; "
+                             "use `mount` for a hand model")
+        return self
 
 
 class FingertipModel(_Request):
@@ -524,11 +601,20 @@ class FingertipModel(_Request):
         default=None, min_length=1, max_length=40, pattern=r"^[A-Za-z][A-Za-z0-9_\-]*$",
         description="a name for this contact in the result (unique, not 'palm'); default: "
                     "the hand's name of the finger, else 'finger<i>'")
-    initial: FingerContactCoordinates = Field(
-        description="the contact coordinates at t = 0: (x_f, y_f) on the pad [m], "
-                    "(u_f, v_f) on the object in this contact's chart patch [rad], psi_f [rad]")
-    chart_rotation: RotationVector = Field(
-        min_length=3, max_length=3,
+    initial: FingerContactCoordinates | None = Field(
+        default=None,
+        description="the contact coordinates at t = 0: (x_f, y_f) on the pad [m] (a round "
+                    "tip: its chart's latitude and longitude [rad]), (u_f, v_f) on the "
+                    "object in this contact's chart patch [rad], psi_f [rad]; give it with "
+                    "`chart_rotation`, or neither: the contact where `initial_q` (default "
+                    "the hand's nominal grasp) puts a round tip on a ball")
+    initial_q: list[Angle] | None = Field(
+        default=None, min_length=1, max_length=MAX_FINGER_JOINTS,
+        description="a round tip on a ball, without `initial`: the finger's joint angles at "
+                    "t = 0 [rad]; its contact is where they put the tip (a gap up to 2 mm is "
+                    "closed by the least joint motion); default: the hand's nominal grasp")
+    chart_rotation: RotationVector | None = Field(
+        default=None, min_length=3, max_length=3,
         description="rotation vector [rad] of this contact's chart patch in the object "
                     "frame: patch point (u_f, v_f) = (0, 0) is where the rotated x axis "
                     "leaves the object (keep the contact near it, away from the patch's "
@@ -551,6 +637,17 @@ class FingertipModel(_Request):
             raise ValueError("give `finger` (a finger model) or `hand_finger` (the index of "
                              "a finger of `hand`)")
         return value
+
+    @model_validator(mode="after")
+    def _initial_contact(self) -> FingertipModel:
+        if (self.initial is None) != (self.chart_rotation is None):
+            raise ValueError("give `initial` with `chart_rotation` (the patch its "
+                             "coordinates are in), or neither (the contact from "
+                             "`initial_q` or the hand's nominal grasp)")
+        if self.initial is not None and self.initial_q is not None:
+            raise ValueError("give `initial` (contact coordinates) or `initial_q` (joint "
+                             "angles), not both")
+        return self
 
 
 class PalmModel(_Request):

@@ -1,0 +1,164 @@
+"""Whole hands through the service's doors (issue 14, items 2-4 and 6): the built-in
+Allegro-class hand by name, our own URDF and MJCF of it as text in the request (the same
+plan), the catalog, and bad hand requests answered 422 naming the field and the reason
+(over HTTP: through the model checker process, before any NLP is built)."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from conftest import Server
+from helpers import assert_close
+
+from dexroll_client.models import ManipulationRequest, PlanStatus
+from ocp.robots.allegro import mjcf_text, urdf_text
+from planner_service.planners import solve as plan_request
+from planner_service.planners.cache import FingerCache
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+TIPS = [{"name": n} for n in ("index_tip", "middle_tip", "ring_tip", "thumb_tip")]
+#: The same caps' charts as the built-in hand's (ocp.robots.allegro.TIP_SIDES).
+SIDES = [[0.5744, -0.6481, 0.0], [0.8424, 0.2009, 0.0], [0.0737, 0.8626, 0.0],
+         [0.5119, -0.3655, 0.0]]
+
+
+def turn(hand: dict[str, Any], angle: float = 0.2618) -> dict[str, Any]:
+    """A 4-finger turn of the 60 mm ball about the palm's z axis, from the built-in
+    hand's nominal grasp (the joints: its nominal ones)."""
+    from ocp.robots.allegro import NOMINAL_Q
+
+    return {
+        "planner": "manipulation", "object": {"shape": "sphere", "dimensions": [0.03]},
+        "hand": hand,
+        "fingers": [{"hand_finger": k, "initial_q": list(NOMINAL_Q[k])} for k in range(4)],
+        "initial_pose": {"position": [0.03, 0.0, 0.07], "orientation_wxyz": [1, 0, 0, 0]},
+        "motion": {"kind": "steps",
+                   "steps": [{"duration": 2.0, "axis": [0, 0, 1], "angle": angle}]},
+        "tracking": {"position_tolerance": 0.001, "orientation_tolerance": 0.01745},
+        "duration": 2.0, "n_intervals": 20}
+
+
+def own(fmt: str) -> dict[str, Any]:
+    text = urdf_text() if fmt == "urdf" else mjcf_text()
+    return {fmt: text, "tips": [dict(t, side=s) for t, s in zip(TIPS, SIDES, strict=True)]}
+
+
+def solve(body: dict[str, Any]) -> Any:
+    request = ManipulationRequest.model_validate(body)
+    result, _ = plan_request(request, fingers=CACHE)
+    return result
+
+
+CACHE = FingerCache()
+
+
+@pytest.fixture(scope="module")
+def builtin_plan() -> Any:
+    return solve(turn({"builtin": "allegro"}))
+
+
+def test_the_builtin_hand_turns_the_ball_with_four_round_tips(builtin_plan: Any) -> None:
+    result = builtin_plan
+    assert result.status is PlanStatus.SOLVED, result.message
+    cert = result.certificate
+    assert cert.passed and not cert.failures
+    for name in ("index", "middle", "ring", "thumb"):
+        for law in ("max_slip_speed", "max_spin_rate", "max_gap_error", "max_cap_angle"):
+            assert cert.values[f"{law}_{name}"] <= cert.tolerances[f"{law}_{name}"]
+    assert [f.name for f in result.trajectory.fingers] == ["index", "middle", "ring", "thumb"]
+    assert sum(len(f.joint_names) for f in result.trajectory.fingers) == 16
+
+
+@pytest.mark.parametrize("fmt", ["urdf", "mjcf"])
+def test_our_urdf_and_mjcf_of_the_hand_give_the_builtin_hands_plan(fmt: str,
+                                                                    builtin_plan: Any) -> None:
+    """The hand written twice (URDF, MJCF), sent as text with its tips read from the
+    capsule geometry: the same plan as the built-in hand's."""
+    result = solve(turn(own(fmt)))
+    assert result.status is PlanStatus.SOLVED, result.message
+    a, b = result.trajectory, builtin_plan.trajectory
+    assert_close(np.array(a.object_position), np.array(b.object_position), atol=1e-7)
+    for fa, fb in zip(a.fingers, b.fingers, strict=True):
+        assert_close(np.array(fa.q), np.array(fb.q), atol=1e-6)
+    for ca_, cb in zip(a.contacts, b.contacts, strict=True):
+        assert_close(np.array(ca_.eta), np.array(cb.eta), atol=1e-6)
+
+
+def test_the_examples_are_valid_requests() -> None:
+    for name in ("allegro_turn.json", "hand_from_mjcf.json", "hand_from_urdf.json"):
+        body = json.loads((EXAMPLES / name).read_text())
+        ManipulationRequest.model_validate(body)
+
+
+# -- bad hand requests: 422 naming the field, over HTTP ---------------------------------------
+
+def _post(server: Server, body: dict[str, Any]) -> dict[str, str]:
+    r = httpx.post(f"{server.url}/v1/plans", params={"wait": 0}, content=json.dumps(body),
+                   headers={"content-type": "application/json"}, timeout=60)
+    assert r.status_code == 422, r.text
+    return {d["field"]: d["reason"] for d in r.json()["detail"]}
+
+
+def test_a_tip_name_not_in_the_model_is_422(live_server: Server) -> None:
+    body = turn(own("urdf"))
+    body["hand"]["tips"][1]["name"] = "pinky_tip"
+    fields = _post(live_server, body)
+    assert "'pinky_tip' is not a link" in fields["hand.tips[1].name"]
+
+
+def test_a_tip_without_round_geometry_and_no_surface_is_422(live_server: Server) -> None:
+    body = turn(own("mjcf"))
+    body["hand"]["mjcf"] = body["hand"]["mjcf"].replace('type="capsule"', 'type="box"', 1)
+    fields = _post(live_server, body)
+    assert "no sphere or capsule geom" in fields["hand.tips[0].surface"]
+
+
+def test_a_coupled_joint_is_422_naming_what_and_where(live_server: Server) -> None:
+    body = turn(own("mjcf"))
+    body["hand"]["mjcf"] = body["hand"]["mjcf"].replace(
+        "<worldbody>", '<equality><joint joint1="index_j2" joint2="index_j3"/></equality>'
+                       "<worldbody>")
+    fields = _post(live_server, body)
+    assert "joint1='index_j2'" in fields["hand.mjcf"] and "coupling" in fields["hand.mjcf"]
+
+
+def test_an_unsupported_joint_is_422(live_server: Server) -> None:
+    body = turn(own("urdf"))
+    body["hand"]["urdf"] = body["hand"]["urdf"].replace(
+        '<joint name="ring_j1" type="revolute">', '<joint name="ring_j1" type="floating">')
+    fields = _post(live_server, body)
+    assert "'ring_j1' is a 'floating' joint" in fields["hand.urdf"]
+
+
+def test_an_unreachable_initial_grasp_is_422_with_finger_distance_and_limit(
+        live_server: Server) -> None:
+    body = turn({"builtin": "allegro"})
+    body["fingers"][1]["initial_q"] = [0.0, 0.0, 0.0, 0.0]
+    body["fingers"][2]["initial_q"] = [0.1, 0.3, 2.0, 0.8]
+    fields = _post(live_server, body)
+    assert "finger 'middle' cannot reach the initial grasp: its tip is" in \
+        fields["fingers[1].initial_q"]
+    assert "ring_j2 = 2 is above its limit 1.709" in fields["fingers[2].initial_q"]
+
+
+def test_overlapping_fingertips_are_422(live_server: Server) -> None:
+    body = turn({"builtin": "allegro"})
+    body["fingers"][1] = copy.deepcopy(body["fingers"][0])
+    body["fingers"][1]["name"] = "index_again"
+    fields = _post(live_server, body)
+    assert "their tips overlap by" in fields["fingers[1].initial_q"]
+
+
+def test_the_catalog_lists_the_allegro_with_its_models(live_server: Server) -> None:
+    catalog = httpx.get(f"{live_server.url}/v1/models", timeout=30).json()
+    hand = next(h for h in catalog["hands"] if h["name"] == "allegro")
+    assert hand["n_fingers"] == 4 and hand["urdf"] == urdf_text()
+    assert hand["mjcf"] == mjcf_text()
+    assert hand["nominal_radius"] == 0.03
+    assert [f["tip_surface"]["kind"] for f in hand["fingers"]] == ["capsule"] * 4
