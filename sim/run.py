@@ -21,6 +21,9 @@ __all__ = ["Simulation", "hermite", "simulate", "slerp"]
 
 #: A contact whose normal force is at most this [N] is not touching.
 TOUCH_FORCE = 1e-6
+#: The report's time series has at most about this many rows (a long plan is recorded
+#: less often than ``record_every`` asks).
+MAX_SERIES = 5000
 
 
 def _unique(t: FloatArray) -> np.ndarray:
@@ -317,7 +320,9 @@ class Simulation:
                 else float(np.mean(planned)),
                 normal_force_error_max=None if planned is None or not planned.size
                 else float(np.max(np.abs(f - planned)))))
-        rec = np.arange(0, n_steps, o.record_every)
+        # every record_every-th step, thinned to at most MAX_SERIES rows
+        every = max(o.record_every, math.ceil(n_steps / MAX_SERIES))
+        rec = np.arange(0, n_steps, every)
         if rec[-1] != n_steps - 1:
             rec = np.append(rec, n_steps - 1)
         rec = rec[t_end[rec] >= -o.settle]

@@ -46,7 +46,8 @@ def test_a_plan_is_simulated_and_its_report_stored(live_server: Server,
         assert client.simulation(finger_job) == report  # stored beside the plan
         # options: no grip loses the finger; the latest run is the stored one
         loose = client.simulate(finger_job, SimulationOptions(squeeze=0.0, grip_force=0.0),
-                                record_every=50)
+                                record_every=50, use_plan_forces=True, impratio=10.0,
+                                noslip_iterations=3)
         assert not loose.passed
         assert any(c.lost_time > 0 for c in loose.contacts)
         assert loose.options["record_every"] == 50

@@ -66,6 +66,20 @@ class SimulationOptions(_Request):
     torsional_friction: Real | None = Field(default=None, ge=0.0, le=1.0,
                                             description="torsional friction [m] (default: "
                                                         "the plan's, else 0.005)")
+    rolling_friction: Real | None = Field(default=None, ge=0.0, le=1.0,
+                                          description="rolling friction [m] with condim 6 "
+                                                      "(default 0)")
+    impratio: Real | None = Field(default=None, gt=0.0, le=1000.0,
+                                  description="MuJoCo's ratio of frictional to normal "
+                                              "constraint impedance (default 10)")
+    noslip_iterations: Count | None = Field(default=None, ge=0, le=100,
+                                            description="MuJoCo's no-slip solver "
+                                                        "iterations (default 3)")
+    use_plan_forces: bool | None = Field(default=None,
+                                         description="a plan that states contact forces or "
+                                                     "joint torques is executed with them "
+                                                     "as feed-forward instead of "
+                                                     "`grip_force` (default true)")
     timestep: Real | None = Field(default=None, ge=1e-5, le=2e-3,
                                   description="the physics step [s] (default 0.0005)")
     settle: Real | None = Field(default=None, ge=0.0, le=5.0,

@@ -2,10 +2,11 @@
 stored beside the plan (docs/simulation.md).
 
 ``POST`` runs the simulation (options in the body; a few seconds of the service's CPU,
-one run at a time per service process) and answers 201 with the report, which it stores
-as the job's latest; ``GET`` answers the stored report. A job without a plan a hand
-executes (still running, failed without a plan, a ball-on-palm plan) is a 409; a service
-installed without MuJoCo (the ``sim`` extra) answers 503.
+one run at a time per service process, plans of up to 120 s) and answers 201 with the
+report, which it stores as the job's latest; ``GET`` answers the stored report. A job
+without a plan a hand executes (still running, failed without a plan, a ball-on-palm
+plan, a plan too long to simulate here) is a 409; a service installed without MuJoCo
+(the ``sim`` extra) answers 503.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from fastapi.responses import Response
 from dexroll_client.models import ErrorBody, JobState
 from dexroll_client.simulation import SimulationOptions, SimulationReport
 
-from ...execution import NotExecutableError, simulate_result
+from ...execution import NotExecutableError, execution_plan
 from ...planners import REQUEST, RESULT, ProblemError
 from ..access import OwnerDep
 from ..deps import ServiceError, StoreDep
@@ -30,6 +31,9 @@ router = APIRouter()
 
 #: One simulation at a time per process (each takes a core for a few seconds).
 _running = threading.Lock()
+#: The longest plan simulated here [s] (about a minute of the API process's core at
+#: 0.5 ms steps); a longer one: ``dexroll simulate`` on its result.
+MAX_SIMULATED_DURATION = 120.0
 
 _RESPONSES: dict[int | str, dict[str, Any]] = {
     409: {"model": ErrorBody,
@@ -64,7 +68,7 @@ def simulate_plan(job_id: str, store: StoreDep, owner: OwnerDep,
         raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without a plan")
     options = options or SimulationOptions()
     try:
-        import mujoco  # noqa: F401  (the sim extra)
+        from sim import SimOptions, simulate  # MuJoCo: the sim extra
     except ImportError as exc:
         raise ServiceError(503, "simulation_unavailable",
                            "this service was installed without MuJoCo: pip install "
@@ -72,8 +76,16 @@ def simulate_plan(job_id: str, store: StoreDep, owner: OwnerDep,
     try:
         result = RESULT.validate_json(row.result)
         request = REQUEST.validate_json(row.request)
+        plan = execution_plan(result, request)
+        if plan.duration > MAX_SIMULATED_DURATION:
+            raise ServiceError(409, "too_long", f"job {job_id}: a plan of {plan.duration:g} s "
+                                                f"is longer than the "
+                                                f"{MAX_SIMULATED_DURATION:g} s this service "
+                                                "simulates: run `dexroll simulate` on its "
+                                                "result")
+        sim_options = SimOptions.from_dict(options.simulator_options())
         with _running:
-            report = simulate_result(result, request, options.simulator_options())
+            report = simulate(plan, sim_options)
     except (NotExecutableError, ProblemError) as exc:
         raise ServiceError(409, "not_executable", f"job {job_id}: {exc}") from exc
     except ValueError as exc:  # an option the simulator refuses (solref vs timestep, ...)
