@@ -37,19 +37,23 @@ def _unique(t: FloatArray) -> np.ndarray:
 def hermite(t: FloatArray, y: FloatArray, dy: FloatArray, ts: FloatArray
             ) -> tuple[FloatArray, FloatArray]:
     """The cubic Hermite interpolant through (t, y, dy) and its derivative at ``ts``
-    (clamped to [t0, tN]); rows of y, dy are samples."""
-    keep = _unique(t)
-    t, y, dy = t[keep], y[keep], dy[keep]
-    ts = np.clip(ts, t[0], t[-1])
-    i = np.clip(np.searchsorted(t, ts, side="right") - 1, 0, t.size - 2)
-    h = (t[i + 1] - t[i])[:, None]
-    s = (ts - t[i])[:, None] / h
+    (clamped to [t0, tN]); rows of y, dy are samples, t non-decreasing. A time listed twice
+    is a rate break (the plan's velocities jump there): the interval before it ends with
+    the first row's rate, the one after starts with the second's; at the break itself the
+    outgoing rate."""
+    times, first = np.unique(t, return_index=True)
+    last = np.searchsorted(t, times, side="right") - 1
+    ts = np.clip(ts, times[0], times[-1])
+    k = np.clip(np.searchsorted(times, ts, side="right") - 1, 0, times.size - 2)
+    a, b = last[k], first[k + 1]
+    h = (times[k + 1] - times[k])[:, None]
+    s = (ts - times[k])[:, None] / h
     h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, \
         s**3 - s**2
-    value = h00 * y[i] + h10 * h * dy[i] + h01 * y[i + 1] + h11 * h * dy[i + 1]
+    value = h00 * y[a] + h10 * h * dy[a] + h01 * y[b] + h11 * h * dy[b]
     d00, d10, d01, d11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, -6 * s**2 + 6 * s, \
         3 * s**2 - 2 * s
-    rate = (d00 * y[i] + d01 * y[i + 1]) / h + d10 * dy[i] + d11 * dy[i + 1]
+    rate = (d00 * y[a] + d01 * y[b]) / h + d10 * dy[a] + d11 * dy[b]
     return value, rate
 
 

@@ -35,6 +35,7 @@ from sim import (
     TipShape,
     simulate,
 )
+from sim.run import hermite
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The paper's experiments and every example whose plan has fingers.
@@ -391,3 +392,42 @@ def test_bench_rows_execute_solved_finger_plans(
     monkeypatch.setenv("DEXROLL_BENCH_EXECUTE", "0")
     off = row_from_result(_unit("experiment2", "manipulation", request), result, 1.0, 0, 0.0)
     assert off["ok"] and off["exec_status"] is None
+
+
+def test_the_reference_follows_the_plan_on_both_sides_of_a_rate_break(
+        plans: dict[str, tuple[AnyPlanResult, PlanRequest]]) -> None:
+    """Experiment 1's joint velocities jump at its via-points (the paper's timing): the
+    executed plan lists each break twice, with the incoming velocities first, and the
+    reference's rate is the plan's on either side."""
+    result, request = plans["experiment1"]
+    plan = execution_plan(result, request)
+    breaks = result.joint_trajectory.rate_breaks
+    assert [b.t for b in breaks] == pytest.approx([2.0, 4.0])
+    for b in breaks:
+        (i, j) = np.flatnonzero(plan.t == b.t)
+        assert j == i + 1
+        ref = plan.references[0]
+        assert ref.q[i] == pytest.approx(ref.q[j], abs=0)
+        assert ref.q_dot[i] == pytest.approx(b.velocities_before, abs=1e-12)
+        assert ref.q_dot[j] == pytest.approx(b.velocities_after, abs=1e-12)
+        eps = 1e-7
+        _, rate = hermite(plan.t, ref.q, ref.q_dot, np.array([b.t - eps, b.t, b.t + eps]))
+        assert rate[0] == pytest.approx(b.velocities_before, abs=1e-4)
+        assert rate[1] == pytest.approx(b.velocities_after, abs=1e-12)
+        assert rate[2] == pytest.approx(b.velocities_after, abs=1e-4)
+
+
+def test_hermite_is_exact_for_cubics_and_splits_at_repeated_times() -> None:
+    t = np.array([0.0, 0.5, 1.0, 1.0, 2.0])
+    cubic = np.array([[x**3 - x] for x in t])
+    rate = np.array([[3 * x**2 - 1] for x in t])
+    ts = np.linspace(0.0, 1.0, 7)
+    value, d = hermite(t[:3], cubic[:3], rate[:3], ts)
+    assert value[:, 0] == pytest.approx(ts**3 - ts, abs=1e-12)
+    assert d[:, 0] == pytest.approx(3 * ts**2 - 1, abs=1e-12)
+    # a break at t = 1: after it a straight line of slope 5 from the cubic's value there
+    y = np.vstack([cubic[:4], [[cubic[3, 0] + 5.0]]])
+    dy = np.vstack([rate[:3], [[5.0]], [[5.0]]])
+    value, d = hermite(t, y, dy, np.array([0.75, 1.5]))
+    assert value[:, 0] == pytest.approx([0.75**3 - 0.75, 2.5], abs=1e-12)
+    assert d[:, 0] == pytest.approx([3 * 0.75**2 - 1, 5.0], abs=1e-12)

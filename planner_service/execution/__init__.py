@@ -29,7 +29,8 @@ from ..view.models import SceneModels, infer_models, models_from_request
 from ..view.robot import pad_thickness
 from ..view.tracks import NoPlanError, PlanTracks, tracks_of
 
-__all__ = ["NotExecutableError", "execution_plan", "plan_forces", "simulate_result"]
+__all__ = ["NotExecutableError", "execution_plan", "plan_forces", "simulate_result",
+           "with_rate_breaks"]
 
 #: Friction coefficient when neither the request nor the result states it.
 DEFAULT_MU = 0.5
@@ -170,8 +171,54 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
         models.palm_half_extent, mu, None if torsion is None else float(torsion),
         (0.0, 0.0, -9.81) if gravity is None else
         (float(gravity[0]), float(gravity[1]), float(gravity[2])), tuple(notes))
+    plan = with_rate_breaks(plan, result)
     plan.check()
     return plan
+
+
+def with_rate_breaks(plan: Any, result: AnyPlanResult) -> Any:
+    """The plan with a second row at each of the result's rate breaks (the paper's
+    piecewise timing: the joint velocities jump at a via-point; the trajectory's row there
+    has the outgoing ones): the same time and positions with the incoming velocities
+    (``joint_trajectory.rate_breaks[].velocities_before``) first, so that the simulator's
+    reference follows the plan's polynomial on both sides of the break."""
+    from dataclasses import replace
+
+    jt = getattr(result, "joint_trajectory", None)
+    breaks = list(getattr(jt, "rate_breaks", None) or [])
+    width = sum(f.nq for f in plan.fingers)
+    if not breaks or jt is None or len(jt.joint_names) != width:
+        return plan
+    t = plan.t
+    rows = []  # (index of the break's row, the incoming velocities of every joint)
+    for b in breaks:
+        hits = np.flatnonzero(np.abs(t - b.t) <= 1e-9 * max(1.0, abs(b.t)))
+        if hits.size == 1 and len(b.velocities_before) == width:
+            rows.append((int(hits[0]), np.asarray(b.velocities_before, dtype=float)))
+    if not rows:
+        return plan
+    index = np.arange(t.size)
+    at = np.array([i for i, _ in rows])
+    order = np.insert(index, at, at)  # each break's row twice: the copy first
+    copies = at + np.arange(at.size)  # where the copies land in the new arrays
+
+    def dup(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else np.asarray(a)[order]
+
+    refs = []
+    start = 0
+    for f, r in zip(plan.fingers, plan.references, strict=True):
+        q_dot = np.asarray(r.q_dot)[order].copy()
+        for c, (_, before) in zip(copies, rows, strict=True):
+            q_dot[c] = before[start:start + f.nq]
+        start += f.nq
+        refs.append(replace(r, q=np.asarray(r.q)[order], q_dot=q_dot,
+                            joint_torques=dup(r.joint_torques),
+                            contact_force=dup(r.contact_force)))
+    return replace(plan, t=t[order], object_position=plan.object_position[order],
+                   object_wxyz=plan.object_wxyz[order], references=tuple(refs),
+                   contacts=tuple(replace(c, point=c.point[order], normal=dup(c.normal))
+                                  for c in plan.contacts))
 
 
 def simulate_result(result: AnyPlanResult, request: PlanRequest | None = None,
