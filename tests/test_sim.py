@@ -18,7 +18,13 @@ import numpy as np
 import pytest
 
 from dexroll_client.models import AnyPlanResult, PlanRequest, PlanStatus
-from planner_service.bench.report import _table, summarise
+from planner_service.bench.report import (
+    _table,
+    machine_info,
+    summarise,
+    versions,
+    write_report,
+)
 from planner_service.bench.rows import FIELDS, VOLATILE, row_from_result
 from planner_service.bench.suite import Unit, expand, load_suite
 from planner_service.cli import plan_request
@@ -357,7 +363,7 @@ def _unit(name: str, planner: str, request: dict[str, Any]) -> Unit:
 
 def test_bench_rows_execute_solved_finger_plans(
         plans: dict[str, tuple[AnyPlanResult, PlanRequest]],
-        monkeypatch: pytest.MonkeyPatch) -> None:
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """Every row of a solved plan with fingers (the quick suite's experiment 2 is
     examples/experiment2_two_fingers.json) carries its execution; the report's table an
     "executed" column per family and method."""
@@ -388,6 +394,19 @@ def test_bench_rows_execute_solved_finger_plans(
     table = _table(summary)
     assert table[0].endswith("| executed (worst mm, deg) |")
     assert "| 1/2 (10.00 mm, " in table[2]
+    # the report lists the failed execution, and MuJoCo's version
+    meta = {"suite": {"name": "t", "source": "test", "description": "", "definition": {}},
+            "run": {"runner": "pool", "workers": 1, "started": "", "finished": "",
+                    "wall_time": 1.0, "url": None, "methods": ["collocation"],
+                    "families": ["paper"], "limit": None, "notes": []},
+            "machine": machine_info(), "versions": versions(), "skipped_methods": {}}
+    failed = dict(row, problem_id="x", exec_status="failed", exec_position_error_max=0.01,
+                  exec_message="position error 10 mm > 1 mm")
+    doc = write_report(tmp_path, [row, failed], meta, [])
+    report = (tmp_path / "report.md").read_text()
+    assert "## Solved plans whose execution in MuJoCo failed" in report
+    assert "| paper | x | collocation | failed | 10.000 mm |" in report
+    assert doc["versions"]["mujoco"] == mujoco.__version__
     # DEXROLL_BENCH_EXECUTE=0 turns it off
     monkeypatch.setenv("DEXROLL_BENCH_EXECUTE", "0")
     off = row_from_result(_unit("experiment2", "manipulation", request), result, 1.0, 0, 0.0)

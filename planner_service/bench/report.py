@@ -43,7 +43,7 @@ _RESIDUALS: tuple[tuple[str, str, bool], ...] = (
 #: kept as a row, left out of the counts and rates.
 UNAVAILABLE = "unavailable"
 _PACKAGES = ("dexroll", "dexroll-client", "casadi", "numpy", "pin", "pydantic", "httpx",
-             "fastapi", "matplotlib", "ray", "drake")
+             "fastapi", "matplotlib", "ray", "drake", "mujoco")
 
 
 def _values(rows: Iterable[Row], key: str) -> list[float]:
@@ -433,6 +433,18 @@ def _markdown(doc: dict[str, Any], summary: Sequence[dict[str, Any]], unexpected
                       "counts):"]
         lines += [f"- {family}, {method}: {len(rs)} problem(s): {rs[0]['message']}"
                   for (family, method), rs in missing.items()]
+    failed_runs = [r for r in rows if r.get("exec_status") in ("failed", "error")]
+    if failed_runs:
+        lines += ["", "## Solved plans whose execution in MuJoCo failed", "",
+                  "| family | problem | method | execution | position worst | angle worst | "
+                  "why |", "|---|---|---|---|---:|---:|---|"]
+        for r in failed_runs:
+            pos, ang = r.get("exec_position_error_max"), r.get("exec_angle_error_max")
+            lines.append(
+                f"| {r['family']} | {r['problem_id']} | {r['method']} | {r['exec_status']} | "
+                f"{'–' if pos is None else f'{pos * 1e3:.3f} mm'} | "
+                f"{'–' if ang is None else f'{math.degrees(ang):.3f}°'} | "
+                f"{(r.get('exec_message') or '').replace('|', '/')[:200]} |")
     if unexpected or others:
         lines += ["", "Each problem's request is in `results.json` (`problems`)."]
     if fixed:
