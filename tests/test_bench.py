@@ -102,6 +102,7 @@ def test_every_family_draws_its_own_planner_and_methods() -> None:
     assert planners == {"translation": {"ball_on_palm"}, "reorientation": {"ball_on_palm"},
                         "full_goal": {"ball_on_palm"}, "one_finger": {"one_finger"},
                         "two_fingers": {"manipulation"}, "three_fingers": {"manipulation"},
+                        "four_finger_round": {"manipulation"},
                         "paper": {"one_finger", "manipulation"}}
     methods = {(u.family, u.method) for u in units(problems)}
     assert ("one_finger", "greedy") in methods and ("paper", "greedy") in methods
