@@ -65,15 +65,32 @@ def test_the_examples_with_fingers_are_all_executed() -> None:
     assert {"one_finger_roll", "three_finger_turn"} <= set(PLANS)
 
 
-@pytest.fixture(scope="module")
-def plans() -> dict[str, tuple[AnyPlanResult, PlanRequest]]:
-    return {name: _plan(path) for name, path in PLANS.items()}
+class _Plans(dict[str, tuple[AnyPlanResult, PlanRequest]]):
+    """Each of PLANS planned when first asked for (a test of one plan plans only it)."""
+
+    def __missing__(self, name: str) -> tuple[AnyPlanResult, PlanRequest]:
+        self[name] = _plan(PLANS[name])
+        return self[name]
+
+
+class _Executed(dict[str, SimReport]):
+    def __init__(self, plans: _Plans) -> None:
+        super().__init__()
+        self.plans = plans
+
+    def __missing__(self, name: str) -> SimReport:
+        self[name] = simulate_result(*self.plans[name])
+        return self[name]
 
 
 @pytest.fixture(scope="module")
-def executed(plans: dict[str, tuple[AnyPlanResult, PlanRequest]]) -> dict[str, SimReport]:
-    return {name: simulate_result(result, request) for name, (result, request) in
-            plans.items()}
+def plans() -> _Plans:
+    return _Plans()
+
+
+@pytest.fixture(scope="module")
+def executed(plans: _Plans) -> _Executed:
+    return _Executed(plans)
 
 
 def check_laws(report: SimReport) -> None:
