@@ -263,3 +263,27 @@ def test_a_contact_off_the_cap_is_refused_naming_the_field() -> None:
     errs = problem.errors()
     assert any(f == "fingers[0].initial.y_f" and "cap" in r and "cylindrical" in r
                for f, r in errs), errs
+
+
+def test_spheroid_tips_turn_the_ball_solved_and_certified() -> None:
+    """Spheroidal tips (semi-axes 10, 10, 15 mm; the axis of revolution across the pad,
+    the front point the pad's centre): curved on curved with a curvature that is not a
+    multiple of the identity, solved and certified."""
+    a, c = 0.010, 0.015
+    # the tip frame's z (the axis of revolution) along the pad's y, its x the pad's normal
+    R = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    tip = spheroid_tip(a, c, (0.0, 0.0, -a), R)
+    problem = round_three_finger_problem(tip, angle=20.0)
+    # (0, 0) is the front point: its contact frame is the pad's turned about the normal
+    from ocp.geometry.surfaces import Ellipsoid
+
+    _, G, _, _, _ = Ellipsoid.geometry([0.0, 0.0], [a, c])
+    M = (R @ np.asarray(G))  # the tip's contact frame in the pad (link) frame
+    psi = math.atan2(-M[0, 1], M[0, 0])
+    problem = dataclasses.replace(problem, fingers=tuple(dataclasses.replace(
+        t, initial=(0.0, 0.0, 0.0, 0.0, psi)) for t in problem.fingers))
+    assert problem.errors() == []
+    plan = PLANNER.solve(problem)
+    assert plan.status is Status.SOLVED, plan.message
+    names = {ch.name for ch in plan.certificate.checks}
+    assert {"max_tip_latitude_f1", "max_gap_error_f3"} <= names
