@@ -98,9 +98,11 @@ def fingertip_errors(name: str, tip: Fingertip, obj: ObjectSpec, pad_margin: flo
                              f"margin) by {abs(tip.initial[k]) - half:.4g} m"))
     else:
         bounds = surface.bounds(pad_margin, pole_margin)
+        poles = ("the tip chart's pole limit (place the tip frame, a capsule's `side`, so "
+                 "that the contact starts near the chart's equator)")
         why = {"capsule": "the capsule's cap (0 <= v <= pi in the tip's chart, less the "
-                          "margin; its cylindrical side is not a contact surface here)",
-               "sphere": "the tip chart's pole limit", "spheroid": "the tip chart's pole limit"}
+                          "margin; its cylindrical side is not a contact surface here) and "
+                          + poles, "sphere": poles, "spheroid": poles}
         for k, coord in ((0, "x_f"), (1, "y_f")):
             lo, hi = bounds[k]
             if not lo <= tip.initial[k] <= hi:
