@@ -76,6 +76,12 @@ def plan_forces(result: AnyPlanResult) -> list[tuple[np.ndarray | None, np.ndarr
     return out
 
 
+def _limit(x: object) -> float | None:
+    """A joint limit, None when unbounded."""
+    v = float(x)  # type: ignore[arg-type]
+    return v if math.isfinite(v) else None
+
+
 def _tip_shape(model: Any, tip_shape: Any) -> Any:
     """The simulator's fingertip (a ``sim.TipShape``) of a finger model: its tip surface
     (``model.tip``, ocp/geometry/tips.py: pad, sphere, spheroid, capsule cap) placed as
@@ -144,7 +150,7 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
             j.name, j.kind, (float(j.axis[0]), float(j.axis[1]), float(j.axis[2])),
             np.asarray(j.placement_rotation, dtype=float),
             np.asarray(j.placement_translation, dtype=float),
-            float(model.lower[j.index_q]), float(model.upper[j.index_q]))
+            _limit(model.lower[j.index_q]), _limit(model.upper[j.index_q]))
             for j in model.chain)
         fingers.append(FingerSpec(
             track.name, joints, np.asarray(model.base_rotation, dtype=float),
