@@ -248,7 +248,12 @@ def test_one_finger_on_palm_is_unchanged_by_the_generalisation(
     IPOPT's barrier strategy of that time (adaptive from IPOPT's default mu; the project
     now starts a monotone barrier at 1e-3, which converges to the same optimum within
     IPOPT's tolerance but not to these digits). The first solve on the reference's grid
-    (the certificate of the returned trajectory now refines it further)."""
+    (the certificate of the returned trajectory now refines it further). Since session 7
+    the closure is kept at the velocity level (ocp/transcription/velocity_closure.py): a
+    different discretisation of the same equations, whose plan differs from the reference
+    by at most 9e-6 in the contact coordinates and 1.8e-5 rad in the joints (the grid's
+    discretisation error: the old plan's fingertip slipped 7e-5 m/s at its first node),
+    instead of agreeing to the solver's tolerance."""
     import dataclasses
 
     import ocp.solve.ipopt
@@ -265,10 +270,10 @@ def test_one_finger_on_palm_is_unchanged_by_the_generalisation(
     assert general.raw_status == "Solve_Succeeded", general.message
     palm, tip = general.contacts
     assert_close(general.t, ref["t"], atol=1e-12)
-    assert_close(palm.eta, ref["eta_p"], atol=1e-7)
-    assert_close(tip.eta, ref["eta_f"], atol=1e-6)
-    assert_close(general.fingers[0].q, ref["q"], atol=1e-6)
-    assert_close(palm.w, ref["w_p"], atol=1e-6)
+    assert_close(palm.eta, ref["eta_p"], atol=1e-6)
+    assert_close(tip.eta, ref["eta_f"], atol=2e-5)
+    assert_close(general.fingers[0].q, ref["q"], atol=5e-5)
+    assert_close(palm.w, ref["w_p"], atol=1e-5)
     one = OneFingerPlanner(planner).solve(problem)
     assert_close(one.q, planner.solve(full).fingers[0].q, atol=0)
 

@@ -1,9 +1,10 @@
 """The manipulation NLP from small blocks: per-point and per-interval CasADi functions.
 
 A grasp's direct-collocation NLP (:mod:`ocp.solve.planner`) has the same few functions at
-every collocation point (closure, force closure, tracking: the finger's forward kinematics
-and the contact geometry) and in every interval (the Hermite-Simpson defects of the rolling
-equations, the effort and grasp terms of the objective). Written out in SX at every point,
+every collocation point (force closure, tracking: the finger's forward kinematics and the
+contact geometry; the fingertips' closure at the velocity level) and in every interval
+(the Hermite-Simpson defects of the rolling equations, the effort and grasp terms of the
+objective). Written out in SX at every point,
 the NLP of the paper's experiment 1 (palm + one 6-joint finger, N = 60) took 2.7 s to
 build, held ~220 MB, and its generated C (72 MB) was beyond gcc. Here each block is one SX
 function of its own variables; its Jacobian and the Hessian of its Lagrangian are
@@ -35,8 +36,17 @@ from ocp.geometry.grasp import grasp_cosines
 from ocp.spec.problem import PERIODIC
 from ocp.transcription.collocation import HermiteSimpson, hermite_simpson_defects, target_residuals
 from ocp.transcription.parameters import Parameters
+from ocp.transcription.velocity_closure import fingertip_twist_rows
 
 __all__ = ["BlockAssembler", "BlockNLP", "build_manipulation_nlp"]
+
+
+def _node_input_pairs(hs: HermiteSimpson) -> list[tuple[int, int]]:
+    """(node, input column) of every input at a node: each interval's start, and each
+    segment's end (a via-point node has the input arriving and the one leaving)."""
+    lc, rc = hs.left_cols, hs.right_cols
+    ends = [int(k) for k in np.cumsum(hs.segments)]
+    return [(k, lc[k]) for k in range(hs.n_intervals)] + [(k, rc[k - 1]) for k in ends]
 
 FloatArray = NDArray[np.float64]
 
@@ -166,7 +176,8 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     parameters ``p = (shape, seg_T, goal, vias, charts, weights, cone cosine, tracking
     tolerances, desired positions, desired rotations)``; constraints: the defects of every
     interval, every point's path constraints (node 0, the given initial grasp, without its
-    closure and tracking bounds), the goal and via-point targets. ``small`` (default: for
+    tracking bounds), the goal and via-point targets, then the fingertips' closure at the
+    velocity level at every node (with each of its inputs) and midpoint. ``small`` (default: for
     one contact without tracking) writes the same NLP out in SX instead of from blocks."""
     t0 = time.perf_counter()
     nc = m.n_contacts
@@ -222,10 +233,8 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         if not at_node0:
             not_at_node0.extend(range(start, len(lo)))
 
-    cl, P, N, R_po, p_po = m.path(x_scale * xs, prm)
-    if nf:  # eq. 6: each fingertip where its kinematics put it
-        closure_scale = ca.vertcat(*([1 / L] * 3 + [1.0] * 3) * nf)
-        add(closure_scale * cl, 0.0, 0.0, at_node0=False)
+    # (each fingertip where its kinematics put it, eq. 6: the rate rows below)
+    _, P, N, R_po, p_po = m.path(x_scale * xs, prm)
     if nc == 2:
         c1, c2, dist = grasp_cosines(P[:, 0], N[:, 0], P[:, 1], N[:, 1])
         add(ca.vertcat(c1 - dist * ccone_q, c2 - dist * ccone_q) / L, 0.0, math.inf)
@@ -296,6 +305,36 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     int_jac = ca.Function("interval_jac", iin, ca.cse([D, _nz(Ji)]))
     int_hess = ca.Function("interval_hess", [*iin, lam_i, sig], [ca.cse(_nz(Hi))])
 
+    # -- rate rows: z = (x, u) at one collocation point ----------------------------------
+    # Closure (eq. 6) at the velocity level (ocp/transcription/velocity_closure.py): the
+    # tip's twist from its joints equals the one its rolling contact gives it, at every
+    # collocation point and with every input there (both sides of a via-point), six rows
+    # per finger. The closure itself holds at the initial grasp and follows by integration
+    # (Simpson's rule: its drift is O(h^4), measured 3e-8 m at N = 40). Imposed on the
+    # positions instead, the fingertip's velocity from its joints (J q_dot at the free
+    # joint-rate inputs) matched the contact's only to O(h^2) at the collocation points,
+    # and at the ends of a segment not at all on some plans (the rates there are a free
+    # mode of Hermite-Simpson with algebraic rows): the returned trajectory slipped. With
+    # these rows it does not slip at the collocation points, and between them the slip
+    # shrinks like h^3. Written from the twists (the geometric Jacobian, Montana's rolling
+    # velocity), the rows' Hessian has 15,252 instructions on the two-finger grasp (the
+    # position rows': 11,604; d/dt c(x) by differentiating the contact's pose: 42,822).
+    xr, ur = ca.SX.sym("xr", nx), ca.SX.sym("ur", nu)
+    zr = ca.vertcat(xr, ur)
+    if nf:
+        closure_scale = ca.vertcat(*([1 / L] * 3 + [1.0] * 3) * nf)
+        Gr = Tq * closure_scale * fingertip_twist_rows(m, x_scale * xr, u_scale * ur, prm)
+    else:
+        Gr = ca.SX(0, 1)
+    lam_r = ca.SX.sym("lam", Gr.numel())
+    Jr = ca.jacobian(Gr, zr)
+    Hr = ca.triu(ca.hessian(ca.dot(lam_r, Gr), zr)[0])
+    rin = [zr, Tq, shape_q, charts_q]
+    rt_fn = ca.Function("rates", rin, [Gr])
+    rt_jac = ca.Function("rates_jac", rin, ca.cse([Gr, _nz(Jr)]))
+    rt_hess = ca.Function("rates_hess", [*rin, lam_r], [ca.cse(_nz(Hr))])
+    ng_r = int(Gr.numel())
+
     # -- targets (goal, via-points) on the segment end nodes ------------------------------
     ends = hs.segment_end_nodes
     xe = ca.SX.sym("xe", nx, nseg)
@@ -333,10 +372,17 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
                                        Umi[:, k], Ui[:, rc[k]], Si[:, k], Smi[:, k], Si[:, k + 1]])
                        for k in range(n)])
     ze_idx = np.concatenate([Xi[:, e] for e in ends])
+    zr_list = []
+    if nf:
+        zr_list = [np.concatenate([Xi[:, k], Ui[:, c]]) for k, c in _node_input_pairs(hs)]
+        zr_list += [np.concatenate([Xmi[:, k], Umi[:, k]]) for k in range(n)]
+    n_rate = len(zr_list)
+    zr_idx = np.array(zr_list, dtype=np.int64).reshape(n_rate, nx + nu)
     n_def = 2 * nx * n
     off_p = n_def
     off_t = off_p + len(keep0) + (npts - 1) * ng_pt
-    ng = off_t + int(Gt.numel())
+    off_r = off_t + int(Gt.numel())
+    ng = off_r + n_rate * ng_r
     pos0 = np.full(ng_pt, -1, dtype=np.int64)
     pos0[keep0] = off_p + np.arange(len(keep0))
 
@@ -364,6 +410,13 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     jc.append(ze_idx[cJt])
     hr.append(ze_idx[rHt])
     hc.append(ze_idx[cHt])
+    rJr, cJr = _triplets(Jr.sparsity())
+    rHr, cHr = _triplets(Hr.sparsity())
+    for j in range(n_rate):
+        jr.append(off_r + j * ng_r + rJr)
+        jc.append(zr_idx[j][cJr])
+        hr.append(zr_idx[j][rHr])
+        hc.append(zr_idx[j][cHr])
     jac_asm = BlockAssembler((ng, nw), np.concatenate(jr), np.concatenate(jc))
     hess_asm = BlockAssembler((nw, nw), np.concatenate(hr), np.concatenate(hc),
                               symmetric=True)
@@ -391,20 +444,29 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     p_args = (ZP, Pd, Rd, sw, qv)
     i_args = (ZI, h, T, wts, shape_p, charts)
     t_args = (ZE, goal, vias_v, shape_p)
+    ZR = ca.reshape(w[zr_idx.ravel().tolist()], nx + nu, n_rate)
+    r_args = (ZR, T, shape_p, charts)
 
-    def g_of(Dint: Any, Gpts: Any) -> Any:
-        return ca.vertcat(ca.vec(Dint), Gpts[keep0, 0], ca.vec(Gpts[:, 1:]), tg_fn(*t_args))
+    def g_of(Dint: Any, Gpts: Any, Grt: Any) -> Any:
+        return ca.vertcat(ca.vec(Dint), Gpts[keep0, 0], ca.vec(Gpts[:, 1:]), tg_fn(*t_args),
+                          ca.vec(Grt))
 
-    g_all = g_of(int_fn.map(n)(*i_args), pt_fn.map(npts)(*p_args))
+    g_all = g_of(int_fn.map(n)(*i_args), pt_fn.map(npts)(*p_args),
+                 rt_fn.map(n_rate)(*r_args) if n_rate else ca.MX(0, 1))
     f = ca.sum2(pt_cost.map(npts)(*p_args)) + ca.sum2(int_cost.map(n)(*i_args))
-    lbg = [0.0] * n_def + [lo[r] for r in keep0] + lo * (npts - 1) + [0.0] * len(tg)
-    ubg = [0.0] * n_def + [hi[r] for r in keep0] + hi * (npts - 1) + [0.0] * len(tg)
+    zeros_t = [0.0] * (len(tg) + n_rate * ng_r)
+    lbg = [0.0] * n_def + [lo[r] for r in keep0] + lo * (npts - 1) + zeros_t
+    ubg = [0.0] * n_def + [hi[r] for r in keep0] + hi * (npts - 1) + zeros_t
     assert len(lbg) == ng == g_all.numel()
 
     Gj, Jpn = pt_jac.map(npts)(*p_args)
     Dj, Jin = int_jac.map(n)(*i_args)
-    Jnz = ca.vertcat(ca.vec(Jpn), ca.vec(Jin), tg_jac(*t_args))
-    jac_g = ca.Function("nlp_jac_g", [w, p], [g_of(Dj, Gj), jac_asm(Jnz)], ["x", "p"],
+    if n_rate:
+        Gr_j, Jrn = rt_jac.map(n_rate)(*r_args)
+    else:
+        Gr_j, Jrn = ca.MX(0, 1), ca.MX(0, 1)
+    Jnz = ca.vertcat(ca.vec(Jpn), ca.vec(Jin), tg_jac(*t_args), ca.vec(Jrn))
+    jac_g = ca.Function("nlp_jac_g", [w, p], [g_of(Dj, Gj, Gr_j), jac_asm(Jnz)], ["x", "p"],
                         ["g", "jac_g_x"])
     lam_f = ca.MX.sym("lam_f")
     lam_g = ca.MX.sym("lam_g", ng)
@@ -416,7 +478,10 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     LI = ca.reshape(lam_g[0:n_def], 2 * nx, n)
     Hnz = ca.vertcat(ca.vec(pt_hess.map(npts)(*p_args, LP, lam_f)),
                      ca.vec(int_hess.map(n)(*i_args, LI, lam_f)),
-                     tg_hess(*t_args, lam_g[off_t:ng]))
+                     tg_hess(*t_args, lam_g[off_t:off_r]),
+                     ca.vec(rt_hess.map(n_rate)(*r_args, ca.reshape(lam_g[off_r:ng], ng_r,
+                                                                     n_rate)))
+                     if n_rate else ca.MX(0, 1))
     hess_lag = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess_asm(Hnz)],
                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
 
