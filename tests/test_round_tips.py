@@ -287,3 +287,24 @@ def test_spheroid_tips_turn_the_ball_solved_and_certified() -> None:
     assert plan.status is Status.SOLVED, plan.message
     names = {ch.name for ch in plan.certificate.checks}
     assert {"max_tip_latitude_f1", "max_gap_error_f3"} <= names
+
+
+def test_a_round_tip_presses_the_ball_on_the_palm() -> None:
+    """The paper's section 3 with a round tip: the built-in finger with a 12 mm sphere
+    whose front point is the pad's centre presses the ball on the palm while the palm
+    contact rolls 10 mm (three contacts' worth of laws: the palm's and the tip's), the
+    grasp-angle objective keeping the grasp near antipodal; solved and certified."""
+    from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
+    from ocp.robots.finger import load_finger
+    from ocp.spec.problem import BallOnPalmProblem
+
+    finger = dataclasses.replace(load_finger(), tip=SPHERE_TIP)
+    base = BallOnPalmProblem(object=ObjectSpec("sphere", (RHO,)),
+                             initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2),
+                             goal={"x": 0.01, "y": 0.0}, duration=2.0, n_intervals=40)
+    problem = OneFingerProblem(base=base, finger=finger, contact=FingerContact(
+        initial=(0.0, 0.0, 0.2, 0.0, 0.0), chart_rotation=(0.0, 0.0, math.pi)), mu=0.5)
+    sol = OneFingerPlanner(PLANNER).solve(problem)
+    assert sol.status is Status.SOLVED, sol.message
+    names = {c.name for c in sol.plan.certificate.checks}
+    assert {"max_slip_speed_palm", "max_gap_error_finger", "max_tip_latitude_finger"} <= names
