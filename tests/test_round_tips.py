@@ -306,5 +306,6 @@ def test_a_round_tip_presses_the_ball_on_the_palm() -> None:
         initial=(0.0, 0.0, 0.2, 0.0, 0.0), chart_rotation=(0.0, 0.0, math.pi)), mu=0.5)
     sol = OneFingerPlanner(PLANNER).solve(problem)
     assert sol.status is Status.SOLVED, sol.message
+    assert sol.plan is not None
     names = {c.name for c in sol.plan.certificate.checks}
     assert {"max_slip_speed_palm", "max_gap_error_finger", "max_tip_latitude_finger"} <= names
