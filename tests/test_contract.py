@@ -99,9 +99,9 @@ def round_tips() -> tuple[Any, Any, Callable[[Any], ManipulationSolution]]:
     problem = ManipulationProblem(
         obj, fingertips_from_joints(hand.fingers, NOMINAL_Q, obj, start, names, names), 2.0,
         initial_pose=start,
-        motion=DesiredMotion.from_steps(start, [MotionStep(2.0, (0.0, 0.0, 1.0), 15 * DEG)]),
+        motion=DesiredMotion.from_steps(start, [MotionStep(2.0, (0.0, 0.0, 1.0), 8 * DEG)]),
         tracking=Tracking(position_tolerance=1e-3, orientation_tolerance=DEG),
-        n_intervals=16)
+        n_intervals=12)
     return GENERAL, problem, lambda sol: sol
 
 

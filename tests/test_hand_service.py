@@ -28,7 +28,7 @@ SIDES = [[0.5744, -0.6481, 0.0], [0.8424, 0.2009, 0.0], [0.0737, 0.8626, 0.0],
          [0.5119, -0.3655, 0.0]]
 
 
-def turn(hand: dict[str, Any], angle: float = 0.2618) -> dict[str, Any]:
+def turn(hand: dict[str, Any], angle: float = 0.1, n: int = 10) -> dict[str, Any]:
     """A 4-finger turn of the 60 mm ball about the palm's z axis, from the built-in
     hand's nominal grasp (the joints: its nominal ones)."""
     from ocp.robots.allegro import NOMINAL_Q
@@ -41,7 +41,7 @@ def turn(hand: dict[str, Any], angle: float = 0.2618) -> dict[str, Any]:
         "motion": {"kind": "steps",
                    "steps": [{"duration": 2.0, "axis": [0, 0, 1], "angle": angle}]},
         "tracking": {"position_tolerance": 0.001, "orientation_tolerance": 0.01745},
-        "duration": 2.0, "n_intervals": 20}
+        "duration": 2.0, "n_intervals": n}
 
 
 def own(fmt: str) -> dict[str, Any]:
