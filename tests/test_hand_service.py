@@ -16,7 +16,7 @@ import pytest
 from conftest import Server
 from helpers import assert_close
 
-from dexroll_client.models import ManipulationRequest, PlanStatus
+from dexroll_client.models import ManipulationRequest, ManipulationResult, PlanStatus
 from ocp.robots.allegro import mjcf_text, urdf_text
 from planner_service.planners import solve as plan_request
 from planner_service.planners.cache import FingerCache
@@ -88,6 +88,20 @@ def test_our_urdf_and_mjcf_of_the_hand_give_the_builtin_hands_plan(fmt: str,
         assert_close(np.array(fa.q), np.array(fb.q), atol=1e-6)
     for ca_, cb in zip(a.contacts, b.contacts, strict=True):
         assert_close(np.array(ca_.eta), np.array(cb.eta), atol=1e-6)
+
+
+def test_the_client_plans_the_builtin_hand_over_http(live_server: Server) -> None:
+    """The client's door: a 4-finger round-tip plan over HTTP, solved and certified, every
+    finger's joints in the ROS-shaped joint trajectory."""
+    from dexroll_client import DexrollClient
+
+    with DexrollClient.from_url(live_server.url, timeout=120) as client:
+        job = client.plan(turn({"builtin": "allegro"}), timeout=300)
+    result = job.result
+    assert isinstance(result, ManipulationResult) and result.status is PlanStatus.SOLVED
+    assert result.certificate is not None and result.certificate.passed
+    assert result.joint_trajectory is not None
+    assert len(result.joint_trajectory.joint_names) == 16
 
 
 def test_the_examples_are_valid_requests() -> None:
