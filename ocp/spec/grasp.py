@@ -23,6 +23,7 @@ from ocp.spec.problem import (
     DEFAULT_FINGER_CHART_ROTATION,
     MAX_POSITION,
     BallOnPalmProblem,
+    ForceSpec,
     ObjectSpec,
     ProblemError,
     SolverOptions,
@@ -151,6 +152,9 @@ class ManipulationProblem:
     options: SolverOptions = field(default_factory=SolverOptions)
     #: How strictly the certificate checks the plan (:mod:`ocp.certify.laws`).
     tolerances: TolerancePolicy = GRASP_TOLERANCES
+    #: Plan the contact forces (the object's load, the grip; docs/forces.md); None (the
+    #: default): a kinematic plan, as before.
+    forces: ForceSpec | None = None
 
     @property
     def n_contacts(self) -> int:
@@ -180,7 +184,7 @@ class ManipulationProblem:
     def palm_only(self) -> ManipulationProblem:
         """The object on this problem's palm alone (its grid, goals, limits and solver
         options; the palm's tolerances): its plan seeds a finger grasp's initial guess."""
-        return replace(self, fingers=(), motion=None, tracking=Tracking(),
+        return replace(self, fingers=(), motion=None, forces=None, tracking=Tracking(),
                        object_effort_weight=1.0, tolerances=PALM_TOLERANCES)
 
     def errors(self) -> list[tuple[str, str]]:
@@ -243,6 +247,10 @@ class ManipulationProblem:
             if c.q_seed is not None and len(c.q_seed) != c.finger.nq:
                 errs.append((f"{name}.q_seed",
                              f"must have {c.finger.nq} joint angles, got {len(c.q_seed)}"))
+        if self.forces is not None:
+            errs += self.forces.errors("forces", self.mu)
+            if not self.fingers:
+                errs.append(("forces", "planned forces need a fingertip contact"))
         return errs
 
     def validate(self) -> None:

@@ -20,6 +20,7 @@ FloatArray = NDArray[np.float64]
 __all__ = [
     "CONTACT_COORDS",
     "BallOnPalmProblem",
+    "ForceSpec",
     "ObjectSpec",
     "ProblemError",
     "SolverOptions",
@@ -78,6 +79,64 @@ class ObjectSpec:
     def length_scale(self) -> float:
         """Characteristic length [m] used to scale the NLP (the largest semi-axis)."""
         return float(max(self.dimensions))
+
+
+@dataclass(frozen=True)
+class ForceSpec:
+    """What a plan's contact forces must hold (issue 15; docs/forces.md): the object's
+    ``mass`` [kg] and principal ``inertia`` about its own axes [kg m^2] (default: the solid
+    sphere's or ellipsoid's of that mass), ``gravity`` [m/s^2] in the palm frame, the grip:
+    every contact's normal force at least ``min_normal_force`` [N], and
+    ``torsional_friction`` [m], the soft-finger coefficient: the moment about the normal
+    within ``torsional_friction`` times the normal force (0: hard point contacts).
+    ``cone_margin`` [rad]: the planned forces stay this far inside the friction cones."""
+
+    mass: float
+    inertia: tuple[float, float, float] | None = None
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    min_normal_force: float = 0.5
+    torsional_friction: float = 0.0
+    cone_margin: float = 0.05
+
+    def principal_inertia(self, obj: ObjectSpec) -> tuple[float, float, float]:
+        """The inertia given, else the solid body's of ``obj`` with this mass."""
+        if self.inertia is not None:
+            return self.inertia
+        d = tuple(float(x) for x in obj.dimensions)
+        a, c = (d[0], d[0]) if obj.shape == "sphere" else (d[0], d[1])
+        side = self.mass * (a * a + c * c) / 5
+        return (side, side, 2 * self.mass * a * a / 5)
+
+    def errors(self, name: str, mu: float) -> list[tuple[str, str]]:
+        """Every reason these fields are invalid, as (field, reason) under ``name``."""
+        errs: list[tuple[str, str]] = []
+
+        def finite(value: object) -> bool:
+            return isinstance(value, int | float) and not isinstance(value, bool) \
+                and math.isfinite(value)
+
+        if not (finite(self.mass) and 0.0 < self.mass <= 100.0):
+            errs.append((f"{name}.mass", f"must be in (0, 100] kg, got {self.mass}"))
+        if self.inertia is not None and not (
+                len(self.inertia) == 3 and all(finite(v) and 0.0 < v <= 100.0
+                                               for v in self.inertia)):
+            errs.append((f"{name}.inertia", "must be 3 principal moments in (0, 100] kg m^2, "
+                                            f"got {list(self.inertia)}"))
+        if not (len(self.gravity) == 3 and all(finite(v) and abs(v) <= 100.0
+                                               for v in self.gravity)):
+            errs.append((f"{name}.gravity", "must be 3 finite numbers within 100 m/s^2 "
+                                            f"(palm frame), got {list(self.gravity)}"))
+        if not (finite(self.min_normal_force) and 0.0 < self.min_normal_force <= 1e3):
+            errs.append((f"{name}.min_normal_force",
+                         f"must be in (0, 1000] N, got {self.min_normal_force}"))
+        if not (finite(self.torsional_friction) and 0.0 <= self.torsional_friction <= 0.1):
+            errs.append((f"{name}.torsional_friction",
+                         f"must be in [0, 0.1] m, got {self.torsional_friction}"))
+        if not (finite(self.cone_margin) and 0.0 <= self.cone_margin
+                < (math.atan(mu) if finite(mu) and mu > 0 else math.pi / 2)):
+            errs.append((f"{name}.cone_margin",
+                         f"must be in [0, atan(mu)) rad, got {self.cone_margin}"))
+        return errs
 
 
 @dataclass(frozen=True)
