@@ -169,6 +169,22 @@ def test_overlapping_fingertips_are_422(live_server: Server) -> None:
     assert "their tips overlap by" in fields["fingers[1].initial_q"]
 
 
+def test_a_400_joint_mjcf_hand_is_refused_by_the_checker_before_pinocchio(
+        live_server: Server) -> None:
+    chain = "".join(f'<body name="b{i}" pos="0 0 0.01"><joint name="j{i}" axis="0 1 0" '
+                    'range="-1 1"/>' for i in range(400)) + "</body>" * 400
+    body = turn({"mjcf": f"<mujoco><worldbody>{chain}</worldbody></mujoco>",
+                 "tips": [{"name": "b399"}]})
+    body["fingers"] = [{"hand_finger": 0}, {"hand_finger": 0, "name": "again"}]
+    r = httpx.post(f"{live_server.url}/v1/plans", params={"wait": 0}, content=json.dumps(body),
+                   headers={"content-type": "application/json"}, timeout=60)
+    assert r.status_code == 422, r.text
+    reasons = [d["reason"] for d in r.json()["detail"] if d["field"] == "hand.mjcf"]
+    # the XML's nesting (a limit of the tree, counted while parsing) stops it first
+    assert any("nested deeper than" in why or "joints; at most" in why for why in reasons), \
+        r.text
+
+
 def test_the_catalog_lists_the_allegro_with_its_models(live_server: Server) -> None:
     catalog = httpx.get(f"{live_server.url}/v1/models", timeout=30).json()
     hand = next(h for h in catalog["hands"] if h["name"] == "allegro")
