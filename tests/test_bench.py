@@ -415,8 +415,23 @@ def test_quick_suite_solves_are_certified(quick_run: tuple[int, Path]) -> None:
             assert r["ok"], (r["problem_id"], r["method"], r["message"])
         assert r["worker_pid"] and r["peak_rss_mb"] > 0
     ours = [r for r in rows if r["method"] in OURS]
-    assert ours and all(r["iterations"] and r["certificate"] for r in ours)
+    # a plan stopped at its time limit has no certificate (the deadline skips it); on a
+    # loaded machine a family expected 'any' may end so
+    assert ours and all(r["iterations"] and (r["certificate"] or r["status"] == "time_limit")
+                        for r in ours)
+    assert all(r["status"] != "time_limit" for r in ours if r["expected"] == "solved")
     assert len({r["worker_pid"] for r in rows}) == 2
+
+
+def test_quick_suite_plans_with_fingers_execute_in_mujoco(quick_run: tuple[int, Path]
+                                                          ) -> None:
+    """Every solved plan with fingers is executed in MuJoCo by the row that reports it
+    (docs/simulation.md) and passes: within 1 mm and 2 degrees, no contact lost."""
+    pytest.importorskip("mujoco")
+    executed = [r for r in _rows(quick_run[1]) if r.get("exec_status") is not None]
+    assert executed, "no plan with fingers was executed"
+    for r in executed:
+        assert r["exec_status"] == "passed", (r["problem_id"], r["method"], r)
 
 
 def test_one_worker_gives_the_same_rows(quick_run: tuple[int, Path], tmp_path: Path) -> None:
