@@ -28,9 +28,9 @@ if TYPE_CHECKING:
     from ocp.transcription.grasp_model import GraspModel
 
 __all__ = ["Collocation", "ContactTrajectory", "FingerTrajectory", "GraspSample",
-           "JointTrajectory", "ManipulationSolution", "RateBreak", "Solution", "SolverStats",
-           "Status", "Trajectory", "assemble_solution", "fixed_rate_times",
-           "status_from_ipopt"]
+           "JointTrajectory", "ManipulationSolution", "PlannedForces", "RateBreak", "Solution",
+           "SolverStats", "Status", "Trajectory", "assemble_solution", "fixed_rate_times",
+           "joint_torques", "planned_forces", "status_from_ipopt"]
 
 FloatArray = NDArray[np.float64]
 
@@ -217,6 +217,11 @@ class ContactTrajectory:
     point: FloatArray
     normal: FloatArray
     force_angle: FloatArray
+    #: The planned force this contact's body (palm, fingertip) exerts on the object [N],
+    #: palm frame, and the torsion [N m]: its moment about the object's outward normal
+    #: (soft finger); None for a plan without forces (docs/forces.md).
+    force: FloatArray | None = None
+    torsion: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -230,6 +235,10 @@ class FingerTrajectory:
     q_dot: FloatArray
     tip_position: FloatArray
     tip_rotation: FloatArray
+    #: The joint torques [N m] (or forces [N]) that exert the planned contact force and
+    #: torsion on the object: tau = J^T (f; m) at the contact point (not the finger's own
+    #: gravity); None for a plan without forces.
+    joint_torques: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -246,8 +255,74 @@ class Collocation:
     U0: FloatArray
     Um: FloatArray
     U1: FloatArray
+    #: The planned contact forces at the nodes and midpoints (None without forces).
+    forces: PlannedForces | None = None
 
 
+@dataclass(frozen=True)
+class PlannedForces:
+    """Every contact's planned force at the collocation points: ``f_nodes`` (n+1 x nc x 3)
+    and ``f_mid`` (n x nc x 3) [N], palm frame, the force each contact's body exerts on the
+    object; ``tau_nodes``, ``tau_mid`` [N m] the torsion about the object's outward normal.
+    Between the points, on each interval, the quadratic through node, midpoint and node,
+    like the inputs (:meth:`on_intervals`): continuous (the NLP has one force per point)."""
+
+    f_nodes: FloatArray
+    f_mid: FloatArray
+    tau_nodes: FloatArray
+    tau_mid: FloatArray
+
+    def on_intervals(self, k: NDArray[np.intp], s: FloatArray
+                     ) -> tuple[FloatArray, FloatArray]:
+        """(forces (len x nc x 3), torsions (len x nc)) at normalised times s of intervals k."""
+        s = np.asarray(s, dtype=float)
+        b0, bm, b1 = 2 * (s - 0.5) * (s - 1), -4 * s * (s - 1), 2 * s * (s - 0.5)
+        f = (b0[:, None, None] * self.f_nodes[k] + bm[:, None, None] * self.f_mid[k]
+             + b1[:, None, None] * self.f_nodes[k + 1])
+        tau = (b0[:, None] * self.tau_nodes[k] + bm[:, None] * self.tau_mid[k]
+               + b1[:, None] * self.tau_nodes[k + 1])
+        return f, tau
+
+
+def planned_forces(problem: ManipulationProblem, m: GraspModel, F: FloatArray,
+                   X: FloatArray, Xm: FloatArray, prm: FloatArray) -> PlannedForces:
+    """The planned forces of an NLP solution: ``F`` its load-force rows at the points
+    (nodes, then midpoints; :mod:`ocp.transcription.nlp_blocks`: per contact the force in
+    the object frame over the force scale, then the torsion's share of its limit), the
+    states ``X`` at the nodes and ``Xm`` at the midpoints (rows), in palm-frame newtons."""
+    from ocp.transcription.nlp_blocks import LOAD_VARS
+    from ocp.transcription.values import force_scale
+
+    assert problem.forces is not None
+    nc, n = m.n_contacts, len(Xm)
+    Xa = np.vstack([X, Xm])
+    k = len(Xa)
+    cart = m.mapped("cartesian", k)(Xa.T, prm)
+    R_po = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
+    nrm = np.asarray(cart[5]).T.reshape(k, nc, 3)  # palm frame
+    Fl = np.asarray(F, dtype=float).reshape(LOAD_VARS, nc, k, order="F")
+    F0 = force_scale(problem)
+    f = F0 * np.einsum("kij,jck->kci", R_po, Fl[0:3])  # k x nc x 3, palm frame
+    fn = -np.einsum("kci,kci->kc", nrm, f)
+    tau = problem.forces.torsional_friction * fn * Fl[3].T
+    return PlannedForces(f[: n + 1], f[n + 1:], tau[: n + 1], tau[n + 1:])
+
+
+def joint_torques(finger: Any, q: FloatArray, tip_point: FloatArray, normal: FloatArray,
+                  force: FloatArray, torsion: FloatArray) -> FloatArray:
+    """tau = J^T (f; tau_n n) for rows of joint angles ``q``: J the finger's geometric
+    Jacobian (:attr:`~ocp.robots.finger.FingerModel.jacobian`) moved to the contact point
+    ``tip_point`` (palm frame), f the force the fingertip exerts on the object, tau_n n the
+    torsion about the object's outward normal ``normal``."""
+    k = len(q)
+    out = np.zeros((k, finger.nq))
+    for j in range(k):
+        J = np.asarray(finger.jacobian(q[j]))
+        _, p_tip = finger.fk(q[j])
+        r = tip_point[j] - np.asarray(p_tip).ravel()
+        moment = np.cross(r, force[j]) + torsion[j] * normal[j]
+        out[j] = J[:3].T @ force[j] + J[3:].T @ moment
+    return out
 def fixed_rate_times(duration: float, rate: float) -> FloatArray:
     """Times [s] at a controller's rate [Hz] from 0 to ``duration``: k / rate for every k
     with k / rate < duration, then ``duration`` itself (the plan's end, where it stops)."""
@@ -407,6 +482,38 @@ class ManipulationSolution:
                                           traj.inputs_on_intervals(k, s))
 
 
+    def forces(self, t: FloatArray | list[float], side: str = "right"
+               ) -> tuple[FloatArray, FloatArray]:
+        """The planned contact forces at any times (:class:`PlannedForces`, quadratic on
+        each interval): (forces (len x contacts x 3) [N], palm frame, the force each
+        contact's body exerts on the object; torsions (len x contacts) [N m]).
+        ValueError for a plan without forces."""
+        col = self.collocation
+        if col is None or col.forces is None:
+            raise ValueError("this plan has no forces (plan with ManipulationProblem.forces)")
+        k, s = self.trajectory.locate(self._times(t), side)
+        return col.forces.on_intervals(k, s)
+
+    def joint_torques(self, t: FloatArray | list[float], side: str = "right"
+                      ) -> list[FloatArray]:
+        """Every finger's joint torques at any times (:func:`joint_torques` of the planned
+        forces at the returned joint angles and contact points), one (len x joints) array
+        per finger."""
+        f, tau = self.forces(t, side)
+        smp = self.sample(t, side)
+        assert self._interpolant is not None
+        m, prm = self._interpolant.m, self._interpolant.prm
+        k = len(smp.t)
+        cart = m.mapped("cartesian", k)(smp.x.T, prm)
+        pts = np.asarray(cart[4]).T.reshape(k, m.n_contacts, 3)
+        nrm = np.asarray(cart[5]).T.reshape(k, m.n_contacts, 3)
+        out = []
+        for tip in m.fingertips:
+            j = m.point_contacts.index(tip)
+            out.append(joint_torques(tip.finger, smp.x[:, tip.q_cols], pts[:, j],
+                                     nrm[:, j], f[:, j], tau[:, j]))
+        return out
+
     def break_nodes(self) -> list[int]:
         """The nodes where the input jumps (the rates have two sides): via-point nodes
         of the paper's piecewise timing."""
@@ -489,13 +596,27 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
     v_obj, w_obj = np.asarray(laws[0]).T, np.asarray(laws[1]).T
     phi, angles, _ = force_angles(pts, nrm)
     margin = math.atan(problem.mu) - phi
+    fg: FloatArray | None = None
+    tg: FloatArray | None = None
+    if col.forces is not None:  # the planned forces on the grid (nodes, midpoints)
+        fg = np.concatenate([col.forces.f_nodes, col.forces.f_mid])[order]
+        tg = np.concatenate([col.forces.tau_nodes, col.forces.tau_mid])[order]
     contacts = [ContactTrajectory(c.label(problem), c.body, Xg[:, c.eta_cols],
                                   xdot[:, c.eta_cols], Ug[:, c.w_cols], pts[:, j],
-                                  nrm[:, j], angles[:, j])
+                                  nrm[:, j], angles[:, j],
+                                  None if fg is None else fg[:, j],
+                                  None if tg is None else tg[:, j])
                 for j, c in enumerate(m.point_contacts)]
-    fingers = [FingerTrajectory(tip.label(problem), tuple(tip.finger.joint_names),
-                                Xg[:, tip.q_cols], xdot[:, tip.q_cols], p_pf[:, i],
-                                R_pf[:, i]) for i, tip in enumerate(m.fingertips)]
+    fingers = []
+    for i, tip in enumerate(m.fingertips):
+        torques = None
+        if fg is not None and tg is not None and finite:
+            j = m.point_contacts.index(tip)
+            torques = joint_torques(tip.finger, Xg[:, tip.q_cols], pts[:, j], nrm[:, j],
+                                    fg[:, j], tg[:, j])
+        fingers.append(FingerTrajectory(tip.label(problem), tuple(tip.finger.joint_names),
+                                        Xg[:, tip.q_cols], xdot[:, tip.q_cols], p_pf[:, i],
+                                        R_pf[:, i], torques))
     Rd = Pd = ep = ea = None
     if problem.motion is not None:
         Rd, Pd = problem.motion.at(t)

@@ -44,3 +44,102 @@ def test_the_default_inertia_is_the_solid_bodys() -> None:
     assert np.isclose(Ix, 2.0 * (0.02**2 + 0.03**2) / 5) and Ix == Iy
     assert np.isclose(Iz, 2 * 2.0 * 0.02**2 / 5)
     assert ForceSpec(1.0, inertia=(1.0, 2.0, 3.0)).principal_inertia(egg) == (1.0, 2.0, 3.0)
+
+
+# -- a plan with forces: two fingers turn the ball in the air (the paper's experiment 2) ----
+
+@pytest.fixture(scope="module")
+def planned() -> tuple[Any, Any]:
+    from test_manipulation import PLANNER
+
+    problem = two_fingers(n=40, forces=LOAD)
+    return problem, PLANNER.solve(problem)
+
+
+def _points(problem: Any, sol: Any) -> tuple[np.ndarray, ...]:
+    """Object pose, contact points and outward normals (palm frame) at the collocation
+    points (nodes, then midpoints) of the NLP's own states, and the forces there."""
+    from test_manipulation import PLANNER
+
+    from ocp.spec.grasp import contact_charts
+
+    m = PLANNER.model(problem)
+    prm = m.params(np.asarray(problem.object.dimensions, dtype=float),
+                   contact_charts(problem))
+    col = sol.collocation
+    X = np.vstack([col.X, col.Xm])
+    k = len(X)
+    cart = m.mapped("cartesian", k)(X.T, prm)
+    p_po = np.asarray(cart[1]).T
+    pts = np.asarray(cart[4]).T.reshape(k, m.n_contacts, 3)
+    nrm = np.asarray(cart[5]).T.reshape(k, m.n_contacts, 3)
+    f = np.concatenate([col.forces.f_nodes, col.forces.f_mid])
+    tau = np.concatenate([col.forces.tau_nodes, col.forces.tau_mid])
+    return p_po, pts, nrm, f, tau
+
+
+def test_the_forces_hold_the_object_at_every_collocation_point(
+        planned: tuple[Any, Any]) -> None:
+    problem, sol = planned
+    assert sol.ok, sol.message
+    p_po, pts, nrm, f, tau = _points(problem, sol)
+    weight = LOAD.mass * np.asarray(LOAD.gravity)
+    # equilibrium with the weight at the centre, to round-off (IPOPT's tolerance)
+    assert np.max(np.abs(f.sum(axis=1) + weight)) < 1e-9
+    moment = (np.cross(pts - p_po[:, None], f) + tau[:, :, None] * nrm).sum(axis=1)
+    assert np.max(np.abs(moment)) < 1e-9 * problem.object.length_scale
+    fn = -np.einsum("kci,kci->kc", nrm, f)
+    ft = np.linalg.norm(f + fn[:, :, None] * nrm, axis=2)
+    mu_m = math.tan(math.atan(problem.mu) - LOAD.cone_margin)
+    assert np.all(ft <= mu_m * fn + 1e-9)  # inside the cone with its margin
+    assert np.all(fn >= LOAD.min_normal_force - 1e-9)
+    assert np.all(np.abs(tau) <= LOAD.torsional_friction * fn + 1e-12)
+    # the smallest forces (the objective's regularisation): the top finger presses with
+    # about the minimum, the bottom one carries the weight besides (the grip does not grow)
+    assert np.min(fn) < LOAD.min_normal_force * 1.05
+    assert np.max(fn) < LOAD.min_normal_force + 1.05 * LOAD.mass * 9.81
+
+
+def test_the_certificate_checks_the_forces_on_the_returned_samples(
+        planned: tuple[Any, Any]) -> None:
+    _, sol = planned
+    cert = sol.certificate
+    for name in ("max_force_equilibrium_residual", "max_moment_equilibrium_residual",
+                 "min_friction_cone_margin", "min_normal_force", "min_torsion_margin"):
+        assert name in cert, name
+    assert cert.passed
+    # the grid's forces are the collocation points' and sample() interpolates them
+    f, _ = sol.forces(sol.t)
+    assert np.allclose(f, np.stack([c.force for c in sol.contacts], axis=1), atol=1e-12)
+
+
+def test_joint_torques_are_the_transposed_jacobian_times_the_force(
+        planned: tuple[Any, Any]) -> None:
+    """tau = J^T (f; r x f + tau_n n) with Pinocchio's Jacobian of the tip frame, r from
+    its origin to the contact point (independent of the CasADi kinematics the plan used)."""
+    problem, sol = planned
+    for i, (tip, fin) in enumerate(zip(problem.fingers, sol.fingers, strict=True)):
+        c = sol.contacts[i]  # no palm: the contacts are the fingertips
+        for j in range(0, len(sol.t), 7):
+            J = tip.finger.frame_jacobian_pin(fin.q[j])
+            _, p_tip = tip.finger.fingertip_pose_pin(fin.q[j])
+            moment = np.cross(c.point[j] - p_tip, c.force[j]) + c.torsion[j] * c.normal[j]
+            expect = J[:3].T @ c.force[j] + J[3:].T @ moment
+            assert np.allclose(fin.joint_torques[j], expect, rtol=1e-9, atol=1e-12)
+
+
+def test_without_forces_the_nlp_and_the_plan_are_as_before() -> None:
+    from test_manipulation import PLANNER
+
+    from ocp.solve.planner import GraspStructure
+
+    problem = two_fingers(n=10)
+    assert not GraspStructure.of(problem).forces
+    nlp, _ = PLANNER._build(problem)
+    assert nlp.n_load == 0
+    with_forces, _ = PLANNER._build(replace(problem, forces=LOAD))
+    assert with_forces.n_load == 2
+    # 4 variables per contact and point; rows: 6 equilibrium, 2 normal, 2 cone per point
+    npts = 2 * 10 + 1
+    assert with_forces.pack.nnz_out(0) - nlp.pack.nnz_out(0) == 4 * 2 * npts
+    assert len(with_forces.lbg) - len(nlp.lbg) == 10 * npts

@@ -33,9 +33,17 @@ from ocp.spec.grasp import ManipulationProblem, support_goal_errors
 from ocp.transcription.collocation import HermiteInterpolant, reintegrate
 
 if TYPE_CHECKING:
+    from ocp.solution import PlannedForces
     from ocp.transcription.grasp_model import GraspModel
 
-__all__ = ["certify_grasp", "check_samples"]
+__all__ = ["certify_grasp", "check_samples", "force_checks"]
+
+#: Relative tolerance of the planned forces' checks between collocation points: the
+#: equilibrium residual (of the force scale; moments of it times the object's size) and
+#: the normal force's shortfall below the minimum (of the minimum). At the collocation
+#: points both hold to IPOPT's tolerance; between them the interpolated forces and the
+#: returned poses differ from an exact equilibrium by O(h^3).
+FORCE_REL_TOL = 1e-3
 
 FloatArray = NDArray[np.float64]
 
@@ -74,9 +82,53 @@ def _rms(values: FloatArray, weights: FloatArray) -> float:
     return math.sqrt(float(np.sum(weights * values**2)) / total) if total > 0 else 0.0
 
 
+def force_checks(problem: ManipulationProblem, forces: PlannedForces, k: NDArray[np.intp],
+                 s: FloatArray, ts: FloatArray, p_po: FloatArray, R_po: FloatArray,
+                 pts: FloatArray, nrm: FloatArray) -> tuple[list[Check], dict[str, float]]:
+    """The planned forces' checks on the samples (intervals k, normalised times s, times
+    ts; the returned object pose and contact points and outward normals, palm frame):
+    the object's quasi-static equilibrium with its weight, every force inside its
+    friction cone (the request's mu, not the NLP's narrowed one), every normal force at
+    least the minimum, every torsion within its limit. The forces between collocation
+    points: :meth:`~ocp.solution.PlannedForces.on_intervals` (quadratic, like the inputs)."""
+    from ocp.transcription.values import force_scale
+
+    fs = problem.forces
+    assert fs is not None
+    D = CheckKind.DISCRETISATION
+    f, tau = forces.on_intervals(k, s)
+    F0, L = force_scale(problem), problem.object.length_scale
+    weight = fs.mass * np.asarray(fs.gravity, dtype=float)
+    r = pts - p_po[:, None, :]
+    res_f = np.linalg.norm(f.sum(axis=1) + weight, axis=1) / F0
+    res_m = np.linalg.norm((np.cross(r, f) + tau[:, :, None] * nrm).sum(axis=1),
+                           axis=1) / (F0 * L)
+    fn = -np.einsum("kci,kci->kc", nrm, f)
+    ft = np.linalg.norm(f + fn[:, :, None] * nrm, axis=2)
+    cone = (problem.mu * fn - ft) / F0
+    tors = (fs.torsional_friction * fn - np.abs(tau)) / (F0 * L)
+    checks = []
+    for name, values, tol in (("max_force_equilibrium_residual", res_f, FORCE_REL_TOL),
+                              ("max_moment_equilibrium_residual", res_m, FORCE_REL_TOL)):
+        j = int(np.argmax(values))
+        checks.append(Check(name, float(values[j]), tol, D, time=float(ts[j])))
+    for name, values, tol in (
+            ("min_friction_cone_margin", cone.min(axis=1), 0.0),
+            ("min_normal_force", fn.min(axis=1), fs.min_normal_force * (1 - FORCE_REL_TOL)),
+            ("min_torsion_margin", tors.min(axis=1), -1e-12)):
+        j = int(np.argmin(values))
+        checks.append(Check(name, float(values[j]), tol, D, lower_bound=True,
+                            time=float(ts[j])))
+    reported = {"max_normal_force": float(fn.max()),
+                "max_tangential_force_ratio": float(np.max(ft / np.maximum(fn, 1e-300)))}
+    return checks, reported
+
+
 def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInterpolant,
-                  prm: FloatArray, policy: TolerancePolicy) -> Certificate:
-    """The certificate of a plan as returned (``traj``): see the module's doc."""
+                  prm: FloatArray, policy: TolerancePolicy,
+                  forces: PlannedForces | None = None) -> Certificate:
+    """The certificate of a plan as returned (``traj``, and its planned ``forces``): see
+    the module's doc."""
     arrays = (traj.X, traj.F0, traj.F1, traj.U0, traj.Um, traj.U1)
     if not all(np.all(np.isfinite(a)) for a in arrays):
         return Certificate.failed("the plan has non-finite states or inputs")
@@ -169,4 +221,12 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
                                 reason="the grasp map is not onto at t = "
                                        f"{ts[int(np.argmin(onto))]:.6g} s (force closure "
                                        "lost)"))
+    if forces is not None and problem.forces is not None:
+        n_int = len(t_nodes) - 1
+        pts_s = np.asarray(policy.check_points, dtype=float)
+        kk = np.repeat(np.arange(n_int), len(pts_s))
+        more, rep_ = force_checks(problem, forces, kk, np.tile(pts_s, n_int), ts, p_po, R_po,
+                                  pts, nrm)
+        checks += more
+        reported.update(rep_)
     return Certificate.of(checks, reported, n_samples=n)

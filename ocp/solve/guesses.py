@@ -143,26 +143,60 @@ def strategy_for(problem: ManipulationProblem) -> Strategy:
     return GraspStrategy()
 
 
-def epigraph_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray
-                   ) -> tuple[FloatArray, FloatArray]:
-    """Grasp epigraph values (1 x k; 0 x k for one contact) and internal-force guesses
-    at the given states."""
+def load_guess(R_po: FloatArray, p_po: FloatArray, pts: FloatArray, nrm: FloatArray,
+               load: FloatArray) -> FloatArray:
+    """Planned-force guesses (``LOAD_VARS * nc`` x k, :mod:`ocp.transcription.nlp_blocks`):
+    every contact pushing along its inward normal with twice the minimum normal force,
+    corrected by the least-norm forces that restore the object's equilibrium with its
+    weight (palm-frame points ``pts`` and normals ``nrm``, k x nc x 3); no torsion."""
+    from ocp.transcription.nlp_blocks import LOAD_VARS
+
+    k, nc, _ = pts.shape
+    weight, f_min, F0 = load[0:3], float(load[3]), float(load[5])
+    out = np.zeros((LOAD_VARS * nc, k))
+    for j in range(k):
+        r = pts[j] - p_po[j]  # nc x 3, about the object's centre
+        A = np.zeros((6, 3 * nc))
+        for i in range(nc):
+            A[0:3, 3 * i:3 * i + 3] = np.eye(3)
+            x, y, z = r[i]
+            A[3:6, 3 * i:3 * i + 3] = [[0, -z, y], [z, 0, -x], [-y, x, 0]]
+        f0 = (-2 * f_min * nrm[j]).ravel()
+        b = np.concatenate([-weight, np.zeros(3)])
+        f = f0 + np.linalg.lstsq(A, b - A @ f0, rcond=None)[0]
+        f_obj = (R_po[j].T @ f.reshape(nc, 3).T) / F0  # 3 x nc, the object frame
+        for i in range(nc):
+            out[LOAD_VARS * i:LOAD_VARS * i + 3, j] = f_obj[:, i]
+    return out
+
+
+def epigraph_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray,
+                   load: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    """Grasp epigraph values (1 x k; 0 x k for one contact) and force guesses at the
+    given states: the internal forces of 3+ contacts, then (``load``: the NLP's load
+    parameters, when it plans forces) the planned forces (:func:`load_guess`)."""
     from ocp.geometry.grasp import force_angles
 
     k = len(Xall)
-    if m.n_contacts < 2:  # no force closure to certify: neither
+    nc = m.n_contacts
+    if nc < 2 and load is None:  # no force closure to certify: neither
         return np.zeros((0, k)), np.zeros((0, k))
     out = m.mapped("cartesian", k)(Xall.T, prm)
-    nc = m.n_contacts
     pts = np.asarray(out[4]).T.reshape(k, nc, 3)
     nrm = np.asarray(out[5]).T.reshape(k, nc, 3)
+    loads = np.zeros((0, k))
+    if load is not None:
+        R_po = np.asarray(out[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
+        loads = load_guess(R_po, np.asarray(out[1]).T, pts, nrm, load)
+    if nc < 2:
+        return np.zeros((0, k)), loads
     if nc == 2:
         phi, _, _ = force_angles(pts, nrm)
-        return np.clip(1 - np.cos(phi), 0.0, 2.0)[None], np.zeros((0, k))
+        return np.clip(1 - np.cos(phi), 0.0, 2.0)[None], loads
     # a pushing guess: each contact pushes along its inward normal (scaled so that the
     # pushes sum to nc); IPOPT restores equilibrium
     F = -nrm.reshape(k, 3 * nc).T
-    return np.full((1, k), 0.5), F
+    return np.full((1, k), 0.5), np.vstack([F, loads])
 
 
 def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: NLP,

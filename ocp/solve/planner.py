@@ -57,6 +57,7 @@ from ocp.solution import (
     SolverStats,
     Status,
     assemble_solution,
+    planned_forces,
     status_from_ipopt,
 )
 from ocp.solve.compiled import BackgroundCompiler
@@ -79,7 +80,7 @@ from ocp.spec.problem import MAX_INTERVALS, ProblemError, Structure
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.nlp_blocks import build_manipulation_nlp
-from ocp.transcription.values import bounds, scales
+from ocp.transcription.values import bounds, load_parameters, scales
 from ocp.transcription.values import parameters as nlp_parameters
 
 __all__ = [
@@ -120,6 +121,8 @@ class GraspStructure:
     via_masks: tuple[tuple[bool, ...], ...]
     fingers: tuple[Any, ...]
     tracking: bool
+    #: the contact forces are planned (``problem.forces``): more variables and rows
+    forces: bool = False
 
     @staticmethod
     def of(problem: ManipulationProblem) -> GraspStructure:
@@ -131,7 +134,7 @@ class GraspStructure:
             goal_mask, via_masks = st.goal_mask, st.via_masks
         return GraspStructure(problem.object.shape, problem.palm is not None, segments,
                               goal_mask, via_masks, tuple(c.finger for c in problem.fingers),
-                              problem.motion is not None)
+                              problem.motion is not None, problem.forces is not None)
 
     def fingerprint(self, m: GraspModel) -> str:
         """The structure as a string that another process computes alike: the fingers by
@@ -139,7 +142,7 @@ class GraspStructure:
         import hashlib
 
         parts = [repr((self.shape, self.palm, self.segments, self.goal_mask, self.via_masks,
-                       self.tracking, m.nx, m.nu))]
+                       self.tracking, m.nx, m.nu)) + (":forces" if self.forces else "")]
         for f in self.fingers:
             parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
                       repr(np.asarray(f.base_rotation).round(12).tolist()),
@@ -232,7 +235,8 @@ class ManipulationPlanner:
             return self._nlps[key], True
         m = self.model(problem)
         block = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
-                                       key.tracking, FORCE_REGULARISATION)
+                                       key.tracking, FORCE_REGULARISATION,
+                                       forces=key.forces)
         nlp = ipopt_solver(block, key.fingerprint(m), None if self.compiler else self.compile_dir)
         self._nlps[key] = nlp
         if self.compiler is not None:
@@ -448,7 +452,8 @@ class ManipulationPlanner:
             used = sum(a.iterations for a in attempts) if strategy.shared_budget else 0
             remaining = budget - used
             limit = remaining if cap is None else max(1, min(remaining, cap))
-            Sg, Fg = epigraph_guess(m, np.vstack([X, Xm]), prm)
+            Sg, Fg = epigraph_guess(m, np.vstack([X, Xm]), prm,
+                                    load_parameters(problem) if nlp.n_load else None)
             w0 = nlp.pack((X / x_scale).T, (Xm / x_scale).T, (U / u_scale).T,
                           (Um / u_scale).T, Sg[:, : n + 1], Sg[:, n + 1:], Fg)
             w0 = np.clip(np.asarray(w0).ravel(), lbx, ubx)
@@ -487,10 +492,14 @@ class ManipulationPlanner:
         solve_time = time.perf_counter() - t_loop
         best = next((a for a in attempts if a.status is Status.SOLVED),
                     min(attempts, key=lambda a: a.violation))
-        Xs, Xms, Us, Ums = (np.asarray(a) for a in nlp.unpack(best.w)[:4])
+        parts = nlp.unpack(best.w)
+        Xs, Xms, Us, Ums = (np.asarray(a) for a in parts[:4])
         Ucols = Us.T * u_scale
         col = Collocation(t_nodes, Xs.T * x_scale, Xms.T * x_scale, Ucols[nlp.hs.left_cols],
                           Ums.T * u_scale, Ucols[nlp.hs.right_cols])
+        if nlp.n_load:  # the planned forces, after the internal forces' rows
+            col = replace(col, forces=planned_forces(
+                problem, m, np.asarray(parts[6])[3 * nlp.n_force:], col.X, col.Xm, prm))
         # one deadline over the whole plan: past it, no certificate either (seconds for a
         # multi-finger grasp); the plan is the last iterate, stopped by the time limit
         late = certify and time.perf_counter() >= deadline
@@ -498,7 +507,7 @@ class ManipulationPlanner:
             best = replace(best, status=Status.TIME_LIMIT)
         t_cert = time.perf_counter()
         traj = m.interpolant(t_nodes, col.X, col.U0, col.Um, col.U1, prm)
-        cert = certify_grasp(problem, m, traj, prm, problem.tolerances) \
+        cert = certify_grasp(problem, m, traj, prm, problem.tolerances, col.forces) \
             if certify and not late else \
             Certificate.failed("not certified: the time limit was reached first" if late
                                else "not certified (planned as an initial guess)")

@@ -73,6 +73,24 @@ class BlockNLP:
     oracle: ca.Function
     jac_g: ca.Function
     hess_lag: ca.Function
+    #: contacts with planned load forces (:data:`LOAD_VARS` variables each at every
+    #: point, after the internal forces in ``F``; 0 without ``forces``)
+    n_load: int = 0
+
+
+#: Variables of one contact's planned force at a point: the force in the object frame,
+#: divided by the force scale, and the torsion's fraction of its limit (soft fingers).
+LOAD_VARS = 4
+#: The torsion stays within this fraction of its limit |tau| <= torsional_friction f_n.
+TORSION_SHARE = 0.95
+#: Load parameters: the weight m g in the palm frame [N], the minimum normal force [N],
+#: the torsional friction [m], the force scale [N], tan(atan(mu) - margin), the cone's
+#: smoothing (scaled force).
+LOAD_PARAMS = 8
+#: Weight of the planned forces' size (scaled) in the objective: it picks the smallest
+#: forces that hold the object, and is small enough not to move the plan (the forces'
+#: size depends on the grasp's geometry).
+LOAD_REGULARISATION = 1e-3
 
 
 def _nz(M: Any) -> Any:
@@ -111,7 +129,8 @@ def _declaration(m: Any, nseg: int, nv: int, npts: int, tracking: bool) -> Param
     n_track = npts if tracking else 0
     return Parameters.of(shape=(m.surface.n_params, 1), seg_T=(nseg, 1), goal=(5, 1),
                          vias=(5, nv), charts=(9 * m.n_contacts, 1), weights=(6, 1),
-                         ccone=(1, 1), tol=(2, 1), Pd=(3, n_track), Rd=(9, n_track))
+                         ccone=(1, 1), tol=(2, 1), Pd=(3, n_track), Rd=(9, n_track),
+                         load=(LOAD_PARAMS, 1))
 
 
 def _small_grasp_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, ...],
@@ -157,7 +176,7 @@ def _small_grasp_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, .
                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
     zeros = np.zeros(g_all.numel())
     return BlockNLP(hs, unpack, pack, decl, zeros, zeros.copy(), time.perf_counter() - t0,
-                    0, 0, oracle, jac_g, hess_lag)
+                    0, 0, oracle, jac_g, hess_lag, 0)
 
 
 def _triplets(sp: ca.Sparsity) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -167,8 +186,8 @@ def _triplets(sp: ca.Sparsity) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
 
 def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, ...],
                            via_masks: tuple[tuple[bool, ...], ...], tracking: bool,
-                           force_regularisation: float, small: bool | None = None
-                           ) -> BlockNLP:
+                           force_regularisation: float, small: bool | None = None,
+                           forces: bool = False) -> BlockNLP:
     """The NLP of one grasp structure (``m``: its
     :class:`~ocp.transcription.grasp_model.GraspModel`):
     variables ``w = (X, Xm, U, Um, S, Sm, F)`` (scaled states and inputs at
@@ -178,13 +197,17 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     interval, every point's path constraints (node 0, the given initial grasp, without its
     tracking bounds), the goal and via-point targets, then the fingertips' closure at the
     velocity level at every node (with each of its inputs) and midpoint. ``small`` (default: for
-    one contact without tracking) writes the same NLP out in SX instead of from blocks."""
+    one contact without tracking) writes the same NLP out in SX instead of from blocks.
+    ``forces``: every contact's force at every point too (docs/forces.md): variables
+    ``F``'s last ``LOAD_VARS * n_contacts`` rows, the object's quasi-static equilibrium
+    with its weight, the friction cones with a margin, the minimum normal force, the
+    soft-finger torsion within its limit; the load parameters ``load``."""
     t0 = time.perf_counter()
     nc = m.n_contacts
     if small is None:
         small = nc < 2 and not tracking
     if small:
-        if nc >= 2 or tracking:
+        if nc >= 2 or tracking or forces:
             raise ValueError("only a grasp without path rows (one contact, no tracking) "
                              "has the small SX form")
         return _small_grasp_nlp(m, segments, goal_mask, via_masks, t0)
@@ -194,6 +217,8 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     nseg = len(segments)
     npts = 2 * n + 1
     n_force = nc if nc >= 3 else 0
+    n_load = nc if forces else 0
+    n_fv = 3 * n_force + LOAD_VARS * n_load  # force variables at a point
     n_s = 1 if nc >= 2 else 0  # the grasp-angle epigraph: force closure needs 2+ contacts
     nx, nu = m.nx, m.nu
     ns = m.surface.n_params
@@ -206,7 +231,8 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     ccone_q = ca.SX.sym("ccone")
     tol_q = ca.SX.sym("tol", 2)
     wtr_q = ca.SX.sym("wtr", 2)  # tracking weights (position, rotation)
-    q = ca.vertcat(shape_q, charts_q, ccone_q, tol_q, wtr_q)
+    load_q = ca.SX.sym("load", LOAD_PARAMS)
+    q = ca.vertcat(shape_q, charts_q, ccone_q, tol_q, wtr_q, load_q)
     L = ca.mmax(shape_q)
     prm = ca.vertcat(shape_q, charts_q)
     x_scale = ca.vertcat(*m.x_scale(L))
@@ -216,7 +242,8 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     xs = ca.SX.sym("xs", nx)
     s = ca.SX.sym("s", n_s)
     fcol = ca.SX.sym("f", 3 * n_force)
-    zp = ca.vertcat(xs, s, fcol)
+    fl = ca.SX.sym("fl", LOAD_VARS * n_load)
+    zp = ca.vertcat(xs, s, fcol, fl)
     pd = ca.SX.sym("pd", 3 if tracking else 0)
     rd = ca.SX.sym("rd", 9 if tracking else 0)
     swp = ca.SX.sym("sw")  # the point's Simpson weight (normalised time)
@@ -249,6 +276,26 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         add(push - PUSH_FLOOR, 0.0, math.inf)
         add(push - ccone_q * norms, 0.0, math.inf)
         add(push - (1 - s) * norms, 0.0, math.inf)
+    if n_load:
+        # Quasi-static equilibrium of the object (docs/forces.md: the inertial wrench of
+        # the paper's slow motions is below 1e-3 of the weight), in the object frame: the
+        # contact forces f_i = F0 fl_i[:3] at the points P_i, the torsion about each
+        # outward normal N_i, the weight at the centre (the object frame's origin).
+        weight, f_min, mu_t, F0, mu_m, eps = (load_q[0:3], load_q[3], load_q[4], load_q[5],
+                                              load_q[6], load_q[7])
+        Fl = ca.reshape(fl, LOAD_VARS, nc)
+        fs = Fl[0:3, :]  # scaled forces, object frame
+        fn = -ca.sum1(N * fs)  # scaled normal forces (the push along -N)
+        tors = mu_t / L * fn * Fl[3, :]  # scaled torsion moments (/ F0 L)
+        w_obj = R_po.T @ weight / F0
+        add(ca.sum2(fs) + w_obj, 0.0, 0.0)
+        add(ca.sum2(ca.cross(P, fs) / L + N * ca.repmat(tors, 3, 1)), 0.0, 0.0)
+        add(ca.transpose(fn) - f_min / F0, 0.0, math.inf)
+        tang2 = ca.sum1(fs * fs) - fn * fn  # |f_t|^2 (scaled)
+        # the cone, smooth: mu_m f_n >= sqrt(|f_t|^2 + eps^2), inside the cone of
+        # tan(atan(mu) - margin) (never looser); eps a quarter of the smallest normal
+        # force's cone radius, so the row's curvature at f_t = 0 stays moderate
+        add(ca.transpose(mu_m * fn - ca.sqrt(tang2 + eps * eps)), 0.0, math.inf)
     cost_p: Any = ca.SX(0)
     if tracking:
         ep = (p_po - pd) / L
@@ -261,6 +308,9 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         # small penalty on their size picks one, so that IPOPT does not wander along flat
         # directions (the grasp term only sees the worst force angle).
         cost_p = cost_p + force_regularisation * ca.sumsqr(fcol) / (npts * n_force)
+    if n_load:
+        # the smallest forces that hold the object (the grip's floor on the normals)
+        cost_p = cost_p + LOAD_REGULARISATION * ca.sumsqr(fl) / (npts * n_load)
     Gp = ca.vertcat(*rows)
     ng_pt = len(lo)
     dropped = set(not_at_node0)
@@ -355,15 +405,15 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     tg_hess = ca.Function("targets_hess", [*tin, lam_t], [_nz(Ht)])
 
     # -- where every block entry sits in w and g ------------------------------------------
-    nw = int(hs.w.numel()) + n_s * (n + 1) + n_s * n + 3 * n_force * npts
+    nw = int(hs.w.numel()) + n_s * (n + 1) + n_s * n + n_fv * npts
     S_sx, Sm_sx = ca.SX.sym("S", n_s, n + 1), ca.SX.sym("Sm", n_s, n)
-    F_sx = ca.SX.sym("F", 3 * n_force, npts)
+    F_sx = ca.SX.sym("F", n_fv, npts)
     w_sx = ca.vertcat(hs.w, ca.vec(S_sx), ca.vec(Sm_sx), ca.vec(F_sx))
     unpack = ca.Function("unpack", [w_sx], [hs.X, hs.Xm, hs.U, hs.Um, S_sx, Sm_sx, F_sx])
     pack = ca.Function("pack", [hs.X, hs.Xm, hs.U, hs.Um, S_sx, Sm_sx, F_sx], [w_sx])
     Xi, Xmi, Ui, Umi, Si, Smi, Fi = (np.asarray(a).round().astype(np.int64)
                                      for a in unpack(np.arange(nw, dtype=float)))
-    Fi = Fi.reshape(3 * n_force, npts)
+    Fi = Fi.reshape(n_fv, npts)
     XA = np.hstack([Xi, Xmi])  # nodes, then midpoints: the points' order in the NLP
     Si, Smi = Si.reshape(n_s, n + 1), Smi.reshape(n_s, n)
     SA = np.hstack([Si, Smi])
@@ -436,7 +486,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     hn_all = h / T
     # Simpson weight of every point (nodes, then midpoints), normalised time
     sw = ca.horzcat((ca.horzcat(0, hn_all) + ca.horzcat(hn_all, 0)) / 6, 4 * hn_all / 6)
-    qv = ca.vertcat(shape_p, charts, ccone, tol, weights[4], weights[5])
+    qv = ca.vertcat(shape_p, charts, ccone, tol, weights[4], weights[5], prm_["load"])
     ZP = ca.reshape(w[zp_idx.ravel().tolist()], zp_idx.shape[1], npts)
     ZI = ca.reshape(w[zi_idx.ravel().tolist()], zi_idx.shape[1], n)
     ZE = w[ze_idx.tolist()]
@@ -487,4 +537,4 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
 
     oracle = ca.Function("manipulation_nlp", [w, p], [f, g_all], ["x", "p"], ["f", "g"])
     return BlockNLP(hs, unpack, pack, decl, np.array(lbg), np.array(ubg),
-                    time.perf_counter() - t0, n_force, n_s, oracle, jac_g, hess_lag)
+                    time.perf_counter() - t0, n_force, n_s, oracle, jac_g, hess_lag, n_load)

@@ -13,9 +13,17 @@ from ocp.spec.grasp import ManipulationProblem, contact_charts
 from ocp.spec.problem import CONTACT_COORDS
 from ocp.transcription.collocation import node_times
 from ocp.transcription.grasp_model import GraspModel
-from ocp.transcription.nlp_blocks import BlockNLP
+from ocp.transcription.nlp_blocks import LOAD_PARAMS, LOAD_VARS, TORSION_SHARE, BlockNLP
 
-__all__ = ["TRACKING_BOUND_SHRINK", "bounds", "parameters", "scales"]
+__all__ = ["TRACKING_BOUND_SHRINK", "bounds", "force_scale", "load_parameters", "parameters",
+           "scales"]
+
+#: The friction cone's smoothing: mu_m f_n >= sqrt(|f_t|^2 + eps^2) with eps this fraction
+#: of the minimum normal force's cone radius mu_m f_min: smooth at f_t = 0 (curvature
+#: 1 / eps), never looser than the cone, and at f_n = f_min still 97 % of its radius.
+CONE_SMOOTHING = 0.25
+#: Bound of every planned force component, in units of the force scale.
+LOAD_BOUND = 20.0
 
 FloatArray = NDArray[np.float64]
 
@@ -29,6 +37,29 @@ def scales(problem: ManipulationProblem, m: GraspModel) -> tuple[FloatArray, Flo
     L, T = problem.object.length_scale, problem.duration
     return (np.asarray(m.x_scale(L), dtype=float),
             np.asarray(m.u_scale(L, T), dtype=float))
+
+def force_scale(problem: ManipulationProblem) -> float:
+    """The planned forces' scale [N]: the weight, or the grip of all contacts if larger."""
+    fs = problem.forces
+    if fs is None:
+        return 1.0
+    weight = fs.mass * float(np.linalg.norm(fs.gravity))
+    return max(weight, problem.n_contacts * fs.min_normal_force, 1e-6)
+
+
+def load_parameters(problem: ManipulationProblem) -> FloatArray:
+    """The NLP's load parameters (:data:`~ocp.transcription.nlp_blocks.LOAD_PARAMS`)."""
+    fs = problem.forces
+    if fs is None:
+        return np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0])
+    weight = fs.mass * np.asarray(fs.gravity, dtype=float)
+    mu_m = math.tan(math.atan(problem.mu) - fs.cone_margin)
+    F0 = force_scale(problem)
+    out = np.array([*weight, fs.min_normal_force, fs.torsional_friction, F0, mu_m,
+                    CONE_SMOOTHING * mu_m * fs.min_normal_force / F0])
+    assert out.size == LOAD_PARAMS
+    return out
+
 
 def parameters(problem: ManipulationProblem, nlp: BlockNLP) -> FloatArray:
     """The NLP parameter vector of a problem (its structure's NLP ``nlp``): object,
@@ -62,7 +93,8 @@ def parameters(problem: ManipulationProblem, nlp: BlockNLP) -> FloatArray:
     return nlp.params.pack(
         shape=shape, seg_T=np.diff(tb), goal=goal, vias=vias,
         charts=np.concatenate([R.ravel(order="F") for R in charts]), weights=weights,
-        ccone=[cone_cosine(problem.mu)], tol=tol, Pd=Pd_, Rd=Rd_)
+        ccone=[cone_cosine(problem.mu)], tol=tol, Pd=Pd_, Rd=Rd_,
+        load=load_parameters(problem))
 
 
 def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: FloatArray,
@@ -86,7 +118,10 @@ def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: Float
     lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
     ns = nlp.n_epigraph
     zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))
-    big = 1e3 * np.ones((3 * nlp.n_force, 2 * n + 1))
+    big = 1e3 * np.ones((3 * nlp.n_force + LOAD_VARS * nlp.n_load, 2 * n + 1))
+    big[3 * nlp.n_force:] = LOAD_BOUND
+    # the torsion's share of its limit (the last load variable of each contact)
+    big[3 * nlp.n_force + LOAD_VARS - 1::LOAD_VARS] = TORSION_SHARE
     lbx = nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n], -big)
     ubx = nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n], big)
     return np.asarray(lbx).ravel(), np.asarray(ubx).ravel()
