@@ -167,6 +167,10 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
     mass = getattr(obj_request, "mass", None)
     gravity = getattr(request, "gravity", None)
     torsion = getattr(request, "torsional_friction", None)
+    load = getattr(request, "forces", None)  # a plan with forces: its load (docs/forces.md)
+    if load is not None:
+        mass, gravity = load.mass, load.gravity
+        torsion = load.torsional_friction if load.torsional_friction > 0 else torsion
     notes = list(models.notes) + ([mu_note] if mu_note else [])
     if mass is None:
         notes.append(f"object mass: not in the plan, {DEFAULT_MASS} kg (solid)")

@@ -36,7 +36,7 @@ from ocp.solve.planner import (
     Tracking,
 )
 from ocp.spec.grasp import fingertips_from_joints
-from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
+from ocp.spec.problem import ForceSpec, ObjectSpec, ProblemError, ViaPoint
 
 from .base import SOLVER_FIELDS, PlannerAdapter
 from .cache import FingerCache, Planners, hand_finger_name
@@ -225,6 +225,11 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
     if errors:
         raise ProblemError(errors)
     tr = request.tracking
+    fm = request.forces
+    forces = None if fm is None else ForceSpec(
+        fm.mass, None if fm.inertia is None else (fm.inertia[0], fm.inertia[1], fm.inertia[2]),
+        (fm.gravity[0], fm.gravity[1], fm.gravity[2]), fm.min_normal_force,
+        fm.torsional_friction, fm.cone_margin)
     return ManipulationProblem(
         object=obj, fingers=tuple(t for t in tips if t is not None), duration=request.duration,
         palm=palm,
@@ -238,7 +243,7 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
         pad_margin=request.pad_margin, n_intervals=request.n_intervals,
         pole_margin=request.pole_margin, max_object_speed=request.max_object_speed,
         max_object_rate=request.max_object_rate, max_refinements=request.max_refinements,
-        options=solver_options(request.solver))
+        options=solver_options(request.solver), forces=forces)
 
 
 class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProblem,
@@ -327,10 +332,12 @@ def _manipulation_trajectory(sol: ManipulationSolution) -> ManipulationTrajector
     arrays.update({k: v for k, v in optional.items() if v is not None})
     for c in sol.contacts:
         arrays.update({f"{c.name}.{k}": getattr(c, k) for k in
-                       ("eta", "eta_dot", "w", "point", "normal", "force_angle")})
+                       ("eta", "eta_dot", "w", "point", "normal", "force_angle", "force",
+                        "torsion") if getattr(c, k) is not None})
     for f in sol.fingers:
         arrays.update({f"{f.name}.{k}": getattr(f, k) for k in
-                       ("q", "q_dot", "tip_position", "tip_rotation")})
+                       ("q", "q_dot", "tip_position", "tip_rotation", "joint_torques")
+                       if getattr(f, k) is not None})
     if not all_finite(arrays):
         return None  # JSON has no NaN; a diverged last iterate is reported by its status
     return ManipulationTrajectoryModel(
@@ -341,12 +348,15 @@ def _manipulation_trajectory(sol: ManipulationSolution) -> ManipulationTrajector
         contacts=[ContactTrajectoryModel(
             name=c.name, body="palm" if c.body == "palm" else "finger", eta=rows(c.eta),
             eta_dot=rows(c.eta_dot), w=rows(c.w), point=rows(c.point),
-            normal=rows(c.normal), force_angle=rows(c.force_angle))
+            normal=rows(c.normal), force_angle=rows(c.force_angle),
+            force=None if c.force is None else rows(c.force),
+            torsion=None if c.torsion is None else rows(c.torsion))
             for c in sol.contacts],
         fingers=[FingerJointsModel(
             name=f.name, joint_names=list(f.joint_names), q=rows(f.q), q_dot=rows(f.q_dot),
             tip_position=rows(f.tip_position),
-            tip_orientation_wxyz=rows(quaternion_wxyz(f.tip_rotation)))
+            tip_orientation_wxyz=rows(quaternion_wxyz(f.tip_rotation)),
+            joint_torques=None if f.joint_torques is None else rows(f.joint_torques))
             for f in sol.fingers],
         grasp_angle=rows(sol.grasp_angle), cone_margin=rows(sol.cone_margin),
         desired_position=None if sol.desired_position is None else

@@ -316,6 +316,13 @@ class ContactTrajectoryModel(_Response):
         description="angle between the contact's push (-normal) and the internal force of "
                     "the grasp that certifies force closure [rad] (two contacts: the "
                     "paper's grasp angle)")
+    force: Rows | None = Field(
+        default=None, description="the planned force the contact's body (palm, fingertip) "
+                                  "exerts on the object [N], palm frame; null without "
+                                  "`forces` in the request")
+    torsion: list[float] | None = Field(
+        default=None, description="the planned moment about the object's outward normal "
+                                  "[N m] (soft finger); null without `forces`")
 
 
 class FingerJointsModel(_Response):
@@ -330,6 +337,11 @@ class FingerJointsModel(_Response):
     tip_orientation_wxyz: Rows = Field(description="fingertip (pad) frame orientation in "
                                                    "the palm frame, unit quaternion "
                                                    "(w, x, y, z), w >= 0")
+    joint_torques: Rows | None = Field(
+        default=None, description="joint torques [N m; N for a prismatic joint] that exert "
+                                  "the planned contact force and torsion: J^T (f; m) at the "
+                                  "contact point (without the finger's own gravity); null "
+                                  "without `forces`")
 
 
 class ManipulationTrajectoryModel(_Response):
