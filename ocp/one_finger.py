@@ -37,7 +37,12 @@ from ocp.solve.planner import (
     Palm,
     fingertip_errors,
 )
-from ocp.spec.problem import DEFAULT_FINGER_CHART_ROTATION, BallOnPalmProblem, ProblemError
+from ocp.spec.problem import (
+    DEFAULT_FINGER_CHART_ROTATION,
+    BallOnPalmProblem,
+    ForceSpec,
+    ProblemError,
+)
 from ocp.transcription.collocation import NlpPoint, WarmStart
 
 __all__ = ["FingerContact", "OneFingerPlanner", "OneFingerProblem", "OneFingerSolution"]
@@ -78,9 +83,13 @@ class OneFingerProblem:
     finger_effort_weight: float = 0.01
     joint_effort_weight: float = 0.01
     pad_margin: float = 0.002  # m kept between the contact and the pad's edge
+    #: Plan the contact forces (docs/forces.md); None: a kinematic plan.
+    forces: ForceSpec | None = None
 
     def errors(self) -> list[tuple[str, str]]:
         errs = list(self.base.errors())
+        if self.forces is not None:
+            errs += self.forces.errors("forces", self.mu)
         if not (math.isfinite(self.mu) and 0.0 < self.mu <= 10.0):
             errs.append(("mu", f"must be in (0, 10], got {self.mu}"))
         for name in ("grasp_weight", "finger_effort_weight", "joint_effort_weight"):
@@ -134,6 +143,11 @@ class OneFingerSolution:
     nlp_point: NlpPoint | None = field(default=None, repr=False)
     #: The grasp pipeline's own plan (its collocation values and polynomials).
     plan: ManipulationSolution | None = field(default=None, repr=False, compare=False)
+    #: The planned forces (palm frame, N, on the object) and joint torques [N m] of a plan
+    #: with ``forces``; None otherwise.
+    palm_contact_force: FloatArray | None = None
+    finger_contact_force: FloatArray | None = None
+    joint_torques: FloatArray | None = None
 
     @property
     def ok(self) -> bool:
@@ -200,7 +214,7 @@ class OneFingerPlanner:
             joint_effort_weight=problem.joint_effort_weight,
             grasp_weight=problem.grasp_weight, pad_margin=problem.pad_margin,
             n_intervals=b.n_intervals, pole_margin=b.pole_margin,
-            max_refinements=b.max_refinements, options=b.options)
+            max_refinements=b.max_refinements, options=b.options, forces=problem.forces)
 
     def initial_grasp(self, problem: OneFingerProblem) -> FloatArray:
         """Joint angles of the initial grasp by inverse kinematics, or ProblemError saying
@@ -254,4 +268,6 @@ class OneFingerPlanner:
             certificate=cert,
             certificate_times={_rename(k): v for k, v in sol.certificate.times().items()},
             certificate_failures=tuple(_rename(f) for f in sol.certificate_failures),
-            refinements=sol.refinements, nlp_point=sol.nlp_point, plan=sol)
+            refinements=sol.refinements, nlp_point=sol.nlp_point, plan=sol,
+            palm_contact_force=palm.force, finger_contact_force=tip.force,
+            joint_torques=finger.joint_torques)

@@ -7,10 +7,20 @@ from typing import Any
 
 import numpy as np
 
-from dexroll_client.models import ObjectModel, SolverModel
-from ocp.spec.problem import ObjectSpec, SolverOptions
+from dexroll_client.models import ForcesModel, ObjectModel, SolverModel
+from ocp.spec.problem import ForceSpec, ObjectSpec, SolverOptions
 
-__all__ = ["all_finite", "finite_or_none", "object_spec", "rows", "solver_options"]
+__all__ = ["all_finite", "finite_or_none", "force_spec", "object_spec", "rows",
+           "solver_options"]
+
+
+def force_spec(f: ForcesModel | None) -> ForceSpec | None:
+    """The core's load and grip of a request's ``forces`` (None: no forces planned)."""
+    if f is None:
+        return None
+    inertia = None if f.inertia is None else (f.inertia[0], f.inertia[1], f.inertia[2])
+    return ForceSpec(f.mass, inertia, (f.gravity[0], f.gravity[1], f.gravity[2]),
+                     f.min_normal_force, f.torsional_friction, f.cone_margin)
 
 
 def solver_options(o: SolverModel) -> SolverOptions:

@@ -34,11 +34,15 @@ class GreedyAdapter(FingerAdapter[GreedyResult]):
 
     def warm_start_errors(self, request: OneFingerRequest, problem: OneFingerProblem
                           ) -> FieldErrors:
+        errors: FieldErrors = []
+        if request.forces is not None:  # (the request's other fields the method ignores)
+            errors.append(("forces", "planned forces need method 'collocation' (the greedy "
+                                     "method plans kinematics only)"))
         if request.warm_start is None:
-            return []
-        return [("warm_start", "not used by the greedy method (it chooses each step from "
-                               "the current state, with no initial guess): drop it or use "
-                               "method 'collocation'")]
+            return errors
+        return [*errors, ("warm_start", "not used by the greedy method (it chooses each step "
+                                        "from the current state, with no initial guess): drop "
+                                        "it or use method 'collocation'")]
 
     def plan(self, request: OneFingerRequest, problem: OneFingerProblem,
              warm: WarmStart | None, fingers: FingerCache) -> GreedyResult:

@@ -36,12 +36,12 @@ from ocp.solve.planner import (
     Tracking,
 )
 from ocp.spec.grasp import fingertips_from_joints
-from ocp.spec.problem import ForceSpec, ObjectSpec, ProblemError, ViaPoint
+from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
 
 from .base import SOLVER_FIELDS, PlannerAdapter
 from .cache import FingerCache, Planners, hand_finger_name
 from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
-from .common import all_finite, object_spec, rows, solver_options
+from .common import all_finite, force_spec, object_spec, rows, solver_options
 from .fields import FieldErrors, FieldMap, Rule
 from .samples import joint_trajectory_block, requested_times, samples_block
 
@@ -225,11 +225,7 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
     if errors:
         raise ProblemError(errors)
     tr = request.tracking
-    fm = request.forces
-    forces = None if fm is None else ForceSpec(
-        fm.mass, None if fm.inertia is None else (fm.inertia[0], fm.inertia[1], fm.inertia[2]),
-        (fm.gravity[0], fm.gravity[1], fm.gravity[2]), fm.min_normal_force,
-        fm.torsional_friction, fm.cone_margin)
+    forces = force_spec(request.forces)
     return ManipulationProblem(
         object=obj, fingers=tuple(t for t in tips if t is not None), duration=request.duration,
         palm=palm,

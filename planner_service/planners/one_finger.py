@@ -34,7 +34,7 @@ from .ball_on_palm import ball_on_palm_problem
 from .base import SOLVER_FIELDS, PlannerAdapter
 from .cache import FingerCache, Planners
 from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
-from .common import all_finite
+from .common import all_finite, force_spec
 from .fields import FieldErrors, FieldMap, Rule
 from .samples import joint_trajectory_block, requested_times, samples_block
 
@@ -69,7 +69,8 @@ def one_finger_problem(request: OneFingerRequest, fingers: FingerCache) -> OneFi
                               q_seed=None if c.q_seed is None else tuple(c.q_seed)),
         mu=request.mu, grasp_weight=request.grasp_weight,
         finger_effort_weight=request.finger_effort_weight,
-        joint_effort_weight=request.joint_effort_weight, pad_margin=request.pad_margin)
+        joint_effort_weight=request.joint_effort_weight, pad_margin=request.pad_margin,
+        forces=force_spec(request.forces))
 
 
 def seed_errors(problem: OneFingerProblem) -> FieldErrors:
@@ -180,6 +181,10 @@ def finger_trajectory(sol: OneFingerSolution | GreedyResult, eta_p_dot: Any, eta
         "finger_contact_point": sol.finger_contact_point,
         "finger_contact_normal": sol.finger_contact_normal,
         "grasp_angles": sol.grasp_angles, "cone_margin": sol.cone_margin}
+    for k in ("palm_contact_force", "finger_contact_force", "joint_torques"):
+        v = getattr(sol, k, None)
+        if v is not None:
+            d[k] = v
     if not all_finite(d):
         return None  # JSON has no NaN; a diverged last iterate is reported by its status
     return FingerTrajectoryModel(**{k: np.asarray(v, dtype=float).tolist()

@@ -432,6 +432,34 @@ class FingerContactModel(_Request):
                     "paper's (0, -22.68, -12.34, 0, 47.65, 0) deg")
 
 
+class ForcesModel(_Request):
+    """Plan the contact forces (docs/forces.md): the object's load and the grip. At every
+    collocation point each contact's force (and, for soft fingers, its torsion about the
+    normal) holds the object in quasi-static equilibrium with its weight, inside the
+    friction cone less ``cone_margin``, with at least ``min_normal_force`` along the normal;
+    the result gives each contact's force and each finger's joint torques."""
+
+    mass: Real = Field(gt=0.0, le=100.0, description="the object's mass [kg]")
+    inertia: list[Annotated[Real, Field(gt=0.0, le=100.0)]] | None = Field(
+        default=None, min_length=3, max_length=3,
+        description="principal moments of inertia about the object's axes [kg m^2]; null: "
+                    "the solid sphere's or ellipsoid's of that mass")
+    gravity: list[Annotated[Real, Field(ge=-100.0, le=100.0)]] = Field(
+        default_factory=lambda: [0.0, 0.0, -9.81], min_length=3, max_length=3,
+        description="gravity in the palm frame [m/s^2]")
+    min_normal_force: Real = Field(
+        default=0.5, gt=0.0, le=1000.0,
+        description="the grip: every contact pushes at least this hard along its normal [N]")
+    torsional_friction: Real = Field(
+        default=0.0, ge=0.0, le=0.1,
+        description="soft-finger torsional friction [m]: the moment about the normal within "
+                    "this times the normal force (0: hard point contacts)")
+    cone_margin: Real = Field(
+        default=0.05, ge=0.0, lt=math.pi / 2,
+        description="the planned forces stay this far inside the friction cones [rad] (less "
+                    "than atan(mu))")
+
+
 class OneFingerRequest(_PalmRequest):
     """Roll a ball on the palm with one flat fingertip pressing on it, keeping the grasp
     inside the friction cone (paper, section 3). The plan holds the palm contact, the
@@ -447,6 +475,10 @@ class OneFingerRequest(_PalmRequest):
     mu: Real = Field(default=0.5, gt=0.0, le=10.0,
                       description="friction coefficient at both contacts (dimensionless); "
                                   "the friction cone's half-angle is atan(mu) [rad]")
+    forces: ForcesModel | None = Field(
+        default=None, description="plan the palm's and the fingertip's forces for this load "
+                                  "and grip (method 'collocation'); null (the default): a "
+                                  "kinematic plan")
     grasp_weight: Real = Field(
         default=100.0, ge=0.0, le=1e6,
         description="objective weight (dimensionless) of the grasp-angle term, the time "
@@ -748,34 +780,6 @@ class TrackingModel(_Request):
         default=None, gt=0.0, le=math.pi,
         description="bound on the angle between the object's orientation and the desired "
                     "one at every instant [rad]; null: none")
-
-
-class ForcesModel(_Request):
-    """Plan the contact forces (docs/forces.md): the object's load and the grip. At every
-    collocation point each contact's force (and, for soft fingers, its torsion about the
-    normal) holds the object in quasi-static equilibrium with its weight, inside the
-    friction cone less ``cone_margin``, with at least ``min_normal_force`` along the normal;
-    the result gives each contact's force and each finger's joint torques."""
-
-    mass: Real = Field(gt=0.0, le=100.0, description="the object's mass [kg]")
-    inertia: list[Annotated[Real, Field(gt=0.0, le=100.0)]] | None = Field(
-        default=None, min_length=3, max_length=3,
-        description="principal moments of inertia about the object's axes [kg m^2]; null: "
-                    "the solid sphere's or ellipsoid's of that mass")
-    gravity: list[Annotated[Real, Field(ge=-100.0, le=100.0)]] = Field(
-        default_factory=lambda: [0.0, 0.0, -9.81], min_length=3, max_length=3,
-        description="gravity in the palm frame [m/s^2]")
-    min_normal_force: Real = Field(
-        default=0.5, gt=0.0, le=1000.0,
-        description="the grip: every contact pushes at least this hard along its normal [N]")
-    torsional_friction: Real = Field(
-        default=0.0, ge=0.0, le=0.1,
-        description="soft-finger torsional friction [m]: the moment about the normal within "
-                    "this times the normal force (0: hard point contacts)")
-    cone_margin: Real = Field(
-        default=0.05, ge=0.0, lt=math.pi / 2,
-        description="the planned forces stay this far inside the friction cones [rad] (less "
-                    "than atan(mu))")
 
 
 class ManipulationRequest(_Request):

@@ -239,6 +239,16 @@ class FingerTrajectoryModel(_Response):
                                            "contacts, 0 for an antipodal grasp [rad]")
     cone_margin: list[float] = Field(description="atan(mu) - max(Phi_p, Phi_f): positive "
                                                  "inside the friction cone [rad]")
+    palm_contact_force: Rows | None = Field(
+        default=None, description="the planned force the palm exerts on the object [N], palm "
+                                  "frame; null without `forces` in the request")
+    finger_contact_force: Rows | None = Field(
+        default=None, description="the planned force the fingertip exerts on the object [N], "
+                                  "palm frame; null without `forces`")
+    joint_torques: Rows | None = Field(
+        default=None, description="the finger's joint torques [N m] that exert the planned "
+                                  "fingertip force and torsion (J^T (f; m) at the contact "
+                                  "point); null without `forces`")
 
 
 class FingerCertificateModel(_Response):
