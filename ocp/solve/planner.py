@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import OrderedDict
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -174,6 +175,11 @@ def warm_grid_factor(problem: ManipulationProblem,
     return k
 
 
+#: NLPs a planner keeps by default (:attr:`ManipulationPlanner.max_nlps`): a few MB each
+#: for one or two fingers, ~40 MB for the four-finger hand's.
+MAX_CACHED_NLPS = 24
+
+
 @dataclass
 class _Totals:
     """What a plan spent over its guesses and refinements."""
@@ -202,7 +208,7 @@ class ManipulationPlanner:
     module's doc."""
 
     def __init__(self, compile_dir: Path | None = None, background: bool = False,
-                 max_iter_per_guess: int = 300) -> None:
+                 max_iter_per_guess: int = 300, max_nlps: int = MAX_CACHED_NLPS) -> None:
         #: When set, each structure's NLP functions are generated as C, compiled with gcc
         #: and cached there (:func:`ocp.solve.compiled.compiled_block_solver`): seconds the first
         #: time, IPOPT about 40 % faster on experiment 1 (docs/performance.md).
@@ -220,7 +226,11 @@ class ManipulationPlanner:
         self.auto_patch = True
         # keyed by the finger objects themselves (identity; the key keeps them alive)
         self._models: dict[tuple[Any, ...], GraspModel] = {}
-        self._nlps: dict[GraspStructure, _NLP] = {}
+        #: The NLPs built, by structure, the least recently used dropped beyond
+        #: ``max_nlps`` (every refined grid is a structure of its own: a worker planning
+        #: twenty four-finger turns held 1.28 GB of them).
+        self.max_nlps = max_nlps
+        self._nlps: OrderedDict[GraspStructure, _NLP] = OrderedDict()
 
     def model(self, problem: ManipulationProblem) -> GraspModel:
         key = (problem.object.shape, problem.palm is not None,
@@ -232,6 +242,7 @@ class ManipulationPlanner:
     def _build(self, problem: ManipulationProblem) -> tuple[_NLP, bool]:
         key = GraspStructure.of(problem)
         if key in self._nlps:
+            self._nlps.move_to_end(key)
             return self._nlps[key], True
         m = self.model(problem)
         block = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
@@ -239,6 +250,8 @@ class ManipulationPlanner:
                                        forces=key.forces)
         nlp = ipopt_solver(block, key.fingerprint(m), None if self.compiler else self.compile_dir)
         self._nlps[key] = nlp
+        while len(self._nlps) > max(1, self.max_nlps):
+            self._nlps.popitem(last=False)
         if self.compiler is not None:
             self.compiler.submit(key, nlp.oracle, nlp.options, nlp.fingerprint)
         return nlp, False
