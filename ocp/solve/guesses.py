@@ -143,6 +143,10 @@ def strategy_for(problem: ManipulationProblem) -> Strategy:
     return GraspStrategy()
 
 
+#: The planned forces' initial guess pushes this many times the minimum normal force.
+LOAD_GUESS_PUSH = 2.0
+
+
 def load_guess(R_po: FloatArray, p_po: FloatArray, pts: FloatArray, nrm: FloatArray,
                load: FloatArray) -> FloatArray:
     """Planned-force guesses (``LOAD_VARS * nc`` x k, :mod:`ocp.transcription.nlp_blocks`):
@@ -161,7 +165,7 @@ def load_guess(R_po: FloatArray, p_po: FloatArray, pts: FloatArray, nrm: FloatAr
             A[0:3, 3 * i:3 * i + 3] = np.eye(3)
             x, y, z = r[i]
             A[3:6, 3 * i:3 * i + 3] = [[0, -z, y], [z, 0, -x], [-y, x, 0]]
-        f0 = (-2 * f_min * nrm[j]).ravel()
+        f0 = (-LOAD_GUESS_PUSH * f_min * nrm[j]).ravel()
         b = np.concatenate([-weight, np.zeros(3)])
         f = f0 + np.linalg.lstsq(A, b - A @ f0, rcond=None)[0]
         f_obj = (R_po[j].T @ f.reshape(nc, 3).T) / F0  # 3 x nc, the object frame

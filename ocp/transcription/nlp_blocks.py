@@ -90,7 +90,7 @@ LOAD_PARAMS = 8
 #: Weight of the planned forces' size (scaled) in the objective: it picks the smallest
 #: forces that hold the object, and is small enough not to move the plan (the forces'
 #: size depends on the grasp's geometry).
-LOAD_REGULARISATION = 1e-3
+LOAD_REGULARISATION = 1e-4
 
 
 def _nz(M: Any) -> Any:
