@@ -144,3 +144,35 @@ def test_without_forces_the_nlp_and_the_plan_are_as_before() -> None:
     npts = 2 * 10 + 1
     assert with_forces.pack.nnz_out(0) - nlp.pack.nnz_out(0) == 4 * 2 * npts
     assert len(with_forces.lbg) - len(nlp.lbg) == 10 * npts
+
+
+def test_three_hard_fingers_hold_the_ball_without_torsion() -> None:
+    """Three fingers of the built-in hand turn the ball with hard point contacts (no
+    torsional friction): the planned forces sit after the force-closure internal forces in
+    the NLP; they balance the weight at every collocation point with no torsion at all."""
+    from test_manipulation import DEG, OBJ, PLANNER
+
+    from ocp.robots.hands import load_hand
+    from ocp.solve.planner import (
+        DesiredMotion,
+        ManipulationProblem,
+        MotionStep,
+        ObjectPose,
+        hand_fingertips,
+    )
+
+    hand = load_hand("three_finger")
+    start = ObjectPose(position=hand.nominal_object_position)
+    problem = ManipulationProblem(
+        OBJ, hand_fingertips(hand, start, OBJ), 2.0, initial_pose=start,
+        motion=DesiredMotion.from_steps(start, [MotionStep(2.0, (1.0, 0.0, 1.0), 10 * DEG)]),
+        n_intervals=16, forces=replace(LOAD, torsional_friction=0.0, mass=0.1))
+    sol = PLANNER.solve(problem)
+    assert sol.ok, sol.message
+    p_po, pts, nrm, f, tau = _points(problem, sol)
+    assert np.all(tau == 0.0)
+    assert np.max(np.abs(f.sum(axis=1) + 0.1 * np.asarray(LOAD.gravity))) < 1e-9
+    moment = np.cross(pts - p_po[:, None], f).sum(axis=1)
+    assert np.max(np.abs(moment)) < 1e-9 * problem.object.length_scale
+    fn = -np.einsum("kci,kci->kc", nrm, f)
+    assert np.all(fn >= LOAD.min_normal_force - 1e-9)
