@@ -356,6 +356,8 @@ class JointTrajectory:
     velocities: FloatArray
     accelerations: FloatArray
     breaks: tuple[RateBreak, ...] = ()
+    #: Joint torques of the planned forces (ROS's ``effort``); None without forces.
+    efforts: FloatArray | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ROS 2 message's fields (``time_from_start`` as builtin_interfaces/Duration
@@ -369,6 +371,8 @@ class JointTrajectory:
                            "accelerations": self.accelerations[i].tolist(),
                            "time_from_start": {"sec": sec, "nanosec": nanosec},
                            "t": t})
+            if self.efforts is not None:
+                points[-1]["effort"] = self.efforts[i].tolist()
         return {"joint_names": list(self.joint_names), "points": points,
                 "rate_breaks": [{"t": b.t, "velocities_before": b.velocities_before.tolist(),
                                  "velocities_after": b.velocities_after.tolist()}
@@ -540,8 +544,11 @@ class ManipulationSolution:
             tk = np.array([traj.t_nodes[k]])
             breaks.append(RateBreak(float(tk[0]), traj(tk, 1, "left")[0, cols],
                                     traj(tk, 1, "right")[0, cols]))
+        efforts = None
+        if self.collocation is not None and self.collocation.forces is not None:
+            efforts = np.hstack(self.joint_torques(t))
         return JointTrajectory(joint_names, smp.t, smp.x[:, cols], smp.x_dot[:, cols],
-                               smp.x_ddot[:, cols], tuple(breaks))
+                               smp.x_ddot[:, cols], tuple(breaks), efforts)
 
 
 class _Interpolant:

@@ -62,7 +62,7 @@ def test_bad_forces_are_422_naming_the_field(http: httpx.Client, patch: dict[str
 
 @pytest.fixture(scope="module")
 def planned() -> ManipulationResult:
-    result, summary = plan_request(with_forces())
+    result, summary = plan_request({**with_forces(), "sample_rate": 20.0})
     assert isinstance(result, ManipulationResult)
     assert result.status is PlanStatus.SOLVED, summary
     return result
@@ -83,6 +83,18 @@ def test_the_result_carries_forces_and_joint_torques(planned: ManipulationResult
     cert = planned.certificate
     assert cert is not None and cert.passed
     assert cert.values["min_normal_force"] >= FORCES["min_normal_force"] * (1 - 1e-3)
+    # at the controller's rate too: forces balancing the weight between collocation points
+    # (quadratic on each interval, the weight constant: to round-off), and the joint
+    # trajectory's `effort` is the fingers' joint torques side by side
+    smp = planned.samples
+    assert smp is not None
+    fs = np.array([c.force for c in smp.contacts])
+    assert fs.shape == (2, len(smp.t), 3)
+    assert np.max(np.abs(fs.sum(axis=0) + weight)) < 1e-9
+    jt = planned.joint_trajectory
+    assert jt is not None
+    effort = np.array([p.effort for p in jt.points])
+    assert np.allclose(effort, np.hstack([f.joint_torques for f in smp.fingers]), atol=1e-12)
     # without `forces` the wire result has none (a kinematic plan, as before)
     assert REQUEST.validate_python(EXP2).forces is None  # type: ignore[union-attr]
 

@@ -56,14 +56,22 @@ def samples_block(plan: ManipulationSolution | None, times: NDArray[np.float64] 
     if not _finite(smp.x, smp.x_dot, smp.x_ddot, smp.object_position):
         return None
     m = plan._interpolant.m
+    forces: Any = None
+    torques: list[Any] = [None] * len(plan.fingers)
+    if plan.collocation is not None and plan.collocation.forces is not None:
+        forces = plan.forces(times)[0]
+        torques = [rows(tau) for tau in plan.joint_torques(times)]
     contacts = [ContactSamplesModel(name=c.name, eta=rows(smp.x[:, mc.eta_cols]),
-                                    eta_dot=rows(smp.x_dot[:, mc.eta_cols]))
-                for c, mc in zip(plan.contacts, m.point_contacts, strict=True)]
+                                    eta_dot=rows(smp.x_dot[:, mc.eta_cols]),
+                                    force=None if forces is None else rows(forces[:, j]))
+                for j, (c, mc) in enumerate(zip(plan.contacts, m.point_contacts,
+                                                strict=True))]
     fingers = [FingerSamplesModel(name=f.name, joint_names=list(f.joint_names),
                                   q=rows(smp.x[:, tip.q_cols]),
                                   q_dot=rows(smp.x_dot[:, tip.q_cols]),
-                                  q_ddot=rows(smp.x_ddot[:, tip.q_cols]))
-               for f, tip in zip(plan.fingers, m.fingertips, strict=True)]
+                                  q_ddot=rows(smp.x_ddot[:, tip.q_cols]),
+                                  joint_torques=tau)
+               for f, tip, tau in zip(plan.fingers, m.fingertips, torques, strict=True)]
     return PlanSamplesModel(t=rows(smp.t), object_position=rows(smp.object_position),
                             object_orientation_wxyz=rows(quaternion_wxyz(
                                 smp.object_rotation)),
@@ -85,6 +93,7 @@ def joint_trajectory_block(plan: ManipulationSolution | None,
         points=[JointTrajectoryPointModel(
             positions=p["positions"], velocities=p["velocities"],
             accelerations=p["accelerations"],
-            time_from_start=DurationModel(**p["time_from_start"]), t=p["t"])
+            time_from_start=DurationModel(**p["time_from_start"]), t=p["t"],
+            effort=p.get("effort"))
             for p in d["points"]],
         rate_breaks=[RateBreakModel(**b) for b in d["rate_breaks"]])

@@ -403,6 +403,9 @@ class JointTrajectoryPointModel(_Response):
                                                    "[rad/s^2; m/s^2]")
     time_from_start: DurationModel
     t: float = Field(description="time_from_start in seconds")
+    effort: list[float] | None = Field(
+        default=None, description="joint torques [N m; N] that exert the planned contact "
+                                  "forces (a plan with `forces`; else null)")
 
 
 class RateBreakModel(_Response):
@@ -435,6 +438,9 @@ class ContactSamplesModel(_Response):
     name: str = Field(description="'palm', or the fingertip's name")
     eta: Rows = Field(description="contact coordinates (as the trajectory's `eta`)")
     eta_dot: Rows = Field(description="their time derivatives ([m/s], [rad/s])")
+    force: Rows | None = Field(default=None, description="the planned force on the object "
+                                                         "[N], palm frame (a plan with "
+                                                         "`forces`; else null)")
 
 
 class FingerSamplesModel(_Response):
@@ -445,6 +451,9 @@ class FingerSamplesModel(_Response):
     q: Rows = Field(description="joint angles [rad; m for a prismatic joint]")
     q_dot: Rows = Field(description="their time derivatives [rad/s; m/s]")
     q_ddot: Rows = Field(description="their second time derivatives [rad/s^2; m/s^2]")
+    joint_torques: Rows | None = Field(default=None, description="joint torques [N m] of "
+                                                                 "the planned forces (a "
+                                                                 "plan with `forces`)")
 
 
 class PlanSamplesModel(_Response):
