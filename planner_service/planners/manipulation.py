@@ -415,6 +415,11 @@ def manipulation_summary(result: ManipulationResult) -> str:
     t = result.trajectory
     if t is not None:
         lines.append("contacts     " + ", ".join(c.name for c in t.contacts))
+        if all(c.force is not None for c in t.contacts) and t.contacts:
+            normal = [-float(np.dot(f, n)) for c in t.contacts
+                      for f, n in zip(c.force or [], c.normal, strict=True)]
+            lines.append(f"forces       normal {min(normal):.3g} to {max(normal):.3g} N "
+                         "(planned, every contact)")
     if result.goal_error:
         worst_goal = max(result.goal_error.values())
         lines.append(f"goal error   {worst_goal:.3g} (worst of {len(result.goal_error)} "
