@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Certificate
 from ocp.geometry.grasp import force_angles
 from ocp.geometry.rotations import quaternion_wxyz, rotation_angle_between
-from ocp.transcription.collocation import HermiteInterpolant, NlpPoint, WarmStart
+from ocp.transcription.collocation import HermiteInterpolant, NlpPoint, PlannedForces, WarmStart
 
 if TYPE_CHECKING:
     from ocp.spec.grasp import ManipulationProblem
@@ -257,31 +257,6 @@ class Collocation:
     U1: FloatArray
     #: The planned contact forces at the nodes and midpoints (None without forces).
     forces: PlannedForces | None = None
-
-
-@dataclass(frozen=True)
-class PlannedForces:
-    """Every contact's planned force at the collocation points: ``f_nodes`` (n+1 x nc x 3)
-    and ``f_mid`` (n x nc x 3) [N], palm frame, the force each contact's body exerts on the
-    object; ``tau_nodes``, ``tau_mid`` [N m] the torsion about the object's outward normal.
-    Between the points, on each interval, the quadratic through node, midpoint and node,
-    like the inputs (:meth:`on_intervals`): continuous (the NLP has one force per point)."""
-
-    f_nodes: FloatArray
-    f_mid: FloatArray
-    tau_nodes: FloatArray
-    tau_mid: FloatArray
-
-    def on_intervals(self, k: NDArray[np.intp], s: FloatArray
-                     ) -> tuple[FloatArray, FloatArray]:
-        """(forces (len x nc x 3), torsions (len x nc)) at normalised times s of intervals k."""
-        s = np.asarray(s, dtype=float)
-        b0, bm, b1 = 2 * (s - 0.5) * (s - 1), -4 * s * (s - 1), 2 * s * (s - 0.5)
-        f = (b0[:, None, None] * self.f_nodes[k] + bm[:, None, None] * self.f_mid[k]
-             + b1[:, None, None] * self.f_nodes[k + 1])
-        tau = (b0[:, None] * self.tau_nodes[k] + bm[:, None] * self.tau_mid[k]
-               + b1[:, None] * self.tau_nodes[k + 1])
-        return f, tau
 
 
 def planned_forces(problem: ManipulationProblem, m: GraspModel, F: FloatArray,

@@ -30,10 +30,9 @@ from ocp.geometry.grasp import force_angles
 from ocp.geometry.rotations import rotation_angle_between
 from ocp.spec.contacts import CertificateContext
 from ocp.spec.grasp import ManipulationProblem, support_goal_errors
-from ocp.transcription.collocation import HermiteInterpolant, reintegrate
+from ocp.transcription.collocation import HermiteInterpolant, PlannedForces, reintegrate
 
 if TYPE_CHECKING:
-    from ocp.solution import PlannedForces
     from ocp.transcription.grasp_model import GraspModel
 
 __all__ = ["certify_grasp", "check_samples", "force_checks"]
@@ -90,7 +89,8 @@ def force_checks(problem: ManipulationProblem, forces: PlannedForces, k: NDArray
     the object's quasi-static equilibrium with its weight, every force inside its
     friction cone (the request's mu, not the NLP's narrowed one), every normal force at
     least the minimum, every torsion within its limit. The forces between collocation
-    points: :meth:`~ocp.solution.PlannedForces.on_intervals` (quadratic, like the inputs)."""
+    points: :meth:`~ocp.transcription.collocation.PlannedForces.on_intervals` (quadratic,
+    like the inputs)."""
     from ocp.transcription.values import force_scale
 
     fs = problem.forces

@@ -28,7 +28,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HermiteInterpolant", "HermiteSimpson", "NlpPoint", "WarmStart",
+__all__ = ["HermiteInterpolant", "HermiteSimpson", "NlpPoint", "PlannedForces", "WarmStart",
            "hermite_simpson_defects", "left_input_columns", "node_inputs", "node_times",
            "quadratic_input", "reintegrate", "reintegrator", "rk4_step", "target_residuals"]
 
@@ -422,3 +422,28 @@ def reintegrate(F: ca.Function, x0: NDArray[np.float64], t_nodes: NDArray[np.flo
     ws = quadratic_input(s, U0[:n, None, :], Um[:n, None, :], U1[:n, None, :])
     return (np.vstack([x, np.asarray(nodes).T]), np.vstack([x, np.asarray(samples).T]),
             np.vstack([U0[:1], ws.reshape(n * n_sub, -1)]))
+
+
+@dataclass(frozen=True)
+class PlannedForces:
+    """Every contact's planned force at the collocation points: ``f_nodes`` (n+1 x nc x 3)
+    and ``f_mid`` (n x nc x 3) [N], palm frame, the force each contact's body exerts on the
+    object; ``tau_nodes``, ``tau_mid`` [N m] the torsion about the object's outward normal.
+    Between the points, on each interval, the quadratic through node, midpoint and node,
+    like the inputs (:meth:`on_intervals`): continuous (the NLP has one force per point)."""
+
+    f_nodes: NDArray[np.float64]
+    f_mid: NDArray[np.float64]
+    tau_nodes: NDArray[np.float64]
+    tau_mid: NDArray[np.float64]
+
+    def on_intervals(self, k: NDArray[np.intp], s: NDArray[np.float64]
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(forces (len x nc x 3), torsions (len x nc)) at normalised times s of intervals k."""
+        s = np.asarray(s, dtype=float)
+        b0, bm, b1 = 2 * (s - 0.5) * (s - 1), -4 * s * (s - 1), 2 * s * (s - 0.5)
+        f = (b0[:, None, None] * self.f_nodes[k] + bm[:, None, None] * self.f_mid[k]
+             + b1[:, None, None] * self.f_nodes[k + 1])
+        tau = (b0[:, None] * self.tau_nodes[k] + bm[:, None] * self.tau_mid[k]
+               + b1[:, None] * self.tau_nodes[k + 1])
+        return f, tau
