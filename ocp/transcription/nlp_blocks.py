@@ -445,33 +445,24 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     jc: list[NDArray[np.int64]] = []
     hr: list[NDArray[np.int64]] = []
     hc: list[NDArray[np.int64]] = []
-    rJp, cJp = _triplets(Jp.sparsity())
-    rHp, cHp = _triplets(Hp.sparsity())
-    for c in range(npts):
-        jr.append(pos0[rJp] if c == 0 else off_p + len(keep0) + (c - 1) * ng_pt + rJp)
-        jc.append(zp_idx[c][cJp])
-        hr.append(zp_idx[c][rHp])
-        hc.append(zp_idx[c][cHp])
-    rJi, cJi = _triplets(Ji.sparsity())
-    rHi, cHi = _triplets(Hi.sparsity())
-    for k in range(n):
-        jr.append(2 * nx * k + rJi)
-        jc.append(zi_idx[k][cJi])
-        hr.append(zi_idx[k][rHi])
-        hc.append(zi_idx[k][cHi])
-    rJt, cJt = _triplets(Jt.sparsity())
-    rHt, cHt = _triplets(Ht.sparsity())
-    jr.append(off_t + rJt)
-    jc.append(ze_idx[cJt])
-    hr.append(ze_idx[rHt])
-    hc.append(ze_idx[cHt])
-    rJr, cJr = _triplets(Jr.sparsity())
-    rHr, cHr = _triplets(Hr.sparsity())
-    for j in range(n_rate):
-        jr.append(off_r + j * ng_r + rJr)
-        jc.append(zr_idx[j][cJr])
-        hr.append(zr_idx[j][rHr])
-        hc.append(zr_idx[j][cHr])
+
+    def place(row_maps: list[NDArray[np.int64]], z_idx: Any, J: Any, H: Any) -> None:
+        """Each instance of a block: its Jacobian's rows (``row_maps``: the global row of
+        each of its rows, -1 for one it does not have) and columns, its Hessian's entries
+        (``z_idx``: the global variable of each of its variables)."""
+        rJ, cJ = _triplets(J.sparsity())
+        rH, cH = _triplets(H.sparsity())
+        for row_map, z in zip(row_maps, z_idx, strict=True):
+            jr.append(row_map[rJ])
+            jc.append(z[cJ])
+            hr.append(z[rH])
+            hc.append(z[cH])
+
+    place([pos0] + [off_p + len(keep0) + (c - 1) * ng_pt + np.arange(ng_pt)
+                    for c in range(1, npts)], zp_idx, Jp, Hp)
+    place([2 * nx * k + np.arange(2 * nx) for k in range(n)], zi_idx, Ji, Hi)
+    place([off_t + np.arange(int(Gt.numel()))], [ze_idx], Jt, Ht)
+    place([off_r + j * ng_r + np.arange(ng_r) for j in range(n_rate)], zr_idx, Jr, Hr)
     jac_asm = BlockAssembler((ng, nw), np.concatenate(jr), np.concatenate(jc))
     hess_asm = BlockAssembler((nw, nw), np.concatenate(hr), np.concatenate(hc),
                               symmetric=True)
