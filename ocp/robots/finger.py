@@ -260,17 +260,25 @@ class FingerModel:
         J_w = ca.horzcat(*cols)
         return ca.Function("fingertip_jacobian", [q], [ca.vertcat(J_v, J_w)], ["q"], ["J"])
 
-    def _fk_expr(self, q: ca.SX) -> tuple[ca.SX, ca.SX]:
+    def joint_frames(self, q: Any) -> tuple[list[tuple[ChainJoint, Any, Any]], Any, Any]:
+        """The chain's product (CasADi): each joint with its frame's orientation and origin
+        in the palm frame before its own motion, and the last joint's frame after it."""
         R: Any = ca.DM(self.base_rotation)
         p: Any = ca.DM(self.base_position)
+        frames = []
         for joint in self.chain:
             p = p + R @ ca.DM(joint.placement_translation)
             R = R @ ca.DM(joint.placement_rotation)
+            frames.append((joint, R, p))
             qi = q[joint.index_q]
             if joint.kind == "revolute":
                 R = R @ _axis_rotation(joint.axis, qi)
             else:
                 p = p + R @ (ca.DM(joint.axis) * qi)
+        return frames, R, p
+
+    def _fk_expr(self, q: ca.SX) -> tuple[ca.SX, ca.SX]:
+        _, R, p = self.joint_frames(q)
         p = p + R @ ca.DM(self.tip_translation)
         R = R @ ca.DM(self.tip_rotation)
         return R, p

@@ -26,7 +26,6 @@ from typing import Any
 import casadi as ca
 
 from ocp.geometry.rotations import vee
-from ocp.robots.finger import _axis_rotation
 from ocp.spec.contacts import SymbolicGrasp
 
 __all__ = ["contact_twists", "finger_twist", "fingertip_twist_rows"]
@@ -35,24 +34,19 @@ __all__ = ["contact_twists", "finger_twist", "fingertip_twist_rows"]
 def finger_twist(finger: Any, q: Any, qd: Any, point: Any) -> tuple[Any, Any]:
     """The velocity of the finger's material point at ``point`` (palm frame) and the
     tip's angular velocity, moved by the joint rates ``qd``: the geometric Jacobian, each
-    joint's axis and origin in the palm frame from the chain's placements (the same
-    product as :meth:`~ocp.robots.finger.FingerModel.fk`)."""
-    R: Any = ca.DM(finger.base_rotation)
-    p: Any = ca.DM(finger.base_position)
+    joint's axis and origin in the palm frame
+    (:meth:`~ocp.robots.finger.FingerModel.joint_frames`, the product its ``fk`` takes)."""
     v: Any = ca.SX.zeros(3)
     omega: Any = ca.SX.zeros(3)
-    for joint in finger.chain:
-        p = p + R @ ca.DM(joint.placement_translation)
-        R = R @ ca.DM(joint.placement_rotation)
+    frames, _, _ = finger.joint_frames(q)
+    for joint, R, p in frames:
         i = joint.index_q
         axis = R @ ca.DM(joint.axis)  # palm frame
         if joint.kind == "revolute":
             omega = omega + axis * qd[i]
             v = v + ca.cross(axis, point - p) * qd[i]
-            R = R @ _axis_rotation(joint.axis, q[i])
         else:
             v = v + axis * qd[i]
-            p = p + R @ (ca.DM(joint.axis) * q[i])
     return v, omega
 
 
