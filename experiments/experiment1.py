@@ -85,6 +85,7 @@ def build_problem(finger: FingerModel | None = None) -> OneFingerProblem:
         via_points=(ViaPoint(VIA_TIMES[0], {"x": xa, "y": ya}),
                     ViaPoint(VIA_TIMES[1], {"x": xb, "y": yb})),
         n_intervals=N_INTERVALS,
+        timing="paper",  # the paper's piecewise inputs, as its figures
     )
     contact = FingerContact(initial=FINGER_CONTACT_INITIAL,
                             chart_rotation=FINGER_CHART_ROTATION,

@@ -81,7 +81,7 @@ def grasp_problem(problem: BallOnPalmProblem) -> ManipulationProblem:
                   problem.max_contact_speed),
         n_intervals=problem.n_intervals, pole_margin=problem.pole_margin,
         max_refinements=problem.max_refinements, options=problem.options,
-        tolerances=PALM_TOLERANCES)
+        tolerances=PALM_TOLERANCES, timing=problem.timing, ramp_time=problem.ramp_time)
 
 
 def palm_certificate(cert: Certificate) -> Certificate:

@@ -39,6 +39,7 @@ from ocp.solve.planner import (
 )
 from ocp.spec.problem import (
     DEFAULT_FINGER_CHART_ROTATION,
+    DEFAULT_MAX_JOINT_ACCELERATION,
     BallOnPalmProblem,
     ForceSpec,
     ProblemError,
@@ -85,9 +86,14 @@ class OneFingerProblem:
     pad_margin: float = 0.002  # m kept between the contact and the pad's edge
     #: Plan the contact forces (docs/forces.md); None: a kinematic plan.
     forces: ForceSpec | None = None
+    #: The bound on each joint's acceleration of a smooth plan (``base.timing``) [rad/s^2].
+    max_joint_acceleration: float = DEFAULT_MAX_JOINT_ACCELERATION
 
     def errors(self) -> list[tuple[str, str]]:
         errs = list(self.base.errors())
+        a = self.max_joint_acceleration
+        if not (math.isfinite(a) and 0.0 < a <= 1e5):
+            errs.append(("max_joint_acceleration", f"must be in (0, 1e5] rad/s^2, got {a}"))
         if self.forces is not None:
             errs += self.forces.errors("forces", self.mu)
         if not (math.isfinite(self.mu) and 0.0 < self.mu <= 10.0):
@@ -214,7 +220,9 @@ class OneFingerPlanner:
             joint_effort_weight=problem.joint_effort_weight,
             grasp_weight=problem.grasp_weight, pad_margin=problem.pad_margin,
             n_intervals=b.n_intervals, pole_margin=b.pole_margin,
-            max_refinements=b.max_refinements, options=b.options, forces=problem.forces)
+            max_refinements=b.max_refinements, options=b.options, forces=problem.forces,
+            timing=b.timing, ramp_time=b.ramp_time,
+            max_joint_acceleration=problem.max_joint_acceleration)
 
     def initial_grasp(self, problem: OneFingerProblem) -> FloatArray:
         """Joint angles of the initial grasp by inverse kinematics, or ProblemError saying

@@ -101,12 +101,14 @@ def test_grasp_stays_inside_the_friction_cone(plan: OneFingerSolution) -> None:
 
 
 def test_grasp_angle_moves_towards_antipodal(plan: OneFingerSolution) -> None:
-    """Started 5.7 deg away from antipodal, the optimiser brings the grasp closer."""
+    """Started 5.7 deg away from antipodal, the optimiser brings the grasp closer: from the
+    start (at rest: the smooth timing) steadily, to a tenth of it within the first half."""
     worst = plan.grasp_angles.max(axis=1)
     assert worst[0] > math.radians(5.0)
     assert np.min(worst) < 0.25 * worst[0]
-    half = len(worst) // 2
-    assert np.all(np.diff(worst[: half // 2]) < 0), "it improves from the start"
+    tenth = int(np.argmax(worst < 0.1 * worst[0]))
+    assert 0 < tenth < len(worst) // 2
+    assert np.all(np.diff(worst[: tenth + 1]) < 0), "it improves from the start"
 
 
 def test_joint_limits_are_respected(plan: OneFingerSolution) -> None:

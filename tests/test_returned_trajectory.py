@@ -241,7 +241,8 @@ def test_via_point_rates_are_reported_from_both_sides() -> None:
     is continuous at the via-point node and its two one-sided rates are those of the
     two intervals' polynomials."""
     planner, problem, plan_of = CASES["palm_alone"]()
-    plan = plan_of(planner.solve(dataclasses.replace(problem, max_refinements=0)))
+    plan = plan_of(planner.solve(dataclasses.replace(problem, max_refinements=0,
+                                                     timing="paper")))
     breaks = plan.break_nodes()
     assert len(breaks) == 1
     traj = plan.trajectory

@@ -35,7 +35,7 @@ from ocp.transcription.collocation import HermiteInterpolant, PlannedForces, rei
 if TYPE_CHECKING:
     from ocp.transcription.grasp_model import GraspModel
 
-__all__ = ["certify_grasp", "check_samples", "force_checks"]
+__all__ = ["certify_grasp", "check_samples", "force_checks", "timing_checks"]
 
 #: Relative tolerance of the planned forces' checks between collocation points: the
 #: equilibrium residual (of the force scale; moments of it times the object's size) and
@@ -43,6 +43,11 @@ __all__ = ["certify_grasp", "check_samples", "force_checks"]
 #: points both hold to IPOPT's tolerance; between them the interpolated forces and the
 #: returned poses differ from an exact equilibrium by O(h^3).
 FORCE_REL_TOL = 1e-3
+#: Tolerance of the smooth timing's rest and continuity checks, of the state's rate scale
+#: (length / duration, or 1 / duration for angles): both hold exactly by construction (the
+#: inputs at the ends are fixed at zero, one input per node), so anything above round-off
+#: is a defect.
+TIMING_REL_TOL = 1e-9
 
 FloatArray = NDArray[np.float64]
 
@@ -122,6 +127,39 @@ def force_checks(problem: ManipulationProblem, forces: PlannedForces, k: NDArray
     reported = {"max_normal_force": float(fn.max()),
                 "max_tangential_force_ratio": float(np.max(ft / np.maximum(fn, 1e-300)))}
     return checks, reported
+
+
+def timing_checks(problem: ManipulationProblem, m: GraspModel, traj: HermiteInterpolant
+                  ) -> list[Check]:
+    """The smooth timing's laws on the returned trajectory: every state at rest at both ends
+    (its rate there), no state's rate jumps at any node (the rates from the interval before
+    and after), every joint's acceleration within ``max_joint_acceleration`` (the cubic's
+    second derivative is linear on an interval, so the values at both ends of every
+    interval bound it)."""
+    T = float(traj.t_nodes[-1] - traj.t_nodes[0])
+    scale = np.full(m.nx, 1.0 / T)
+    scale[m.length_columns()] = problem.object.length_scale / T
+    rest = np.abs(np.vstack([traj.F0[0], traj.F1[-1]])) / scale
+    jumps = np.abs(traj.F1[:-1] - traj.F0[1:]) / scale
+    k_jump = int(np.argmax(jumps.max(axis=1))) if len(jumps) else 0
+    P = CheckKind.PHYSICS
+    checks = [Check("max_rest_rate", float(rest.max()), TIMING_REL_TOL, P,
+                    time=float(traj.t_nodes[0] if rest[0].max() >= rest[1].max()
+                               else traj.t_nodes[-1])),
+              Check("max_velocity_jump", float(jumps.max(initial=0.0)), TIMING_REL_TOL, P,
+                    time=float(traj.t_nodes[k_jump + 1]))]
+    joints = m.joint_columns()
+    if joints:
+        n = len(traj.t_nodes) - 1
+        k = np.repeat(np.arange(n), 2)
+        s = np.tile([0.0, 1.0], n)
+        acc = np.abs(traj.on_intervals(k, s, order=2)[:, joints]).max(axis=1)
+        j = int(np.argmax(acc))
+        h = traj.t_nodes[k[j] + 1] - traj.t_nodes[k[j]]
+        checks.append(Check("max_joint_acceleration", float(acc[j]),
+                            problem.max_joint_acceleration * (1 + 1e-6), CheckKind.LIMITS,
+                            time=float(traj.t_nodes[k[j]] + s[j] * h)))
+    return checks
 
 
 def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInterpolant,
@@ -229,4 +267,6 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
                                   pts, nrm)
         checks += more
         reported.update(rep_)
+    if problem.smooth:
+        checks += timing_checks(problem, m, traj)
     return Certificate.of(checks, reported, n_samples=n)

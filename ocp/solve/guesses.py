@@ -77,9 +77,8 @@ class Strategy:
                    nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Guess:
         """A previous plan (or a warm start) on this grid."""
         ws = warm if isinstance(warm, WarmStart) else warm.warm_start
-        n = len(t_nodes) - 1
         X, Xm, U, Um = ws.on_grid(t_nodes, nlp.hs.left_cols, nlp.hs.right_cols,
-                                  n + len(nlp.hs.segments))
+                                  nlp.hs.n_input_cols)
         X[0] = x0  # the fixed initial state, exactly
         return X, Xm, U, Um
 
@@ -106,7 +105,7 @@ class PalmStrategy(Strategy):
     def own_guesses(self, planner: Any, problem: ManipulationProblem, m: GraspModel,
                     nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Iterator[Guess]:
         base = problem.palm_problem()
-        n_cols = len(t_nodes) - 1 + len(nlp.hs.segments)
+        n_cols = nlp.hs.n_input_cols
         for loop in guess_loops(base):
             yield simulate_guess(base, t_nodes, reference_input(base, loop),
                                  nlp.hs.left_cols, nlp.hs.right_cols, n_cols)
@@ -118,20 +117,22 @@ class PalmStrategy(Strategy):
         if isinstance(warm, WarmStart) or warm.collocation is None or \
                 abs(warm.duration - problem.duration) >= 1e-9:
             return super().warm_guess(warm, problem, nlp, x0, t_nodes)
-        n = len(t_nodes) - 1
         tm = (t_nodes[:-1] + t_nodes[1:]) / 2
         U = node_inputs(lambda ts: warm.sample(ts).u, t_nodes, nlp.hs.left_cols,
-                        nlp.hs.right_cols, n + len(nlp.hs.segments))
+                        nlp.hs.right_cols, nlp.hs.n_input_cols)
         sm = warm.sample(tm)
         return warm.sample(t_nodes).x, sm.x, U, sm.u
 
     def adjust_bounds(self, problem: ManipulationProblem, nlp: NLP, lbx: FloatArray,
                       ubx: FloatArray) -> None:
         if rotation_symmetric(problem.palm_problem()):
-            # Gauge: the plan's rotation about the contact normal is free; depart along +x.
-            _, _, Ui, _, _, _, _ = nlp.unpack(np.arange(len(lbx), dtype=float))
-            c0 = nlp.hs.left_cols[0]
-            i_x, i_y = (round(float(Ui[j, c0])) for j in (0, 1))
+            # Gauge: the plan's rotation about the contact normal is free; depart along +x
+            # (the first input, or with the smooth timing, which starts at rest, the first
+            # midpoint's).
+            _, _, Ui, Umi, _, _, _ = nlp.unpack(np.arange(len(lbx), dtype=float))
+            first = np.asarray(Umi)[:, 0] if nlp.hs.continuous else \
+                np.asarray(Ui)[:, nlp.hs.left_cols[0]]
+            i_x, i_y = (round(float(first[j])) for j in (0, 1))
             lbx[i_x] = 0.0
             lbx[i_y] = ubx[i_y] = 0.0
 
@@ -214,7 +215,6 @@ def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: 
     charts = contact_charts(problem)
     shape = np.asarray(problem.object.dimensions, dtype=float)
     prm = m.params(shape, charts)
-    n = len(t_nodes) - 1
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
     ts = np.sort(np.concatenate([t_nodes, tm]))  # node, mid, node, ...
     cart0 = m.cartesian(x0, prm)
@@ -241,7 +241,7 @@ def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: 
     for i, tip in enumerate(m.fingertips):
         X[:, tip.q_cols], W[:, tip.qd_cols] = tip.guess_joints(
             R_all[:, :, i, :].transpose(1, 0, 2), p_all[:, :, i].T, x0[tip.q_cols], ts)
-    Ucols = np.zeros((n + len(nlp.hs.segments), m.nu))
+    Ucols = np.zeros((nlp.hs.n_input_cols, m.nu))
     Ucols[nlp.hs.left_cols] = W[0:-1:2]
     Ucols[nlp.hs.right_cols] = W[2::2]
     if obj_w is not None:  # the palm plan's inputs jump at via-points: both sides

@@ -124,6 +124,8 @@ class GraspStructure:
     tracking: bool
     #: the contact forces are planned (``problem.forces``): more variables and rows
     forces: bool = False
+    #: the smooth timing (``problem.timing``): one input per node, joint-acceleration rows
+    smooth: bool = False
 
     @staticmethod
     def of(problem: ManipulationProblem) -> GraspStructure:
@@ -135,7 +137,8 @@ class GraspStructure:
             goal_mask, via_masks = st.goal_mask, st.via_masks
         return GraspStructure(problem.object.shape, problem.palm is not None, segments,
                               goal_mask, via_masks, tuple(c.finger for c in problem.fingers),
-                              problem.motion is not None, problem.forces is not None)
+                              problem.motion is not None, problem.forces is not None,
+                              problem.smooth)
 
     def fingerprint(self, m: GraspModel) -> str:
         """The structure as a string that another process computes alike: the fingers by
@@ -143,7 +146,8 @@ class GraspStructure:
         import hashlib
 
         parts = [repr((self.shape, self.palm, self.segments, self.goal_mask, self.via_masks,
-                       self.tracking, m.nx, m.nu)) + (":forces" if self.forces else "")]
+                       self.tracking, m.nx, m.nu)) + (":forces" if self.forces else "")
+                 + (":smooth" if self.smooth else "")]
         for f in self.fingers:
             parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
                       repr(np.asarray(f.base_rotation).round(12).tolist()),
@@ -247,7 +251,7 @@ class ManipulationPlanner:
         m = self.model(problem)
         block = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
                                        key.tracking, FORCE_REGULARISATION,
-                                       forces=key.forces)
+                                       forces=key.forces, smooth=key.smooth)
         nlp = ipopt_solver(block, key.fingerprint(m), None if self.compiler else self.compile_dir)
         self._nlps[key] = nlp
         while len(self._nlps) > max(1, self.max_nlps):

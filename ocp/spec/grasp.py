@@ -21,6 +21,8 @@ from ocp.geometry.surfaces import SURFACES, rotation_from_vector
 from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
 from ocp.spec.problem import (
     DEFAULT_FINGER_CHART_ROTATION,
+    DEFAULT_MAX_JOINT_ACCELERATION,
+    DEFAULT_RAMP_FRACTION,
     MAX_POSITION,
     BallOnPalmProblem,
     ForceSpec,
@@ -155,6 +157,26 @@ class ManipulationProblem:
     #: Plan the contact forces (the object's load, the grip; docs/forces.md); None (the
     #: default): a kinematic plan, as before.
     forces: ForceSpec | None = None
+    #: The plan's timing (docs/timing.md, :data:`~ocp.spec.problem.TIMINGS`): ``"smooth"``
+    #: starts and ends at rest, every velocity continuous, each joint's acceleration within
+    #: ``max_joint_acceleration`` [rad/s^2]; ``"paper"`` the paper's piecewise inputs.
+    timing: str = "smooth"
+    max_joint_acceleration: float = DEFAULT_MAX_JOINT_ACCELERATION
+    #: The smooth plan's ramps' time constant [s] (None: :data:`DEFAULT_RAMP_FRACTION` of
+    #: the duration): the objective weighs each input's rate of change by its square
+    #: (docs/timing.md).
+    ramp_time: float | None = None
+
+    @property
+    def ramp_time_fraction(self) -> float:
+        """The ramps' time constant over the duration."""
+        if self.ramp_time is None:
+            return DEFAULT_RAMP_FRACTION
+        return self.ramp_time / self.duration
+
+    @property
+    def smooth(self) -> bool:
+        return self.timing == "smooth"
 
     @property
     def n_contacts(self) -> int:
@@ -169,7 +191,7 @@ class ManipulationProblem:
             via_points=pm.via_points, n_intervals=self.n_intervals,
             pole_margin=self.pole_margin, max_contact_speed=pm.max_contact_speed,
             palm_half_extent=pm.palm_half_extent, max_refinements=self.max_refinements,
-            options=self.options)
+            options=self.options, timing=self.timing, ramp_time=self.ramp_time)
 
     def segments(self) -> tuple[tuple[int, ...], FloatArray]:
         """(intervals per segment, segment boundary times): via-points split the grid."""
@@ -204,7 +226,8 @@ class ManipulationProblem:
                                       self.duration, n_intervals=self.n_intervals,
                                       pole_margin=self.pole_margin,
                                       max_refinements=self.max_refinements,
-                                      options=self.options).errors()
+                                      options=self.options, timing=self.timing,
+                                      ramp_time=self.ramp_time).errors()
             if self.initial_pose is None:
                 errs.append(("initial_pose", "required when no palm carries the object"))
             else:
@@ -247,6 +270,11 @@ class ManipulationProblem:
             if c.q_seed is not None and len(c.q_seed) != c.finger.nq:
                 errs.append((f"{name}.q_seed",
                              f"must have {c.finger.nq} joint angles, got {len(c.q_seed)}"))
+        a = self.max_joint_acceleration
+        if isinstance(a, bool) or not isinstance(a, int | float) or not (
+                math.isfinite(a) and 0.0 < a <= 1e5):
+            errs.append(("max_joint_acceleration", f"must be in (0, 1e5] rad/s^2, got {a!r}"))
+
         if self.forces is not None:
             errs += self.forces.errors("forces", self.mu)
             if not self.fingers:

@@ -19,6 +19,9 @@ FloatArray = NDArray[np.float64]
 
 __all__ = [
     "CONTACT_COORDS",
+    "DEFAULT_MAX_JOINT_ACCELERATION",
+    "DEFAULT_RAMP_FRACTION",
+    "TIMINGS",
     "BallOnPalmProblem",
     "ForceSpec",
     "ObjectSpec",
@@ -47,6 +50,22 @@ MAX_POSITION = 10.0  # m, any palm coordinate
 #: the ball's top.
 DEFAULT_FINGER_CHART_ROTATION: tuple[float, float, float] = (0.0, 0.0, math.pi)
 MAX_DURATION = 3600.0  # s
+#: A plan's timing (docs/timing.md): ``"smooth"`` (the default) starts and ends at rest,
+#: every velocity continuous (also at via-points), joint accelerations bounded;
+#: ``"paper"`` the paper's piecewise inputs (full speed at the start and the end, velocity
+#: jumps at via-points), for reproducing its figures.
+TIMINGS: tuple[str, ...] = ("smooth", "paper")
+#: The default bound on every joint's acceleration of a smooth plan [rad/s^2].
+DEFAULT_MAX_JOINT_ACCELERATION = 20.0
+#: The smooth plan's default ramp time constant, as a fraction of the duration.
+DEFAULT_RAMP_FRACTION = 0.05
+
+
+def timing_errors(timing: object) -> list[tuple[str, str]]:
+    """(field, reason) when ``timing`` is not one of :data:`TIMINGS`."""
+    if timing in TIMINGS:
+        return []
+    return [("timing", f"must be one of {list(TIMINGS)}, got {timing!r}")]
 
 
 class ProblemError(ValueError):
@@ -182,6 +201,12 @@ class BallOnPalmProblem:
     palm_half_extent: float = 0.5
     max_refinements: int = 2
     options: SolverOptions = field(default_factory=SolverOptions)
+    #: :data:`TIMINGS`: ``"smooth"`` starts and ends at rest with continuous velocities;
+    #: ``"paper"`` the paper's piecewise inputs.
+    timing: str = "smooth"
+    #: A smooth plan's ramps' time constant [s]; None: :data:`DEFAULT_RAMP_FRACTION` of the
+    #: duration.
+    ramp_time: float | None = None
 
     # -- validation -----------------------------------------------------------------------
     def errors(self) -> list[tuple[str, str]]:
@@ -222,6 +247,12 @@ class BallOnPalmProblem:
                          f"between via-points at least), got {self.n_intervals}"))
         if not (0 <= self.max_refinements <= 5):
             errs.append(("max_refinements", f"must be in [0, 5], got {self.max_refinements}"))
+        errs += timing_errors(self.timing)
+        r = self.ramp_time
+        if r is not None and not (isinstance(r, int | float) and math.isfinite(r)
+                                  and 0.0 < r <= self.duration):
+            errs.append(("ramp_time", f"must be in (0, duration = {self.duration} s], got "
+                                      f"{r}"))
         o = self.options
         if not (1 <= o.max_iter <= 100_000):
             errs.append(("options.max_iter", f"must be in [1, 100000], got {o.max_iter}"))

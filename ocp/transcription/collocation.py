@@ -33,10 +33,13 @@ __all__ = ["HermiteInterpolant", "HermiteSimpson", "NlpPoint", "PlannedForces", 
            "quadratic_input", "reintegrate", "reintegrator", "rk4_step", "target_residuals"]
 
 
-def left_input_columns(segments: tuple[int, ...]) -> list[int]:
+def left_input_columns(segments: tuple[int, ...], continuous: bool = False) -> list[int]:
     """Column of the node inputs holding the input at the start of each interval: a node
     between two segments has two input columns (incoming and outgoing), so each segment
-    shifts the columns after it by one."""
+    shifts the columns after it by one; with ``continuous`` inputs (smooth timing) every
+    node has one input column, interval k starts at column k."""
+    if continuous:
+        return list(range(int(sum(segments))))
     return [k + s for s, n0 in enumerate(segments)
             for k in range(sum(segments[:s]), sum(segments[:s]) + n0)]
 
@@ -179,20 +182,23 @@ class HermiteSimpson:
     """Symbolic decision variables and defect constraints for one problem structure.
 
     ``segments`` gives the number of intervals in each segment; node k of the whole grid
-    is shared by the segments it joins.
+    is shared by the segments it joins. ``continuous``: one input per node, also at a
+    via-point (the smooth timing: every velocity continuous); else a via-point node has the
+    input arriving and the one leaving (the paper's piecewise timing).
     """
 
     nx: int
     nu: int
     segments: tuple[int, ...]
+    continuous: bool = False
 
     def __post_init__(self) -> None:
         n = self.n_intervals
         self.X = ca.SX.sym("X", self.nx, n + 1)  # scaled states at nodes
         self.Xm = ca.SX.sym("Xm", self.nx, n)  # scaled states at midpoints
-        # Inputs at nodes, per segment: a via-point node has an incoming and an outgoing
-        # input, since the min-effort optimum turns a corner there.
-        self.U = ca.SX.sym("U", self.nu, n + len(self.segments))
+        # Inputs at nodes, per segment: with the paper's timing a via-point node has an
+        # incoming and an outgoing input, since the min-effort optimum turns a corner there.
+        self.U = ca.SX.sym("U", self.nu, self.n_input_cols)
         self.Um = ca.SX.sym("Um", self.nu, n)  # scaled inputs at midpoints
 
     @property
@@ -200,9 +206,15 @@ class HermiteSimpson:
         return int(sum(self.segments))
 
     @property
+    def n_input_cols(self) -> int:
+        """Columns of U: one per node, plus one per via-point unless ``continuous``."""
+        n = self.n_intervals
+        return n + 1 if self.continuous else n + len(self.segments)
+
+    @property
     def left_cols(self) -> list[int]:
         """Column of U holding the input at the start of each interval."""
-        return left_input_columns(self.segments)
+        return left_input_columns(self.segments, self.continuous)
 
     @property
     def right_cols(self) -> list[int]:

@@ -42,11 +42,18 @@ __all__ = ["BlockAssembler", "BlockNLP", "build_manipulation_nlp"]
 
 
 def _node_input_pairs(hs: HermiteSimpson) -> list[tuple[int, int]]:
-    """(node, input column) of every input at a node: each interval's start, and each
-    segment's end (a via-point node has the input arriving and the one leaving)."""
+    """(node, input column) of every input at a node that is not fixed: each interval's
+    start, and each segment's end (with the paper's timing a via-point node has the input
+    arriving and the one leaving). With the smooth timing (continuous inputs) each node
+    has one input, and the first and last are fixed at rest (zero: rows in them would be
+    identically zero)."""
     lc, rc = hs.left_cols, hs.right_cols
     ends = [int(k) for k in np.cumsum(hs.segments)]
-    return [(k, lc[k]) for k in range(hs.n_intervals)] + [(k, rc[k - 1]) for k in ends]
+    pairs = [(k, lc[k]) for k in range(hs.n_intervals)] + [(k, rc[k - 1]) for k in ends]
+    if hs.continuous:
+        pairs = [pc for pc in dict.fromkeys(pairs)
+                 if pc not in ((0, lc[0]), (hs.n_intervals, rc[-1]))]
+    return pairs
 
 FloatArray = NDArray[np.float64]
 
@@ -134,16 +141,27 @@ def _declaration(m: Any, nseg: int, nv: int, npts: int, tracking: bool) -> Param
     return Parameters.of(shape=(m.surface.n_params, 1), seg_T=(nseg, 1), goal=(5, 1),
                          vias=(5, nv), charts=(9 * m.n_contacts, 1), weights=(6, 1),
                          ccone=(1, 1), tol=(2, 1), Pd=(3, n_track), Rd=(9, n_track),
-                         load=(LOAD_PARAMS, 1))
+                         load=(LOAD_PARAMS, 1), accel=(2, 1))
+
+
+def ramp_penalty(u0: Any, um: Any, u1: Any, hn: Any) -> Any:
+    """The integral of |du/ds|^2 over one interval of normalised time s = t / T (length
+    ``hn``) of the quadratic input through (u0, um, u1): its derivative is linear, from
+    a0 = (-3 u0 + 4 um - u1) / hn to a1 = (u0 - 4 um + 3 u1) / hn, so the integral is
+    hn (a0^2 + a0 a1 + a1^2) / 3."""
+    a0 = (-3 * u0 + 4 * um - u1) / hn
+    a1 = (u0 - 4 * um + 3 * u1) / hn
+    return hn * (ca.sumsqr(a0) + ca.dot(a0, a1) + ca.sumsqr(a1)) / 3
 
 
 def _small_grasp_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, ...],
-                     via_masks: tuple[tuple[bool, ...], ...], t0: float) -> BlockNLP:
+                     via_masks: tuple[tuple[bool, ...], ...], t0: float,
+                     smooth: bool) -> BlockNLP:
     """The same NLP for a grasp without path rows (one contact, no tracking: the object
     on the palm alone), written out in SX: at this size one SX graph is cheaper to call
     than mapped blocks, and the rolling equations at a node shared by two intervals are
     evaluated once. Same variables, constraints, order and objective as the blocks'."""
-    hs = HermiteSimpson(m.nx, m.nu, segments)
+    hs = HermiteSimpson(m.nx, m.nu, segments, smooth)
     n, nseg = hs.n_intervals, len(segments)
     decl = _declaration(m, nseg, len(via_masks), 2 * n + 1, False)
     p = ca.SX.sym("p", decl.size)
@@ -167,6 +185,15 @@ def _small_grasp_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, .
     effort_fn = ca.Function("effort", [xs, us, wq], [effort])
     weights = prm["weights"][0:3]
     f = hs.simpson(lambda x, u: effort_fn(x, u, weights), seg_T / T)
+    if smooth:  # the ramps' term (see build_manipulation_nlp)
+        ramp = prm["accel"][1]
+        hns = hs.steps(seg_T / T)
+        for k in range(n):
+            for j, idx in enumerate(m.effort_groups()):
+                if idx:
+                    f += weights[j] * ramp ** 2 * ramp_penalty(
+                        hs.U[idx, hs.left_cols[k]], hs.Um[idx, k], hs.U[idx, hs.right_cols[k]],
+                        hns[k])
     w = hs.w
     empty = [ca.SX(0, n + 1), ca.SX(0, n), ca.SX(0, 2 * n + 1)]
     unpack = ca.Function("unpack", [w], [hs.X, hs.Xm, hs.U, hs.Um, *empty])
@@ -191,7 +218,7 @@ def _triplets(sp: ca.Sparsity) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
 def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, ...],
                            via_masks: tuple[tuple[bool, ...], ...], tracking: bool,
                            force_regularisation: float, small: bool | None = None,
-                           forces: bool = False) -> BlockNLP:
+                           forces: bool = False, smooth: bool = False) -> BlockNLP:
     """The NLP of one grasp structure (``m``: its
     :class:`~ocp.transcription.grasp_model.GraspModel`):
     variables ``w = (X, Xm, U, Um, S, Sm, F)`` (scaled states and inputs at
@@ -205,7 +232,17 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     ``forces``: every contact's force at every point too (docs/forces.md): variables
     ``F``'s last ``LOAD_VARS * n_contacts`` rows, the object's quasi-static equilibrium
     with its weight, the friction cones with a margin, the minimum normal force, the
-    soft-finger torsion within its limit; the load parameters ``load``."""
+    soft-finger torsion within its limit; the load parameters ``load``.
+    ``smooth`` (the smooth timing, docs/timing.md): one input per node, also at via-points
+    (every velocity continuous), the first and last fixed at rest by their bounds
+    (:func:`~ocp.transcription.values.bounds`), every joint's acceleration within the
+    parameter ``accel[0]`` [rad/s^2] at both ends of every interval (the input is quadratic
+    on an interval, its derivative linear: the ends bound it), the last rows; and each
+    effort term has a ramp term, its weight times ``accel[1]^2`` times the integral of the
+    squared rate of change of its inputs (``accel[1]``: the ramps' time constant over the
+    duration). Without that term, continuity alone would let the optimum ramp up within
+    one interval: a velocity jump again as h -> 0 (slip converged like h on the triangle
+    example)."""
     t0 = time.perf_counter()
     nc = m.n_contacts
     if small is None:
@@ -214,9 +251,9 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         if nc >= 2 or tracking or forces:
             raise ValueError("only a grasp without path rows (one contact, no tracking) "
                              "has the small SX form")
-        return _small_grasp_nlp(m, segments, goal_mask, via_masks, t0)
+        return _small_grasp_nlp(m, segments, goal_mask, via_masks, t0, smooth)
     nf = len(m.fingers)
-    hs = HermiteSimpson(m.nx, m.nu, segments)
+    hs = HermiteSimpson(m.nx, m.nu, segments, smooth)
     n = hs.n_intervals
     nseg = len(segments)
     npts = 2 * n + 1
@@ -339,6 +376,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     hq = ca.SX.sym("h")  # the interval's length [s]
     Tq = ca.SX.sym("T")
     wq = ca.SX.sym("w", 4)  # effort weights (object, contacts, joints) and grasp weight
+    ramp_q = ca.SX.sym("ramp")  # the ramps' time constant over the duration (smooth)
     u_scale = ca.vertcat(*m.u_scale(L, Tq))
 
     def fdyn(x_: Any, u_: Any) -> Any:
@@ -351,10 +389,12 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         if idx:
             cost_i += wq[i] * hn / 6 * (ca.sumsqr(u0[idx]) + 4 * ca.sumsqr(um[idx])
                                         + ca.sumsqr(u1[idx]))
+            if smooth:
+                cost_i += wq[i] * ramp_q ** 2 * ramp_penalty(u0[idx], um[idx], u1[idx], hn)
     lam_i = ca.SX.sym("lam", 2 * nx)
     Ji = ca.jacobian(D, zi)
     Hi = ca.triu(ca.hessian(sig * cost_i + ca.dot(lam_i, D), zi)[0])
-    iin = [zi, hq, Tq, wq, shape_q, charts_q]
+    iin = [zi, hq, Tq, wq, shape_q, charts_q, ramp_q]
     int_fn = ca.Function("interval", iin, [D])
     int_cost = ca.Function("interval_cost", iin, [cost_i])
     int_jac = ca.Function("interval_jac", iin, ca.cse([D, _nz(Ji)]))
@@ -389,6 +429,27 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     rt_jac = ca.Function("rates_jac", rin, ca.cse([Gr, _nz(Jr)]))
     rt_hess = ca.Function("rates_hess", [*rin, lam_r], [ca.cse(_nz(Hr))])
     ng_r = int(Gr.numel())
+
+    # -- joint accelerations (smooth timing): z = (u_0, u_m, u_1) of one interval ---------
+    # The input is the quadratic through (u_0, u_m, u_1) on the interval, its derivative
+    # linear: (-3 u_0 + 4 u_m - u_1) / h at the start, (u_0 - 4 u_m + 3 u_1) / h at the end
+    # bound it everywhere. Rows: those of every joint rate over the limit, in [-1, 1];
+    # linear in z (no Hessian).
+    jcols = list(m.effort_groups()[2]) if smooth else []
+    ua0, uam, ua1 = (ca.SX.sym(name, nu) for name in ("ua0", "uam", "ua1"))
+    za = ca.vertcat(ua0, uam, ua1)
+    amax_q = ca.SX.sym("amax")
+    if jcols:
+        sj = u_scale[jcols] / (hq * amax_q)
+        Ga = ca.vertcat(sj * (-3 * ua0[jcols] + 4 * uam[jcols] - ua1[jcols]),
+                        sj * (ua0[jcols] - 4 * uam[jcols] + 3 * ua1[jcols]))
+    else:
+        Ga = ca.SX(0, 1)
+    ng_a = int(Ga.numel())
+    Ja = ca.jacobian(Ga, za)
+    ain = [za, hq, Tq, shape_q, amax_q]
+    ac_fn = ca.Function("accel", ain, [Ga])
+    ac_jac = ca.Function("accel_jac", ain, [Ga, _nz(Ja)])
 
     # -- targets (goal, via-points) on the segment end nodes ------------------------------
     ends = hs.segment_end_nodes
@@ -433,11 +494,15 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         zr_list += [np.concatenate([Xmi[:, k], Umi[:, k]]) for k in range(n)]
     n_rate = len(zr_list)
     zr_idx = np.array(zr_list, dtype=np.int64).reshape(n_rate, nx + nu)
+    n_acc = n if ng_a else 0
+    za_idx = np.array([np.concatenate([Ui[:, lc[k]], Umi[:, k], Ui[:, rc[k]]])
+                       for k in range(n_acc)], dtype=np.int64).reshape(n_acc, 3 * nu)
     n_def = 2 * nx * n
     off_p = n_def
     off_t = off_p + len(keep0) + (npts - 1) * ng_pt
     off_r = off_t + int(Gt.numel())
-    ng = off_r + n_rate * ng_r
+    off_a = off_r + n_rate * ng_r
+    ng = off_a + n_acc * ng_a
     pos0 = np.full(ng_pt, -1, dtype=np.int64)
     pos0[keep0] = off_p + np.arange(len(keep0))
 
@@ -463,6 +528,8 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     place([2 * nx * k + np.arange(2 * nx) for k in range(n)], zi_idx, Ji, Hi)
     place([off_t + np.arange(int(Gt.numel()))], [ze_idx], Jt, Ht)
     place([off_r + j * ng_r + np.arange(ng_r) for j in range(n_rate)], zr_idx, Jr, Hr)
+    place([off_a + k * ng_a + np.arange(ng_a) for k in range(n_acc)], za_idx, Ja,
+          ca.SX(3 * nu, 3 * nu))
     jac_asm = BlockAssembler((ng, nw), np.concatenate(jr), np.concatenate(jc))
     hess_asm = BlockAssembler((nw, nw), np.concatenate(hr), np.concatenate(hc),
                               symmetric=True)
@@ -488,21 +555,26 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     ZE = w[ze_idx.tolist()]
     wts = weights[0:4]
     p_args = (ZP, Pd, Rd, sw, qv)
-    i_args = (ZI, h, T, wts, shape_p, charts)
+    i_args = (ZI, h, T, wts, shape_p, charts, prm_["accel"][1])
     t_args = (ZE, goal, vias_v, shape_p)
     ZR = ca.reshape(w[zr_idx.ravel().tolist()], nx + nu, n_rate)
     r_args = (ZR, T, shape_p, charts)
+    ZA = ca.reshape(w[za_idx.ravel().tolist()], 3 * nu, n_acc)
+    a_args = (ZA, h, T, shape_p, prm_["accel"][0])
 
-    def g_of(Dint: Any, Gpts: Any, Grt: Any) -> Any:
+    def g_of(Dint: Any, Gpts: Any, Grt: Any, Gacc: Any) -> Any:
         return ca.vertcat(ca.vec(Dint), Gpts[keep0, 0], ca.vec(Gpts[:, 1:]), tg_fn(*t_args),
-                          ca.vec(Grt))
+                          ca.vec(Grt), ca.vec(Gacc))
 
     g_all = g_of(int_fn.map(n)(*i_args), pt_fn.map(npts)(*p_args),
-                 rt_fn.map(n_rate)(*r_args) if n_rate else ca.MX(0, 1))
+                 rt_fn.map(n_rate)(*r_args) if n_rate else ca.MX(0, 1),
+                 ac_fn.map(n_acc)(*a_args) if n_acc else ca.MX(0, 1))
     f = ca.sum2(pt_cost.map(npts)(*p_args)) + ca.sum2(int_cost.map(n)(*i_args))
     zeros_t = [0.0] * (len(tg) + n_rate * ng_r)
-    lbg = [0.0] * n_def + [lo[r] for r in keep0] + lo * (npts - 1) + zeros_t
-    ubg = [0.0] * n_def + [hi[r] for r in keep0] + hi * (npts - 1) + zeros_t
+    lbg = [0.0] * n_def + [lo[r] for r in keep0] + lo * (npts - 1) + zeros_t \
+        + [-1.0] * (n_acc * ng_a)
+    ubg = [0.0] * n_def + [hi[r] for r in keep0] + hi * (npts - 1) + zeros_t \
+        + [1.0] * (n_acc * ng_a)
     assert len(lbg) == ng == g_all.numel()
 
     Gj, Jpn = pt_jac.map(npts)(*p_args)
@@ -511,9 +583,13 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         Gr_j, Jrn = rt_jac.map(n_rate)(*r_args)
     else:
         Gr_j, Jrn = ca.MX(0, 1), ca.MX(0, 1)
-    Jnz = ca.vertcat(ca.vec(Jpn), ca.vec(Jin), tg_jac(*t_args), ca.vec(Jrn))
-    jac_g = ca.Function("nlp_jac_g", [w, p], [g_of(Dj, Gj, Gr_j), jac_asm(Jnz)], ["x", "p"],
-                        ["g", "jac_g_x"])
+    if n_acc:
+        Ga_j, Jan = ac_jac.map(n_acc)(*a_args)
+    else:
+        Ga_j, Jan = ca.MX(0, 1), ca.MX(0, 1)
+    Jnz = ca.vertcat(ca.vec(Jpn), ca.vec(Jin), tg_jac(*t_args), ca.vec(Jrn), ca.vec(Jan))
+    jac_g = ca.Function("nlp_jac_g", [w, p], [g_of(Dj, Gj, Gr_j, Ga_j), jac_asm(Jnz)],
+                        ["x", "p"], ["g", "jac_g_x"])
     lam_f = ca.MX.sym("lam_f")
     lam_g = ca.MX.sym("lam_g", ng)
     # the multipliers of each point's rows (node 0: zero for the rows it does not have)
@@ -525,7 +601,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     Hnz = ca.vertcat(ca.vec(pt_hess.map(npts)(*p_args, LP, lam_f)),
                      ca.vec(int_hess.map(n)(*i_args, LI, lam_f)),
                      tg_hess(*t_args, lam_g[off_t:off_r]),
-                     ca.vec(rt_hess.map(n_rate)(*r_args, ca.reshape(lam_g[off_r:ng], ng_r,
+                     ca.vec(rt_hess.map(n_rate)(*r_args, ca.reshape(lam_g[off_r:off_a], ng_r,
                                                                      n_rate)))
                      if n_rate else ca.MX(0, 1))
     hess_lag = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess_asm(Hnz)],

@@ -94,7 +94,8 @@ def parameters(problem: ManipulationProblem, nlp: BlockNLP) -> FloatArray:
         shape=shape, seg_T=np.diff(tb), goal=goal, vias=vias,
         charts=np.concatenate([R.ravel(order="F") for R in charts]), weights=weights,
         ccone=[cone_cosine(problem.mu)], tol=tol, Pd=Pd_, Rd=Rd_,
-        load=load_parameters(problem))
+        load=load_parameters(problem),
+        accel=[problem.max_joint_acceleration, problem.ramp_time_fraction])
 
 
 def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: FloatArray,
@@ -102,7 +103,6 @@ def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: Float
     """(lower, upper) bounds of the NLP's variables: every contact's own (physical,
     scaled here), the fixed initial state, the epigraph in [0, 2], the internal forces."""
     n = nlp.hs.n_intervals
-    n_seg = len(nlp.hs.segments)
     lo: list[float] = []
     hi: list[float] = []
     uhi: list[float] = []
@@ -114,7 +114,11 @@ def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: Float
     lo_x[0] = hi_x[0] = x0 / x_scale
     lo_xm, hi_xm = np.tile(xb_lo, (n, 1)), np.tile(xb_hi, (n, 1))
     ub_in = np.array(uhi) / u_scale
-    lo_u, hi_u = np.tile(-ub_in, (n + n_seg, 1)), np.tile(ub_in, (n + n_seg, 1))
+    n_cols = nlp.hs.n_input_cols
+    lo_u, hi_u = np.tile(-ub_in, (n_cols, 1)), np.tile(ub_in, (n_cols, 1))
+    if nlp.hs.continuous:  # the smooth timing: at rest at the start and at the end
+        for col in (nlp.hs.left_cols[0], nlp.hs.right_cols[-1]):
+            lo_u[col] = hi_u[col] = 0.0
     lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
     ns = nlp.n_epigraph
     zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))

@@ -51,6 +51,8 @@ def ball_on_palm_problem(request: BallOnPalmRequest | OneFingerRequest) -> BallO
         palm_half_extent=request.palm_half_extent,
         max_refinements=request.max_refinements,
         options=solver_options(request.solver),
+        timing=request.timing,
+        ramp_time=request.ramp_time,
     )
 
 

@@ -239,7 +239,9 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
         pad_margin=request.pad_margin, n_intervals=request.n_intervals,
         pole_margin=request.pole_margin, max_object_speed=request.max_object_speed,
         max_object_rate=request.max_object_rate, max_refinements=request.max_refinements,
-        options=solver_options(request.solver), forces=forces)
+        options=solver_options(request.solver), forces=forces, timing=request.timing,
+        ramp_time=request.ramp_time,
+        max_joint_acceleration=request.max_joint_acceleration)
 
 
 class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProblem,

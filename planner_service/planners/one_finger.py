@@ -70,7 +70,8 @@ def one_finger_problem(request: OneFingerRequest, fingers: FingerCache) -> OneFi
         mu=request.mu, grasp_weight=request.grasp_weight,
         finger_effort_weight=request.finger_effort_weight,
         joint_effort_weight=request.joint_effort_weight, pad_margin=request.pad_margin,
-        forces=force_spec(request.forces))
+        forces=force_spec(request.forces),
+        max_joint_acceleration=request.max_joint_acceleration)
 
 
 def seed_errors(problem: OneFingerProblem) -> FieldErrors:

@@ -284,6 +284,20 @@ def _rate_fits(value: float | None, info: ValidationInfo) -> float | None:
     return value
 
 
+TIMING_DESCRIPTION = (
+    "'smooth' (the default): the motion starts and ends at rest and every velocity (object, "
+    "contacts, joints) is continuous, also at via-points, which are still met at their "
+    "times; each joint's acceleration stays within `max_joint_acceleration` where the plan "
+    "has joints. 'paper': the paper's piecewise timing (full speed at the start and the end, "
+    "velocity jumps at via-points), for reproducing its figures")
+RAMP_TIME_DESCRIPTION = (
+    "a 'smooth' plan's ramps' time constant [s]: the objective weighs the rate of change of "
+    "every velocity by its square, so that the plan speeds up and slows down over about "
+    "this time; null: 5 % of the duration (ignored by 'paper' timing)")
+MAX_JOINT_ACCELERATION_DESCRIPTION = (
+    "bound on every joint's acceleration [rad/s^2] of a 'smooth' plan (ignored by 'paper' "
+    "timing)")
+
 SAMPLE_TIMES_DESCRIPTION = (
     "times [s] at which to return the plan (its collocation polynomials, the trajectory the "
     "certificate checked): `samples` and the `joint_trajectory`; null: the collocation "
@@ -319,6 +333,10 @@ class _PalmRequest(_Request):
                                  description="grid refinements allowed when the certificate "
                                              "finds the grid too coarse (each makes it 2, "
                                              "4 or 8 times as fine)")
+    timing: Literal["smooth", "paper"] = Field(default="smooth",
+                                               description=TIMING_DESCRIPTION)
+    ramp_time: Real | None = Field(default=None, gt=0.0, le=MAX_DURATION,
+                                   description=RAMP_TIME_DESCRIPTION)
     solver: SolverModel = Field(default_factory=SolverModel)
     sample_times: list[Annotated[Real, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
         default=None, max_length=MAX_SAMPLES, description=SAMPLE_TIMES_DESCRIPTION)
@@ -494,13 +512,16 @@ class OneFingerRequest(_PalmRequest):
     pad_margin: Real = Field(default=0.002, ge=0.0, le=0.1,
                               description="distance kept between the finger contact and "
                                           "the pad's edge [m]")
+    max_joint_acceleration: Real = Field(default=20.0, gt=0.0, le=1e5,
+                                          description=MAX_JOINT_ACCELERATION_DESCRIPTION)
     method: Literal["collocation", "greedy"] = Field(
         default="collocation",
         description="'collocation': the direct-collocation NLP (effort plus grasp quality "
                     "over the whole horizon); 'greedy': the paper's own method (section 3): "
                     "the finger contact velocity chosen step by step by a grid search in the "
                     "ellipse bounding the rolling angle, joint rates from the Jacobian's "
-                    "pseudo-inverse (200 steps); the weights do not apply to it")
+                    "pseudo-inverse (200 steps); the weights and `timing` do not apply to it "
+                    "(its plan has the paper's piecewise timing)")
 
     @field_validator("method")
     @classmethod
@@ -835,6 +856,12 @@ class ManipulationRequest(_Request):
     pad_margin: Real = Field(default=0.002, ge=0.0, le=0.1,
                               description="distance kept between each contact and its "
                                           "pad's edge [m]")
+    timing: Literal["smooth", "paper"] = Field(default="smooth",
+                                               description=TIMING_DESCRIPTION)
+    ramp_time: Real | None = Field(default=None, gt=0.0, le=MAX_DURATION,
+                                   description=RAMP_TIME_DESCRIPTION)
+    max_joint_acceleration: Real = Field(default=20.0, gt=0.0, le=1e5,
+                                          description=MAX_JOINT_ACCELERATION_DESCRIPTION)
     n_intervals: Count = Field(default=50, ge=1, le=MAX_INTERVALS,
                              description="collocation intervals over the horizon")
     pole_margin: Real = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
