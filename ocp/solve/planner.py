@@ -79,8 +79,9 @@ from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
 from ocp.spec.patches import pole_clear_patch, recharted, rides_pole
 from ocp.spec.problem import MAX_INTERVALS, ProblemError, Structure
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
+from ocp.transcription.force_stage import ForceStage
 from ocp.transcription.grasp_model import GraspModel
-from ocp.transcription.nlp_blocks import build_manipulation_nlp
+from ocp.transcription.nlp_blocks import LOAD_VARS, build_manipulation_nlp
 from ocp.transcription.values import bounds, load_parameters, scales
 from ocp.transcription.values import parameters as nlp_parameters
 
@@ -228,6 +229,11 @@ class ManipulationPlanner:
         #: Re-plan in another patch of the object's chart when a plan's palm contact rides
         #: the pole bound of the problem's patch (:meth:`_repatched`; spheres only).
         self.auto_patch = True
+        #: Plan a problem's forces in two stages (:mod:`ocp.transcription.force_stage`):
+        #: the kinematics, then the forces at its collocation points; the coupled NLP only
+        #: when some point admits no forces. False: always the coupled NLP.
+        self.two_stage_forces = True
+        self._force_stages: dict[int, ForceStage] = {}
         # keyed by the finger objects themselves (identity; the key keeps them alive)
         self._models: dict[tuple[Any, ...], GraspModel] = {}
         #: The NLPs built, by structure, the least recently used dropped beyond
@@ -343,8 +349,81 @@ class ManipulationPlanner:
         (:func:`warm_grid_factor`) starts on that grid, counted as one refinement.
         ``certify=False`` (a plan that only seeds another's initial guess): no certificate
         and so no refinement; the plan is at best ``inaccurate``.
+
+        A problem with ``forces`` is planned in two stages (``two_stage_forces``): its
+        kinematics as without them, then the forces at the plan's collocation points
+        (:mod:`ocp.transcription.force_stage`), certified with them; when some point admits
+        no forces, or the certificate fails with them, the coupled NLP, from the kinematic
+        plan, within what is left of the time limit.
         """
         problem.validate()
+        if problem.forces is None or not self.two_stage_forces or not certify:
+            return self._plan(problem, warm_start, certify)
+        t0 = time.perf_counter()
+        kin = self._plan(replace(problem, forces=None), warm_start, certify)
+        if kin.status is Status.SOLVED:
+            out = self._with_forces(problem, kin)
+            if out is not None:
+                return out
+        left = problem.options.time_limit - (time.perf_counter() - t0)
+        coupled = self._plan(
+            replace(problem, options=replace(problem.options, time_limit=max(left, 1e-3))),
+            kin if kin.status in (Status.SOLVED, Status.INACCURATE) else warm_start, certify)
+        return _with_earlier(coupled, kin)
+
+    def _with_forces(self, problem: ManipulationProblem, kin: ManipulationSolution
+                     ) -> ManipulationSolution | None:
+        """The kinematic plan ``kin`` of ``problem`` with its forces (the force stage at its
+        collocation points), certified; None when some point admits no forces or the
+        certificate fails with them."""
+        col = kin.collocation
+        if col is None or kin.stats is None:
+            return None
+        pf = problem.with_intervals(len(col.t_nodes) - 1)
+        if kin.object_chart_rotation is not None and not np.allclose(
+                kin.object_chart_rotation, problem.object.chart_rotation):
+            rv = kin.object_chart_rotation
+            alt = recharted(pf, (rv[0], rv[1], rv[2]))  # the plan's own patch
+            if alt is None:
+                return None
+            pf = alt
+        m = self.model(pf)
+        t_build = time.perf_counter()
+        stage = self._force_stages.setdefault(id(m), ForceStage(m))
+        stage.prepare(2 * len(col.t_nodes) - 1)
+        t_build = time.perf_counter() - t_build
+        t0 = time.perf_counter()
+        prm = m.params(np.asarray(pf.object.dimensions, dtype=float), contact_charts(pf))
+        Xall = np.vstack([col.X, col.Xm])
+        load = load_parameters(pf)
+        _, Fg = epigraph_guess(m, Xall, prm, load)
+        F, iterations = stage.solve(Xall, prm, load, pf.object.length_scale,
+                                    Fg[-LOAD_VARS * m.n_contacts:])
+        t_stage = time.perf_counter() - t0
+        if F is None:
+            return None
+        forces = planned_forces(pf, m, F, col.X, col.Xm, prm)
+        t_cert = time.perf_counter()
+        cert = certify_grasp(pf, m, kin.trajectory, prm, pf.tolerances, forces)
+        if not cert.passed:
+            return None
+        sol = assemble_solution(pf, m, Status.SOLVED, kin.raw_status, replace(col, forces=forces),
+                                kin.trajectory, prm, cert, kin.goal_error)
+        t_cert = time.perf_counter() - t_cert
+        stats = replace(kin.stats, iterations=kin.stats.iterations + iterations,
+                        build_time=kin.stats.build_time + t_build,
+                        solve_time=kin.stats.solve_time + t_stage,
+                        ipopt_time=kin.stats.ipopt_time + t_stage,
+                        certificate_time=kin.stats.certificate_time + t_cert)
+        return replace(sol, iterations=stats.iterations, build_time=kin.build_time + t_build,
+                       solve_time=kin.solve_time + t_stage, refinements=kin.refinements,
+                       stats=stats, nlp_point=kin.nlp_point,
+                       object_chart_rotation=kin.object_chart_rotation)
+
+    def _plan(self, problem: ManipulationProblem,
+              warm_start: WarmStart | ManipulationSolution | None, certify: bool
+              ) -> ManipulationSolution:
+        """:meth:`solve`'s pipeline for one NLP kind (the coupled one when ``forces``)."""
         self.adopt_compiled()
         if warm_start is not None:
             m = self.model(problem)
@@ -546,3 +625,19 @@ class ManipulationPlanner:
                             cache_hit=hit, n_intervals=n, ipopt_time=ipopt_time)
         return replace(sol, iterations=iterations, build_time=build_time,
                        solve_time=ipopt_time, stats=stats, nlp_point=best.point)
+
+
+def _with_earlier(sol: ManipulationSolution, earlier: ManipulationSolution
+                  ) -> ManipulationSolution:
+    """``sol`` with the work of an ``earlier`` plan it followed (its iterations and
+    times) added to its statistics."""
+    if sol.stats is None or earlier.stats is None:
+        return sol
+    a, b = sol.stats, earlier.stats
+    stats = replace(a, iterations=a.iterations + b.iterations,
+                    attempts=a.attempts + b.attempts, build_time=a.build_time + b.build_time,
+                    solve_time=a.solve_time + b.solve_time,
+                    certificate_time=a.certificate_time + b.certificate_time,
+                    ipopt_time=a.ipopt_time + b.ipopt_time)
+    return replace(sol, iterations=stats.iterations, build_time=stats.build_time,
+                   solve_time=sol.solve_time + earlier.solve_time, stats=stats)

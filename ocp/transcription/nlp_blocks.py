@@ -104,6 +104,43 @@ LOAD_REGULARISATION = 1e-4
 LOAD_PUSH_WEIGHT = 1e-2
 
 
+def load_rows(P: Any, N: Any, R_po: Any, fl: Any, load_q: Any, L: Any
+              ) -> tuple[list[tuple[Any, float, float]], Any]:
+    """The planned forces' rows at one point: (rows as (expression, lower, upper), the
+    scaled normal forces). ``P``, ``N``: the contact points and outward normals in the
+    object frame (3 x nc), ``R_po`` the object's rotation, ``fl`` the point's load
+    variables (:data:`LOAD_VARS` per contact), ``load_q`` the load parameters
+    (:data:`LOAD_PARAMS`), ``L`` the object's size.
+
+    Quasi-static equilibrium of the object (docs/forces.md: the inertial wrench of the
+    paper's slow motions is below 1e-3 of the weight), in the object frame: the contact
+    forces f_i = F0 fl_i[:3] at the points P_i, the torsion about each outward normal N_i,
+    the weight at the centre (the object frame's origin); every normal force at least the
+    minimum; every force inside its (smooth, narrowed) friction cone."""
+    nc = int(P.shape[1])
+    weight, f_min, mu_t, F0, mu_m, eps = (load_q[0:3], load_q[3], load_q[4], load_q[5],
+                                          load_q[6], load_q[7])
+    Fl = ca.reshape(fl, LOAD_VARS, nc)
+    fs = Fl[0:3, :]  # scaled forces, object frame
+    fn = -ca.sum1(N * fs)  # scaled normal forces (the push along -N)
+    tors = mu_t / L * fn * Fl[3, :]  # scaled torsion moments (/ F0 L)
+    w_obj = R_po.T @ weight / F0
+    tang2 = ca.sum1(fs * fs) - fn * fn  # |f_t|^2 (scaled)
+    # the cone, smooth: mu_m f_n >= sqrt(|f_t|^2 + eps^2), inside the cone of
+    # tan(atan(mu) - margin) (never looser); eps a quarter of the smallest normal force's
+    # cone radius, so the row's curvature at f_t = 0 stays moderate
+    return [(ca.sum2(fs) + w_obj, 0.0, 0.0),
+            (ca.sum2(ca.cross(P, fs) / L + N * ca.repmat(tors, 3, 1)), 0.0, 0.0),
+            (ca.transpose(fn) - f_min / F0, 0.0, math.inf),
+            (ca.transpose(mu_m * fn - ca.sqrt(tang2 + eps * eps)), 0.0, math.inf)], fn
+
+
+def load_cost(fl: Any, fn: Any) -> Any:
+    """One point's forces' objective (before the average over points and contacts): small
+    forces that hold the object, the grip at its floor on the normals."""
+    return LOAD_REGULARISATION * ca.sumsqr(fl) + LOAD_PUSH_WEIGHT * ca.sum2(fn)
+
+
 def _nz(M: Any) -> Any:
     """The nonzeros of a sparse SX matrix as a column (its sparsity's order)."""
     return ca.vertcat(*M.nonzeros()) if M.nnz() else ca.SX(0, 1)
@@ -318,25 +355,9 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         add(push - ccone_q * norms, 0.0, math.inf)
         add(push - (1 - s) * norms, 0.0, math.inf)
     if n_load:
-        # Quasi-static equilibrium of the object (docs/forces.md: the inertial wrench of
-        # the paper's slow motions is below 1e-3 of the weight), in the object frame: the
-        # contact forces f_i = F0 fl_i[:3] at the points P_i, the torsion about each
-        # outward normal N_i, the weight at the centre (the object frame's origin).
-        weight, f_min, mu_t, F0, mu_m, eps = (load_q[0:3], load_q[3], load_q[4], load_q[5],
-                                              load_q[6], load_q[7])
-        Fl = ca.reshape(fl, LOAD_VARS, nc)
-        fs = Fl[0:3, :]  # scaled forces, object frame
-        fn = -ca.sum1(N * fs)  # scaled normal forces (the push along -N)
-        tors = mu_t / L * fn * Fl[3, :]  # scaled torsion moments (/ F0 L)
-        w_obj = R_po.T @ weight / F0
-        add(ca.sum2(fs) + w_obj, 0.0, 0.0)
-        add(ca.sum2(ca.cross(P, fs) / L + N * ca.repmat(tors, 3, 1)), 0.0, 0.0)
-        add(ca.transpose(fn) - f_min / F0, 0.0, math.inf)
-        tang2 = ca.sum1(fs * fs) - fn * fn  # |f_t|^2 (scaled)
-        # the cone, smooth: mu_m f_n >= sqrt(|f_t|^2 + eps^2), inside the cone of
-        # tan(atan(mu) - margin) (never looser); eps a quarter of the smallest normal
-        # force's cone radius, so the row's curvature at f_t = 0 stays moderate
-        add(ca.transpose(mu_m * fn - ca.sqrt(tang2 + eps * eps)), 0.0, math.inf)
+        load_rows_, fn = load_rows(P, N, R_po, fl, load_q, L)
+        for expr, a, b in load_rows_:
+            add(expr, a, b)
     cost_p: Any = ca.SX(0)
     if tracking:
         ep = (p_po - pd) / L
@@ -350,9 +371,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
         # directions (the grasp term only sees the worst force angle).
         cost_p = cost_p + force_regularisation * ca.sumsqr(fcol) / (npts * n_force)
     if n_load:
-        # small forces that hold the object, the grip at its floor on the normals
-        cost_p = cost_p + LOAD_REGULARISATION * ca.sumsqr(fl) / (npts * n_load)
-        cost_p = cost_p + LOAD_PUSH_WEIGHT * ca.sum2(fn) / (npts * n_load)
+        cost_p = cost_p + load_cost(fl, fn) / (npts * n_load)
     Gp = ca.vertcat(*rows)
     ng_pt = len(lo)
     dropped = set(not_at_node0)
