@@ -82,8 +82,7 @@ def build_problem(hand: Hand | None = None) -> ManipulationProblem:
         object=obj, fingers=hand_fingertips(hand, start, obj), duration=motion.times[-1],
         initial_pose=start, motion=motion, mu=MU, n_intervals=N_INTERVALS,
         tracking=Tracking(position_tolerance=POSITION_TOLERANCE,
-                          orientation_tolerance=ORIENTATION_TOLERANCE),
-        timing="paper")  # the paper's piecewise inputs, as its figures
+                          orientation_tolerance=ORIENTATION_TOLERANCE))
 
 
 def path_length(p: FloatArray) -> float:
