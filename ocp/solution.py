@@ -280,23 +280,29 @@ def planned_forces(problem: ManipulationProblem, m: GraspModel, F: FloatArray,
     f = F0 * np.einsum("kij,jck->kci", R_po, Fl[0:3])  # k x nc x 3, palm frame
     fn = -np.einsum("kci,kci->kc", nrm, f)
     tau = problem.forces.torsional_friction * fn * Fl[3].T
-    return PlannedForces(f[: n + 1], f[n + 1:], tau[: n + 1], tau[n + 1:])
+    g = problem.forces.gravity
+    return PlannedForces(f[: n + 1], f[n + 1:], tau[: n + 1], tau[n + 1:],
+                         (float(g[0]), float(g[1]), float(g[2])))
 
 
 def joint_torques(finger: Any, q: FloatArray, tip_point: FloatArray, normal: FloatArray,
-                  force: FloatArray, torsion: FloatArray) -> FloatArray:
-    """tau = J^T (f; tau_n n) for rows of joint angles ``q``: J the finger's geometric
-    Jacobian (:attr:`~ocp.robots.finger.FingerModel.jacobian`) moved to the contact point
-    ``tip_point`` (palm frame), f the force the fingertip exerts on the object, tau_n n the
-    torsion about the object's outward normal ``normal``."""
+                  force: FloatArray, torsion: FloatArray,
+                  gravity: Any = (0.0, 0.0, 0.0)) -> FloatArray:
+    """tau = J^T (f; tau_n n) + g(q) for rows of joint angles ``q``: J the finger's
+    geometric Jacobian (:attr:`~ocp.robots.finger.FingerModel.jacobian`) moved to the
+    contact point ``tip_point`` (palm frame), f the force the fingertip exerts on the
+    object, tau_n n the torsion about the object's outward normal ``normal``; g(q) the
+    torques that hold the finger's own links against ``gravity`` (palm frame;
+    :meth:`~ocp.robots.finger.FingerModel.gravity_torques`: zero when its model has no
+    inertias, as the built-in fingers)."""
     k = len(q)
-    out = np.zeros((k, finger.nq))
+    out = finger.gravity_torques(q, gravity) if finger.mass > 0 else np.zeros((k, finger.nq))
     for j in range(k):
         J = np.asarray(finger.jacobian(q[j]))
         _, p_tip = finger.fk(q[j])
         r = tip_point[j] - np.asarray(p_tip).ravel()
         moment = np.cross(r, force[j]) + torsion[j] * normal[j]
-        out[j] = J[:3].T @ force[j] + J[3:].T @ moment
+        out[j] += J[:3].T @ force[j] + J[3:].T @ moment
     return out
 def fixed_rate_times(duration: float, rate: float) -> FloatArray:
     """Times [s] at a controller's rate [Hz] from 0 to ``duration``: k / rate for every k
@@ -487,10 +493,12 @@ class ManipulationSolution:
         pts = np.asarray(cart[4]).T.reshape(k, m.n_contacts, 3)
         nrm = np.asarray(cart[5]).T.reshape(k, m.n_contacts, 3)
         out = []
+        assert self.collocation is not None and self.collocation.forces is not None
+        gravity = self.collocation.forces.gravity
         for tip in m.fingertips:
             j = m.point_contacts.index(tip)
             out.append(joint_torques(tip.finger, smp.x[:, tip.q_cols], pts[:, j],
-                                     nrm[:, j], f[:, j], tau[:, j]))
+                                     nrm[:, j], f[:, j], tau[:, j], gravity))
         return out
 
     def break_nodes(self) -> list[int]:
@@ -595,7 +603,8 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
         if fg is not None and tg is not None and finite:
             j = m.point_contacts.index(tip)
             torques = joint_torques(tip.finger, Xg[:, tip.q_cols], pts[:, j], nrm[:, j],
-                                    fg[:, j], tg[:, j])
+                                    fg[:, j], tg[:, j],
+                                    col.forces.gravity if col.forces else (0.0, 0.0, 0.0))
         fingers.append(FingerTrajectory(tip.label(problem), tuple(tip.finger.joint_names),
                                         Xg[:, tip.q_cols], xdot[:, tip.q_cols], p_pf[:, i],
                                         R_pf[:, i], torques))

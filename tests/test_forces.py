@@ -226,3 +226,48 @@ def test_when_a_point_admits_no_forces_the_coupled_nlp_plans_them(
     kinematic = planner.solve(replace(problem, forces=None))
     assert out.iterations > kinematic.iterations
     assert not np.array_equal(out.X, kinematic.X)  # the coupled optimum moves a little
+
+
+def test_joint_torques_hold_the_fingers_own_weight_when_its_model_has_inertias() -> None:
+    """A finger whose URDF gives its links masses (the built-in one with 30 g links whose
+    centres sit 15 mm along each link): its joint torques are J^T f plus the gradient of
+    its links' potential energy, by central differences of the centre of mass's height
+    (Pinocchio's centerOfMass, the base mounted in the palm frame); without inertias the
+    gravity part is zero."""
+    import re
+
+    import pinocchio as pin
+
+    from ocp.robots.finger import builtin_urdf_text, load_finger
+    from ocp.solution import joint_torques
+
+    plain = load_finger()
+    inertial = ('<inertial><origin xyz="0.005 0.0 0.015" rpy="0 0 0"/><mass value="0.03"/>'
+                '<inertia ixx="2e-6" ixy="0" ixz="0" iyy="2e-6" iyz="0" izz="1e-6"/>'
+                '</inertial>')
+    text = re.sub(r'(<link name="link\d">)', r"\1" + inertial, builtin_urdf_text())
+    heavy = load_finger(text, base_rotation=plain.base_rotation,
+                        base_position=plain.base_position)
+    assert plain.mass == 0.0 and heavy.mass == pytest.approx(0.18)
+    gravity = np.array([0.0, 0.0, -9.81])
+    rng = np.random.default_rng(5)
+    q = plain.lower + (plain.upper - plain.lower) * rng.uniform(0.3, 0.7, (3, plain.nq))
+    data = heavy.model.createData()
+
+    def potential(qk: np.ndarray) -> float:
+        com = plain.base_rotation @ np.asarray(pin.centerOfMass(heavy.model, data, qk)) \
+            + plain.base_position
+        return -heavy.mass * float(gravity @ com)
+
+    force, torsion = np.tile([0.3, -0.2, -1.0], (3, 1)), np.full(3, 0.001)
+    tip = np.array([np.asarray(heavy.fk(qk)[1]).ravel() for qk in q])
+    normal = np.tile([0.0, 0.0, 1.0], (3, 1))
+    with_weight = joint_torques(heavy, q, tip, normal, force, torsion, gravity)
+    without = joint_torques(plain, q, tip, normal, force, torsion, gravity)
+    eps = 1e-6
+    for k in range(3):
+        grad = np.array([(potential(q[k] + eps * e) - potential(q[k] - eps * e)) / (2 * eps)
+                         for e in np.eye(plain.nq)])
+        assert np.max(np.abs(with_weight[k] - without[k] - grad)) < 1e-7
+        assert np.max(np.abs(grad)) > 1e-3  # the weight matters at these angles
+    assert np.array_equal(without, joint_torques(plain, q, tip, normal, force, torsion))

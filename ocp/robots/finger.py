@@ -313,6 +313,24 @@ class FingerModel:
         in palm coordinates (``LOCAL_WORLD_ALIGNED`` rotated by the base rotation)."""
         return self._jacobian_pin(self._check_q(q), self.data)
 
+    @property
+    def mass(self) -> float:
+        """The total mass of the finger's links [kg] (0: its model has no inertias, as the
+        built-in fingers)."""
+        return float(sum(float(inertia.mass) for inertia in self.model.inertias))
+
+    def gravity_torques(self, q: ArrayLike, gravity: ArrayLike) -> FloatArray:
+        """The joint torques [N m] that hold the finger's links still against ``gravity``
+        [m/s^2, palm frame] at the joint angles ``q`` (rows): Pinocchio's generalized
+        gravity of the model, the gravity turned into the finger's base frame."""
+        qa = np.atleast_2d(np.asarray(q, dtype=float))
+        model = pin.Model(self.model)  # a copy: its gravity is this call's
+        g_base = self.base_rotation.T @ np.asarray(gravity, dtype=float)
+        model.gravity = pin.Motion(np.concatenate([g_base, np.zeros(3)]))
+        data = model.createData()
+        return np.array([pin.computeGeneralizedGravity(model, data, self._check_q(qk))
+                         for qk in qa]).reshape(len(qa), self.nq)
+
     def within_limits(self, q: ArrayLike, margin: float = 0.0) -> bool:
         """Whether ``lower + margin <= q <= upper - margin`` for every joint."""
         qa = self._check_q(q)

@@ -442,12 +442,15 @@ class PlannedForces:
     and ``f_mid`` (n x nc x 3) [N], palm frame, the force each contact's body exerts on the
     object; ``tau_nodes``, ``tau_mid`` [N m] the torsion about the object's outward normal.
     Between the points, on each interval, the quadratic through node, midpoint and node,
-    like the inputs (:meth:`on_intervals`): continuous (the NLP has one force per point)."""
+    like the inputs (:meth:`on_intervals`): continuous (the NLP has one force per point).
+    ``gravity`` [m/s^2]: the load's gravity, palm frame (the fingers' own weight in their
+    joint torques, when their models have inertias)."""
 
     f_nodes: NDArray[np.float64]
     f_mid: NDArray[np.float64]
     tau_nodes: NDArray[np.float64]
     tau_mid: NDArray[np.float64]
+    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def on_intervals(self, k: NDArray[np.intp], s: NDArray[np.float64]
                      ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
