@@ -158,3 +158,30 @@ def test_the_greedy_method_does_not_plan_forces() -> None:
     result, _ = plan_request({**copy.deepcopy(EXP1), "forces": FORCES, "method": "greedy"})
     assert result.status is PlanStatus.INVALID_INPUT
     assert "forces" in result.message, result.message
+
+
+def test_the_bench_plans_forces_and_executes_on_them(tmp_path: Path) -> None:
+    """``dexroll bench --forces``: every collocation finger request gets the ``forces``
+    block (the greedy method's and the palm planners' do not: they plan none); a planned
+    row is executed in MuJoCo on the plan's own forces alone and passes."""
+    from planner_service.bench.command import forces_option, run_bench, with_forces
+    from planner_service.bench.suite import SuiteError, expand, load_suite, units
+
+    assert forces_option("0.05") == {"mass": 0.05, "min_normal_force": 1.0,
+                                     "torsional_friction": 0.005}
+    assert forces_option("0.1,2,0") == {"mass": 0.1, "min_normal_force": 2.0,
+                                        "torsional_friction": 0.0}
+    for bad in ("", "a", "1,2,3,4"):
+        with pytest.raises(SuiteError, match="--forces"):
+            forces_option(bad)
+    todo = with_forces(units(expand(load_suite("quick"), ["one_finger", "translation"], 1)),
+                       FORCES)
+    got = {(u.family, u.method): "forces" in u.request for u in todo}
+    assert got[("one_finger", "collocation")] and not got[("one_finger", "greedy")]
+    assert not got[("translation", "collocation")]
+    _, doc = run_bench("quick", workers=1, out=tmp_path, methods=["collocation"],
+                       families=["two_fingers"], limit=1, progress=False, forces=FORCES)
+    rows = json.loads((tmp_path / "results.json").read_text())["rows"]
+    assert [r["status"] for r in rows] == ["solved"]
+    assert rows[0]["exec_status"] == "passed", rows[0].get("exec_message")
+    assert doc["run"]["forces"] == FORCES

@@ -12,7 +12,7 @@ import argparse
 import datetime as dt
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                      "casadi_plain (default: every applicable one)")
     p.add_argument("--families", help="comma-separated subset of the suite's families")
     p.add_argument("--limit", type=int, help="only the first K problems of each family")
+    p.add_argument("--forces", metavar="MASS[,MIN_NORMAL[,TORSIONAL]]",
+                   help="plan every finger request's contact forces (collocation: the "
+                        "request's `forces` with this mass [kg], minimum normal force [N, "
+                        "default 1] and torsional friction [m, default 0.005]); its "
+                        "execution in MuJoCo then uses the plan's own forces alone")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--no-views", action="store_true",
                    help="no views of each family's best and worst plan beside the report "
@@ -47,18 +52,46 @@ def _split(text: str | None) -> list[str] | None:
     return None if text is None else [t.strip() for t in text.split(",") if t.strip()]
 
 
+def forces_option(text: str | None) -> dict[str, float] | None:
+    """The ``--forces`` option as a request's ``forces`` block (SuiteError when bad)."""
+    from .suite import SuiteError
+
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if not 1 <= len(values) <= 3:
+        raise SuiteError(f"--forces takes MASS[,MIN_NORMAL[,TORSIONAL]], got {text!r}")
+    out = dict(zip(("mass", "min_normal_force", "torsional_friction"),
+                   [*values, 1.0, 0.005][:3], strict=True))
+    return out
+
+
+def with_forces(todo: list[Any], forces: dict[str, float] | None) -> list[Any]:
+    """The units with ``forces`` in the requests of the collocation method's finger
+    planners (the greedy method and the palm's planners plan none)."""
+    if forces is None:
+        return todo
+    return [replace(u, request={**u.request, "forces": dict(forces)})
+            if u.method == "collocation" and u.planner in ("one_finger", "manipulation")
+            else u for u in todo]
+
+
 def run_bench(suite: str | Path, *, workers: int | None = None, url: str | None = None,
               ray: str | None = None, use_ray: bool = False, out: str | Path | None = None,
               methods: list[str] | None = None, families: list[str] | None = None,
-              limit: int | None = None, progress: bool = True, views: bool = False
-              ) -> tuple[int, dict[str, Any]]:
+              limit: int | None = None, progress: bool = True, views: bool = False,
+              forces: dict[str, float] | None = None) -> tuple[int, dict[str, Any]]:
     """Run a suite and write its report; (exit code, the results document).
 
     ``url``: through that service; ``ray`` (an address, ``auto``, ``local``) or
     ``use_ray`` (the Ray instance this process has initialised): on Ray; else a local pool
     of ``workers`` processes. ``views``: write the views of each family's best and worst
-    plan beside the report (``views/``, linked from it). Raises SuiteError for a suite,
-    family or method that does not exist."""
+    plan beside the report (``views/``, linked from it). ``forces``: every finger
+    request's ``forces`` (:func:`with_forces`). Raises SuiteError for a suite, family or
+    method that does not exist."""
     from .progress import Progress
     from .report import machine_info, now_utc, versions, write_report
     from .rows import peer_status
@@ -76,7 +109,7 @@ def run_bench(suite: str | Path, *, workers: int | None = None, url: str | None 
     stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")
     out_dir = Path(out) if out is not None else Path("bench-results") / f"{loaded.name}-{stamp}"
     problems = expand(loaded, families, limit)
-    todo = units(problems, methods)
+    todo = with_forces(units(problems, methods), forces)
     skipped: dict[str, str] = {}
     wanted_peers = {u.method for u in todo if u.method in PEER_METHODS}
     if wanted_peers:
@@ -103,7 +136,8 @@ def run_bench(suite: str | Path, *, workers: int | None = None, url: str | None 
     run: dict[str, Any] = {
         "runner": runner, "workers": int(ray_info.get("actors", n_workers)),
         "started": started, "finished": now_utc(), "wall_time": wall, "url": url,
-        "methods": methods, "families": families, "limit": limit, "notes": notes}
+        "methods": methods, "families": families, "limit": limit, "forces": forces,
+        "notes": notes}
     if runner == "ray":
         run["ray"] = dict(ray_info)
     meta = {"suite": {"name": loaded.name, "source": loaded.source,
@@ -125,7 +159,8 @@ def main(args: argparse.Namespace) -> int:
         code, doc = run_bench(args.suite, workers=args.workers, url=args.url, ray=args.ray,
                               out=args.out, methods=_split(args.methods),
                               families=_split(args.families), limit=args.limit,
-                              progress=not args.no_progress, views=not args.no_views)
+                              progress=not args.no_progress, views=not args.no_views,
+                              forces=forces_option(args.forces))
     except SuiteError as exc:
         print(f"dexroll bench: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -144,9 +144,10 @@ def row_from_result(unit: Unit, result: Any, wall_time: float | None,
 
 def execute(unit: Unit, result: Any) -> dict[str, Any]:
     """The ``exec_*`` fields of a solved plan executed in MuJoCo with the simulator's
-    defaults (docs/simulation.md): ``exec_status`` 'passed' or 'failed' (its tolerances:
-    1 mm, 2 deg, no contact lost), or 'error' (``exec_message`` says why); none when MuJoCo
-    is not installed or ``DEXROLL_BENCH_EXECUTE=0``. Never raises."""
+    defaults (docs/simulation.md; a plan with forces on its own forces alone):
+    ``exec_status`` 'passed' or 'failed' (its tolerances: 1 mm, 2 deg, no contact lost), or
+    'error' (``exec_message`` says why); none when MuJoCo is not installed or
+    ``DEXROLL_BENCH_EXECUTE=0``. Never raises."""
     if os.environ.get("DEXROLL_BENCH_EXECUTE", "1") == "0":
         return {}
     try:
@@ -158,7 +159,10 @@ def execute(unit: Unit, result: Any) -> dict[str, Any]:
         from planner_service.execution import simulate_result
         from planner_service.planners import REQUEST
 
-        report = simulate_result(result, REQUEST.validate_python(unit.request))
+        # a plan with its own forces is executed on them alone (no squeeze or grip of the
+        # simulator's own); one without, with the simulator's grip
+        own = {"squeeze": 0.0, "grip_force": 0.0} if unit.request.get("forces") else None
+        report = simulate_result(result, REQUEST.validate_python(unit.request), own)
     except Exception as exc:  # a failure is a row's field, never a crash of the benchmark
         return {"exec_status": "error", "exec_message": f"{type(exc).__name__}: {exc}",
                 "exec_wall_time": time.perf_counter() - t0}
