@@ -24,10 +24,12 @@ from ocp.robots.allegro import (
     mjcf_text,
     urdf_text,
 )
+from ocp.robots.grasp_reach import contact_sides, roll, search_grasp, tip_state, tips_gap
 from ocp.robots.whole_hand import HandModelError, TipSpec, load_whole_hand, tip_geometry
+from ocp.solution import Status
 from ocp.solve.planner import ManipulationPlanner, ManipulationProblem
 from ocp.spec.grasp import fingertips_from_joints
-from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose
+from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
 from ocp.spec.problem import ObjectSpec, ProblemError
 
 URDF, MJCF = load_allegro("urdf"), load_allegro("mjcf")
@@ -177,3 +179,64 @@ def test_overlapping_fingertips_are_refused() -> None:
 
 def test_tip_names_are_the_hands() -> None:
     assert URDF.tip_names == TIP_NAMES == MJCF.tip_names
+
+
+# -- how far a grasp can turn the ball: rolling reach and the grasp search ------------------
+
+def test_the_rolled_motion_has_no_slip_no_spin_and_equal_arcs_on_ball_and_tip() -> None:
+    """A finger's motion as rolling without slip or spin fixes it (4 rows on 4 joint
+    rates) while the ball turns: over a small turn, by finite differences of Pinocchio's
+    poses, the tip's material point at the contact moves with the ball's and the tip turns
+    about the contact normal as the ball does; over the whole motion the contact's path is
+    as long on the ball as on the cap, and the motion stops within the joint limits."""
+    f, q0 = URDF.fingers[0], np.asarray(NOMINAL_Q[0])
+    c, axis = np.asarray(NOMINAL_OBJECT_POSITION), np.array([0.0, 0.0, -1.0])
+    d = 1e-3
+    step = roll(f, q0, c, NOMINAL_RADIUS, axis, max_turn=d)
+    assert step.reach == pytest.approx(d) and step.why == ""
+    s0 = tip_state(f, q0, c, NOMINAL_RADIUS)
+    R0, p0 = f.fingertip_pose_pin(q0)
+    R1, p1 = f.fingertip_pose_pin(step.q)
+    K = np.array([[0, 1, 0], [-1, 0, 0], [0, 0, 0]], dtype=float)  # [axis]x, axis -z
+    Rb = np.eye(3) + math.sin(d) * K + (1 - math.cos(d)) * K @ K
+    moved = NOMINAL_RADIUS * d  # the ball's surface point moves about this far
+    tip_point = p1 + R1 @ R0.T @ (s0.contact - p0)
+    assert np.linalg.norm(tip_point - (c + Rb @ (s0.contact - c))) < 1e-2 * moved
+    dR = R1 @ R0.T  # the tip's rotation: about the normal as much as the ball's
+    spin = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
+    assert float(spin @ s0.n) == pytest.approx(d * float(axis @ s0.n), abs=1e-2 * d)
+    whole = roll(f, q0, c, NOMINAL_RADIUS, axis)
+    assert 0 < whole.reach < math.pi and whole.why
+    assert whole.tip_arc == pytest.approx(whole.ball_arc, rel=1e-3)
+    assert np.all(whole.q >= f.lower) and np.all(whole.q <= f.upper)
+
+
+def test_a_searched_grasp_turns_the_ball_beyond_the_nominal_grasps_reach() -> None:
+    """The grasp search (initial contacts near the nominal ones, each finger's rolled
+    motion about the axis) finds a grasp whose rolled reach about the palm's z exceeds the
+    nominal grasp's; a turn between the two reaches, which the nominal grasp cannot make
+    by rolling, is planned from the searched grasp (its tips' charts centred on its
+    contacts): solved and certified, every joint within its limits."""
+    c, axis = np.asarray(NOMINAL_OBJECT_POSITION), np.array([0.0, 0.0, 1.0])
+    nominal = min(roll(f, q, c, NOMINAL_RADIUS, axis).reach
+                  for f, q in zip(URDF.fingers, NOMINAL_Q, strict=True))
+    found = search_grasp(URDF.fingers, NOMINAL_Q, c, NOMINAL_RADIUS, axis,
+                         max_turn=math.radians(45.0), samples=10, seed=0)
+    assert found.reach > nominal + math.radians(10.0)
+    assert tips_gap(URDF.fingers, found.q) >= 1e-3
+    hand = load_whole_hand(urdf_text(), "urdf", [TipSpec(n, side=s) for n, s in zip(
+        TIP_NAMES, contact_sides(URDF.fingers, found.q, c, NOMINAL_RADIUS), strict=True)])
+    tips = fingertips_from_joints(hand.fingers, tuple(tuple(q) for q in found.q), BALL, POSE,
+                                  NAMES, WHERE)
+    angle = (nominal + found.reach) / 2
+    problem = ManipulationProblem(
+        BALL, tips, 2.0, initial_pose=POSE,
+        motion=DesiredMotion.from_steps(POSE, [MotionStep(2.0, tuple(axis), angle)]),
+        tracking=Tracking(position_tolerance=1e-3, orientation_tolerance=math.radians(1.0)),
+        n_intervals=20)
+    plan = ManipulationPlanner().solve(problem)
+    assert plan.status is Status.SOLVED, plan.message
+    assert plan.certificate.passed
+    for tip, finger in zip(problem.fingers, plan.fingers, strict=True):
+        assert np.all(finger.q >= tip.finger.lower - 1e-6)
+        assert np.all(finger.q <= tip.finger.upper + 1e-6)
