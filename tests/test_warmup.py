@@ -4,12 +4,13 @@ first request of those structures is served from the structure cache (real servi
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import httpx
-from conftest import Server
+import pytest
+from conftest import Server, start_server
 
 from ocp.ball_on_palm import BallOnPalmPlanner
 from planner_service.planners import FingerCache
@@ -31,14 +32,23 @@ def plan(server: Server, path: Path) -> dict[str, Any]:
     return result
 
 
-def test_warmed_structures_are_served_from_the_cache(
-        server_factory: Callable[..., Server], tmp_path: Path) -> None:
-    # experiment 2 on a grid its certificate passes on, not refined (a refinement would
-    # build a grid the warm-up did not)
-    exp2 = tmp_path / "experiment2.json"
+@pytest.fixture(scope="module")
+def warmed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Server, Path]]:
+    """One worker that warms up the triangle and experiment 2 (on a grid its certificate
+    passes on, not refined: a refinement would build a grid the warm-up did not), and the
+    experiment's request file."""
+    folder = tmp_path_factory.mktemp("warmup")
+    exp2 = folder / "experiment2.json"
     exp2.write_text(json.dumps({**json.loads(EXPERIMENT2.read_text()), "n_intervals": 160,
                                 "max_refinements": 0}))
-    server = server_factory(DEXROLL_WORKERS="1", DEXROLL_WARMUP=f"{TRIANGLE},{exp2}")
+    server = start_server(folder / "data", DEXROLL_WORKERS="1",
+                          DEXROLL_WARMUP=f"{TRIANGLE},{exp2}")
+    yield server, exp2
+    server.stop()
+
+
+def test_warmed_structures_are_served_from_the_cache(warmed: tuple[Server, Path]) -> None:
+    server, exp2 = warmed
     triangle = plan(server, TRIANGLE)
     assert triangle["stats"]["cache_hit"] is True and triangle["stats"]["build_time"] == 0.0
     two = plan(server, exp2)
@@ -46,11 +56,16 @@ def test_warmed_structures_are_served_from_the_cache(
     assert "warm-up: 2 structures built" in server.log_text()
 
 
-def test_without_warm_up_the_first_request_builds(server_factory: Callable[..., Server]
-                                                  ) -> None:
-    server = server_factory(DEXROLL_WORKERS="1")  # conftest: DEXROLL_WARMUP empty
-    triangle = plan(server, TRIANGLE)
-    assert triangle["stats"]["cache_hit"] is False and triangle["stats"]["build_time"] > 0.0
+def test_without_warm_up_the_first_request_builds(warmed: tuple[Server, Path],
+                                                  tmp_path: Path) -> None:
+    """A structure not in the warm-up list (the triangle over another duration) is built by
+    its first request, on the same worker (the service without a warm-up list, conftest's
+    default, has none: tests/test_service.py's jobs build theirs)."""
+    server, _ = warmed
+    other = tmp_path / "triangle_7s.json"
+    other.write_text(json.dumps({**json.loads(TRIANGLE.read_text()), "duration": 7.0}))
+    first = plan(server, other)
+    assert first["stats"]["cache_hit"] is False and first["stats"]["build_time"] > 0.0
 
 
 def test_bad_and_missing_warm_up_requests_are_skipped(tmp_path: Path) -> None:
