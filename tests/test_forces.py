@@ -194,6 +194,16 @@ def test_two_stages_keep_the_kinematic_plan_and_agree_with_the_coupled_nlp(
     assert plain.ok and sol.ok
     assert np.array_equal(sol.X, plain.X)
     assert plain.contacts[0].force is None and sol.contacts[0].force is not None
+    # its certificate: the kinematic one with the force checks added, the same values as
+    # certifying the plan with its forces from scratch
+    from ocp.certify.laws import certify_grasp
+
+    assert sol.collocation is not None and sol._interpolant is not None
+    pf = problem.with_intervals(len(sol.collocation.t_nodes) - 1)
+    full = certify_grasp(pf, PLANNER.model(pf), sol.trajectory, sol._interpolant.prm,
+                         pf.tolerances, sol.collocation.forces)
+    assert {c.name: c.value for c in sol.certificate.checks} == pytest.approx(
+        {c.name: c.value for c in full.checks}, rel=1e-12, abs=1e-15)
     coupled_planner = ManipulationPlanner()
     coupled_planner.two_stage_forces = False
     coupled = coupled_planner.solve(problem)

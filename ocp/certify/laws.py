@@ -35,7 +35,8 @@ from ocp.transcription.collocation import HermiteInterpolant, PlannedForces, rei
 if TYPE_CHECKING:
     from ocp.transcription.grasp_model import GraspModel
 
-__all__ = ["certify_grasp", "check_samples", "force_checks", "timing_checks"]
+__all__ = ["certify_grasp", "check_samples", "force_checks", "timing_checks",
+           "with_force_checks"]
 
 #: Relative tolerance of the planned forces' checks between collocation points: the
 #: equilibrium residual (of the force scale; moments of it times the object's size) and
@@ -160,6 +161,29 @@ def timing_checks(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
                             problem.max_joint_acceleration * (1 + 1e-6), CheckKind.LIMITS,
                             time=float(traj.t_nodes[k[j]] + s[j] * h)))
     return checks
+
+
+def with_force_checks(cert: Certificate, problem: ManipulationProblem, m: GraspModel,
+                      traj: HermiteInterpolant, prm: FloatArray, policy: TolerancePolicy,
+                      forces: PlannedForces) -> Certificate:
+    """The certificate ``cert`` of the plan ``traj`` (its kinematics, by
+    :func:`certify_grasp`) with the checks of its planned ``forces`` added: the same
+    samples, poses, points and normals as :func:`certify_grasp` gives
+    :func:`force_checks`, without checking the kinematics again."""
+    ts, sx, _, _ = check_samples(traj, policy.check_points)
+    n = len(ts)
+    cart = m.mapped("cartesian", n)(sx.T, prm)
+    nc = m.n_contacts
+    R_po = np.asarray(cart[0]).T.reshape(n, 3, 3).transpose(0, 2, 1)
+    p_po = np.asarray(cart[1]).T
+    pts = np.asarray(cart[4]).T.reshape(n, nc, 3)
+    nrm = np.asarray(cart[5]).T.reshape(n, nc, 3)
+    n_int = len(traj.t_nodes) - 1
+    s = np.asarray(policy.check_points, dtype=float)
+    more, reported = force_checks(problem, forces, np.repeat(np.arange(n_int), len(s)),
+                                  np.tile(s, n_int), ts, p_po, R_po, pts, nrm)
+    return Certificate.of([*cert.checks, *more], {**dict(cert.reported), **reported},
+                          n_samples=cert.n_samples)
 
 
 def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInterpolant,

@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate
-from ocp.certify.laws import certify_grasp
+from ocp.certify.laws import certify_grasp, with_force_checks
 from ocp.geometry.grasp import force_angles
 from ocp.solution import (
     Collocation,
@@ -404,7 +404,8 @@ class ManipulationPlanner:
             return None
         forces = planned_forces(pf, m, F, col.X, col.Xm, prm)
         t_cert = time.perf_counter()
-        cert = certify_grasp(pf, m, kin.trajectory, prm, pf.tolerances, forces)
+        cert = with_force_checks(kin.certificate, pf, m, kin.trajectory, prm, pf.tolerances,
+                                 forces)
         if not cert.passed:
             return None
         sol = assemble_solution(pf, m, Status.SOLVED, kin.raw_status, replace(col, forces=forces),
