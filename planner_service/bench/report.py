@@ -387,8 +387,11 @@ def _markdown(doc: dict[str, Any], summary: Sequence[dict[str, Any]], unexpected
               "certificate residuals are the worst over the successful runs (cone margin: "
               "the smallest; > 0 is inside the friction cones). Greedy iterations are its "
               "steps. Executed: the successful plans with fingers run in MuJoCo by a hand "
-              "following them (docs/simulation.md: position servos, a 0.5 mm squeeze and "
-              "1 N grip), passed within 1 mm and 2° with no contact lost / run, and the "
+              "following them (docs/simulation.md: position servos, "
+              + ("the plans' own forces as feed-forward (planned with `--forces` "
+                 f"{run['forces']}; the greedy method's with a 0.5 mm squeeze and 1 N grip)"
+                 if run.get("forces") else "a 0.5 mm squeeze and 1 N grip")
+              + "), passed within 1 mm and 2° with no contact lost / run, and the "
               "worst object errors."]
     if doc["ratios"]:
         lines += ["", f"## Against `{REFERENCE}`, in this run", "",
