@@ -520,8 +520,8 @@ class OneFingerRequest(_PalmRequest):
                     "over the whole horizon); 'greedy': the paper's own method (section 3): "
                     "the finger contact velocity chosen step by step by a grid search in the "
                     "ellipse bounding the rolling angle, joint rates from the Jacobian's "
-                    "pseudo-inverse (200 steps); the weights and `timing` do not apply to it "
-                    "(its plan has the paper's piecewise timing)")
+                    "pseudo-inverse (200 steps); the weights do not apply to it, `timing` only "
+                    "to the ball-on-palm plan whose path it follows")
 
     @field_validator("method")
     @classmethod
