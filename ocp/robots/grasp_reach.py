@@ -148,7 +148,7 @@ def roll(f: Any, q0: ArrayLike, centre: ArrayLike, radius: float, axis: ArrayLik
         qd2, _ = joint_rates(f, q + h / 2 * qd1, c, radius, a)
         q_new = q + h * qd2
         s = tip_state(f, q_new, c, radius)
-        if float(np.abs(q_new - q).max()) > 0.01 or abs(s.gap) > abs(prev.gap) + 1e-5:
+        if float(np.abs(q_new - q).max()) > 0.01 or abs(s.gap) > abs(s0.gap) + 1e-6:
             h /= 2  # a fast joint (near a fold of the finger's motion): smaller steps
             continue
         out = np.flatnonzero((q_new < f.lower) | (q_new > f.upper))
