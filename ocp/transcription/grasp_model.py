@@ -155,6 +155,13 @@ class GraspModel:
             self._rolls[steps] = self._roll_step.mapaccum("roll", steps)
         return self._rolls[steps]
 
+    def unpack_params(self, prm: Any) -> tuple[Any, list[Any]]:
+        """(shape, every point contact's chart R_c as 3 x 3) of a parameter vector
+        (:meth:`params`' layout; symbolic or numeric)."""
+        ns = self.surface.n_params
+        return prm[0:ns], [ca.reshape(prm[ns + 9 * k:ns + 9 * k + 9], 3, 3)
+                           for k in range(self.n_contacts)]
+
     def params(self, shape: FloatArray, charts: Sequence[FloatArray]) -> FloatArray:
         return np.concatenate([np.asarray(shape, dtype=float),
                                *[np.asarray(R).ravel(order="F") for R in charts]])

@@ -60,7 +60,7 @@ def fingertip_twist_rows(m: Any, x: Any, u: Any, prm: Any) -> Any:
     rows = []
     for c, (cp, v_c, omega_c) in zip(m.fingertips, contact_twists(m, xs, us, ps),
                                      strict=True):
-        v_fk, omega_fk = finger_twist(c.finger, xs[c.xs][5:], us[c.us][2:], cp)
+        v_fk, omega_fk = finger_twist(c.finger, xs[c.q_cols], us[c.qd_cols], cp)
         rows += [v_fk - v_c, omega_fk - omega_c]
     expr = ca.vertcat(*rows) if rows else ca.SX(0, 1)
     return ca.Function("fingertip_twists", [xs, us, ps], [expr])(x, u, prm)
@@ -71,10 +71,7 @@ def contact_twists(m: Any, x: Any, u: Any, prm: Any) -> list[tuple[Any, Any, Any
     purely symbolic, physical units): ``(c, v, omega)``, the contact point c in the palm
     frame, the velocity of the tip's material point there (the object's material point's:
     no slip) and the tip's angular velocity (the object's plus Montana's rolling one)."""
-    ns = m.surface.n_params
-    shape = prm[0:ns]
-    charts = [ca.reshape(prm[ns + 9 * k:ns + 9 * k + 9], 3, 3)
-              for k in range(m.n_contacts)]
+    shape, charts = m.unpack_params(prm)
     chart_of = {id(c): charts[k] for k, c in enumerate(m.point_contacts)}
     g = SymbolicGrasp(m.surface, shape, x, m.dynamics(x, u, prm))
     obj = m.object
