@@ -123,7 +123,7 @@ def test_a_model_past_its_time_or_memory_is_refused_while_healthz_answers(
     for limit, reason in MODEL_CHECK_LIMITS:
         server = server_factory(DEXROLL_MODEL_MAX_JOINTS="1000",
                                 DEXROLL_MODEL_MAX_LINKS="1000",
-                                DEXROLL_MODEL_MAX_DEPTH="1000", **limit)
+                                DEXROLL_MODEL_MAX_DEPTH="1000", DEXROLL_WORKERS="1", **limit)
         servers.append(server)
         answers: list[int] = []
         done = threading.Event()
@@ -258,26 +258,11 @@ def alive(pid: int) -> bool:
     return "\nState:\tZ" not in status
 
 
-def test_a_job_ends_at_its_limit_during_the_build_and_its_worker_is_kept(
-        server_factory: Any) -> None:
-    # kill grace far away: only the job's own deadline can end it; the worker must then
-    # finish its build (cached for the next job of that structure) instead of being killed
-    server = server_factory(DEXROLL_KILL_GRACE="120", DEXROLL_WORKERS="1")
-    job = post(server, {**SLOW, "solver": {"time_limit": 0.5}}, wait=0).json()
-    job = wait_terminal(server, job["id"])
-    assert (job["state"], job["code"]) == ("timed_out", "time_limit"), job
-    assert "before the planner had an iterate" in job["message"]
-    assert alive(job["worker_pid"])
-    again = wait_terminal(server, post(server, {**SLOW, "solver": {"time_limit": 120}},
-                                       wait=0).json()["id"])
-    assert again["worker_pid"] == job["worker_pid"]  # the same worker: not replaced
-    assert again["result"]["stats"]["cache_hit"] is True, again["result"]["stats"]
-    assert "killed" not in server.log_text()
-
-
-# -- 7. workers die with the service ---------------------------------------------------------
+# -- 7. workers die with the service; 2. one deadline per job ---------------------------------
 
 def test_workers_and_checkers_die_with_the_service(server_factory: Any) -> None:
+    """... and the restarted service (1 worker) then ends a job at its limit during the
+    build and keeps its worker (one service start fewer than a test each: suite time)."""
     server = server_factory(DEXROLL_KILL_GRACE="120")
     job = post(server, {**SLOW, "solver": {"time_limit": 120}}, wait=0).json()
     deadline = time.monotonic() + 120
@@ -297,10 +282,29 @@ def test_workers_and_checkers_die_with_the_service(server_factory: Any) -> None:
         time.sleep(0.1)
     assert not any(alive(p) for p in children), [p for p in children if alive(p)]
     # restarted on the same store: the job runs again, once
-    again = server_factory(server.data_dir, DEXROLL_KILL_GRACE="120")
+    again = server_factory(server.data_dir, DEXROLL_KILL_GRACE="120", DEXROLL_WORKERS="1")
     job = wait_terminal(again, job["id"])
     assert job["state"] in ("succeeded", "failed", "timed_out") and job["worker_pid"] \
         not in children
+    a_job_ends_at_its_limit_during_the_build_and_its_worker_is_kept(again)
+
+
+def a_job_ends_at_its_limit_during_the_build_and_its_worker_is_kept(server: Server) -> None:
+    """On a service of one worker whose kill grace is far away: only the job's own deadline
+    can end it; the worker must then finish its build (cached for the next job of that
+    structure) instead of being killed. The structure is new to the worker (the triangle
+    over another duration than the job it ran before)."""
+    slow = {**SLOW, "duration": 6.5}
+    job = post(server, {**slow, "solver": {"time_limit": 0.5}}, wait=0).json()
+    job = wait_terminal(server, job["id"])
+    assert (job["state"], job["code"]) == ("timed_out", "time_limit"), job
+    assert "before the planner had an iterate" in job["message"]
+    assert alive(job["worker_pid"])
+    again = wait_terminal(server, post(server, {**slow, "solver": {"time_limit": 120}},
+                                       wait=0).json()["id"])
+    assert again["worker_pid"] == job["worker_pid"]  # the same worker: not replaced
+    assert again["result"]["stats"]["cache_hit"] is True, again["result"]["stats"]
+    assert "killed" not in server.log_text()
 
 
 # -- 3. large results served as stored; retention --------------------------------------------
@@ -321,18 +325,25 @@ def test_a_result_is_served_as_stored_and_without_it_on_request(live_server: Ser
     assert head["links"] == job["links"] and head["links"]["view"]
 
 
+#: Both limits on the same services (one service start fewer: suite time); a result limit
+#: the triangle's plan (80 kB) is under and its plan sampled 1000 times (600 kB) over.
+LIMITS = {"DEXROLL_MAX_JOBS": "2", "DEXROLL_MAX_RESULT_BYTES": "262144",
+          "DEXROLL_WORKERS": "1"}
+
+
 def test_retention_purges_the_oldest_finished_jobs(server_factory: Any) -> None:
-    server = server_factory(DEXROLL_MAX_JOBS="2")
+    """... and a plan over the result limit is not stored (on the restarted service)."""
+    server = server_factory(**LIMITS)
     ids = [post(server, TRIANGLE).json()["id"] for _ in range(3)]
     server.stop()  # the purge runs at start (and every minute)
-    again = server_factory(server.data_dir, DEXROLL_MAX_JOBS="2")
+    again = server_factory(server.data_dir, **LIMITS)
     listed = httpx.get(f"{again.url}/v1/plans", timeout=30).json()
     assert [j["id"] for j in listed["items"]] == ids[:0:-1] and listed["total"] == 2
     assert httpx.get(f"{again.url}/v1/plans/{ids[0]}", timeout=30).status_code == 404
+    a_plan_over_the_result_limit_is_not_stored(again)
 
 
-def test_a_plan_over_the_result_limit_is_not_stored(server_factory: Any) -> None:
-    server = server_factory(DEXROLL_MAX_RESULT_BYTES="65536")
+def a_plan_over_the_result_limit_is_not_stored(server: Server) -> None:
     job = post(server, {**TRIANGLE, "sample_times": [6.0 * i / 999 for i in range(1000)]})
     job = job.json()
     assert (job["state"], job["code"]) == ("failed", "result_too_large"), job
@@ -345,7 +356,7 @@ KEYS = "alice:alice-key-0123456789,bob:bob-key-0123456789abc"
 
 
 def test_with_api_keys_jobs_and_idempotency_keys_are_the_owners(server_factory: Any) -> None:
-    server = server_factory(DEXROLL_API_KEYS=KEYS)
+    server = server_factory(DEXROLL_API_KEYS=KEYS, DEXROLL_WORKERS="1")
     alice = {"Authorization": "Bearer alice-key-0123456789"}
     bob = {"X-API-Key": "bob-key-0123456789abc"}
     for headers in ({}, {"Authorization": "Bearer wrong-key-0123456789"}):
