@@ -178,7 +178,7 @@ def test_three_hard_fingers_hold_the_ball_without_torsion() -> None:
 
 
 def test_two_stages_keep_the_kinematic_plan_and_agree_with_the_coupled_nlp(
-        planned: tuple[Any, Any]) -> None:
+        planned: tuple[Any, Any], monkeypatch: pytest.MonkeyPatch) -> None:
     """The forces are planned after the kinematics, point by point
     (ocp/transcription/force_stage.py): the plan with forces moves exactly as the plan
     without them; the coupled NLP (``two_stage_forces = False``) plans forces within 1 % of
@@ -186,8 +186,6 @@ def test_two_stages_keep_the_kinematic_plan_and_agree_with_the_coupled_nlp(
     terms pull the kinematics by up to 7e-4 of a state) and both are certified with
     them."""
     from test_manipulation import PLANNER
-
-    from ocp.solve.planner import ManipulationPlanner
 
     problem, sol = planned
     plain = PLANNER.solve(replace(problem, forces=None))
@@ -204,9 +202,8 @@ def test_two_stages_keep_the_kinematic_plan_and_agree_with_the_coupled_nlp(
                          pf.tolerances, sol.collocation.forces)
     assert {c.name: c.value for c in sol.certificate.checks} == pytest.approx(
         {c.name: c.value for c in full.checks}, rel=1e-12, abs=1e-15)
-    coupled_planner = ManipulationPlanner()
-    coupled_planner.two_stage_forces = False
-    coupled = coupled_planner.solve(problem)
+    monkeypatch.setattr(PLANNER, "two_stage_forces", False)
+    coupled = PLANNER.solve(problem)
     assert coupled.ok, coupled.message
     assert coupled.certificate.passed and sol.certificate.passed
     f2 = np.stack([c.force for c in sol.contacts])
@@ -222,18 +219,18 @@ def test_when_a_point_admits_no_forces_the_coupled_nlp_plans_them(
     bounds) hands the problem to the coupled NLP, warm-started from the kinematic plan:
     the plan returned is the coupled one, certified with its forces, its statistics
     holding both solves."""
-    from ocp.solve.planner import ManipulationPlanner
+    from test_manipulation import PLANNER
+
     from ocp.transcription.force_stage import ForceStage
 
     problem, _ = planned
     monkeypatch.setattr(ForceStage, "solve", lambda self, *a, **k: (None, 0))
-    planner = ManipulationPlanner()
-    out = planner.solve(problem)
+    out = PLANNER.solve(problem)
     assert out.ok, out.message
     assert out.contacts[0].force is not None
     assert {c.name for c in out.certificate.checks} >= {"max_force_equilibrium_residual",
                                                        "min_normal_force"}
-    kinematic = planner.solve(replace(problem, forces=None))
+    kinematic = PLANNER.solve(replace(problem, forces=None))
     assert out.iterations > kinematic.iterations
     assert not np.array_equal(out.X, kinematic.X)  # the coupled optimum moves a little
 
