@@ -198,9 +198,27 @@ def test_killed_worker_fails_its_job_with_reason_and_next_job_succeeds(live_serv
     assert_certified_triangle(post(live_server, TRIANGLE, wait=60).json())
 
 
-def test_full_queue_answers_503_with_retry_after(server_factory: Callable[..., Server]
-                                                 ) -> None:
-    server = server_factory(DEXROLL_WORKERS="1", DEXROLL_MAX_QUEUE="1")
+def test_restart_keeps_finished_jobs_and_runs_queued_ones(
+        server_factory: Callable[..., Server], tmp_path: Path) -> None:
+    """... and (on the first service: one worker, a queue of one) a full queue answers 503
+    (one service start fewer than a test each: suite time)."""
+    data = tmp_path / "kept"
+    first = server_factory(data, DEXROLL_WORKERS="1", DEXROLL_MAX_QUEUE="1")
+    done = post(first, TRIANGLE).json()
+    assert_certified_triangle(done)
+    full_queue_answers_503_with_retry_after(first)
+    first.stop()
+    # a job left queued in the store while the service was down
+    store = Store(Settings(data_dir=data).db_path)
+    queued, _ = store.create("ball_on_palm", json.dumps(TRIANGLE), 60.0, None)
+    store.close()
+    second = server_factory(data)
+    assert get_job(second, done["id"])["result"] == done["result"]
+    assert_certified_triangle(wait_until(second, queued.id, terminal))
+
+
+def full_queue_answers_503_with_retry_after(server: Server) -> None:
+    """On a service of one worker and a queue of one."""
     running = post(server, SLOW, wait=0.0).json()
     wait_until(server, running["id"], lambda j: j["state"] == "running")
     queued = post(server, {**SLOW, "duration": 6.1}, wait=0.0)
@@ -211,22 +229,9 @@ def test_full_queue_answers_503_with_retry_after(server_factory: Callable[..., S
     # cancelling the queued job frees the queue, and it never ran
     cancelled = httpx.delete(f"{server.url}/v1/plans/{queued.json()['id']}").json()
     assert cancelled["state"] == "cancelled" and cancelled["started_at"] is None
-
-
-def test_restart_keeps_finished_jobs_and_runs_queued_ones(
-        server_factory: Callable[..., Server], tmp_path: Path) -> None:
-    data = tmp_path / "kept"
-    first = server_factory(data)
-    done = post(first, TRIANGLE).json()
-    assert_certified_triangle(done)
-    first.stop()
-    # a job left queued in the store while the service was down
-    store = Store(Settings(data_dir=data).db_path)
-    queued, _ = store.create("ball_on_palm", json.dumps(TRIANGLE), 60.0, None)
-    store.close()
-    second = server_factory(data)
-    assert get_job(second, done["id"])["result"] == done["result"]
-    assert_certified_triangle(wait_until(second, queued.id, terminal))
+    # the running one too (else the restarted service would run it again)
+    stopped = httpx.delete(f"{server.url}/v1/plans/{running['id']}", timeout=30).json()
+    assert stopped["state"] == "cancelled"
 
 
 # -- the contract ----------------------------------------------------------------------------
