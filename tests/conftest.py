@@ -94,3 +94,50 @@ def server_factory(tmp_path: Path) -> Iterator[Callable[..., Server]]:
     yield factory
     for server in started:
         server.stop()
+
+
+@pytest.fixture(scope="session")
+def quick_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path]:
+    """The whole quick suite through the library, 2 workers, by the command line (the
+    process pool's rows: tests/test_bench.py checks them, and compares a one-worker run, a
+    live service's and Ray's with them)."""
+    from planner_service import cli
+
+    out = tmp_path_factory.mktemp("bench") / "quick"
+    code = cli.main(["bench", "quick", "--workers", "2", "--out", str(out), "--no-progress"])
+    return code, out
+
+
+@dataclass
+class CliPlan:
+    """`dexroll plan <request> -o <result>` run as a real process."""
+
+    request_file: Path
+    proc: subprocess.CompletedProcess[str]
+    result_file: Path
+
+
+class CliPlans(dict[Path, CliPlan]):
+    """Each request file planned by the command line when first asked for, in a folder of
+    its own (its working directory): tests/test_cli.py checks the command line's output
+    and result, tests/test_sim.py executes the same plans in MuJoCo (one plan of each
+    example for the session)."""
+
+    def __init__(self, folder: Path) -> None:
+        super().__init__()
+        self.folder = folder
+
+    def __missing__(self, request_file: Path) -> CliPlan:
+        cwd = self.folder / f"{request_file.stem}-{len(self)}"
+        cwd.mkdir(parents=True)
+        out = cwd / "result.json"
+        proc = subprocess.run([sys.executable, "-m", "planner_service.cli", "plan",
+                               str(request_file), "-o", str(out)], cwd=cwd,
+                              capture_output=True, text=True, timeout=600, check=False)
+        self[request_file] = CliPlan(request_file, proc, out)
+        return self[request_file]
+
+
+@pytest.fixture(scope="session")
+def cli_plans(tmp_path_factory: pytest.TempPathFactory) -> CliPlans:
+    return CliPlans(tmp_path_factory.mktemp("cli-plans"))

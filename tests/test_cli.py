@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import CliPlans
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Every example but the two whole-hand files (10 s each here): they describe the built-in
@@ -52,10 +53,12 @@ def test_examples_include_the_paper_triangle_and_a_pure_reorientation() -> None:
 
 
 @pytest.mark.parametrize("request_file", EXAMPLES, ids=[p.stem for p in EXAMPLES])
-def test_plan_writes_a_certified_result_and_a_summary(request_file: Path, tmp_path: Path
-                                                      ) -> None:
-    out = tmp_path / "result.json"
-    proc = dexroll("plan", str(request_file), "-o", str(out), cwd=tmp_path)
+def test_plan_writes_a_certified_result_and_a_summary(request_file: Path,
+                                                      cli_plans: CliPlans) -> None:
+    # `dexroll plan` as a real process (conftest: one run per example for the session;
+    # tests/test_sim.py executes its result in MuJoCo)
+    run = cli_plans[request_file]
+    proc, out = run.proc, run.result_file
     assert proc.returncode == 0, proc.stdout + proc.stderr
     request = json.loads(request_file.read_text())
     # a desired object motion is summarised by its tracking error, palm goals by theirs

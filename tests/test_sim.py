@@ -1,7 +1,7 @@
 """Plans executed in MuJoCo (sim/, docs/simulation.md): the paper's experiments and every
-example with fingers, planned here and executed with the default grip, pass; a plan that
-slides the pad instead of rolling fails; without a grip the contacts are lost; and the
-report's numbers obey their laws. Real MuJoCo, no mocks."""
+example with fingers, planned (by the command line: conftest) and executed with the default
+grip, pass; a plan that slides the pad instead of rolling fails; without a grip the contacts
+are lost; and the report's numbers obey their laws. Real MuJoCo, no mocks."""
 
 from __future__ import annotations
 
@@ -16,6 +16,8 @@ from typing import Any
 import mujoco
 import numpy as np
 import pytest
+from conftest import CliPlans
+from pydantic import TypeAdapter
 
 from dexroll_client.models import AnyPlanResult, PlanRequest, PlanStatus
 from planner_service.bench.report import (
@@ -44,6 +46,7 @@ from sim import (
 from sim.run import hermite
 
 ROOT = Path(__file__).resolve().parents[1]
+RESULT: TypeAdapter[AnyPlanResult] = TypeAdapter(AnyPlanResult)
 #: The paper's experiments and every example whose plan has fingers.
 PLANS = {
     "experiment1": ROOT / "docs" / "viewer-experiment1.json",
@@ -54,10 +57,23 @@ PLANS = {
 }
 
 
-def _plan(path: Path) -> tuple[AnyPlanResult, PlanRequest]:
+#: Examples that tests/test_cli.py plans by the command line (every one but the two
+#: whole-hand files, which only this module plans): their plans are the command line's
+#: results (conftest's cli_plans, one plan of each for the session), read back.
+CLI_PLANNED = {p for p in PLANS.values() if p.parent == ROOT / "examples"
+               and p.stem not in ("hand_from_mjcf", "hand_from_urdf")}
+
+
+def _plan(path: Path, cli_plans: CliPlans) -> tuple[AnyPlanResult, PlanRequest]:
     raw = json.loads(path.read_text(encoding="utf-8"))
-    result, summary = plan_request(raw)
-    assert result.status is PlanStatus.SOLVED, summary
+    if path in CLI_PLANNED:
+        run = cli_plans[path]
+        assert run.proc.returncode == 0, run.proc.stdout + run.proc.stderr
+        result: AnyPlanResult = RESULT.validate_json(run.result_file.read_text())
+        assert result.status is PlanStatus.SOLVED, run.proc.stdout
+    else:
+        result, summary = plan_request(raw)
+        assert result.status is PlanStatus.SOLVED, summary
     return result, REQUEST.validate_python(raw)
 
 
@@ -68,8 +84,12 @@ def test_the_examples_with_fingers_are_all_executed() -> None:
 class _Plans(dict[str, tuple[AnyPlanResult, PlanRequest]]):
     """Each of PLANS planned when first asked for (a test of one plan plans only it)."""
 
+    def __init__(self, cli_plans: CliPlans) -> None:
+        super().__init__()
+        self.cli_plans = cli_plans
+
     def __missing__(self, name: str) -> tuple[AnyPlanResult, PlanRequest]:
-        self[name] = _plan(PLANS[name])
+        self[name] = _plan(PLANS[name], self.cli_plans)
         return self[name]
 
 
@@ -84,8 +104,8 @@ class _Executed(dict[str, SimReport]):
 
 
 @pytest.fixture(scope="module")
-def plans() -> _Plans:
-    return _Plans()
+def plans(cli_plans: CliPlans) -> _Plans:
+    return _Plans(cli_plans)
 
 
 @pytest.fixture(scope="module")
