@@ -4,6 +4,7 @@ FastAPI, NumPy), into a fresh virtual environment, and talks to a live service t
 from __future__ import annotations
 
 import subprocess
+import sys
 import tomllib
 import venv
 from pathlib import Path
@@ -22,15 +23,20 @@ def test_client_declares_only_httpx_and_pydantic() -> None:
 
 def test_client_installs_alone_and_plans_against_a_live_service(tmp_path: Path,
                                                                 live_server: Server) -> None:
+    # a fresh environment without pip of its own (seeding pip into it took ~8 s of CPU):
+    # this interpreter's pip installs into it and lists it (``pip --python``)
     env_dir = tmp_path / "venv"
-    venv.EnvBuilder(with_pip=True).create(env_dir)
+    venv.EnvBuilder(with_pip=False).create(env_dir)
     python = env_dir / "bin" / "python"
-    install = subprocess.run([str(python), "-m", "pip", "install", "--quiet",
-                              "--disable-pip-version-check", str(CLIENT)],
+    pip = [sys.executable, "-m", "pip", "--python", str(python),
+           "--disable-pip-version-check"]
+    install = subprocess.run([*pip, "install", "--quiet", str(CLIENT)],
                              capture_output=True, text=True, timeout=600, check=False)
     assert install.returncode == 0, install.stdout + install.stderr
-    listed = subprocess.run([str(python), "-m", "pip", "list", "--format=freeze"],
+    listed = subprocess.run([*pip, "list", "--format=freeze"],
                             capture_output=True, text=True, check=True).stdout.lower()
+    assert "dexroll-client==" in listed and "httpx==" in listed and "pydantic==" in listed
+    assert "pip==" not in listed  # the environment's own packages, not this one's
     for heavy in ("casadi", "pin==", "fastapi", "numpy", "uvicorn"):
         assert heavy not in listed, f"{heavy} was installed with the client"
     code = f"""
