@@ -347,12 +347,8 @@ def test_exit_code_follows_the_suites_expectations(tmp_path: Path) -> None:
 
 # -- the quick suite, run -----------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def quick_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, Path]:
-    """The whole quick suite through the library, 2 workers, by the command line."""
-    out = tmp_path_factory.mktemp("bench") / "quick"
-    code = cli.main(["bench", "quick", "--workers", "2", "--out", str(out), "--no-progress"])
-    return code, out
+# quick_run (conftest, one run for the session): the whole quick suite through the library,
+# 2 workers, by the command line; tests/test_bench_ray.py compares Ray's rows with it
 
 
 def _rows(out: Path) -> list[dict[str, Any]]:

@@ -3,6 +3,7 @@ a pool of actors and gives the same rows as the local process pool."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -42,7 +43,12 @@ def local_ray() -> Iterator[Any]:
     ray.shutdown()
 
 
-def test_ray_gives_the_same_rows_as_the_process_pool(local_ray: Any, tmp_path: Path) -> None:
+def test_ray_gives_the_same_rows_as_the_process_pool(local_ray: Any,
+                                                     quick_run: tuple[int, Path],
+                                                     tmp_path: Path) -> None:
+    """Ray's rows against the process pool's (2 workers) of the same problems: those of
+    the whole quick suite's run (conftest's quick_run, shared with tests/test_bench.py;
+    the same suite, seeds and generated requests)."""
     code, on_ray = run_bench("quick", use_ray=True, limit=LIMIT, families=FAMILIES,
                              out=tmp_path / "ray",
                              progress=False)
@@ -50,18 +56,21 @@ def test_ray_gives_the_same_rows_as_the_process_pool(local_ray: Any, tmp_path: P
     assert on_ray["run"]["runner"] == "ray"
     assert on_ray["run"]["ray"]["actors"] == 2 and not on_ray["run"]["ray"]["started_here"]
     assert ray.is_initialized()  # the instance the test started is left to the test
-    code, pooled = run_bench("quick", workers=2, limit=LIMIT, families=FAMILIES,
-                             out=tmp_path / "pool",
-                             progress=False)
-    assert code == 0
-    assert on_ray["skipped_methods"] == pooled["skipped_methods"]
+    assert quick_run[0] == 0
+    pool_doc = json.loads((quick_run[1] / "results.json").read_text())
+    assert pool_doc["run"]["runner"] == "pool" and pool_doc["run"]["workers"] == 2
+    assert on_ray["skipped_methods"] == pool_doc["skipped_methods"]
+    # the pool's rows of the problems Ray ran: the first of each of FAMILIES
+    first = {f"{family}-000" for family in FAMILIES}
+    pooled = [r for r in pool_doc["rows"] if r["problem_id"] in first]
+    assert {r["family"] for r in pooled} == set(FAMILIES)
     assert [(r["problem_id"], r["method"]) for r in on_ray["rows"]] == [
-        (r["problem_id"], r["method"]) for r in pooled["rows"]]
-    for a, b in zip(on_ray["rows"], pooled["rows"], strict=True):
+        (r["problem_id"], r["method"]) for r in pooled]
+    for a, b in zip(on_ray["rows"], pooled, strict=True):
         rel = REL_DRAKE if a["method"] == "drake" else REL
         assert differences(a, b, rel=rel, floor=FLOOR) == {}, (a["problem_id"], a["method"])
     assert {(r["family"], r["method"]) for r in on_ray["rows"]} == {
-        (s["family"], s["method"]) for s in pooled["summary"]}
+        (s["family"], s["method"]) for s in pool_doc["summary"] if s["family"] in FAMILIES}
     # the actors are processes of their own, each planning several units
     pids = {r["worker_pid"] for r in on_ray["rows"]}
     assert len(pids) == 2 and all(r["peak_rss_mb"] > 0 for r in on_ray["rows"])
