@@ -154,13 +154,15 @@ def test_reported_rates_are_the_rolling_equations_at_both_contacts(plan: OneFing
 
 
 def test_a_grid_too_coarse_for_a_fast_regrasp_is_refined_until_certified() -> None:
-    """The grasp weight (100, the default) makes the finger re-grasp fast at the start; on
-    20 intervals the finger then slips between collocation points in the first interval,
-    which the certificate catches. Without refinement the plan says so (inaccurate); with
+    """The grasp weight (100, the default) makes the finger re-grasp fast at the start when
+    the ramps are short (0.1 s: the default is 15 % of the 2 s); on 20 intervals the finger
+    then slips between collocation points in the first intervals, which the certificate
+    catches. Without refinement the plan says so (inaccurate); with
     it the grid is made 2, 4 or 8 times as fine until the plan is certified (80 intervals,
     a few seconds). A heavier weight makes the start a boundary layer that a uniform grid
     resolves slowly (3000: the slip converges like h there, 320 intervals and more)."""
     fast = roll(20)
+    fast = replace(fast, base=replace(fast.base, ramp_time=0.1))
     coarse = PLANNER.solve(replace(fast, base=replace(fast.base, max_refinements=0)))
     assert coarse.status is Status.INACCURATE
     assert coarse.certificate_failures

@@ -58,7 +58,7 @@ TIMINGS: tuple[str, ...] = ("smooth", "paper")
 #: The default bound on every joint's acceleration of a smooth plan [rad/s^2].
 DEFAULT_MAX_JOINT_ACCELERATION = 20.0
 #: The smooth plan's default ramp time constant, as a fraction of the duration.
-DEFAULT_RAMP_FRACTION = 0.05
+DEFAULT_RAMP_FRACTION = 0.15
 
 
 def timing_errors(timing: object) -> list[tuple[str, str]]:

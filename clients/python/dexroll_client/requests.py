@@ -293,7 +293,7 @@ TIMING_DESCRIPTION = (
 RAMP_TIME_DESCRIPTION = (
     "a 'smooth' plan's ramps' time constant [s]: the objective weighs the rate of change of "
     "every velocity by its square, so that the plan speeds up and slows down over about "
-    "this time; null: 5 % of the duration (ignored by 'paper' timing)")
+    "this time; null: 15 % of the duration (ignored by 'paper' timing)")
 MAX_JOINT_ACCELERATION_DESCRIPTION = (
     "bound on every joint's acceleration [rad/s^2] of a 'smooth' plan (ignored by 'paper' "
     "timing)")
