@@ -1,6 +1,10 @@
 """Benchmark of planned forces (issue 15, docs/forces.md): the solve time a plan's forces
 add, and the size of the inertial wrench the quasi-static model leaves out.
 
+Each problem is solved three ways: without forces, with forces in two stages (the
+kinematics, then the forces point by point: the planner's default) and with the coupled
+NLP (``two_stage_forces = False``), old and new side by side in one run.
+
 Problems: the paper's experiments (experiment 1: docs/viewer-experiment1.json; 2:
 examples/experiment2_two_fingers.json) and the quick bench suite's finger families
 (one_finger, two_fingers, three_fingers). Each is solved by the library's planner without
@@ -87,17 +91,21 @@ def main() -> None:
             for name, path in EXPERIMENTS.items()]
     raws += [(p.id, p.request) for p in expand(load_suite("quick"),
                                                 ["one_finger", "two_fingers", "three_fingers"])]
-    ratios, totals = [], {"plain": 0.0, "forces": 0.0}
-    print("| problem | plain: status, iterations, refinements, solve [s] | forces: ... | ratio |")
-    print("|---|---|---|---:|")
+    ratios, coupled_ratios = [], []
+    totals = {"plain": 0.0, "forces": 0.0, "coupled": 0.0}
+    print("| problem | plain: status, iterations, refinements, solve [s] | forces, two "
+          "stages: ... | forces, coupled NLP: ... | ratio two stages | ratio coupled |")
+    print("|---|---|---|---|---:|---:|")
     plans = {}
     for name, raw in raws:
         problem = problem_of(raw, cache)
         cells = []
         times = {}
-        for tag, pr in (("plain", problem), ("forces", replace(problem, forces=load))):
+        for tag, pr in (("plain", problem), ("forces", replace(problem, forces=load)),
+                        ("coupled", replace(problem, forces=load))):
             planner = ManipulationPlanner()
-            planner.prepare(pr)
+            planner.two_stage_forces = tag != "coupled"
+            planner.prepare(pr)  # two stages: the kinematic NLP; coupled: its own
             t0 = time.perf_counter()
             sol = planner.solve(pr)
             _ = time.perf_counter() - t0
@@ -108,9 +116,13 @@ def main() -> None:
             if tag == "plain" and name in EXPERIMENTS:
                 plans[name] = (problem, sol)
         ratios.append(times["forces"] / times["plain"])
-        print(f"| {name} | {cells[0]} | {cells[1]} | {ratios[-1]:.2f} |", flush=True)
-    print(f"\nmedian ratio {statistics.median(ratios):.2f}, total solve {totals['plain']:.1f} s "
-          f"-> {totals['forces']:.1f} s ({totals['forces'] / totals['plain']:.2f}x)")
+        coupled_ratios.append(times["coupled"] / times["plain"])
+        print(f"| {name} | {cells[0]} | {cells[1]} | {cells[2]} | {ratios[-1]:.2f} | "
+              f"{coupled_ratios[-1]:.2f} |", flush=True)
+    print(f"\nmedian ratio: two stages {statistics.median(ratios):.2f}, coupled "
+          f"{statistics.median(coupled_ratios):.2f}; total solve {totals['plain']:.1f} s -> "
+          f"{totals['forces']:.1f} s two stages ({totals['forces'] / totals['plain']:.2f}x), "
+          f"{totals['coupled']:.1f} s coupled ({totals['coupled'] / totals['plain']:.2f}x)")
     for name, (problem, sol) in plans.items():
         acc, mom = inertial_terms(problem, sol)
         print(f"{name}: inertial force <= {acc:.2e} m g, inertial moment <= {mom:.2e} m g L "

@@ -282,7 +282,10 @@ class ManipulationPlanner:
     def prepare(self, problem: ManipulationProblem) -> float:
         """Build (and cache) the NLP of this problem's structure and its model's
         re-integrator, without solving: a service's warm-up. Returns the build time [s]
-        (0 when already cached)."""
+        (0 when already cached). A problem with forces planned in two stages builds the
+        kinematic NLP its first stage solves (the coupled one only if ever needed)."""
+        if problem.forces is not None and self.two_stage_forces:
+            problem = replace(problem, forces=None)
         nlp, hit = self._build(problem)
         self.model(problem).reintegrator(2)  # the certificate's: nodes and midpoints
         return 0.0 if hit else nlp.build_time
