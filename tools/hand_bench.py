@@ -10,6 +10,7 @@ refinements, certificate: the planner's ``solve_time``); medians over the repeat
 ``--compile DIR``: the NLP's functions as compiled C (``ManipulationPlanner(compile_dir)``,
 gcc once per structure, cached in DIR), instead of CasADi's virtual machine.
 
+Every process runs with one BLAS/OpenMP thread (as the bench's and the service's workers).
 ``--memory``: one fresh process per measurement (so that nothing is shared): the resident
 set size (VmRSS) before building, after building the first problem's structure, and after
 its first plan, and the NLP's size (variables, constraints, Jacobian and Hessian
@@ -17,12 +18,14 @@ non-zeros).
 
     .venv/bin/python tools/hand_bench.py [--problems 4] [--repeats 3] [--compile DIR]
     .venv/bin/python tools/hand_bench.py --memory
+    .venv/bin/python tools/hand_bench.py --profile [--compile DIR]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -31,6 +34,10 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
+# one BLAS/OpenMP thread, as the bench's and the service's workers run (set before numpy,
+# CasADi and IPOPT load their libraries)
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 
 def rss_mb() -> float:
@@ -104,6 +111,60 @@ def memory(raw: dict[str, Any], compile_dir: Path | None) -> dict[str, Any]:
             "build_wall_s": build_wall, "plan": out, "nlp": nlp_size(planners)}
 
 
+def profile(raw: dict[str, Any], compile_dir: Path | None, repeats: int = 20
+            ) -> dict[str, Any]:
+    """Where an IPOPT iteration's time goes: the first problem's NLP (built as the planner
+    does), each of its functions evaluated ``repeats`` times at a random point (median
+    [ms]): the objective and constraints, their Jacobian, the Lagrangian's Hessian; in
+    CasADi's virtual machine and, with ``compile_dir``, compiled; and one plan's IPOPT
+    time split into its function calls and the rest (virtual machine)."""
+    import casadi as ca
+    import numpy as np
+
+    from ocp.solve.compiled import compiled_block_solver
+    from planner_service.planners import REQUEST, adapter_for
+
+    planners = _planners(None)
+    request = REQUEST.validate_python(raw)
+    adapter_for(request).prepare(request, planners)
+    nlp = list(planners.fingers.manipulation._nlps.values())[-1]
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-0.1, 0.1, nlp.oracle.size1_in(0))
+    p = rng.uniform(0.01, 0.1, nlp.oracle.size1_in(1))
+    lam = rng.uniform(-1.0, 1.0, len(nlp.lbg))
+
+    def timed(f: ca.Function, *args: Any) -> float:
+        f(*args)
+        ts = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            f(*args)
+            ts.append(time.perf_counter() - t0)
+        return 1e3 * statistics.median(ts)
+
+    def row(options: dict[str, Any], oracle: ca.Function) -> dict[str, float]:
+        return {"f_g_ms": timed(oracle, x, p),
+                "jac_g_ms": timed(options["jac_g"], x, p),
+                "hess_lag_ms": timed(options["hess_lag"], x, p, 1.0, lam)}
+
+    out: dict[str, Any] = {"nlp": nlp_size(planners), "vm": row(nlp.options, nlp.oracle)}
+    # one plan: IPOPT's own split of its time (the functions' calls and the rest: its
+    # linear algebra and bookkeeping), from the solver's statistics
+    out["plan"] = plan_once(raw, planners)
+    st = nlp.solver.stats()
+    calls = {k.removeprefix("t_wall_"): round(float(v), 3) for k, v in st.items()
+             if k.startswith("t_wall_") and float(v) > 0}
+    calls["functions"] = round(sum(v for k, v in calls.items() if k.startswith("nlp_")), 3)
+    out["ipopt_wall_s"] = calls
+    if compile_dir is not None:
+        t0 = time.perf_counter()
+        _, options = compiled_block_solver(nlp.oracle, nlp.options, nlp.fingerprint,
+                                           compile_dir)
+        out["compile_s"] = time.perf_counter() - t0
+        out["compiled"] = row(options, nlp.oracle)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--problems", type=int, default=4)
@@ -112,12 +173,17 @@ def main() -> None:
                         help="a request file instead of the family (repeatable)")
     parser.add_argument("--compile", type=Path, default=None, metavar="DIR")
     parser.add_argument("--memory", action="store_true")
+    parser.add_argument("--profile", action="store_true",
+                        help="time the first problem's NLP functions (VM, --compile)")
     parser.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.request:
         reqs = [(Path(p).stem, json.loads(Path(p).read_text())) for p in args.request]
     else:
         reqs = family_requests(args.problems)
+    if args.profile:
+        print(json.dumps(profile(reqs[0][1], args.compile), indent=1))
+        return
     if args.child is not None:  # one memory measurement, in its own process
         raw = dict(reqs)[args.child]
         print(json.dumps(memory(raw, args.compile)))
