@@ -13,10 +13,11 @@ ball"):
    the ball's angular velocities agree along the normal: 1 row) are 4 rows on the 4 joint
    rates of a 4-joint finger: a square system, integrated here (midpoint steps of at most
    0.25 deg, smaller where a joint moves fast, the ball's distance held by feedback)
-   until a joint reaches its limit, the contact its cap's seam or the system turns
-   singular. The arcs travelled by the contact on the ball (in the ball's frame) and on
-   the tip (in the tip's) are integrated too: they agree (the rolling law), and a tip's
-   orbit about the ball is what lets the turn exceed the cap's bound.
+   until a joint reaches its limit, the contact comes within 2 mm of its cap's seam (the
+   planner's margin) or the motion folds ("singular"). The arcs travelled by the contact
+   on the ball (in the ball's frame) and on the tip (in the tip's) are integrated too:
+   they agree (the rolling law), and a tip's orbit about the ball is what lets the turn
+   exceed the cap's bound.
 3. ``plan``: the planner on the built-in hand's URDF, the same grasp, a turn of the measured
    reach less 1 deg and of the reach plus 3 deg about the axis (2 s, N = 20, tracked within
    1 mm / 1 deg, a 30 s limit): solved and certified or not.
@@ -24,11 +25,12 @@ ball"):
 Grasps: the shipped nominal grasp (a 60 mm ball), the same contact directions on balls of
 40-70 mm (joints by least squares), and, per axis, the best grasp of a small search: per
 finger, initial contacts sampled on the ball within 30 deg of the nominal contact's
-direction (so that the four still oppose one another), each finger's motion rolled as in 2,
-the finger's best kept; the hand's reach is the least over its fingers (tips checked for
-overlap; force closure is the planner's certificate's).
+direction (so that the four still oppose one another), each finger's motion rolled as in 2
+(up to 120 deg), of each finger's 6 farthest the combination with the caps at least 1 mm
+apart and the largest least reach (``ocp.robots.grasp_reach.search_grasp``; force closure
+is the planner's certificate's).
 
-    .venv/bin/python tools/hand_reach.py [--plan] [--samples 60] [--seed 0]
+    .venv/bin/python tools/hand_reach.py [--plan] [--samples 30] [--seed 0]
 """
 
 from __future__ import annotations
@@ -101,7 +103,7 @@ def _deg(x: float) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--plan", action="store_true", help="check the reach by planning")
-    parser.add_argument("--samples", type=int, default=60,
+    parser.add_argument("--samples", type=int, default=30,
                         help="initial contacts tried per finger in the grasp search")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
