@@ -303,9 +303,12 @@ class Simulation:
         pos_err = np.linalg.norm(obj_pose[:, :3] - pos_ref[1:], axis=1)
         ang_err = _angle_between(obj_pose[:, 3:], quat_ref[1:])
         during = t_end >= 0
+        # the steps inside the plan's horizon (the one ending at t = 0 is the settling's)
+        inside = t_end > 0.5 * dt
         contacts = []
         for j, spec in enumerate(plan.contacts):
-            lost = ~(normal_force[during, j] > TOUCH_FORCE)
+            lost_all = ~(normal_force[:, j] > TOUCH_FORCE)
+            lost = lost_all[during]
             events = int(np.sum(lost[1:] & ~lost[:-1]) + (1 if lost.size and lost[0] else 0))
             first = float(t_end[during][np.argmax(lost)]) if lost.any() else None
             f = normal_force[during, j]
@@ -313,7 +316,8 @@ class Simulation:
             if planned is not None:
                 planned = planned[1:][during]
             contacts.append(ContactReport(
-                spec.name, spec.body, lost_time=float(np.sum(lost) * dt), loss_events=events,
+                spec.name, spec.body, lost_time=float(np.sum(lost_all[inside]) * dt),
+                loss_events=events,
                 first_loss_at=first,
                 slip_distance=float(np.sum(slip_speed[during, j]) * dt),
                 max_slip_speed=float(np.max(slip_speed[during, j], initial=0.0)),

@@ -87,7 +87,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -180,9 +180,14 @@ class _Grid:
 
 
 def _problem(request: BallOnPalmRequest) -> BallOnPalmProblem:
+    """The request's problem with the paper's timing: the peers' NLPs are the paper's
+    (piecewise inputs, free at the start and the end; docs/timing.md), and their plans are
+    certified as such. A comparison with the project's planner plans the same timing (the
+    suites' ball-on-palm families ask for it)."""
     problem = to_problem(request)
     if not isinstance(problem, BallOnPalmProblem):  # pragma: no cover - typed input
         raise TypeError(f"a ball-on-palm request is needed, got {type(request).__name__}")
+    problem = replace(problem, timing="paper")
     problem.validate()
     return problem
 
