@@ -19,11 +19,12 @@ pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="no gcc")
 
 
 def small() -> BallOnPalmProblem:
-    """A short roll on a coarse grid: a C file that compiles in a couple of seconds."""
+    """A short roll on a coarse grid: a C file that compiles in a couple of seconds (the
+    paper's timing: 3 intervals cannot resolve a smooth plan's ramps)."""
     return BallOnPalmProblem(object=ObjectSpec("sphere", (0.03,)),
                              initial=(0.0, 0.0, 0.0, 0.0, 0.0),
                              goal={"x": 0.02, "y": 0.01, "psi": math.radians(10)},
-                             duration=1.0, n_intervals=3, max_refinements=0)
+                             duration=1.0, n_intervals=3, max_refinements=0, timing="paper")
 
 
 @pytest.fixture(scope="module")
