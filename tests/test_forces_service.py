@@ -9,6 +9,7 @@ import copy
 import json
 import math
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -160,12 +161,14 @@ def test_the_greedy_method_does_not_plan_forces() -> None:
     assert "forces" in result.message, result.message
 
 
-def test_the_bench_plans_forces_and_executes_on_them(tmp_path: Path) -> None:
+def test_the_bench_plans_forces_and_executes_on_them(planned: ManipulationResult) -> None:
     """``dexroll bench --forces``: every collocation finger request gets the ``forces``
     block (the greedy method's and the palm planners' do not: they plan none); a planned
-    row is executed in MuJoCo on the plan's own forces alone and passes."""
-    from planner_service.bench.command import forces_option, run_bench, with_forces
-    from planner_service.bench.suite import SuiteError, expand, load_suite, units
+    row of a request with forces is executed in MuJoCo on the plan's own forces alone (no
+    squeeze or grip of the simulator's) and passes."""
+    from planner_service.bench.command import forces_option, with_forces
+    from planner_service.bench.rows import execute
+    from planner_service.bench.suite import SuiteError, Unit, expand, load_suite, units
 
     assert forces_option("0.05") == {"mass": 0.05, "min_normal_force": 1.0,
                                      "torsional_friction": 0.005}
@@ -179,9 +182,10 @@ def test_the_bench_plans_forces_and_executes_on_them(tmp_path: Path) -> None:
     got = {(u.family, u.method): "forces" in u.request for u in todo}
     assert got[("one_finger", "collocation")] and not got[("one_finger", "greedy")]
     assert not got[("translation", "collocation")]
-    _, doc = run_bench("quick", workers=1, out=tmp_path, methods=["collocation"],
-                       families=["two_fingers"], limit=1, progress=False, forces=FORCES)
-    rows = json.loads((tmp_path / "results.json").read_text())["rows"]
-    assert [r["status"] for r in rows] == ["solved"]
-    assert rows[0]["exec_status"] == "passed", rows[0].get("exec_message")
-    assert doc["run"]["forces"] == FORCES
+    unit = Unit("paper", "experiment2", "collocation", "manipulation",
+                {**copy.deepcopy(EXP2), "forces": FORCES}, "solved")
+    row = execute(unit, planned)
+    assert row["exec_status"] == "passed", row.get("exec_message")
+    # the same plan with the simulator's grip instead (a request without forces) passes too
+    plain = execute(replace(unit, request=copy.deepcopy(EXP2)), planned)
+    assert plain["exec_status"] == "passed", plain.get("exec_message")
