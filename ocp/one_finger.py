@@ -43,6 +43,7 @@ from ocp.spec.problem import (
     BallOnPalmProblem,
     ForceSpec,
     ProblemError,
+    joint_acceleration_errors,
 )
 from ocp.transcription.collocation import NlpPoint, WarmStart
 
@@ -91,9 +92,7 @@ class OneFingerProblem:
 
     def errors(self) -> list[tuple[str, str]]:
         errs = list(self.base.errors())
-        a = self.max_joint_acceleration
-        if not (math.isfinite(a) and 0.0 < a <= 1e5):
-            errs.append(("max_joint_acceleration", f"must be in (0, 1e5] rad/s^2, got {a}"))
+        errs += joint_acceleration_errors(self.max_joint_acceleration)
         if self.forces is not None:
             errs += self.forces.errors("forces", self.mu)
         if not (math.isfinite(self.mu) and 0.0 < self.mu <= 10.0):

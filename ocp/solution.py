@@ -236,8 +236,9 @@ class FingerTrajectory:
     tip_position: FloatArray
     tip_rotation: FloatArray
     #: The joint torques [N m] (or forces [N]) that exert the planned contact force and
-    #: torsion on the object: tau = J^T (f; m) at the contact point (not the finger's own
-    #: gravity); None for a plan without forces.
+    #: torsion on the object, tau = J^T (f; m) at the contact point, and hold the finger's
+    #: own links against gravity when its model has inertias (:func:`joint_torques`);
+    #: None for a plan without forces.
     joint_torques: FloatArray | None = None
 
 

@@ -35,7 +35,7 @@ from ocp.transcription.collocation import HermiteInterpolant, PlannedForces, rei
 if TYPE_CHECKING:
     from ocp.transcription.grasp_model import GraspModel
 
-__all__ = ["certify_grasp", "check_samples", "force_checks", "timing_checks",
+__all__ = ["certify_grasp", "check_samples", "force_checks", "sample_intervals", "timing_checks",
            "with_force_checks"]
 
 #: Relative tolerance of the planned forces' checks between collocation points: the
@@ -63,6 +63,14 @@ def _wrapped(d: FloatArray, periodic: list[bool]) -> FloatArray:
     return out
 
 
+def sample_intervals(traj: HermiteInterpolant, points: tuple[float, ...]
+                     ) -> tuple[NDArray[np.intp], FloatArray]:
+    """(interval, normalised time) of every check sample: ``points`` of every interval,
+    in time order (:func:`check_samples`' samples)."""
+    n, s = len(traj.t_nodes) - 1, np.asarray(points, dtype=float)
+    return np.repeat(np.arange(n), len(s)), np.tile(s, n)
+
+
 def check_samples(traj: HermiteInterpolant, points: tuple[float, ...]
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Where the returned trajectory is checked: (times, states, their time derivatives,
@@ -70,8 +78,7 @@ def check_samples(traj: HermiteInterpolant, points: tuple[float, ...]
     time order (a node twice: as the end of one interval and the start of the next, with
     each side's rate)."""
     n, s = len(traj.t_nodes) - 1, np.asarray(points, dtype=float)
-    k = np.repeat(np.arange(n), len(s))
-    ss = np.tile(s, n)
+    k, ss = sample_intervals(traj, points)
     h = np.diff(traj.t_nodes)
     t = traj.t_nodes[k] + h[k] * ss
     # trapezoid weights over the equal steps (the extra points weigh nothing)
@@ -87,11 +94,13 @@ def _rms(values: FloatArray, weights: FloatArray) -> float:
     return math.sqrt(float(np.sum(weights * values**2)) / total) if total > 0 else 0.0
 
 
-def force_checks(problem: ManipulationProblem, forces: PlannedForces, k: NDArray[np.intp],
-                 s: FloatArray, ts: FloatArray, p_po: FloatArray, R_po: FloatArray,
-                 pts: FloatArray, nrm: FloatArray) -> tuple[list[Check], dict[str, float]]:
-    """The planned forces' checks on the samples (intervals k, normalised times s, times
-    ts; the returned object pose and contact points and outward normals, palm frame):
+def force_checks(problem: ManipulationProblem, forces: PlannedForces,
+                 traj: HermiteInterpolant, points: tuple[float, ...], ts: FloatArray,
+                 p_po: FloatArray, R_po: FloatArray, pts: FloatArray, nrm: FloatArray
+                 ) -> tuple[list[Check], dict[str, float]]:
+    """The planned forces' checks on the samples (:func:`check_samples` of the normalised
+    times ``points``, at times ts; the returned object pose and contact points and
+    outward normals, palm frame):
     the object's quasi-static equilibrium with its weight, every force inside its
     friction cone (the request's mu, not the NLP's narrowed one), every normal force at
     least the minimum, every torsion within its limit. The forces between collocation
@@ -102,7 +111,7 @@ def force_checks(problem: ManipulationProblem, forces: PlannedForces, k: NDArray
     fs = problem.forces
     assert fs is not None
     D = CheckKind.DISCRETISATION
-    f, tau = forces.on_intervals(k, s)
+    f, tau = forces.on_intervals(*sample_intervals(traj, points))
     F0, L = force_scale(problem), problem.object.length_scale
     weight = fs.mass * np.asarray(fs.gravity, dtype=float)
     r = pts - p_po[:, None, :]
@@ -178,10 +187,8 @@ def with_force_checks(cert: Certificate, problem: ManipulationProblem, m: GraspM
     p_po = np.asarray(cart[1]).T
     pts = np.asarray(cart[4]).T.reshape(n, nc, 3)
     nrm = np.asarray(cart[5]).T.reshape(n, nc, 3)
-    n_int = len(traj.t_nodes) - 1
-    s = np.asarray(policy.check_points, dtype=float)
-    more, reported = force_checks(problem, forces, np.repeat(np.arange(n_int), len(s)),
-                                  np.tile(s, n_int), ts, p_po, R_po, pts, nrm)
+    more, reported = force_checks(problem, forces, traj, policy.check_points, ts, p_po, R_po,
+                                  pts, nrm)
     return Certificate.of([*cert.checks, *more], {**dict(cert.reported), **reported},
                           n_samples=cert.n_samples)
 
@@ -284,10 +291,7 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
                                        f"{ts[int(np.argmin(onto))]:.6g} s (force closure "
                                        "lost)"))
     if forces is not None and problem.forces is not None:
-        n_int = len(t_nodes) - 1
-        pts_s = np.asarray(policy.check_points, dtype=float)
-        kk = np.repeat(np.arange(n_int), len(pts_s))
-        more, rep_ = force_checks(problem, forces, kk, np.tile(pts_s, n_int), ts, p_po, R_po,
+        more, rep_ = force_checks(problem, forces, traj, policy.check_points, ts, p_po, R_po,
                                   pts, nrm)
         checks += more
         reported.update(rep_)

@@ -175,6 +175,23 @@ def load_guess(R_po: FloatArray, p_po: FloatArray, pts: FloatArray, nrm: FloatAr
     return out
 
 
+def _load_guess_at(out: Any, pts: FloatArray, nrm: FloatArray, load: FloatArray
+                   ) -> FloatArray:
+    """:func:`load_guess` from the grasp model's mapped ``cartesian`` outputs ``out``."""
+    k = len(pts)
+    R_po = np.asarray(out[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
+    return load_guess(R_po, np.asarray(out[1]).T, pts, nrm, load)
+
+
+def planned_force_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray,
+                        load: FloatArray) -> FloatArray:
+    """The planned forces' guess (:func:`load_guess`) at the states ``Xall`` (rows)."""
+    k, nc = len(Xall), m.n_contacts
+    out = m.mapped("cartesian", k)(Xall.T, prm)
+    return _load_guess_at(out, np.asarray(out[4]).T.reshape(k, nc, 3),
+                          np.asarray(out[5]).T.reshape(k, nc, 3), load)
+
+
 def epigraph_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray,
                    load: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
     """Grasp epigraph values (1 x k; 0 x k for one contact) and force guesses at the
@@ -191,8 +208,7 @@ def epigraph_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray,
     nrm = np.asarray(out[5]).T.reshape(k, nc, 3)
     loads = np.zeros((0, k))
     if load is not None:
-        R_po = np.asarray(out[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
-        loads = load_guess(R_po, np.asarray(out[1]).T, pts, nrm, load)
+        loads = _load_guess_at(out, pts, nrm, load)
     if nc < 2:
         return np.zeros((0, k)), loads
     if nc == 2:

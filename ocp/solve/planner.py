@@ -62,7 +62,13 @@ from ocp.solution import (
     status_from_ipopt,
 )
 from ocp.solve.compiled import BackgroundCompiler
-from ocp.solve.guesses import Guess, Strategy, epigraph_guess, strategy_for
+from ocp.solve.guesses import (
+    Guess,
+    Strategy,
+    epigraph_guess,
+    planned_force_guess,
+    strategy_for,
+)
 from ocp.solve.ipopt import IPOPT_WARM_OPTIONS, ipopt_solver
 from ocp.solve.ipopt import NLP as _NLP
 from ocp.spec.grasp import (
@@ -81,7 +87,7 @@ from ocp.spec.problem import MAX_INTERVALS, ProblemError, Structure
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.force_stage import ForceStage
 from ocp.transcription.grasp_model import GraspModel
-from ocp.transcription.nlp_blocks import LOAD_VARS, build_manipulation_nlp
+from ocp.transcription.nlp_blocks import build_manipulation_nlp
 from ocp.transcription.values import bounds, load_parameters, scales
 from ocp.transcription.values import parameters as nlp_parameters
 
@@ -233,7 +239,7 @@ class ManipulationPlanner:
         #: the kinematics, then the forces at its collocation points; the coupled NLP only
         #: when some point admits no forces. False: always the coupled NLP.
         self.two_stage_forces = True
-        self._force_stages: dict[int, ForceStage] = {}
+        self._force_stages: dict[GraspModel, ForceStage] = {}
         # keyed by the finger objects themselves (identity; the key keeps them alive)
         self._models: dict[tuple[Any, ...], GraspModel] = {}
         #: The NLPs built, by structure, the least recently used dropped beyond
@@ -392,16 +398,17 @@ class ManipulationPlanner:
             pf = alt
         m = self.model(pf)
         t_build = time.perf_counter()
-        stage = self._force_stages.setdefault(id(m), ForceStage(m))
+        if m not in self._force_stages:
+            self._force_stages[m] = ForceStage(m)
+        stage = self._force_stages[m]
         stage.prepare(2 * len(col.t_nodes) - 1)
         t_build = time.perf_counter() - t_build
         t0 = time.perf_counter()
         prm = m.params(np.asarray(pf.object.dimensions, dtype=float), contact_charts(pf))
         Xall = np.vstack([col.X, col.Xm])
         load = load_parameters(pf)
-        _, Fg = epigraph_guess(m, Xall, prm, load)
         F, iterations = stage.solve(Xall, prm, load, pf.object.length_scale,
-                                    Fg[-LOAD_VARS * m.n_contacts:])
+                                    planned_force_guess(m, Xall, prm, load))
         t_stage = time.perf_counter() - t0
         if F is None:
             return None

@@ -31,6 +31,7 @@ from ocp.spec.problem import (
     SolverOptions,
     ViaPoint,
     goal_errors,
+    joint_acceleration_errors,
 )
 
 __all__ = ["Fingertip", "ManipulationProblem", "Palm", "contact_chart_for_pad",
@@ -270,11 +271,7 @@ class ManipulationProblem:
             if c.q_seed is not None and len(c.q_seed) != c.finger.nq:
                 errs.append((f"{name}.q_seed",
                              f"must have {c.finger.nq} joint angles, got {len(c.q_seed)}"))
-        a = self.max_joint_acceleration
-        if isinstance(a, bool) or not isinstance(a, int | float) or not (
-                math.isfinite(a) and 0.0 < a <= 1e5):
-            errs.append(("max_joint_acceleration", f"must be in (0, 1e5] rad/s^2, got {a!r}"))
-
+        errs += joint_acceleration_errors(self.max_joint_acceleration)
         if self.forces is not None:
             errs += self.forces.errors("forces", self.mu)
             if not self.fingers:

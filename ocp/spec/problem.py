@@ -61,6 +61,14 @@ DEFAULT_MAX_JOINT_ACCELERATION = 20.0
 DEFAULT_RAMP_FRACTION = 0.15
 
 
+def joint_acceleration_errors(a: object) -> list[tuple[str, str]]:
+    """(field, reason) when ``max_joint_acceleration`` is not in (0, 1e5] rad/s^2."""
+    if isinstance(a, int | float) and not isinstance(a, bool) and math.isfinite(a) \
+            and 0.0 < a <= 1e5:
+        return []
+    return [("max_joint_acceleration", f"must be in (0, 1e5] rad/s^2, got {a!r}")]
+
+
 def timing_errors(timing: object) -> list[tuple[str, str]]:
     """(field, reason) when ``timing`` is not one of :data:`TIMINGS`."""
     if timing in TIMINGS:

@@ -26,11 +26,10 @@ from numpy.typing import NDArray
 from ocp.transcription.nlp_blocks import (
     LOAD_PARAMS,
     LOAD_VARS,
-    TORSION_SHARE,
     load_cost,
     load_rows,
 )
-from ocp.transcription.values import LOAD_BOUND
+from ocp.transcription.values import load_bounds
 
 __all__ = ["ForceStage"]
 
@@ -95,8 +94,7 @@ class ForceStage:
         geo = np.vstack([np.asarray(P).reshape(3 * nc, k, order="F"),
                          np.asarray(N).reshape(3 * nc, k, order="F"),
                          np.asarray(R).reshape(9, k, order="F")])
-        bound = np.full((LOAD_VARS * nc, k), LOAD_BOUND)
-        bound[LOAD_VARS - 1::LOAD_VARS] = TORSION_SHARE
+        bound = load_bounds(nc, k)
         solver = self._solver(k)
         res = solver(x0=np.clip(guess, -bound, bound).ravel(order="F"),
                      p=np.concatenate([geo.ravel(order="F"), load, [L]]),

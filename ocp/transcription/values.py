@@ -15,8 +15,8 @@ from ocp.transcription.collocation import node_times
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.nlp_blocks import LOAD_PARAMS, LOAD_VARS, TORSION_SHARE, BlockNLP
 
-__all__ = ["TRACKING_BOUND_SHRINK", "bounds", "force_scale", "load_parameters", "parameters",
-           "scales"]
+__all__ = ["TRACKING_BOUND_SHRINK", "bounds", "force_scale", "load_bounds", "load_parameters",
+           "parameters", "scales"]
 
 #: The friction cone's smoothing: mu_m f_n >= sqrt(|f_t|^2 + eps^2) with eps this fraction
 #: of the minimum normal force's cone radius mu_m f_min: smooth at f_t = 0 (curvature
@@ -45,6 +45,16 @@ def force_scale(problem: ManipulationProblem) -> float:
         return 1.0
     weight = fs.mass * float(np.linalg.norm(fs.gravity))
     return max(weight, problem.n_contacts * fs.min_normal_force, 1e-6)
+
+
+def load_bounds(n_load: int, k: int) -> FloatArray:
+    """The symmetric bound of the planned forces' variables of ``n_load`` contacts at ``k``
+    points (``LOAD_VARS * n_load`` x k, scaled): every force component within
+    :data:`LOAD_BOUND`, the torsion's share of its limit (each contact's last variable)
+    within :data:`~ocp.transcription.nlp_blocks.TORSION_SHARE`."""
+    bound = np.full((LOAD_VARS * n_load, k), LOAD_BOUND)
+    bound[LOAD_VARS - 1::LOAD_VARS] = TORSION_SHARE
+    return bound
 
 
 def load_parameters(problem: ManipulationProblem) -> FloatArray:
@@ -122,10 +132,8 @@ def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: Float
     lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
     ns = nlp.n_epigraph
     zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))
-    big = 1e3 * np.ones((3 * nlp.n_force + LOAD_VARS * nlp.n_load, 2 * n + 1))
-    big[3 * nlp.n_force:] = LOAD_BOUND
-    # the torsion's share of its limit (the last load variable of each contact)
-    big[3 * nlp.n_force + LOAD_VARS - 1::LOAD_VARS] = TORSION_SHARE
+    big = np.vstack([1e3 * np.ones((3 * nlp.n_force, 2 * n + 1)),
+                     load_bounds(nlp.n_load, 2 * n + 1)])
     lbx = nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n], -big)
     ubx = nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n], big)
     return np.asarray(lbx).ravel(), np.asarray(ubx).ravel()
