@@ -248,7 +248,8 @@ class FingerTrajectoryModel(_Response):
     joint_torques: Rows | None = Field(
         default=None, description="the finger's joint torques [N m] that exert the planned "
                                   "fingertip force and torsion (J^T (f; m) at the contact "
-                                  "point); null without `forces`")
+                                  "point) and hold its links against gravity when its model "
+                                  "has inertias; null without `forces`")
 
 
 class FingerCertificateModel(_Response):
@@ -349,9 +350,10 @@ class FingerJointsModel(_Response):
                                                    "(w, x, y, z), w >= 0")
     joint_torques: Rows | None = Field(
         default=None, description="joint torques [N m; N for a prismatic joint] that exert "
-                                  "the planned contact force and torsion: J^T (f; m) at the "
-                                  "contact point (without the finger's own gravity); null "
-                                  "without `forces`")
+                                  "the planned contact force and torsion, J^T (f; m) at the "
+                                  "contact point, and hold the finger's links against gravity "
+                                  "when its model has inertias (the built-in ones have "
+                                  "none); null without `forces`")
 
 
 class ManipulationTrajectoryModel(_Response):
