@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from ocp.robots.finger import FingerModel, load_finger
     from ocp.robots.hands import Hand, load_hand
     from ocp.solution import GraspSample, ManipulationSolution, Solution, Status, Trajectory
+    from ocp.solve.attempt import AttemptOptions, attempt, shifted
     from ocp.solve.planner import ManipulationPlanner
     from ocp.spec.contacts import FingertipContact, FreeObject, SupportContact
     from ocp.spec.grasp import Fingertip, ManipulationProblem, Palm, hand_fingertips
@@ -60,6 +61,8 @@ _EXPORTS = {
     "GraspSample": "ocp.solution", "ManipulationSolution": "ocp.solution",
     "Solution": "ocp.solution", "Status": "ocp.solution", "Trajectory": "ocp.solution",
     "ManipulationPlanner": "ocp.solve.planner",
+    "AttemptOptions": "ocp.solve.attempt", "attempt": "ocp.solve.attempt",
+    "shifted": "ocp.solve.attempt",
     "FingertipContact": "ocp.spec.contacts", "FreeObject": "ocp.spec.contacts",
     "SupportContact": "ocp.spec.contacts",
     "Fingertip": "ocp.spec.grasp", "ManipulationProblem": "ocp.spec.grasp",
@@ -73,6 +76,7 @@ _EXPORTS = {
 
 __all__ = [
     "SURFACES",
+    "AttemptOptions",
     "BallOnPalmPlanner",
     "BallOnPalmProblem",
     "Certificate",
@@ -106,11 +110,13 @@ __all__ = [
     "Tracking",
     "Trajectory",
     "ViaPoint",
+    "attempt",
     "greedy_plan",
     "hand_fingertips",
     "load_finger",
     "load_hand",
     "plan",
+    "shifted",
 ]
 
 

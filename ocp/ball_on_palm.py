@@ -28,6 +28,7 @@ from ocp.certify.certificate import PALM_TOLERANCES, Certificate
 from ocp.certify.laws import certify_grasp
 from ocp.geometry.surfaces import rotation_from_vector
 from ocp.solution import ManipulationSolution, Solution, SolverStats, Status, Trajectory
+from ocp.solve import planner as _pipeline
 from ocp.solve.planner import ManipulationPlanner, ManipulationProblem, Palm
 from ocp.spec.palm import NU, NX, BallOnPalmModel, contact_coordinates, model_for, object_pose
 from ocp.spec.problem import (
@@ -133,7 +134,7 @@ class BallOnPalmPlanner:
 
     def nlp_for(self, problem: BallOnPalmProblem) -> tuple[Any, bool]:
         """The NLP of this problem's structure, and whether it came from the cache."""
-        return self.general._build(grasp_problem(problem))
+        return self.general.build(grasp_problem(problem))
 
     def solve(self, problem: BallOnPalmProblem,
               warm_start: Solution | WarmStart | None = None, *,
@@ -224,7 +225,7 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
                     chart_rotation=tuple(float(a) for a in patch))
 
 
-_DEFAULT = BallOnPalmPlanner()
+_DEFAULT = BallOnPalmPlanner(general=_pipeline.default_planner())
 
 
 def default_planner() -> BallOnPalmPlanner:

@@ -64,6 +64,10 @@ _IPOPT_STATUS = {
 }
 
 
+#: IPOPT's return statuses of a converged solve.
+_CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
 def status_from_ipopt(raw: str) -> Status:
     """Map IPOPT's return status to ours; anything unlisted is a numerical error."""
     return _IPOPT_STATUS.get(raw, Status.NUMERICAL_ERROR)
@@ -423,6 +427,13 @@ class ManipulationSolution:
     @property
     def ok(self) -> bool:
         return self.status is Status.SOLVED
+
+    @property
+    def converged(self) -> bool:
+        """Whether IPOPT converged (``raw_status``), certified or not: an uncertified
+        re-plan (:func:`~ocp.solve.attempt.attempt`) that converged is ``inaccurate`` by
+        status (only a certificate makes a plan ``solved``) and ``converged`` here."""
+        return self.raw_status in _CONVERGED
 
     @property
     def warm_start(self) -> WarmStart:

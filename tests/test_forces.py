@@ -135,9 +135,9 @@ def test_without_forces_the_nlp_and_the_plan_are_as_before() -> None:
 
     problem = two_fingers(n=10)
     assert not GraspStructure.of(problem).forces
-    nlp, _ = PLANNER._build(problem)
+    nlp, _ = PLANNER.build(problem)
     assert nlp.n_load == 0
-    with_forces, _ = PLANNER._build(replace(problem, forces=LOAD))
+    with_forces, _ = PLANNER.build(replace(problem, forces=LOAD))
     assert with_forces.n_load == 2
     # 4 variables per contact and point; rows: 6 equilibrium, 2 normal, 2 cone per point
     npts = 2 * 10 + 1

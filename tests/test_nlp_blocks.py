@@ -60,7 +60,7 @@ CASES = {"palm_via_points": palm_with_via_points, "two_fingers_tracking":
 def test_block_jacobian_and_hessian_are_the_nlps_own(name: str) -> None:
     problem = CASES[name]()
     planner = ManipulationPlanner()
-    nlp, _ = planner._build(problem)
+    nlp, _ = planner.build(problem)
     p = planner.parameters(problem, nlp)
     nw, ng = nlp.pack.nnz_out(0), len(nlp.lbg)
     w, lam_g = ca.MX.sym("w", nw), ca.MX.sym("lam_g", ng)
@@ -104,7 +104,7 @@ def test_the_compiled_nlp_plans_what_the_virtual_machine_plans(tmp_path: Path) -
     plain: Any = ManipulationPlanner().solve(problem)
     compiled_planner = ManipulationPlanner(compile_dir=tmp_path)
     compiled = compiled_planner.solve(problem)
-    nlp, _ = compiled_planner._build(problem)
+    nlp, _ = compiled_planner.build(problem)
     assert nlp.compiled
     assert plain.raw_status == compiled.raw_status == "Solve_Succeeded"
     assert plain.status is compiled.status
@@ -123,7 +123,7 @@ def test_the_compiled_nlp_plans_what_the_virtual_machine_plans(tmp_path: Path) -
     stamps = [p.stat().st_mtime_ns for p in libraries]
     again = ManipulationPlanner(compile_dir=tmp_path)
     again.prepare(problem)
-    assert again._build(problem)[0].compiled
+    assert again.build(problem)[0].compiled
     assert sorted(p for p in tmp_path.iterdir() if p.is_file()) == libraries
     assert [p.stat().st_mtime_ns for p in libraries] == stamps
 
@@ -144,7 +144,7 @@ def test_a_background_compile_takes_over_between_solves(tmp_path: Path) -> None:
         timing="paper"))
     planner = ManipulationPlanner(compile_dir=tmp_path, background=True)
     first: Any = planner.solve(problem)
-    nlp, _ = planner._build(problem)
+    nlp, _ = planner.build(problem)
     assert planner.compiler is not None and not planner.compiler.errors
     assert first.raw_status == "Solve_Succeeded" and first.refinements == 0
     structures = 1
@@ -163,7 +163,7 @@ def test_a_background_compile_takes_over_between_solves(tmp_path: Path) -> None:
     # a foreground planner finds the same libraries in the cache
     again = ManipulationPlanner(compile_dir=tmp_path)
     again.prepare(problem)
-    assert again._build(problem)[0].compiled
+    assert again.build(problem)[0].compiled
     assert sorted(p for p in tmp_path.iterdir() if p.is_file()) == sorted(libraries)
 
 
@@ -174,7 +174,7 @@ def test_a_background_compile_without_a_compiler_keeps_the_virtual_machine(
     assert planner.compiler is not None
     planner.compiler.compiler = "no-such-cc"
     sol: Any = planner.solve(problem)
-    assert sol.status is Status.SOLVED and not planner._build(problem)[0].compiled
+    assert sol.status is Status.SOLVED and not planner.build(problem)[0].compiled
     assert planner.compiler.pending == 0
     assert any("no C compiler" in e for e in planner.compiler.errors)
 

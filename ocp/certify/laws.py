@@ -150,10 +150,18 @@ def timing_checks(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
     scale = np.full(m.nx, 1.0 / T)
     scale[m.length_columns()] = problem.object.length_scale / T
     rest = np.abs(np.vstack([traj.F0[0], traj.F1[-1]])) / scale
+    checks = []
+    if problem.initial_input is not None:  # a moving start: its given input, not rest
+        rest[0] = 0.0
+        u0 = np.asarray(problem.initial_input, dtype=float)
+        u_scale = np.maximum(np.abs(u0), np.max(np.abs(traj.U0), axis=0))
+        err = np.abs(traj.U0[0] - u0) / np.maximum(u_scale, 1e-300)
+        checks.append(Check("max_initial_input_error", float(err.max(initial=0.0)),
+                            TIMING_REL_TOL, CheckKind.PHYSICS, time=float(traj.t_nodes[0])))
     jumps = np.abs(traj.F1[:-1] - traj.F0[1:]) / scale
     k_jump = int(np.argmax(jumps.max(axis=1))) if len(jumps) else 0
     P = CheckKind.PHYSICS
-    checks = [Check("max_rest_rate", float(rest.max()), TIMING_REL_TOL, P,
+    checks += [Check("max_rest_rate", float(rest.max()), TIMING_REL_TOL, P,
                     time=float(traj.t_nodes[0] if rest[0].max() >= rest[1].max()
                                else traj.t_nodes[-1])),
               Check("max_velocity_jump", float(jumps.max(initial=0.0)), TIMING_REL_TOL, P,

@@ -38,39 +38,34 @@ import math
 import time
 from collections import OrderedDict
 from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from ocp.certify.certificate import Certificate
-from ocp.certify.laws import certify_grasp, with_force_checks
+from ocp.certify.laws import with_force_checks
 from ocp.geometry.grasp import force_angles
 from ocp.solution import (
-    Collocation,
     ContactTrajectory,
     FingerTrajectory,
     GraspSample,
     ManipulationSolution,
-    SolverStats,
     Status,
     assemble_solution,
     planned_forces,
-    status_from_ipopt,
 )
+from ocp.solve.attempt import IpoptRun, finish, initial_point, run, setup
 from ocp.solve.compiled import BackgroundCompiler
 from ocp.solve.guesses import (
     Guess,
     Strategy,
-    epigraph_guess,
     planned_force_guess,
     strategy_for,
 )
-from ocp.solve.ipopt import IPOPT_WARM_OPTIONS, ipopt_solver
 from ocp.solve.ipopt import NLP as _NLP
+from ocp.solve.ipopt import ipopt_solver
 from ocp.spec.grasp import (
     Fingertip,
     ManipulationProblem,
@@ -79,7 +74,6 @@ from ocp.spec.grasp import (
     contact_charts,
     fingertip_errors,
     hand_fingertips,
-    support_goal_errors,
 )
 from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
 from ocp.spec.patches import pole_clear_patch, recharted, rides_pole
@@ -88,7 +82,7 @@ from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.force_stage import ForceStage
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.nlp_blocks import build_manipulation_nlp
-from ocp.transcription.values import bounds, load_parameters, scales
+from ocp.transcription.values import load_parameters
 from ocp.transcription.values import parameters as nlp_parameters
 
 __all__ = [
@@ -203,17 +197,6 @@ class _Totals:
     attempts: int = 0
 
 
-@dataclass
-class _Attempt:
-    status: Status
-    raw: str
-    iterations: int
-    objective: float
-    violation: float
-    w: FloatArray
-    point: NlpPoint | None = field(default=None, repr=False)
-
-
 class ManipulationPlanner:
     """Direct-collocation planner for any grasp (NLPs cached per structure): see the
     module's doc."""
@@ -255,7 +238,9 @@ class ManipulationPlanner:
             self._models[key] = GraspModel(*key)
         return self._models[key]
 
-    def _build(self, problem: ManipulationProblem) -> tuple[_NLP, bool]:
+    def build(self, problem: ManipulationProblem) -> tuple[_NLP, bool]:
+        """The NLP of this problem's structure (:class:`GraspStructure`), built or from
+        the cache, and whether it was cached."""
         key = GraspStructure.of(problem)
         if key in self._nlps:
             self._nlps.move_to_end(key)
@@ -292,7 +277,7 @@ class ManipulationPlanner:
         kinematic NLP its first stage solves (the coupled one only if ever needed)."""
         if problem.forces is not None and self.two_stage_forces:
             problem = replace(problem, forces=None)
-        nlp, hit = self._build(problem)
+        nlp, hit = self.build(problem)
         self.model(problem).reintegrator(2)  # the certificate's: nodes and midpoints
         return 0.0 if hit else nlp.build_time
 
@@ -538,104 +523,33 @@ class ManipulationPlanner:
     def _solve_once(self, problem: ManipulationProblem, strategy: Strategy, x0: FloatArray,
                     warm: WarmStart | ManipulationSolution | None, deadline: float,
                     budget: int, totals: _Totals, certify: bool) -> ManipulationSolution:
-        nlp, hit = self._build(problem)
-        build_time = 0.0 if hit else nlp.build_time
-        m = self.model(problem)
-        x_scale, u_scale = scales(problem, m)
-        segments, tb = problem.segments()
-        t_nodes = node_times(segments, tb)
-        n = len(t_nodes) - 1
-        prm = m.params(np.asarray(problem.object.dimensions, dtype=float),
-                       contact_charts(problem))
-        p = self.parameters(problem, nlp)
-        lbx, ubx = bounds(problem, nlp, m, x0, x_scale, u_scale)
-        strategy.adjust_bounds(problem, nlp, lbx, ubx)
+        """The initial guesses in turn (:meth:`_guesses`), each one IPOPT call
+        (:func:`~ocp.solve.attempt.run`) within what is left of the budget, until one
+        solves: the plan of the best (:func:`~ocp.solve.attempt.finish`)."""
+        s = setup(self, problem, x0)
+        s.strategy = strategy
         cap = self.max_iter_per_guess if strategy.caps_guesses else None
-        attempts: list[_Attempt] = []
-        ipopt_time = 0.0
+        runs: list[IpoptRun] = []
         t_loop = time.perf_counter()
-        for (X, Xm, U, Um), mult in self._guesses(problem, strategy, m, nlp, x0, t_nodes,
-                                                  warm):
-            used = sum(a.iterations for a in attempts) if strategy.shared_budget else 0
+        for guess, mult in self._guesses(problem, strategy, s.model, s.nlp, x0, s.t_nodes,
+                                         warm):
+            used = sum(r.iterations for r in runs) if strategy.shared_budget else 0
             remaining = budget - used
             limit = remaining if cap is None else max(1, min(remaining, cap))
-            Sg, Fg = epigraph_guess(m, np.vstack([X, Xm]), prm,
-                                    load_parameters(problem) if nlp.n_load else None)
-            w0 = nlp.pack((X / x_scale).T, (Xm / x_scale).T, (U / u_scale).T,
-                          (Um / u_scale).T, Sg[:, : n + 1], Sg[:, n + 1:], Fg)
-            w0 = np.clip(np.asarray(w0).ravel(), lbx, ubx)
-            solver, duals = nlp.solver, {}
-            if mult is not None:  # the previous primal-dual point of this very NLP
-                # states and inputs as interpolated (this problem's scaling), the epigraph
-                # and internal-force variables as they were
-                n_xu = nlp.hs.w.numel()
-                w0[n_xu:] = np.clip(mult.w[n_xu:], lbx[n_xu:], ubx[n_xu:])
-                if nlp.warm_solver is None:
-                    t_build = time.perf_counter()
-                    nlp.warm_solver = ca.nlpsol("manipulation_warm", "ipopt", nlp.oracle,
-                                                {**nlp.options, **IPOPT_WARM_OPTIONS})
-                    build_time += time.perf_counter() - t_build
-                solver, duals = nlp.warm_solver, {"lam_x0": mult.lam_x, "lam_g0": mult.lam_g}
-            nlp.stop.arm(deadline, limit)
-            t_ipopt = time.perf_counter()
-            res = solver(x0=w0, p=p, lbx=lbx, ubx=ubx, lbg=nlp.lbg, ubg=nlp.ubg, **duals)
-            ipopt_time += time.perf_counter() - t_ipopt
-            st = solver.stats()
-            raw = str(st["return_status"])
-            status = nlp.stop.reason if raw == "User_Requested_Stop" and nlp.stop.reason \
-                else status_from_ipopt(raw)
-            g = np.asarray(res["g"]).ravel()
-            viol = float(np.max(np.maximum(nlp.lbg - g, g - nlp.ubg), initial=0.0))
-            point = [np.asarray(res[k]).ravel() for k in ("x", "lam_x", "lam_g")]
-            attempts.append(_Attempt(
-                status, raw, int(st["iter_count"]), float(res["f"]),
-                viol if math.isfinite(viol) else math.inf, point[0],
-                NlpPoint(nlp.fingerprint, *point)
-                if all(np.all(np.isfinite(a)) for a in point) else None))
-            if status is Status.SOLVED or nlp.stop.reason is Status.TIME_LIMIT \
+            runs.append(run(s, initial_point(s, guess), mult, deadline, limit))
+            if runs[-1].status is Status.SOLVED or s.nlp.stop.reason is Status.TIME_LIMIT \
                     or (cap is not None and remaining <= cap) \
                     or time.perf_counter() >= deadline:
                 break
-        solve_time = time.perf_counter() - t_loop
-        best = next((a for a in attempts if a.status is Status.SOLVED),
-                    min(attempts, key=lambda a: a.violation))
-        parts = nlp.unpack(best.w)
-        Xs, Xms, Us, Ums = (np.asarray(a) for a in parts[:4])
-        Ucols = Us.T * u_scale
-        col = Collocation(t_nodes, Xs.T * x_scale, Xms.T * x_scale, Ucols[nlp.hs.left_cols],
-                          Ums.T * u_scale, Ucols[nlp.hs.right_cols])
-        if nlp.n_load:  # the planned forces, after the internal forces' rows
-            col = replace(col, forces=planned_forces(
-                problem, m, np.asarray(parts[6])[3 * nlp.n_force:], col.X, col.Xm, prm))
-        # one deadline over the whole plan: past it, no certificate either (seconds for a
-        # multi-finger grasp); the plan is the last iterate, stopped by the time limit
-        late = certify and time.perf_counter() >= deadline
-        if late:
-            best = replace(best, status=Status.TIME_LIMIT)
-        t_cert = time.perf_counter()
-        traj = m.interpolant(t_nodes, col.X, col.U0, col.Um, col.U1, prm)
-        cert = certify_grasp(problem, m, traj, prm, problem.tolerances, col.forces) \
-            if certify and not late else \
-            Certificate.failed("not certified: the time limit was reached first" if late
-                               else "not certified (planned as an initial guess)")
-        cert_time = time.perf_counter() - t_cert
-        goal_error = support_goal_errors(problem, col.X,
-                                         [0, *np.cumsum(segments).tolist()])
-        sol = assemble_solution(problem, m, best.status, best.raw, col, traj, prm, cert,
-                                goal_error)
-        iterations = sum(a.iterations for a in attempts)
-        totals.build += build_time
-        totals.solve += solve_time
-        totals.ipopt += ipopt_time
-        totals.certificate += cert_time
-        totals.iterations += iterations
-        totals.attempts += len(attempts)
-        stats = SolverStats(raw_status=best.raw, iterations=iterations, attempts=len(attempts),
-                            build_time=build_time, solve_time=solve_time,
-                            certificate_time=cert_time, objective=best.objective,
-                            cache_hit=hit, n_intervals=n, ipopt_time=ipopt_time)
-        return replace(sol, iterations=iterations, build_time=build_time,
-                       solve_time=ipopt_time, stats=stats, nlp_point=best.point)
+        sol = finish(s, runs, time.perf_counter() - t_loop, deadline, certify)
+        assert sol.stats is not None
+        totals.build += sol.stats.build_time
+        totals.solve += sol.stats.solve_time
+        totals.ipopt += sol.stats.ipopt_time
+        totals.certificate += sol.stats.certificate_time
+        totals.iterations += sol.stats.iterations
+        totals.attempts += sol.stats.attempts
+        return sol
 
 
 def _with_earlier(sol: ManipulationSolution, earlier: ManipulationSolution
@@ -652,3 +566,15 @@ def _with_earlier(sol: ManipulationSolution, earlier: ManipulationSolution
                     ipopt_time=a.ipopt_time + b.ipopt_time)
     return replace(sol, iterations=stats.iterations, build_time=stats.build_time,
                    solve_time=sol.solve_time + earlier.solve_time, stats=stats)
+
+
+_DEFAULT: ManipulationPlanner | None = None
+
+
+def default_planner() -> ManipulationPlanner:
+    """The process-wide planner: one NLP cache for every kind of grasp (the front ends'
+    default planners share it)."""
+    global _DEFAULT
+    if _DEFAULT is None:
+        _DEFAULT = ManipulationPlanner()
+    return _DEFAULT

@@ -167,6 +167,10 @@ class ManipulationProblem:
     #: the duration): the objective weighs each input's rate of change by its square
     #: (docs/timing.md).
     ramp_time: float | None = None
+    #: The input at t = 0 in the grasp's input layout (physical units): a plan that starts
+    #: moving, re-planned from a measured state (:func:`ocp.solve.attempt.attempt`'s
+    #: ``u0``). None: at rest with the smooth timing, free with the paper's.
+    initial_input: tuple[float, ...] | None = None
 
     @property
     def ramp_time_fraction(self) -> float:

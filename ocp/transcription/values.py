@@ -129,6 +129,9 @@ def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: Float
     if nlp.hs.continuous:  # the smooth timing: at rest at the start and at the end
         for col in (nlp.hs.left_cols[0], nlp.hs.right_cols[-1]):
             lo_u[col] = hi_u[col] = 0.0
+    if problem.initial_input is not None:  # a moving start: the given input, either timing
+        col = nlp.hs.left_cols[0]
+        lo_u[col] = hi_u[col] = np.asarray(problem.initial_input, dtype=float) / u_scale
     lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
     ns = nlp.n_epigraph
     zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))

@@ -1,0 +1,165 @@
+"""The public one-NLP seam (:func:`ocp.solve.attempt.attempt`): solve a problem's cached
+NLP from a given (measured, possibly moving) state and a warm point; the receding-horizon
+loop of docs/replanning.md, run."""
+
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import assert_close
+
+from ocp import AttemptOptions, attempt, shifted
+from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
+from ocp.robots.finger import load_finger
+from ocp.solution import Status
+from ocp.solve.planner import ManipulationPlanner, ManipulationProblem
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ProblemError
+
+PLANNER = ManipulationPlanner()
+ROOT = Path(__file__).resolve().parents[1]
+GOAL = {"x": 0.012, "y": 0.006}
+
+
+def palm_and_finger(duration: float = 2.0) -> ManipulationProblem:
+    """The paper's experiment-1 grasp (the built-in finger pressing the ball on the palm)
+    rolling the ball 13 mm over the palm, 16 intervals, the smooth timing."""
+    base = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)),
+                             initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2), goal=GOAL,
+                             duration=duration, n_intervals=16)
+    contact = FingerContact(initial=(0.0, 0.0, 0.2, 0.0, 0.0),
+                            chart_rotation=(0.0, 0.0, math.pi),
+                            q_seed=tuple(math.radians(a) for a in (0, 30, 0, 30, 0, 30)))
+    return OneFingerPlanner.manipulation_problem(
+        OneFingerProblem(base=base, finger=load_finger(), contact=contact, mu=0.5))
+
+
+@pytest.fixture(scope="module")
+def first() -> tuple[ManipulationProblem, object]:
+    problem = palm_and_finger()
+    sol = PLANNER.solve(problem)
+    assert sol.status is Status.SOLVED and sol.certificate.passed, sol.certificate
+    # the grid the certificate asked for (the plan may have been refined): its NLP
+    assert sol.stats is not None
+    return problem.with_intervals(sol.stats.n_intervals), sol
+
+
+def test_an_attempt_from_its_own_plan_stays_there(first: tuple) -> None:
+    """Warm-started at a plan of this very NLP (its primal-dual point), one attempt is
+    already at the optimum: a few iterations, the same plan."""
+    problem, sol = first
+    again = attempt(problem, warm=sol, planner=PLANNER)
+    # not certified (not asked): converged, and "inaccurate" until a certificate says more
+    assert again.converged and again.status is Status.INACCURATE
+    assert "not certified" in again.message
+    assert again.stats is not None and again.stats.cache_hit
+    assert again.stats.iterations <= 5, again.stats
+    # the same optimum to IPOPT's tolerance (its objective to 1e-4; the joints, along
+    # which the objective is flattest, to 1e-3 rad)
+    assert sol.stats is not None
+    assert math.isclose(again.stats.objective, sol.stats.objective, rel_tol=1e-4)
+    assert_close(again.X, sol.X, atol=1e-3)
+
+
+def test_a_moving_start_keeps_the_measured_state_and_rates(first: tuple) -> None:
+    """From the plan's state and inputs at t = 0.5 s (the object rolling, the finger
+    moving), the rest of the motion is planned from exactly that state and with exactly
+    those first inputs (not pinned to rest), and it reaches the same goal."""
+    problem, sol = first
+    dt = 0.5
+    now = sol.sample([dt])
+    assert np.max(np.abs(now.u)) > 1e-3  # really moving
+    rest = replace(problem, duration=problem.duration - dt)
+    new = attempt(rest, x0=now.x[0], u0=now.u[0], warm=shifted(sol, dt),
+                  options=AttemptOptions(max_iter=200, certify=True), planner=PLANNER)
+    assert new.status is Status.SOLVED, new.stats
+    assert new.certificate.passed, new.certificate.failures
+    assert_close(new.X[0], now.x[0], atol=1e-12 * (1 + np.abs(now.x[0])))
+    assert_close(new.U[0], now.u[0], atol=1e-9 * (1 + np.abs(now.u[0])))
+    palm = new.contacts[0].eta[-1]
+    assert_close(palm[:2], [GOAL["x"], GOAL["y"]], atol=1e-6)
+
+
+def test_the_receding_horizon_loop_of_the_docs(first: tuple) -> None:
+    """docs/replanning.md's loop: re-plan every 0.25 s from the state the last plan
+    reaches (the 'measured' one here), shrinking the horizon, each warm-started at the
+    last plan shifted in time; every re-plan solves within its small iteration budget, is
+    continuous with the executed motion, and the last one is certified and at the goal."""
+    problem, sol = first
+    period, t = 0.25, 0.0
+    while problem.duration - t > 2 * period:
+        t += period
+        now = sol.sample([period])  # the state and rates one period later
+        rest = replace(problem, duration=problem.duration - t)
+        last = problem.duration - t <= 3 * period
+        sol = attempt(rest, x0=now.x[0], u0=now.u[0], warm=shifted(sol, period),
+                      options=AttemptOptions(max_iter=30, certify=last), planner=PLANNER)
+        assert sol.converged, (t, sol.stats)
+        assert sol.status is (Status.SOLVED if last else Status.INACCURATE)
+        assert_close(sol.X[0], now.x[0], atol=1e-12 * (1 + np.abs(now.x[0])))
+    assert sol.certificate.passed, sol.certificate.failures
+    assert_close(sol.contacts[0].eta[-1][:2], [GOAL["x"], GOAL["y"]], atol=1e-6)
+
+
+def test_a_state_the_grasp_cannot_explain_is_refused(first: tuple) -> None:
+    """A fingertip away from where its joints put it (a joint angle off by 0.05 rad), a
+    state of the wrong size or not finite: a ProblemError naming the field, no solve."""
+    problem, sol = first
+    x = sol.X[0].copy()
+    q0 = PLANNER.model(problem).fingertips[0].q_cols.start
+    x[q0 + 1] += 0.05
+    with pytest.raises(ProblemError) as e:
+        attempt(problem, x0=x, planner=PLANNER)
+    assert "x0 (finger 0)" in str(e.value) and "from where its contact" in str(e.value)
+    for bad in (sol.X[0][:-1], np.full_like(sol.X[0], np.nan)):
+        with pytest.raises(ProblemError, match="x0"):
+            attempt(problem, x0=bad, planner=PLANNER)
+    with pytest.raises(ProblemError, match="u0"):
+        attempt(problem, u0=np.zeros(3), planner=PLANNER)
+
+
+def test_shifted_is_the_rest_of_the_plan(first: tuple) -> None:
+    _, sol = first
+    ws = shifted(sol, 0.5)
+    assert ws.t[0] == 0.0 and math.isclose(ws.t[-1], sol.duration - 0.5)
+    assert_close(ws.x, sol.interpolate(ws.t + 0.5)[0], atol=1e-12)
+    with pytest.raises(ValueError, match="dt"):
+        shifted(sol, sol.duration)
+
+
+def test_the_certificate_holds_a_moving_start_to_its_given_input(first: tuple) -> None:
+    """The smooth timing's start law: a plan from rest starts with zero rates; a moving
+    start starts with the given input, and a plan that does not is caught."""
+    from ocp.certify.laws import timing_checks
+
+    problem, sol = first
+    m = PLANNER.model(problem)
+    checks = {c.name: c for c in timing_checks(problem, m, sol.trajectory)}
+    assert checks["max_rest_rate"].passed and "max_initial_input_error" not in checks
+    u0 = sol.collocation.U0[0] + 0.05 * np.max(np.abs(sol.collocation.U0), axis=0)
+    moving = replace(problem, initial_input=tuple(u0))
+    checks = {c.name: c for c in timing_checks(moving, m, sol.trajectory)}
+    assert not checks["max_initial_input_error"].passed
+    assert checks["max_initial_input_error"].value >= 0.04
+
+
+def test_the_docs_loop_runs_as_written(tmp_path: Path) -> None:
+    """docs/replanning.md's Python block, run in a fresh interpreter: every re-plan
+    printed converged."""
+    block = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "replanning.md").read_text(),
+                       flags=re.S)
+    assert len(block) == 1
+    script = tmp_path / "loop.py"
+    script.write_text(block[0])
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.strip().splitlines()
+    assert len(lines) >= 4 and all(line.endswith("converged True") for line in lines), \
+        proc.stdout
