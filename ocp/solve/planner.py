@@ -127,6 +127,9 @@ class GraspStructure:
     forces: bool = False
     #: the smooth timing (``problem.timing``): one input per node, joint-acceleration rows
     smooth: bool = False
+    #: the contact phases on the grid (``problem.schedule()``): None, one phase with every
+    #: fingertip touching
+    schedule: tuple[tuple[int, tuple[bool, ...]], ...] | None = None
 
     @staticmethod
     def of(problem: ManipulationProblem) -> GraspStructure:
@@ -139,7 +142,7 @@ class GraspStructure:
         return GraspStructure(problem.object.shape, problem.palm is not None, segments,
                               goal_mask, via_masks, tuple(c.finger for c in problem.fingers),
                               problem.motion is not None, problem.forces is not None,
-                              problem.smooth)
+                              problem.smooth, problem.schedule())
 
     def fingerprint(self, m: GraspModel) -> str:
         """The structure as a string that another process computes alike: the fingers by
@@ -148,7 +151,8 @@ class GraspStructure:
 
         parts = [repr((self.shape, self.palm, self.segments, self.goal_mask, self.via_masks,
                        self.tracking, m.nx, m.nu)) + (":forces" if self.forces else "")
-                 + (":smooth" if self.smooth else "")]
+                 + (":smooth" if self.smooth else "")
+                 + (f":phases={self.schedule!r}" if self.schedule is not None else "")]
         for f in self.fingers:
             parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
                       repr(np.asarray(f.base_rotation).round(12).tolist()),
@@ -248,7 +252,8 @@ class ManipulationPlanner:
         m = self.model(problem)
         block = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
                                        key.tracking, FORCE_REGULARISATION,
-                                       forces=key.forces, smooth=key.smooth)
+                                       forces=key.forces, smooth=key.smooth,
+                                       schedule=key.schedule)
         nlp = ipopt_solver(block, key.fingerprint(m), None if self.compiler else self.compile_dir)
         self._nlps[key] = nlp
         while len(self._nlps) > max(1, self.max_nlps):

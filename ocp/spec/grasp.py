@@ -19,6 +19,7 @@ from ocp.certify.certificate import GRASP_TOLERANCES, PALM_TOLERANCES, Tolerance
 from ocp.geometry.rotations import log_rotation
 from ocp.geometry.surfaces import SURFACES, rotation_from_vector
 from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
+from ocp.spec.phases import ContactPhase, phase_errors, phase_intervals
 from ocp.spec.problem import (
     DEFAULT_FINGER_CHART_ROTATION,
     DEFAULT_MAX_JOINT_ACCELERATION,
@@ -171,6 +172,9 @@ class ManipulationProblem:
     #: moving, re-planned from a measured state (:func:`ocp.solve.attempt.attempt`'s
     #: ``u0``). None: at rest with the smooth timing, free with the paper's.
     initial_input: tuple[float, ...] | None = None
+    #: The motion's contact phases (:mod:`ocp.spec.phases`): which fingertips touch the
+    #: object when. None: one phase, every fingertip touching throughout.
+    phases: tuple[ContactPhase, ...] | None = None
 
     @property
     def ramp_time_fraction(self) -> float:
@@ -204,6 +208,15 @@ class ManipulationProblem:
             base = self.palm_problem()
             return base.segment_intervals(), base.segment_times
         return (self.n_intervals,), np.array([0.0, self.duration])
+
+    def schedule(self) -> tuple[tuple[int, tuple[bool, ...]], ...] | None:
+        """The phases on the grid: (intervals, touching) per phase; None for one phase
+        with every fingertip touching (the transcription's default)."""
+        if self.phases is None or (len(self.phases) == 1 and all(self.phases[0].touching)):
+            return None
+        counts = phase_intervals(self.phases, self.n_intervals)
+        return tuple((k, tuple(bool(t) for t in ph.touching))
+                     for k, ph in zip(counts, self.phases, strict=True))
 
     def with_intervals(self, n: int) -> ManipulationProblem:
         return replace(self, n_intervals=n)
@@ -276,6 +289,16 @@ class ManipulationProblem:
                 errs.append((f"{name}.q_seed",
                              f"must have {c.finger.nq} joint angles, got {len(c.q_seed)}"))
         errs += joint_acceleration_errors(self.max_joint_acceleration)
+        if self.phases is not None:
+            errs += phase_errors(self.phases, self.duration, len(self.fingers),
+                                 self.n_intervals, self.palm is not None,
+                                 len(self.palm.via_points) if self.palm else 0)
+            if len(self.phases) > 1 and not any(e[0].startswith("phases") for e in errs):
+                errs.append(("phases", "plans with more than one contact phase (a fingertip "
+                                       "lifted) are not planned yet: the swing's initial "
+                                       "guess, clearance and certificate come with finger "
+                                       "gaiting; the NLP of such a schedule is built by "
+                                       "ManipulationPlanner.build"))
         if self.forces is not None:
             errs += self.forces.errors("forces", self.mu)
             if not self.fingers:

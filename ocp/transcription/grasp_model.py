@@ -69,34 +69,23 @@ class GraspModel:
         self.n_params = int(prm.numel())
         xd = ca.SX.sym("xd", self.nx)
         g = SymbolicGrasp(surface, shape_p, x, xd)
-        chart_of = {id(c): charts[k] for k, c in enumerate(self.point_contacts)}
-        chart_of[id(obj)] = chart_of.get(id(obj), g.eye)
+        self._sym = (x, u, prm, g, charts)
+        self._phases: dict[tuple[bool, ...], PhaseModel] = {}
+        every = self.phase((True,) * len(self.fingertips))
+        self.dynamics, self.path = every.dynamics, every.path
+        chart_of = self._chart_of()
 
         def block(c: Contact) -> tuple[Any, Any, Any]:
             return x[c.xs], u[c.us], chart_of.get(id(c), g.eye)
 
-        g.R_po, g.p_po = obj.pose(g, x[obj.xs], chart_of[id(obj)])
-        xdot = ca.vertcat(*[c.rates(g, *block(c)) for c in self.contacts])
-        points, normals = [], []  # object frame
-        for c in self.point_contacts:
-            p, n = c.point_normal(g, x[c.xs], chart_of[id(c)])
-            points.append(p)
-            normals.append(n)
-        closure, tip_R, tip_p = [], [], []
-        for c in self.fingertips:
-            xb, _, chart = block(c)
-            closure.append(c.closure(g, xb, chart))
-            R_pf, p_pf = c.pad_pose(g, xb, chart)
+        tip_R, tip_p = [], []
+        for tip in self.fingertips:
+            xb, _, chart = block(tip)
+            R_pf, p_pf = tip.pad_pose(g, xb, chart)
             tip_R.append(R_pf)
             tip_p.append(p_pf)
-        self.dynamics = ca.Function("manipulation_dynamics", [x, u, prm], [xdot],
-                                    ["x", "u", "params"], ["x_dot"])
-        P, N = _cat(points, 3), _cat(normals, 3)
+        P, N = every.points_normals
         R_po, p_po = g.R_po, g.p_po
-        cl = ca.vertcat(*closure) if closure else ca.SX(0, 1)
-        self.path = ca.Function("manipulation_path", [x, prm], [cl, P, N, R_po, p_po],
-                                ["x", "params"], ["closure", "points", "normals", "R_po",
-                                                  "p_po"])
         self.cartesian = ca.Function(
             "manipulation_cartesian", [x, prm],
             [R_po, p_po, _cat(tip_R, 3), _cat(tip_p, 3), p_po + R_po @ P, R_po @ N],
@@ -121,6 +110,24 @@ class GraspModel:
         self._rolls: dict[int, ca.Function] = {}
         self._reintegrators: dict[int, ca.Function] = {}
         self._mapped: dict[tuple[str, int], ca.Function] = {}
+
+    def _chart_of(self) -> dict[int, Any]:
+        """Each point contact's chart symbol (the object block's too, or the identity)."""
+        _, _, _, g, charts = self._sym
+        chart_of = {id(c): charts[k] for k, c in enumerate(self.point_contacts)}
+        chart_of[id(self.object)] = chart_of.get(id(self.object), g.eye)
+        return chart_of
+
+    def phase(self, touching: tuple[bool, ...]) -> PhaseModel:
+        """The grasp in a contact phase: ``touching[i]`` whether fingertip i touches the
+        object (:class:`PhaseModel`; built once per mask)."""
+        touching = tuple(bool(t) for t in touching)
+        if len(touching) != len(self.fingertips):
+            raise ValueError(f"a phase of this grasp names {len(self.fingertips)} "
+                             f"fingertips, got {len(touching)}")
+        if touching not in self._phases:
+            self._phases[touching] = PhaseModel(self, touching)
+        return self._phases[touching]
 
     # -- columns of the state and input vectors, by kind ----------------------------------
     def _columns(self, attr: str) -> list[int]:
@@ -187,3 +194,106 @@ class GraspModel:
             self._reintegrators[n_sub] = reintegrator(self.dynamics, self.nx, self.nu,
                                                       self.n_params, n_sub)
         return self._reintegrators[n_sub]
+
+
+class PhaseModel:
+    """A grasp in one contact phase: which fingertips touch the object, and the functions
+    of the phase built from what each contact contributes where it is active.
+
+    A touching fingertip contributes its rolling equations, its contact point and normal
+    (force closure, loads) and its closure rows; a fingertip off the object contributes
+    only its joints' kinematics (q_dot = the joint-rate inputs): its contact coordinates
+    are not states of the phase (:attr:`dyn_cols` leaves them out of the defects; the
+    transcription parks them) and it has no contact rows. The state and input layout is
+    the grasp's in every phase (:class:`GraspModel`), so that phases share one grid.
+
+    * ``dynamics(x, u, params) -> x_dot`` (zero rates for the parked coordinates);
+    * ``path(x, params) -> (closure, points, normals, R_po, p_po)`` of the active contacts.
+    """
+
+    def __init__(self, m: GraspModel, touching: tuple[bool, ...]) -> None:
+        self.grasp = m
+        self.touching = touching
+        x, u, prm, g, _ = m._sym
+        chart_of = m._chart_of()
+        obj = m.object
+        active = {id(c) for c, on in zip(m.fingertips, touching, strict=True) if on}
+        #: the fingertips touching the object, and the point contacts (the support, if
+        #: any, first): the rows of force closure and loads, in the grasp's order
+        self.fingertips: tuple[FingertipContact, ...] = tuple(
+            c for c in m.fingertips if id(c) in active)
+        self.point_contacts: tuple[Contact, ...] = tuple(
+            c for c in m.point_contacts
+            if not isinstance(c, FingertipContact) or id(c) in active)
+        #: each active point contact's index among the grasp's point contacts (its chart,
+        #: its force variables' slot)
+        self.slots: tuple[int, ...] = tuple(m.point_contacts.index(c)
+                                            for c in self.point_contacts)
+        self.n_contacts = len(self.point_contacts)
+        #: state columns with dynamics in this phase (all but a lifted tip's coordinates)
+        self.dyn_cols: tuple[int, ...] = tuple(
+            j for j in range(m.nx) if not any(
+                c.eta_cols.start <= j < c.eta_cols.stop
+                for c in m.fingertips if id(c) not in active))
+        #: the lifted fingertips' contact coordinates and contact inputs: parked
+        self.parked_x: tuple[int, ...] = tuple(j for j in range(m.nx)
+                                               if j not in self.dyn_cols)
+        self.parked_u: tuple[int, ...] = tuple(
+            j for c in m.fingertips if id(c) not in active
+            for j in range(c.w_cols.start, c.w_cols.stop))
+
+        def block(c: Contact) -> tuple[Any, Any, Any]:
+            return x[c.xs], u[c.us], chart_of.get(id(c), g.eye)
+
+        if g.R_po is None:  # the object's pose: the same in every phase
+            g.R_po, g.p_po = obj.pose(g, x[obj.xs], chart_of[id(obj)])
+        rates = []
+        for c in m.contacts:
+            if isinstance(c, FingertipContact) and id(c) not in active:
+                # off the object: the joints move by their rates, nothing rolls
+                rates.append(ca.vertcat(ca.SX.zeros(5), u[c.qd_cols]))
+            else:
+                rates.append(c.rates(g, *block(c)))
+        self.dynamics = ca.Function("manipulation_dynamics", [x, u, prm],
+                                    [ca.vertcat(*rates)], ["x", "u", "params"], ["x_dot"])
+        points, normals = [], []  # object frame
+        for c in self.point_contacts:
+            pt, nrm = c.point_normal(g, x[c.xs], chart_of[id(c)])
+            points.append(pt)
+            normals.append(nrm)
+        closure = [c.closure(g, *block(c)[::2]) for c in self.fingertips]
+        self.points_normals = (_cat(points, 3), _cat(normals, 3))
+        cl = ca.vertcat(*closure) if closure else ca.SX(0, 1)
+        self.path = ca.Function("manipulation_path", [x, prm],
+                                [cl, *self.points_normals, g.R_po, g.p_po],
+                                ["x", "params"], ["closure", "points", "normals", "R_po",
+                                                  "p_po"])
+        #: every fingertip's closure (eq. 6), touching or not: the touch-down's rows
+        all_closure = [c.closure(g, *block(c)[::2]) for c in m.fingertips]
+        self.closure_of = ca.Function("closure_of", [x, prm], all_closure) \
+            if all_closure else None
+
+    @property
+    def nx(self) -> int:
+        return self.grasp.nx
+
+    @property
+    def nu(self) -> int:
+        return self.grasp.nu
+
+    @property
+    def n_params(self) -> int:
+        return self.grasp.n_params
+
+    @property
+    def surface(self) -> Any:
+        return self.grasp.surface
+
+    @property
+    def object(self) -> ObjectBlock:
+        return self.grasp.object
+
+    def unpack_params(self, prm: Any) -> tuple[Any, list[Any]]:
+        """(shape, every point contact's chart) of the grasp's parameters; the charts of
+        the active contacts are ``charts[k] for k in slots``."""
+        return self.grasp.unpack_params(prm)

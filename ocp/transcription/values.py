@@ -111,7 +111,8 @@ def parameters(problem: ManipulationProblem, nlp: BlockNLP) -> FloatArray:
 def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: FloatArray,
            x_scale: FloatArray, u_scale: FloatArray) -> tuple[FloatArray, FloatArray]:
     """(lower, upper) bounds of the NLP's variables: every contact's own (physical,
-    scaled here), the fixed initial state, the epigraph in [0, 2], the internal forces."""
+    scaled here), the fixed initial state, the epigraph in [0, 2], the internal forces,
+    the parked variables (:attr:`~ocp.transcription.nlp_blocks.BlockNLP.parked`) at zero."""
     n = nlp.hs.n_intervals
     lo: list[float] = []
     hi: list[float] = []
@@ -137,6 +138,11 @@ def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: Float
     zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))
     big = np.vstack([1e3 * np.ones((3 * nlp.n_force, 2 * n + 1)),
                      load_bounds(nlp.n_load, 2 * n + 1)])
-    lbx = nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n], -big)
-    ubx = nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n], big)
-    return np.asarray(lbx).ravel(), np.asarray(ubx).ravel()
+    lbx = np.asarray(nlp.pack(lo_x.T, lo_xm.T, lo_u.T, lo_um.T, zeros_s, zeros_s[:, :n],
+                              -big)).ravel()
+    ubx = np.asarray(nlp.pack(hi_x.T, hi_xm.T, hi_u.T, hi_um.T, twos_s, twos_s[:, :n],
+                              big)).ravel()
+    # what the phases do not use (a lifted fingertip's contact coordinates and inputs, the
+    # forces of contacts that do not touch): parked at zero
+    lbx[nlp.parked] = ubx[nlp.parked] = 0.0
+    return lbx, ubx

@@ -52,10 +52,11 @@ def finger_twist(finger: Any, q: Any, qd: Any, point: Any) -> tuple[Any, Any]:
 
 def fingertip_twist_rows(m: Any, x: Any, u: Any, prm: Any) -> Any:
     """The 6 rows of every fingertip (``m``: the grasp's
-    :class:`~ocp.transcription.grasp_model.GraspModel`; ``x``, ``u``, ``prm`` in physical
-    units, any expressions): the tip's material velocity at the contact point [m/s] from
-    its joints less the one the contact gives it, then its angular velocity [rad/s] from
-    its joints less the contact's (:func:`contact_twists`)."""
+    :class:`~ocp.transcription.grasp_model.GraspModel`, or a phase of it,
+    :class:`~ocp.transcription.grasp_model.PhaseModel`: its touching fingertips; ``x``,
+    ``u``, ``prm`` in physical units, any expressions): the tip's material velocity at
+    the contact point [m/s] from its joints less the one the contact gives it, then its
+    angular velocity [rad/s] from its joints less the contact's (:func:`contact_twists`)."""
     xs, us, ps = (ca.SX.sym(n, k) for n, k in (("x", m.nx), ("u", m.nu), ("p", m.n_params)))
     rows = []
     for c, (cp, v_c, omega_c) in zip(m.fingertips, contact_twists(m, xs, us, ps),
@@ -72,7 +73,8 @@ def contact_twists(m: Any, x: Any, u: Any, prm: Any) -> list[tuple[Any, Any, Any
     frame, the velocity of the tip's material point there (the object's material point's:
     no slip) and the tip's angular velocity (the object's plus Montana's rolling one)."""
     shape, charts = m.unpack_params(prm)
-    chart_of = {id(c): charts[k] for k, c in enumerate(m.point_contacts)}
+    grasp = getattr(m, "grasp", m)  # a phase's charts are its grasp's, by contact
+    chart_of = {id(c): charts[k] for k, c in enumerate(grasp.point_contacts)}
     g = SymbolicGrasp(m.surface, shape, x, m.dynamics(x, u, prm))
     obj = m.object
     g.R_po, g.p_po = obj.pose(g, x[obj.xs], chart_of.get(id(obj), g.eye))
