@@ -1,5 +1,6 @@
-"""The wire contract's requests: one model per planner (``planner`` tells them apart),
-their parts, and warm starts.
+"""The wire contract's requests: one model per planner (``planner`` tells them apart) on
+one base (:class:`PlanRequestBase`: the fields every planner shares), their parts, and warm
+starts.
 
 Import from :mod:`dexroll_client.models` (it re-exports everything).
 """

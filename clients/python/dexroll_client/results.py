@@ -1,6 +1,7 @@
-"""The wire contract's results: one model per planner (``planner`` tells them apart),
-their trajectories, certificates and statistics, and the ``collocation`` block a later
-request's ``warm_start`` takes.
+"""The wire contract's results: one model per planner (``planner`` tells them apart) on
+one base (:class:`PlanResultBase`), their trajectories, certificates and statistics (each
+planner's on :class:`CertificateBase`, :class:`StatsBase`), and the ``collocation`` block a
+later request's ``warm_start`` takes.
 
 Import from :mod:`dexroll_client.models` (it re-exports everything).
 """
