@@ -30,7 +30,7 @@ from .columns import (
     collocation_block,
     warm_start_of,
 )
-from .common import all_finite, finite_or_none, object_spec, solver_options
+from .common import all_finite, check_values, finite_or_none, object_spec, solver_options
 from .fields import FieldErrors
 from .samples import requested_times
 
@@ -110,9 +110,10 @@ def result_from_solution(sol: Solution, sample_times: Any = None) -> PlanResult:
     """The wire result of a ball-on-palm plan (``sample_times``: the request's,
     :func:`~.samples.requested_times`)."""
     c = sol.certificate
+    values = check_values(c)
 
     def value(name: str) -> float | None:
-        return finite_or_none(c.get(name, math.nan))
+        return finite_or_none(values.get(name, math.nan))
 
     cert = CertificateModel(
         passed=c.passed, max_position_defect=value("max_position_defect"),

@@ -1,17 +1,22 @@
 """Conversions every planner's adapter shares: request parts to the core's, the core's
-arrays to wire values."""
+arrays and certificates to wire values."""
 
 from __future__ import annotations
 
-from typing import Any
+import math
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import numpy as np
 
-from dexroll_client.models import ForcesModel, ObjectModel, SolverModel
+from dexroll_client.models import FingerCertificateModel, ForcesModel, ObjectModel, SolverModel
+from ocp.certify.certificate import Certificate, CheckKind
 from ocp.spec.problem import ForceSpec, ObjectSpec, SolverOptions
 
-__all__ = ["all_finite", "finite_or_none", "force_spec", "object_spec", "rows",
-           "solver_options"]
+__all__ = ["all_finite", "check_tolerances", "check_values", "finger_certificate",
+           "finite_or_none", "force_spec", "object_spec", "rows", "solver_options"]
+
+CertificateT = TypeVar("CertificateT", bound=FingerCertificateModel)
 
 
 def force_spec(f: ForcesModel | None) -> ForceSpec | None:
@@ -46,3 +51,42 @@ def all_finite(d: dict[str, Any]) -> bool:
 
 def finite_or_none(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
+
+
+def check_values(certificate: Certificate) -> dict[str, float]:
+    """The worst value of each of a certificate's checks by its name, then the values it
+    reports without a check (e.g. the largest grasp angle). A ``numerics`` check (the plan
+    could not be checked) has no value to report, nor has a check marked
+    ``report_value=False``."""
+    values = {c.name: c.value for c in certificate.checks
+              if c.kind is not CheckKind.NUMERICS and c.report_value}
+    values.update(certificate.reported)
+    return values
+
+
+def check_tolerances(certificate: Certificate) -> dict[str, float]:
+    """The tolerance of each of a certificate's checks by its name (not a ``numerics``
+    check's, nor one marked ``report_tolerance=False``)."""
+    return {c.name: c.tolerance for c in certificate.checks
+            if c.kind is not CheckKind.NUMERICS and c.report_tolerance}
+
+
+def _same(text: str) -> str:
+    return text
+
+
+def finger_certificate(model: type[CertificateT], certificate: Certificate,
+                       rename: Callable[[str], str] = _same) -> CertificateT:
+    """The wire certificate of a plan with fingers (``model``: the planner's) from the
+    core's typed one: each check's worst value and tolerance by name (finite ones: JSON has
+    no NaN), the time of its worst sample, the failures. ``passed`` needs values: a plan
+    that could not be checked has none. ``rename`` gives a check's (or a failure's) name
+    in the planner's vocabulary."""
+    values = {rename(k): float(v) for k, v in check_values(certificate).items()
+              if math.isfinite(v)}
+    tolerances = {rename(k): float(v) for k, v in check_tolerances(certificate).items()
+                  if math.isfinite(v)}
+    failures = [rename(f) for f in certificate.failures]
+    return model(passed=bool(values) and not failures, values=values, tolerances=tolerances,
+                 times={rename(k): v for k, v in certificate.times().items()},
+                 failures=failures)

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -41,7 +40,14 @@ from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
 from .base import SOLVER_FIELDS, PlannerAdapter
 from .cache import FingerCache, Planners, hand_finger_name
 from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
-from .common import all_finite, force_spec, object_spec, rows, solver_options
+from .common import (
+    all_finite,
+    finger_certificate,
+    force_spec,
+    object_spec,
+    rows,
+    solver_options,
+)
 from .fields import FieldErrors, FieldMap, Rule
 from .samples import joint_trajectory_block, requested_times, samples_block
 
@@ -306,17 +312,6 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
         return manipulation_summary(result)
 
 
-def certificate_parts(certificate: Mapping[str, float]
-                       ) -> tuple[dict[str, float], dict[str, float]]:
-    """(values, tolerances) of a core certificate dict (its ``tol_<key>`` entries are the
-    tolerances), finite entries only."""
-    values = {k: float(v) for k, v in certificate.items()
-              if not k.startswith("tol_") and math.isfinite(v)}
-    tolerances = {k.removeprefix("tol_"): float(v) for k, v in certificate.items()
-                  if k.startswith("tol_") and math.isfinite(v)}
-    return values, tolerances
-
-
 def _manipulation_trajectory(sol: ManipulationSolution) -> ManipulationTrajectoryModel | None:
     arrays: dict[str, Any] = {
         "t": sol.t, "object_position": sol.object_position,
@@ -372,11 +367,7 @@ def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = No
     """The wire result of a manipulation plan (``times``: the request's sample times,
     :func:`~.samples.requested_times`). A plan with non-finite values (a diverged last
     iterate) keeps its status and drops its trajectory (JSON has no NaN)."""
-    values, tolerances = certificate_parts(sol.certificate)
-    failures = list(sol.certificate_failures)
-    cert = ManipulationCertificateModel(passed=bool(values) and not failures, values=values,
-                                        tolerances=tolerances,
-                                        times=sol.certificate.times(), failures=failures)
+    cert = finger_certificate(ManipulationCertificateModel, sol.certificate)
     trajectory = _manipulation_trajectory(sol)
     message = sol.message if trajectory is not None else \
         sol.message + " (non-finite iterate omitted)"

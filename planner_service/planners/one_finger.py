@@ -24,6 +24,7 @@ from dexroll_client.models import (
     OneFingerRequest,
     PlanStatus,
 )
+from ocp.certify.certificate import Certificate
 from ocp.geometry.rotations import quaternion_wxyz
 from ocp.methods.greedy import GreedyResult
 from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem, OneFingerSolution
@@ -34,11 +35,12 @@ from .ball_on_palm import ball_on_palm_problem
 from .base import SOLVER_FIELDS, PlannerAdapter
 from .cache import FingerCache, Planners
 from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
-from .common import all_finite, force_spec
+from .common import all_finite, finger_certificate, force_spec
 from .fields import FieldErrors, FieldMap, Rule
 from .samples import joint_trajectory_block, requested_times, samples_block
 
 __all__ = [
+    "ONE_FINGER_CHECK_NAMES",
     "ONE_FINGER_FIELDS",
     "FingerAdapter",
     "OneFingerAdapter",
@@ -56,6 +58,25 @@ SolutionT = TypeVar("SolutionT")
 ONE_FINGER_FIELDS = SOLVER_FIELDS + FieldMap(
     Rule("fingers[0]", "finger_contact"),
     Rule("fingers", "finger_contact.initial", keep_rest=False))
+
+
+#: The one-finger result's names of the general planner's checks, where they differ: the
+#: one-finger planner's own vocabulary, which predates the general planner (the palm
+#: contact's length defect is ``max_position_defect``, as on the ball-on-palm certificate;
+#: the one fingertip's checks carry no ``_finger`` suffix). The core's one-finger solution
+#: restates its flat certificate in the same names.
+ONE_FINGER_CHECK_NAMES = {
+    "max_length_defect": "max_position_defect",
+    "max_pad_excursion_finger": "max_pad_excursion",
+    "max_joint_limit_violation_finger": "max_joint_limit_violation",
+}
+
+
+def one_finger_check_name(text: str) -> str:
+    """A check's name, or a failure's text, in the one-finger result's vocabulary."""
+    for general, own in ONE_FINGER_CHECK_NAMES.items():
+        text = text.replace(general, own)
+    return text
 
 
 def one_finger_problem(request: OneFingerRequest, fingers: FingerCache) -> OneFingerProblem:
@@ -196,15 +217,11 @@ def result_from_finger_solution(sol: OneFingerSolution, joint_names: Sequence[st
                                 times: Any = None) -> FingerPlanResult:
     """The wire result of a one-finger plan (``joint_names``: the finger's, in q order;
     ``times``: the request's sample times, :func:`~.samples.requested_times`)."""
-    values = {k: float(v) for k, v in sol.certificate.items()
-              if not k.startswith("tol_") and math.isfinite(v)}
-    tolerances = {k[len("tol_"):]: float(v) for k, v in sol.certificate.items()
-                  if k.startswith("tol_") and math.isfinite(v)}
-    failures = list(sol.certificate_failures)
-    cert = FingerCertificateModel(passed=bool(values) and not failures, values=values,
-                                  tolerances=tolerances,
-                                  times=sol.certificate_times,
-                                  failures=failures)
+    # the typed certificate is the general planner's plan's (the solution's own is its
+    # flat restatement); a solution without that plan was never checked
+    checked = sol.plan.certificate if sol.plan is not None else \
+        Certificate.failed("no plan of the general planner to check")
+    cert = finger_certificate(FingerCertificateModel, checked, one_finger_check_name)
     trajectory = finger_trajectory(sol, sol.eta_p_dot, sol.eta_f_dot)
     message = sol.message if trajectory is not None else \
         sol.message + " (non-finite iterate omitted)"

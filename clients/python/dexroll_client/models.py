@@ -6,10 +6,11 @@ SI units throughout (m, rad, s); every field's unit is in its description. Reque
 forbid unknown fields and NaN/infinity, and bound every number and array length.
 
 This module gathers the whole contract under one import path; the definitions live in
-:mod:`dexroll_client.requests` (one request per planner, warm starts),
-:mod:`dexroll_client.results` (one result per planner, the ``collocation`` block),
-:mod:`dexroll_client.jobs` (jobs, error bodies), :mod:`dexroll_client.catalog`
-(``GET /v1/models``) and :mod:`dexroll_client.common` (limits, base classes).
+:mod:`dexroll_client.requests` (one request per planner on a shared base, warm starts),
+:mod:`dexroll_client.results` (one result per planner on shared bases, the
+``collocation`` block), :mod:`dexroll_client.jobs` (jobs, error bodies),
+:mod:`dexroll_client.catalog` (``GET /v1/models``) and :mod:`dexroll_client.common`
+(limits, base classes).
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ from dexroll_client.requests import (
     PalmModel,
     PartialContactCoordinates,
     PlanRequest,
+    PlanRequestBase,
     SolverModel,
     TipSurfaceModel,
     TrackingModel,
@@ -83,6 +85,7 @@ from dexroll_client.results import (
 )
 from dexroll_client.results import (
     AnyPlanResult,
+    CertificateBase,
     CertificateModel,
     CollocationModel,
     ContactSamplesModel,
@@ -102,9 +105,11 @@ from dexroll_client.results import (
     ManipulationStatsModel,
     ManipulationTrajectoryModel,
     PlanResult,
+    PlanResultBase,
     PlanSamplesModel,
     PlanStatus,
     RateBreakModel,
+    StatsBase,
     StatsModel,
     TrajectoryModel,
 )
@@ -128,6 +133,7 @@ __all__ = [
     "PLANNERS",
     "AnyPlanResult",
     "BallOnPalmRequest",
+    "CertificateBase",
     "CertificateModel",
     "CollocationModel",
     "ContactCoordinates",
@@ -176,11 +182,14 @@ __all__ = [
     "PalmModel",
     "PartialContactCoordinates",
     "PlanRequest",
+    "PlanRequestBase",
     "PlanResult",
+    "PlanResultBase",
     "PlanSamplesModel",
     "PlanStatus",
     "RateBreakModel",
     "SolverModel",
+    "StatsBase",
     "StatsModel",
     "TipSurfaceModel",
     "TrackingModel",

@@ -1,5 +1,6 @@
-"""The wire contract's requests: one model per planner (``planner`` tells them apart),
-their parts, and warm starts.
+"""The wire contract's requests: one model per planner (``planner`` tells them apart) on
+one base (:class:`PlanRequestBase`: the fields every planner shares), their parts, and warm
+starts.
 
 Import from :mod:`dexroll_client.models` (it re-exports everything).
 """
@@ -59,6 +60,7 @@ __all__ = [
     "PalmModel",
     "PartialContactCoordinates",
     "PlanRequest",
+    "PlanRequestBase",
     "SolverModel",
     "TipSurfaceModel",
     "TrackingModel",
@@ -307,28 +309,20 @@ SAMPLE_RATE_DESCRIPTION = (
     "duration, then at duration (instead of `sample_times`)")
 
 
-class _PalmRequest(_Request):
-    """What every planner shares: the object, its palm contact, goals, grid and limits.
+class PlanRequestBase(_Request):
+    """What every planner's request shares, declared once: the object, the horizon and its
+    grid, the refinements the certificate may ask for, the timing law, the solver's limits,
+    where the plan is returned (``sample_times`` or ``sample_rate``) and the warm start.
 
-    Each planner's request narrows ``planner`` to its own name and adds its own fields."""
+    Each planner's request narrows ``planner`` to its own name and adds its own fields
+    after these (the palm contact and its goals, fingers, a desired motion, weights and
+    bounds)."""
 
     planner: str = Field(description="which planner")
     object: ObjectModel = Field(default_factory=ObjectModel)
-    initial: ContactCoordinates = Field(description="contact coordinates at t = 0")
-    goal: PartialContactCoordinates = Field(
-        default_factory=PartialContactCoordinates,
-        description="coordinates required at t = duration (any subset)")
-    via_points: list[ViaPointModel] = Field(default_factory=list, max_length=MAX_VIA_POINTS)
     duration: Real = Field(ge=MIN_DURATION, le=MAX_DURATION, description="planning horizon [s]")
     n_intervals: Count = Field(default=50, ge=1, le=MAX_INTERVALS,
                              description="collocation intervals over the horizon")
-    pole_margin: Real = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
-                               description="keep |u| <= pi/2 - pole_margin [rad]")
-    max_contact_speed: Real = Field(default=1.0, gt=0.0, le=100.0,
-                                     description="bound on each palm contact velocity "
-                                                 "component [m/s]")
-    palm_half_extent: Real = Field(default=0.5, gt=0.0, le=MAX_POSITION,
-                                    description="palm coordinates stay in [-e, e] [m]")
     max_refinements: Count = Field(default=2, ge=0, le=5,
                                  description="grid refinements allowed when the certificate "
                                              "finds the grid too coarse (each makes it 2, "
@@ -356,6 +350,24 @@ class _PalmRequest(_Request):
     def _rate_within_limits(cls, value: float | None, info: ValidationInfo
                             ) -> float | None:
         return _rate_fits(value, info)
+
+
+class _PalmRequest(PlanRequestBase):
+    """What the planners of an object on the palm (ball_on_palm, one_finger) add: the palm
+    contact, its goals and via-points, and the palm's bounds."""
+
+    initial: ContactCoordinates = Field(description="contact coordinates at t = 0")
+    goal: PartialContactCoordinates = Field(
+        default_factory=PartialContactCoordinates,
+        description="coordinates required at t = duration (any subset)")
+    via_points: list[ViaPointModel] = Field(default_factory=list, max_length=MAX_VIA_POINTS)
+    pole_margin: Real = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
+                               description="keep |u| <= pi/2 - pole_margin [rad]")
+    max_contact_speed: Real = Field(default=1.0, gt=0.0, le=100.0,
+                                     description="bound on each palm contact velocity "
+                                                 "component [m/s]")
+    palm_half_extent: Real = Field(default=0.5, gt=0.0, le=MAX_POSITION,
+                                    description="palm coordinates stay in [-e, e] [m]")
 
 
 class BallOnPalmRequest(_PalmRequest):
@@ -803,7 +815,7 @@ class TrackingModel(_Request):
                     "one at every instant [rad]; null: none")
 
 
-class ManipulationRequest(_Request):
+class ManipulationRequest(PlanRequestBase):
     """Manipulate an object with any grasp: an optional flat palm carrying it and one or
     more flat fingertips rolling on it (paper, sections 3 and 4, and beyond). Without a
     palm the object starts at ``initial_pose`` and follows ``motion``; with one, its pose
@@ -812,7 +824,6 @@ class ManipulationRequest(_Request):
     ``sample_rate`` when given (``samples``); ``joint_trajectory`` at the latter."""
 
     planner: Literal["manipulation"] = Field(description="which planner")
-    object: ObjectModel = Field(default_factory=ObjectModel)
     hand: HandModel | None = Field(
         default=None, description="a built-in hand whose fingers `fingers[].hand_finger` "
                                   "picks; required when a fingertip gives `hand_finger` "
@@ -831,7 +842,6 @@ class ManipulationRequest(_Request):
     forces: ForcesModel | None = Field(
         default=None, description="plan the contact forces for this load and grip; null (the "
                                   "default): a kinematic plan")
-    duration: Real = Field(ge=MIN_DURATION, le=MAX_DURATION, description="planning horizon [s]")
     mu: Real = Field(default=0.5, gt=0.0, le=10.0,
                       description="friction coefficient at every contact (dimensionless); "
                                   "the friction cone's half-angle is atan(mu) [rad]")
@@ -856,14 +866,8 @@ class ManipulationRequest(_Request):
     pad_margin: Real = Field(default=0.002, ge=0.0, le=0.1,
                               description="distance kept between each contact and its "
                                           "pad's edge [m]")
-    timing: Literal["smooth", "paper"] = Field(default="smooth",
-                                               description=TIMING_DESCRIPTION)
-    ramp_time: Real | None = Field(default=None, gt=0.0, le=MAX_DURATION,
-                                   description=RAMP_TIME_DESCRIPTION)
     max_joint_acceleration: Real = Field(default=20.0, gt=0.0, le=1e5,
                                           description=MAX_JOINT_ACCELERATION_DESCRIPTION)
-    n_intervals: Count = Field(default=50, ge=1, le=MAX_INTERVALS,
-                             description="collocation intervals over the horizon")
     pole_margin: Real = Field(default=math.radians(15.0), gt=0.0, lt=math.pi / 2,
                                description="keep |u| <= pi/2 - pole_margin on every contact's "
                                            "chart patch [rad]")
@@ -873,29 +877,6 @@ class ManipulationRequest(_Request):
     max_object_rate: Real = Field(default=20.0, gt=0.0, le=1000.0,
                                    description="bound on each component of a free object's "
                                                "angular velocity [rad/s]")
-    max_refinements: Count = Field(default=2, ge=0, le=5,
-                                 description="grid refinements allowed when the certificate "
-                                             "finds the grid too coarse (each makes it 2, "
-                                             "4 or 8 times as fine)")
-    solver: SolverModel = Field(default_factory=SolverModel)
-    sample_times: list[Annotated[Real, Field(ge=0.0, le=MAX_DURATION)]] | None = Field(
-        default=None, max_length=MAX_SAMPLES, description=SAMPLE_TIMES_DESCRIPTION)
-    sample_rate: Real | None = Field(default=None, gt=0.0, le=MAX_SAMPLE_RATE,
-                                     description=SAMPLE_RATE_DESCRIPTION)
-    warm_start: WarmStartModel | None = Field(default=None,
-                                              description=WARM_START_DESCRIPTION)
-
-    @field_validator("sample_times")
-    @classmethod
-    def _samples_inside_horizon(cls, value: list[float] | None, info: ValidationInfo
-                                ) -> list[float] | None:
-        return _times_inside(value, info)
-
-    @field_validator("sample_rate")
-    @classmethod
-    def _rate_within_limits(cls, value: float | None, info: ValidationInfo
-                            ) -> float | None:
-        return _rate_fits(value, info)
 
 
 #: Every planning request, told apart by its ``planner`` field ("ball_on_palm" when the

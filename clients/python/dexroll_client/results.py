@@ -1,6 +1,7 @@
-"""The wire contract's results: one model per planner (``planner`` tells them apart),
-their trajectories, certificates and statistics, and the ``collocation`` block a later
-request's ``warm_start`` takes.
+"""The wire contract's results: one model per planner (``planner`` tells them apart) on
+one base (:class:`PlanResultBase`), their trajectories, certificates and statistics (each
+planner's on :class:`CertificateBase`, :class:`StatsBase`), and the ``collocation`` block a
+later request's ``warm_start`` takes.
 
 Import from :mod:`dexroll_client.models` (it re-exports everything).
 """
@@ -16,6 +17,7 @@ from dexroll_client.common import NlpPointModel, _planner_of, _Response
 
 __all__ = [
     "AnyPlanResult",
+    "CertificateBase",
     "CertificateModel",
     "CollocationModel",
     "ContactSamplesModel",
@@ -35,9 +37,11 @@ __all__ = [
     "ManipulationStatsModel",
     "ManipulationTrajectoryModel",
     "PlanResult",
+    "PlanResultBase",
     "PlanSamplesModel",
     "PlanStatus",
     "RateBreakModel",
+    "StatsBase",
     "StatsModel",
     "TrajectoryModel",
 ]
@@ -77,15 +81,29 @@ class TrajectoryModel(_Response):
 
 TIMES_DESCRIPTION = ("the time [s] of each check's worst sample (checks along the "
                      "motion), e.g. where the largest slip is")
+TOLERANCES_DESCRIPTION = "tolerance of each check (units as the checked quantity)"
+FAILURES_DESCRIPTION = "checks that failed, with values"
 
 
-class CertificateModel(_Response):
+class CertificateBase(_Response):
+    """A plan's certificate, whichever its planner: the verdict (``passed``) on the returned
+    trajectory, computed independently of the NLP from the core's typed checks (each with
+    its name, worst value, tolerance and kind). Each planner's model then states the
+    checks' worst values in its own layout (named fields on the palm, a ``values`` map
+    with fingers), followed alike by ``tolerances``, ``times`` and ``failures``: these are
+    declared by each model after its values (with the descriptions above) because a
+    subclass's fields follow its base's on the wire, and every certificate keeps its
+    published key order."""
+
+    passed: bool
+
+
+class CertificateModel(CertificateBase):
     """Physical validity of the returned trajectory (the plan's polynomials, as ``samples``
     gives them), computed independently of the NLP: slip, spin and height checked densely
     along it, its states compared with a re-integration of the inputs at the nodes and
     midpoints (docs/conventions.md)."""
 
-    passed: bool
     max_position_defect: float | None = Field(
         description="worst re-integration defect of x, y [m] (null: not computed)")
     max_angle_defect: float | None = Field(
@@ -100,17 +118,26 @@ class CertificateModel(_Response):
     max_goal_error: float | None = Field(
         description="worst goal or via-point error of the re-integrated motion [m or rad]")
     n_samples: int = Field(description="samples checked along the returned trajectory")
-    tolerances: dict[str, float] = Field(description="tolerance of each check (units as "
-                                                     "the checked quantity)")
+    tolerances: dict[str, float] = Field(description=TOLERANCES_DESCRIPTION)
     times: dict[str, float] = Field(default_factory=dict, description=TIMES_DESCRIPTION)
-    failures: list[str] = Field(description="checks that failed, with values")
+    failures: list[str] = Field(description=FAILURES_DESCRIPTION)
 
 
-class StatsModel(_Response):
+BUILD_TIME_DESCRIPTION = "NLP construction time [s] (0 when cached)"
+
+
+class StatsBase(_Response):
+    """IPOPT's account of a plan, whichever its planner: its return status and iterations,
+    then (each planner's model) the timings and counts that planner reports."""
+
     raw_status: str = Field(description="IPOPT's return status")
+    iterations: int = Field(description="IPOPT iterations")
+
+
+class StatsModel(StatsBase):
     iterations: int = Field(description="IPOPT iterations, all attempts and refinements")
     attempts: int = Field(description="initial guesses tried")
-    build_time: float = Field(description="NLP construction time [s] (0 when cached)")
+    build_time: float = Field(description=BUILD_TIME_DESCRIPTION)
     solve_time: float = Field(description="IPOPT and initial-guess time [s]")
     certificate_time: float = Field(description="certificate time [s]")
     objective: float = Field(description="control effort integral |w|^2 dt [m^2/s]")
@@ -124,6 +151,28 @@ class StatsModel(_Response):
 class FieldError(_Response):
     field: str = Field(description="dotted path of the offending field")
     reason: str
+
+
+GOAL_ERROR_DESCRIPTION = "error of each goal/via-point coordinate [m or rad]"
+
+
+class PlanResultBase(_Response):
+    """A plan of any planner, or why there is none: what every result says first, in this
+    order (each planner's model narrows ``planner``, ``stats`` and ``certificate`` to its
+    own). The plan follows in the planner's own layout (its model's fields), and every
+    model ends with the plan's ``chart_rotation`` and ``collocation`` block
+    (:data:`CHART_DESCRIPTION`, :data:`COLLOCATION_DESCRIPTION`), declared by each model
+    after its trajectories so that every result keeps its published key order.
+    :data:`AnyPlanResult` tells the models apart by ``planner``."""
+
+    planner: str = Field(description="the planner of the request")
+    status: PlanStatus
+    message: str
+    errors: list[FieldError] = Field(default_factory=list)
+    stats: StatsBase | None = None
+    goal_error: dict[str, float] | None = Field(default=None,
+                                                description=GOAL_ERROR_DESCRIPTION)
+    certificate: CertificateBase | None = None
 
 
 class CollocationModel(_Response):
@@ -179,18 +228,13 @@ CHART_DESCRIPTION = (
     "request's (the same physical plan, restated; docs/conventions.md); null without a "
     "palm or a plan")
 
-class PlanResult(_Response):
+class PlanResult(PlanResultBase):
     """A ball-on-palm plan, or why there is none. ``grid``: the collocation points (nodes
     and midpoints); ``samples``: the request's ``sample_times``."""
 
     planner: Literal["ball_on_palm"] = Field(default="ball_on_palm",
                                              description="the planner of the request")
-    status: PlanStatus
-    message: str
-    errors: list[FieldError] = Field(default_factory=list)
     stats: StatsModel | None = None
-    goal_error: dict[str, float] | None = Field(
-        default=None, description="error of each goal/via-point coordinate [m or rad]")
     certificate: CertificateModel | None = None
     grid: TrajectoryModel | None = None
     samples: TrajectoryModel | None = None
@@ -252,25 +296,21 @@ class FingerTrajectoryModel(_Response):
                                   "has inertias; null without `forces`")
 
 
-class FingerCertificateModel(_Response):
+class FingerCertificateModel(CertificateBase):
     """Physical validity of a one-finger plan's returned trajectory, computed
     independently of the NLP: checked densely along it, the finger placed by Pinocchio's
     forward kinematics at the returned joint angles, the inputs re-integrated."""
 
-    passed: bool
     values: dict[str, float] = Field(description="worst value of each check along the "
                                                  "returned trajectory (units as the "
                                                  "quantity: m, rad, m/s, rad/s)")
-    tolerances: dict[str, float] = Field(description="tolerance of each check (units as "
-                                                     "the checked quantity)")
+    tolerances: dict[str, float] = Field(description=TOLERANCES_DESCRIPTION)
     times: dict[str, float] = Field(default_factory=dict, description=TIMES_DESCRIPTION)
-    failures: list[str] = Field(description="checks that failed, with values")
+    failures: list[str] = Field(description=FAILURES_DESCRIPTION)
 
 
-class FingerStatsModel(_Response):
-    raw_status: str = Field(description="IPOPT's return status")
-    iterations: int = Field(description="IPOPT iterations")
-    build_time: float = Field(description="NLP construction time [s] (0 when cached)")
+class FingerStatsModel(StatsBase):
+    build_time: float = Field(description=BUILD_TIME_DESCRIPTION)
     solve_time: float = Field(description="IPOPT time [s]")
     refinements: int = Field(default=0, description="grid refinements after the first solve "
                                                     "(the certificate found the grid coarse)")
@@ -284,18 +324,13 @@ JOINT_TRAJECTORY_DESCRIPTION = (
     "finite plan, and for the greedy method)")
 
 
-class FingerPlanResult(_Response):
+class FingerPlanResult(PlanResultBase):
     """A one-finger plan, or why there is none. ``trajectory``: the collocation points
     (nodes and midpoints)."""
 
     planner: Literal["one_finger"] = Field(default="one_finger",
                                            description="the planner of the request")
-    status: PlanStatus
-    message: str
-    errors: list[FieldError] = Field(default_factory=list)
     stats: FingerStatsModel | None = None
-    goal_error: dict[str, float] | None = Field(
-        default=None, description="error of each goal/via-point coordinate [m or rad]")
     certificate: FingerCertificateModel | None = None
     joint_names: list[str] = Field(default_factory=list,
                                    description="the finger's joints, in the order of `q`")
@@ -489,15 +524,12 @@ class ManipulationStatsModel(FingerStatsModel):
     n_intervals: int = Field(description="collocation intervals of the returned plan")
 
 
-class ManipulationResult(_Response):
+class ManipulationResult(PlanResultBase):
     """A manipulation plan, or why there is none. ``trajectory``: the collocation points
     (nodes and midpoints)."""
 
     planner: Literal["manipulation"] = Field(default="manipulation",
                                              description="the planner of the request")
-    status: PlanStatus
-    message: str
-    errors: list[FieldError] = Field(default_factory=list)
     stats: ManipulationStatsModel | None = None
     goal_error: dict[str, float] | None = Field(
         default=None, description="error of each palm goal/via-point coordinate [m or "
