@@ -1,0 +1,363 @@
+"""The assembly of a grasp's NLP from its phases' blocks
+(:func:`~ocp.transcription.nlp_blocks.build_manipulation_nlp`): every block kind placed at
+its instances (its variables' and rows' global positions), mapped over them in MX, the
+constraints in the NLP's order, and the derivatives assembled from the blocks' nonzeros
+(:class:`~ocp.transcription.nlp_blocks.BlockAssembler`)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from ocp.spec.problem import PERIODIC
+from ocp.transcription.blocks import (
+    Block,
+    PointLayout,
+    _nz,
+    accel_block,
+    interval_block,
+    point_block,
+    rate_block,
+    touchdown_block,
+)
+from ocp.transcription.collocation import HermiteSimpson, target_residuals
+from ocp.transcription.grasp_conditions import grasp_condition
+from ocp.transcription.nlp_blocks import (
+    BlockAssembler,
+    BlockNLP,
+    _declaration,
+    _node_input_pairs,
+    _triplets,
+)
+
+__all__ = ["PhasedNLP"]
+
+
+def _union(a: tuple[bool, ...], b: tuple[bool, ...]) -> tuple[bool, ...]:
+    return tuple(x or y for x, y in zip(a, b, strict=True))
+
+
+@dataclass
+class _Placed:
+    """The instances of one block kind: its block, their variables (rows of ``z_idx``:
+    the global variable of each block variable), the global row of each of their rows
+    (``row_maps``, -1 for a row an instance does not have) and their arguments' columns."""
+
+    block: Block
+    z_idx: NDArray[np.int64]
+    row_maps: list[NDArray[np.int64]]
+    cols: list[int]
+
+
+class PhasedNLP:
+    """The assembly of :func:`build_manipulation_nlp` (blocks placed, mapped and summed)."""
+
+    def __init__(self, m: Any, hs: HermiteSimpson, touching: list[tuple[bool, ...]],
+                 goal_mask: tuple[bool, ...], via_masks: tuple[tuple[bool, ...], ...],
+                 tracking: bool, force_regularisation: float, forces: bool,
+                 smooth: bool) -> None:
+        self.m, self.hs, self.touching = m, hs, touching
+        self.goal_mask, self.via_masks = goal_mask, via_masks
+        self.tracking, self.forces, self.smooth = tracking, forces, smooth
+        n = hs.n_intervals
+        self.n, self.npts = n, 2 * n + 1
+        # every point's contacts: a node has those of the intervals it joins
+        nodes = [touching[0]] + [_union(touching[k - 1], touching[k])
+                                 for k in range(1, n)] + [touching[-1]]
+        self.point_masks = nodes + touching  # nodes, then midpoints: the NLP's order
+        self._points: dict[tuple[bool, ...], Block] = {}
+        conditions = [m.phase(mask) for mask in dict.fromkeys(self.point_masks)]
+        conds = [grasp_condition(pm.n_contacts) for pm in conditions]
+        self.layout = PointLayout(
+            m.nx, max(c.n_epigraph for c in conds),
+            m.n_contacts if any(c.internal_forces for c in conds) else 0,
+            m.n_contacts if forces else 0)
+        for pm in conditions:
+            self._points[pm.touching] = point_block(pm, self.layout, tracking, forces,
+                                                    force_regularisation, self.npts)
+
+    def build(self, t0: float) -> BlockNLP:
+        m, hs, n, npts, layout = self.m, self.hs, self.n, self.npts, self.layout
+        nx = m.nx
+        nseg, nv = len(hs.segments), len(self.via_masks)
+        n_s, n_fv = layout.n_s, layout.size - nx - layout.n_s
+        lc, rc = hs.left_cols, hs.right_cols
+        # -- the variables, and where every block instance's sit ---------------------------
+        nw = int(hs.w.numel()) + n_s * (n + 1) + n_s * n + n_fv * npts
+        S_sx, Sm_sx = ca.SX.sym("S", n_s, n + 1), ca.SX.sym("Sm", n_s, n)
+        F_sx = ca.SX.sym("F", n_fv, npts)
+        w_sx = ca.vertcat(hs.w, ca.vec(S_sx), ca.vec(Sm_sx), ca.vec(F_sx))
+        unpack = ca.Function("unpack", [w_sx], [hs.X, hs.Xm, hs.U, hs.Um, S_sx, Sm_sx, F_sx])
+        pack = ca.Function("pack", [hs.X, hs.Xm, hs.U, hs.Um, S_sx, Sm_sx, F_sx], [w_sx])
+        Xi, Xmi, Ui, Umi, Si, Smi, Fi = (np.asarray(a).round().astype(np.int64)
+                                         for a in unpack(np.arange(nw, dtype=float)))
+        Fi = Fi.reshape(n_fv, npts)
+        XA = np.hstack([Xi, Xmi])  # nodes, then midpoints: the points' order in the NLP
+        SA = np.hstack([Si.reshape(n_s, n + 1), Smi.reshape(n_s, n)])
+        point_vars = [np.concatenate([XA[:, c], SA[:, c], Fi[:, c]]) for c in range(npts)]
+        Si = Si.reshape(n_s, n + 1)
+        Smi = Smi.reshape(n_s, n)
+        self.idx = (Xi, Xmi, Ui, Umi, Si, Smi)
+
+        # -- each block kind's instances, their rows in g in order -------------------------
+        row = 0
+        placed: list[_Placed] = []
+        lbg: list[float] = []
+        ubg: list[float] = []
+
+        def group(kinds: list[Any], make: Any, z_of: Any, rows_of: Any) -> None:
+            """Place the instances (in g's order) of the blocks ``make(kind)``."""
+            nonlocal row
+            by_kind: dict[Any, _Placed] = {}
+            for i, kind in enumerate(kinds):
+                if kind not in by_kind:
+                    blk = make(kind)
+                    by_kind[kind] = _Placed(blk, np.zeros((0, 0), dtype=np.int64), [], [])
+                pl = by_kind[kind]
+                keep = rows_of(i, pl.block)
+                rmap = np.full(pl.block.n_rows, -1, dtype=np.int64)
+                rmap[keep] = row + np.arange(len(keep))
+                row += len(keep)
+                lbg.extend(pl.block.lo[r] for r in keep)
+                ubg.extend(pl.block.hi[r] for r in keep)
+                pl.row_maps.append(rmap)
+                pl.cols.append(i)
+            for pl in by_kind.values():
+                pl.z_idx = np.array([z_of(i, pl.block) for i in pl.cols], dtype=np.int64)
+                placed.append(pl)
+
+        def all_rows(i: int, blk: Block) -> list[int]:
+            return list(range(blk.n_rows))
+
+        # defects of every interval
+        group(self.touching, lambda k: interval_block(m.phase(k), n_s, self.smooth),
+              lambda k, _: np.concatenate([Xi[:, k], Xmi[:, k], Xi[:, k + 1], Ui[:, lc[k]],
+                                           Umi[:, k], Ui[:, rc[k]], Si[:, k], Smi[:, k],
+                                           Si[:, k + 1]]), all_rows)
+        # every point's rows (node 0: the given initial grasp, without tracking bounds)
+        group(self.point_masks, lambda k: self._points[k],
+              lambda c, blk: point_vars[c][blk.z_map],
+              lambda c, blk: blk.keep0 if c == 0 else all_rows(c, blk))
+        off_t = row
+        tg_fn, tg_jac, tg_hess, Jt, Ht, n_t = self._targets()
+        ends = hs.segment_end_nodes
+        ze_idx = np.concatenate([Xi[:, e] for e in ends])
+        row += n_t
+        lbg += [0.0] * n_t
+        ubg += [0.0] * n_t
+        off_r = row
+        # the closure at the velocity level: every node with each of its inputs (those of
+        # the intervals using that input touch), then the midpoints
+        pairs = _node_input_pairs(hs)
+        users = {c: [k for k in range(n) if c in (lc[k], rc[k])] for _, c in pairs}
+        rate_kinds = [self._touching_of(users[c]) for _, c in pairs] + list(self.touching)
+        rate_z = [np.concatenate([Xi[:, k], Ui[:, c]]) for k, c in pairs] + \
+            [np.concatenate([Xmi[:, k], Umi[:, k]]) for k in range(n)]
+        if m.fingertips:
+            group(rate_kinds, lambda k: rate_block(m.phase(k)), lambda i, _: rate_z[i],
+                  all_rows)
+        if self.smooth and m.effort_groups()[2]:
+            group([None] * n, lambda _: accel_block(m, True),
+                  lambda k, _: np.concatenate([Ui[:, lc[k]], Umi[:, k], Ui[:, rc[k]]]),
+                  all_rows)
+        # fingertips landing on the object at a node: their closure there
+        landings = [(k, tuple(i for i, (a, b) in enumerate(zip(self.touching[k - 1],
+                                                                 self.touching[k],
+                                                                 strict=True))
+                              if b and not a)) for k in range(1, n)]
+        landings = [(k, tips) for k, tips in landings if tips]
+        if landings:
+            group([(self.touching[k], tips) for k, tips in landings],
+                  lambda kt: touchdown_block(m.phase(kt[0]), kt[1]),
+                  lambda i, _: Xi[:, landings[i][0]], all_rows)
+        ng = row
+        parked = self._parked(point_vars, placed, Ui, Umi, Xi, Xmi)
+        return _functions(self, t0, nw, ng, placed, (off_t, off_r),
+                               (tg_fn, tg_jac, tg_hess, Jt, Ht, ze_idx), lbg, ubg, unpack,
+                               pack, nseg, nv, parked)
+
+    def _touching_of(self, intervals: list[int]) -> tuple[bool, ...]:
+        out = self.touching[intervals[0]]
+        for k in intervals[1:]:
+            out = _union(out, self.touching[k])
+        return out
+
+    def _targets(self) -> tuple[Any, ...]:
+        """The goal and via-point rows on the segments' end nodes."""
+        m, hs = self.m, self.hs
+        nx, nseg, nv = m.nx, len(hs.segments), len(self.via_masks)
+        shape_q = ca.SX.sym("shape", m.surface.n_params)
+        x_scale = ca.vertcat(*m.x_scale(ca.mmax(shape_q)))
+        xe = ca.SX.sym("xe", nx, nseg)
+        goal_q = ca.SX.sym("goal", 5)
+        vias_q = ca.SX.sym("vias", 5, nv)
+        tg: list[Any] = []
+        for j, vmask in enumerate(self.via_masks):
+            tg += target_residuals(xe[:, j], vias_q[:, j], vmask, x_scale, PERIODIC)
+        tg += target_residuals(xe[:, nseg - 1], goal_q, self.goal_mask, x_scale, PERIODIC)
+        Gt = ca.vertcat(*tg) if tg else ca.SX(0, 1)
+        lam_t = ca.SX.sym("lam", Gt.numel())
+        ze = ca.vec(xe)
+        Jt = ca.jacobian(Gt, ze)
+        Ht = ca.triu(ca.hessian(ca.dot(lam_t, Gt), ze)[0])
+        tin = [ze, goal_q, ca.vec(vias_q), shape_q]
+        return (ca.Function("targets", tin, [Gt]), ca.Function("targets_jac", tin, [_nz(Jt)]),
+                ca.Function("targets_hess", [*tin, lam_t], [_nz(Ht)]), Jt, Ht,
+                int(Gt.numel()))
+
+    def _parked(self, point_vars: list[NDArray[np.int64]], placed: list[_Placed],
+                Ui: NDArray[np.int64], Umi: NDArray[np.int64], Xi: NDArray[np.int64],
+                Xmi: NDArray[np.int64]) -> NDArray[np.int64]:
+        """The variables nothing of their phase uses: each point's unused force and
+        epigraph slots; a lifted fingertip's contact coordinates at the midpoints of its
+        lifted intervals and at the nodes between two of them, and its contact inputs
+        used only by lifted intervals."""
+        m, hs, n = self.m, self.hs, self.n
+        out: list[int] = []
+        for c, mask in enumerate(self.point_masks):
+            z_map = self._points[mask].z_map
+            assert z_map is not None
+            used = set(z_map.tolist())
+            out += [int(point_vars[c][j]) for j in range(self.layout.size) if j not in used]
+        lc, rc = hs.left_cols, hs.right_cols
+        for i, tip in enumerate(m.fingertips):
+            lifted = [not t[i] for t in self.touching]
+            eta = np.arange(tip.eta_cols.start, tip.eta_cols.stop)
+            w = np.arange(tip.w_cols.start, tip.w_cols.stop)
+            for k in range(n):
+                if lifted[k]:
+                    out += Xmi[eta, k].tolist() + Umi[w, k].tolist()
+            for j in range(1, n + 1):  # node 0 is the given initial state
+                if all(lifted[k] for k in (j - 1, j) if k < n):
+                    out += Xi[eta, j].tolist()
+            for col in range(hs.n_input_cols):
+                ks = [k for k in range(n) if col in (lc[k], rc[k])]
+                if ks and all(lifted[k] for k in ks):
+                    out += Ui[w, col].tolist()
+        return np.array(sorted(set(out)), dtype=np.int64)
+
+
+def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed],
+               offsets: tuple[int, int], targets: tuple[Any, ...],
+               lbg: list[float], ubg: list[float], unpack: ca.Function,
+               pack: ca.Function, nseg: int, nv: int, parked: NDArray[np.int64]
+               ) -> BlockNLP:
+    """The NLP in MX from the placed blocks: every kind mapped over its instances,
+    the constraints in g's order, the derivatives assembled from the blocks'."""
+    m, hs, n, npts = nlp.m, nlp.hs, nlp.n, nlp.npts
+    off_t, off_r = offsets
+    tg_fn, tg_jac, tg_hess, Jt, Ht, ze_idx = targets
+    segments = hs.segments
+    w = ca.MX.sym("w", nw)
+    decl = _declaration(m, nseg, nv, npts, nlp.tracking)
+    p = ca.MX.sym("p", decl.size)
+    prm_ = decl.unpack(p)
+    shape_p, seg_T, goal, charts, weights, ccone, tol, Pd, Rd = (
+        prm_[k] for k in ("shape", "seg_T", "goal", "charts", "weights", "ccone", "tol",
+                          "Pd", "Rd"))
+    vias_v = ca.vec(prm_["vias"])
+    T = ca.sum1(seg_T)
+    h = ca.horzcat(*[ca.repmat(seg_T[j] / segments[j], 1, segments[j])
+                     for j in range(nseg)])  # 1 x n [s]
+    hn_all = h / T
+    # Simpson weight of every point (nodes, then midpoints), normalised time
+    sw = ca.horzcat((ca.horzcat(0, hn_all) + ca.horzcat(hn_all, 0)) / 6, 4 * hn_all / 6)
+    qv = ca.vertcat(shape_p, charts, ccone, tol, weights[4], weights[5], prm_["load"])
+    wts = weights[0:4]
+    accel = prm_["accel"]
+
+    def cols(M: Any, c: list[int], total: int) -> Any:
+        return M if len(c) == total else M[:, c]
+
+    def args(pl: _Placed) -> list[Any]:
+        """The mapped arguments of a kind's instances (its variables first)."""
+        Z = ca.reshape(w[pl.z_idx.ravel().tolist()], pl.z_idx.shape[1], len(pl.cols))
+        name = pl.block.fn.name()
+        if name == "point":
+            return [Z, cols(Pd, pl.cols, npts), cols(Rd, pl.cols, npts),
+                    cols(sw, pl.cols, npts), qv]
+        if name == "interval":
+            return [Z, cols(h, pl.cols, n), T, wts, shape_p, charts, accel[1]]
+        if name == "rates":
+            return [Z, T, shape_p, charts]
+        if name == "accel":
+            return [Z, cols(h, pl.cols, n), T, shape_p, accel[0]]
+        return [Z, shape_p, charts]  # touchdown
+
+    t_args = (w[ze_idx.tolist()], goal, vias_v, shape_p)
+    # g in its order: each kind's rows (vec: instance by instance), then re-ordered
+    pieces: list[Any] = []
+    jac_pieces: list[Any] = []
+    where: list[NDArray[np.int64]] = []
+    jr: list[NDArray[np.int64]] = []
+    jc: list[NDArray[np.int64]] = []
+    hr: list[NDArray[np.int64]] = []
+    hc: list[NDArray[np.int64]] = []
+    jnz: list[Any] = []
+    hnz: list[Any] = []
+    fcost: list[Any] = []
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", ng)
+    lam_x = ca.vertcat(lam_g, 0)  # index ng: a row an instance does not have
+
+    def place(row_maps: list[NDArray[np.int64]], z_idx: Any, J: Any, H: Any) -> None:
+        rJ, cJ = _triplets(J.sparsity())
+        rH, cH = _triplets(H.sparsity())
+        for row_map, z in zip(row_maps, z_idx, strict=True):
+            jr.append(row_map[rJ])
+            jc.append(z[cJ])
+            hr.append(z[rH])
+            hc.append(z[cH])
+
+    for pl in placed:
+        blk, k = pl.block, len(pl.cols)
+        a = args(pl)
+        G, Jn = blk.jac.map(k)(*a)
+        pieces.append(ca.vec(blk.fn.map(k)(*a)))
+        jac_pieces.append(ca.vec(G))
+        rm = np.concatenate(pl.row_maps)
+        where.append(rm)
+        jnz.append(ca.vec(Jn))
+        place(pl.row_maps, pl.z_idx, blk.J, blk.H)
+        if blk.hess is not None:
+            L = ca.reshape(lam_x[np.where(rm >= 0, rm, ng).tolist()], blk.n_rows, k)
+            extra = [lam_f] if blk.cost is not None else []
+            hnz.append(ca.vec(blk.hess.map(k)(*a, L, *extra)))
+        if blk.cost is not None:
+            fcost.append(ca.sum2(blk.cost.map(k)(*a)))
+    # the targets' one instance
+    place([off_t + np.arange(int(Jt.size1()))], [ze_idx], Jt, Ht)
+    jnz.append(tg_jac(*t_args))
+    hnz.append(tg_hess(*t_args, lam_g[off_t:off_r]))
+    pieces.append(tg_fn(*t_args))
+    jac_pieces.append(tg_fn(*t_args))
+    where.append(off_t + np.arange(int(Jt.size1())))
+    order = np.concatenate(where)
+    keep = np.flatnonzero(order >= 0)
+    perm = np.empty(ng, dtype=np.int64)
+    perm[order[keep]] = keep
+
+    def g_of(parts: list[Any]) -> Any:
+        return ca.vertcat(*parts)[perm.tolist()]
+
+    g_all = g_of(pieces)
+    f = sum(fcost[1:], fcost[0]) if fcost else ca.MX(0)
+    assert len(lbg) == ng == g_all.numel()
+    jac_asm = BlockAssembler((ng, nw), np.concatenate(jr), np.concatenate(jc))
+    hess_asm = BlockAssembler((nw, nw), np.concatenate(hr), np.concatenate(hc),
+                              symmetric=True)
+    jac_g = ca.Function("nlp_jac_g", [w, p], [g_of(jac_pieces), jac_asm(ca.vertcat(*jnz))],
+                        ["x", "p"], ["g", "jac_g_x"])
+    hess_lag = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g],
+                           [hess_asm(ca.vertcat(*hnz))],
+                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+    oracle = ca.Function("manipulation_nlp", [w, p], [f, g_all], ["x", "p"], ["f", "g"])
+    n_force = nlp.layout.n_force
+    return BlockNLP(hs, unpack, pack, decl, np.array(lbg), np.array(ubg),
+                    time.perf_counter() - t0, n_force, nlp.layout.n_s, oracle, jac_g,
+                    hess_lag, nlp.layout.n_load, parked, tuple(nlp.touching))
