@@ -9,15 +9,16 @@ What a library user needs is here::
                                  initial=(0, 0, 0, 0, 0), goal={"psi": 1.0}, duration=2.0))
     sol.status, sol.certificate.passed, sol.sample([0.5, 1.0]).eta
 
-The data flow is in the folder names: ``geometry`` (surfaces, Montana's contact
+The data flow is in the folder names: ``certify`` (the certificate's types: checks with
+name, value, tolerance and kind; a leaf), ``geometry`` (surfaces, Montana's contact
 kinematics, rotations, grasp geometry) and ``robots`` (fingers from URDF through
-Pinocchio, the built-in hands) -> ``spec`` (the object, its contacts as model objects, the
-motion, the problems) -> ``transcription`` (collocation, the NLP's parameters, the grasp
-model, the NLP from blocks) -> ``solve`` (IPOPT, initial guesses and strategies, the
-pipeline) -> ``solution`` -> ``certify`` (the certificate: checks with name, value,
-tolerance and kind). ``ball_on_palm`` and ``one_finger`` are front ends of the pipeline for
-the paper's two settings; ``methods`` holds the paper's greedy method. The names below are
-loaded on first use, so that ``import ocp.geometry.surfaces`` stays light.
+Pinocchio, the built-in hands) -> ``spec`` (the object, the palm and fingertips, the
+motion, the problems: data) -> ``contacts`` (each contact kind's CasADi model) ->
+``transcription`` (collocation, the NLP's parameters, the grasp model, the NLP from
+blocks) -> ``solution`` -> ``solve`` (IPOPT, initial guesses and strategies, the pipeline,
+the certification of a plan). ``ball_on_palm`` and ``one_finger`` are front ends of the
+pipeline for the paper's two settings; ``methods`` holds the paper's greedy method. The
+names below are loaded on first use, so that ``import ocp.geometry.surfaces`` stays light.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from ocp.ball_on_palm import BallOnPalmPlanner
     from ocp.certify.certificate import Certificate, Check, CheckKind, TolerancePolicy
+    from ocp.contacts import FingertipContact, FreeFingertip, FreeObject, SupportContact
     from ocp.geometry.surfaces import SURFACES, Surface
     from ocp.methods.greedy import GreedyResult, greedy_plan
     from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
@@ -35,7 +37,6 @@ if TYPE_CHECKING:
     from ocp.robots.hands import Hand, load_hand
     from ocp.solution import GraspSample, ManipulationSolution, Solution, Status, Trajectory
     from ocp.solve.planner import ManipulationPlanner
-    from ocp.spec.contacts import FingertipContact, FreeObject, SupportContact
     from ocp.spec.grasp import Fingertip, ManipulationProblem, Palm, hand_fingertips
     from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
     from ocp.spec.problem import (
@@ -60,8 +61,8 @@ _EXPORTS = {
     "GraspSample": "ocp.solution", "ManipulationSolution": "ocp.solution",
     "Solution": "ocp.solution", "Status": "ocp.solution", "Trajectory": "ocp.solution",
     "ManipulationPlanner": "ocp.solve.planner",
-    "FingertipContact": "ocp.spec.contacts", "FreeObject": "ocp.spec.contacts",
-    "SupportContact": "ocp.spec.contacts",
+    "FingertipContact": "ocp.contacts", "FreeFingertip": "ocp.contacts",
+    "FreeObject": "ocp.contacts", "SupportContact": "ocp.contacts",
     "Fingertip": "ocp.spec.grasp", "ManipulationProblem": "ocp.spec.grasp",
     "Palm": "ocp.spec.grasp", "hand_fingertips": "ocp.spec.grasp",
     "DesiredMotion": "ocp.spec.motion", "MotionStep": "ocp.spec.motion",
@@ -83,6 +84,7 @@ __all__ = [
     "FingerModel",
     "Fingertip",
     "FingertipContact",
+    "FreeFingertip",
     "FreeObject",
     "GraspSample",
     "GreedyResult",

@@ -47,7 +47,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate
-from ocp.certify.laws import certify_grasp, with_force_checks
 from ocp.geometry.grasp import force_angles
 from ocp.solution import (
     Collocation,
@@ -61,6 +60,7 @@ from ocp.solution import (
     planned_forces,
     status_from_ipopt,
 )
+from ocp.solve.certify import certify_grasp, with_force_checks
 from ocp.solve.compiled import BackgroundCompiler
 from ocp.solve.guesses import (
     Guess,
