@@ -27,25 +27,45 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ocp.ball_on_palm import BallOnPalmPlanner
+    from ocp.ball_on_palm import PALM_NX, BallOnPalmPlanner, certify_palm_plan, palm_model
     from ocp.certify.certificate import Certificate, Check, CheckKind, TolerancePolicy
     from ocp.contacts import FingertipContact, FreeFingertip, FreeObject, SupportContact
+    from ocp.geometry.rotations import quaternion_wxyz
     from ocp.geometry.surfaces import SURFACES, Surface
     from ocp.methods.greedy import GreedyResult, greedy_plan
     from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
     from ocp.robots.finger import FingerModel, load_finger
-    from ocp.robots.hands import Hand, load_hand
-    from ocp.solution import GraspSample, ManipulationSolution, Solution, Status, Trajectory
+    from ocp.robots.hands import HAND_NAMES, Hand, load_hand
+    from ocp.solution import (
+        GraspSample,
+        ManipulationSolution,
+        Solution,
+        Status,
+        Trajectory,
+        status_from_ipopt,
+    )
+    from ocp.solve.guesses import (
+        guess_loops,
+        reference_input,
+        rotation_symmetric,
+        simulate_guess,
+    )
+    from ocp.solve.ipopt import IPOPT_OPTIONS
     from ocp.solve.planner import ManipulationPlanner
     from ocp.spec.grasp import Fingertip, ManipulationProblem, Palm, hand_fingertips
     from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
     from ocp.spec.problem import (
+        CONTACT_COORDS,
+        PERIODIC,
         BallOnPalmProblem,
         ObjectSpec,
         ProblemError,
         SolverOptions,
+        Structure,
         ViaPoint,
+        goal_errors,
     )
+    from ocp.transcription.collocation import left_input_columns, node_times
 
 #: public name -> the module that defines it
 _EXPORTS = {
@@ -70,9 +90,28 @@ _EXPORTS = {
     "BallOnPalmProblem": "ocp.spec.problem", "ObjectSpec": "ocp.spec.problem",
     "ProblemError": "ocp.spec.problem", "SolverOptions": "ocp.spec.problem",
     "ViaPoint": "ocp.spec.problem",
+    # the pieces of the ball-on-palm NLP a peer transcription re-uses (the benchmarks'
+    # peers: planner_service/bench/peers.py)
+    "PALM_NX": "ocp.ball_on_palm", "palm_model": "ocp.ball_on_palm",
+    "certify_palm_plan": "ocp.ball_on_palm",
+    "CONTACT_COORDS": "ocp.spec.problem", "PERIODIC": "ocp.spec.problem",
+    "Structure": "ocp.spec.problem", "goal_errors": "ocp.spec.problem",
+    "status_from_ipopt": "ocp.solution",
+    "guess_loops": "ocp.solve.guesses", "reference_input": "ocp.solve.guesses",
+    "rotation_symmetric": "ocp.solve.guesses", "simulate_guess": "ocp.solve.guesses",
+    "IPOPT_OPTIONS": "ocp.solve.ipopt",
+    "left_input_columns": "ocp.transcription.collocation",
+    "node_times": "ocp.transcription.collocation",
+    # what the plan viewer draws with (planner_service/view/)
+    "HAND_NAMES": "ocp.robots.hands", "quaternion_wxyz": "ocp.geometry.rotations",
 }
 
 __all__ = [
+    "CONTACT_COORDS",
+    "HAND_NAMES",
+    "IPOPT_OPTIONS",
+    "PALM_NX",
+    "PERIODIC",
     "SURFACES",
     "BallOnPalmPlanner",
     "BallOnPalmProblem",
@@ -102,17 +141,29 @@ __all__ = [
     "Solution",
     "SolverOptions",
     "Status",
+    "Structure",
     "SupportContact",
     "Surface",
     "TolerancePolicy",
     "Tracking",
     "Trajectory",
     "ViaPoint",
+    "certify_palm_plan",
+    "goal_errors",
     "greedy_plan",
+    "guess_loops",
     "hand_fingertips",
+    "left_input_columns",
     "load_finger",
     "load_hand",
+    "node_times",
+    "palm_model",
     "plan",
+    "quaternion_wxyz",
+    "reference_input",
+    "rotation_symmetric",
+    "simulate_guess",
+    "status_from_ipopt",
 ]
 
 

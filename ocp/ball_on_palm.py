@@ -231,6 +231,13 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
                     chart_rotation=tuple(float(a) for a in patch))
 
 
+#: The ball-on-palm NLP's pieces a peer transcription of the same problem re-uses (the
+#: benchmarks' peers, planner_service/bench/peers.py), exported by ``ocp`` under these
+#: names: the state's size, the palm contact's CasADi functions, the certificate of a plan.
+PALM_NX = NX
+palm_model = model_for
+certify_palm_plan = certify
+
 _DEFAULT = BallOnPalmPlanner()
 
 

@@ -104,6 +104,45 @@ def test_only_the_planners_touch_the_core() -> None:
     assert not offenders
 
 
+def _core_names(folder: str) -> list[str]:
+    """The core modules a service folder's files import, as ``file: module``."""
+    return [f"{p.relative_to(SERVICE)}: {m}" for p in (SERVICE / folder).rglob("*.py")
+            for m in sorted(_imports(p)) if m == "ocp" or m.startswith("ocp.")]
+
+
+def test_the_bench_peers_use_the_public_core() -> None:
+    """The benchmarks' peers re-use the ball-on-palm NLP's pieces through the names ``ocp``
+    exports, never the solver's internals."""
+    used = _imports(SERVICE / "bench" / "peers.py")
+    assert "ocp" in used and not [m for m in used if m.startswith("ocp.")]
+
+
+def _ocp_all() -> set[str]:
+    import ocp
+
+    return set(ocp.__all__)
+
+
+def test_the_viewer_and_the_execution_use_the_public_core_only() -> None:
+    """The viewer and the execution read results; the core's models they draw and run
+    with come from ``ocp``'s public names (or the planners' adapters), never its
+    internals."""
+    public = {"ocp"} | {f"ocp.{n}" for n in _ocp_all()}
+    offenders = [line for folder in ("view", "execution") for line in _core_names(folder)
+                 if line.split(": ")[1] not in public]
+    assert not offenders, offenders
+
+
+def test_the_service_folders_keep_their_places() -> None:
+    """bench, view and execution sit beside the jobs: neither the API nor the jobs, and
+    the viewer never the bench or the execution."""
+    up = ("planner_service.api", "planner_service.jobs", "fastapi", "starlette")
+    assert not _offenders("bench", up)
+    assert not _offenders("view", (*up, "planner_service.bench",
+                                   "planner_service.execution"))
+    assert not _offenders("execution", (*up, "planner_service.bench"))
+
+
 # -- the core's own layers -------------------------------------------------------------------
 #
 # The data flow in the folder names: certify (the certificate's types: a leaf that imports
