@@ -3,7 +3,7 @@
 A finger of 4 joints rolling on the object has 4 + 2 rates for the 6 rows of its closure,
 so the object's motion fixes each finger's motion (docs/hands.md). This script integrates
 each finger's fixed motion (the initial guess's integrator,
-``FingertipContact._integrated_guess``: the contact inputs and joint rates that keep
+``ocp.solve.contact_guesses.integrated_guess``: the contact inputs and joint rates that keep
 d/dt closure = 0) from the hand's nominal grasp while the ball turns about each palm axis,
 both ways, up to ``--angle`` degrees, and reports for each finger the angle at which it
 first reaches a joint limit (within 0.01 rad), leaves its cap (within 0.05 rad of the
@@ -20,9 +20,10 @@ import math
 
 import numpy as np
 
+from ocp.contacts import FingertipContact
 from ocp.geometry.surfaces import Sphere, rotation_from_vector
 from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_Q, NOMINAL_RADIUS, load_allegro
-from ocp.spec.contacts import FingertipContact
+from ocp.solve.contact_guesses import integrated_guess
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
 from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose
 from ocp.spec.problem import ObjectSpec
@@ -44,11 +45,9 @@ def reach(axis: tuple[float, float, float], angle_deg: float, samples: int
     out = {}
     for i, tip in enumerate(tips):
         contact = FingertipContact(Sphere, tip.finger, i)
-        eta, _ = contact._integrated_guess(problem, motion.at, ts,
-                                           rotation_from_vector(tip.chart_rotation),
-                                           np.array([NOMINAL_RADIUS]))
-        assert contact._guess_q is not None
-        q = contact._guess_q[1]
+        eta, _, q = integrated_guess(contact, problem, motion.at, ts,
+                                     rotation_from_vector(tip.chart_rotation),
+                                     np.array([NOMINAL_RADIUS]))
         f = tip.finger
         margin = np.min(np.minimum(q - f.lower, f.upper - q), axis=1)
         (a_lo, a_hi), (b_lo, b_hi) = f.tip_surface.bounds(0.0, math.radians(15.0))

@@ -9,15 +9,16 @@ What a library user needs is here::
                                  initial=(0, 0, 0, 0, 0), goal={"psi": 1.0}, duration=2.0))
     sol.status, sol.certificate.passed, sol.sample([0.5, 1.0]).eta
 
-The data flow is in the folder names: ``geometry`` (surfaces, Montana's contact
+The data flow is in the folder names: ``certify`` (the certificate's types: checks with
+name, value, tolerance and kind; a leaf), ``geometry`` (surfaces, Montana's contact
 kinematics, rotations, grasp geometry) and ``robots`` (fingers from URDF through
-Pinocchio, the built-in hands) -> ``spec`` (the object, its contacts as model objects, the
-motion, the problems) -> ``transcription`` (collocation, the NLP's parameters, the grasp
-model, the NLP from blocks) -> ``solve`` (IPOPT, initial guesses and strategies, the
-pipeline) -> ``solution`` -> ``certify`` (the certificate: checks with name, value,
-tolerance and kind). ``ball_on_palm`` and ``one_finger`` are front ends of the pipeline for
-the paper's two settings; ``methods`` holds the paper's greedy method. The names below are
-loaded on first use, so that ``import ocp.geometry.surfaces`` stays light.
+Pinocchio, the built-in hands) -> ``spec`` (the object, the palm and fingertips, the
+motion, the problems: data) -> ``contacts`` (each contact kind's CasADi model) ->
+``transcription`` (collocation, the NLP's parameters, the grasp model, the NLP from
+blocks) -> ``solution`` -> ``solve`` (IPOPT, initial guesses and strategies, the pipeline,
+the certification of a plan). ``ball_on_palm`` and ``one_finger`` are front ends of the
+pipeline for the paper's two settings; ``methods`` holds the paper's greedy method. The
+names below are loaded on first use, so that ``import ocp.geometry.surfaces`` stays light.
 """
 
 from __future__ import annotations
@@ -26,26 +27,46 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ocp.ball_on_palm import BallOnPalmPlanner
+    from ocp.ball_on_palm import PALM_NX, BallOnPalmPlanner, certify_palm_plan, palm_model
     from ocp.certify.certificate import Certificate, Check, CheckKind, TolerancePolicy
+    from ocp.contacts import FingertipContact, FreeFingertip, FreeObject, SupportContact
+    from ocp.geometry.rotations import quaternion_wxyz
     from ocp.geometry.surfaces import SURFACES, Surface
     from ocp.methods.greedy import GreedyResult, greedy_plan
     from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
     from ocp.robots.finger import FingerModel, load_finger
-    from ocp.robots.hands import Hand, load_hand
-    from ocp.solution import GraspSample, ManipulationSolution, Solution, Status, Trajectory
+    from ocp.robots.hands import HAND_NAMES, Hand, load_hand
+    from ocp.solution import (
+        GraspSample,
+        ManipulationSolution,
+        Solution,
+        Status,
+        Trajectory,
+        status_from_ipopt,
+    )
     from ocp.solve.attempt import AttemptOptions, attempt, shifted
+    from ocp.solve.guesses import (
+        guess_loops,
+        reference_input,
+        rotation_symmetric,
+        simulate_guess,
+    )
+    from ocp.solve.ipopt import IPOPT_OPTIONS
     from ocp.solve.planner import ManipulationPlanner
-    from ocp.spec.contacts import FingertipContact, FreeObject, SupportContact
     from ocp.spec.grasp import Fingertip, ManipulationProblem, Palm, hand_fingertips
     from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
     from ocp.spec.problem import (
+        CONTACT_COORDS,
+        PERIODIC,
         BallOnPalmProblem,
         ObjectSpec,
         ProblemError,
         SolverOptions,
+        Structure,
         ViaPoint,
+        goal_errors,
     )
+    from ocp.transcription.collocation import left_input_columns, node_times
 
 #: public name -> the module that defines it
 _EXPORTS = {
@@ -63,8 +84,8 @@ _EXPORTS = {
     "ManipulationPlanner": "ocp.solve.planner",
     "AttemptOptions": "ocp.solve.attempt", "attempt": "ocp.solve.attempt",
     "shifted": "ocp.solve.attempt",
-    "FingertipContact": "ocp.spec.contacts", "FreeObject": "ocp.spec.contacts",
-    "SupportContact": "ocp.spec.contacts",
+    "FingertipContact": "ocp.contacts", "FreeFingertip": "ocp.contacts",
+    "FreeObject": "ocp.contacts", "SupportContact": "ocp.contacts",
     "Fingertip": "ocp.spec.grasp", "ManipulationProblem": "ocp.spec.grasp",
     "Palm": "ocp.spec.grasp", "hand_fingertips": "ocp.spec.grasp",
     "DesiredMotion": "ocp.spec.motion", "MotionStep": "ocp.spec.motion",
@@ -72,9 +93,28 @@ _EXPORTS = {
     "BallOnPalmProblem": "ocp.spec.problem", "ObjectSpec": "ocp.spec.problem",
     "ProblemError": "ocp.spec.problem", "SolverOptions": "ocp.spec.problem",
     "ViaPoint": "ocp.spec.problem",
+    # the pieces of the ball-on-palm NLP a peer transcription re-uses (the benchmarks'
+    # peers: planner_service/bench/peers.py)
+    "PALM_NX": "ocp.ball_on_palm", "palm_model": "ocp.ball_on_palm",
+    "certify_palm_plan": "ocp.ball_on_palm",
+    "CONTACT_COORDS": "ocp.spec.problem", "PERIODIC": "ocp.spec.problem",
+    "Structure": "ocp.spec.problem", "goal_errors": "ocp.spec.problem",
+    "status_from_ipopt": "ocp.solution",
+    "guess_loops": "ocp.solve.guesses", "reference_input": "ocp.solve.guesses",
+    "rotation_symmetric": "ocp.solve.guesses", "simulate_guess": "ocp.solve.guesses",
+    "IPOPT_OPTIONS": "ocp.solve.ipopt",
+    "left_input_columns": "ocp.transcription.collocation",
+    "node_times": "ocp.transcription.collocation",
+    # what the plan viewer draws with (planner_service/view/)
+    "HAND_NAMES": "ocp.robots.hands", "quaternion_wxyz": "ocp.geometry.rotations",
 }
 
 __all__ = [
+    "CONTACT_COORDS",
+    "HAND_NAMES",
+    "IPOPT_OPTIONS",
+    "PALM_NX",
+    "PERIODIC",
     "SURFACES",
     "AttemptOptions",
     "BallOnPalmPlanner",
@@ -87,6 +127,7 @@ __all__ = [
     "FingerModel",
     "Fingertip",
     "FingertipContact",
+    "FreeFingertip",
     "FreeObject",
     "GraspSample",
     "GreedyResult",
@@ -104,6 +145,7 @@ __all__ = [
     "Solution",
     "SolverOptions",
     "Status",
+    "Structure",
     "SupportContact",
     "Surface",
     "TolerancePolicy",
@@ -111,12 +153,23 @@ __all__ = [
     "Trajectory",
     "ViaPoint",
     "attempt",
+    "certify_palm_plan",
+    "goal_errors",
     "greedy_plan",
+    "guess_loops",
     "hand_fingertips",
+    "left_input_columns",
     "load_finger",
     "load_hand",
+    "node_times",
+    "palm_model",
     "plan",
+    "quaternion_wxyz",
+    "reference_input",
+    "rotation_symmetric",
     "shifted",
+    "simulate_guess",
+    "status_from_ipopt",
 ]
 
 

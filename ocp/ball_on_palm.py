@@ -4,11 +4,11 @@ object on the palm alone, in the ball-on-palm planner's terms.
 State: the palm/object contact coordinates eta_p = (x, y, u, v, psi); input: the palm
 contact velocity w = d/dt (x, y) [m/s]; objective: the control effort integral |w|^2 dt;
 goals and via-points: equality constraints on any subset of eta. This is a one-contact
-grasp (a :class:`~ocp.spec.contacts.SupportContact` and no fingers) of the one formulation in
+grasp (a :class:`~ocp.contacts.SupportContact` and no fingers) of the one formulation in
 :mod:`ocp.solve.planner`: the same transcription (written out in SX at this size), the
 same solve loop with the palm's strategies (simulated reference paths with loops for pure
 reorientations, the gauge bound of the symmetric vertical case: :mod:`ocp.solve.guesses`),
-the same certificate (:func:`ocp.certify.laws.certify_grasp`) with the palm's
+the same certificate (:func:`ocp.solve.certify.certify_grasp`) with the palm's
 tolerances. :class:`BallOnPalmPlanner` poses a :class:`~ocp.spec.problem.BallOnPalmProblem` as
 that grasp and returns its plan as a :class:`~ocp.solution.Solution` (the contact
 coordinates' trajectory, sampled on any grid, with the certificate under the
@@ -25,12 +25,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import PALM_TOLERANCES, Certificate
-from ocp.certify.laws import certify_grasp
+from ocp.contacts.palm_model import (
+    NU,
+    NX,
+    BallOnPalmModel,
+    contact_coordinates,
+    model_for,
+    object_pose,
+)
 from ocp.geometry.surfaces import rotation_from_vector
 from ocp.solution import ManipulationSolution, Solution, SolverStats, Status, Trajectory
 from ocp.solve import planner as _pipeline
+from ocp.solve.certify import certify_grasp
 from ocp.solve.planner import ManipulationPlanner, ManipulationProblem, Palm
-from ocp.spec.palm import NU, NX, BallOnPalmModel, contact_coordinates, model_for, object_pose
 from ocp.spec.problem import (
     BallOnPalmProblem,
     ProblemError,
@@ -224,6 +231,13 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
                     certificate=cert, goal_error=goal_error, _sampler=sampler, plan=plan,
                     chart_rotation=tuple(float(a) for a in patch))
 
+
+#: The ball-on-palm NLP's pieces a peer transcription of the same problem re-uses (the
+#: benchmarks' peers, planner_service/bench/peers.py), exported by ``ocp`` under these
+#: names: the state's size, the palm contact's CasADi functions, the certificate of a plan.
+PALM_NX = NX
+palm_model = model_for
+certify_palm_plan = certify
 
 _DEFAULT = BallOnPalmPlanner(general=_pipeline.default_planner())
 

@@ -368,7 +368,7 @@ class JointTrajectory:
 @dataclass(frozen=True)
 class GraspSample:
     """A plan at given times (rows): states x and inputs u in the grasp's layout (the
-    contacts' blocks, :mod:`ocp.spec.contacts`), the states' rates and accelerations (the
+    contacts' blocks, :mod:`ocp.contacts`), the states' rates and accelerations (the
     time derivatives of the returned polynomials), the object's pose (palm frame)."""
 
     t: FloatArray

@@ -150,7 +150,7 @@ def test_no_slip_and_no_spin_on_the_returned_trajectory(
     p = smp.object_position.reshape(k, 2, 3)
     omega_o, v_o = _twist(R, p, dt)
     mid = slice(1, None, 2)  # the grid's midpoints (nodes and midpoints alternate)
-    # the certificate's speed scale (ocp.certify.laws), here from the returned grid
+    # the certificate's speed scale (ocp.solve.certify), here from the returned grid
     speed = max(float(np.max(np.abs(plan.object_velocity))) + RHO * float(
         np.max(np.abs(plan.object_angular_velocity))) + RHO * float(np.max(np.abs(plan.U))),
         1e-3)

@@ -194,7 +194,7 @@ def test_two_stages_keep_the_kinematic_plan_and_agree_with_the_coupled_nlp(
     assert plain.contacts[0].force is None and sol.contacts[0].force is not None
     # its certificate: the kinematic one with the force checks added, the same values as
     # certifying the plan with its forces from scratch
-    from ocp.certify.laws import certify_grasp
+    from ocp.solve.certify import certify_grasp
 
     assert sol.collocation is not None and sol._interpolant is not None
     pf = problem.with_intervals(len(sol.collocation.t_nodes) - 1)

@@ -104,39 +104,89 @@ def test_only_the_planners_touch_the_core() -> None:
     assert not offenders
 
 
+def _core_names(folder: str) -> list[str]:
+    """The core modules a service folder's files import, as ``file: module``."""
+    return [f"{p.relative_to(SERVICE)}: {m}" for p in (SERVICE / folder).rglob("*.py")
+            for m in sorted(_imports(p)) if m == "ocp" or m.startswith("ocp.")]
+
+
+def test_the_bench_peers_use_the_public_core() -> None:
+    """The benchmarks' peers re-use the ball-on-palm NLP's pieces through the names ``ocp``
+    exports, never the solver's internals."""
+    used = _imports(SERVICE / "bench" / "peers.py")
+    assert "ocp" in used and not [m for m in used if m.startswith("ocp.")]
+
+
+def _ocp_all() -> set[str]:
+    import ocp
+
+    return set(ocp.__all__)
+
+
+def test_the_viewer_and_the_execution_use_the_public_core_only() -> None:
+    """The viewer and the execution read results; the core's models they draw and run
+    with come from ``ocp``'s public names (or the planners' adapters), never its
+    internals."""
+    public = {"ocp"} | {f"ocp.{n}" for n in _ocp_all()}
+    offenders = [line for folder in ("view", "execution") for line in _core_names(folder)
+                 if line.split(": ")[1] not in public]
+    assert not offenders, offenders
+
+
+def test_the_service_folders_keep_their_places() -> None:
+    """bench, view and execution sit beside the jobs: neither the API nor the jobs, and
+    the viewer never the bench or the execution."""
+    up = ("planner_service.api", "planner_service.jobs", "fastapi", "starlette")
+    assert not _offenders("bench", up)
+    assert not _offenders("view", (*up, "planner_service.bench",
+                                   "planner_service.execution"))
+    assert not _offenders("execution", (*up, "planner_service.bench"))
+
+
 # -- the core's own layers -------------------------------------------------------------------
 #
-# The data flow in the folder names: geometry (surfaces, contact kinematics, rotations,
-# grasp geometry) and robots (fingers, hands) at the bottom; spec (the object, its contacts,
-# the motion, the problems) on them; transcription (collocation, parameters, the grasp
-# model, the NLP from blocks); certify (the certificate's laws; its types,
-# certify.certificate, are a leaf that every layer may use and that imports nothing of the
-# core); the solution; solve (IPOPT, guesses and strategies, the pipeline); the front ends
-# (ball_on_palm, one_finger) on the pipeline; methods (greedy) on everything. Each layer
-# imports only the layers listed for it (and itself).
+# The data flow in the folder names: certify (the certificate's types: a leaf that imports
+# nothing of the core and that every layer may use); geometry (surfaces, contact
+# kinematics, rotations, grasp geometry) and robots (fingers, hands) at the bottom; spec
+# (the problems: data) on them; contacts (each contact kind's CasADi model) on spec;
+# transcription (collocation, parameters, the grasp model, the NLP from blocks); the
+# solution; solve (IPOPT, guesses and strategies, the pipeline, the certification of a
+# plan); the front ends (ball_on_palm, one_finger) on the pipeline; methods (greedy) on
+# everything. Each layer imports only the layers listed for it (and itself, and certify).
 
 CORE_LAYERS: dict[str, set[str]] = {
+    "certify": set(),
     "geometry": set(),
     "robots": {"geometry"},
-    "spec": {"geometry", "robots", "certify.certificate"},
-    "transcription": {"geometry", "robots", "spec", "certify.certificate"},
-    "certify": {"geometry", "robots", "spec", "transcription"},
-    "solution": {"geometry", "spec", "transcription", "certify.certificate"},
-    "solve": {"geometry", "robots", "spec", "transcription", "certify", "solution"},
-    "ball_on_palm": {"geometry", "spec", "transcription", "certify", "solution", "solve"},
+    "spec": {"geometry", "robots"},
+    "contacts": {"geometry", "robots", "spec"},
+    "transcription": {"geometry", "robots", "spec", "contacts"},
+    "solution": {"geometry", "spec", "transcription"},
+    "solve": {"geometry", "robots", "spec", "contacts", "transcription", "solution"},
+    "ball_on_palm": {"geometry", "spec", "contacts", "transcription", "solution", "solve"},
     "one_finger": {"geometry", "robots", "spec", "transcription", "solution", "solve"},
-    "methods": {"geometry", "robots", "spec", "transcription", "certify", "solution", "solve",
+    "methods": {"geometry", "robots", "spec", "contacts", "transcription", "solution", "solve",
                 "ball_on_palm", "one_finger"},
 }
 
 
 def _layer(module: str) -> str:
-    """The layer of an ``ocp`` module: its subpackage, or the top-level module's name;
-    ``certify.certificate`` (the certificate's types) is a layer of its own."""
+    """The layer of an ``ocp`` module: its subpackage, or the top-level module's name."""
     parts = module.split(".")[1:]
-    if parts[:2] == ["certify", "certificate"]:
-        return "certify.certificate"
     return parts[0] if parts else ""
+
+
+def _core_imports(path: Path) -> list[str]:
+    """The ``ocp`` modules a core source file imports (the core has no relative imports)."""
+    module = ".".join(path.relative_to(OCP.parent).with_suffix("").parts)
+    names: list[str] = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            assert node.level == 0, f"{module}: relative import of {node.module}"
+            names.append(node.module)
+        elif isinstance(node, ast.Import):
+            names += [a.name for a in node.names]
+    return [n for n in names if n.split(".")[0] == "ocp" and n != "ocp"]
 
 
 def test_the_core_imports_only_down_its_layers() -> None:
@@ -146,26 +196,57 @@ def test_the_core_imports_only_down_its_layers() -> None:
         layer = _layer(module.removesuffix(".__init__"))
         if layer in ("", "__init__"):
             continue  # the package's public API re-exports every layer
-        # the certificate's types: a leaf that every layer may use
         allowed = CORE_LAYERS.get(layer, set()) | {layer}
-        if layer != "certify.certificate":
-            allowed |= {"certify.certificate"}
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ImportFrom) and node.module:
-                assert node.level == 0, f"{module}: relative import of {node.module}"
-                names = [node.module]
-            elif isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            else:
-                continue
-            for name in names:
-                if name.split(".")[0] == "ocp" and name != "ocp" and \
-                        _layer(name) not in allowed:
-                    offenders.append(f"{module} ({layer}) imports {name}")
+        if layer != "certify":  # the certificate's types: a leaf every layer may use
+            allowed |= {"certify"}
+        offenders += [f"{module} ({layer}) imports {name}" for name in _core_imports(path)
+                      if _layer(name) not in allowed]
     assert not offenders, "\n".join(offenders)
+
+
+def test_the_layers_are_ordered() -> None:
+    """No two layers may import each other: the allowed imports form an order."""
+    def below(layer: str, seen: frozenset[str] = frozenset()) -> set[str]:
+        assert layer not in seen, f"a cycle through {layer}"
+        out = set(CORE_LAYERS[layer])
+        for lower in CORE_LAYERS[layer]:
+            out |= below(lower, seen | {layer})
+        return out
+
+    for layer in CORE_LAYERS:
+        assert layer not in below(layer)
 
 
 def test_every_core_module_is_in_a_layer() -> None:
     layers = {_layer(".".join(p.relative_to(OCP.parent).with_suffix("").parts))
               for p in OCP.rglob("*.py") if p.name != "__init__.py" or p.parent != OCP}
-    assert layers - {"", "__init__"} <= set(CORE_LAYERS) | {"certify.certificate"}, layers
+    assert layers - {"", "__init__"} <= set(CORE_LAYERS), layers
+
+
+def test_the_problem_descriptions_are_data() -> None:
+    """``ocp.spec`` describes problems: no CasADi, no Pinocchio (the models are the
+    contacts' and the robots'), nothing of the certificate but its tolerance policies."""
+    offenders = []
+    for path in (OCP / "spec").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names = [(a.name, a.name) for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names = [(node.module, a.name) for a in node.names]
+            else:
+                continue
+            for module, name in names:
+                if module.split(".")[0] in ("casadi", "pinocchio") or (
+                        module.startswith("ocp.certify") and "TOLERANCES" not in name
+                        and name != "TolerancePolicy"):
+                    offenders.append(f"{path.name}: {module}.{name}")
+    assert not offenders
+
+
+def test_the_certificate_types_are_a_leaf() -> None:
+    """``ocp.certify`` holds the certificate's types alone: the certification of a plan
+    (which reads the transcription) is the solve layer's."""
+    assert sorted(p.name for p in (OCP / "certify").glob("*.py")) == ["__init__.py",
+                                                                      "certificate.py"]
+    for path in (OCP / "certify").glob("*.py"):
+        assert not _core_imports(path), path.name

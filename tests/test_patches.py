@@ -13,9 +13,9 @@ import pytest
 from helpers import assert_close
 
 from ocp.ball_on_palm import BallOnPalmPlanner
+from ocp.contacts.palm_model import object_pose
 from ocp.geometry.surfaces import Chart
 from ocp.solution import Status
-from ocp.spec.palm import object_pose
 from ocp.spec.patches import recharted_coordinates
 from ocp.spec.problem import BallOnPalmProblem, ObjectSpec
 

@@ -136,7 +136,7 @@ def test_shifted_is_the_rest_of_the_plan(first: tuple) -> None:
 def test_the_certificate_holds_a_moving_start_to_its_given_input(first: tuple) -> None:
     """The smooth timing's start law: a plan from rest starts with zero rates; a moving
     start starts with the given input, and a plan that does not is caught."""
-    from ocp.certify.laws import timing_checks
+    from ocp.solve.certify import timing_checks
 
     problem, sol = first
     m = PLANNER.model(problem)

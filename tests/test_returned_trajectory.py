@@ -25,8 +25,8 @@ from helpers import assert_close
 from test_contract import CASES
 
 from ocp.certify.certificate import CHECK_POINTS, Certificate, CheckKind
-from ocp.certify.laws import certify_grasp
 from ocp.solution import ManipulationSolution, Status, fixed_rate_times
+from ocp.solve.certify import certify_grasp
 from ocp.transcription.collocation import HermiteInterpolant
 
 

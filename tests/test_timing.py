@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from ocp.ball_on_palm import grasp_problem
-from ocp.certify.laws import timing_checks
 from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
 from ocp.robots.finger import load_finger
 from ocp.solution import ManipulationSolution, Status
+from ocp.solve.certify import timing_checks
 from ocp.solve.planner import ManipulationPlanner, ManipulationProblem
 from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ProblemError, ViaPoint
 

@@ -15,8 +15,9 @@ sample, and the planners decide by kind (never by message text):
 * ``goal``: a goal or via-point missed.
 * ``numerics``: the plan could not be checked (non-finite values, CVODES gave up).
 
-Tolerances are set where each check is made (:mod:`ocp.spec.contacts` for the contacts' laws,
-the planners for defects, goals and cones) and stated in docs/conventions.md.
+Tolerances are set where each check is made (:mod:`ocp.solve.contact_checks` for the
+contacts' laws, :mod:`ocp.solve.certify` for defects, goals and cones) and stated in
+docs/conventions.md.
 """
 
 from __future__ import annotations

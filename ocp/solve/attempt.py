@@ -34,7 +34,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate
-from ocp.certify.laws import certify_grasp
 from ocp.solution import (
     Collocation,
     ManipulationSolution,
@@ -44,6 +43,7 @@ from ocp.solution import (
     planned_forces,
     status_from_ipopt,
 )
+from ocp.solve.certify import certify_grasp
 from ocp.solve.guesses import Guess, Strategy, epigraph_guess, strategy_for
 from ocp.solve.ipopt import IPOPT_WARM_OPTIONS
 from ocp.solve.ipopt import NLP as _NLP

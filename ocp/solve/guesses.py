@@ -28,8 +28,9 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from ocp.contacts.palm_model import NU, NX, model_for
+from ocp.solve.contact_guesses import SubPlanner, guess_contact, guess_joints, object_guess
 from ocp.spec.grasp import contact_charts
-from ocp.spec.palm import NU, NX, model_for
 from ocp.spec.problem import CONTACT_COORDS, BallOnPalmProblem
 from ocp.transcription.collocation import WarmStart, node_inputs, rk4_step
 
@@ -69,7 +70,7 @@ class Strategy:
     #: whether a previous plan's IPOPT primal-dual point seeds a solve of the same NLP
     use_nlp_point: bool = True
 
-    def own_guesses(self, planner: Any, problem: ManipulationProblem, m: GraspModel,
+    def own_guesses(self, planner: SubPlanner, problem: ManipulationProblem, m: GraspModel,
                     nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Iterator[Guess]:
         raise NotImplementedError
 
@@ -90,7 +91,7 @@ class Strategy:
 class GraspStrategy(Strategy):
     """Grasps with fingers."""
 
-    def own_guesses(self, planner: Any, problem: ManipulationProblem, m: GraspModel,
+    def own_guesses(self, planner: SubPlanner, problem: ManipulationProblem, m: GraspModel,
                     nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Iterator[Guess]:
         yield grasp_guess(planner, problem, m, nlp, x0, t_nodes)
 
@@ -102,7 +103,7 @@ class PalmStrategy(Strategy):
     shared_budget = True
     use_nlp_point = False
 
-    def own_guesses(self, planner: Any, problem: ManipulationProblem, m: GraspModel,
+    def own_guesses(self, planner: SubPlanner, problem: ManipulationProblem, m: GraspModel,
                     nlp: NLP, x0: FloatArray, t_nodes: FloatArray) -> Iterator[Guess]:
         base = problem.palm_problem()
         n_cols = nlp.hs.n_input_cols
@@ -220,14 +221,14 @@ def epigraph_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray,
     return np.full((1, k), 0.5), np.vstack([F, loads])
 
 
-def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: NLP,
+def grasp_guess(planner: SubPlanner, problem: ManipulationProblem, m: GraspModel, nlp: NLP,
                 x0: FloatArray, t_nodes: FloatArray) -> Guess:
     """A consistent initial guess: the object's motion (the ball-on-palm plan, or the
     desired motion); each fingertip's contact point kept where it started relative to
     the object's centre (palm frame), its contact coordinates integrated with the
     rolling equations; the joints by inverse kinematics along the way (closure holds);
-    joint rates by finite differences (each fingertip's part:
-    :meth:`~ocp.spec.contacts.FingertipContact.guess_contact` and ``guess_joints``)."""
+    joint rates by finite differences (each kind's part: :mod:`ocp.solve.contact_guesses`;
+    ``planner`` plans the support's palm sub-plan, :func:`~.contact_guesses.palm_subplan`)."""
     charts = contact_charts(problem)
     shape = np.asarray(problem.object.dimensions, dtype=float)
     prm = m.params(shape, charts)
@@ -235,18 +236,21 @@ def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: 
     ts = np.sort(np.concatenate([t_nodes, tm]))  # node, mid, node, ...
     cart0 = m.cartesian(x0, prm)
     obj = m.object
-    Xo, Wo, pose, obj_w = obj.guess(problem, x0[obj.xs], ts, np.asarray(cart0[0]),
-                                    np.asarray(cart0[1]).ravel(), planner)
+    Xo, Wo, pose, obj_w = object_guess(planner, problem, obj, x0[obj.xs], ts,
+                                       np.asarray(cart0[0]), np.asarray(cart0[1]).ravel())
     p_obj0 = np.asarray(cart0[1]).ravel()
     pts0 = np.asarray(cart0[4])
     X = np.zeros((len(ts), m.nx))
     W = np.zeros((len(ts), m.nu))
     X[:, obj.xs], W[:, obj.us] = Xo, Wo
     X[0, obj.xs] = x0[obj.xs]
+    found: list[FloatArray | None] = []  # the joints of the guesses that found them
     for tip in m.fingertips:
         k = m.point_contacts.index(tip)
-        X[:, tip.eta_cols], W[:, tip.w_cols] = tip.guess_contact(
-            problem, pose, ts, pts0[:, k] - p_obj0, charts[k], shape, m.roll(len(ts) - 1))
+        X[:, tip.eta_cols], W[:, tip.w_cols], q_found = guess_contact(
+            tip, problem, pose, ts, pts0[:, k] - p_obj0, charts[k], shape,
+            m.roll(len(ts) - 1))
+        found.append(q_found)
     # joints by IK along the way, every finger: the pads' poses do not depend on the
     # joints (one batched evaluation); one batched IK from the initial grasp's joints,
     # and a sequential one from the previous point's where that does not converge
@@ -255,8 +259,9 @@ def grasp_guess(planner: Any, problem: ManipulationProblem, m: GraspModel, nlp: 
     R_all = np.asarray(out[2]).reshape(3, len(ts), -1, 3)  # (3, k, finger, 3)
     p_all = np.asarray(out[3]).reshape(3, len(ts), -1)  # (3, k, finger)
     for i, tip in enumerate(m.fingertips):
-        X[:, tip.q_cols], W[:, tip.qd_cols] = tip.guess_joints(
-            R_all[:, :, i, :].transpose(1, 0, 2), p_all[:, :, i].T, x0[tip.q_cols], ts)
+        X[:, tip.q_cols], W[:, tip.qd_cols] = guess_joints(
+            tip, R_all[:, :, i, :].transpose(1, 0, 2), p_all[:, :, i].T, x0[tip.q_cols], ts,
+            found[i])
     Ucols = np.zeros((nlp.hs.n_input_cols, m.nu))
     Ucols[nlp.hs.left_cols] = W[0:-1:2]
     Ucols[nlp.hs.right_cols] = W[2::2]

@@ -2,7 +2,7 @@
 certificate.
 
 A grasp (:class:`~ocp.spec.grasp.ManipulationProblem`) is a list of contacts
-(:mod:`ocp.spec.contacts`): an object block (the palm carrying the object, or the object's pose
+(:mod:`ocp.contacts`): an object block (the palm carrying the object, or the object's pose
 when fingers alone hold it) and the fingertips. :class:`ManipulationPlanner`
 
 1. builds the grasp's model from its contacts
@@ -14,7 +14,7 @@ when fingers alone hold it) and the fingertips. :class:`ManipulationPlanner`
    (:mod:`ocp.solve.guesses`: the fingers' consistent guess, or the palm's simulated reference
    paths with loops), in turn, within the request's time and iteration limits;
 3. assembles the plan (:func:`~ocp.solution.assemble_solution`);
-4. certifies it independently (:func:`~ocp.certify.laws.certify_grasp`), and when only
+4. certifies it independently (:func:`~ocp.solve.certify.certify_grasp`), and when only
    discretisation checks fail solves again on a grid twice as fine, warm-started.
 
 The object on the palm alone (the paper's ball on palm, :mod:`ocp.ball_on_palm`), one
@@ -22,7 +22,7 @@ finger pressing the ball on the palm (its section 3), two fingers holding it in 
 (its section 4) and three or more fingers are the same pipeline with different data.
 
 States (scaled for IPOPT; docs/conventions.md): each contact's block in turn (see
-:mod:`ocp.spec.contacts`). Dynamics: the rolling equations at every contact (eq. 3 via
+:mod:`ocp.contacts`). Dynamics: the rolling equations at every contact (eq. 3 via
 :class:`~ocp.geometry.contact.ContactPair`). Path constraints at every collocation point: each
 finger's closure (eq. 6), force closure with a margin (friction cones;
 :mod:`ocp.geometry.force_closure` for 3+ contacts), contacts inside the pads, joint and joint-rate
@@ -45,7 +45,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ocp.certify.laws import with_force_checks
 from ocp.geometry.grasp import force_angles
 from ocp.solution import (
     ContactTrajectory,
@@ -57,6 +56,7 @@ from ocp.solution import (
     planned_forces,
 )
 from ocp.solve.attempt import IpoptRun, finish, initial_point, run, setup
+from ocp.solve.certify import with_force_checks
 from ocp.solve.compiled import BackgroundCompiler
 from ocp.solve.guesses import (
     Guess,

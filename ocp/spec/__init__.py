@@ -1,3 +1,4 @@
-"""Problem specification: the object, its contacts (each a model object owning its states,
-rolling equations, path rows and certificate laws), the desired motion, the problems.
+"""Problem specification, data only: the object, the palm and the fingertips of a grasp,
+the desired motion, the problems and their checks of input. The contact kinds' CasADi
+models are :mod:`ocp.contacts`.
 """

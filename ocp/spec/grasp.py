@@ -154,7 +154,7 @@ class ManipulationProblem:
     max_object_rate: float = 20.0  # rad/s, each component of a free object's angular rate
     max_refinements: int = 2
     options: SolverOptions = field(default_factory=SolverOptions)
-    #: How strictly the certificate checks the plan (:mod:`ocp.certify.laws`).
+    #: How strictly the certificate checks the plan (:mod:`ocp.solve.certify`).
     tolerances: TolerancePolicy = GRASP_TOLERANCES
     #: Plan the contact forces (the object's load, the grip; docs/forces.md); None (the
     #: default): a kinematic plan, as before.

@@ -1,7 +1,7 @@
 """The CasADi functions of one grasp structure, assembled from its contacts.
 
 A grasp structure is the object's shape, its object block (a support, or the free object)
-and its fingers (:mod:`ocp.spec.contacts`). :class:`GraspModel` builds, by looping over the
+and its fingers (:mod:`ocp.contacts`). :class:`GraspModel` builds, by looping over the
 contacts (no case for any kind of contact here):
 
 * ``dynamics(x, u, params) -> x_dot``: every contact's rolling equations;
@@ -23,15 +23,15 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from ocp.geometry.rotations import vee
-from ocp.spec.contacts import (
+from ocp.contacts import (
     Contact,
     FingertipContact,
     ObjectBlock,
     SymbolicGrasp,
     grasp_contacts,
 )
-from ocp.spec.palm import model_for
+from ocp.contacts.palm_model import model_for
+from ocp.geometry.rotations import vee
 from ocp.transcription.collocation import HermiteInterpolant, reintegrator, rk4_step
 
 __all__ = ["GraspModel"]

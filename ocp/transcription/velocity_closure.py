@@ -25,8 +25,8 @@ from typing import Any
 
 import casadi as ca
 
+from ocp.contacts import SymbolicGrasp
 from ocp.geometry.rotations import vee
-from ocp.spec.contacts import SymbolicGrasp
 
 __all__ = ["contact_twists", "finger_twist", "fingertip_twist_rows"]
 

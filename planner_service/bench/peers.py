@@ -11,7 +11,7 @@ with CVODES from the initial state, the rolling laws checked along that motion:
 ``casadi_plain``
     The project's NLP written the plain way: built per request with every value (radius,
     durations, goal, via-points) baked in as a constant, an MX graph calling the project's
-    dynamics ``model_for(shape).dynamics`` and ``nlpsol(..., "ipopt", {"expand": True})``
+    dynamics ``palm_model(shape).dynamics`` and ``nlpsol(..., "ipopt", {"expand": True})``
     (what ``ca.Opti`` does underneath). Mathematically the same NLP as the project's: the
     same separated Hermite-Simpson discretisation on the same grid (segments between
     via-points, an incoming and an outgoing input at each via-point node), the same scaled
@@ -96,21 +96,27 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dexroll_client.models import BallOnPalmRequest
-from ocp.ball_on_palm import (
-    NX,
+from ocp import (
+    CONTACT_COORDS,
+    IPOPT_OPTIONS,
+    PALM_NX,
+    PERIODIC,
     BallOnPalmPlanner,
+    BallOnPalmProblem,
+    Certificate,
+    Status,
     Structure,
-    certify,
+    certify_palm_plan,
     goal_errors,
-    model_for,
+    guess_loops,
+    left_input_columns,
+    node_times,
+    palm_model,
+    reference_input,
+    simulate_guess,
+    status_from_ipopt,
 )
-from ocp.certify.certificate import Certificate
-from ocp.solution import Status, status_from_ipopt
-from ocp.solve.guesses import guess_loops, reference_input, simulate_guess
-from ocp.solve.guesses import rotation_symmetric as _rotation_symmetric
-from ocp.solve.ipopt import IPOPT_OPTIONS
-from ocp.spec.problem import CONTACT_COORDS, PERIODIC, BallOnPalmProblem
-from ocp.transcription.collocation import left_input_columns, node_times
+from ocp import rotation_symmetric as _rotation_symmetric
 from planner_service.planners import to_problem
 
 __all__ = ["GOAL_TOLERANCE", "PEER_METHODS", "PeerOutcome", "available", "compare"]
@@ -213,7 +219,7 @@ def _assess(problem: BallOnPalmProblem, grid: _Grid, X: FloatArray, U0: FloatArr
             Um: FloatArray, U1: FloatArray) -> tuple[float, Certificate, float]:
     """(worst goal error, certificate, effort integral) of a plan at the nodes."""
     errs = goal_errors(problem, X, grid.ends)
-    cert = certify(problem, grid.t_nodes, X, U0, Um, U1)
+    cert = certify_palm_plan(problem, grid.t_nodes, X, U0, Um, U1)
     sq = [np.sum(np.square(a), axis=1) for a in (U0, Um, U1)]
     effort = float(np.sum(grid.h / 6 * (sq[0] + 4 * sq[1] + sq[2])))
     return float(max(errs.values(), default=0.0)), cert, effort
@@ -258,7 +264,7 @@ def casadi_plain(request: BallOnPalmRequest) -> PeerOutcome:
     """The project's NLP built per request, values baked in, MX + ``expand=True``."""
     problem = _problem(request)
     grid = _Grid.of(problem)
-    model = model_for(problem.object.shape)  # process-wide, as for the project's planner
+    model = palm_model(problem.object.shape)  # process-wide, as for the project's planner
     X0, Xm0, U0g, Um0 = _first_guess(problem, grid)
 
     t0 = time.perf_counter()
@@ -266,8 +272,8 @@ def casadi_plain(request: BallOnPalmRequest) -> PeerOutcome:
     _, x_scale, u_scale = _scales(problem)
     T = problem.duration
     rho = ca.DM(list(problem.object.dimensions))
-    X = ca.MX.sym("X", NX, n + 1)
-    Xm = ca.MX.sym("Xm", NX, n)
+    X = ca.MX.sym("X", PALM_NX, n + 1)
+    Xm = ca.MX.sym("Xm", PALM_NX, n)
     U = ca.MX.sym("U", NU, n + n_seg)
     Um = ca.MX.sym("Um", NU, n)
     w = ca.vertcat(ca.vec(X), ca.vec(Xm), ca.vec(U), ca.vec(Um))
@@ -350,9 +356,9 @@ def casadi_plain(request: BallOnPalmRequest) -> PeerOutcome:
     raw = str(stats["return_status"])
 
     sol = np.asarray(res["x"]).ravel()
-    sizes = [NX * (n + 1), NX * n, NU * (n + n_seg), NU * n]
+    sizes = [PALM_NX * (n + 1), PALM_NX * n, NU * (n + n_seg), NU * n]
     Xs, _, Us, Ums = np.split(sol, np.cumsum(sizes)[:-1])
-    Xp = Xs.reshape(n + 1, NX) * x_scale
+    Xp = Xs.reshape(n + 1, PALM_NX) * x_scale
     Ucols = Us.reshape(n + n_seg, NU) * u_scale
     Ump = Ums.reshape(n, NU) * u_scale
     ok = status_from_ipopt(raw) is Status.SOLVED
@@ -409,7 +415,7 @@ def drake(request: BallOnPalmRequest) -> PeerOutcome:
     _, x_scale, u_scale = _scales(problem)
     T = problem.duration
     rho = float(problem.object.dimensions[0])
-    s = [Variable(f"s{i}") for i in range(NX)]  # scaled state
+    s = [Variable(f"s{i}") for i in range(PALM_NX)]  # scaled state
     q = [Variable(f"q{i}") for i in range(NU)]  # scaled input
     u, psi = s[2], s[4]
     w1, w2 = u_scale * q[0], u_scale * q[1]
@@ -418,7 +424,7 @@ def drake(request: BallOnPalmRequest) -> PeerOutcome:
     eta_dot = [w1, w2, (c * w1 - sn * w2) / rho, -(sn * w1 + c * w2) / (rho * cos(u)),
                tan(u) * (sn * w1 + c * w2) / rho]
     system = SymbolicVectorSystem(state=s, input=q,
-                                  dynamics=[eta_dot[i] / x_scale[i] for i in range(NX)])
+                                  dynamics=[eta_dot[i] / x_scale[i] for i in range(PALM_NX)])
     context = system.CreateDefaultContext()
     # one DirectCollocation per segment between via-points, all in one program: the input
     # may jump at a via-point node, as the project's does; the states join by equalities
@@ -442,7 +448,7 @@ def drake(request: BallOnPalmRequest) -> PeerOutcome:
             prog.AddBoundingBoxConstraint(-ub * np.ones(NU), ub * np.ones(NU), dircol.input(k))
         if segments:
             prog.AddLinearEqualityConstraint(
-                np.hstack([np.eye(NX), -np.eye(NX)]), np.zeros(NX),
+                np.hstack([np.eye(PALM_NX), -np.eye(PALM_NX)]), np.zeros(PALM_NX),
                 np.concatenate([segments[-1].final_state(), dircol.initial_state()]))
         segments.append(dircol)
     assert prog is not None

@@ -17,10 +17,14 @@ from typing import Any
 import numpy as np
 
 from dexroll_client.models import PlanRequest
-from ocp.robots.finger import FingerModel, load_finger
-from ocp.robots.hands import HAND_NAMES, load_hand
-from ocp.spec.grasp import ManipulationProblem
-from ocp.spec.problem import BallOnPalmProblem
+from ocp import (
+    HAND_NAMES,
+    BallOnPalmProblem,
+    FingerModel,
+    ManipulationProblem,
+    load_finger,
+    load_hand,
+)
 
 from .tracks import PlanTracks
 

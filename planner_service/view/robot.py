@@ -22,8 +22,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from ocp.geometry.rotations import quaternion_wxyz
-from ocp.robots.finger import FingerModel
+from ocp import FingerModel, quaternion_wxyz
 
 __all__ = ["LinkBody", "finger_bodies", "pad_thickness"]
 

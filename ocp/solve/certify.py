@@ -4,13 +4,15 @@ The returned trajectory is the plan's :class:`~ocp.transcription.collocation.Her
 (the one ``sample(t)`` gives and the wire documents). It is checked at
 :data:`~ocp.certify.certificate.CHECK_POINTS` of every interval (nodes from both sides,
 midpoints, and between): each contact's laws along the trajectory's own time derivative
-(:meth:`ocp.spec.contacts.Contact.checks`: slip and spin from the returned poses, closure
-and gaps by Pinocchio at the returned joint angles, pads and joint limits), tracking and
-force closure. Independently, the plan's inputs are re-integrated from its initial state
-with CVODES over the whole horizon (never reset): its defects against the returned states
-at the nodes *and* the midpoints, and the goals and via-points it reaches. The result is one
-:class:`~ocp.certify.certificate.Certificate`; every check along the motion names the time
-of its worst sample.
+(:mod:`ocp.solve.contact_checks`, by the contact's kind: slip and spin from the returned
+poses, closure and gaps by Pinocchio at the returned joint angles, pads and joint limits),
+tracking and force closure. Independently, the plan's inputs are re-integrated from its
+initial state with CVODES over the whole horizon (never reset): its defects against the
+returned states at the nodes *and* the midpoints, and the goals and via-points it reaches.
+The result is one :class:`~ocp.certify.certificate.Certificate`; every check along the
+motion names the time of its worst sample. (It lives in the solve layer: it reads the
+transcription's trajectory and grasp model; the certificate's types,
+:mod:`ocp.certify.certificate`, are a leaf below every layer.)
 
 How strict it is comes from the problem's :class:`~ocp.certify.certificate.TolerancePolicy`
 (docs/conventions.md): the contacts' laws are the same for every grasp; the defects are the
@@ -28,7 +30,7 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Certificate, Check, CheckKind, TolerancePolicy
 from ocp.geometry.grasp import force_angles
 from ocp.geometry.rotations import rotation_angle_between
-from ocp.spec.contacts import CertificateContext
+from ocp.solve.contact_checks import CertificateContext, contact_checks
 from ocp.spec.grasp import ManipulationProblem, support_goal_errors
 from ocp.transcription.collocation import HermiteInterpolant, PlannedForces, reintegrate
 
@@ -269,7 +271,7 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
         shape=np.asarray(problem.object.dimensions, dtype=float), L=L, speed=speed,
         rate=rate, policy=policy)
     for k, c in enumerate(m.contacts):
-        checks += c.checks(problem, k, ctx)
+        checks += contact_checks(c, problem, k, ctx)
     reported: dict[str, float] = {"speed_scale": speed, "rolling_rate_scale": rate}
     if problem.motion is not None:
         Rd, Pd = problem.motion.at(ts)
