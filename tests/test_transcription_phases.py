@@ -26,6 +26,8 @@ from ocp.spec.grasp import ManipulationProblem, contact_charts, hand_fingertips
 from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose
 from ocp.spec.phases import ContactPhase
 from ocp.spec.problem import ObjectSpec, ProblemError
+from ocp.transcription.grasp_model import GraspModel
+from ocp.transcription.nlp_blocks import build_manipulation_nlp
 from ocp.transcription.values import bounds, scales
 from ocp.transcription.values import parameters as nlp_parameters
 
@@ -184,3 +186,27 @@ def test_the_phased_nlp_solves_from_the_one_phase_plan(lifted: dict[str, Any]) -
     assert r.violation < 1e-6
     with pytest.raises(ProblemError, match="phases"):
         PLANNER.solve(lift)
+
+
+def test_the_free_fingertips_clearance_rows_reach_the_nlp(lifted: dict[str, Any],
+                                                          monkeypatch: pytest.MonkeyPatch
+                                                          ) -> None:
+    """Finger gaiting fills :meth:`FreeFingertip.clearance` without touching the
+    transcription: a row it returns is a row >= 0 at every point where the fingertip is
+    lifted (the second phase's 4 midpoints and its 4 nodes after the lift-off's), and
+    nowhere else."""
+    from ocp.contacts import FreeFingertip
+
+    def above(self: FreeFingertip, g: Any, x: Any) -> Any:
+        return self.tip_pose(g, x)[1][2:3] + 1.0  # the tip's height + 1 m
+
+    problem = lifted["lift"]
+    m = GraspModel(problem.object.shape, False, tuple(c.finger for c in problem.fingers))
+    before = build_manipulation_nlp(m, (8,), (False,) * 5, (), True, 1e-3, smooth=True,
+                                    schedule=problem.schedule())
+    monkeypatch.setattr(FreeFingertip, "clearance", above)
+    m = GraspModel(problem.object.shape, False, tuple(c.finger for c in problem.fingers))
+    after = build_manipulation_nlp(m, (8,), (False,) * 5, (), True, 1e-3, smooth=True,
+                                   schedule=problem.schedule())
+    assert len(after.lbg) - len(before.lbg) == 8
+    assert np.sum(np.isinf(after.ubg)) - np.sum(np.isinf(before.ubg)) == 8

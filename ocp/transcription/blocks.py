@@ -179,6 +179,9 @@ def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
     # (each fingertip where its kinematics put it, eq. 6: the rate rows)
     _, P, N, R_po, p_po = pm.path(x_scale * xs, prm)
     cond.rows(add, P, N, s, fcol, ccone_q, L, nc)
+    clear = pm.clearance(x_scale * xs, prm)  # the lifted fingertips kept off the object
+    if clear.numel():
+        add(clear, 0.0, math.inf)
     if n_load:
         load_rows_, fn = load_rows(P, N, R_po, fl, load_q, L)
         for expr, a, b in load_rows_:

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from ocp.contacts import (
     Contact,
     FingertipContact,
+    FreeFingertip,
     ObjectBlock,
     SymbolicGrasp,
     grasp_contacts,
@@ -208,7 +209,9 @@ class PhaseModel:
     the grasp's in every phase (:class:`GraspModel`), so that phases share one grid.
 
     * ``dynamics(x, u, params) -> x_dot`` (zero rates for the parked coordinates);
-    * ``path(x, params) -> (closure, points, normals, R_po, p_po)`` of the active contacts.
+    * ``path(x, params) -> (closure, points, normals, R_po, p_po)`` of the active contacts;
+    * ``clearance(x, params) -> rows >= 0`` of the lifted fingertips
+      (:meth:`~ocp.contacts.free_fingertip.FreeFingertip.clearance`).
     """
 
     def __init__(self, m: GraspModel, touching: tuple[bool, ...]) -> None:
@@ -247,13 +250,26 @@ class PhaseModel:
 
         if g.R_po is None:  # the object's pose: the same in every phase
             g.R_po, g.p_po = obj.pose(g, x[obj.xs], chart_of[id(obj)])
-        rates = []
+        #: the lifted fingertips as what they are in this phase: free fingertips (their
+        #: joints' kinematics, their clearance from the object)
+        self.free: tuple[FreeFingertip, ...] = tuple(
+            FreeFingertip(m.surface, c.finger, c.index) for c in m.fingertips
+            if id(c) not in active)
+        free_of = {f.index: f for f in self.free}
+        rates, clearance = [], []
         for c in m.contacts:
             if isinstance(c, FingertipContact) and id(c) not in active:
-                # off the object: the joints move by their rates, nothing rolls
-                rates.append(ca.vertcat(ca.SX.zeros(5), u[c.qd_cols]))
+                # off the object: the joints move by their rates (the free fingertip's
+                # block), the contact coordinates have no dynamics
+                free, q = free_of[c.index], x[c.q_cols]
+                rates.append(ca.vertcat(ca.SX.zeros(5),
+                                        free.rates(g, q, u[c.qd_cols], g.eye)))
+                clearance.append(free.clearance(g, q))
             else:
                 rates.append(c.rates(g, *block(c)))
+        #: rows >= 0 that keep the lifted fingertips off the object (x, params) -> rows
+        self.clearance = ca.Function("clearance", [x, prm], [ca.vertcat(*clearance)
+                                                             if clearance else ca.SX(0, 1)])
         self.dynamics = ca.Function("manipulation_dynamics", [x, u, prm],
                                     [ca.vertcat(*rates)], ["x", "u", "params"], ["x_dot"])
         points, normals = [], []  # object frame
