@@ -262,7 +262,7 @@ class OneFingerPlanner:
         cert = {_rename(k): v for k, v in sol.certificate.items()}
         return OneFingerSolution(
             status=sol.status, message=_rename(sol.message), raw_status=sol.raw_status,
-            iterations=sol.iterations, build_time=sol.build_time, solve_time=sol.solve_time,
+            iterations=sol.iterations, build_time=sol.build_time, solve_time=sol.ipopt_time,
             t=sol.t, eta_p=palm.eta, eta_f=tip.eta, eta_p_dot=palm.eta_dot,
             eta_f_dot=tip.eta_dot, q=finger.q, q_dot=finger.q_dot, w_p=palm.w, w_f=tip.w,
             object_position=sol.object_position, object_rotation=sol.object_rotation,

@@ -387,9 +387,6 @@ class ManipulationSolution:
     status: Status
     message: str
     raw_status: str
-    iterations: int
-    build_time: float
-    solve_time: float
     t: FloatArray
     object_position: FloatArray
     object_rotation: FloatArray
@@ -406,14 +403,15 @@ class ManipulationSolution:
     goal_error: dict[str, float]
     certificate: Certificate
     certificate_failures: tuple[str, ...] = ()
-    refinements: int = 0
     #: The collocation grid's raw values (states, inputs), for warm starts.
     X: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
     U: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
     #: IPOPT's primal-dual point at this plan, for a warm start of the same NLP.
     nlp_point: NlpPoint | None = field(default=None, repr=False)
     #: Solver statistics of the whole plan (every initial guess tried, every refinement;
-    #: ``solve_time`` here is the whole attempt loop, ``ipopt_time`` the IPOPT calls).
+    #: ``solve_time`` the whole attempt loop, ``ipopt_time`` the IPOPT calls): the plan's
+    #: one record of its work (``iterations``, ``build_time``, ``ipopt_time`` and
+    #: ``refinements`` below read it).
     stats: SolverStats | None = None
     #: The NLP's own values (for sampling and for the ball-on-palm's view).
     collocation: Collocation | None = field(default=None, repr=False)
@@ -427,6 +425,26 @@ class ManipulationSolution:
     @property
     def ok(self) -> bool:
         return self.status is Status.SOLVED
+
+    @property
+    def iterations(self) -> int:
+        """IPOPT iterations of the whole plan (``stats.iterations``)."""
+        return self.stats.iterations if self.stats is not None else 0
+
+    @property
+    def build_time(self) -> float:
+        """Building the NLPs and solvers the plan needed [s] (``stats.build_time``)."""
+        return self.stats.build_time if self.stats is not None else 0.0
+
+    @property
+    def ipopt_time(self) -> float:
+        """The IPOPT calls of the whole plan [s] (``stats.ipopt_time``)."""
+        return self.stats.ipopt_time if self.stats is not None else 0.0
+
+    @property
+    def refinements(self) -> int:
+        """Grid refinements after the first solve (``stats.refinements``)."""
+        return self.stats.refinements if self.stats is not None else 0
 
     @property
     def converged(self) -> bool:
@@ -633,8 +651,8 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
         Status.INACCURATE: "converged, but the certificate failed: " + "; ".join(failures),
     }.get(status, f"not solved: IPOPT {raw}; the last iterate is returned")
     return ManipulationSolution(
-        status=status, message=message, raw_status=raw, iterations=0, build_time=0.0,
-        solve_time=0.0, t=t, object_position=p_po, object_rotation=R_po,
+        status=status, message=message, raw_status=raw, t=t, object_position=p_po,
+        object_rotation=R_po,
         object_velocity=v_obj, object_angular_velocity=w_obj, contacts=tuple(contacts),
         fingers=tuple(fingers), grasp_angle=phi, cone_margin=margin, desired_position=Pd,
         desired_rotation=Rd, tracking_position_error=ep, tracking_angle_error=ea,

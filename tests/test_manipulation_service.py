@@ -411,7 +411,7 @@ def test_a_diverged_plan_is_a_typed_result_without_nan() -> None:
     bad = np.full((k, 3), np.nan)
     sol = ManipulationSolution(
         status=Status.NUMERICAL_ERROR, message="not solved", raw_status="Error_In_Step_Computation",
-        iterations=7, build_time=0.1, solve_time=0.2, t=np.linspace(0.0, 1.0, k),
+        t=np.linspace(0.0, 1.0, k),
         object_position=bad, object_rotation=np.tile(np.eye(3), (k, 1, 1)),
         object_velocity=bad, object_angular_velocity=bad,
         contacts=(ContactTrajectory("f1", "finger", np.zeros((k, 5)), np.zeros((k, 5)),

@@ -218,8 +218,7 @@ def finish(s: Setup, runs: list[IpoptRun], solve_time: float, deadline: float,
                         certificate_time=cert_time, objective=best.objective,
                         cache_hit=s.cache_hit, n_intervals=len(s.t_nodes) - 1,
                         ipopt_time=ipopt_time)
-    return replace(sol, iterations=iterations, build_time=s.build_time,
-                   solve_time=ipopt_time, stats=stats, nlp_point=best.point)
+    return replace(sol, stats=stats, nlp_point=best.point)
 
 
 def _checked_state(problem: ManipulationProblem, m: GraspModel, name: str, value: Any,

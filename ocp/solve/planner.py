@@ -416,9 +416,7 @@ class ManipulationPlanner:
                         solve_time=kin.stats.solve_time + t_stage,
                         ipopt_time=kin.stats.ipopt_time + t_stage,
                         certificate_time=kin.stats.certificate_time + t_cert)
-        return replace(sol, iterations=stats.iterations, build_time=kin.build_time + t_build,
-                       solve_time=kin.solve_time + t_stage, refinements=kin.refinements,
-                       stats=stats, nlp_point=kin.nlp_point,
+        return replace(sol, stats=stats, nlp_point=kin.nlp_point,
                        object_chart_rotation=kin.object_chart_rotation)
 
     def _plan(self, problem: ManipulationProblem,
@@ -470,8 +468,7 @@ class ManipulationPlanner:
                         build_time=totals.build, solve_time=totals.solve,
                         certificate_time=totals.certificate, ipopt_time=totals.ipopt,
                         refinements=refinements)
-        return replace(sol, build_time=totals.build, solve_time=totals.ipopt,
-                       iterations=totals.iterations, refinements=refinements, stats=stats,
+        return replace(sol, stats=stats,
                        object_chart_rotation=tuple(problem.object.chart_rotation)
                        if problem.palm is not None else None)
 
@@ -569,8 +566,7 @@ def _with_earlier(sol: ManipulationSolution, earlier: ManipulationSolution
                     solve_time=a.solve_time + b.solve_time,
                     certificate_time=a.certificate_time + b.certificate_time,
                     ipopt_time=a.ipopt_time + b.ipopt_time)
-    return replace(sol, iterations=stats.iterations, build_time=stats.build_time,
-                   solve_time=sol.solve_time + earlier.solve_time, stats=stats)
+    return replace(sol, stats=stats)
 
 
 _DEFAULT: ManipulationPlanner | None = None

@@ -374,7 +374,7 @@ def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = No
     status = PlanStatus(sol.status.value)
     if trajectory is None and status is PlanStatus.SOLVED:  # pragma: no cover - defensive
         status = PlanStatus.NUMERICAL_ERROR
-    timing = [sol.build_time, sol.solve_time]
+    timing = [sol.build_time, sol.ipopt_time]
     collocation = None if trajectory is None else collocation_block(
         sol.warm_start, grasp_names(any(c.body == "palm" for c in sol.contacts),
                                      [(f.name, tuple(f.joint_names)) for f in sol.fingers]))
