@@ -1,13 +1,17 @@
 """dexroll's planning core: dextrous manipulation with rolling contacts as direct
 collocation (Han, Guan, Li, Shi, Trinkle).
 
-What a library user needs is here::
+What a library user needs is here: one problem type (:class:`ManipulationProblem`, a
+grasp: the object, an optional palm, fingertips, a horizon, what to achieve; the paper's
+settings are presets of it, :mod:`ocp.presets`), one pipeline, one solution type
+(:class:`ManipulationSolution`), and the one-NLP seam re-planning uses
+(:func:`attempt`)::
 
-    from ocp import BallOnPalmProblem, ObjectSpec, plan
+    from ocp import ObjectSpec, plan, presets
 
-    sol = plan(BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)),
-                                 initial=(0, 0, 0, 0, 0), goal={"psi": 1.0}, duration=2.0))
-    sol.status, sol.certificate.passed, sol.sample([0.5, 1.0]).eta
+    sol = plan(presets.ball_on_palm(ObjectSpec("sphere", (0.025,)),
+                                    initial=(0, 0, 0, 0, 0), goal={"psi": 1.0}, duration=2.0))
+    sol.status, sol.certificate.passed, sol.sample([0.5, 1.0]).x
 
 The data flow is in the folder names: ``certify`` (the certificate's types: checks with
 name, value, tolerance and kind; a leaf), ``geometry`` (surfaces, Montana's contact
@@ -17,7 +21,8 @@ motion, the problems: data) -> ``contacts`` (each contact kind's CasADi model) -
 ``transcription`` (collocation, the NLP's parameters, the grasp model, the NLP from
 blocks) -> ``solution`` -> ``solve`` (IPOPT, initial guesses and strategies, the pipeline,
 the certification of a plan). ``ball_on_palm`` and ``one_finger`` are front ends of the
-pipeline for the paper's two settings; ``methods`` holds the paper's greedy method. The
+pipeline for the paper's two settings (their plans in the paper's coordinates), ``presets``
+builds those settings as the one problem type; ``methods`` holds the paper's greedy method. The
 names below are loaded on first use, so that ``import ocp.geometry.surfaces`` stays light.
 """
 
@@ -39,6 +44,7 @@ if TYPE_CHECKING:
     from ocp.solution import (
         GraspSample,
         ManipulationSolution,
+        PalmSolution,
         Solution,
         Status,
         Trajectory,
@@ -81,6 +87,7 @@ _EXPORTS = {
     "Hand": "ocp.robots.hands", "load_hand": "ocp.robots.hands",
     "GraspSample": "ocp.solution", "ManipulationSolution": "ocp.solution",
     "Solution": "ocp.solution", "Status": "ocp.solution", "Trajectory": "ocp.solution",
+    "PalmSolution": "ocp.solution",
     "ManipulationPlanner": "ocp.solve.planner",
     "AttemptOptions": "ocp.solve.attempt", "attempt": "ocp.solve.attempt",
     "shifted": "ocp.solve.attempt",
@@ -141,6 +148,7 @@ __all__ = [
     "OneFingerPlanner",
     "OneFingerProblem",
     "Palm",
+    "PalmSolution",
     "ProblemError",
     "Solution",
     "SolverOptions",
@@ -187,24 +195,29 @@ def __dir__() -> list[str]:
 
 
 def plan(problem: Any, warm_start: Any = None) -> Any:
-    """Plan any problem with the process-wide planner of its kind (NLPs cached per
-    structure): a :class:`BallOnPalmProblem` (-> :class:`Solution`), a
-    :class:`OneFingerProblem` (-> its solution) or a :class:`ManipulationProblem` (->
-    :class:`ManipulationSolution`); ``warm_start``: a previous plan of a similar problem.
-    Raises :class:`ProblemError` (naming each bad field) before building anything."""
+    """Plan a :class:`ManipulationProblem` (the one problem type; :mod:`ocp.presets` builds
+    the paper's settings as one) with the process-wide planner (NLPs cached per
+    structure): a :class:`ManipulationSolution`. ``warm_start``: a previous plan of a
+    similar problem. Raises :class:`ProblemError` (naming each bad field) before building
+    anything.
+
+    The paper's front-end problems are planned by their front ends and presented in their
+    coordinates: a :class:`BallOnPalmProblem` gives a :class:`PalmSolution`, a
+    :class:`OneFingerProblem` a one-finger solution (each carries the general plan)."""
     from ocp import ball_on_palm
     from ocp.one_finger import OneFingerProblem
+    from ocp.solve.planner import default_planner
     from ocp.spec.grasp import ManipulationProblem
     from ocp.spec.problem import BallOnPalmProblem
 
-    general = ball_on_palm.default_planner().general
+    if isinstance(problem, ManipulationProblem):
+        return default_planner().solve(problem, warm_start)
     if isinstance(problem, BallOnPalmProblem):
         return ball_on_palm.default_planner().solve(problem, warm_start)
     if isinstance(problem, OneFingerProblem):
         from ocp.one_finger import OneFingerPlanner
 
-        return OneFingerPlanner(general).solve(problem, warm_start)
-    if isinstance(problem, ManipulationProblem):
-        return general.solve(problem, warm_start)
-    raise TypeError(f"no planner for {type(problem).__name__}; one of BallOnPalmProblem, "
-                    "OneFingerProblem, ManipulationProblem")
+        return OneFingerPlanner(default_planner()).solve(problem, warm_start)
+    raise TypeError(f"no planner for {type(problem).__name__}; a ManipulationProblem "
+                    "(ocp.presets builds the paper's settings), BallOnPalmProblem or "
+                    "OneFingerProblem")

@@ -28,7 +28,8 @@ if TYPE_CHECKING:
     from ocp.transcription.grasp_model import GraspModel
 
 __all__ = ["Collocation", "ContactTrajectory", "FingerTrajectory", "GraspSample",
-           "JointTrajectory", "ManipulationSolution", "PlannedForces", "RateBreak", "Solution",
+           "JointTrajectory", "ManipulationSolution", "PalmSolution", "PlannedForces", "RateBreak",
+           "Solution",
            "SolverStats", "Status", "Trajectory", "assemble_solution", "fixed_rate_times",
            "joint_torques", "planned_forces", "status_from_ipopt"]
 
@@ -133,8 +134,10 @@ class SolverStats:
 
 
 @dataclass(frozen=True)
-class Solution:
-    """A plan: status, the NLP's own grid, interpolation on any grid, certificate."""
+class PalmSolution:
+    """The ball-on-palm front end's plan (:class:`~ocp.ball_on_palm.BallOnPalmPlanner`) in
+    the palm contact's coordinates: status, the NLP's own grid, interpolation on any grid,
+    certificate. The general plan it presents is a :class:`ManipulationSolution`."""
 
     status: Status
     message: str
@@ -199,6 +202,11 @@ class Solution:
             "certificate": self.certificate.to_dict(),
             "grid": self.grid.to_dict(),
         }
+
+
+
+#: The former name of :class:`PalmSolution` (the ball-on-palm front end's plan).
+Solution = PalmSolution
 
 
 @dataclass(frozen=True)

@@ -165,6 +165,7 @@ CORE_LAYERS: dict[str, set[str]] = {
     "solve": {"geometry", "robots", "spec", "contacts", "transcription", "solution"},
     "ball_on_palm": {"geometry", "spec", "contacts", "transcription", "solution", "solve"},
     "one_finger": {"geometry", "robots", "spec", "transcription", "solution", "solve"},
+    "presets": {"robots", "spec", "ball_on_palm", "one_finger"},
     "methods": {"geometry", "robots", "spec", "contacts", "transcription", "solution", "solve",
                 "ball_on_palm", "one_finger"},
 }
