@@ -34,7 +34,6 @@ pose and the desired one: |p - p_d|^2 / L^2 + (3 - tr(R_d^T R)) / 2.
 
 from __future__ import annotations
 
-import math
 import time
 from collections import OrderedDict
 from collections.abc import Iterator
@@ -45,25 +44,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ocp.geometry.grasp import force_angles
 from ocp.solution import (
     ContactTrajectory,
     FingerTrajectory,
     GraspSample,
     ManipulationSolution,
     Status,
-    assemble_solution,
-    planned_forces,
 )
 from ocp.solve.attempt import IpoptRun, finish, initial_point, run, setup
-from ocp.solve.certify import with_force_checks
 from ocp.solve.compiled import BackgroundCompiler
+from ocp.solve.force_plan import with_earlier, with_forces
 from ocp.solve.guesses import (
     Guess,
     Strategy,
-    planned_force_guess,
     strategy_for,
 )
+from ocp.solve.initial import initial_state
 from ocp.solve.ipopt import NLP as _NLP
 from ocp.solve.ipopt import ipopt_solver
 from ocp.spec.grasp import (
@@ -71,7 +67,6 @@ from ocp.spec.grasp import (
     ManipulationProblem,
     Palm,
     contact_chart_for_pad,
-    contact_charts,
     fingertip_errors,
     hand_fingertips,
 )
@@ -82,7 +77,6 @@ from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.force_stage import ForceStage
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.nlp_blocks import build_manipulation_nlp
-from ocp.transcription.values import load_parameters
 from ocp.transcription.values import parameters as nlp_parameters
 
 __all__ = [
@@ -289,47 +283,8 @@ class ManipulationPlanner:
     def initial_state(self, problem: ManipulationProblem) -> FloatArray:
         """The state at t = 0, the fingers' joints by inverse kinematics; ProblemError
         saying why the initial grasp is impossible (unreachable, outside the joint limits,
-        not in force closure)."""
-        from ocp.robots.finger import PAPER_SEED, inverse_kinematics
-
-        m = self.model(problem)
-        x = np.zeros(m.nx)
-        x[m.object.xs] = m.object.initial(problem)
-        for tip in m.fingertips:
-            x[tip.eta_cols] = tip.spec(problem).initial
-        prm = m.params(np.asarray(problem.object.dimensions, dtype=float), contact_charts(problem))
-        out = m.cartesian(x, prm)
-        R_pf, p_pf = np.asarray(out[2]), np.asarray(out[3])
-        errs: list[tuple[str, str]] = []
-        for i, c in enumerate(problem.fingers):
-            seed = np.asarray(c.q_seed if c.q_seed is not None else
-                              PAPER_SEED[: c.finger.nq], dtype=float)
-            if len(seed) < c.finger.nq:
-                seed = np.concatenate([seed, np.zeros(c.finger.nq - len(seed))])
-            ik = inverse_kinematics(c.finger, R_pf[:, 3 * i:3 * i + 3], p_pf[:, i], seed)
-            name = f"fingers[{i}].initial"
-            if not ik.converged:
-                errs.append((name, f"the finger cannot reach the initial grasp: after "
-                                   f"inverse kinematics its pad is {ik.position_error:.3g} m "
-                                   f"and {ik.orientation_error:.3g} rad from it"))
-            elif not ik.within_limits:
-                errs.append((name, "the initial grasp needs joint angles outside the "
-                                   "finger's limits"))
-            x[m.fingertips[i].q_cols] = ik.q
-        pts, nrm = np.asarray(out[4]).T[None], np.asarray(out[5]).T[None]
-        phi, _, onto = force_angles(pts, nrm)
-        cone = math.atan(problem.mu)
-        if m.n_contacts >= 2 and not (phi[0] < cone and onto[0]):
-            errs.append(("fingers", f"the initial grasp is outside the friction cone (not in "
-                                    f"force closure): grasp angle "
-                                    f"{math.degrees(phi[0]):.2f} deg >= atan(mu) = "
-                                    f"{math.degrees(cone):.2f} deg, by "
-                                    f"{math.degrees(phi[0] - cone):.2f} deg"
-                         if onto[0] else "the initial grasp's contacts cannot resist every "
-                                         "wrench (grasp map not onto)"))
-        if errs:
-            raise ProblemError(errs)
-        return x
+        not in force closure): :func:`~ocp.solve.initial.initial_state`."""
+        return initial_state(self.model(problem), problem)
 
     def solve(self, problem: ManipulationProblem,
               warm_start: WarmStart | ManipulationSolution | None = None, *,
@@ -368,56 +323,13 @@ class ManipulationPlanner:
         coupled = self._plan(
             replace(problem, options=replace(problem.options, time_limit=max(left, 1e-3))),
             kin if kin.status in (Status.SOLVED, Status.INACCURATE) else warm_start, certify)
-        return _with_earlier(coupled, kin)
+        return with_earlier(coupled, kin)
 
     def _with_forces(self, problem: ManipulationProblem, kin: ManipulationSolution
                      ) -> ManipulationSolution | None:
-        """The kinematic plan ``kin`` of ``problem`` with its forces (the force stage at its
-        collocation points), certified; None when some point admits no forces or the
-        certificate fails with them."""
-        col = kin.collocation
-        if col is None or kin.stats is None:
-            return None
-        pf = problem.with_intervals(len(col.t_nodes) - 1)
-        if kin.object_chart_rotation is not None and not np.allclose(
-                kin.object_chart_rotation, problem.object.chart_rotation):
-            rv = kin.object_chart_rotation
-            alt = recharted(pf, (rv[0], rv[1], rv[2]))  # the plan's own patch
-            if alt is None:
-                return None
-            pf = alt
-        m = self.model(pf)
-        t_build = time.perf_counter()
-        if m not in self._force_stages:
-            self._force_stages[m] = ForceStage(m)
-        stage = self._force_stages[m]
-        stage.prepare(2 * len(col.t_nodes) - 1)
-        t_build = time.perf_counter() - t_build
-        t0 = time.perf_counter()
-        prm = m.params(np.asarray(pf.object.dimensions, dtype=float), contact_charts(pf))
-        Xall = np.vstack([col.X, col.Xm])
-        load = load_parameters(pf)
-        F, iterations = stage.solve(Xall, prm, load, pf.object.length_scale,
-                                    planned_force_guess(m, Xall, prm, load))
-        t_stage = time.perf_counter() - t0
-        if F is None:
-            return None
-        forces = planned_forces(pf, m, F, col.X, col.Xm, prm)
-        t_cert = time.perf_counter()
-        cert = with_force_checks(kin.certificate, pf, m, kin.trajectory, prm, pf.tolerances,
-                                 forces)
-        if not cert.passed:
-            return None
-        sol = assemble_solution(pf, m, Status.SOLVED, kin.raw_status, replace(col, forces=forces),
-                                kin.trajectory, prm, cert, kin.goal_error)
-        t_cert = time.perf_counter() - t_cert
-        stats = replace(kin.stats, iterations=kin.stats.iterations + iterations,
-                        build_time=kin.stats.build_time + t_build,
-                        solve_time=kin.stats.solve_time + t_stage,
-                        ipopt_time=kin.stats.ipopt_time + t_stage,
-                        certificate_time=kin.stats.certificate_time + t_cert)
-        return replace(sol, stats=stats, nlp_point=kin.nlp_point,
-                       object_chart_rotation=kin.object_chart_rotation)
+        """The kinematic plan with its forces (:func:`~ocp.solve.force_plan.with_forces`),
+        the force stage of its grasp model kept."""
+        return with_forces(self.model, self._force_stages, problem, kin)
 
     def _plan(self, problem: ManipulationProblem,
               warm_start: WarmStart | ManipulationSolution | None, certify: bool
@@ -447,8 +359,8 @@ class ManipulationPlanner:
         sol = self._solve_once(problem, strategy, x0, warm_start, deadline, budget, totals,
                                certify)
         if self.auto_patch and certify:
-            problem, strategy, x0, sol = self._repatched(problem, strategy, x0, sol, deadline,
-                                                         budget, totals)
+            problem, strategy, x0, sol = repatched(self, problem, strategy, x0, sol, deadline,
+                                                   budget, totals)
         # only failures that shrink with the grid (what happens between collocation
         # points), decided by the checks' kind (an inaccurate plan has failed checks)
         while (certify and sol.status is Status.INACCURATE
@@ -471,36 +383,6 @@ class ManipulationPlanner:
         return replace(sol, stats=stats,
                        object_chart_rotation=tuple(problem.object.chart_rotation)
                        if problem.palm is not None else None)
-
-    def _repatched(self, problem: ManipulationProblem, strategy: Strategy, x0: FloatArray,
-                   sol: ManipulationSolution, deadline: float, budget: int, totals: _Totals
-                   ) -> tuple[ManipulationProblem, Strategy, FloatArray, ManipulationSolution]:
-        """When the palm contact's path rides the pole bound of the object's patch (a
-        bound of the chart, not of the physics), the plan again in a patch whose poles
-        are far from that path (:mod:`ocp.spec.patches`; spheres only), kept when it is
-        solved and clear of the bound, or when the first plan was not solved."""
-        if problem.palm is None or sol.status not in (Status.SOLVED, Status.INACCURATE) \
-                or not sol.contacts or not rides_pole(problem, sol.contacts[0].eta[:, 2]):
-            return problem, strategy, x0, sol
-        palm = sol.contacts[0]
-        path = np.einsum("kji,kj->ki", sol.object_rotation, palm.point - sol.object_position)
-        rotvec = pole_clear_patch(problem, path)
-        alt = recharted(problem, rotvec) if rotvec is not None else None
-        if alt is None or time.perf_counter() >= deadline:
-            return problem, strategy, x0, sol
-        try:
-            alt_x0 = self.initial_state(alt)
-        except ProblemError:
-            return problem, strategy, x0, sol
-        alt_strategy = strategy_for(alt)
-        left = budget - totals.iterations if alt_strategy.shared_budget else budget
-        alt_sol = self._solve_once(alt, alt_strategy, alt_x0, None, deadline, left, totals,
-                                   True)
-        clear = alt_sol.status in (Status.SOLVED, Status.INACCURATE) and not rides_pole(
-            alt, alt_sol.contacts[0].eta[:, 2])
-        if clear or (sol.status is not Status.SOLVED and alt_sol.status is Status.SOLVED):
-            return alt, alt_strategy, alt_x0, alt_sol
-        return problem, strategy, x0, sol
 
     @staticmethod
     def parameters(problem: ManipulationProblem, nlp: _NLP) -> FloatArray:
@@ -554,19 +436,36 @@ class ManipulationPlanner:
         return sol
 
 
-def _with_earlier(sol: ManipulationSolution, earlier: ManipulationSolution
-                  ) -> ManipulationSolution:
-    """``sol`` with the work of an ``earlier`` plan it followed (its iterations and
-    times) added to its statistics."""
-    if sol.stats is None or earlier.stats is None:
-        return sol
-    a, b = sol.stats, earlier.stats
-    stats = replace(a, iterations=a.iterations + b.iterations,
-                    attempts=a.attempts + b.attempts, build_time=a.build_time + b.build_time,
-                    solve_time=a.solve_time + b.solve_time,
-                    certificate_time=a.certificate_time + b.certificate_time,
-                    ipopt_time=a.ipopt_time + b.ipopt_time)
-    return replace(sol, stats=stats)
+def repatched(planner: ManipulationPlanner, problem: ManipulationProblem, strategy: Strategy,
+              x0: FloatArray, sol: ManipulationSolution, deadline: float, budget: int,
+              totals: _Totals
+              ) -> tuple[ManipulationProblem, Strategy, FloatArray, ManipulationSolution]:
+    """When the palm contact's path rides the pole bound of the object's patch (a
+    bound of the chart, not of the physics), the plan again in a patch whose poles
+    are far from that path (:mod:`ocp.spec.patches`; spheres only), kept when it is
+    solved and clear of the bound, or when the first plan was not solved."""
+    if problem.palm is None or sol.status not in (Status.SOLVED, Status.INACCURATE) \
+            or not sol.contacts or not rides_pole(problem, sol.contacts[0].eta[:, 2]):
+        return problem, strategy, x0, sol
+    palm = sol.contacts[0]
+    path = np.einsum("kji,kj->ki", sol.object_rotation, palm.point - sol.object_position)
+    rotvec = pole_clear_patch(problem, path)
+    alt = recharted(problem, rotvec) if rotvec is not None else None
+    if alt is None or time.perf_counter() >= deadline:
+        return problem, strategy, x0, sol
+    try:
+        alt_x0 = planner.initial_state(alt)
+    except ProblemError:
+        return problem, strategy, x0, sol
+    alt_strategy = strategy_for(alt)
+    left = budget - totals.iterations if alt_strategy.shared_budget else budget
+    alt_sol = planner._solve_once(alt, alt_strategy, alt_x0, None, deadline, left, totals,
+                               True)
+    clear = alt_sol.status in (Status.SOLVED, Status.INACCURATE) and not rides_pole(
+        alt, alt_sol.contacts[0].eta[:, 2])
+    if clear or (sol.status is not Status.SOLVED and alt_sol.status is Status.SOLVED):
+        return alt, alt_strategy, alt_x0, alt_sol
+    return problem, strategy, x0, sol
 
 
 _DEFAULT: ManipulationPlanner | None = None

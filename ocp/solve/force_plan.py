@@ -1,0 +1,89 @@
+"""A plan's contact forces in two stages (docs/forces.md): the kinematic plan first, then
+the forces at its collocation points (:class:`~ocp.transcription.force_stage.ForceStage`),
+certified with them; and the statistics of a plan that followed another."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from ocp.solution import ManipulationSolution, Status, assemble_solution, planned_forces
+from ocp.solve.certify import with_force_checks
+from ocp.solve.guesses import planned_force_guess
+from ocp.spec.grasp import ManipulationProblem, contact_charts
+from ocp.spec.patches import recharted
+from ocp.transcription.force_stage import ForceStage
+from ocp.transcription.grasp_model import GraspModel
+from ocp.transcription.values import load_parameters
+
+__all__ = ["with_earlier", "with_forces"]
+
+
+def with_forces(model: Callable[[ManipulationProblem], GraspModel],
+                stages: dict[GraspModel, ForceStage], problem: ManipulationProblem,
+                kin: ManipulationSolution) -> ManipulationSolution | None:
+    """The kinematic plan ``kin`` of ``problem`` with its forces (the force stage at its
+    collocation points), certified; None when some point admits no forces or the
+    certificate fails with them. ``model``: the planner's grasp models, ``stages``: its
+    force stages by model (built here when missing)."""
+    col = kin.collocation
+    if col is None or kin.stats is None:
+        return None
+    pf = problem.with_intervals(len(col.t_nodes) - 1)
+    if kin.object_chart_rotation is not None and not np.allclose(
+            kin.object_chart_rotation, problem.object.chart_rotation):
+        rv = kin.object_chart_rotation
+        alt = recharted(pf, (rv[0], rv[1], rv[2]))  # the plan's own patch
+        if alt is None:
+            return None
+        pf = alt
+    m = model(pf)
+    t_build = time.perf_counter()
+    if m not in stages:
+        stages[m] = ForceStage(m)
+    stage = stages[m]
+    stage.prepare(2 * len(col.t_nodes) - 1)
+    t_build = time.perf_counter() - t_build
+    t0 = time.perf_counter()
+    prm = m.params(np.asarray(pf.object.dimensions, dtype=float), contact_charts(pf))
+    Xall = np.vstack([col.X, col.Xm])
+    load = load_parameters(pf)
+    F, iterations = stage.solve(Xall, prm, load, pf.object.length_scale,
+                                planned_force_guess(m, Xall, prm, load))
+    t_stage = time.perf_counter() - t0
+    if F is None:
+        return None
+    forces = planned_forces(pf, m, F, col.X, col.Xm, prm)
+    t_cert = time.perf_counter()
+    cert = with_force_checks(kin.certificate, pf, m, kin.trajectory, prm, pf.tolerances,
+                             forces)
+    if not cert.passed:
+        return None
+    sol = assemble_solution(pf, m, Status.SOLVED, kin.raw_status, replace(col, forces=forces),
+                            kin.trajectory, prm, cert, kin.goal_error)
+    t_cert = time.perf_counter() - t_cert
+    stats = replace(kin.stats, iterations=kin.stats.iterations + iterations,
+                    build_time=kin.stats.build_time + t_build,
+                    solve_time=kin.stats.solve_time + t_stage,
+                    ipopt_time=kin.stats.ipopt_time + t_stage,
+                    certificate_time=kin.stats.certificate_time + t_cert)
+    return replace(sol, stats=stats, nlp_point=kin.nlp_point,
+                   object_chart_rotation=kin.object_chart_rotation)
+
+
+def with_earlier(sol: ManipulationSolution, earlier: ManipulationSolution
+                  ) -> ManipulationSolution:
+    """``sol`` with the work of an ``earlier`` plan it followed (its iterations and
+    times) added to its statistics."""
+    if sol.stats is None or earlier.stats is None:
+        return sol
+    a, b = sol.stats, earlier.stats
+    stats = replace(a, iterations=a.iterations + b.iterations,
+                    attempts=a.attempts + b.attempts, build_time=a.build_time + b.build_time,
+                    solve_time=a.solve_time + b.solve_time,
+                    certificate_time=a.certificate_time + b.certificate_time,
+                    ipopt_time=a.ipopt_time + b.ipopt_time)
+    return replace(sol, stats=stats)
