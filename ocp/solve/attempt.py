@@ -39,10 +39,9 @@ from ocp.solution import (
     ManipulationSolution,
     SolverStats,
     Status,
-    assemble_solution,
-    planned_forces,
     status_from_ipopt,
 )
+from ocp.solve.assemble import assemble_solution, planned_forces
 from ocp.solve.certify import certify_grasp
 from ocp.solve.guesses import Guess, Strategy, epigraph_guess, strategy_for
 from ocp.solve.ipopt import IPOPT_WARM_OPTIONS

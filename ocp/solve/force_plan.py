@@ -10,7 +10,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ocp.solution import ManipulationSolution, Status, assemble_solution, planned_forces
+from ocp.solution import ManipulationSolution, Status
+from ocp.solve.assemble import assemble_solution, planned_forces
 from ocp.solve.certify import with_force_checks
 from ocp.solve.guesses import planned_force_guess
 from ocp.spec.grasp import ManipulationProblem, contact_charts

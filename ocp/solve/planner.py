@@ -13,7 +13,7 @@ when fingers alone hold it) and the fingertips. :class:`ManipulationPlanner`
 2. solves it with IPOPT from the initial guesses of the grasp's strategy
    (:mod:`ocp.solve.guesses`: the fingers' consistent guess, or the palm's simulated reference
    paths with loops), in turn, within the request's time and iteration limits;
-3. assembles the plan (:func:`~ocp.solution.assemble_solution`);
+3. assembles the plan (:func:`~ocp.solve.assemble.assemble_solution`);
 4. certifies it independently (:func:`~ocp.solve.certify.certify_grasp`), and when only
    discretisation checks fail solves again on a grid twice as fine, warm-started.
 
