@@ -62,7 +62,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
 
@@ -75,6 +74,7 @@ from ocp.ball_on_palm import BallOnPalmPlanner, coordinate_error
 from ocp.geometry.contact import ContactPair
 from ocp.geometry.grasp import grasp_cosines
 from ocp.geometry.surfaces import SURFACES, Plane, Surface, rotation_from_vector
+from ocp.methods.greedy_result import GreedyResult
 from ocp.one_finger import OneFingerPlanner, OneFingerProblem
 from ocp.solution import Solution
 from ocp.spec.problem import CONTACT_COORDS, ProblemError
@@ -167,117 +167,6 @@ def candidate_grid(n_radii: int, n_angles: int) -> FloatArray:
 
 
 # -- the result -------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class GreedyResult:
-    """A plan by the paper's method. Arrays have one row per grid time t_k (k = 0..n_steps).
-
-    Inputs held over a step (``w_f``, ``q_dot``, ``rotation_step``) are in the row of the
-    step's start; their last row is 0 (the motion ends at t_n). ``w_p`` is the palm plan's
-    input sampled at t_k.
-
-    t [s]; eta_p = (x, y, u_p, v_p, psi_p) [m, m, rad, rad, rad];
-    eta_f = (x_f, y_f, u_f, v_f, psi_f) (pad point [m], ball point in the finger contact's
-    chart patch [rad], contact angle [rad]); q [rad]; q_dot [rad/s]; w_p = d/dt (x, y)
-    [m/s]; w_f = alpha_dot_of [rad/s]; rotation_step |Delta Theta| of the step [rad];
-    grasp_angles (Phi_p, Phi_f) [rad]; cone_margin = atan(mu) - max(Phi_p, Phi_f) [rad];
-    fingertip_rotation/position: Pinocchio's FK of q (palm frame) [-, m];
-    contact_fingertip_rotation/position: the pose g_po g_of from the contact coordinates;
-    closure_position_error [m] / closure_rotation_error [rad] between the two;
-    object_rotation/position: the ball's pose in the palm [-, m];
-    palm_contact_point, finger_contact_point, finger_contact_normal: palm frame [m, -];
-    pad_point: the finger contact point in the pad frame of FK(q) [m] (z ~ 0 on the pad).
-    """
-
-    t: FloatArray
-    eta_p: FloatArray
-    eta_f: FloatArray
-    q: FloatArray
-    q_dot: FloatArray
-    w_p: FloatArray
-    w_f: FloatArray
-    rotation_step: FloatArray
-    grasp_angles: FloatArray
-    cone_margin: FloatArray
-    fingertip_rotation: FloatArray
-    fingertip_position: FloatArray
-    contact_fingertip_rotation: FloatArray
-    contact_fingertip_position: FloatArray
-    closure_position_error: FloatArray
-    closure_rotation_error: FloatArray
-    object_rotation: FloatArray
-    object_position: FloatArray
-    palm_contact_point: FloatArray
-    finger_contact_point: FloatArray
-    finger_contact_normal: FloatArray
-    pad_point: FloatArray
-    #: Per goal/via-point coordinate error of the integrated palm path [m or rad].
-    goal_error: dict[str, float]
-    #: Max closure error over the grid: (position [m], rotation [rad]).
-    closure_error: tuple[float, float]
-    #: sum_k |q_dot_k|^2 dt [rad^2/s].
-    joint_effort: float
-    #: Wall time of the whole plan, palm plan included [s], and of the palm plan alone [s]
-    #: (~0 when the palm plan was given).
-    compute_time: float
-    palm_plan_time: float
-    #: Smallest distance of any joint to its limits along the plan [rad or m] (< 0: beyond).
-    joint_limit_margin: float
-    #: Largest |q_dot_i| / velocity_limit_i along the plan.
-    max_velocity_ratio: float
-    #: Smallest singular value of the finger Jacobian met along the plan.
-    min_jacobian_singular_value: float
-    #: Steps at which no candidate satisfied the pad, cone and pole constraints.
-    fallback_steps: int
-    #: |eta_p(t_k) integrated - eta_p(t_k) of the palm plan's interpolant| (worst) [m or rad].
-    palm_integration_error: float
-    #: Settings used.
-    dt: float
-    delta: float
-    grid: tuple[int, int]
-    closure_gain: float
-    #: What went wrong, each with the first time it happened (empty when the plan holds):
-    #: closure beyond :data:`CLOSURE_TOL`, joints beyond their position or velocity limits,
-    #: the grasp outside the friction cone, steps without a feasible candidate.
-    failures: tuple[str, ...]
-    #: Earliest time of any failure [s], or None.
-    failure_time: float | None
-    palm_plan: Solution = field(repr=False, compare=False)
-
-    @property
-    def ok(self) -> bool:
-        """Whether the plan holds: no failure (see ``failures``)."""
-        return not self.failures
-
-    @property
-    def max_grasp_angle(self) -> FloatArray:
-        """max(Phi_p, Phi_f) at every t_k [rad]."""
-        return np.asarray(self.grasp_angles.max(axis=1))
-
-    @property
-    def pad_excursion(self) -> float:
-        """max |x_f|, |y_f| over the plan [m]."""
-        return float(np.max(np.abs(self.eta_f[:, 0:2])))
-
-    def summary(self) -> str:
-        phi = np.degrees(self.max_grasp_angle)
-        return "\n".join([
-            f"status       {'ok' if self.ok else 'FAILED: ' + '; '.join(self.failures)}",
-            f"steps        {len(self.t) - 1} x {self.dt:.4g} s, delta {self.delta:.4g} rad, "
-            f"grid {self.grid}, closure gain {self.closure_gain:g}",
-            f"grasp angle  start {phi[0]:.3f} deg, end {phi[-1]:.3f} deg, "
-            f"max {phi.max():.3f} deg; min cone margin "
-            f"{math.degrees(float(self.cone_margin.min())):.3f} deg",
-            f"goal error   {max(self.goal_error.values(), default=0.0):.3g}",
-            f"closure      {self.closure_error[0]:.3g} m, {self.closure_error[1]:.3g} rad",
-            f"pad          max |x_f|, |y_f| {self.pad_excursion * 1e3:.2f} mm",
-            f"joints       limit margin {self.joint_limit_margin:.3f}, max |q_dot|/limit "
-            f"{self.max_velocity_ratio:.3f}, effort {self.joint_effort:.4g} rad^2/s",
-            f"time         {self.compute_time:.3f} s (palm plan {self.palm_plan_time:.3f} s)",
-        ])
-
-
-# -- symbolic model ---------------------------------------------------------------------------
 
 class _Kinematics:
     """CasADi functions of the palm + flat finger contact for one object surface."""
@@ -396,29 +285,10 @@ def _index_of(knots: FloatArray, t: float) -> int:
 
 # -- the planner ------------------------------------------------------------------------------
 
-def greedy_plan(
-    problem: OneFingerProblem,
-    n_steps: int = DEFAULT_N_STEPS,
-    delta: float | None = None,
-    grid: tuple[int, int] = DEFAULT_GRID,
-    closure_gain: float = 1.0,
-    palm_plan: Solution | None = None,
-    planner: OneFingerPlanner | None = None,
-) -> GreedyResult:
-    """Plan by the paper's section-3 method (see the module docstring).
-
-    ``delta`` bounds the finger's rolling angle per step [rad] (None:
-    :data:`DEFAULT_ROLLING_RATE` times dt; 0: the finger contact never moves over the
-    ball); ``grid = (n_radii, n_angles)`` is the polar search grid in the
-    rotation ellipse, plus its centre (n_radii = 0: the centre only); ``closure_gain`` in
-    [0, 1] is the fraction of the closure error at t_k removed over the step (0: open-loop
-    pseudo-inverse, as in the paper). ``palm_plan`` reuses a ball-on-palm plan of
-    ``problem.base``; ``planner`` supplies the initial grasp (IK, ``initial_grasp``).
-
-    Raises :class:`~ocp.spec.problem.ProblemError` for an invalid problem or settings, an
-    initial grasp that is impossible, or a palm plan that failed.
-    """
-    t_start = time.perf_counter()
+def _checked_settings(problem: OneFingerProblem, n_steps: int, delta: float | None,
+                      grid: tuple[int, int], closure_gain: float) -> float:
+    """The rolling bound per step (``delta``, its default when None); ProblemError naming
+    every bad field of the problem and the settings."""
     errs = list(problem.errors())
     if not (isinstance(n_steps, int) and 1 <= n_steps <= 100_000):
         errs.append(("n_steps", f"must be an integer in [1, 100000], got {n_steps!r}"))
@@ -433,36 +303,47 @@ def greedy_plan(
         errs.append(("closure_gain", f"must be in [0, 1], got {closure_gain}"))
     if errs:
         raise ProblemError(errs)
+    return delta
+
+
+def _failures(t: FloatArray, pos_err: FloatArray, rot_err: FloatArray, margins: FloatArray,
+              ratios: FloatArray, cone_margin: FloatArray, fallback_at: NDArray[np.bool_]
+              ) -> tuple[list[str], list[float]]:
+    """What the greedy plan breaks and from when: (messages, their first times)."""
+    checks = (
+        (f"closure error beyond {CLOSURE_TOL[0]:g} m / {CLOSURE_TOL[1]:g} rad (the finger "
+         f"cannot follow the contacts: workspace boundary, singularity or divergence)",
+         (pos_err > CLOSURE_TOL[0]) | (rot_err > CLOSURE_TOL[1])),
+        ("joints beyond their position limits", margins < 0.0),
+        ("joint rates beyond their velocity limits", ratios > 1.0),
+        ("grasp outside the friction cone", cone_margin < 0.0),
+        ("no candidate kept the contact on the pad, in the cone and off the chart poles",
+         fallback_at),
+    )
+    failures: list[str] = []
+    first: list[float] = []
+    for what, bad in checks:
+        if np.any(bad):
+            t_bad = float(t[int(np.argmax(bad))])
+            failures.append(f"{what} from t = {t_bad:.4g} s")
+            first.append(t_bad)
+    return failures, first
+
+
+def _greedy_steps(problem: OneFingerProblem, kin: Any, eta_p: FloatArray, q0: FloatArray,
+                  shape: FloatArray, Rcp: FloatArray, Rcf: FloatArray, dt: float,
+                  delta: float, grid: tuple[int, int], closure_gain: float
+                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
+                             NDArray[np.bool_], float]:
+    """Steps 2-4 of the method along the palm path ``eta_p``: at each step the candidate
+    finger contact rates in the rotation ellipse, the one with the smallest grasp angle
+    that keeps the contact on the pad, in the cone and off the chart poles (the least
+    violating one when none does: ``fallback_at``), the finger's coordinates stepped, and
+    its joints by the pseudo-inverse of the secant twist with the closure correction:
+    (eta_f, q, q_dot, w_f, rotation steps, fallback steps, the Jacobian's smallest singular
+    value)."""
     base, finger = problem.base, problem.finger
-    q0 = (planner or OneFingerPlanner()).initial_grasp(problem)
-
-    # 1. palm contact path
-    t_palm = time.perf_counter()
-    if palm_plan is None:
-        palm_plan = BallOnPalmPlanner().solve(base)
-        if not palm_plan.ok:
-            raise ProblemError([("base", f"the ball-on-palm plan failed: {palm_plan.message}")])
-    palm_plan_time = time.perf_counter() - t_palm
-
-    kin = _kinematics(base.object.shape)
-    shape = np.asarray(base.object.dimensions, dtype=float)
-    Rcp = rotation_from_vector(base.object.chart_rotation)
-    Rcf = rotation_from_vector(problem.contact.chart_rotation)
-    T = base.duration
-    dt = T / n_steps
-    t = np.linspace(0.0, T, n_steps + 1)
-    seg = base.segment_times
-    knots = _merge_knots(np.concatenate([t, palm_plan.nodes.t, seg]), 1e-9 * T)
-    eta_knots = _integrate_palm(kin, palm_plan, np.asarray(base.initial, dtype=float), knots,
-                                shape, T)
-    grid_idx = np.array([_index_of(knots, tk) for tk in t])
-    eta_p = eta_knots[grid_idx]
-    sampled = palm_plan.sample(t)
-    w_p = sampled.w
-    d = eta_p - sampled.eta
-    d[:, 3:] = (d[:, 3:] + np.pi) % (2 * np.pi) - np.pi
-    palm_integration_error = float(np.max(np.abs(d)))
-
+    n_steps = len(eta_p) - 1
     # 2.-4. greedy finger contact, its coordinates, the joints
     unit = candidate_grid(grid[0], grid[1]) if grid[0] > 0 else np.zeros((2, 1))
     unit_radius = np.linalg.norm(unit, axis=0)
@@ -526,6 +407,66 @@ def greedy_plan(
         q_dot[k] = np.linalg.pinv(J) @ (np.concatenate([v, omega]) + closure_gain * e / dt)
         q[k + 1] = q[k] + q_dot[k] * dt
         R_star, p_star = R_next, p_next
+    return eta_f, q, q_dot, w_f, rot_step, fallback_at, min_sv
+
+
+def greedy_plan(
+    problem: OneFingerProblem,
+    n_steps: int = DEFAULT_N_STEPS,
+    delta: float | None = None,
+    grid: tuple[int, int] = DEFAULT_GRID,
+    closure_gain: float = 1.0,
+    palm_plan: Solution | None = None,
+    planner: OneFingerPlanner | None = None,
+) -> GreedyResult:
+    """Plan by the paper's section-3 method (see the module docstring).
+
+    ``delta`` bounds the finger's rolling angle per step [rad] (None:
+    :data:`DEFAULT_ROLLING_RATE` times dt; 0: the finger contact never moves over the
+    ball); ``grid = (n_radii, n_angles)`` is the polar search grid in the
+    rotation ellipse, plus its centre (n_radii = 0: the centre only); ``closure_gain`` in
+    [0, 1] is the fraction of the closure error at t_k removed over the step (0: open-loop
+    pseudo-inverse, as in the paper). ``palm_plan`` reuses a ball-on-palm plan of
+    ``problem.base``; ``planner`` supplies the initial grasp (IK, ``initial_grasp``).
+
+    Raises :class:`~ocp.spec.problem.ProblemError` for an invalid problem or settings, an
+    initial grasp that is impossible, or a palm plan that failed.
+    """
+    t_start = time.perf_counter()
+    delta = _checked_settings(problem, n_steps, delta, grid, closure_gain)
+    base, finger = problem.base, problem.finger
+    q0 = (planner or OneFingerPlanner()).initial_grasp(problem)
+
+    # 1. palm contact path
+    t_palm = time.perf_counter()
+    if palm_plan is None:
+        palm_plan = BallOnPalmPlanner().solve(base)
+        if not palm_plan.ok:
+            raise ProblemError([("base", f"the ball-on-palm plan failed: {palm_plan.message}")])
+    palm_plan_time = time.perf_counter() - t_palm
+
+    kin = _kinematics(base.object.shape)
+    shape = np.asarray(base.object.dimensions, dtype=float)
+    Rcp = rotation_from_vector(base.object.chart_rotation)
+    Rcf = rotation_from_vector(problem.contact.chart_rotation)
+    T = base.duration
+    dt = T / n_steps
+    t = np.linspace(0.0, T, n_steps + 1)
+    seg = base.segment_times
+    knots = _merge_knots(np.concatenate([t, palm_plan.nodes.t, seg]), 1e-9 * T)
+    eta_knots = _integrate_palm(kin, palm_plan, np.asarray(base.initial, dtype=float), knots,
+                                shape, T)
+    grid_idx = np.array([_index_of(knots, tk) for tk in t])
+    eta_p = eta_knots[grid_idx]
+    sampled = palm_plan.sample(t)
+    w_p = sampled.w
+    d = eta_p - sampled.eta
+    d[:, 3:] = (d[:, 3:] + np.pi) % (2 * np.pi) - np.pi
+    palm_integration_error = float(np.max(np.abs(d)))
+
+    # 2.-4. greedy finger contact, its coordinates, the joints
+    eta_f, q, q_dot, w_f, rot_step, fallback_at, min_sv = _greedy_steps(
+        problem, kin, eta_p, q0, shape, Rcp, Rcf, dt, delta, grid, closure_gain)
 
     # 5. Cartesian quantities and reports
     n = n_steps + 1
@@ -562,24 +503,9 @@ def greedy_plan(
 
     margins = np.minimum(q - finger.lower, finger.upper - q).min(axis=1)
     ratios = (np.abs(q_dot) / np.asarray(finger.velocity_limit)).max(axis=1)
-    cone_margin = cone - phis_all.max(axis=1)
-    checks = (
-        (f"closure error beyond {CLOSURE_TOL[0]:g} m / {CLOSURE_TOL[1]:g} rad (the finger "
-         f"cannot follow the contacts: workspace boundary, singularity or divergence)",
-         (pos_err > CLOSURE_TOL[0]) | (rot_err > CLOSURE_TOL[1])),
-        ("joints beyond their position limits", margins < 0.0),
-        ("joint rates beyond their velocity limits", ratios > 1.0),
-        ("grasp outside the friction cone", cone_margin < 0.0),
-        ("no candidate kept the contact on the pad, in the cone and off the chart poles",
-         fallback_at),
-    )
-    failures: list[str] = []
-    first: list[float] = []
-    for what, bad in checks:
-        if np.any(bad):
-            t_bad = float(t[int(np.argmax(bad))])
-            failures.append(f"{what} from t = {t_bad:.4g} s")
-            first.append(t_bad)
+    cone_margin = math.atan(problem.mu) - phis_all.max(axis=1)
+    failures, first = _failures(t, pos_err, rot_err, margins, ratios, cone_margin,
+                                fallback_at)
     return GreedyResult(
         t=t, eta_p=eta_p, eta_f=eta_f, q=q, q_dot=q_dot, w_p=w_p, w_f=w_f,
         rotation_step=rot_step, grasp_angles=phis_all,
