@@ -163,3 +163,76 @@ def test_the_docs_loop_runs_as_written(tmp_path: Path) -> None:
     lines = proc.stdout.strip().splitlines()
     assert len(lines) >= 4 and all(line.endswith("converged True") for line in lines), \
         proc.stdout
+
+
+def test_the_rest_of_a_problem_follows_the_same_motion_and_targets() -> None:
+    """ManipulationProblem.remaining(dt): the desired poses are the original's dt later,
+    the via-points still ahead are moved back by dt (those passed dropped), the phases
+    still ahead kept (the current one shortened), the grid size kept."""
+    from ocp.spec.grasp import Palm
+    from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose
+    from ocp.spec.phases import ContactPhase
+    from ocp.spec.problem import ViaPoint
+
+    problem = palm_and_finger(duration=2.0)
+    assert problem.palm is not None
+    palm = Palm(problem.palm.initial, problem.palm.goal,
+                (ViaPoint(0.5, {"x": 0.004}), ViaPoint(1.5, {"x": 0.009})))
+    start = ObjectPose(position=(0.0, 0.0, 0.025))
+    motion = DesiredMotion.from_steps(start, [MotionStep(1.0, (0, 0, 1), 0.2),
+                                              MotionStep(1.0, (0, 1, 0), 0.1)])
+    phases = (ContactPhase(0.8, (True,)), ContactPhase(1.2, (True,)))
+    full = replace(problem, palm=palm, motion=motion, phases=phases)
+    rest = full.remaining(0.7)
+    assert math.isclose(rest.duration, 1.3) and rest.n_intervals == full.n_intervals
+    assert rest.palm is not None and [vp.time for vp in rest.palm.via_points] == \
+        pytest.approx([0.8])
+    assert [ph.duration for ph in rest.phases or ()] == pytest.approx([0.1, 1.2])
+    s = np.linspace(0.0, rest.duration, 7)
+    assert rest.motion is not None
+    R1, p1 = rest.motion.at(s)
+    R0, p0 = motion.at(s + 0.7)
+    assert_close(R1, R0, atol=1e-15)
+    assert_close(p1, p0, atol=1e-15)
+    assert not [e for e in rest.motion.errors("motion", rest.duration)]
+    with pytest.raises(ValueError, match="dt"):
+        full.remaining(2.0)
+
+
+def test_a_tracking_grasp_replans_its_remaining_motion() -> None:
+    """Three fingers turning the ball 10 deg in 1 s, re-planned every 0.25 s from where
+    the last plan is (a receding horizon on the rest of the desired motion): each re-plan
+    starts at the measured state, converges, and the certified last one tracks the
+    motion's end."""
+    from ocp.robots.hands import load_hand
+    from ocp.spec.grasp import hand_fingertips
+    from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
+
+    hand = load_hand("three_finger")
+    obj = ObjectSpec("sphere", (0.025,))
+    start = ObjectPose(position=hand.nominal_object_position)
+    motion = DesiredMotion.from_steps(start, [MotionStep(1.0, (0.0, 0.0, 1.0),
+                                                         math.radians(10))])
+    problem = ManipulationProblem(
+        obj, hand_fingertips(hand, start, obj), 1.0, initial_pose=start, motion=motion,
+        tracking=Tracking(position_tolerance=1e-3, orientation_tolerance=math.radians(1)),
+        n_intervals=12)
+    sol = PLANNER.solve(problem)
+    assert sol.status is Status.SOLVED, sol.message
+    assert sol.stats is not None
+    problem = problem.with_intervals(sol.stats.n_intervals)
+    period, t = 0.25, 0.0
+    while problem.duration - t > period + 1e-9:
+        t += period
+        now = sol.sample([period])
+        last = problem.duration - t <= period + 1e-9
+        sol = attempt(problem.remaining(t), x0=now.x[0], u0=now.u[0],
+                      warm=shifted(sol, period),
+                      options=AttemptOptions(max_iter=50, certify=last), planner=PLANNER)
+        assert sol.converged, (t, sol.stats)
+        assert_close(sol.X[0], now.x[0], atol=1e-12 * (1 + np.abs(now.x[0])))
+    assert sol.status is Status.SOLVED, sol.certificate.failures
+    R_end, _ = motion.at([1.0])
+    angle = np.arccos(np.clip((np.trace(R_end[0].T @ sol.object_rotation[-1]) - 1) / 2,
+                              -1, 1))
+    assert angle <= math.radians(1)

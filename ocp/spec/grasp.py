@@ -218,6 +218,33 @@ class ManipulationProblem:
         return tuple((k, tuple(bool(t) for t in ph.touching))
                      for k, ph in zip(counts, self.phases, strict=True))
 
+    def remaining(self, dt: float) -> ManipulationProblem:
+        """The rest of this problem ``dt`` seconds in (a shrinking horizon: re-planning
+        part-way): the duration shortened, the desired motion followed from its pose at
+        ``dt`` on (its ``t0``), the palm's via-points still ahead moved back by ``dt``
+        (those passed dropped), the contact phases still ahead; the same grid size. Its
+        initial state is the measured one (:func:`ocp.solve.attempt.attempt`'s ``x0``)."""
+        if not (math.isfinite(dt) and 0.0 < dt < self.duration):
+            raise ValueError(f"dt must be in (0, {self.duration}) s, got {dt}")
+        eps = 1e-9 * self.duration
+        motion = None if self.motion is None else \
+            replace(self.motion, t0=self.motion.t0 + dt)
+        palm = self.palm
+        if palm is not None:
+            palm = replace(palm, via_points=tuple(
+                replace(vp, time=vp.time - dt) for vp in palm.via_points if vp.time > dt + eps))
+        phases = self.phases
+        if phases is not None:
+            kept, t = [], 0.0
+            for ph in phases:
+                end = t + ph.duration
+                if end > dt + eps:
+                    kept.append(replace(ph, duration=end - max(t, dt)))
+                t = end
+            phases = tuple(kept)
+        return replace(self, duration=self.duration - dt, motion=motion, palm=palm,
+                       phases=phases)
+
     def with_intervals(self, n: int) -> ManipulationProblem:
         return replace(self, n_intervals=n)
 

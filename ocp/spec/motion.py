@@ -76,6 +76,10 @@ class DesiredMotion:
     orientations: tuple[tuple[float, float, float, float], ...]
     positions: tuple[tuple[float, float, float], ...]
     smooth: bool = True
+    #: The motion's time at the plan's t = 0 [s]: a plan of the rest of the motion (a
+    #: re-plan part-way, :meth:`~ocp.spec.grasp.ManipulationProblem.remaining`) follows
+    #: the same poses, ``at(t)`` being the motion's at ``t + t0``.
+    t0: float = 0.0
 
     @staticmethod
     def from_steps(start: ObjectPose, steps: Sequence[MotionStep], smooth: bool = True
@@ -105,17 +109,21 @@ class DesiredMotion:
         if not all(map(math.isfinite, ts)) or ts[0] != 0.0 or \
                 any(b <= a for a, b in itertools.pairwise(ts)):
             errs.append((f"{name}.times", "must start at 0 and increase strictly"))
-        elif abs(ts[-1] - duration) > 1e-9 * max(1.0, duration):
+        elif abs(ts[-1] - self.t0 - duration) > 1e-9 * max(1.0, duration + self.t0):
             errs.append((f"{name}.times",
-                         f"must end at the duration {duration} s, got {ts[-1]}"))
+                         f"must end at the duration {duration} s"
+                         + (f" after {self.t0} s" if self.t0 else "") + f", got {ts[-1]}"))
+        if not (math.isfinite(self.t0) and 0.0 <= self.t0 < ts[-1]):
+            errs.append((f"{name}.t0", f"must be in [0, {ts[-1]}) s, got {self.t0}"))
         for i, q in enumerate(self.orientations):
             errs += ObjectPose(q, self.positions[i]).errors(f"{name}[{i}]")
         return errs
 
     def at(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """(R (k, 3, 3), p (k, 3)) at times t (clipped to the knots' span)."""
+        """(R (k, 3, 3), p (k, 3)) at the plan's times t (the motion's t + t0, clipped to
+        the knots' span)."""
         ts = np.asarray(self.times, dtype=float)
-        tq = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), ts[0], ts[-1])
+        tq = np.clip(np.atleast_1d(np.asarray(t, dtype=float)) + self.t0, ts[0], ts[-1])
         Rk = [quaternion_matrix(q) for q in self.orientations]
         Pk = np.asarray(self.positions, dtype=float)
         j = np.clip(np.searchsorted(ts, tq, side="right") - 1, 0, len(ts) - 2)
