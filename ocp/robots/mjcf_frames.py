@@ -307,8 +307,8 @@ def build_mjcf(text: str) -> tuple[Any, str]:
 
 def mujoco_text(text: str) -> str:
     """The MJCF ``text`` MuJoCo can compile without the files it names: ``<mesh>``,
-    ``<hfield>``, ``<skin>`` and file textures removed (and the materials' references to
-    them), every mesh or height-field geom (in the bodies and the default classes) a small
+    ``<hfield>``, ``<skin>`` and file textures removed (and every material's texture),
+    every mesh or height-field geom (in the bodies and the default classes) a small
     sphere, every body given a least mass and inertia (``boundmass``, ``boundinertia``:
     a body with a joint and no geom compiles). Frames, joints and limits unchanged."""
     root = ET.fromstring(text)

@@ -7,6 +7,12 @@ hand's root to that link (body, or a frame of it; the joints of the other finger
 of it), mounted in the palm frame by the request's mount, its fingertip surface read from
 the link's collision geometry (a sphere or a capsule: its size and offset) or given.
 
+An MJCF is read in MuJoCo's frames (:mod:`ocp.robots.mjcf_frames`: what Pinocchio 4.1
+misreads is corrected or refused), and the result is checked when it is loaded: its
+bodies and sites against MuJoCo's ``mj_kinematics`` of the same text (where MuJoCo is
+installed), a URDF's links against its own joint origins (:mod:`ocp.robots.urdf_frames`);
+a model read in another frame is refused (:func:`frame_problems`).
+
 What Pinocchio would not model is refused before it builds anything, naming what and
 where (:class:`HandModelError`, (field, reason) pairs): an MJCF ``<include>`` (a file the
 service would read), joint couplings (MJCF ``<equality>`` and ``<tendon>``, URDF
@@ -268,7 +274,8 @@ def frame_problems(text: str, fmt: str, model: Any) -> list[tuple[str, str]]:
     else:
         found = urdf_disagreements(text, model)
         why = "Pinocchio's reading of the URDF differs from its joint origins, so it is refused"
-    return [("model", f"{r} ({why})") for r in found or []]
+    return [("model", r if r.startswith("MuJoCo cannot") else f"{r} ({why})")
+            for r in found or []]
 
 
 @dataclass(frozen=True, eq=False)
@@ -297,8 +304,10 @@ def load_whole_hand(text: str, fmt: str, tips: Sequence[TipSpec],
                     ) -> WholeHand:
     """The hand of a URDF (``fmt`` "urdf") or MJCF ("mjcf") text with fingers ending at
     ``tips``, its root mounted at (``mount_rotation``, ``mount_position``) in the palm
-    frame (default: the palm frame itself). Raises :class:`HandModelError` naming
-    ``model``, ``tips[i].name`` or ``tips[i].surface``."""
+    frame (default: the palm frame itself): for an MJCF, MuJoCo's world frame. Raises
+    :class:`HandModelError` naming ``model``, ``tips[i].name`` or ``tips[i].surface``;
+    ``model`` also where the built model puts a body, site or link elsewhere than the
+    file's own reader (:func:`frame_problems`)."""
     from ocp.robots.finger import finger_from_model
 
     if fmt not in ("urdf", "mjcf"):
@@ -317,9 +326,7 @@ def load_whole_hand(text: str, fmt: str, tips: Sequence[TipSpec],
     except Exception as exc:
         raise HandModelError([("model", f"Pinocchio cannot build the {fmt.upper()}: "
                                         f"{str(exc)[:300]}")]) from exc
-    errs = frame_problems(text, fmt, model)
-    if errs:
-        raise HandModelError(errs)
+    errs = frame_problems(text, fmt, model)  # reported with the tips' own
     frames = sorted({str(f.name) for f in model.frames} - {"universe"})
     R = np.eye(3) if mount_rotation is None else np.asarray(mount_rotation, dtype=float)
     p = np.zeros(3) if mount_position is None else np.asarray(mount_position, dtype=float)
