@@ -100,14 +100,19 @@ def _side(side: ArrayLike | None, axis: FloatArray) -> FloatArray:
 
 
 def _capsule(r: float, half: float, centre: FloatArray, R: FloatArray,
-             side: ArrayLike | None) -> TipSurface:
+             side: ArrayLike | None, tip: tuple[FloatArray, FloatArray] | None = None
+             ) -> TipSurface:
     """The cap of a capsule (axis its frame's z, ``R``, ``centre`` in the link frame)
-    farther from the link's origin (the fingertip's end)."""
+    farther from the link's origin (the fingertip's end), in the tip frame ``tip`` (its
+    rotation and origin in the link frame; None: the link frame, as ``side``)."""
     axis = R[:, 2]
     ends = [centre + half * axis, centre - half * axis]
     k = int(np.argmax([np.linalg.norm(e) for e in ends]))
     out = axis if k == 0 else -axis
-    return capsule_tip(r, ends[k], out, _side(side, out), half)
+    cap = ends[k]
+    if tip is not None:
+        cap, out = tip[0].T @ (cap - tip[1]), tip[0].T @ out
+    return capsule_tip(r, cap, out, _side(side, out), half)
 
 
 def _mjcf_defaults(root: ET.Element) -> dict[str, dict[str, str]]:
@@ -198,10 +203,9 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
             p = _floats(attrs.get("pos"), 3, (0, 0, 0))
             R = _quat(_floats(attrs.get("quat"), 4, (1, 0, 0, 0)))
             half = float(size[1]) if len(size) > 1 else 0.0
-        p, R = R_s.T @ (p - p_s), R_s.T @ R
         if kind == "sphere":
-            return sphere_tip(float(size[0]), p, R)
-        return _capsule(float(size[0]), half, p, R, side)
+            return sphere_tip(float(size[0]), R_s.T @ (p - p_s), R_s.T @ R)
+        return _capsule(float(size[0]), half, p, R, side, (R_s, p_s))
     return (f"body {name!r} has no sphere or capsule geom (it has {kinds or 'none'}): give "
             "the fingertip's surface in the request")
 
