@@ -399,3 +399,26 @@ def test_a_urdf_read_in_another_frame_is_refused_naming_the_link() -> None:
     model.jointPlacements[1] = pin.SE3(np.eye(3), np.zeros(3))  # the origin dropped
     found = urdf_disagreements(POSED_URDF, model)
     assert any(r.startswith("link 'tip' is ") and " mm and " in r for r in found)
+
+
+def test_a_posed_root_with_its_own_joint_is_left_as_pinocchio_reads_it() -> None:
+    text = """<mujoco><worldbody>
+      <body name="root" pos="0.1 0 0.02" euler="0 30 90"><joint name="j0" axis="1 0 0"
+          range="-40 40"/><geom size="0.01"/>
+        <body name="tip" pos="0 0.1 0"><joint name="j1" axis="0 0 1" range="-90 90"/>
+          <geom type="sphere" size="0.01"/></body></body></worldbody></mujoco>"""
+    hand = load_whole_hand(text, "mjcf", [TipSpec("tip")])
+    _assert_fingertips_are_mujocos(hand, text)
+
+
+def test_a_whole_hand_urdf_is_checked_at_load() -> None:
+    from ocp.geometry.tips import sphere_tip
+
+    hand = load_whole_hand(POSED_URDF, "urdf", [TipSpec("tip_sphere", sphere_tip(0.01))])
+    finger = hand.fingers[0]
+    q = np.array([0.3, -0.01, 0.5])
+    poses = urdf_link_poses(ET.fromstring(POSED_URDF),
+                            dict(zip(finger.joint_names, q, strict=True)))
+    R, p = (np.asarray(x) for x in finger.fk(q))
+    np.testing.assert_allclose(p.ravel(), poses["tip_sphere"][1], atol=1e-12)
+    np.testing.assert_allclose(R, poses["tip_sphere"][0], atol=1e-12)
