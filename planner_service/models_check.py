@@ -253,8 +253,12 @@ def check_model(model: ModelText, limits: ModelLimits) -> FieldErrors:
     return LOADERS[model.kind](model.text, dict(model.params))
 
 
-#: A small valid model of each kind, loaded once before a checker reports ready.
-_WARM_UP = {"urdf": '<robot name="warm-up"><link name="fingertip"/></robot>'}
+#: A small valid model of each kind, loaded once before a checker reports ready (the
+#: MJCF's load imports MuJoCo, whose kinematics checks an MJCF, before the memory limit).
+_WARM_UP = {"urdf": '<robot name="warm-up"><link name="fingertip"/></robot>',
+            "mjcf": '<mujoco model="warm-up"><worldbody><body name="fingertip"><joint '
+                    'name="j" axis="0 0 1" range="-1 1"/><geom size="0.01"/></body>'
+                    '</worldbody></mujoco>'}
 
 
 def _checker_main(conn: Connection, limits: dict[str, Any], parent: int) -> None:

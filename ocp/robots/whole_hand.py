@@ -7,6 +7,12 @@ hand's root to that link (body, or a frame of it; the joints of the other finger
 of it), mounted in the palm frame by the request's mount, its fingertip surface read from
 the link's collision geometry (a sphere or a capsule: its size and offset) or given.
 
+An MJCF is read in MuJoCo's frames (:mod:`ocp.robots.mjcf_frames`: what Pinocchio 4.1
+misreads is corrected or refused), and the result is checked when it is loaded: its
+bodies and sites against MuJoCo's ``mj_kinematics`` of the same text (where MuJoCo is
+installed), a URDF's links against its own joint origins (:mod:`ocp.robots.urdf_frames`);
+a model read in another frame is refused (:func:`frame_problems`).
+
 What Pinocchio would not model is refused before it builds anything, naming what and
 where (:class:`HandModelError`, (field, reason) pairs): an MJCF ``<include>`` (a file the
 service would read), joint couplings (MJCF ``<equality>`` and ``<tendon>``, URDF
@@ -17,17 +23,17 @@ planar, floating, continuous without limits).
 from __future__ import annotations
 
 import math
-import tempfile
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.tips import TipSurface, capsule_tip, sphere_tip
+from ocp.robots.mjcf_frames import MjcfReadError, build_mjcf, mujoco_disagreements, site_pose
+from ocp.robots.urdf_frames import urdf_disagreements
 
 __all__ = ["DEFAULT_VELOCITY", "HandModelError", "TipSpec", "WholeHand", "load_whole_hand",
            "model_problems", "tip_geometry"]
@@ -94,14 +100,19 @@ def _side(side: ArrayLike | None, axis: FloatArray) -> FloatArray:
 
 
 def _capsule(r: float, half: float, centre: FloatArray, R: FloatArray,
-             side: ArrayLike | None) -> TipSurface:
+             side: ArrayLike | None, tip: tuple[FloatArray, FloatArray] | None = None
+             ) -> TipSurface:
     """The cap of a capsule (axis its frame's z, ``R``, ``centre`` in the link frame)
-    farther from the link's origin (the fingertip's end)."""
+    farther from the link's origin (the fingertip's end), in the tip frame ``tip`` (its
+    rotation and origin in the link frame; None: the link frame, as ``side``)."""
     axis = R[:, 2]
     ends = [centre + half * axis, centre - half * axis]
     k = int(np.argmax([np.linalg.norm(e) for e in ends]))
     out = axis if k == 0 else -axis
-    return capsule_tip(r, ends[k], out, _side(side, out), half)
+    cap = ends[k]
+    if tip is not None:
+        cap, out = tip[0].T @ (cap - tip[1]), tip[0].T @ out
+    return capsule_tip(r, cap, out, _side(side, out), half)
 
 
 def _mjcf_defaults(root: ET.Element) -> dict[str, dict[str, str]]:
@@ -128,8 +139,10 @@ def _mjcf_defaults(root: ET.Element) -> dict[str, dict[str, str]]:
 def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
                  ) -> TipSurface | str:
     """The fingertip surface of link/body ``name`` from the model text's collision
-    geometry (the first sphere or capsule on it; URDF ``<collision>``, MJCF ``<geom>``),
-    or why there is none (a string)."""
+    geometry (the first sphere or capsule on it; URDF ``<collision>``, MJCF ``<geom>``;
+    for an MJCF site, its body's geom in the site's frame), or why there is none (a
+    string). An MJCF's geoms are read by ``pos`` and ``quat`` or ``fromto``: give the
+    text :func:`~ocp.robots.mjcf_frames.normalise_mjcf` wrote."""
     root = ET.fromstring(text)
     if fmt == "urdf":
         link = next((ln for ln in root.iter("link") if ln.get("name") == name), None)
@@ -153,11 +166,13 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
     defaults = _mjcf_defaults(root)
     parents = {c: p for p in root.iter() for c in p}
     body = next((b for b in root.iter("body") if b.get("name") == name), None)
+    R_s, p_s = np.eye(3), np.zeros(3)  # the tip frame in the body's
     if body is None:
         site = next((s for s in root.iter("site") if s.get("name") == name), None)
         if site is None:
             return f"no body or site {name!r} in the MJCF"
         body = parents[site]
+        R_s, p_s = site_pose(root, site)
     kinds = []
     for g in body.findall("geom"):
         cls = g.get("class")
@@ -189,8 +204,8 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
             R = _quat(_floats(attrs.get("quat"), 4, (1, 0, 0, 0)))
             half = float(size[1]) if len(size) > 1 else 0.0
         if kind == "sphere":
-            return sphere_tip(float(size[0]), p, R)
-        return _capsule(float(size[0]), half, p, R, side)
+            return sphere_tip(float(size[0]), R_s.T @ (p - p_s), R_s.T @ R)
+        return _capsule(float(size[0]), half, p, R, side, (R_s, p_s))
     return (f"body {name!r} has no sphere or capsule geom (it has {kinds or 'none'}): give "
             "the fingertip's surface in the request")
 
@@ -241,15 +256,30 @@ def model_problems(text: str, fmt: str) -> list[tuple[str, str]]:
     return errs
 
 
-def _build(text: str, fmt: str) -> Any:
+def _build(text: str, fmt: str) -> tuple[Any, str]:
+    """Pinocchio's model of the text, an MJCF's frames made MuJoCo's, and the text its
+    geometry is read from (an MJCF's orientations as quaternions:
+    :func:`~ocp.robots.mjcf_frames.build_mjcf`)."""
     import pinocchio as pin
 
     if fmt == "urdf":
-        return pin.buildModelFromXML(text)
-    with tempfile.TemporaryDirectory(prefix="dexroll-mjcf-") as tmp:
-        path = Path(tmp) / "hand.xml"
-        path.write_text(text, encoding="utf-8")
-        return pin.buildModelFromMJCF(str(path))
+        return pin.buildModelFromXML(text), text
+    return build_mjcf(text)
+
+
+def frame_problems(text: str, fmt: str, model: Any) -> list[tuple[str, str]]:
+    """Where the model built from ``text`` puts a body, site or link elsewhere than the
+    file's own reader does, or reads other joint limits, as ("model", reason) pairs: for
+    an MJCF MuJoCo's ``mj_kinematics`` of the same text (nothing when MuJoCo is not
+    installed), for a URDF the URDF's own joint origins (:mod:`ocp.robots.urdf_frames`)."""
+    if fmt == "mjcf":
+        found = mujoco_disagreements(text, model)
+        why = "dexroll's reading of the MJCF differs from MuJoCo's, so it is refused"
+    else:
+        found = urdf_disagreements(text, model)
+        why = "Pinocchio's reading of the URDF differs from its joint origins, so it is refused"
+    return [("model", r if r.startswith("MuJoCo cannot") else f"{r} ({why})")
+            for r in found or []]
 
 
 @dataclass(frozen=True, eq=False)
@@ -278,8 +308,10 @@ def load_whole_hand(text: str, fmt: str, tips: Sequence[TipSpec],
                     ) -> WholeHand:
     """The hand of a URDF (``fmt`` "urdf") or MJCF ("mjcf") text with fingers ending at
     ``tips``, its root mounted at (``mount_rotation``, ``mount_position``) in the palm
-    frame (default: the palm frame itself). Raises :class:`HandModelError` naming
-    ``model``, ``tips[i].name`` or ``tips[i].surface``."""
+    frame (default: the palm frame itself): for an MJCF, MuJoCo's world frame. Raises
+    :class:`HandModelError` naming ``model``, ``tips[i].name`` or ``tips[i].surface``;
+    ``model`` also where the built model puts a body, site or link elsewhere than the
+    file's own reader (:func:`frame_problems`)."""
     from ocp.robots.finger import finger_from_model
 
     if fmt not in ("urdf", "mjcf"):
@@ -290,12 +322,15 @@ def load_whole_hand(text: str, fmt: str, tips: Sequence[TipSpec],
     if not tips:
         raise HandModelError([("tips", "name at least one fingertip link")])
     try:
-        model = _build(text, fmt)
+        model, read = _build(text, fmt)
     except MemoryError:
         raise
+    except MjcfReadError as exc:
+        raise HandModelError([("model", str(exc))]) from exc
     except Exception as exc:
         raise HandModelError([("model", f"Pinocchio cannot build the {fmt.upper()}: "
                                         f"{str(exc)[:300]}")]) from exc
+    errs = frame_problems(text, fmt, model)  # reported with the tips' own
     frames = sorted({str(f.name) for f in model.frames} - {"universe"})
     R = np.eye(3) if mount_rotation is None else np.asarray(mount_rotation, dtype=float)
     p = np.zeros(3) if mount_position is None else np.asarray(mount_position, dtype=float)
@@ -314,7 +349,7 @@ def load_whole_hand(text: str, fmt: str, tips: Sequence[TipSpec],
             continue
         surface = tip.surface
         if surface is None:
-            got = tip_geometry(text, fmt, tip.name, tip.side)
+            got = tip_geometry(read, fmt, tip.name, tip.side)
             if isinstance(got, str):
                 errs.append((f"{where}.surface", got))
                 continue
