@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 
 from dexroll_client.models import ErrorBody
 
@@ -23,7 +23,7 @@ async def healthz() -> dict[str, str]:
 
 
 @router.get("/readyz", responses={503: {"model": ErrorBody}})
-def readyz(store: StoreDep, dispatcher: DispatcherDep) -> Any:
+def readyz(request: Request, store: StoreDep, dispatcher: DispatcherDep) -> Any:
     """Readiness: the job store answers and can be written, the dispatcher runs, and at
     least one worker is ready."""
     retry = {"Retry-After": str(STORE_RETRY_AFTER)}
@@ -42,4 +42,6 @@ def readyz(store: StoreDep, dispatcher: DispatcherDep) -> Any:
     if workers < 1:
         return error_response(503, "not_ready", "no solver worker is ready yet",
                               headers={"Retry-After": "1"})
-    return {"status": "ready", "workers": workers, "queued": queued}
+    simulations = request.app.state.simulations.stats()
+    return {"status": "ready", "workers": workers, "queued": queued,
+            "simulations": simulations}
