@@ -7,7 +7,7 @@ GET  /v1/plans           jobs, newest first, paginated (?limit=&offset=)
 DELETE /v1/plans/{id}    cancel a queued or running job
 GET  /v1/models          built-in objects, fingers (with URDFs), hands and planners
 POST /v1/plans/{id}/simulation  execute a finished plan in MuJoCo; GET: the stored report
-GET  /healthz, /readyz   liveness; readiness (store reachable, a worker ready)
+GET  /healthz, /readyz   liveness; readiness (store writable, a worker ready)
 
 Every error is an ``ErrorBody`` (no traceback ever leaves the service); an invalid request
 is a 422 naming each bad field; a failed solve is a finished job with its typed status.
