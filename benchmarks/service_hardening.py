@@ -5,6 +5,7 @@ loopback: run by hand, print one JSON line per measurement.
     python benchmarks/service_hardening.py deadlines   # 20 jobs with time_limit 1 s: lateness
     python benchmarks/service_hardening.py results     # 40 concurrent GETs of a large result
     python benchmarks/service_hardening.py clients     # 200 concurrent clients: lost/dup jobs
+    python benchmarks/service_hardening.py simulations # 40 long simulations: API latency
 
 ``--src DIR`` runs the service from another checkout (``git worktree add /tmp/base <rev>``)
 to measure the code before a change with the same interpreter and packages.
@@ -212,9 +213,61 @@ def bench_clients(svc: Service, n: int, src: Path | None) -> dict[str, Any]:
             "duplicated": listed["total"] - n}
 
 
+def bench_simulations(svc: Service, n: int) -> dict[str, Any]:
+    """``n`` concurrent long simulations of a one-finger plan (timestep 2e-5 s, settle
+    2 s: about 200 000 steps each), every client leaving after 5 s, while GET /healthz,
+    /readyz, /v1/plans, the job and /v1/models and a POST of a plan are timed in turn
+    (issue 25: the API kept busy for about an hour by 45 of them)."""
+    req = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
+    req["n_intervals"] = 16
+    job = httpx.post(f"{svc.url}/v1/plans", params={"wait": 120}, json=req,
+                     timeout=300).json()
+    assert job["state"] == "succeeded", job
+    sim_url = f"{svc.url}/v1/plans/{job['id']}/simulation"
+    httpx.post(sim_url, json={}, timeout=300)  # the simulation process started
+    codes: list[str] = []
+    lock = threading.Lock()
+
+    def simulate(_: int) -> None:
+        try:
+            r = httpx.post(sim_url, json={"timestep": 2e-5, "settle": 2.0}, timeout=5.0)
+            code = str(r.status_code)
+        except httpx.TimeoutException:
+            code = "client_left"
+        with lock:
+            codes.append(code)
+
+    paths = ["/healthz", "/readyz", "/v1/plans", f"/v1/plans/{job['id']}", "/v1/models"]
+    latencies: dict[str, list[float]] = {p: [] for p in [*paths, "POST /v1/plans"]}
+    triangle = json.loads((ROOT / "examples" / "triangle.json").read_text())
+    with cf.ThreadPoolExecutor(n) as pool:
+        futures = [pool.submit(simulate, i) for i in range(n)]
+        time.sleep(0.5)
+        with httpx.Client(timeout=60) as http:
+            while not all(f.done() for f in futures):
+                for path in paths:
+                    t0 = time.perf_counter()
+                    assert http.get(f"{svc.url}{path}").status_code == 200, path
+                    latencies[path].append(time.perf_counter() - t0)
+                t0 = time.perf_counter()
+                http.post(f"{svc.url}/v1/plans", params={"wait": 0}, json=triangle)
+                latencies["POST /v1/plans"].append(time.perf_counter() - t0)
+                time.sleep(0.1)
+    t0 = time.perf_counter()
+    while httpx.get(f"{svc.url}/readyz", timeout=60).json()["simulations"]["running"]:
+        time.sleep(0.1)
+    idle_s = time.perf_counter() - t0
+    return {"simulations": n, "answers": {c: codes.count(c) for c in sorted(set(codes))},
+            "pool_idle_after_clients_left_s": round(idle_s, 2),
+            **{f"{p}_max_s": round(max(v), 4) for p, v in latencies.items() if v},
+            **{f"{p}_median_s": round(statistics.median(v), 4)
+               for p, v in latencies.items() if v}}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("what", choices=["healthz", "deadlines", "results", "clients"])
+    parser.add_argument("what", choices=["healthz", "deadlines", "results", "clients",
+                                            "simulations"])
     parser.add_argument("--src", type=Path)
     parser.add_argument("--joints", type=int, default=400)
     parser.add_argument("-n", type=int)
@@ -228,6 +281,8 @@ def main() -> None:
             out = bench_deadlines(svc, args.n or 20)
         elif args.what == "results":
             out = bench_results(svc, args.n or 40)
+        elif args.what == "simulations":
+            out = bench_simulations(svc, args.n or 40)
         else:
             out = bench_clients(svc, args.n or 200, args.src)
     finally:

@@ -32,6 +32,7 @@ import logging
 import multiprocessing as mp
 import os
 import queue
+import re
 import threading
 import time
 import xml.etree.ElementTree as ET
@@ -52,8 +53,10 @@ __all__ = [
     "ModelText",
     "TreeSize",
     "check_model",
+    "file_references",
     "parse_tree",
     "request_models",
+    "without_file_references",
 ]
 
 log = logging.getLogger("dexroll.models")
@@ -106,6 +109,48 @@ class ModelText:
         return digest.hexdigest()
 
 
+#: A DOCTYPE or entity declaration, anywhere in a model's text (any case).
+_DECLARATION = re.compile(r"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
+#: Attributes by which a model names a file its loader would open (URDF: a <mesh>'s or a
+#: <texture>'s ``filename``; MJCF: ``file`` of <include>, <mesh>, <texture>, <hfield>, and
+#: the <compiler>'s folders).
+_FILE_ATTRIBUTES = ("filename", "file", "meshdir", "texturedir", "assetdir")
+
+
+def file_references(root: ET.Element) -> list[tuple[str, str]]:
+    """The (element, path) of every file a model's XML names."""
+    return [(element.tag, element.get(a, "")) for element in root.iter()
+            for a in _FILE_ATTRIBUTES if a in element.attrib]
+
+
+def without_file_references(urdf: str) -> str:
+    """A URDF without the elements that name files: each <visual> or <collision> whose
+    geometry is a <mesh filename=...>, and any other element with a file attribute (a
+    material's <texture>). What Pinocchio's geometry loader gets from the viewer (and the
+    execution): the service never opens a path a request names; the meshes were not drawn
+    anyway. ValueError when the text declares a DOCTYPE or entities or is not XML."""
+    if _DECLARATION.search(urdf):
+        raise ValueError("the model declares a DOCTYPE or entities")
+    try:
+        root = ET.fromstring(urdf)
+    except ET.ParseError as exc:
+        raise ValueError(f"not a well-formed XML document: {exc}") from exc
+    parent = {child: p for p in root.iter() for child in p}
+    doomed = []
+    for element in root.iter():
+        if not any(a in element.attrib for a in _FILE_ATTRIBUTES):
+            continue
+        node = element
+        while node in parent and node.tag not in ("visual", "collision"):
+            node = parent[node]
+        doomed.append(node if node.tag in ("visual", "collision") else element)
+    for element in doomed:
+        holder = parent.get(element)
+        if holder is not None and any(c is element for c in holder):
+            holder.remove(element)
+    return ET.tostring(root, encoding="unicode")
+
+
 class TreeError(ValueError):
     """The XML is not a model this service loads (too large, malformed, not that kind)."""
 
@@ -119,8 +164,7 @@ def parse_tree(text: str, limits: ModelLimits, what: str = "model") -> ET.Elemen
     if len(text) > limits.max_bytes:
         raise TreeError(f"the model is {len(text)} characters; at most {limits.max_bytes} "
                         "are accepted")
-    head = text[:4096].upper()
-    if "<!DOCTYPE" in head or "<!ENTITY" in text.upper():
+    if _DECLARATION.search(text):  # anywhere: a long comment does not hide one
         raise TreeError("the model declares a DOCTYPE or entities; plain XML only")
     parser: Any = ET.XMLPullParser(events=("start", "end"))
     depth = elements = 0
@@ -185,6 +229,12 @@ def _urdf_size(root: ET.Element) -> TreeSize:
 def _mjcf_size(root: ET.Element) -> TreeSize:
     if root.tag != "mujoco":
         raise TreeError(f"an MJCF model's root element is <mujoco>, got <{root.tag}>")
+    named = file_references(root)
+    if named:  # Pinocchio's MJCF loader would read them (<include> at least)
+        tag, path = named[0]
+        raise TreeError(f"the model's <{tag}> names a file ({path!r}): this service reads "
+                        "no file a request names; give the model inline, with primitive "
+                        "geoms")
     joints = sum(1 for e in root.iter() if e.tag in ("joint", "freejoint"))
     bodies = sum(1 for _ in root.iter("body"))
     depth = 0

@@ -25,6 +25,11 @@
 | DEXROLL_RETENTION_DAYS | 30 | finished jobs older than this are purged (0: never) |
 | DEXROLL_MAX_JOBS | 10000 | beyond this many jobs the oldest finished ones are purged |
 | DEXROLL_MAX_RESULT_BYTES | 67108864 | a plan's JSON above this is not stored (job failed) |
+| DEXROLL_SIM_PROCESSES | 1 | processes that run simulations (never the API's own) |
+| DEXROLL_SIM_QUEUE | 4 | simulations waiting before POST .../simulation answers 503 |
+| DEXROLL_SIM_TIME_LIMIT | 120 | wall time of one simulation before it is stopped [s] |
+| DEXROLL_SIM_CPU_SECONDS | 120 | CPU time of one simulation before it is stopped [s] |
+| DEXROLL_SIM_MAX_STEPS | 500000 | physics steps one simulation may ask for (else 422) |
 | DEXROLL_API_KEYS | (none) | `owner:key` pairs (or bare keys), comma-separated |
 | DEXROLL_API_KEYS_FILE | (none) | a file of `owner:key` lines, read at start |
 | DEXROLL_ALLOWED_HOSTS | 127.0.0.1,localhost,::1 | Host headers served (`*`: any) |
@@ -83,6 +88,12 @@ class Settings(BaseSettings):
     retention_days: float = Field(default=30.0, ge=0.0, le=36_500.0)
     max_jobs: int = Field(default=10_000, ge=1, le=100_000_000)
     max_result_bytes: int = Field(default=64 << 20, ge=1 << 16)
+    # simulations (planner_service.jobs.simulations)
+    sim_processes: int = Field(default=1, ge=1, le=64)
+    sim_queue: int = Field(default=4, ge=0, le=10_000)
+    sim_time_limit: float = Field(default=120.0, gt=0.0, le=86_400.0)
+    sim_cpu_seconds: float = Field(default=120.0, gt=0.0, le=86_400.0)
+    sim_max_steps: int = Field(default=500_000, ge=1_000, le=1_000_000_000)
     # who may use the service (planner_service.api.access)
     api_keys: str = ""
     api_keys_file: Path | None = None

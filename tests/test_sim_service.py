@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import time
 from pathlib import Path
 
 import httpx
@@ -92,3 +93,66 @@ def test_the_command_line_simulates_a_jobs_json(live_server: Server, finger_job:
                  "--grip-force", "0"]) == 1
     assert "lost" in capsys.readouterr().out and not json.loads(out.read_text())["passed"]
     assert main(["simulate", str(tmp_path / "missing.json")]) == 2
+
+
+# -- issue 25, part 2: simulations are jobs of their own processes ----------------------------
+
+def test_a_simulation_over_the_step_bound_is_a_422_naming_timestep(
+        live_server: Server, finger_job: str) -> None:
+    url = f"{live_server.url}/v1/plans/{finger_job}/simulation"
+    r = httpx.post(url, json={"timestep": 1e-5, "settle": 5.0}, timeout=60)
+    assert r.status_code == 422, r.text
+    (detail,) = r.json()["detail"]
+    assert detail["field"] == "timestep"
+    assert "at most 500000" in detail["reason"] and "DEXROLL_SIM_MAX_STEPS" in detail["reason"]
+
+
+def test_the_api_answers_while_simulations_run_and_a_left_run_is_stopped(
+        live_server: Server, finger_job: str) -> None:
+    """Six long simulations at once (one slot, four waiting at most), each client leaving
+    after a few seconds: the API's other routes answer meanwhile, the sixth is refused
+    with Retry-After, and the runs stop once their clients have left."""
+    url = live_server.url
+    long_run = {"timestep": 2e-5, "settle": 2.0, "record_every": 1000}
+
+    async def simulate() -> int | None:
+        async with httpx.AsyncClient(timeout=4.0) as client:
+            try:
+                r = await client.post(f"{url}/v1/plans/{finger_job}/simulation",
+                                      json=long_run)
+            except httpx.TimeoutException:
+                return None  # the client left
+            if r.status_code == 503:
+                assert r.json()["error"] == "simulations_busy" and "Retry-After" in r.headers
+            return r.status_code
+
+    async def the_rest_answer() -> list[int]:
+        await asyncio.sleep(1.0)  # the runs have started (or wait)
+        async with httpx.AsyncClient(timeout=60.0) as client:
+            codes = []
+            for path in ("/healthz", "/readyz", "/v1/plans", f"/v1/plans/{finger_job}",
+                         "/v1/models"):
+                codes.append((await client.get(f"{url}{path}")).status_code)
+            busy = (await client.get(f"{url}/readyz")).json()["simulations"]
+            assert busy["running"] == 1 and busy["slots"] == 1, busy
+            return codes
+
+    async def main() -> tuple[list[int | None], list[int]]:
+        runs = asyncio.gather(*(simulate() for _ in range(6)))
+        codes = await the_rest_answer()
+        return list(await runs), codes
+
+    runs, codes = asyncio.run(main())
+    assert codes == [200] * 5
+    assert 503 in runs, runs
+    # every client has left: the running one is stopped, the waiting ones dropped
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        busy = httpx.get(f"{url}/readyz", timeout=30).json()["simulations"]
+        if busy["running"] == 0 and busy["queued"] == 0:
+            break
+        time.sleep(0.2)
+    assert busy == {"running": 0, "queued": 0, "slots": 1}
+    # and the pool runs the next one
+    r = httpx.post(f"{url}/v1/plans/{finger_job}/simulation", json={}, timeout=120)
+    assert r.status_code == 201, r.text

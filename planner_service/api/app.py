@@ -7,7 +7,7 @@ GET  /v1/plans           jobs, newest first, paginated (?limit=&offset=)
 DELETE /v1/plans/{id}    cancel a queued or running job
 GET  /v1/models          built-in objects, fingers (with URDFs), hands and planners
 POST /v1/plans/{id}/simulation  execute a finished plan in MuJoCo; GET: the stored report
-GET  /healthz, /readyz   liveness; readiness (store reachable, a worker ready)
+GET  /healthz, /readyz   liveness; readiness (store writable, a worker ready)
 
 Every error is an ``ErrorBody`` (no traceback ever leaves the service); an invalid request
 is a 422 naming each bad field; a failed solve is a finished job with its typed status.
@@ -27,6 +27,7 @@ from typing import Any
 from fastapi import FastAPI
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from ..jobs.simulations import SimulationPool
 from ..jobs.store import Store
 from ..jobs.workers import Dispatcher
 from ..models_check import ModelChecker
@@ -99,11 +100,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         dispatcher.housekeeping = purge
         dispatcher.start()
         checker = ModelChecker(settings.model_limits(), settings.model_checkers)
+        simulations = SimulationPool(settings.sim_processes, settings.sim_queue,
+                                     settings.sim_time_limit, settings.sim_cpu_seconds)
         app.state.store, app.state.dispatcher = store, dispatcher
-        app.state.checker = checker
+        app.state.checker, app.state.simulations = checker, simulations
         try:
             yield
         finally:
+            simulations.close()
             checker.close()
             dispatcher.stop()
             store.close()

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import sqlite3
 import threading
 from typing import Annotated, Any
 
@@ -35,6 +36,7 @@ __all__ = [
     "StoreDep",
     "add_error_handlers",
     "error_response",
+    "store_fault_error",
 ]
 
 log = logging.getLogger("dexroll.service")
@@ -142,6 +144,22 @@ def error_response(status: int, error: str, message: str,
     return JSONResponse(body.model_dump(mode="json"), status_code=status, headers=headers)
 
 
+#: Retry-After of an answer refused because the job store cannot be written [s]: the
+#: dispatcher probes the store every second and resumes as soon as a write succeeds.
+STORE_RETRY_AFTER = 5
+
+
+def store_fault_error(store: Store) -> ServiceError | None:
+    """The 503 that refuses new work while the store cannot be written (None: it can)."""
+    fault = store.fault
+    if fault is None:
+        return None
+    return ServiceError(503, "storage_error", f"the job store cannot be written ({fault}); "
+                        "new work is refused until it can (the service resumes by itself "
+                        "when space returns)",
+                        headers={"Retry-After": str(STORE_RETRY_AFTER)})
+
+
 #: FastAPI's detail when a request body cannot be decoded at all (raised as a 400).
 _BODY_PARSE_ERROR = "There was an error parsing the body"
 
@@ -212,6 +230,15 @@ def add_error_handlers(app: FastAPI) -> None:
         if exc.status_code == 405:  # every method of the path (Starlette names one route's)
             headers["Allow"] = ", ".join(sorted(_allowed_methods(request)))
         return error_response(exc.status_code, name, str(exc.detail), headers=headers or None)
+
+    @app.exception_handler(sqlite3.OperationalError)
+    async def _store_error(request: Request, exc: sqlite3.OperationalError) -> JSONResponse:
+        # the store is the service's memory: when it cannot be read or written (disk
+        # full, read-only, locked past its timeout) the service is unavailable, not broken
+        log.warning("job store error on %s %s: %s", request.method, request.url.path, exc)
+        return error_response(503, "store_unavailable",
+                              f"the job store cannot be used now: {exc}",
+                              headers={"Retry-After": str(STORE_RETRY_AFTER)})
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:

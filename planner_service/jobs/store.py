@@ -9,11 +9,20 @@ reads and cancels of another owner's job find nothing, and an idempotency key is
 owner's (stored scoped by the owner). A plan's result is stored as the worker's compact
 JSON and read back in chunks (:meth:`Store.result_chunks`), never parsed. Finished jobs
 are purged by age and count (:meth:`Store.purge`).
+
+A write that SQLite refuses for want of space or permission ("database or disk is full",
+"attempt to write a readonly database", "disk I/O error") raises :class:`StorageError`
+(an ``sqlite3.OperationalError``) and leaves the store *faulted* (:attr:`Store.fault`): the
+API refuses new work with 503 and ``/readyz`` says why, until a write succeeds again
+(the dispatcher probes with :meth:`Store.probe` while faulted). Nothing crashes: the
+store's state is a fault to report, not an exception to die of.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import shutil
 import sqlite3
 import threading
 import time
@@ -23,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["IdempotencyConflictError", "JobRow", "Store"]
+__all__ = ["IdempotencyConflictError", "JobRow", "StorageError", "Store", "free_bytes"]
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
@@ -45,6 +54,10 @@ CREATE TABLE IF NOT EXISTS jobs (
     finished_at REAL
 );
 CREATE INDEX IF NOT EXISTS jobs_by_state ON jobs(state, created_at);
+CREATE TABLE IF NOT EXISTS probe (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    at REAL NOT NULL
+);
 CREATE TABLE IF NOT EXISTS simulations (
     job_id TEXT PRIMARY KEY,
     report TEXT NOT NULL,
@@ -64,6 +77,31 @@ CHUNK = 1 << 16
 ACTIVE = ("queued", "running")
 #: A job interrupted this many times by service restarts is failed instead of re-run.
 MAX_ATTEMPTS = 3
+
+
+class StorageError(sqlite3.OperationalError):
+    """SQLite could not write the store: its disk is full, it is read-only, or its file
+    cannot be written (the reason is SQLite's own message)."""
+
+
+#: SQLite's messages that say a write failed for a lasting reason (space, permission,
+#: I/O), not a passing one ("database is locked" is a busy store: retried by SQLite's
+#: own timeout, never a fault).
+_FAULTS = ("full", "readonly", "read-only", "disk i/o", "unable to open", "out of memory")
+
+
+def is_storage_fault(exc: BaseException) -> bool:
+    """Whether an SQLite error is a lasting write fault (see :data:`_FAULTS`)."""
+    text = str(exc).lower()
+    return isinstance(exc, sqlite3.OperationalError) and any(f in text for f in _FAULTS)
+
+
+def free_bytes(path: Path) -> int | None:
+    """Free space of the file system holding ``path`` [bytes] (None: unknown)."""
+    try:
+        return int(shutil.disk_usage(path).free)
+    except OSError:
+        return None
 
 
 class IdempotencyConflictError(Exception):
@@ -120,6 +158,10 @@ class Store:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._local = threading.local()
+        #: why the last write failed (SQLite's message; None: the last write succeeded)
+        self.fault: str | None = None
+        #: when the store became faulted (time.time(); None: it is not)
+        self.fault_since: float | None = None
         db = self._conn()
         db.executescript(_SCHEMA)  # executescript manages its own transaction
         columns = {r["name"] for r in db.execute("PRAGMA table_info(jobs)")}
@@ -139,19 +181,82 @@ class Store:
             self._local.conn = conn
         return conn
 
+    def _faulted(self, exc: sqlite3.OperationalError) -> sqlite3.OperationalError:
+        """Record a failed write: a lasting one (full, read-only, I/O) faults the store and
+        comes back as a :class:`StorageError`; a passing one (locked) as it is."""
+        if not is_storage_fault(exc):
+            return exc
+        if self.fault is None:
+            self.fault_since = time.time()
+        self.fault = str(exc)
+        if isinstance(exc, StorageError):
+            return exc
+        err = StorageError(str(exc))
+        err.__cause__ = exc
+        return err
+
+    def _wrote(self) -> None:
+        self.fault = self.fault_since = None
+
     class _Tx:
-        def __init__(self, conn: sqlite3.Connection) -> None:
-            self.conn = conn
+        """One write transaction (BEGIN IMMEDIATE ... COMMIT); a write SQLite refuses
+        faults the store (:meth:`Store._faulted`), a committed one clears the fault."""
+
+        def __init__(self, store: Store, conn: sqlite3.Connection) -> None:
+            self.store, self.conn = store, conn
 
         def __enter__(self) -> sqlite3.Connection:
-            self.conn.execute("BEGIN IMMEDIATE")
+            try:
+                self.conn.execute("BEGIN IMMEDIATE")
+            except sqlite3.OperationalError as exc:
+                raise self.store._faulted(exc) from exc
             return self.conn
 
         def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
-            self.conn.execute("ROLLBACK" if exc_type else "COMMIT")
+            if exc_type is not None:
+                with contextlib.suppress(sqlite3.Error):
+                    if self.conn.in_transaction:
+                        self.conn.execute("ROLLBACK")
+                if isinstance(exc, sqlite3.OperationalError):
+                    raise self.store._faulted(exc) from exc
+                return
+            try:
+                self.conn.execute("COMMIT")
+            except sqlite3.OperationalError as err:
+                with contextlib.suppress(sqlite3.Error):
+                    if self.conn.in_transaction:
+                        self.conn.execute("ROLLBACK")
+                raise self.store._faulted(err) from err
+            self.store._wrote()
 
     def _tx(self) -> Store._Tx:
-        return Store._Tx(self._conn())
+        return Store._Tx(self, self._conn())
+
+    #: Space kept free beside a result being stored: SQLite writes it to the WAL, then
+    #: checkpoints it into the database file (twice its size at worst) [bytes].
+    RESERVE = 1 << 20
+
+    def room_for(self, nbytes: int) -> str | None:
+        """Why a result of ``nbytes`` would not fit on the store's disk (None: it fits, or
+        the free space is not known): refused before it is written, so that one large plan
+        does not fill the disk under every other job."""
+        free = free_bytes(self.path.parent)
+        need = 2 * nbytes + self.RESERVE
+        if free is None or need <= free:
+            return None
+        return (f"the plan's JSON is {nbytes} bytes; storing it needs about {need} bytes "
+                f"and the job store's disk has {free} free")
+
+    def probe(self) -> bool:
+        """Whether the store can be written now: one small write (a row of its own table);
+        it clears the fault when it succeeds, and records it when it does not."""
+        try:
+            with self._tx() as db:
+                db.execute("INSERT OR REPLACE INTO probe (id, at) VALUES (1, ?)",
+                           (time.time(),))
+        except sqlite3.OperationalError:
+            return False
+        return True
 
     # -- jobs ------------------------------------------------------------------------------
     def create(self, planner: str, request: str, time_limit: float,

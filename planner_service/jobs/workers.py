@@ -17,6 +17,15 @@ makes sure every job ends exactly once:
   warm-up structures between jobs, never ahead of a queued one;
 * a cancelled running job gets its worker killed and replaced, and ends ``cancelled``;
 * a worker that dies mid-solve ends its job ``failed`` with the exit code, and is replaced.
+
+The store's faults are states, not crashes (docs/service.md, "Storage faults"): a job
+whose result would not fit on the store's disk ends ``failed`` (``storage_error``)
+without it; a result the store refuses to write (disk full, read-only) is dropped and the
+job ends ``failed`` (``storage_error``) with SQLite's reason; while the store cannot be
+written at all, no job is handed out, the ends that could not be written are kept and
+written when it can, and the store is probed every :data:`PROBE_INTERVAL` so that the
+dispatcher resumes by itself once space returns. An unexpected error in a step is logged
+and the next step runs: the dispatcher never stops before the service does.
 """
 
 from __future__ import annotations
@@ -26,6 +35,7 @@ import logging
 import multiprocessing as mp
 import os
 import queue
+import sqlite3
 import threading
 import time
 from collections.abc import Callable
@@ -36,7 +46,7 @@ from typing import Any
 
 from dexroll_client.models import JobState, PlanStatus
 
-from .store import JobRow, Store
+from .store import JobRow, StorageError, Store
 
 __all__ = ["DEADLINE_MARGIN", "Dispatcher", "job_outcome"]
 
@@ -45,6 +55,8 @@ __all__ = ["DEADLINE_MARGIN", "Dispatcher", "job_outcome"]
 DEADLINE_MARGIN = 0.3
 #: The worker's planner is given the time left minus this much, for the reply to travel [s].
 _REPLY_TIME = 0.05
+#: How often a faulted store is probed for a write [s].
+PROBE_INTERVAL = 1.0
 
 log = logging.getLogger("dexroll.workers")
 
@@ -195,6 +207,12 @@ class Dispatcher(threading.Thread):
         self._wake_r, self._wake_w = self._ctx.Pipe(duplex=False)
         self._wake_lock = threading.Lock()
         self._stopping = threading.Event()
+        #: job ends the store could not write yet (job id -> the end's fields), written
+        #: once it can be written again
+        self._unwritten: dict[str, tuple[Any, ...]] = {}
+        self._probed = 0.0
+        #: the last unexpected error of a step (None: the last step went through)
+        self.last_error: str | None = None
 
     # -- called from other threads -----------------------------------------------------------
     def wake(self) -> None:
@@ -241,19 +259,69 @@ class Dispatcher(threading.Thread):
     def _end(self, job_id: str, state: JobState, code: str, message: str,
              raw_status: str | None = None, result: str | None = None,
              has_plan: bool | None = None) -> None:
-        if self.store.finish(job_id, state.value, code, message, raw_status, result,
-                             has_plan):
-            log.info("job %s ended %s (%s)", job_id, state.value, code)
+        """End a job in the store and tell its waiters. A result that would not fit on the
+        store's disk, or that the store refuses, is dropped: the job ends ``failed``
+        (``storage_error``) with the reason; an end the store cannot write at all is kept
+        for :meth:`_flush`."""
+        if result is not None:
+            reason = self.store.room_for(len(result))
+            if reason is None:
+                try:
+                    self._finish(job_id, state.value, code, message, raw_status, result,
+                                 has_plan)
+                    return
+                except StorageError as exc:
+                    reason = f"the job store could not store its plan: {exc}"
+            log.warning("job %s: %s", job_id, reason)
+            message = f"the plan ended {code}, but it was not stored: {reason}"
+            state, code, result, has_plan = JobState.FAILED, "storage_error", None, False
+        try:
+            self._finish(job_id, state.value, code, message, raw_status, result, has_plan)
+        except sqlite3.OperationalError as exc:
+            log.warning("job %s: its end (%s) cannot be written yet (%s); kept until the "
+                        "store can be written", job_id, code, exc)
+            self._unwritten[job_id] = (state.value, code, message, raw_status, result,
+                                       has_plan)
+
+    def _finish(self, job_id: str, *end: Any) -> None:
+        if self.store.finish(job_id, *end):
+            log.info("job %s ended %s (%s)", job_id, end[0], end[1])
         self.on_finish(job_id)
+
+    def _flush(self) -> None:
+        """Write the job ends kept while the store could not be written."""
+        for job_id, end in list(self._unwritten.items()):
+            try:
+                self._finish(job_id, *end)
+            except sqlite3.OperationalError:
+                return
+            del self._unwritten[job_id]
+
+    def _store_writable(self) -> bool:
+        """Whether jobs may be handed out: the store is not faulted, or a probe (at most
+        every PROBE_INTERVAL) found it writable again; then the kept ends are written."""
+        if self.store.fault is not None or self._unwritten:
+            now = time.monotonic()
+            if now - self._probed < PROBE_INTERVAL:
+                return False
+            self._probed = now
+            if not self.store.probe():
+                return False
+            log.info("the job store can be written again")
+            self._flush()
+        return self.store.fault is None and not self._unwritten
 
     def run(self) -> None:
         self._slots = [self._spawn() for _ in range(self.n_workers)]
         try:
             while not self._stopping.is_set():
-                self._step()
-        except Exception:  # pragma: no cover - keep the failure visible
-            log.exception("dispatcher crashed")
-            raise
+                try:
+                    self._step()
+                    self.last_error = None
+                except Exception as exc:  # logged; the next step runs (never stop here)
+                    log.exception("dispatcher step failed; going on")
+                    self.last_error = f"{type(exc).__name__}: {exc}"
+                    self._stopping.wait(PROBE_INTERVAL)
         finally:
             for slot in self._slots:
                 with contextlib.suppress(OSError, BrokenPipeError):
@@ -264,14 +332,21 @@ class Dispatcher(threading.Thread):
                     slot.process.kill()
 
     def _step(self) -> None:
-        # hand queued jobs to idle, ready workers
+        # hand queued jobs to idle, ready workers (none while the store cannot be written)
+        writable = self._store_writable()
         for slot in self._slots:
-            if slot.ready and not slot.warming and slot.job is None:
-                job = self.store.claim_next()
+            if writable and slot.ready and not slot.warming and slot.job is None:
+                try:
+                    job = self.store.claim_next()
+                except sqlite3.OperationalError as exc:
+                    log.warning("no job handed out: the job store cannot be written (%s)",
+                                exc)
+                    break
                 if job is None:
                     break
                 slot.job, slot.draining = job, False
-                self.store.set_worker(job.id, slot.process.pid)
+                with contextlib.suppress(sqlite3.OperationalError):  # the pid is a hint
+                    self.store.set_worker(job.id, slot.process.pid)
                 slot.started = time.monotonic()
                 slot.job_deadline = slot.started + job.time_limit
                 slot.deadline = slot.job_deadline + self.kill_grace
@@ -282,9 +357,10 @@ class Dispatcher(threading.Thread):
         for slot in self._slots:
             waitables += [slot.conn, slot.process.sentinel]
         now = time.monotonic()
-        timeout = min([0.5] + [max(0.0, (s.deadline if s.draining else
-                                          s.job_deadline + DEADLINE_MARGIN) - now)
-                               for s in self._slots if s.job])
+        timeout = min([0.5 if writable else PROBE_INTERVAL]
+                      + [max(0.0, (s.deadline if s.draining else
+                                   s.job_deadline + DEADLINE_MARGIN) - now)
+                         for s in self._slots if s.job])
         ready = wait(waitables, timeout=timeout)
         if self._wake_r in ready:
             while self._wake_r.poll():

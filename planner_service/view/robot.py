@@ -1,11 +1,12 @@
 """A finger's links as shapes with a pose per sample, from its own model.
 
 The shapes are the URDF's visual geometries as Pinocchio reads them
-(``buildGeomFromUrdfString``; boxes, cylinders, spheres, capsules), placed by Pinocchio's
-forward kinematics at the plan's joint angles. A joint whose link has no such shape (no
-visual, or a mesh the viewer cannot draw) gets a cylinder from its origin to the next
-joint's (or to the pad). The geometry on the pad's own link is left out: the pad is the
-fingertip record (:mod:`.scene`), drawn with its contact trace.
+(``buildGeomFromUrdfString``; boxes, cylinders, spheres, capsules; elements that name
+files, meshes and textures, are removed first: no path a request names is opened),
+placed by Pinocchio's forward kinematics at the plan's joint angles. A joint whose link
+has no such shape (no visual, or a mesh the viewer cannot draw) gets a cylinder from its
+origin to the next joint's (or to the pad). The geometry on the pad's own link is left
+out: the pad is the fingertip record (:mod:`.scene`), drawn with its contact trace.
 
 For a finger of a hand (a branch of the hand's tree), only its own links move; the fixed
 links it hangs from (the hand's palm, its base) are drawn once for the whole hand, and the
@@ -23,6 +24,8 @@ import numpy as np
 import pinocchio as pin
 
 from ocp import FingerModel, quaternion_wxyz
+
+from ..models_check import without_file_references
 
 __all__ = ["LinkBody", "finger_bodies", "pad_thickness"]
 
@@ -84,8 +87,12 @@ def _ancestor_links(urdf: str, first_joint: str) -> set[str]:
 
 
 def _geometry(finger: FingerModel) -> Any:
+    """The finger's visual shapes, read from its URDF without the elements that name files
+    (meshes, textures: :func:`~planner_service.models_check.without_file_references`):
+    a request's model never makes the service open a path; None when none can be read."""
     try:
-        return pin.buildGeomFromUrdfString(finger.model, finger.urdf_text,
+        return pin.buildGeomFromUrdfString(finger.model,
+                                           without_file_references(finger.urdf_text),
                                            pin.GeometryType.VISUAL)
     except Exception:  # no shapes known: every joint gets a segment
         return None

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 
 from dexroll_client.models import ErrorBody
 
-from ..deps import DispatcherDep, StoreDep, error_response
+from ..deps import STORE_RETRY_AFTER, DispatcherDep, StoreDep, error_response
 
 __all__ = ["router"]
 
@@ -23,14 +23,25 @@ async def healthz() -> dict[str, str]:
 
 
 @router.get("/readyz", responses={503: {"model": ErrorBody}})
-def readyz(store: StoreDep, dispatcher: DispatcherDep) -> Any:
-    """Readiness: the job store answers and at least one worker is ready."""
+def readyz(request: Request, store: StoreDep, dispatcher: DispatcherDep) -> Any:
+    """Readiness: the job store answers and can be written, the dispatcher runs, and at
+    least one worker is ready."""
+    retry = {"Retry-After": str(STORE_RETRY_AFTER)}
     try:
         queued = store.count("queued")
     except Exception as exc:  # the store is the service's memory: not ready without it
-        return error_response(503, "not_ready", f"job store unavailable: {exc}")
+        return error_response(503, "not_ready", f"job store unavailable: {exc}",
+                              headers=retry)
+    if store.fault is not None:
+        return error_response(503, "not_ready", f"the job store cannot be written "
+                              f"({store.fault}); new jobs are refused until it can",
+                              headers=retry)
+    if not dispatcher.is_alive():
+        return error_response(503, "not_ready", "the dispatcher is not running")
     workers = dispatcher.ready_workers
     if workers < 1:
         return error_response(503, "not_ready", "no solver worker is ready yet",
                               headers={"Retry-After": "1"})
-    return {"status": "ready", "workers": workers, "queued": queued}
+    simulations = request.app.state.simulations.stats()
+    return {"status": "ready", "workers": workers, "queued": queued,
+            "simulations": simulations}

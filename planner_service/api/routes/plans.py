@@ -19,11 +19,19 @@ from fastapi.responses import StreamingResponse
 
 from dexroll_client.models import FieldError, Job, JobList, JobState, PlanRequest
 
-from ...jobs.store import IdempotencyConflictError, JobRow, Store
+from ...jobs.store import IdempotencyConflictError, JobRow, StorageError, Store
 from ...models_check import CheckerBusyError
 from ...planners import RESULT
 from ..access import OwnerDep
-from ..deps import CheckerDep, DispatcherDep, NotifierDep, ServiceError, SettingsDep, StoreDep
+from ..deps import (
+    CheckerDep,
+    DispatcherDep,
+    NotifierDep,
+    ServiceError,
+    SettingsDep,
+    StoreDep,
+    store_fault_error,
+)
 from ..submission import StoreUnavailableError, submission_errors
 from .view import JobLinks, LinkedJob, with_links
 
@@ -115,7 +123,11 @@ async def submit_plan(
 ) -> Response:
     """Submit a planning request (`planner` picks the planner: `ball_on_palm`, the
     default, `one_finger` or `manipulation`): 201 with the finished job, or 202 and a
-    Location."""
+    Location. 503 + Retry-After while the job store cannot be written (disk full,
+    read-only)."""
+    refused = store_fault_error(store)
+    if refused is not None:
+        raise refused
     # cheap checks (no NLP), in a thread: a finger's URDF and the inverse kinematics
     # of its initial grasp take milliseconds; a warm start's job id is replaced by
     # that job's plan (the new job is self-contained)
@@ -136,6 +148,9 @@ async def submit_plan(
     capped = min(body.solver.time_limit, settings.max_time_limit)
     body = body.model_copy(update={"solver": body.solver.model_copy(
         update={"time_limit": capped})})
+    refused = store_fault_error(store)  # faulted while the request was checked
+    if refused is not None:
+        raise refused
     if store.count("queued") >= settings.max_queue:
         raise ServiceError(503, "queue_full",
                            f"{settings.max_queue} jobs are already queued",
@@ -145,6 +160,9 @@ async def submit_plan(
                                     idempotency_key, owner or "")
     except IdempotencyConflictError as exc:
         raise ServiceError(409, "idempotency_conflict", str(exc)) from exc
+    except StorageError as exc:  # the store faulted on this very write
+        raise store_fault_error(store) or ServiceError(
+            503, "storage_error", str(exc), headers={"Retry-After": "5"}) from exc
     if created:
         dispatcher.wake()
     if not JobState(row.state).terminal:
