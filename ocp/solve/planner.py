@@ -346,12 +346,17 @@ class ManipulationPlanner:
             return None
         reason = ("not planned: the turn is beyond the grasp's rolled reach (finger "
                   f"{short.finger!r}, the message says where)")
-        e = np.zeros(0)
+        e, e3 = np.zeros(0), np.zeros((0, 3))
         return ManipulationSolution(
-            Status.INFEASIBLE, short.message, "", e, np.zeros((0, 3)), np.zeros((0, 3, 3)),
-            np.zeros((0, 3)), np.zeros((0, 3)), (), (), e, e, None, None, None, None, {},
-            Certificate.failed(reason), (reason,),
-            stats=SolverStats("", 0, 0, 0.0, time.perf_counter() - t0, 0.0, math.nan, False))
+            status=Status.INFEASIBLE, message=short.message, raw_status="", t=e,
+            object_position=e3, object_rotation=np.zeros((0, 3, 3)), object_velocity=e3,
+            object_angular_velocity=e3, contacts=(), fingers=(), grasp_angle=e,
+            cone_margin=e, desired_position=None, desired_rotation=None,
+            tracking_position_error=None, tracking_angle_error=None, goal_error={},
+            certificate=Certificate.failed(reason), certificate_failures=(reason,),
+            stats=SolverStats(raw_status="", iterations=0, attempts=0, build_time=0.0,
+                              solve_time=time.perf_counter() - t0, certificate_time=0.0,
+                              objective=math.nan, cache_hit=False))
 
     def _with_forces(self, problem: ManipulationProblem, kin: ManipulationSolution
                      ) -> ManipulationSolution | None:
