@@ -313,6 +313,8 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
 
 
 def _manipulation_trajectory(sol: ManipulationSolution) -> ManipulationTrajectoryModel | None:
+    if sol.t.size == 0:
+        return None  # not planned (a turn beyond the grasp's rolled reach)
     arrays: dict[str, Any] = {
         "t": sol.t, "object_position": sol.object_position,
         "object_rotation": sol.object_rotation, "object_velocity": sol.object_velocity,
@@ -369,7 +371,7 @@ def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = No
     iterate) keeps its status and drops its trajectory (JSON has no NaN)."""
     cert = finger_certificate(ManipulationCertificateModel, sol.certificate)
     trajectory = _manipulation_trajectory(sol)
-    message = sol.message if trajectory is not None else \
+    message = sol.message if trajectory is not None or sol.t.size == 0 else \
         sol.message + " (non-finite iterate omitted)"
     status = PlanStatus(sol.status.value)
     if trajectory is None and status is PlanStatus.SOLVED:  # pragma: no cover - defensive
@@ -395,11 +397,19 @@ def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = No
 
 
 def manipulation_summary(result: ManipulationResult) -> str:
-    """One screen on a manipulation plan."""
-    lines = [f"status       {result.status.value}"
-             + (f"  (IPOPT: {result.stats.raw_status})" if result.stats else ""),
-             f"message      {result.message}"]
+    """One screen on a manipulation plan. Only a ``solved`` plan is certified; any other
+    says "not certified" on its first line, before any figure, and its tracking and force
+    lines are marked as the last iterate's, so that none reads as a result."""
+    certified = result.status is PlanStatus.SOLVED
+    mark = "" if certified else "not certified: "
+    ipopt = ""
     if result.stats is not None:
+        ipopt = f"  (IPOPT: {result.stats.raw_status})" if result.stats.raw_status else \
+            "  (answered before any NLP was built)"
+    lines = [f"status       {result.status.value}" + ("" if certified else ", not certified")
+             + ipopt,
+             f"message      {result.message}"]
+    if result.stats is not None and result.stats.raw_status:
         s = result.stats
         lines += [f"iterations   {s.iterations}, N = {s.n_intervals}, {s.refinements} "
                   "refinement(s)",
@@ -411,8 +421,8 @@ def manipulation_summary(result: ManipulationResult) -> str:
         if all(c.force is not None for c in t.contacts) and t.contacts:
             normal = [-float(np.dot(f, n)) for c in t.contacts
                       for f, n in zip(c.force or [], c.normal, strict=True)]
-            lines.append(f"forces       normal {min(normal):.3g} to {max(normal):.3g} N "
-                         "(planned, every contact)")
+            lines.append(f"forces       {mark}normal {min(normal):.3g} to {max(normal):.3g}"
+                         " N (planned, every contact)")
     if result.goal_error:
         worst_goal = max(result.goal_error.values())
         lines.append(f"goal error   {worst_goal:.3g} (worst of {len(result.goal_error)} "
@@ -424,8 +434,9 @@ def manipulation_summary(result: ManipulationResult) -> str:
         if "max_tracking_position_error" in tol and "max_tracking_angle_error" in tol:
             bounds = (f" (tolerances {tol['max_tracking_position_error'] * 1e3:.3g} mm, "
                       f"{math.degrees(tol['max_tracking_angle_error']):.3g} deg)")
-        lines.append(f"tracking     {max(t.tracking_position_error) * 1e3:.3g} mm, "
-                     f"{math.degrees(max(t.tracking_angle_error)):.3g} deg worst{bounds}")
+        lines.append(f"tracking     {mark}{max(t.tracking_position_error) * 1e3:.3g} mm, "
+                     f"{math.degrees(max(t.tracking_angle_error)):.3g} deg worst{bounds}"
+                     + ("" if certified else " (the last iterate's, not a plan's)"))
     if c is not None:
         lines.append("certificate  " + ("PASSED" if c.passed else "FAILED"))
         slips = [v for k, v in c.values.items() if k.startswith("max_slip_speed_")]
