@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 import time
 from collections import OrderedDict
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -334,29 +334,10 @@ class ManipulationPlanner:
         return with_earlier(coupled, kin)
 
     def beyond_reach(self, problem: ManipulationProblem) -> ManipulationSolution | None:
-        """A turn of a ball in round fingertips that the grasp cannot roll through (a
-        finger stops at a joint limit or its cap's seam well short of it:
-        :func:`~ocp.robots.turn_reach.problem_shortfall`), answered without an NLP: an
-        ``infeasible`` plan without samples whose message names the finger, the limit and
-        the angle; None for any other problem. Milliseconds to a few hundred."""
-        t0 = time.perf_counter()
-        short = problem_shortfall(problem, lambda: [
+        """A turn the grasp cannot roll through, answered without an NLP
+        (:func:`unplanned_turn`); None for any other problem."""
+        return unplanned_turn(problem, lambda: [
             self.initial_state(problem)[tip.q_cols] for tip in self.model(problem).fingertips])
-        if short is None:
-            return None
-        reason = ("not planned: the turn is beyond the grasp's rolled reach (finger "
-                  f"{short.finger!r}, the message says where)")
-        e, e3 = np.zeros(0), np.zeros((0, 3))
-        return ManipulationSolution(
-            status=Status.INFEASIBLE, message=short.message, raw_status="", t=e,
-            object_position=e3, object_rotation=np.zeros((0, 3, 3)), object_velocity=e3,
-            object_angular_velocity=e3, contacts=(), fingers=(), grasp_angle=e,
-            cone_margin=e, desired_position=None, desired_rotation=None,
-            tracking_position_error=None, tracking_angle_error=None, goal_error={},
-            certificate=Certificate.failed(reason), certificate_failures=(reason,),
-            stats=SolverStats(raw_status="", iterations=0, attempts=0, build_time=0.0,
-                              solve_time=time.perf_counter() - t0, certificate_time=0.0,
-                              objective=math.nan, cache_hit=False))
 
     def _with_forces(self, problem: ManipulationProblem, kin: ManipulationSolution
                      ) -> ManipulationSolution | None:
@@ -499,6 +480,33 @@ def repatched(planner: ManipulationPlanner, problem: ManipulationProblem, strate
     if clear or (sol.status is not Status.SOLVED and alt_sol.status is Status.SOLVED):
         return alt, alt_strategy, alt_x0, alt_sol
     return problem, strategy, x0, sol
+
+
+def unplanned_turn(problem: ManipulationProblem,
+                   joints: Callable[[], list[FloatArray]]) -> ManipulationSolution | None:
+    """A turn of a ball in round fingertips that the grasp cannot roll through (a
+    finger stops at a joint limit or its cap's seam well short of it:
+    :func:`~ocp.robots.turn_reach.problem_shortfall`), answered without an NLP: an
+    ``infeasible`` plan without samples whose message names the finger, the limit and
+    the angle; None for any other problem (``joints``: the fingers' initial joints, asked
+    for only when the check applies). Milliseconds to a few hundred."""
+    t0 = time.perf_counter()
+    short = problem_shortfall(problem, joints)
+    if short is None:
+        return None
+    reason = ("not planned: the turn is beyond the grasp's rolled reach (finger "
+              f"{short.finger!r}, the message says where)")
+    e, e3 = np.zeros(0), np.zeros((0, 3))
+    return ManipulationSolution(
+        status=Status.INFEASIBLE, message=short.message, raw_status="", t=e,
+        object_position=e3, object_rotation=np.zeros((0, 3, 3)), object_velocity=e3,
+        object_angular_velocity=e3, contacts=(), fingers=(), grasp_angle=e,
+        cone_margin=e, desired_position=None, desired_rotation=None,
+        tracking_position_error=None, tracking_angle_error=None, goal_error={},
+        certificate=Certificate.failed(reason), certificate_failures=(reason,),
+        stats=SolverStats(raw_status="", iterations=0, attempts=0, build_time=0.0,
+                          solve_time=time.perf_counter() - t0, certificate_time=0.0,
+                          objective=math.nan, cache_hit=False))
 
 
 _DEFAULT: ManipulationPlanner | None = None
