@@ -184,14 +184,16 @@ def _fatrop(block: BlockNLP, name: str, warm: bool = False) -> ca.Function:
     """fatrop on a stage-ordered block NLP, its stages given (``structure_detection``
     'manual': the layout knows them; 'auto' finds the same, measured in
     benchmarks/structured_solve.py). fatrop's CasADi interface takes no ``jac_g`` or
-    ``hess_lag``: it differentiates the oracle itself (the mapped blocks in MX)."""
+    ``hess_lag``: it differentiates the oracle itself, here expanded to SX (``expand``:
+    seconds more to build, its derivatives' evaluations ~4x faster than CasADi's MX
+    derivatives of the mapped blocks; docs/performance.md)."""
     assert block.stages is not None
     opts = {**FATROP_OPTIONS, **({"mu_init": 1e-6} if warm else {})}
     return ca.nlpsol(name, "fatrop", block.oracle,
                      {"structure_detection": "manual", "N": block.stages["N"],
                       "nx": block.stages["nx"], "nu": block.stages["nu"],
                       "ng": block.stages["ng"], "fatrop": opts, "print_time": False,
-                      "error_on_fail": False})
+                      "error_on_fail": False, "expand": True})
 
 
 def warm_solver(nlp: NLP) -> ca.Function | StructuredSolver:
