@@ -192,21 +192,16 @@ class PhasedNLP:
         ng = row
         parked = self._parked(point_vars, placed, Ui, Umi, Xi, Xmi)
         t_rows = off_t + np.arange(n_t)
-        structure: dict[str, Any] | None = None
+        ng_k: list[int] = []
         if stages is not None:
-            new_row, ng_k = _stage_rows(placed, stages, t_rows, Jt, ze_idx, ng, n)
-            t_rows = new_row[t_rows]
-            for pl in placed:
-                pl.row_maps = [np.where(r >= 0, new_row[np.maximum(r, 0)], -1)
-                               for r in pl.row_maps]
-            inv = np.argsort(new_row)
-            lbg, ubg = [lbg[i] for i in inv], [ubg[i] for i in inv]
-            structure = {"N": n, "nx": stages.nx, "nu": stages.nu, "ng": ng_k}
+            t_rows, lbg, ubg, ng_k = _reorder_rows(placed, stages, t_rows, Jt, ze_idx,
+                                                   lbg, ubg, n)
         out = _functions(self, t0, nw, ng, placed, t_rows,
                          (tg_fn, tg_jac, tg_hess, Jt, Ht, ze_idx), lbg, ubg, unpack,
                          pack, nseg, nv, parked)
         if stages is not None:
-            out.copies, out.stages = stages.copies, structure
+            out.copies = stages.copies
+            out.stages = {"N": n, "nx": stages.nx, "nu": stages.nu, "ng": ng_k}
         return out
 
     def _touching_of(self, intervals: list[int]) -> tuple[bool, ...]:
@@ -300,6 +295,18 @@ def _stage_rows(placed: list[_Placed], st: StageLayout, t_rows: NDArray[np.int64
     for i, row in enumerate(t_rows):
         row_stage[row] = int(st.stage_of[ze_idx[c[r == i]]].min())
     return stage_rows(row_stage, gap, n + 1)
+
+
+def _reorder_rows(placed: list[_Placed], st: StageLayout, t_rows: NDArray[np.int64],
+                  Jt: Any, ze_idx: NDArray[np.int64], lbg: list[float], ubg: list[float],
+                  n: int) -> tuple[NDArray[np.int64], list[float], list[float], list[int]]:
+    """The rows in the stage order (:func:`_stage_rows`): the instances' row maps moved in
+    place; the targets' rows, the bounds and each stage's ``ng`` returned."""
+    new_row, ng_k = _stage_rows(placed, st, t_rows, Jt, ze_idx, len(lbg), n)
+    for pl in placed:
+        pl.row_maps = [np.where(r >= 0, new_row[np.maximum(r, 0)], -1) for r in pl.row_maps]
+    inv = np.argsort(new_row)
+    return new_row[t_rows], [lbg[i] for i in inv], [ubg[i] for i in inv], ng_k
 
 
 def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed],
