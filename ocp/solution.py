@@ -125,6 +125,9 @@ class SolverStats:
     n_intervals: int = 0
     #: The IPOPT calls alone [s] (part of ``solve_time``, which includes the guesses).
     ipopt_time: float = 0.0
+    #: The NLP solver whose point is the plan: "ipopt", "fatrop", or "ipopt (fatrop: its
+    #: status)" when IPOPT took over from a fatrop that did not succeed (issue 27).
+    solver: str = "ipopt"
 
     def to_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)

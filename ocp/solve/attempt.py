@@ -29,7 +29,6 @@ import time
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
-import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
@@ -44,8 +43,8 @@ from ocp.solution import (
 from ocp.solve.assemble import assemble_solution, planned_forces
 from ocp.solve.certify import certify_grasp
 from ocp.solve.guesses import Guess, Strategy, epigraph_guess, strategy_for
-from ocp.solve.ipopt import IPOPT_WARM_OPTIONS
 from ocp.solve.ipopt import NLP as _NLP
+from ocp.solve.ipopt import warm_solver
 from ocp.spec.grasp import ManipulationProblem, contact_charts, support_goal_errors
 from ocp.spec.problem import ProblemError
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
@@ -107,6 +106,8 @@ class IpoptRun:
     w: FloatArray
     time: float  # the IPOPT call [s]
     point: NlpPoint | None = field(default=None, repr=False)
+    #: the solver whose point this is (``nlp.solver``'s ``stats()["solver"]``)
+    solver: str = "ipopt"
 
 
 def setup(planner: ManipulationPlanner, problem: ManipulationProblem,
@@ -153,13 +154,12 @@ def run(s: Setup, w0: FloatArray, point: NlpPoint | None, deadline: float,
     nlp = s.nlp
     solver, duals = nlp.solver, {}
     if point is not None:
-        n_xu = nlp.hs.w.numel()
+        aux = nlp.aux_indices()
         w0 = w0.copy()
-        w0[n_xu:] = np.clip(point.w[n_xu:], s.lbx[n_xu:], s.ubx[n_xu:])
+        w0[aux] = np.clip(point.w[aux], s.lbx[aux], s.ubx[aux])
         if nlp.warm_solver is None:
             t_build = time.perf_counter()
-            nlp.warm_solver = ca.nlpsol("manipulation_warm", "ipopt", nlp.oracle,
-                                        {**nlp.options, **IPOPT_WARM_OPTIONS})
+            nlp.warm_solver = warm_solver(nlp)
             s.build_time += time.perf_counter() - t_build
         solver, duals = nlp.warm_solver, {"lam_x0": point.lam_x, "lam_g0": point.lam_g}
     nlp.stop.arm(deadline, max_iter)
@@ -176,7 +176,8 @@ def run(s: Setup, w0: FloatArray, point: NlpPoint | None, deadline: float,
     return IpoptRun(status, raw, int(st["iter_count"]), float(res["f"]),
                     viol if math.isfinite(viol) else math.inf, out[0], elapsed,
                     NlpPoint(nlp.fingerprint, *out)
-                    if all(np.all(np.isfinite(a)) for a in out) else None)
+                    if all(np.all(np.isfinite(a)) for a in out) else None,
+                    str(st.get("solver", "ipopt")))
 
 
 def finish(s: Setup, runs: list[IpoptRun], solve_time: float, deadline: float,
@@ -216,7 +217,7 @@ def finish(s: Setup, runs: list[IpoptRun], solve_time: float, deadline: float,
                         build_time=s.build_time, solve_time=solve_time,
                         certificate_time=cert_time, objective=best.objective,
                         cache_hit=s.cache_hit, n_intervals=len(s.t_nodes) - 1,
-                        ipopt_time=ipopt_time)
+                        ipopt_time=ipopt_time, solver=best.solver)
     return replace(sol, stats=stats, nlp_point=best.point)
 
 

@@ -14,11 +14,28 @@ from pathlib import Path
 from typing import Any
 
 import casadi as ca
+import numpy as np
 
 from ocp.solution import Status
 from ocp.transcription.nlp_blocks import BlockNLP
 
-__all__ = ["IPOPT_OPTIONS", "IPOPT_WARM_OPTIONS", "NLP", "StopCallback", "ipopt_solver"]
+__all__ = ["FATROP_OPTIONS", "IPOPT_OPTIONS", "IPOPT_WARM_OPTIONS", "NLP", "SOLVERS",
+           "StopCallback", "StructuredSolver", "ipopt_solver", "warm_solver"]
+
+#: The NLP solvers a planner may choose (``ManipulationPlanner(solver=...)``).
+SOLVERS = ("ipopt", "fatrop")
+
+#: fatrop's settings (of the few its CasADi interface passes on: no acceptable level, no
+#: barrier strategy, no warm-start options): IPOPT's tolerances and barrier start
+#: (:data:`IPOPT_OPTIONS`), so that a converged fatrop point is one IPOPT would accept;
+#: fatrop calls no iteration callback, so its iteration budget is fixed here.
+FATROP_OPTIONS: dict[str, Any] = {
+    "tol": 1e-6,
+    "constr_viol_tol": 1e-10,
+    "mu_init": 1e-3,
+    "max_iter": 300,
+    "print_level": 0,
+}
 
 #: IPOPT settings shared by every structure. Constraint violation (goals, dynamics, in
 #: scaled units) must be tight; the optimality (dual) tolerance is looser because a pure
@@ -113,40 +130,119 @@ class StopCallback(ca.Callback):
 class NLP(BlockNLP):
     """One grasp structure's NLP with its IPOPT solver: what the planner solves."""
 
-    solver: ca.Function
+    solver: ca.Function | StructuredSolver
     stop: StopCallback
     #: the options of ``solver`` (with the block derivatives): what the warm-start solver
     #: is built from, on first use
     options: dict[str, Any]
     #: fingerprint of this NLP (structure, grid, fingers' models), for warm starts
     fingerprint: str
-    warm_solver: ca.Function | None = None
+    warm_solver: ca.Function | StructuredSolver | None = None
     #: whether ``solver`` runs compiled code (``compile_dir``)
     compiled: bool = False
+    #: the solver chosen (:data:`SOLVERS`): "fatrop" runs IPOPT as its fallback
+    solver_name: str = "ipopt"
 
 
-def ipopt_solver(block: BlockNLP, fingerprint: str, compile_dir: Path | None = None) -> NLP:
+class StructuredSolver:
+    """The solver of a stage-ordered NLP, called as an ``nlpsol`` is (``solver(x0=..., ...)``,
+    ``solver.stats()``): the copies of the intervals' ends freed of their bounds (the
+    gap-closing rows tie them to the bounded variables; bounded copies would make active
+    bounds linearly dependent), fatrop first when there is one, IPOPT (``fallback``) when
+    fatrop does not succeed. ``stats()["solver"]`` says which solver's point is returned;
+    ``iter_count`` counts both solvers' iterations."""
+
+    def __init__(self, fatrop: ca.Function | None, fallback: ca.Function,
+                 copies: Any) -> None:
+        self.fatrop, self.fallback, self.copies = fatrop, fallback, copies
+        self._stats: dict[str, Any] = {}
+
+    def __call__(self, **kw: Any) -> dict[str, Any]:
+        lbx, ubx = (np.array(kw[k], dtype=float, copy=True) for k in ("lbx", "ubx"))
+        lbx[self.copies], ubx[self.copies] = -np.inf, np.inf
+        kw = {**kw, "lbx": lbx, "ubx": ubx}
+        iters, note = 0, ""
+        if self.fatrop is not None:
+            res = self.fatrop(**{k: v for k, v in kw.items() if k not in ("lam_x0",)})
+            st = dict(self.fatrop.stats())
+            if st.get("success"):
+                self._stats = {**st, "return_status": "Solve_Succeeded", "solver": "fatrop",
+                               "fatrop_status": st["return_status"]}
+                return dict(res)
+            iters, note = int(st.get("iter_count", 0)), f" (fatrop: {st['return_status']})"
+        res = self.fallback(**kw)
+        st = dict(self.fallback.stats())
+        self._stats = {**st, "iter_count": iters + int(st["iter_count"]),
+                       "solver": "ipopt" + note}
+        return dict(res)
+
+    def stats(self) -> dict[str, Any]:
+        return self._stats
+
+
+def _fatrop(block: BlockNLP, name: str, warm: bool = False) -> ca.Function:
+    """fatrop on a stage-ordered block NLP, its stages given (``structure_detection``
+    'manual': the layout knows them; 'auto' finds the same, measured in
+    benchmarks/structured_solve.py). fatrop's CasADi interface takes no ``jac_g`` or
+    ``hess_lag``: it differentiates the oracle itself, here expanded to SX (``expand``:
+    seconds more to build, its derivatives' evaluations ~4x faster than CasADi's MX
+    derivatives of the mapped blocks; docs/performance.md)."""
+    assert block.stages is not None
+    opts = {**FATROP_OPTIONS, **({"mu_init": 1e-6} if warm else {})}
+    return ca.nlpsol(name, "fatrop", block.oracle,
+                     {"structure_detection": "manual", "N": block.stages["N"],
+                      "nx": block.stages["nx"], "nu": block.stages["nu"],
+                      "ng": block.stages["ng"], "fatrop": opts, "print_time": False,
+                      "error_on_fail": False, "expand": True})
+
+
+def warm_solver(nlp: NLP) -> ca.Function | StructuredSolver:
+    """The solver of a warm start from a previous primal-dual point of ``nlp``: IPOPT with
+    :data:`IPOPT_WARM_OPTIONS` (behind fatrop, warm-barrier, when the NLP's solver is
+    fatrop)."""
+    ipopt = ca.nlpsol("manipulation_warm", "ipopt", nlp.oracle,
+                      {**nlp.options, **IPOPT_WARM_OPTIONS})
+    if nlp.stages is None:
+        return ipopt
+    fatrop = _fatrop(nlp, "manipulation_warm_fatrop", True) \
+        if nlp.solver_name == "fatrop" else None
+    return StructuredSolver(fatrop, ipopt, nlp.copies)
+
+
+def ipopt_solver(block: BlockNLP, fingerprint: str, compile_dir: Path | None = None,
+                 solver: str = "ipopt") -> NLP:
     """IPOPT (:data:`IPOPT_OPTIONS`, a :class:`StopCallback`) on a block NLP, its functions
     compiled and cached in ``compile_dir`` when given (:mod:`ocp.solve.compiled`; the virtual
-    machine when there is no compiler)."""
+    machine when there is no compiler). A stage-ordered NLP (``block.stages``) is solved by
+    a :class:`StructuredSolver`: with ``solver="fatrop"``, fatrop first and this IPOPT as
+    its fallback (not compiled: the compiled solver takes the kind-ordered NLP's path)."""
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r}: one of {SOLVERS}")
+    if solver == "fatrop" and block.stages is None:
+        raise ValueError("fatrop needs the stage-ordered NLP (stage_order=True)")
     t0 = time.perf_counter()
     nw, ng = block.pack.nnz_out(0), len(block.lbg)
     stop = StopCallback(nw, ng, block.params.size)
     options = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
                "ipopt.max_iter": 100_000, **IPOPT_OPTIONS, "iteration_callback": stop,
                "error_on_fail": False, "jac_g": block.jac_g, "hess_lag": block.hess_lag}
-    solver = ca.nlpsol("manipulation", "ipopt", block.oracle, options)
+    ipopt = ca.nlpsol("manipulation", "ipopt", block.oracle, options)
     compiled = False
-    if compile_dir is not None:
+    structured: Any = None
+    if block.stages is not None:
+        structured = StructuredSolver(_fatrop(block, "manipulation_fatrop")
+                                      if solver == "fatrop" else None, ipopt, block.copies)
+    elif compile_dir is not None:
         from ocp.solve.compiled import compiled_block_solver
 
         try:
-            solver, options = compiled_block_solver(block.oracle, options, fingerprint,
-                                                    compile_dir)
+            ipopt, options = compiled_block_solver(block.oracle, options, fingerprint,
+                                                   compile_dir)
             compiled = True
         except RuntimeError:  # no compiler, or it failed: the virtual machine solves
             pass
     parts = {f.name: getattr(block, f.name) for f in fields(BlockNLP)}
     parts["build_time"] = block.build_time + time.perf_counter() - t0
-    return NLP(**parts, solver=solver, stop=stop, options=options, fingerprint=fingerprint,
-               compiled=compiled)
+    return NLP(**parts, solver=structured if structured is not None else ipopt, stop=stop,
+               options=options, fingerprint=fingerprint, compiled=compiled,
+               solver_name=solver)

@@ -204,11 +204,17 @@ class ManipulationPlanner:
     module's doc."""
 
     def __init__(self, compile_dir: Path | None = None, background: bool = False,
-                 max_iter_per_guess: int = 300, max_nlps: int = MAX_CACHED_NLPS) -> None:
+                 max_iter_per_guess: int = 300, max_nlps: int = MAX_CACHED_NLPS,
+                 solver: str = "ipopt", stage_order: bool | None = None) -> None:
         #: When set, each structure's NLP functions are generated as C, compiled with gcc
         #: and cached there (:func:`ocp.solve.compiled.compiled_block_solver`): seconds the first
         #: time, IPOPT about 40 % faster on experiment 1 (docs/performance.md).
         self.compile_dir = compile_dir
+        #: The NLP solver (:data:`~ocp.solve.ipopt.SOLVERS`): "fatrop" solves the
+        #: stage-ordered NLP with IPOPT as its fallback (issue 27; docs/performance.md).
+        self.solver = solver
+        #: Build the stage-ordered NLP (default: when the solver needs it).
+        self.stage_order = solver == "fatrop" if stage_order is None else stage_order
         #: With ``background``, a new structure is solved in the virtual machine at once and
         #: compiled in a background thread (:class:`ocp.solve.compiled.BackgroundCompiler`); the
         #: compiled solver replaces it at the first solve after the compile (a service
@@ -251,8 +257,10 @@ class ManipulationPlanner:
         block = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
                                        key.tracking, FORCE_REGULARISATION,
                                        forces=key.forces, smooth=key.smooth,
-                                       schedule=key.schedule)
-        nlp = ipopt_solver(block, key.fingerprint(m), None if self.compiler else self.compile_dir)
+                                       schedule=key.schedule, stage_order=self.stage_order)
+        fingerprint = key.fingerprint(m) + (":stages" if self.stage_order else "")
+        nlp = ipopt_solver(block, fingerprint, None if self.compiler else self.compile_dir,
+                           self.solver)
         self._nlps[key] = nlp
         while len(self._nlps) > max(1, self.max_nlps):
             self._nlps.popitem(last=False)

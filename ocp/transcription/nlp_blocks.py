@@ -100,6 +100,21 @@ class BlockNLP:
     parked: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     #: each interval's fingertips touching the object (the schedule, per interval)
     touching: tuple[tuple[bool, ...], ...] = ()
+    #: the stage order's copies of each interval's end (``stage_order``; free variables,
+    #: the gap-closing rows tie them; :mod:`~ocp.transcription.stage_order`): empty in
+    #: the kind order
+    copies: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: the stages' sizes in the stage order (fatrop's ``N``, ``nx``, ``nu``, ``ng``); None
+    #: in the kind order
+    stages: dict[str, Any] | None = None
+
+    def aux_indices(self) -> NDArray[np.int64]:
+        """The variables other than the states and inputs (epigraph, forces, copies):
+        what a warm start takes from a previous NLP point."""
+        Xi, Xmi, Ui, Umi = (np.asarray(a).ravel() for a in
+                            self.unpack(np.arange(self.pack.nnz_out(0), dtype=float))[:4])
+        xu = np.concatenate([Xi, Xmi, Ui, Umi]).round().astype(np.int64)
+        return np.setdiff1d(np.arange(self.pack.nnz_out(0)), xu)
 
 
 class BlockAssembler:
@@ -164,7 +179,8 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
                            via_masks: tuple[tuple[bool, ...], ...], tracking: bool,
                            force_regularisation: float, small: bool | None = None,
                            forces: bool = False, smooth: bool = False,
-                           schedule: Schedule | None = None) -> BlockNLP:
+                           schedule: Schedule | None = None,
+                           stage_order: bool = False) -> BlockNLP:
     """The NLP of one grasp structure (``m``: its
     :class:`~ocp.transcription.grasp_model.GraspModel`) with its contact phases
     (``schedule``: :data:`Schedule`; None, one phase with every fingertip touching):
@@ -200,7 +216,12 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     squared rate of change of its inputs (``accel[1]``: the ramps' time constant over the
     duration). Without that term, continuity alone would let the optimum ramp up within
     one interval: a velocity jump again as h -> 0 (slip converged like h on the triangle
-    example)."""
+    example).
+
+    ``stage_order`` (issue 27): the same NLP laid out stage by stage for a
+    structure-exploiting solver (:mod:`~ocp.transcription.stage_order`: each interval's
+    end copied into its stage, the gap-closing rows first in each stage; ``copies`` and
+    ``stages`` say where); never the small SX form."""
     t0 = time.perf_counter()
     nc = m.n_contacts
     hs = HermiteSimpson(m.nx, m.nu, segments, smooth)
@@ -208,15 +229,15 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     touching = interval_touching(len(m.fingertips), n, schedule)
     one_phase = len(set(touching)) == 1 and all(touching[0])
     if small is None:
-        small = nc < 2 and not tracking and one_phase
+        small = nc < 2 and not tracking and one_phase and not stage_order
     if small:
-        if nc >= 2 or tracking or forces or not one_phase:
+        if nc >= 2 or tracking or forces or not one_phase or stage_order:
             raise ValueError("only a grasp without path rows (one contact, no tracking, "
-                             "one phase) has the small SX form")
+                             "one phase, kind order) has the small SX form")
         from ocp.transcription.small_nlp import small_grasp_nlp
 
         return small_grasp_nlp(m, segments, goal_mask, via_masks, t0, smooth)
     from ocp.transcription.phased_nlp import PhasedNLP
 
     return PhasedNLP(m, hs, touching, goal_mask, via_masks, tracking, force_regularisation,
-                      forces, smooth).build(t0)
+                      forces, smooth, stage_order).build(t0)

@@ -34,6 +34,7 @@ from ocp.transcription.nlp_blocks import (
     _node_input_pairs,
     _triplets,
 )
+from ocp.transcription.stage_order import StageLayout, copy_block, stage_layout, stage_rows
 
 __all__ = ["PhasedNLP"]
 
@@ -60,10 +61,11 @@ class PhasedNLP:
     def __init__(self, m: Any, hs: HermiteSimpson, touching: list[tuple[bool, ...]],
                  goal_mask: tuple[bool, ...], via_masks: tuple[tuple[bool, ...], ...],
                  tracking: bool, force_regularisation: float, forces: bool,
-                 smooth: bool) -> None:
+                 smooth: bool, stage_order: bool = False) -> None:
         self.m, self.hs, self.touching = m, hs, touching
         self.goal_mask, self.via_masks = goal_mask, via_masks
         self.tracking, self.forces, self.smooth = tracking, forces, smooth
+        self.stage_order = stage_order
         n = hs.n_intervals
         self.n, self.npts = n, 2 * n + 1
         # every point's contacts: a node has those of the intervals it joins
@@ -97,11 +99,17 @@ class PhasedNLP:
         Xi, Xmi, Ui, Umi, Si, Smi, Fi = (np.asarray(a).round().astype(np.int64)
                                          for a in unpack(np.arange(nw, dtype=float)))
         Fi = Fi.reshape(n_fv, npts)
+        Si, Smi = Si.reshape(n_s, n + 1), Smi.reshape(n_s, n)
+        stages = None
+        if self.stage_order:
+            stages = stage_layout((Xi, Xmi, Ui, Umi, Si, Smi), Fi, lc, rc, nw)
+            unpack, pack = _reordered(unpack, pack, stages, nw)
+            Xi, Xmi, Ui, Umi, Si, Smi, Fi = (stages.pos[a] for a in
+                                             (Xi, Xmi, Ui, Umi, Si, Smi, Fi))
+            nw = stages.size
         XA = np.hstack([Xi, Xmi])  # nodes, then midpoints: the points' order in the NLP
         SA = np.hstack([Si.reshape(n_s, n + 1), Smi.reshape(n_s, n)])
         point_vars = [np.concatenate([XA[:, c], SA[:, c], Fi[:, c]]) for c in range(npts)]
-        Si = Si.reshape(n_s, n + 1)
-        Smi = Smi.reshape(n_s, n)
         self.idx = (Xi, Xmi, Ui, Umi, Si, Smi)
 
         # -- each block kind's instances, their rows in g in order -------------------------
@@ -134,11 +142,18 @@ class PhasedNLP:
         def all_rows(i: int, blk: Block) -> list[int]:
             return list(range(blk.n_rows))
 
-        # defects of every interval
+        # defects of every interval (in the stage order: with its end's copy)
+        ex, eu, es = (stages.cx, stages.cu, stages.cs) if stages is not None else (
+            Xi[:, 1:], Ui[:, rc], Si[:, 1:])
         group(self.touching, lambda k: interval_block(m.phase(k), n_s, self.smooth),
-              lambda k, _: np.concatenate([Xi[:, k], Xmi[:, k], Xi[:, k + 1], Ui[:, lc[k]],
-                                           Umi[:, k], Ui[:, rc[k]], Si[:, k], Smi[:, k],
-                                           Si[:, k + 1]]), all_rows)
+              lambda k, _: np.concatenate([Xi[:, k], Xmi[:, k], ex[:, k], Ui[:, lc[k]],
+                                           Umi[:, k], eu[:, k], Si[:, k], Smi[:, k],
+                                           es[:, k]]), all_rows)
+        if stages is not None:  # the gap-closing rows: s_k+1 = copy_k
+            arriving = np.vstack([Xi[:, 1:], Ui[:, rc], Si[:, 1:]])
+            copies = np.vstack([ex, eu, es])
+            group([None] * n, lambda _: copy_block(copies.shape[0]),
+                  lambda k, _: np.concatenate([arriving[:, k], copies[:, k]]), all_rows)
         # every point's rows (node 0: the given initial grasp, without tracking bounds)
         group(self.point_masks, lambda k: self._points[k],
               lambda c, blk: point_vars[c][blk.z_map],
@@ -150,7 +165,6 @@ class PhasedNLP:
         row += n_t
         lbg += [0.0] * n_t
         ubg += [0.0] * n_t
-        off_r = row
         # the closure at the velocity level: every node with each of its inputs (those of
         # the intervals using that input touch), then the midpoints
         pairs = _node_input_pairs(hs)
@@ -163,7 +177,7 @@ class PhasedNLP:
                   all_rows)
         if self.smooth and m.effort_groups()[2]:
             group([None] * n, lambda _: accel_block(m, True),
-                  lambda k, _: np.concatenate([Ui[:, lc[k]], Umi[:, k], Ui[:, rc[k]]]),
+                  lambda k, _: np.concatenate([Ui[:, lc[k]], Umi[:, k], eu[:, k]]),
                   all_rows)
         # fingertips landing on the object at a node: their closure there
         landings = [(k, tuple(i for i, (a, b) in enumerate(zip(self.touching[k - 1],
@@ -177,9 +191,18 @@ class PhasedNLP:
                   lambda i, _: Xi[:, landings[i][0]], all_rows)
         ng = row
         parked = self._parked(point_vars, placed, Ui, Umi, Xi, Xmi)
-        return _functions(self, t0, nw, ng, placed, (off_t, off_r),
-                               (tg_fn, tg_jac, tg_hess, Jt, Ht, ze_idx), lbg, ubg, unpack,
-                               pack, nseg, nv, parked)
+        t_rows = off_t + np.arange(n_t)
+        ng_k: list[int] = []
+        if stages is not None:
+            t_rows, lbg, ubg, ng_k = _reorder_rows(placed, stages, t_rows, Jt, ze_idx,
+                                                   lbg, ubg, n)
+        out = _functions(self, t0, nw, ng, placed, t_rows,
+                         (tg_fn, tg_jac, tg_hess, Jt, Ht, ze_idx), lbg, ubg, unpack,
+                         pack, nseg, nv, parked)
+        if stages is not None:
+            out.copies = stages.copies
+            out.stages = {"N": n, "nx": stages.nx, "nu": stages.nu, "ng": ng_k}
+        return out
 
     def _touching_of(self, intervals: list[int]) -> tuple[bool, ...]:
         out = self.touching[intervals[0]]
@@ -242,15 +265,58 @@ class PhasedNLP:
         return np.array(sorted(set(out)), dtype=np.int64)
 
 
+def _reordered(unpack: ca.Function, pack: ca.Function, st: StageLayout, nw: int
+               ) -> tuple[ca.Function, ca.Function]:
+    """``unpack`` and ``pack`` of the stage order: the same parts, read from (written to)
+    the stage-ordered variables; ``pack`` writes each copy as the value it copies (a
+    guess packed from states and inputs is consistent with the gap-closing rows)."""
+    w = ca.SX.sym("w", st.size)
+    unpack_s = ca.Function("unpack", [w], unpack(w[st.pos[:nw].tolist()]))
+    parts = [ca.SX.sym(unpack.name_out(i), *unpack.size_out(i)) for i in range(7)]
+    wk = pack(*parts)
+    ext = ca.vertcat(wk, wk[st.copy_src.tolist()])
+    return unpack_s, ca.Function("pack", parts, [ext[st.order.tolist()]])
+
+
+def _stage_rows(placed: list[_Placed], st: StageLayout, t_rows: NDArray[np.int64],
+                Jt: Any, ze_idx: NDArray[np.int64], ng: int, n: int
+                ) -> tuple[NDArray[np.int64], list[int]]:
+    """Every row's position in the stage order (:func:`stage_rows`) and each stage's
+    number of rows other than its gap-closing ones: a block instance's rows belong to the
+    first stage of its variables, a target row to its node's."""
+    row_stage = np.zeros(ng, dtype=np.int64)
+    gap = np.zeros(ng, dtype=bool)
+    for pl in placed:
+        for rmap, z in zip(pl.row_maps, pl.z_idx, strict=True):
+            rows = rmap[rmap >= 0]
+            row_stage[rows] = int(st.stage_of[z].min())
+            gap[rows] = pl.block.fn.name() == "copy"
+    r, c = (np.asarray(a, dtype=np.int64) for a in Jt.sparsity().get_triplet())
+    for i, row in enumerate(t_rows):
+        row_stage[row] = int(st.stage_of[ze_idx[c[r == i]]].min())
+    return stage_rows(row_stage, gap, n + 1)
+
+
+def _reorder_rows(placed: list[_Placed], st: StageLayout, t_rows: NDArray[np.int64],
+                  Jt: Any, ze_idx: NDArray[np.int64], lbg: list[float], ubg: list[float],
+                  n: int) -> tuple[NDArray[np.int64], list[float], list[float], list[int]]:
+    """The rows in the stage order (:func:`_stage_rows`): the instances' row maps moved in
+    place; the targets' rows, the bounds and each stage's ``ng`` returned."""
+    new_row, ng_k = _stage_rows(placed, st, t_rows, Jt, ze_idx, len(lbg), n)
+    for pl in placed:
+        pl.row_maps = [np.where(r >= 0, new_row[np.maximum(r, 0)], -1) for r in pl.row_maps]
+    inv = np.argsort(new_row)
+    return new_row[t_rows], [lbg[i] for i in inv], [ubg[i] for i in inv], ng_k
+
+
 def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed],
-               offsets: tuple[int, int], targets: tuple[Any, ...],
+               t_rows: NDArray[np.int64], targets: tuple[Any, ...],
                lbg: list[float], ubg: list[float], unpack: ca.Function,
                pack: ca.Function, nseg: int, nv: int, parked: NDArray[np.int64]
                ) -> BlockNLP:
     """The NLP in MX from the placed blocks: every kind mapped over its instances,
     the constraints in g's order, the derivatives assembled from the blocks'."""
     m, hs, n, npts = nlp.m, nlp.hs, nlp.n, nlp.npts
-    off_t, off_r = offsets
     tg_fn, tg_jac, tg_hess, Jt, Ht, ze_idx = targets
     segments = hs.segments
     w = ca.MX.sym("w", nw)
@@ -287,6 +353,8 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
             return [Z, T, shape_p, charts]
         if name == "accel":
             return [Z, cols(h, pl.cols, n), T, shape_p, accel[0]]
+        if name == "copy":
+            return [Z]
         return [Z, shape_p, charts]  # touchdown
 
     t_args = (w[ze_idx.tolist()], goal, vias_v, shape_p)
@@ -331,12 +399,12 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
         if blk.cost is not None:
             fcost.append(ca.sum2(blk.cost.map(k)(*a)))
     # the targets' one instance
-    place([off_t + np.arange(int(Jt.size1()))], [ze_idx], Jt, Ht)
+    place([t_rows], [ze_idx], Jt, Ht)
     jnz.append(tg_jac(*t_args))
-    hnz.append(tg_hess(*t_args, lam_g[off_t:off_r]))
+    hnz.append(tg_hess(*t_args, lam_g[t_rows.tolist()]))
     pieces.append(tg_fn(*t_args))
     jac_pieces.append(tg_fn(*t_args))
-    where.append(off_t + np.arange(int(Jt.size1())))
+    where.append(t_rows)
     order = np.concatenate(where)
     keep = np.flatnonzero(order >= 0)
     perm = np.empty(ng, dtype=np.int64)
