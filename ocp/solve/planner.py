@@ -332,7 +332,7 @@ class ManipulationPlanner:
         t0 = time.perf_counter()
         kin = self._plan(replace(problem, forces=None), warm_start, certify)
         if kin.status is Status.SOLVED:
-            out = self._with_forces(problem, kin)
+            out = with_forces(self.model, self._force_stages, problem, kin)
             if out is not None:
                 return out
         left = problem.options.time_limit - (time.perf_counter() - t0)
@@ -346,12 +346,6 @@ class ManipulationPlanner:
         (:func:`unplanned_turn`); None for any other problem."""
         return unplanned_turn(problem, lambda: [
             self.initial_state(problem)[tip.q_cols] for tip in self.model(problem).fingertips])
-
-    def _with_forces(self, problem: ManipulationProblem, kin: ManipulationSolution
-                     ) -> ManipulationSolution | None:
-        """The kinematic plan with its forces (:func:`~ocp.solve.force_plan.with_forces`),
-        the force stage of its grasp model kept."""
-        return with_forces(self.model, self._force_stages, problem, kin)
 
     def _plan(self, problem: ManipulationProblem,
               warm_start: WarmStart | ManipulationSolution | None, certify: bool
