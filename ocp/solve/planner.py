@@ -224,7 +224,7 @@ class ManipulationPlanner:
         #: IPOPT iterations on one initial guess of the palm's strategy before its next.
         self.max_iter_per_guess = max_iter_per_guess
         #: Re-plan in another patch of the object's chart when a plan's palm contact rides
-        #: the pole bound of the problem's patch (:meth:`_repatched`; spheres only).
+        #: its patch's pole bound (:func:`repatched`; spheres only).
         self.auto_patch = True
         #: Plan a problem's forces in two stages (:mod:`ocp.transcription.force_stage`):
         #: the kinematics, then the forces at its collocation points; the coupled NLP only
@@ -234,8 +234,7 @@ class ManipulationPlanner:
         # keyed by the finger objects themselves (identity; the key keeps them alive)
         self._models: dict[tuple[Any, ...], GraspModel] = {}
         #: The NLPs built, by structure, the least recently used dropped beyond
-        #: ``max_nlps`` (every refined grid is a structure of its own: a worker planning
-        #: twenty four-finger turns held 1.28 GB of them).
+        #: ``max_nlps`` (every refined grid is a structure of its own).
         self.max_nlps = max_nlps
         self._nlps: OrderedDict[GraspStructure, _NLP] = OrderedDict()
 
