@@ -23,7 +23,8 @@ from conftest import Server
 from ocp import load_finger
 from ocp.robots.finger import builtin_urdf_text
 from planner_service.models_check import ModelLimits, tree_errors, without_file_references
-from planner_service.view.robot import finger_bodies, pad_thickness
+from planner_service.plans.shapes import pad_thickness
+from planner_service.view.robot import finger_bodies
 
 ROOT = Path(__file__).resolve().parents[1]
 

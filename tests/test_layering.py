@@ -128,19 +128,24 @@ def test_the_viewer_and_the_execution_use_the_public_core_only() -> None:
     with come from ``ocp``'s public names (or the planners' adapters), never its
     internals."""
     public = {"ocp"} | {f"ocp.{n}" for n in _ocp_all()}
-    offenders = [line for folder in ("view", "execution") for line in _core_names(folder)
+    offenders = [line for folder in ("view", "execution", "plans") for line in _core_names(folder)
                  if line.split(": ")[1] not in public]
     assert not offenders, offenders
 
 
 def test_the_service_folders_keep_their_places() -> None:
-    """bench, view and execution sit beside the jobs: neither the API nor the jobs, and
-    the viewer never the bench or the execution."""
+    """bench, view and execution sit beside the jobs: neither the API nor the jobs, the
+    viewer never the bench or the execution, the execution never the viewer; the readers
+    of a finished plan both use (plans) none of them."""
     up = ("planner_service.api", "planner_service.jobs", "fastapi", "starlette")
     assert not _offenders("bench", up)
     assert not _offenders("view", (*up, "planner_service.bench",
                                    "planner_service.execution"))
     assert not _offenders("execution", (*up, "planner_service.bench"))
+    # the plan's readers they share sit beside both, below them
+    assert not _offenders("execution", ("planner_service.view",))
+    assert not _offenders("plans", (*up, "planner_service.bench", "planner_service.view",
+                                    "planner_service.execution"))
 
 
 # -- the core's own layers -------------------------------------------------------------------

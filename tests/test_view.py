@@ -17,8 +17,8 @@ import pytest
 from dexroll_client.models import AnyPlanResult, PlanRequest
 from planner_service.cli import plan_request
 from planner_service.planners import REQUEST
+from planner_service.plans.models import infer_models, models_from_request
 from planner_service.view import scene_of, tracks_of, view_html
-from planner_service.view.models import infer_models, models_from_request
 from planner_service.view.page import page_html
 
 ROOT = Path(__file__).resolve().parents[1]

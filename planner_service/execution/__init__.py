@@ -2,9 +2,9 @@
 
 :func:`execution_plan` turns a wire result (and, when at hand, its request) into the
 simulator's :class:`sim.ExecutionPlan`, with the viewer's readers: the plan's arrays
-(:func:`planner_service.view.tracks_of`) and its models (the request's own object,
+(:func:`planner_service.plans.tracks.tracks_of`) and its models (the request's own object,
 palm and fingers through the planners' conversion, or inferred from the result:
-:mod:`planner_service.view.models`). :func:`simulate_result` runs it and returns the
+:mod:`planner_service.plans.models`). :func:`simulate_result` runs it and returns the
 report as JSON-ready data.
 
 Plans that carry contact forces or joint torques (issue 15, part 1) are executed with
@@ -25,9 +25,9 @@ from dexroll_client.models import (
     PlanRequest,
 )
 
-from ..view.models import SceneModels, infer_models, models_from_request
-from ..view.robot import pad_thickness
-from ..view.tracks import NoPlanError, PlanTracks, tracks_of
+from ..plans.models import SceneModels, infer_models, models_from_request
+from ..plans.shapes import pad_thickness
+from ..plans.tracks import NoPlanError, PlanTracks, tracks_of
 
 __all__ = ["NotExecutableError", "execution_plan", "plan_forces", "simulate_result",
            "with_rate_breaks"]

@@ -88,7 +88,7 @@ def main(args: argparse.Namespace) -> int:
         return EXIT_INVALID
 
     from ..planners import REQUEST, ProblemError, validation_errors
-    from ..view import read_result
+    from ..plans import read_result
     from . import NotExecutableError, simulate_result
 
     path = Path(args.result)

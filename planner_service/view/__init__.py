@@ -15,16 +15,15 @@ RESULT.json -o plan.html`` writes it to a file.
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 from typing import Any
 
 from dexroll_client.models import AnyPlanResult, PlanRequest
 
-from .models import SceneModels, infer_models, models_from_request
+from ..plans import read_result
+from ..plans.models import SceneModels, infer_models, models_from_request
+from ..plans.tracks import NoPlanError, PlanTracks, has_plan, tracks_of
 from .page import THREE_VERSION, page_html
 from .scene import build_scene
-from .tracks import NoPlanError, PlanTracks, has_plan, tracks_of
 
 __all__ = [
     "THREE_VERSION",
@@ -55,25 +54,3 @@ def view_html(result: AnyPlanResult, request: PlanRequest | None = None, title: 
               ) -> str:
     """The standalone page of a plan (see :func:`scene_of`)."""
     return page_html(scene_of(result, request, title))
-
-
-def read_result(path: Path) -> tuple[AnyPlanResult, str | None]:
-    """A plan's result from a file: a result as ``dexroll plan`` writes it, or a job as
-    ``GET /v1/plans/{id}`` answers it (its ``result``); and the job's id (None for a
-    result file). ValueError saying why the file is neither."""
-    from ..planners import RESULT
-
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"cannot read {path}: {exc}") from exc
-    job_id = None
-    if isinstance(raw, dict) and "result" in raw and "state" in raw:
-        job_id = str(raw.get("id")) if raw.get("id") is not None else None
-        raw = raw["result"]
-        if raw is None:
-            raise ValueError(f"{path} is a job without a result (not finished?)")
-    try:
-        return RESULT.validate_python(raw), job_id
-    except Exception as exc:
-        raise ValueError(f"{path} is not a plan result: {exc}") from exc

@@ -25,14 +25,12 @@ import pinocchio as pin
 
 from ocp import FingerModel, quaternion_wxyz
 
-from ..models_check import without_file_references
+from ..plans.shapes import shape_record, visual_geometry
 
-__all__ = ["LinkBody", "finger_bodies", "pad_thickness"]
+__all__ = ["LinkBody", "finger_bodies"]
 
 #: Radius of the cylinders drawn between joints of a link without a shape [m].
 SEGMENT_RADIUS = 0.004
-#: Thickness of a pad whose URDF gives none [m].
-DEFAULT_PAD_THICKNESS = 0.004
 
 
 @dataclass(frozen=True)
@@ -48,21 +46,6 @@ class LinkBody:
     position: np.ndarray
     wxyz: np.ndarray
     static: bool
-
-
-def _shape(geometry: Any) -> dict[str, Any] | None:
-    kind = type(geometry).__name__
-    if kind == "Box":
-        return {"kind": "box", "size": [float(2 * h) for h in geometry.halfSide]}
-    if kind == "Cylinder":
-        return {"kind": "cylinder", "radius": float(geometry.radius),
-                "length": float(2 * geometry.halfLength)}
-    if kind == "Capsule":
-        return {"kind": "capsule", "radius": float(geometry.radius),
-                "length": float(2 * geometry.halfLength)}
-    if kind == "Sphere":
-        return {"kind": "sphere", "radius": float(geometry.radius)}
-    return None  # meshes, convex hulls: not drawn (the joint gets a segment)
 
 
 def _ancestor_links(urdf: str, first_joint: str) -> set[str]:
@@ -84,29 +67,6 @@ def _ancestor_links(urdf: str, first_joint: str) -> set[str]:
         out.add(link)
         link = parent_of.get(link)
     return out
-
-
-def _geometry(finger: FingerModel) -> Any:
-    """The finger's visual shapes, read from its URDF without the elements that name files
-    (meshes, textures: :func:`~planner_service.models_check.without_file_references`):
-    a request's model never makes the service open a path; None when none can be read."""
-    try:
-        return pin.buildGeomFromUrdfString(finger.model,
-                                           without_file_references(finger.urdf_text),
-                                           pin.GeometryType.VISUAL)
-    except Exception:  # no shapes known: every joint gets a segment
-        return None
-
-
-def pad_thickness(finger: FingerModel) -> float:
-    """The thickness of the pad's box in the URDF (its z side), or a default."""
-    geom = _geometry(finger)
-    if geom is not None:
-        for o in geom.geometryObjects:
-            shape = _shape(o.geometry)
-            if o.parentFrame == finger.tip_frame_id and shape and shape["kind"] == "box":
-                return float(shape["size"][2])
-    return DEFAULT_PAD_THICKNESS
 
 
 def _segment_placement(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
@@ -131,7 +91,7 @@ def finger_bodies(finger: FingerModel, q: np.ndarray, prefix: str,
     ``prefix`` + the geometry's name; fixed shapes (on no joint) have one pose."""
     model = finger.model
     data = model.createData()
-    geom = _geometry(finger)
+    geom = visual_geometry(finger)
     ancestors = _ancestor_links(finger.urdf_text, str(model.names[1])) if model.njoints > 1 \
         else set()
     # (name, joint, placement in the joint's frame, shape, colour)
@@ -139,7 +99,7 @@ def finger_bodies(finger: FingerModel, q: np.ndarray, prefix: str,
     drawn_joints: set[int] = set()
     if geom is not None:
         for o in geom.geometryObjects:
-            shape = _shape(o.geometry)
+            shape = shape_record(o.geometry)
             if shape is None or o.parentFrame == finger.tip_frame_id:
                 continue
             joint = int(o.parentJoint)

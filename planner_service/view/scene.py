@@ -25,9 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from .models import SceneModels, quaternion_matrices
-from .robot import finger_bodies, pad_thickness
-from .tracks import PlanTracks
+from ..plans.models import SceneModels, quaternion_matrices
+from ..plans.shapes import pad_thickness
+from ..plans.tracks import PlanTracks
+from .robot import finger_bodies
 
 __all__ = ["SCENE_VERSION", "build_scene"]
 

@@ -26,8 +26,8 @@ from dexroll_client.simulation import SimulationOptions, SimulationReport
 
 from ...jobs.simulations import SimulationPool, SimulationRefusedError
 from ...planners import RESULT
+from ...plans.tracks import tracks_of
 from ...view import NoPlanError
-from ...view.tracks import tracks_of
 from ..access import OwnerDep
 from ..deps import ServiceError, SettingsDep, StoreDep
 
