@@ -5,12 +5,8 @@ with IPOPT as its fallback)."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from dataclasses import replace
 from functools import partial
-from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -107,16 +103,6 @@ def _experiment1() -> ManipulationProblem:
         OneFingerProblem(base=base, finger=load_finger(), contact=finger, mu=0.5))
 
 
-def _two_fingers() -> ManipulationProblem:
-    path = Path(__file__).resolve().parents[1] / "experiments" / "experiment2.py"
-    spec = importlib.util.spec_from_file_location("experiment2_staged", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return replace(module.build_problem(), n_intervals=12)
-
-
 def _same_plans(a: Any, b: Any) -> None:
     assert a.status == b.status
     assert bool(a.certificate.passed) == bool(b.certificate.passed)
@@ -140,13 +126,6 @@ def test_experiment1_gives_the_same_plan_in_either_order_and_either_solver(
     _same_plans(kind, exp1_plans["fatrop"])
     assert kind.stats.solver == exp1_plans["stage"].stats.solver == "ipopt"
     assert exp1_plans["fatrop"].stats.solver == "fatrop"
-
-
-def test_a_two_finger_tracking_plan_is_the_same_in_either_order() -> None:
-    problem = _two_fingers()
-    assert problem.tracking is not None and len(problem.fingers) == 2
-    _same_plans(ManipulationPlanner().solve(problem),
-                ManipulationPlanner(stage_order=True).solve(problem))
 
 
 def test_ipopt_takes_over_when_fatrop_fails() -> None:
