@@ -7,6 +7,7 @@ import json
 import math
 import subprocess
 import sys
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -75,6 +76,63 @@ def test_the_scene_has_every_pose_at_every_sample(plans: dict[str, Any], planner
                                            raw.get("palm") is not None)
     if planner != "manipulation":
         assert scene["palm"]["half_extent"] > 0
+
+
+@cache
+def allegro_plan() -> tuple[AnyPlanResult, dict[str, Any]]:
+    """The built-in Allegro-class hand's example (capsule fingertips) planned, and its
+    scene drawn with its request (about 5 s)."""
+    raw = json.loads((ROOT / "examples" / "allegro_turn.json").read_text())
+    result, summary = plan_request(raw)
+    assert result.status.value == "solved", summary
+    return result, scene_of(result, REQUEST.validate_python(raw))
+
+
+def test_round_fingertips_are_drawn_as_the_models_tips() -> None:
+    """The Allegro-class hand's capsule tips are capsules of the model's radius and length,
+    at the URDF's collision capsule (19 mm along the tip link's z), the contact's trace on
+    the cap (the pads of the other examples: test_the_scene_has_every_pose_at_every_sample)."""
+    from ocp.robots.allegro import TIP_RADIUS
+    from planner_service.plans.models import quaternion_matrices
+
+    result, scene = allegro_plan()
+    n = len(scene["t"])
+    tips = scene["fingertips"]
+    assert [t["name"] for t in tips] == ["index", "middle", "ring", "thumb"]
+    for tip in tips:
+        shape = tip["shape"]
+        assert shape["kind"] == "capsule" and shape["radius"] == TIP_RADIUS
+        half = shape["length"] / 2
+        assert half in (0.01, 0.008)
+        p, q = _poses(tip["pose"])
+        assert p.shape == (n, 3) and q.shape == (n, 4)
+        trace = np.reshape(tip["trace"], (-1, 3))
+        # on the capsule's outer cap: radius from the cap's centre, beyond the cylinder
+        cap = trace - [0.0, 0.0, half]
+        assert np.allclose(np.linalg.norm(cap, axis=1), TIP_RADIUS, atol=1e-5)
+        assert np.all(cap[:, 2] > 0.0)
+    # the capsule's frame: the tip link's frame moved 19 mm along its z, z the link's z (the
+    # URDF's collision capsule)
+    for tip, finger in zip(tips, tracks_of(result).fingers, strict=True):
+        R_link = quaternion_matrices(finger.tip_wxyz)
+        p, q = _poses(tip["pose"])
+        R = quaternion_matrices(q[:, [3, 0, 1, 2]])
+        centre = 0.019 if tip["name"] != "thumb" else 0.043 - 0.008
+        assert np.allclose(p, finger.tip_position + centre * R_link[:, :, 2], atol=1e-5)
+        assert np.allclose(R[:, :, 2], R_link[:, :, 2], atol=1e-4)
+
+
+def test_sphere_and_spheroid_tips_are_placed_by_their_pose() -> None:
+    from ocp.geometry.tips import sphere_tip, spheroid_tip
+    from planner_service.view.scene import _round_tip
+
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    shape, R_s, p_s = _round_tip(sphere_tip(0.01, (0.0, 0.0, 0.02), R))
+    assert shape == {"kind": "sphere", "radius": 0.01}
+    assert np.allclose(R_s, R) and np.allclose(p_s, [0.0, 0.0, 0.02])
+    shape, _, p_s = _round_tip(spheroid_tip(0.01, 0.015, (0.0, 0.005, 0.0)))
+    assert shape == {"kind": "ellipsoid", "semi_axes": [0.01, 0.01, 0.015]}
+    assert np.allclose(p_s, [0.0, 0.005, 0.0])
 
 
 def test_links_move_rigidly_with_the_pad_by_the_models_kinematics(plans: dict[str, Any]

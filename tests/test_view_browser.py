@@ -146,3 +146,17 @@ def test_dexroll_view_writes_the_served_page(served: tuple[Visit, Path, str]) ->
                           capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr
     assert (folder / "cli.html").read_text() == (folder / "plan.html").read_text()
+
+
+def test_round_fingertips_draw_without_errors(browser: Any, tmp_path: Path) -> None:
+    """The Allegro-class hand's plan: capsule fingertips (sphere and capsule meshes)."""
+    from test_view import allegro_plan
+
+    from planner_service.view.page import page_html
+
+    _, scene = allegro_plan()
+    assert {t["shape"]["kind"] for t in scene["fingertips"]} == {"capsule"}
+    file = tmp_path / "allegro.html"
+    file.write_text(page_html(scene), encoding="utf-8")
+    seen = visit(browser, file.as_uri(), {"start": 0.0})
+    assert seen.failure is None and seen.errors == []

@@ -12,9 +12,14 @@ as three.js takes them, arrays flattened row by row:
   moves, with a grid of ``grid`` [m] (null: no palm contact);
 * ``contacts``: each contact's ``point`` and the object's outward ``normal`` per sample,
   and its ``trace`` on the object (the contact points in the object's frame);
-* ``fingertips``: each pad's ``shape`` (a tagged record: ``{"kind": "pad", "half_size",
-  "thickness"}`` today; round tips will be other kinds), its ``pose`` per sample and the
-  trace of its contact on it (pad frame);
+* ``fingertips``: each fingertip's ``shape``, the model's own (``finger.tip_surface``), as
+  a tagged record: a flat pad ``{"kind": "pad", "half_size", "thickness"}`` (its frame the
+  pad's, the surface its z = 0); a round tip ``{"kind": "sphere", "radius"}``, ``{"kind":
+  "capsule", "radius", "length"}`` (the whole capsule, ``length`` its cylinder's, along
+  its frame's z, the frame at its centre) or ``{"kind": "ellipsoid", "semi_axes"}`` (a
+  spheroid), each in its own frame placed by the tip surface's pose in the tip frame;
+  the fingertip's ``pose`` per sample (that frame's) and the trace of its contact on it
+  (in that frame);
 * ``bodies``: the fingers' link shapes (:mod:`.robot`), each with its ``pose`` per sample
   (one sample: fixed).
 """
@@ -24,6 +29,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+
+from ocp.geometry.rotations import quaternion_wxyz
 
 from ..plans.models import SceneModels, quaternion_matrices
 from ..plans.shapes import pad_thickness
@@ -62,6 +69,24 @@ def _semi_axes(shape: str, dims: tuple[float, ...]) -> list[float]:
     return [r, r, r]
 
 
+def _round_tip(tip: Any) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
+    """A round fingertip's shape record and its frame (R, p) in the tip frame: a sphere's
+    and a spheroid's the tip surface's; a capsule's at the capsule's centre, z along its
+    axis (the tip surface's frame has the axis, outwards, along -y and its origin at the
+    cap's centre, ``extra`` the cylinder's half length)."""
+    R, p = tip.R, tip.p
+    if tip.kind == "sphere":
+        return {"kind": "sphere", "radius": float(tip.params[0])}, R, p
+    if tip.kind == "spheroid":
+        a, c = (float(x) for x in tip.params)
+        return {"kind": "ellipsoid", "semi_axes": [a, a, c]}, R, p
+    half = float(tip.extra[0]) if tip.extra else 0.0
+    axis = -R[:, 1]
+    R_c = np.column_stack([R[:, 0], R[:, 2], axis])  # x, z, -y: right-handed
+    return ({"kind": "capsule", "radius": float(tip.params[0]), "length": 2 * half},
+            R_c, p - half * axis)
+
+
 def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "") -> dict[str, Any]:
     """The scene of a plan drawn with ``models`` (see the module for its layout)."""
     R_obj = quaternion_matrices(tracks.object_wxyz)
@@ -82,12 +107,21 @@ def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "") -> dic
         contact = next((ct for ct in tracks.contacts if ct.name == f.name), None)
         trace = None if contact is None else \
             np.einsum("kji,kj->ki", R_tip, contact.point - f.tip_position)
-        half = DEFAULT_PAD_HALF_SIZE if model is None else float(model.pad_half_size)
-        thick = 0.004 if model is None else pad_thickness(model)
+        tip = None if model is None else model.tip_surface
+        position, wxyz = f.tip_position, f.tip_wxyz
+        if tip is not None and tip.round:
+            shape, R_s, p_s = _round_tip(tip)
+            position = f.tip_position + np.einsum("kij,j->ki", R_tip, p_s)
+            wxyz = quaternion_wxyz(np.einsum("kij,jl->kil", R_tip, R_s))
+            if trace is not None:  # in the shape's frame: R_s^T (p_tip - p_s)
+                trace = (trace - p_s) @ R_s
+        else:
+            half = DEFAULT_PAD_HALF_SIZE if model is None else float(model.pad_half_size)
+            thick = 0.004 if model is None else pad_thickness(model)
+            shape = {"kind": "pad", "half_size": half, "thickness": thick}
         fingertips.append({
             "name": f.name, "color": colors.get(f.name, PALETTE[i % len(PALETTE)]),
-            "shape": {"kind": "pad", "half_size": half, "thickness": thick},
-            "pose": _pose(f.tip_position, f.tip_wxyz),
+            "shape": shape, "pose": _pose(position, wxyz),
             "trace": None if trace is None else _flat(trace)})
         points.append(f.tip_position)
         if model is None:

@@ -96,6 +96,9 @@
         g = new T.CapsuleGeometry(shape.radius, shape.length, 6, 16);
         g.rotateX(Math.PI / 2); break;
       case "sphere": g = new T.SphereGeometry(shape.radius, 24, 16); break;
+      case "ellipsoid":
+        g = new T.SphereGeometry(1, 24, 16);
+        g.scale(shape.semi_axes[0], shape.semi_axes[1], shape.semi_axes[2]); break;
       default: return null;
     }
     return new T.Mesh(g, mat);
@@ -187,7 +190,7 @@
     }
   }
 
-  // -- fingertips: the pads (tagged records) with their contact traces ------------------
+  // -- fingertips: pads or round tips (tagged records) with their contact traces --------
   const tips = [];
   for (const f of data.fingertips) {
     const g = new T.Group();
@@ -201,11 +204,18 @@
       const edges = new T.LineSegments(new T.EdgesGeometry(box),
                                        new T.LineBasicMaterial({ color: f.color }));
       g.add(edges);
-    } else if (s.kind === "sphere" || s.kind === "capsule") {
-      g.add(shapeMesh(s, material([0.17, 0.17, 0.17, 0.8])));
+    } else {  // a round tip (sphere, capsule, ellipsoid) in its own frame
+      const m = shapeMesh(s, material([0.17, 0.17, 0.17, 0.8]));
+      if (m) g.add(m);
     }
     if (f.trace) {
-      const tr = line(f.trace.map((v, i) => (i % 3 === 2 ? v - 2e-4 : v)), f.color, 2);
+      const pad = s.kind === "pad";
+      const tr = line(pad ? f.trace.map((v, i) => (i % 3 === 2 ? v - 2e-4 : v)) : f.trace,
+                      f.color, 2);
+      if (!pad) {  // on the curved surface itself: drawn over it
+        tr.material.depthTest = false;
+        tr.renderOrder = 1;
+      }
       g.add(tr);
       traces.push(tr);
     }
