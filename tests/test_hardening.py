@@ -461,3 +461,48 @@ def test_the_client_retries_idempotent_requests_on_a_dropped_connection(
     with sqlite3.connect(live_server.data_dir / "jobs.sqlite3") as db:
         assert db.execute("SELECT COUNT(*) FROM jobs WHERE idempotency_key = ?",
                           ("retried-once",)).fetchone()[0] == 1
+
+
+# -- issue 25 items 5 and 9: bodies refused before validation ------------------------------
+
+def test_every_request_object_has_fewer_fields_than_an_object_may_have_keys() -> None:
+    from pydantic import TypeAdapter
+
+    from dexroll_client.models import PlanRequest
+    from planner_service.api.body import MAX_OBJECT_KEYS
+    schema = TypeAdapter(PlanRequest).json_schema()
+    most = max(len(d.get("properties", {})) for d in schema["$defs"].values())
+    assert 2 * most <= MAX_OBJECT_KEYS
+
+
+def test_60k_unknown_keys_are_a_bounded_422_naming_the_first_and_a_count(
+        live_server: Server) -> None:
+    body = dict(TRIANGLE, **{f"k{i:05d}": 1 for i in range(60_000)})
+    r = post(live_server, body)
+    assert r.status_code == 422, r.text
+    assert len(r.content) < 2_000, len(r.content)
+    reason = fields_of(r)["body"]
+    assert "'k00000', 'k00001', 'k00002', 'k00003', 'k00004' …and 59,995 more" in reason
+    assert "60,000 are not a field" in reason
+
+
+def test_a_few_unknown_keys_are_each_named(live_server: Server) -> None:
+    r = post(live_server, dict(TRIANGLE, bogus=1, also_bogus=2))
+    assert r.status_code == 422, r.text
+    assert {"bogus", "also_bogus"} <= set(fields_of(r))
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-32"])
+def test_a_utf16_or_utf32_body_is_a_422_naming_body(live_server: Server,
+                                                    encoding: str) -> None:
+    r = post(live_server, json.dumps(TRIANGLE).encode(encoding))
+    assert r.status_code == 422, r.text
+    assert "not UTF-8" in fields_of(r)["body"]
+
+
+def test_a_5000_digit_integer_is_a_422_naming_its_field(live_server: Server) -> None:
+    text = json.dumps(dict(TRIANGLE, solver={"max_iter": 1})).replace(
+        '"max_iter": 1', '"max_iter": ' + "9" * 5_000)
+    r = post(live_server, text)
+    assert r.status_code == 422, r.text
+    assert "a number too large" in fields_of(r)["solver.max_iter"]

@@ -160,6 +160,10 @@ def store_fault_error(store: Store) -> ServiceError | None:
                         headers={"Retry-After": str(STORE_RETRY_AFTER)})
 
 
+#: The most fields a 422 names (the rest are counted in its message).
+MAX_DETAIL = 50
+
+
 #: FastAPI's detail when a request body cannot be decoded at all (raised as a 400).
 _BODY_PARSE_ERROR = "There was an error parsing the body"
 
@@ -213,8 +217,10 @@ def add_error_handlers(app: FastAPI) -> None:
             if e.get("type") == "json_invalid":
                 field, reason = "body", f"not valid JSON: {e.get('ctx', {}).get('error', '')}"
             detail.append(FieldError(field=field, reason=reason))
-        message = "; ".join(f"{d.field}: {d.reason}" for d in detail)
-        return error_response(422, "invalid_request", message, detail)
+        message = "; ".join(f"{d.field}: {d.reason}" for d in detail[:MAX_DETAIL])
+        if len(detail) > MAX_DETAIL:  # the answer's size is bounded: the first are named
+            message += f" …and {len(detail) - MAX_DETAIL:,} more"
+        return error_response(422, "invalid_request", message, detail[:MAX_DETAIL])
 
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:

@@ -23,6 +23,7 @@ from ...jobs.store import IdempotencyConflictError, JobRow, StorageError, Store
 from ...models_check import CheckerBusyError
 from ...planners import RESULT
 from ..access import OwnerDep
+from ..body import JSONBodyRoute
 from ..deps import (
     CheckerDep,
     DispatcherDep,
@@ -37,7 +38,7 @@ from .view import JobLinks, LinkedJob, with_links
 
 __all__ = ["job_model", "router"]
 
-router = APIRouter()
+router = APIRouter(route_class=JSONBodyRoute)
 
 #: The largest ``offset`` of a job listing: SQLite's integers are 64-bit signed.
 MAX_OFFSET = 2**63 - 1

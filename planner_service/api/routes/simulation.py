@@ -29,11 +29,12 @@ from ...planners import RESULT
 from ...plans.tracks import tracks_of
 from ...view import NoPlanError
 from ..access import OwnerDep
+from ..body import JSONBodyRoute
 from ..deps import ServiceError, SettingsDep, StoreDep
 
 __all__ = ["router", "simulation_steps"]
 
-router = APIRouter()
+router = APIRouter(route_class=JSONBodyRoute)
 
 #: The longest plan simulated here [s]; a longer one: ``dexroll simulate`` on its result.
 MAX_SIMULATED_DURATION = 120.0
