@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from ocp.geometry.rotations import quaternion_wxyz
+from ocp import quaternion_wxyz
 
 from ..plans.models import SceneModels, quaternion_matrices
 from ..plans.shapes import pad_thickness
