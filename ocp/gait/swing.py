@@ -205,84 +205,115 @@ def _guess(spec: SwingSpec) -> FloatArray:
     return Q
 
 
-def plan_swing(spec: SwingSpec) -> SwingPlan:
-    """Solve the swing's NLP (see the module's doc)."""
-    f, body = spec.finger, spec.body
-    nq, n, K = int(f.nq), spec.n_intervals, spec.lift_intervals
-    T = float(spec.duration)
+#: The swing NLPs built, by (finger, intervals, lift intervals, other tips): the
+#: geometry, the times and the margins are parameters.
+_SOLVERS: dict[tuple[int, int, int, int], tuple[Any, FloatArray, FloatArray, Any]] = {}
+
+
+def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
+               ) -> tuple[Any, FloatArray, FloatArray, Any]:
+    """(solver, lbg, ubg, the finger it is for) of the swing NLP of finger ``f`` (see the
+    module's doc), built once; the parameters in :func:`_swing_params`' order."""
+    key = (id(f), n, K, n_others)
+    if key in _SOLVERS and _SOLVERS[key][3] is f:
+        return _SOLVERS[key]
+    nq = int(f.nq)
+    P = ca.SX.sym("p", 2 * nq + 31 + 8 * n_others)
+    q_start, q_target = P[0:nq], P[nq:2 * nq]
+    o = 2 * nq
+    T, clearance, cap_sin, rho = P[o], P[o + 1], P[o + 2], P[o + 3]
+    centre, a_start, n0, t0a, t0b = (P[o + 4 + 3 * i:o + 7 + 3 * i] for i in range(5))
+    a_land, n1, t1a, t1b = (P[o + 19 + 3 * i:o + 22 + 3 * i] for i in range(4))
+    oth = ca.reshape(P[o + 31:], 8, n_others) if n_others else None
     h = T / n
     Q, V, A = (ca.SX.sym(s, nq, n + 1) for s in ("Q", "V", "A"))
     Jn = ca.SX.sym("J", nq, n)
-    vs, as_, js = 1.0 / T, 1.0 / T**2, 1.0 / T**3  # variables scaled by the duration
-    Vp, Ap, Jp = V * vs, A * as_, Jn * js
-    fk = f.fk
-    centre, rho, r = ca.DM(spec.centre), float(spec.radius), body.r
+    Vp, Ap, Jp = V / T, A / T**2, Jn / T**3  # variables scaled by the duration
     a_loc, b_loc = ca.DM(body.a), ca.DM(body.b)
-    n0 = spec.start_normal()
-    n1 = np.asarray(spec.landing_normal, dtype=float)
-    n1 = n1 / np.linalg.norm(n1)
-    R0, p0 = f.fingertip_pose_pin(spec.q_start)
-    a_start = p0 + R0 @ body.a
-    a_land = spec.landing_point()
-    gaps = spec.required_gaps()
-
+    capsule = bool(np.linalg.norm(body.b - body.a) > 0)
+    r = body.r
+    L = rho + r
     rows: list[tuple[Any, float, float]] = []
 
     def add(e: Any, lo: float, hi: float) -> None:
         rows.append((e, lo, hi))
 
+    add(Q[:, 0] - q_start, 0.0, 0.0)
     for k in range(n):  # exact integration of the jerk
         qk, vk, ak, jk = Q[:, k], Vp[:, k], Ap[:, k], Jp[:, k]
         add((Q[:, k + 1] - (qk + h * vk + h * h / 2 * ak + h**3 / 6 * jk)), 0.0, 0.0)
         add((Vp[:, k + 1] - (vk + h * ak + h * h / 2 * jk)) * T, 0.0, 0.0)
         add((Ap[:, k + 1] - (ak + h * jk)) * T * T, 0.0, 0.0)
-    L = rho + r
-    t0a, t0b = _tangents(n0)
-    t1a, t1b = _tangents(n1)
     for k in range(1, n + 1):
-        R, p = fk(Q[:, k])
+        R, p = f.fk(Q[:, k])
         a, b = p + R @ a_loc, p + R @ b_loc
         dist = point_segment_distance(centre, a, b) - L
         if k == n:  # touch-down: the cap's centre over the landing point, on the cap
-            add((a - ca.DM(a_land)) / L, 0.0, 0.0)
-            if body.b is not body.a and np.linalg.norm(body.b - body.a) > 0:
+            add((a - a_land) / L, 0.0, 0.0)
+            if capsule:
                 u = (b - a) / float(np.linalg.norm(body.b - body.a))
-                add(ca.dot(centre - a, u) / L, -np.inf,
-                    -float(np.sin(spec.cap_margin / r)))
+                add(ca.dot(centre - a, u) / L + cap_sin, -np.inf, 0.0)
             continue
         if k in (K, n - K):  # the clear part's ends
-            add(dist / L, spec.clearance / L, np.inf)
+            add((dist - clearance) / L, 0.0, np.inf)
         if k <= K:  # lift-off along the normal
-            d = a - ca.DM(a_start)
-            add(ca.vertcat(ca.dot(d, ca.DM(t0a)), ca.dot(d, ca.DM(t0b))) / L, 0.0, 0.0)
-            add(ca.dot(d, ca.DM(n0)) / L, 0.0, np.inf)
+            d = a - a_start
+            add(ca.vertcat(ca.dot(d, t0a), ca.dot(d, t0b)) / L, 0.0, 0.0)
+            add(ca.dot(d, n0) / L, 0.0, np.inf)
             add(dist / L, 0.0, np.inf)
         elif k >= n - K:  # approach along the landing normal
-            d = a - ca.DM(a_land)
-            add(ca.vertcat(ca.dot(d, ca.DM(t1a)), ca.dot(d, ca.DM(t1b))) / L, 0.0, 0.0)
-            add(ca.dot(d, ca.DM(n1)) / L, 0.0, np.inf)
+            d = a - a_land
+            add(ca.vertcat(ca.dot(d, t1a), ca.dot(d, t1b)) / L, 0.0, 0.0)
+            add(ca.dot(d, n1) / L, 0.0, np.inf)
             add(dist / L, 0.0, np.inf)
-        elif k != n - K:
-            add(dist / L, spec.clearance / L, np.inf)
-        for (a1, b1, r1), need in zip(spec.others, gaps, strict=True):
-            for s in np.linspace(0.0, 1.0, SEGMENT_SAMPLES if body.b is not body.a else 1):
+        else:
+            add((dist - clearance) / L, 0.0, np.inf)
+        for j in range(n_others):
+            assert oth is not None
+            a1, b1, r1, need = oth[0:3, j], oth[3:6, j], oth[6, j], oth[7, j]
+            for s in np.linspace(0.0, 1.0, SEGMENT_SAMPLES if capsule else 1):
                 x = a + float(s) * (b - a)
-                add((point_segment_distance(x, ca.DM(a1), ca.DM(b1)) - r - r1) / L,
-                    need / L, np.inf)
-
-    jref = spec.max_joint_acceleration * T / h  # a jerk that reaches the limit in h
-    q_t = ca.DM(spec.q_target)
-    cost = h / T * ca.sumsqr(Jp / jref) + 10.0 * ca.sumsqr(Q[:, n] - q_t)
+                add((point_segment_distance(x, a1, b1) - r - r1 - need) / L, 0.0, np.inf)
+    jref = 20.0 * n  # the jerk's scale in the effort
+    cost = h / T * ca.sumsqr(Jp / jref) + 10.0 * ca.sumsqr(Q[:, n] - q_target)
     w = ca.vertcat(ca.vec(Q), ca.vec(V), ca.vec(A), ca.vec(Jn))
     g = ca.vertcat(*[e for e, _, _ in rows])
     lbg = np.concatenate([np.full(int(e.numel()), lo) for e, lo, _ in rows])
     ubg = np.concatenate([np.full(int(e.numel()), hi) for e, _, hi in rows])
+    solver = ca.nlpsol("swing", "ipopt", {"x": w, "p": P, "f": cost, "g": g}, _IPOPT)
+    _SOLVERS[key] = (solver, lbg, ubg, f)
+    return _SOLVERS[key]
 
+
+def _swing_params(spec: SwingSpec) -> FloatArray:
+    body = spec.body
+    n0 = spec.start_normal()
+    n1 = np.asarray(spec.landing_normal, dtype=float)
+    n1 = n1 / np.linalg.norm(n1)
+    R0, p0 = spec.finger.fingertip_pose_pin(spec.q_start)
+    cap_sin = float(np.sin(spec.cap_margin / body.r))
+    others = [np.concatenate([a1, b1, [r1, need]]) for (a1, b1, r1), need
+              in zip(spec.others, spec.required_gaps(), strict=True)]
+    return np.concatenate([spec.q_start, spec.q_target,
+                           [spec.duration, spec.clearance, cap_sin, spec.radius],
+                           spec.centre, p0 + R0 @ body.a, n0, *_tangents(n0),
+                           spec.landing_point(), n1, *_tangents(n1),
+                           np.concatenate(others, axis=None) if others else []])
+
+
+def plan_swing(spec: SwingSpec) -> SwingPlan:
+    """Solve the swing's NLP (see the module's doc; built once per finger and grid)."""
+    f, body = spec.finger, spec.body
+    nq, n, K = int(f.nq), spec.n_intervals, spec.lift_intervals
+    T = float(spec.duration)
+    h = T / n
+    solver, lbg, ubg, _ = _swing_nlp(f, body, n, K, len(spec.others))
+    vs, as_, js = 1.0 / T, 1.0 / T**2, 1.0 / T**3
     lo_q, hi_q = backed_off_joint_limits(f)
     vmax = np.asarray(f.velocity_limit, dtype=float)
     amax = spec.max_joint_acceleration
     lbq, ubq = np.tile(lo_q, (n + 1, 1)), np.tile(hi_q, (n + 1, 1))
-    lbq[0] = ubq[0] = spec.q_start
+    lbq[0], ubq[0] = np.minimum(lo_q, spec.q_start), np.maximum(hi_q, spec.q_start)
     lbv, ubv = np.tile(-vmax / vs, (n + 1, 1)), np.tile(vmax / vs, (n + 1, 1))
     lbv[0] = ubv[0] = lbv[-1] = ubv[-1] = 0.0
     lba, uba = np.full((n + 1, nq), -amax / as_), np.full((n + 1, nq), amax / as_)
@@ -299,10 +330,9 @@ def plan_swing(spec: SwingSpec) -> SwingPlan:
     Jg = np.diff(Ag, axis=0) / h
     w0 = np.concatenate([Qg.ravel(), (Vg / vs).ravel(), (Ag / as_).ravel(),
                          (Jg / js).ravel()])
-
-    solver = ca.nlpsol("swing", "ipopt", {"x": w, "f": cost, "g": g}, _IPOPT)
     t_start = time.perf_counter()
-    res = solver(x0=np.clip(w0, lbw, ubw), lbx=lbw, ubx=ubw, lbg=lbg, ubg=ubg)
+    res = solver(x0=np.clip(w0, lbw, ubw), p=_swing_params(spec), lbx=lbw, ubx=ubw,
+                 lbg=lbg, ubg=ubg)
     elapsed = time.perf_counter() - t_start
     st = solver.stats()
     x = np.asarray(res["x"]).ravel()
