@@ -58,6 +58,8 @@ class ContactReport:
     normal_force_max: float
     planned_normal_force_mean: float | None = None
     normal_force_error_max: float | None = None
+    #: time [s] the fingertip touched the object while the plan has it lifted
+    unplanned_touch_time: float = 0.0
 
 
 @dataclass
@@ -100,6 +102,10 @@ class SimReport:
                 failures.append(f"contact {c.name} lost for {c.lost_time:.4g} s "
                                 f"({c.loss_events} times, first at t = "
                                 f"{c.first_loss_at:.4g} s)")
+            if c.unplanned_touch_time > tol.contact_loss:
+                failures.append(f"fingertip {c.name} touched the object for "
+                                f"{c.unplanned_touch_time:.4g} s while the plan has it "
+                                "lifted")
         series = {"t": series_t.tolist(), "position_error": series_position.tolist(),
                   "angle_error": series_angle.tolist(),
                   "normal_force": {c.name: series_force[j].tolist()

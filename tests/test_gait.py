@@ -166,3 +166,30 @@ def test_a_gait_rolls_replaces_three_fingertips_and_rolls_on(gait: object) -> No
     target = axis_angle_rotation((0.0, -1.0, 0.0), math.radians(12.0))
     assert float(rotation_angle_between(R_end[None], target[None])[0]) <= math.radians(1.0) + 1e-6
     assert math.degrees(g.turned) == pytest.approx(12.0)
+
+
+def test_the_gait_executes_in_mujoco_lifting_and_landing_as_planned(gait: object) -> None:
+    """The plan's joints followed by MuJoCo's servos, its forces fed forward: the ball
+    follows the plan, no planned contact is lost, and each re-placed fingertip is off the
+    ball while the plan carries it clear and back on it in the next roll."""
+    from planner_service.execution.gait import gait_execution_plan
+    from sim import simulate
+
+    g = gait
+    report = simulate(gait_execution_plan(g, TEMPLATE))
+    assert report.passed, report.failures
+    assert all(c.lost_time == 0.0 and c.unplanned_touch_time == 0.0
+               for c in report.contacts)
+    t = np.asarray(report.series["t"])
+    force = report.series["normal_force"]
+    names = ("index", "middle", "ring", "thumb")
+    for ph in g.phases:
+        if ph.kind == "swing":
+            sw = g.steps[ph.index].swing
+            clear = [(t >= ph.start + x) & (t <= ph.start + x + 0.01) for x in sw.t
+                     if sw.segment(float(x)) == "clear"]
+            mask = np.any(clear, axis=0)
+            assert mask.any() and np.all(np.asarray(force[names[ph.lifted]])[mask] == 0.0)
+    last_roll = g.phases[-1]
+    during = (t > last_roll.start + 0.1) & (t < last_roll.end - 0.1)
+    assert all(np.all(np.asarray(force[nm])[during] > 0.0) for nm in names)

@@ -29,8 +29,8 @@ from ..plans.models import SceneModels, infer_models, models_from_request
 from ..plans.shapes import pad_thickness
 from ..plans.tracks import NoPlanError, PlanTracks, tracks_of
 
-__all__ = ["NotExecutableError", "execution_plan", "plan_forces", "simulate_result",
-           "with_rate_breaks"]
+__all__ = ["NotExecutableError", "execution_plan", "finger_spec", "plan_forces",
+           "simulate_result", "with_rate_breaks"]
 
 #: Friction coefficient when neither the request nor the result states it.
 DEFAULT_MU = 0.5
@@ -111,22 +111,31 @@ def _mu(request: PlanRequest | None, tracks: PlanTracks) -> tuple[float, str | N
     return DEFAULT_MU, f"friction: not known, mu = {DEFAULT_MU}"
 
 
+def finger_spec(name: str, model: Any) -> Any:
+    """The simulator's finger (a ``sim.FingerSpec``) of a finger model
+    (:class:`~ocp.robots.finger.FingerModel`): its joints, base, tip frame and tip."""
+    from sim import FingerSpec, JointSpec, TipShape
+
+    joints = tuple(JointSpec(
+        j.name, j.kind, (float(j.axis[0]), float(j.axis[1]), float(j.axis[2])),
+        np.asarray(j.placement_rotation, dtype=float),
+        np.asarray(j.placement_translation, dtype=float),
+        _limit(model.lower[j.index_q]), _limit(model.upper[j.index_q]))
+        for j in model.chain)
+    return FingerSpec(name, joints, np.asarray(model.base_rotation, dtype=float),
+                      np.asarray(model.base_position, dtype=float),
+                      np.asarray(model.tip_rotation, dtype=float),
+                      np.asarray(model.tip_translation, dtype=float),
+                      _tip_shape(model, TipShape), name)
+
+
 def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
                    ) -> Any:
     """The simulator's plan (a :class:`sim.ExecutionPlan`) of a wire result, with its
     request's models when given (inferred from the result otherwise, as the viewer
     does). :class:`NotExecutableError` when there is nothing a hand executes;
     ProblemError when the request's fingers cannot be loaded."""
-    from sim import (
-        DEFAULT_MASS,
-        ContactSpec,
-        ExecutionPlan,
-        FingerReference,
-        FingerSpec,
-        JointSpec,
-        ObjectSpec,
-        TipShape,
-    )
+    from sim import DEFAULT_MASS, ContactSpec, ExecutionPlan, FingerReference, ObjectSpec
 
     try:
         tracks = tracks_of(result)
@@ -146,18 +155,7 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
         if model is None:
             raise NotExecutableError(f"finger {track.name}: no model known (give the "
                                      "plan's request)")
-        joints = tuple(JointSpec(
-            j.name, j.kind, (float(j.axis[0]), float(j.axis[1]), float(j.axis[2])),
-            np.asarray(j.placement_rotation, dtype=float),
-            np.asarray(j.placement_translation, dtype=float),
-            _limit(model.lower[j.index_q]), _limit(model.upper[j.index_q]))
-            for j in model.chain)
-        fingers.append(FingerSpec(
-            track.name, joints, np.asarray(model.base_rotation, dtype=float),
-            np.asarray(model.base_position, dtype=float),
-            np.asarray(model.tip_rotation, dtype=float),
-            np.asarray(model.tip_translation, dtype=float),
-            _tip_shape(model, TipShape), track.name))
+        fingers.append(finger_spec(track.name, model))
         torques, force = forces[k] if k < len(forces) else (None, None)
         refs.append(FingerReference(track.q, rates[k], torques, force))
     contacts = tuple(ContactSpec(c.name, c.body, c.name if c.body == "finger" else None,
