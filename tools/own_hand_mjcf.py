@@ -7,10 +7,11 @@ our choice, written as a Menagerie file writes it: angles in degrees, the root b
 (``palm``: the vendor's base frame, so that MuJoCo's world frame is dexroll's built-in palm
 frame: fingers along x, the palm's normal z), default classes and ``childclass``, visual
 mesh geoms whose files are absent, collision capsules (the links and fingertips) and a box
-(the palm), an ``<inertial>`` on every body (masses 10-40 g a link, 0.4 kg the palm: our
-round numbers, not a vendor's), joint damping 1 N m s/rad and armature, and one
-``<position>`` actuator per joint (kp 10 N m/rad, the joint's range, force range
-+-0.7 N m: our choice).
+(the palm), the palm's contacts with each finger's first two links excluded (they meet at
+the joints, as a Menagerie file excludes them), an ``<inertial>`` on every body (masses
+10-40 g a link, 0.4 kg the palm: our round numbers, not a vendor's), joint damping
+1 N m s/rad and armature, and one ``<position>`` actuator per joint (kp 10 N m/rad, the
+joint's range, force range +-0.7 N m: our choice).
 """
 
 from __future__ import annotations
@@ -58,16 +59,19 @@ def own_hand_mjcf() -> str:
         for k, part in enumerate(PARTS):
             pose = (f'pos="{_v(f.base_position)}" quat="{_v(f.base_quaternion)}"' if k == 0
                     else f'pos="{_v(f.offsets[k])}"')
-            nxt = f.offsets[k + 1][2] if k + 1 < len(PARTS) else 0.0
+            nxt_v = f.offsets[k + 1] if k + 1 < len(PARTS) else (0.0, 0.0, 0.0)
+            nxt = math.sqrt(sum(c * c for c in nxt_v))
             length = nxt if nxt > 0 else 0.01
             body += [f'{indent}<body name="{s}_{part}" {pose}>',
                      f"{indent}  {_inertial(MASS[part], length)}",
                      f'{indent}  <joint name="{s}j{k}" class="{s}{k}"/>',
                      f'{indent}  <geom class="visual" mesh="{"thumb_" if s == "th" else ""}'
                      f'link_{k}"/>']
-            if nxt > 0.02:
+            if nxt > 0.02:  # the link to the next joint, 6 mm short at each end
+                a = [c * 0.006 / nxt for c in nxt_v]
+                b = [c * (1 - 0.006 / nxt) for c in nxt_v]
                 body.append(f'{indent}  <geom class="link_collision" '
-                            f'fromto="0 0 0.006 0 0 {nxt - 0.006:.6g}"/>')
+                            f'fromto="{_v(a)} {_v(b)}"/>')
             indent += "  "
         body += [f'{indent}<body name="{s}_tip">',
                  f"{indent}  {_inertial(MASS['tip'], f.capsule_centre + TIP_RADIUS)}",
@@ -82,6 +86,8 @@ def own_hand_mjcf() -> str:
     (_, p_mount) = HAND_MOUNT
     actuators = "\n".join(f'    <position name="{SHORT[f.name]}a{k}" joint="{SHORT[f.name]}j{k}" '
                           f'class="hand"/>' for f in FINGERS for k in range(4))
+    excludes = "\n".join(f'    <exclude body1="palm" body2="{SHORT[f.name]}_{part}"/>'
+                         for f in FINGERS for part in ("base", "proximal"))
     meshes = "\n".join(f'    <mesh name="{p}link_{k}" file="{p}link_{k}.stl"/>'
                        for p in ("", "thumb_") for k in range(4))
     return f"""<mujoco model="own_hand">
@@ -123,6 +129,9 @@ def own_hand_mjcf() -> str:
 {chr(10).join(body)}
     </body>
   </worldbody>
+  <contact>
+{excludes}
+  </contact>
   <actuator>
 {actuators}
   </actuator>

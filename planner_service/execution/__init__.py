@@ -30,7 +30,7 @@ from ..plans.shapes import pad_thickness
 from ..plans.tracks import NoPlanError, PlanTracks, tracks_of
 
 __all__ = ["NotExecutableError", "execution_plan", "plan_forces", "simulate_result",
-           "with_rate_breaks"]
+           "user_model", "with_rate_breaks"]
 
 #: Friction coefficient when neither the request nor the result states it.
 DEFAULT_MU = 0.5
@@ -231,11 +231,66 @@ def with_rate_breaks(plan: Any, result: AnyPlanResult) -> Any:
                                   for c in plan.contacts))
 
 
+def user_model(request: PlanRequest | None, plan: Any, text: str | None = None) -> Any:
+    """The user's hand model a plan is executed on (a ``sim.user_model.UserModel``): the
+    MJCF ``text`` (default: the request's ``hand.mjcf``), the tip of each of the plan's
+    fingers (the request's ``hand.tips[hand_finger].name``; the built-in allegro's tip
+    links) and the request's ``mount``. NotExecutableError when the request has no hand
+    model to take them from."""
+    from ocp.geometry.surfaces import rotation_from_vector
+    from sim.user_model import UserModel
+
+    hand = getattr(request, "hand", None)
+    if hand is None:
+        raise NotExecutableError("executing on a hand model needs the plan's request with "
+                                 "its `hand` (the fingertips' names)")
+    if text is None:
+        if hand.mjcf is None:
+            raise NotExecutableError("the request's hand is not an MJCF model: give the "
+                                     "model file (dexroll simulate --model FILE)")
+        text = hand.mjcf
+    if hand.tips is not None:
+        names = [t.name for t in hand.tips]
+    elif hand.builtin == "allegro":
+        from ocp.robots.allegro import TIP_NAMES
+
+        names = list(TIP_NAMES)
+    else:
+        raise NotExecutableError(f"the {hand.builtin} hand's fingers are not a hand model's")
+    tips = []
+    for f in getattr(request, "fingers", []):
+        if f.hand_finger is None:
+            raise NotExecutableError("a finger not of the request's hand cannot be executed "
+                                     "on its model")
+        tips.append(names[f.hand_finger])
+    if len(tips) != len(plan.fingers):
+        raise NotExecutableError(f"{len(tips)} fingers in the request, {len(plan.fingers)} "
+                                 "in the plan")
+    R, p = np.eye(3), np.zeros(3)
+    if hand.mount is not None:
+        R = rotation_from_vector(hand.mount.rotation)
+        p = np.asarray(hand.mount.position, dtype=float)
+    return UserModel(text, tuple(tips), np.asarray(R, dtype=float), p)
+
+
 def simulate_result(result: AnyPlanResult, request: PlanRequest | None = None,
-                    options: dict[str, Any] | None = None) -> Any:
+                    options: dict[str, Any] | None = None,
+                    model: str | None = None) -> Any:
     """Execute a wire result's plan in MuJoCo: the :class:`sim.SimReport`. ``options``:
-    :class:`sim.SimOptions` fields (ValueError naming a bad one)."""
+    :class:`sim.SimOptions` fields (ValueError naming a bad one), and ``model``:
+    "request" to execute it on the request's own MJCF hand (its actuators, masses and
+    contact settings: ``sim.user_model``), or an MJCF text to execute it on; None:
+    dexroll's scene."""
     from sim import SimOptions, simulate
 
-    sim_options = SimOptions.from_dict(options or {})
-    return simulate(execution_plan(result, request), sim_options)
+    raw = dict(options or {})
+    model = raw.pop("model", None) if model is None else model
+    sim_options = SimOptions.from_dict(raw)
+    plan = execution_plan(result, request)
+    if model is None or model == "scene":
+        return simulate(plan, sim_options)
+    from sim.user_model import simulate_on_model
+
+    return simulate_on_model(plan, user_model(request, plan,
+                                              None if model == "request" else model),
+                             sim_options)
