@@ -221,7 +221,8 @@ def _joint_drive(m: Any, jid: int, name: str) -> _Joint:
         return _Joint(name, qpos, dof, -1, "passive", note="actuator bias not affine: "
                                                            "joint left passive")
     return _Joint(name, qpos, dof, a, "affine", gain, float(b[0]),
-                  Kp=-gear * gear * float(b[1]), Kv=-gear * gear * float(b[2]), gear=gear,
+                  Kp=-gear * gear * float(b[1]) + 0.0, Kv=-gear * gear * float(b[2]) + 0.0,
+                  gear=gear,
                   note="affine servo: the reference offset that gives the feed-forward "
                        "torque at its gain" + more)
 
@@ -319,8 +320,10 @@ class UserModelSimulation:
         for g, k in sorted(self.contact_of_geom.items()):
             file_s = _geom_settings(m, g)
             pair = _pair_settings(m, g, self.object_geom)
+            body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g]))
             tips.append({"geom": mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)
-                         or f"geom {g}", "contact": self.plan.contacts[k].name,
+                         or f"{body}'s geom {g}", "geom_id": g,
+                         "contact": self.plan.contacts[k].name,
                          "file": file_s, "with_object": pair,
                          "differs": [key for key in file_s if _differs(file_s[key],
                                                                         pair[key])]})

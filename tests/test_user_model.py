@@ -99,8 +99,7 @@ def test_the_contact_settings_reported_are_mujocos_mix(condim: int) -> None:
     m = sim.model
     og = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, OBJECT)
     for t in sim.settings["fingertip_contacts"]:
-        g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, t["geom"]) \
-            if not t["geom"].startswith("geom ") else int(t["geom"].split()[1])
+        g = t["geom_id"]
         assert t["with_object"]["condim"] == max(m.geom_condim[g], m.geom_condim[og])
         assert np.allclose(t["with_object"]["friction"],
                            np.maximum(m.geom_friction[g], m.geom_friction[og]))
