@@ -61,6 +61,12 @@ MAX_CANDIDATES = 16
 #: The search's roll step [rad] (the planner's check rolls at 0.25 deg: a candidate's
 #: reach is a search's estimate; the chosen grasp's is rolled again at that step).
 COARSE_STEP = math.radians(1.0)
+#: At most this many combinations are weighed (each finger's least preferred candidates
+#: dropped first): 4 fingers keep 16 each, 5 fingers 9.
+MAX_COMBINATIONS = 66_000
+#: A candidate's reach is rolled at most this far [rad] (a turn farther than rolling can
+#: go, docs/hands.md, is not worth the time: the search stays within seconds).
+MAX_SEARCH_TURN = math.radians(60.0)
 #: Finite stand-in for an unlimited joint's range [rad].
 _UNLIMITED = math.pi
 
@@ -178,6 +184,17 @@ def _outside(f: Any, q: FloatArray, centre: FloatArray, radius: float) -> bool:
     return True
 
 
+def _capped(turns: Sequence[Any], cap: float) -> list[Any]:
+    """The turns, one after the other, up to ``cap`` [rad] in all."""
+    out, left = [], cap
+    for t in turns:
+        if left <= 0.0:
+            break
+        out.append(t if t.angle <= left else _Turn(np.asarray(t.axis), left))
+        left -= t.angle
+    return out
+
+
 def _roll_through(f: Any, q: FloatArray, centre: FloatArray, radius: float,
                   turns: Sequence[Any], margin: float, step: float = COARSE_STEP
                   ) -> tuple[float, str]:
@@ -243,20 +260,27 @@ def finger_contacts(f: Any, centre: ArrayLike, radius: float, seeds: Sequence[Ar
 
 
 def _pick(per: list[list[FingerContact]], keep: int, ranked: bool) -> list[list[int]]:
-    """Per finger the indices of its candidates weighed in combinations: its ``keep``
-    farthest-reaching (when ``ranked``) and ``keep`` of the most distinct normals."""
+    """Per finger the indices of its candidates weighed in combinations, in order of
+    preference: its ``keep`` farthest-reaching (when ``ranked``) interleaved with ``keep``
+    of its most distinct normals; trimmed (the least preferred first, from the longest)
+    until the combinations number at most :data:`MAX_COMBINATIONS`."""
     out = []
     for cands in per:
         idx: list[int] = []
         if ranked:
             idx = sorted(range(len(cands)), key=lambda k: -(cands[k].reach or 0.0))[:keep]
         fps = [0] if cands else []
+        N = np.array([c.normal for c in cands]) if cands else np.zeros((0, 3))
         while len(fps) < min(keep, len(cands)):
-            N = np.array([c.normal for c in cands])
             dmin = np.min(N @ N[fps].T, axis=1)  # cos to the nearest chosen
             dmin[fps] = np.inf
             fps.append(int(np.argmin(dmin)))
-        out.append(sorted(set(idx) | set(fps)))
+        order: list[int] = []
+        for pair in itertools.zip_longest(idx, fps):
+            order += [k for k in pair if k is not None and k not in order]
+        out.append(order)
+    while math.prod(len(o) for o in out) > MAX_COMBINATIONS:
+        max(out, key=len).pop()
     return out
 
 
@@ -278,6 +302,7 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
     rng = np.random.default_rng(seed)
     names = list(names) if names is not None else [f"finger{i}" for i in range(len(fingers))]
     requested = float(sum(t.angle for t in turns))
+    turns = _capped(turns, MAX_SEARCH_TURN)
     per: list[list[FingerContact]] = []
     errors: list[tuple[str, str]] = []
     for i, f in enumerate(fingers):
@@ -315,10 +340,11 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
     gap = np.full(len(combos), np.inf)
     for a, b in itertools.combinations(range(n), 2):
         gap = np.minimum(gap, np.linalg.norm(C[:, a] - C[:, b], axis=1) - radii[a] - radii[b])
-    clo = closure(N) if n >= 2 else np.zeros(len(combos))
+    clo = np.concatenate([closure(N[k:k + 4096]) for k in range(0, len(combos), 4096)]) \
+        if n >= 2 else np.zeros(len(combos))
     least = np.zeros(len(combos))
     if turns:
-        R = np.stack([np.array([min(per[i][k].reach or 0.0, requested)
+        R = np.stack([np.array([min(per[i][k].reach or 0.0, requested, MAX_SEARCH_TURN)
                                 for k in range(len(per[i]))])[combos[:, i]]
                       for i in range(n)], axis=1)
         least = np.round(R.min(axis=1), 3)  # ~0.06 deg: equal reaches tie
