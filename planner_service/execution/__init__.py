@@ -237,7 +237,6 @@ def user_model(request: PlanRequest | None, plan: Any, text: str | None = None) 
     fingers (the request's ``hand.tips[hand_finger].name``; the built-in allegro's tip
     links) and the request's ``mount``. NotExecutableError when the request has no hand
     model to take them from."""
-    from ocp.geometry.surfaces import rotation_from_vector
     from sim.user_model import UserModel
 
     hand = getattr(request, "hand", None)
@@ -252,9 +251,9 @@ def user_model(request: PlanRequest | None, plan: Any, text: str | None = None) 
     if hand.tips is not None:
         names = [t.name for t in hand.tips]
     elif hand.builtin == "allegro":
-        from ocp.robots.allegro import TIP_NAMES
+        from ..planners.cache import load_hand_model
 
-        names = list(TIP_NAMES)
+        names = list(load_hand_model(hand).tip_names)
     else:
         raise NotExecutableError(f"the {hand.builtin} hand's fingers are not a hand model's")
     tips = []
@@ -267,8 +266,13 @@ def user_model(request: PlanRequest | None, plan: Any, text: str | None = None) 
         raise NotExecutableError(f"{len(tips)} fingers in the request, {len(plan.fingers)} "
                                  "in the plan")
     R, p = np.eye(3), np.zeros(3)
-    if hand.mount is not None:
-        R = rotation_from_vector(hand.mount.rotation)
+    if hand.mount is not None:  # the rotation vector's matrix (Rodrigues)
+        w = np.asarray(hand.mount.rotation, dtype=float)
+        angle = float(np.linalg.norm(w))
+        if angle > 0.0:
+            k = w / angle
+            K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+            R = np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
         p = np.asarray(hand.mount.position, dtype=float)
     return UserModel(text, tuple(tips), np.asarray(R, dtype=float), p)
 
