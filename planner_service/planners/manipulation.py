@@ -579,6 +579,16 @@ def manipulation_summary(result: ManipulationResult) -> str:
         worst_goal = max(result.goal_error.values())
         lines.append(f"goal error   {worst_goal:.3g} (worst of {len(result.goal_error)} "
                      "palm targets)")
+    g = result.grasp
+    if g is not None:
+        reach = ""
+        if g.reach is not None:
+            least = min(g.fingers, key=lambda f: f.reach if f.reach is not None else 1e9)
+            stop = f", {least.stop}" if least.stop else ""
+            reach = (f": reach {math.degrees(g.reach):.3g} of {math.degrees(g.requested_turn):.3g}"
+                     f" deg toward the motion (least: {least.name}{stop})")
+        lines.append(f"grasp        searched in {g.search_time:.2g} s{reach}, closure "
+                     f"{g.closure:.2g}; its joints and tip sides: the result's `grasp`")
     c = result.certificate
     if t is not None and t.tracking_position_error and t.tracking_angle_error:
         tol = c.tolerances if c is not None else {}
