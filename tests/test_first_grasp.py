@@ -105,6 +105,22 @@ def test_the_request_option_on_our_mjcf_reports_the_grasp_it_used() -> None:
     assert request_errors(ManipulationRequest.model_validate(plain), CACHE) == []
 
 
+def test_the_builtin_hand_takes_the_searched_tip_sides() -> None:
+    body = own_hand_request(grasp={"search": {"maximise_reach": False}})
+    body["hand"] = {"builtin": "allegro"}
+    request = ManipulationRequest.model_validate(body)
+    problem, grasp = problem_and_grasp(request, CACHE)
+    assert grasp is not None and grasp.reach is None and grasp.closure > 0.0
+    centre = request.initial_pose.position  # type: ignore[union-attr]
+    for tip, g in zip(problem.fingers, grasp.fingers, strict=True):
+        assert g.tip_side is not None
+        # each contact on its cap chart's equator: across the chart's poles
+        pole = np.asarray(tip.finger.tip_surface.R)[:, 2]  # the poles' axis, tip frame
+        m = tip_state(tip.finger, g.q, centre, NOMINAL_RADIUS).m
+        assert abs(float(pole @ m)) < 1e-6
+    assert request_errors(request, CACHE) == []
+
+
 @pytest.mark.parametrize(("change", "field", "words"), [
     (lambda b: b.update(grasp={"search": {"samples": 5}}), "grasp.search.samples",
      "greater than or equal to 50"),
