@@ -30,7 +30,7 @@ from ..plans.shapes import pad_thickness
 from ..plans.tracks import NoPlanError, PlanTracks, tracks_of
 
 __all__ = ["NotExecutableError", "execution_plan", "finger_spec", "plan_forces",
-           "simulate_result", "with_rate_breaks"]
+           "simulate_result", "user_model", "with_rate_breaks"]
 
 #: Friction coefficient when neither the request nor the result states it.
 DEFAULT_MU = 0.5
@@ -229,11 +229,70 @@ def with_rate_breaks(plan: Any, result: AnyPlanResult) -> Any:
                                   for c in plan.contacts))
 
 
+def user_model(request: PlanRequest | None, plan: Any, text: str | None = None) -> Any:
+    """The user's hand model a plan is executed on (a ``sim.user_model.UserModel``): the
+    MJCF ``text`` (default: the request's ``hand.mjcf``), the tip of each of the plan's
+    fingers (the request's ``hand.tips[hand_finger].name``; the built-in allegro's tip
+    links) and the request's ``mount``. NotExecutableError when the request has no hand
+    model to take them from."""
+    from sim.user_model import UserModel
+
+    hand = getattr(request, "hand", None)
+    if hand is None:
+        raise NotExecutableError("executing on a hand model needs the plan's request with "
+                                 "its `hand` (the fingertips' names)")
+    if text is None:
+        if hand.mjcf is None:
+            raise NotExecutableError("the request's hand is not an MJCF model: give the "
+                                     "model file (dexroll simulate --model FILE)")
+        text = hand.mjcf
+    if hand.tips is not None:
+        names = [t.name for t in hand.tips]
+    elif hand.builtin == "allegro":
+        from ..planners.cache import load_hand_model
+
+        names = list(load_hand_model(hand).tip_names)
+    else:
+        raise NotExecutableError(f"the {hand.builtin} hand's fingers are not a hand model's")
+    tips = []
+    for f in getattr(request, "fingers", []):
+        if f.hand_finger is None:
+            raise NotExecutableError("a finger not of the request's hand cannot be executed "
+                                     "on its model")
+        tips.append(names[f.hand_finger])
+    if len(tips) != len(plan.fingers):
+        raise NotExecutableError(f"{len(tips)} fingers in the request, {len(plan.fingers)} "
+                                 "in the plan")
+    R, p = np.eye(3), np.zeros(3)
+    if hand.mount is not None:  # the rotation vector's matrix (Rodrigues)
+        w = np.asarray(hand.mount.rotation, dtype=float)
+        angle = float(np.linalg.norm(w))
+        if angle > 0.0:
+            k = w / angle
+            K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+            R = np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
+        p = np.asarray(hand.mount.position, dtype=float)
+    return UserModel(text, tuple(tips), np.asarray(R, dtype=float), p)
+
+
 def simulate_result(result: AnyPlanResult, request: PlanRequest | None = None,
-                    options: dict[str, Any] | None = None) -> Any:
+                    options: dict[str, Any] | None = None,
+                    model: str | None = None) -> Any:
     """Execute a wire result's plan in MuJoCo: the :class:`sim.SimReport`. ``options``:
-    :class:`sim.SimOptions` fields (ValueError naming a bad one)."""
+    :class:`sim.SimOptions` fields (ValueError naming a bad one), and ``model``:
+    "request" to execute it on the request's own MJCF hand (its actuators, masses and
+    contact settings: ``sim.user_model``), or an MJCF text to execute it on; None:
+    dexroll's scene."""
     from sim import SimOptions, simulate
 
-    sim_options = SimOptions.from_dict(options or {})
-    return simulate(execution_plan(result, request), sim_options)
+    raw = dict(options or {})
+    model = raw.pop("model", None) if model is None else model
+    sim_options = SimOptions.from_dict(raw)
+    plan = execution_plan(result, request)
+    if model is None or model == "scene":
+        return simulate(plan, sim_options)
+    from sim.user_model import simulate_on_model
+
+    return simulate_on_model(plan, user_model(request, plan,
+                                              None if model == "request" else model),
+                             sim_options)
