@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from ocp.certify.certificate import Certificate, Check, CheckKind, TolerancePolicy
     from ocp.contacts import FingertipContact, FreeFingertip, FreeObject, SupportContact
     from ocp.gait.planner import GaitPhase, GaitPlan, plan_gait
+    from ocp.gait.samples import GaitSamples, gait_samples, gait_times
     from ocp.gait.step import GaitStep, contact_of, replace_finger
     from ocp.geometry.rotations import quaternion_wxyz
     from ocp.geometry.surfaces import SURFACES, Surface
@@ -81,6 +82,8 @@ _EXPORTS = {
     "GaitPhase": "ocp.gait.planner", "GaitPlan": "ocp.gait.planner",
     "plan_gait": "ocp.gait.planner", "GaitStep": "ocp.gait.step",
     "contact_of": "ocp.gait.step", "replace_finger": "ocp.gait.step",
+    "GaitSamples": "ocp.gait.samples", "gait_samples": "ocp.gait.samples",
+    "gait_times": "ocp.gait.samples",
     "BallOnPalmPlanner": "ocp.ball_on_palm",
     "Certificate": "ocp.certify.certificate", "Check": "ocp.certify.certificate",
     "CheckKind": "ocp.certify.certificate", "TolerancePolicy": "ocp.certify.certificate",
@@ -143,6 +146,7 @@ __all__ = [
     "FreeObject",
     "GaitPhase",
     "GaitPlan",
+    "GaitSamples",
     "GaitStep",
     "GraspSample",
     "GreedyResult",
@@ -171,6 +175,8 @@ __all__ = [
     "attempt",
     "certify_palm_plan",
     "contact_of",
+    "gait_samples",
+    "gait_times",
     "goal_errors",
     "greedy_plan",
     "guess_loops",

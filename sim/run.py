@@ -25,6 +25,10 @@ TOUCH_FORCE = 1e-6
 #: at least this (a gait's force ramps end at zero: the last part of an unloading may lose
 #: the contact early, as planned).
 ACTIVE_SHARE = 0.5
+#: A fingertip's squeeze and grip go linearly from none at this activity to all at 1 (a
+#: gait's lift-off and approach are at a quarter: no squeeze while it leaves or reaches
+#: the object; at the loss threshold a third of it keeps the contact as planned).
+SQUEEZE_FROM = 0.25
 #: The report's time series has at most about this many rows (a long plan is recorded
 #: less often than ``record_every`` asks).
 MAX_SERIES = 5000
@@ -172,7 +176,7 @@ class Simulation:
                 mujoco.mj_jac(m, d, jacp, None, p, idx.tip_body)
                 J = jacp[:, idx.dofs]
                 share = float(active_of[f.name][i]) if f.name in active_of else 1.0
-                share = min(max(2.0 * share - 1.0, 0.0), 1.0)  # none below a half
+                share = min(max((share - SQUEEZE_FROM) / (1.0 - SQUEEZE_FROM), 0.0), 1.0)
                 offsets[k][i] = _damped_pinv(J) @ (share * o.squeeze * normal)
                 if o.use_plan_forces and ref.joint_torques is not None:
                     torques[k][i] = ref.joint_torques[i]

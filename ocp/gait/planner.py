@@ -131,11 +131,13 @@ def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
 def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, angle: float,
               roll_step: float = math.radians(10.0), seconds_per_radian: float = 8.0,
               planner: Any = None, swing: dict[str, Any] | None = None,
-              max_rolls: int = 40) -> GaitPlan:
+              hold_time: float = 0.2, max_rolls: int = 40) -> GaitPlan:
     """Turn the ball of ``template`` (a grasp of round fingertips on a ball, with
     ``forces``: the holds need the object's weight) by ``angle`` [rad] about ``axis``
     (palm frame) from the joints ``qs`` (one array per finger), rolling by at most
-    ``roll_step`` at a time and re-placing fingertips in between (the module's doc)."""
+    ``roll_step`` at a time and re-placing fingertips in between (the module's doc).
+    ``swing``: fields of :class:`~ocp.gait.swing.SwingSpec` (duration, clearance);
+    ``hold_time``: the unloading and loading around each swing [s]."""
     from ocp.solve.planner import ManipulationPlanner
 
     t_wall = time.perf_counter()
@@ -190,7 +192,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             _, n_back = contact_of(fingers[k], q_start[k], centre, rho)
             gs = replace_finger(fingers, q_now, k, n_back, q_start[k],
                                 np.asarray(pose.position, dtype=float), rho, pose.rotation,
-                                load, swing)
+                                load, swing, hold_time)
             if gs.status == "infeasible" and gs.swing is None:
                 continue  # it keeps rolling
             i = len(plan.steps)

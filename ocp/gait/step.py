@@ -118,12 +118,14 @@ class GaitStep:
 def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                    landing_normal: FloatArray, q_target: FloatArray, centre: FloatArray,
                    radius: float, rotation: FloatArray, load: FloatArray,
-                   swing: dict[str, Any] | None = None) -> GaitStep:
+                   swing: dict[str, Any] | None = None, hold_time: float = 0.2
+                   ) -> GaitStep:
     """Re-place fingertip ``k`` of a grasp of a still ball (``fingers`` at the joints
     ``qs``, every tip touching) at the contact whose outward normal is ``landing_normal``
     (palm frame), its joints seeded by ``q_target``. ``load``: the load parameters
     (:func:`~ocp.transcription.values.load_parameters`); ``swing``: fields of the
-    :class:`~ocp.gait.swing.SwingSpec` (duration, clearance, ...). A grasp whose other
+    :class:`~ocp.gait.swing.SwingSpec` (duration, clearance, ...); ``hold_time``: the
+    unloading's and the loading's duration [s]. A grasp whose other
     fingertips cannot hold the object is ``infeasible`` at once, naming the finger."""
     L = radius
     allf = list(range(len(fingers)))
@@ -158,4 +160,4 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                                          "object", plan)
     return GaitStep(k, "solved", "", plan, (before, during, after),
                     (F_before, F_during, F_after), (tuple(allf), tuple(rest), tuple(allf)),
-                    q_after=q_after)
+                    hold_time, hold_time, q_after)

@@ -42,7 +42,12 @@ class NotExecutableError(ValueError):
 
 
 def _q_dot(result: AnyPlanResult) -> list[np.ndarray]:
-    """Each finger's joint rates at the trajectory's times."""
+    """Each finger's joint rates at the trajectory's times (a gait's: its joint
+    trajectory's, every finger's columns together: split by the caller)."""
+    if isinstance(result, ManipulationResult) and result.trajectory is None and \
+            result.gait is not None and result.joint_trajectory is not None:
+        return [np.asarray([p.velocities for p in result.joint_trajectory.points],
+                           dtype=float)]
     if isinstance(result, FingerPlanResult) and result.trajectory is not None:
         return [np.asarray(result.trajectory.q_dot, dtype=float)]
     if isinstance(result, ManipulationResult) and result.trajectory is not None:
@@ -148,6 +153,9 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
         raise NotExecutableError("the plan is not finite")
     models: SceneModels = infer_models(tracks) if request is None \
         else models_from_request(request, tracks)
+    if isinstance(result, ManipulationResult) and result.trajectory is None and \
+            result.gait is not None and result.gait.samples is not None:
+        return _gait_plan(result, request, tracks, models)
     rates = _q_dot(result)
     forces = plan_forces(result)
     fingers, refs = [], []
@@ -182,6 +190,39 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
     plan = with_rate_breaks(plan, result)
     plan.check()
     return plan
+
+
+def _gait_plan(result: ManipulationResult, request: PlanRequest | None, tracks: PlanTracks,
+               models: SceneModels) -> Any:
+    """The simulator's plan of a gait result (docs/gait.md): its samples, the request's
+    models and load."""
+    from ocp import GaitSamples
+
+    from .gait import samples_execution_plan
+
+    gs = result.gait.samples if result.gait is not None else None
+    load = getattr(request, "forces", None)
+    if gs is None or load is None or any(m is None for m in models.fingers):
+        raise NotExecutableError("a gait is executed with its request (its fingers and "
+                                 "load): give the request (dexroll simulate --request)")
+    qd = _q_dot(result)[0]
+    acc = np.zeros_like(qd)
+
+    def stack(attr: str) -> np.ndarray:
+        return np.stack([np.asarray(getattr(c, attr), dtype=float) for c in gs.contacts],
+                        axis=1)
+
+    smp = GaitSamples(tracks.t, np.hstack([f.q for f in tracks.fingers]), qd, acc,
+                      tracks.object_position, tracks.object_wxyz, stack("point"),
+                      stack("normal"), stack("force"),
+                      np.asarray([c.active for c in gs.contacts], dtype=float).T,
+                      np.stack([f.tip_position for f in tracks.fingers], axis=1),
+                      np.stack([f.tip_wxyz for f in tracks.fingers], axis=1))
+    mu, mu_note = _mu(request, tracks)
+    return samples_execution_plan(
+        smp, tuple(f.name for f in tracks.fingers), tuple(models.fingers), models.shape,
+        tuple(models.dimensions), float(load.mass), mu, tuple(load.gravity),
+        (*models.notes, *([mu_note] if mu_note else [])))
 
 
 def with_rate_breaks(plan: Any, result: AnyPlanResult) -> Any:

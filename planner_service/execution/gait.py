@@ -8,101 +8,44 @@ from typing import Any
 
 import numpy as np
 
-from ocp import GaitPlan, contact_of, quaternion_wxyz
+from ocp import GaitPlan, GaitSamples, gait_samples, gait_times
 
 from . import finger_spec
 
-__all__ = ["TRANSITION", "gait_execution_plan"]
-
-#: A contact's activity in a swing's lift-off and approach (``sim.ContactSpec.active``):
-#: planned to leave or reach the object there, neither touching nor lifted.
-TRANSITION = 0.25
-
-
-def _times(gait: GaitPlan, rate: float) -> np.ndarray:
-    t = np.linspace(0.0, gait.duration, max(2, int(np.ceil(gait.duration * rate)) + 1))
-    edges = [p.start for p in gait.phases] + [gait.duration]
-    return np.unique(np.concatenate([t, edges]))
+__all__ = ["gait_execution_plan", "samples_execution_plan"]
 
 
 def gait_execution_plan(gait: GaitPlan, problem: Any, rate: float = 200.0) -> Any:
     """The simulator's plan (a :class:`sim.ExecutionPlan`) of ``gait``, planned from the
     grasp ``problem`` (its fingers, object, friction and load), sampled at ``rate`` [Hz]
-    and at every switch. The fingertips' planned forces are fed forward (J^T f); a
-    lifted fingertip has no force, no squeeze and no grip."""
+    and at every switch."""
+    smp = gait_samples(gait, problem, gait_times(gait, rate))
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(problem.fingers))
+    load = problem.forces
+    return samples_execution_plan(smp, names, tuple(f.finger for f in problem.fingers),
+                                  problem.object.shape,
+                                  tuple(float(d) for d in problem.object.dimensions),
+                                  float(load.mass), float(problem.mu), tuple(load.gravity))
+
+
+def samples_execution_plan(smp: GaitSamples, names: tuple[str, ...], models: tuple[Any, ...],
+                           shape: str, dimensions: tuple[float, ...], mass: float, mu: float,
+                           gravity: tuple[float, ...], notes: tuple[str, ...] = ()) -> Any:
+    """The simulator's plan of a gait's samples: the fingertips' planned forces fed
+    forward (J^T f); a lifted fingertip has no force, no squeeze and no grip (its
+    contact's ``active``)."""
     from sim import ContactSpec, ExecutionPlan, FingerReference, ObjectSpec
 
-    if not gait.phases:
-        raise ValueError("the gait has no phases: nothing to execute")
-    fingers = tuple(f.finger for f in problem.fingers)
-    names = tuple(f.name or f"finger{i}" for i, f in enumerate(problem.fingers))
-    nf = len(fingers)
-    cut = np.cumsum((0, *gait.nq))
-    rho = float(problem.object.dimensions[0])
-    ts = _times(gait, rate)
-    n = ts.size
-    Q, QD = np.zeros((n, int(cut[-1]))), np.zeros((n, int(cut[-1])))
-    pos, wxyz = np.zeros((n, 3)), np.zeros((n, 4))
-    force = np.zeros((n, nf, 3))
-    active = np.ones((n, nf))
-    pose = problem.initial_pose
-    last = (np.asarray(pose.position, dtype=float), pose.rotation)
-    ends = {}  # the object's pose at each roll's end
-    for ph in gait.phases:
-        if ph.kind == "roll":
-            sol = gait.rolls[ph.index]
-            ends[ph.index] = (sol.object_position[-1], sol.object_rotation[-1])
-    phase_of = np.array([next((j for j, p in enumerate(gait.phases) if t <= p.end + 1e-12),
-                              len(gait.phases) - 1) for t in ts])
-    for j, ph in enumerate(gait.phases):
-        rows = np.flatnonzero(phase_of == j)
-        if not rows.size:
-            if ph.kind == "roll":
-                last = ends[ph.index]
-            continue
-        tl = ts[rows] - ph.start
-        if ph.kind == "roll":  # the roll's own polynomials, every time at once
-            sol = gait.rolls[ph.index]
-            jt = sol.joint_trajectory(tl)
-            Q[rows], QD[rows] = jt.positions, jt.velocities
-            smp = sol.sample(tl)
-            pos[rows], wxyz[rows] = smp.object_position, quaternion_wxyz(smp.object_rotation)
-            force[rows] = sol.forces(tl)[0]
-            last = ends[ph.index]
-            continue
-        for r, t in zip(rows, ts[rows], strict=True):
-            Q[r], QD[r], _ = gait.joints(float(t))
-        pos[rows], wxyz[rows] = last[0], quaternion_wxyz(last[1])
-        step = gait.steps[ph.index]
-        k = step.finger
-        s = np.clip(tl / max(ph.end - ph.start, 1e-12), 0.0, 1.0)
-        if ph.kind == "swing":
-            force[rows] = np.insert(step.forces[1], k, 0.0, axis=0)
-            assert step.swing is not None
-            # lifted where the plan keeps it clear; in the lift-off and the approach
-            # (touching at their ends) neither a loss nor a touch counts
-            active[rows, k] = [0.0 if step.swing.segment(float(x)) == "clear"
-                               else TRANSITION for x in tl]
-        else:
-            force[rows] = np.array([step.ramp_forces(ph.kind, float(x)) for x in s])
-            active[rows, k] = np.maximum(1.0 - s if ph.kind == "unload" else s, TRANSITION)
-    points = np.zeros((n, nf, 3))
-    normals = np.zeros((n, nf, 3))
-    for i in range(n):
-        for c, f in enumerate(fingers):
-            points[i, c], normals[i, c] = contact_of(f, Q[i, cut[c]:cut[c + 1]], pos[i], rho)
-    specs = tuple(finger_spec(nm, f) for nm, f in zip(names, fingers, strict=True))
-    refs = tuple(FingerReference(Q[:, cut[k]:cut[k + 1]], QD[:, cut[k]:cut[k + 1]], None,
-                                 force[:, k]) for k in range(nf))
-    contacts = tuple(ContactSpec(nm, "finger", nm, points[:, k], normals[:, k], active[:, k])
-                     for k, nm in enumerate(names))
-    load = problem.forces
-    g = load.gravity
-    plan = ExecutionPlan(ts, ObjectSpec(problem.object.shape,
-                                        tuple(float(d) for d in problem.object.dimensions),
-                                        float(load.mass)),
-                         pos, wxyz, specs, refs, contacts, None, float(problem.mu), None,
-                         (float(g[0]), float(g[1]), float(g[2])),
-                         ("a gait: planned lift-offs and touch-downs (contacts' activity)",))
+    cut = np.cumsum((0, *(int(m.nq) for m in models)))
+    specs = tuple(finger_spec(nm, m) for nm, m in zip(names, models, strict=True))
+    refs = tuple(FingerReference(smp.q[:, cut[k]:cut[k + 1]], smp.q_dot[:, cut[k]:cut[k + 1]],
+                                 None, smp.force[:, k]) for k in range(len(models)))
+    contacts = tuple(ContactSpec(nm, "finger", nm, smp.point[:, k], smp.normal[:, k],
+                                 smp.active[:, k]) for k, nm in enumerate(names))
+    plan = ExecutionPlan(smp.t, ObjectSpec(shape, dimensions, mass), smp.object_position,
+                         smp.object_wxyz, specs, refs, contacts, None, mu, None,
+                         (float(gravity[0]), float(gravity[1]), float(gravity[2])),
+                         ("a gait: planned lift-offs and touch-downs (contacts' activity)",
+                          *notes))
     plan.check()
     return plan

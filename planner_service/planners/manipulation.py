@@ -52,6 +52,7 @@ from .common import (
     solver_options,
 )
 from .fields import FieldErrors, FieldMap, Rule
+from .gait import gait_errors, solve_gait
 from .samples import joint_trajectory_block, requested_times, samples_block
 
 __all__ = [
@@ -430,8 +431,20 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
                            [(tip.name or f"finger{i}", tuple(tip.finger.joint_names))
                             for i, tip in enumerate(problem.fingers)])
 
+    def request_errors(self, request: ManipulationRequest, fingers: FingerCache
+                       ) -> FieldErrors:
+        errors = super().request_errors(request, fingers)
+        if request.gait is not None:
+            try:
+                with fingers.lock:
+                    problem = manipulation_problem(request, fingers)
+            except ProblemError:
+                return errors  # the errors name why there is no problem
+            errors += [e for e in gait_errors(request, problem) if e not in errors]
+        return errors
+
     def solve(self, request: ManipulationRequest, planners: Planners
-              ) -> tuple[ManipulationResult, ManipulationSolution]:
+              ) -> tuple[ManipulationResult, Any]:
         warm = warm_start_of(request)
         fingers, fields = planners.fingers, self.fields(request)
         with fingers.lock:  # the hand and fingers, by the cache's rules
@@ -440,6 +453,12 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
         errors = fields.errors(problem.errors())
         if errors:
             raise ProblemError(errors)
+        if request.gait is not None:  # finger gaiting: rolls and re-placements
+            errors = gait_errors(request, problem)
+            if errors:
+                raise ProblemError(errors)
+            gait_res, gait = solve_gait(request, problem, planner)
+            return gait_res.model_copy(update={"grasp": grasp}), gait
         try:
             sol = planner.solve(problem, warm)
         except ProblemError as exc:
@@ -460,7 +479,7 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
             general = fingers.manipulation
         return general.prepare(problem)
 
-    def summary(self, result: ManipulationResult, solution: ManipulationSolution) -> str:
+    def summary(self, result: ManipulationResult, solution: Any) -> str:
         return manipulation_summary(result)
 
 
@@ -599,6 +618,16 @@ def manipulation_summary(result: ManipulationResult) -> str:
         lines.append(f"tracking     {mark}{max(t.tracking_position_error) * 1e3:.3g} mm, "
                      f"{math.degrees(max(t.tracking_angle_error)):.3g} deg worst{bounds}"
                      + ("" if certified else " (the last iterate's, not a plan's)"))
+    gt = result.gait
+    if gt is not None:
+        moves = ", ".join(p.lifted_finger or "" for p in gt.phases if p.kind == "swing")
+        lines.append(f"gait         {mark}turned {math.degrees(gt.turned):.1f} deg in {gt.rolls} "
+                     f"roll(s) and {gt.replacements} re-placement(s) ({moves or 'none'}); "
+                     f"{gt.phases[-1].end if gt.phases else 0.0:.2f} s, planned in "
+                     f"{gt.wall_time:.1f} s")
+        if gt.never_lifted:
+            lines.append(f"  never lifted: {', '.join(gt.never_lifted)} (the others cannot "
+                         "hold the ball without it)")
     if c is not None:
         lines.append("certificate  " + ("PASSED" if c.passed else "FAILED"))
         slips = [v for k, v in c.values.items() if k.startswith("max_slip_speed_")]

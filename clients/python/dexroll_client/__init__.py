@@ -31,6 +31,14 @@ from dexroll_client.errors import (
     TransportError,
     UnauthorizedError,
 )
+from dexroll_client.gait import (
+    GaitContactModel,
+    GaitFingerModel,
+    GaitModel,
+    GaitPhaseModel,
+    GaitResultModel,
+    GaitSamplesModel,
+)
 from dexroll_client.models import (
     AnyPlanResult,
     BallOnPalmRequest,
@@ -110,6 +118,12 @@ __all__ = [
     "FingerTrajectoryModel",
     "FingertipModel",
     "ForcesModel",
+    "GaitContactModel",
+    "GaitFingerModel",
+    "GaitModel",
+    "GaitPhaseModel",
+    "GaitResultModel",
+    "GaitSamplesModel",
     "GraspModel",
     "GraspUsedModel",
     "HandInfo",

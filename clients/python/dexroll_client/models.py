@@ -40,6 +40,14 @@ from dexroll_client.common import (
     PLANNERS,
     NlpPointModel,
 )
+from dexroll_client.gait import (
+    GaitContactModel,
+    GaitFingerModel,
+    GaitModel,
+    GaitPhaseModel,
+    GaitResultModel,
+    GaitSamplesModel,
+)
 from dexroll_client.jobs import ErrorBody, Job, JobList, JobState
 from dexroll_client.requests import (
     WARM_START_DESCRIPTION as WARM_START_DESCRIPTION,
@@ -158,6 +166,12 @@ __all__ = [
     "FingerTrajectoryModel",
     "FingertipModel",
     "ForcesModel",
+    "GaitContactModel",
+    "GaitFingerModel",
+    "GaitModel",
+    "GaitPhaseModel",
+    "GaitResultModel",
+    "GaitSamplesModel",
     "GraspFingerModel",
     "GraspModel",
     "GraspSearchModel",

@@ -32,6 +32,7 @@ from dexroll_client.common import (
     _planner_of,
     _Request,
 )
+from dexroll_client.gait import GaitModel
 from dexroll_client.results import (
     CollocationModel,
     FingerPlanResult,
@@ -888,6 +889,10 @@ class ManipulationRequest(PlanRequestBase):
                     "closure), maximising the rolled reach toward `motion`; the result's "
                     "`grasp` says which was used. 'auto': {\"search\": {}}; null: the "
                     "fingers' `initial_q` (or the hand's nominal grasp)")
+    gait: GaitModel | None = Field(
+        default=None, description="turn the ball by `motion`'s one rotation step farther "
+                                   "than rolling can: rolls and fingertip re-placements "
+                                   "(docs/gait.md); null: one rolling plan")
     forces: ForcesModel | None = Field(
         default=None, description="plan the contact forces for this load and grip; null (the "
                                   "default): a kinematic plan")

@@ -14,6 +14,7 @@ from typing import Annotated, Literal
 from pydantic import Discriminator, Field, Tag
 
 from dexroll_client.common import NlpPointModel, _planner_of, _Response
+from dexroll_client.gait import GaitResultModel
 
 __all__ = [
     "AnyPlanResult",
@@ -591,6 +592,9 @@ class ManipulationResult(PlanResultBase):
     grasp: GraspUsedModel | None = Field(
         default=None, description="the initial grasp the request's `grasp` search found "
                                   "(null: none was searched)")
+    gait: GaitResultModel | None = Field(
+        default=None, description="the gait's phases (a request with `gait`; null: one "
+                                  "rolling plan)")
 
 
 #: A plan of any planner, told apart by its ``planner`` field (results stored before it
