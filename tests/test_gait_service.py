@@ -91,4 +91,7 @@ def test_a_gait_is_planned_and_executed_over_http(live_server: Server) -> None:
         assert np.all(np.abs(np.diff(q, axis=0)) <= np.abs(qd).max() * np.diff(t)[:, None]
                       + 1e-9)
         report = client.simulate(job.id)
+        # the viewer draws it: the contacts' activity is in the page's scene
+        page = client.http.get(f"/v1/plans/{job.id}/view")
+        assert page.status_code == 200 and '"active":[1.0' in page.text
     assert report.passed, report.failures

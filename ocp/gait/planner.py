@@ -25,7 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate, Check, CheckKind
-from ocp.gait.step import GaitStep, contact_of, replace_finger
+from ocp.gait.hold import hold_forces
+from ocp.gait.step import GaitStep, contact_of, grasp_hold, replace_finger
 from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
 from ocp.solution import ManipulationSolution
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
@@ -65,6 +66,8 @@ class GaitPlan:
     turned: float = 0.0
     wall_time: float = 0.0
     nq: tuple[int, ...] = ()
+    #: the fingers the others cannot hold the ball without: they roll throughout
+    never_lifted: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -128,10 +131,39 @@ def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
                    duration=duration)
 
 
+#: A roll the fingers' rolled reach shortens stops this far before the reach: the larger
+#: of a degree and a tenth of it (docs/hands.md: turns 1 deg inside the reach were planned,
+#: 3 deg beyond were not).
+REACH_MARGIN = math.radians(1.0)
+REACH_SHARE = 0.1
+#: The least roll worth planning [rad]: a gait whose fingers cannot roll farther stops.
+MIN_ROLL = math.radians(0.5)
+
+
+def _rolled_reach(template: ManipulationProblem, qs: tuple[FloatArray, ...],
+                  centre: FloatArray, rho: float, axis: FloatArray, upto: float
+                  ) -> tuple[float, str, str]:
+    """(the turn [rad] the grasp at joints ``qs`` rolls about ``axis`` before its first
+    finger stops, at most ``upto``; that finger's name, why it stops): each 4-joint round
+    fingertip's motion rolled (:func:`~ocp.robots.grasp_reach.roll`, the seam kept
+    ``pad_margin`` away)."""
+    from ocp.robots.grasp_reach import roll
+    from ocp.robots.turn_reach import rolls
+
+    best = (upto, "", "")
+    for i, (tip, q) in enumerate(zip(template.fingers, qs, strict=True)):
+        if not rolls(tip.finger):
+            continue
+        r = roll(tip.finger, q, centre, rho, axis, upto, template.pad_margin)
+        if r.why and r.reach < best[0]:  # a stop (a joint limit, the seam, a fold)
+            best = (r.reach, tip.name or f"finger{i}", r.why)
+    return best
+
+
 def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, angle: float,
               roll_step: float = math.radians(10.0), seconds_per_radian: float = 8.0,
               planner: Any = None, swing: dict[str, Any] | None = None,
-              hold_time: float = 0.2, max_rolls: int = 40) -> GaitPlan:
+              hold_time: float = 0.2, max_rolls: int = 40, warm: bool = False) -> GaitPlan:
     """Turn the ball of ``template`` (a grasp of round fingertips on a ball, with
     ``forces``: the holds need the object's weight) by ``angle`` [rad] about ``axis``
     (palm frame) from the joints ``qs`` (one array per finger), rolling by at most
@@ -156,14 +188,34 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     q_now = tuple(np.asarray(q, dtype=float) for q in qs)
     pose = pose0
     plan = GaitPlan("solved", "", nq=tuple(int(f.nq) for f in fingers))
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
+    # the fingers the others cannot hold the ball without (they roll throughout)
+    never_lifted = {names[k] for k in range(nf) if hold_forces(grasp_hold(
+        fingers, q_now, [i for i in range(nf) if i != k], centre, rho, R0), load, rho) is None}
     checks: list[Check] = []
     t, done = 0.0, 0.0
     while done < angle - 1e-12 and len(plan.rolls) < max_rolls:
         step = min(roll_step, angle - done)
+        reach, who, why = _rolled_reach(template, q_now, np.asarray(pose.position, float),
+                                        rho, ax, step)
+        if why and reach < step - 1e-6:  # a finger stops short: roll to just before it
+            step = reach - max(REACH_MARGIN, REACH_SHARE * reach)
+            if step < MIN_ROLL:
+                plan.status = "infeasible"
+                plan.message = (f"finger {who!r} ({why}) stops the turn after "
+                                f"{math.degrees(done + max(reach, 0.0)):.1f} deg of "
+                                f"{math.degrees(angle):.1f} deg about "
+                                f"({', '.join(f'{c:.3g}' for c in ax)}) and cannot be "
+                                "re-placed (the others cannot hold the ball without it)"
+                                if who in never_lifted else
+                                f"finger {who!r} ({why}) stops the turn after "
+                                f"{math.degrees(done + max(reach, 0.0)):.1f} deg even "
+                                "from its re-placed contact")
+                break
         target = axis_angle_rotation(ax, done + step) @ R0
         dur = max(1.0, seconds_per_radian * step)
         prob = _roll_problem(template, q_now, pose, target, centre, dur)
-        sol = planner.solve(prob)
+        sol = planner.solve(prob, plan.rolls[-1] if warm and plan.rolls else None)
         r = len(plan.rolls)
         plan.rolls.append(sol)
         plan.phases.append(GaitPhase("roll", t, t + dur, (True,) * nf, None, r))
@@ -194,6 +246,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                                 np.asarray(pose.position, dtype=float), rho, pose.rotation,
                                 load, swing, hold_time)
             if gs.status == "infeasible" and gs.swing is None:
+                never_lifted.add(names[k])
                 continue  # it keeps rolling
             i = len(plan.steps)
             plan.steps.append(gs)
@@ -215,6 +268,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         if plan.status != "solved":
             break
     plan.turned = done
+    plan.never_lifted = tuple(nm for nm in names if nm in never_lifted)
     if plan.status == "solved" and done < angle - 1e-9:
         plan.status, plan.message = "failed", f"{max_rolls} rolls did not make the turn"
     plan.certificate = Certificate.of(checks)

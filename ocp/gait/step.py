@@ -18,7 +18,7 @@ from ocp.gait.checks import hold_checks, swing_checks
 from ocp.gait.hold import Hold, hold_forces
 from ocp.gait.swing import SwingPlan, SwingSpec, plan_swing
 
-__all__ = ["GaitStep", "contact_of", "replace_finger"]
+__all__ = ["GaitStep", "contact_of", "grasp_hold", "replace_finger"]
 
 FloatArray = NDArray[np.float64]
 
@@ -36,8 +36,9 @@ def contact_of(finger: Any, q: FloatArray, centre: FloatArray, radius: float
     return centre + radius * n, n
 
 
-def _hold(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
+def grasp_hold(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
           centre: FloatArray, radius: float, rotation: FloatArray) -> Hold:
+    """The still ball held by the fingertips ``which`` of a grasp at joints ``qs``."""
     pn = [contact_of(fingers[i], qs[i], centre, radius) for i in which]
     return Hold(np.array([p for p, _ in pn]), np.array([n for _, n in pn]), centre,
                 rotation)
@@ -130,8 +131,8 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     L = radius
     allf = list(range(len(fingers)))
     rest = [i for i in allf if i != k]
-    before = _hold(fingers, qs, allf, centre, radius, rotation)
-    during = _hold(fingers, qs, rest, centre, radius, rotation)
+    before = grasp_hold(fingers, qs, allf, centre, radius, rotation)
+    during = grasp_hold(fingers, qs, rest, centre, radius, rotation)
     name = fingers[k].joint_names[0].rsplit("_", 1)[0] if fingers[k].joint_names else str(k)
     F_before = hold_forces(before, load, L)
     F_during = hold_forces(during, load, L)
@@ -153,7 +154,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     if not plan.ok:
         return GaitStep(k, plan.status, plan.message, plan)
     q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)
-    after = _hold(fingers, q_after, allf, centre, radius, rotation)
+    after = grasp_hold(fingers, q_after, allf, centre, radius, rotation)
     F_after = hold_forces(after, load, L)
     if F_after is None:
         return GaitStep(k, "infeasible", f"the grasp with {name} landed cannot hold the "

@@ -131,15 +131,13 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float
             fingers=[GaitFingerModel(name=nm, tip_position=rows(smp.tip_position[:, k]),
                                      tip_orientation_wxyz=rows(smp.tip_wxyz[:, k]))
                      for k, nm in enumerate(names)])
-    lifted = {s.finger for s in gait.steps}
     block = GaitResultModel(
         phases=[GaitPhaseModel(kind=p.kind, start=p.start, end=p.end,
                                touching=list(p.touching),
                                lifted_finger=None if p.lifted is None else names[p.lifted])
                 for p in gait.phases],
         turned=gait.turned, rolls=len(gait.rolls), replacements=len(gait.steps),
-        never_lifted=[nm for i, nm in enumerate(names) if i not in lifted]
-        if gait.steps else [], wall_time=gait.wall_time, samples=samples)
+        never_lifted=list(gait.never_lifted), wall_time=gait.wall_time, samples=samples)
     iterations = sum(r.iterations for r in gait.rolls) + \
         sum(s.swing.iterations for s in gait.steps if s.swing is not None)
     build = sum(r.build_time for r in gait.rolls)
