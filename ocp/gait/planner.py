@@ -160,10 +160,59 @@ def _rolled_reach(template: ManipulationProblem, qs: tuple[FloatArray, ...],
     return best
 
 
+def _stopped(who: str, why: str, at: float, angle: float, ax: FloatArray,
+             held: bool) -> str:
+    """Why a gait stops short: which finger, what stops it, after how much of the turn."""
+    head = (f"finger {who!r} ({why}) stops the turn after {math.degrees(at):.1f} deg of "
+            f"{math.degrees(angle):.1f} deg about ({', '.join(f'{c:.3g}' for c in ax)})")
+    return head + (" and cannot be re-placed (the others cannot hold the ball without it)"
+                   if held else " even from its re-placed contact")
+
+
+def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
+                     q_start: tuple[FloatArray, ...], q_now: tuple[FloatArray, ...],
+                     pose: ObjectPose, t: float, load: FloatArray,
+                     swing: dict[str, Any] | None, hold_time: float, never_lifted: set[str]
+                     ) -> tuple[tuple[FloatArray, ...], float]:
+    """After a roll that began at the joints ``q_start``: every fingertip the others can
+    hold the ball without re-placed, in turn, at the contact it had then (relative to the
+    palm), its phases, step and checks added to ``plan`` and ``checks``; (the joints
+    after, the time). A step that fails sets the plan's status and ends the loop."""
+    fingers = tuple(f.finger for f in template.fingers)
+    nf = len(fingers)
+    rho = float(template.object.dimensions[0])
+    centre = np.asarray(pose.position, dtype=float)
+    assert template.forces is not None
+    for k in range(nf):
+        _, n_back = contact_of(fingers[k], q_start[k], centre, rho)
+        gs = replace_finger(fingers, q_now, k, n_back, q_start[k], centre, rho,
+                            pose.rotation, load, swing, hold_time)
+        if gs.status == "infeasible" and gs.swing is None:
+            never_lifted.add(template.fingers[k].name or f"finger{k}")
+            continue  # it keeps rolling
+        i = len(plan.steps)
+        plan.steps.append(gs)
+        if not gs.ok or gs.swing is None:
+            plan.status, plan.message = "failed", f"gait step {i}: {gs.message}"
+            break
+        touching = tuple(j != k for j in range(nf))
+        t1, t2 = t + gs.unload, t + gs.unload + gs.swing.duration
+        plan.phases += [GaitPhase("unload", t, t1, (True,) * nf, k, i),
+                        GaitPhase("swing", t1, t2, touching, k, i),
+                        GaitPhase("load", t2, t2 + gs.load_time, (True,) * nf, k, i)]
+        checks += gs.checks(f"step{i}", t, load, template.forces.min_normal_force)
+        jump = float(np.abs(gs.swing.Q[0] - q_now[k]).max())
+        checks.append(Check(f"switch_position_step{i}", jump, 1e-12, CheckKind.PHYSICS,
+                            time=t))
+        q_now = gs.q_after
+        t = t2 + gs.load_time
+    return q_now, t
+
+
 def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, angle: float,
               roll_step: float = math.radians(10.0), seconds_per_radian: float = 8.0,
               planner: Any = None, swing: dict[str, Any] | None = None,
-              hold_time: float = 0.2, max_rolls: int = 40, warm: bool = False) -> GaitPlan:
+              hold_time: float = 0.2, max_rolls: int = 40) -> GaitPlan:
     """Turn the ball of ``template`` (a grasp of round fingertips on a ball, with
     ``forces``: the holds need the object's weight) by ``angle`` [rad] about ``axis``
     (palm frame) from the joints ``qs`` (one array per finger), rolling by at most
@@ -202,20 +251,13 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             step = reach - max(REACH_MARGIN, REACH_SHARE * reach)
             if step < MIN_ROLL:
                 plan.status = "infeasible"
-                plan.message = (f"finger {who!r} ({why}) stops the turn after "
-                                f"{math.degrees(done + max(reach, 0.0)):.1f} deg of "
-                                f"{math.degrees(angle):.1f} deg about "
-                                f"({', '.join(f'{c:.3g}' for c in ax)}) and cannot be "
-                                "re-placed (the others cannot hold the ball without it)"
-                                if who in never_lifted else
-                                f"finger {who!r} ({why}) stops the turn after "
-                                f"{math.degrees(done + max(reach, 0.0)):.1f} deg even "
-                                "from its re-placed contact")
+                plan.message = _stopped(who, why, done + max(reach, 0.0), angle, ax,
+                                        who in never_lifted)
                 break
         target = axis_angle_rotation(ax, done + step) @ R0
         dur = max(1.0, seconds_per_radian * step)
         prob = _roll_problem(template, q_now, pose, target, centre, dur)
-        sol = planner.solve(prob, plan.rolls[-1] if warm and plan.rolls else None)
+        sol = planner.solve(prob)
         r = len(plan.rolls)
         plan.rolls.append(sol)
         plan.phases.append(GaitPhase("roll", t, t + dur, (True,) * nf, None, r))
@@ -240,31 +282,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         q_now = tuple(q_end)
         if done >= angle - 1e-12:
             break
-        for k in range(nf):  # re-place every fingertip the others can hold without
-            _, n_back = contact_of(fingers[k], q_start[k], centre, rho)
-            gs = replace_finger(fingers, q_now, k, n_back, q_start[k],
-                                np.asarray(pose.position, dtype=float), rho, pose.rotation,
-                                load, swing, hold_time)
-            if gs.status == "infeasible" and gs.swing is None:
-                never_lifted.add(names[k])
-                continue  # it keeps rolling
-            i = len(plan.steps)
-            plan.steps.append(gs)
-            if not gs.ok or gs.swing is None:
-                plan.status, plan.message = "failed", f"gait step {i}: {gs.message}"
-                break
-            touching = tuple(j != k for j in range(nf))
-            t1, t2 = t + gs.unload, t + gs.unload + gs.swing.duration
-            plan.phases += [GaitPhase("unload", t, t1, (True,) * nf, k, i),
-                            GaitPhase("swing", t1, t2, touching, k, i),
-                            GaitPhase("load", t2, t2 + gs.load_time, (True,) * nf, k, i)]
-            fmin = template.forces.min_normal_force
-            checks += gs.checks(f"step{i}", t, load, fmin)
-            jump = float(np.abs(gs.swing.Q[0] - q_now[k]).max())
-            checks.append(Check(f"switch_position_step{i}", jump, 1e-12, CheckKind.PHYSICS,
-                                time=t))
-            q_now = gs.q_after
-            t = t2 + gs.load_time
+        q_now, t = _replace_fingers(plan, checks, template, q_start, q_now, pose, t, load,
+                                    swing, hold_time, never_lifted)
         if plan.status != "solved":
             break
     plan.turned = done
