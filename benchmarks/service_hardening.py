@@ -6,6 +6,7 @@ loopback: run by hand, print one JSON line per measurement.
     python benchmarks/service_hardening.py results     # 40 concurrent GETs of a large result
     python benchmarks/service_hardening.py clients     # 200 concurrent clients: lost/dup jobs
     python benchmarks/service_hardening.py simulations # 40 long simulations: API latency
+    python benchmarks/service_hardening.py models      # 24 hand URDFs: a plain POST's latency
 
 ``--src DIR`` runs the service from another checkout (``git worktree add /tmp/base <rev>``)
 to measure the code before a change with the same interpreter and packages.
@@ -264,15 +265,76 @@ def bench_simulations(svc: Service, n: int) -> dict[str, Any]:
                for p, v in latencies.items() if v}}
 
 
+def bench_models(svc: Service, n: int) -> dict[str, Any]:
+    """``n`` concurrent POSTs of a whole hand's URDF, each text distinct (a comment: every
+    one checked by the model checker and loaded), while a plain POST (the triangle, no
+    model, ``wait=0``) is timed in turn; the plain POST's latency alone first (issue 25:
+    24 of them delayed it by 1.4-1.9 s)."""
+    hand = json.loads((ROOT / "examples" / "hand_from_urdf.json").read_text())
+    triangle = json.loads((ROOT / "examples" / "triangle.json").read_text())
+
+    healthz: list[float] = []
+
+    def plain_posts(http: httpx.Client, until: Any, at_least: int) -> list[float]:
+        out: list[float] = []
+        while len(out) < at_least or not until():
+            t0 = time.perf_counter()
+            r = http.post(f"{svc.url}/v1/plans", params={"wait": 0}, json=triangle)
+            out.append(time.perf_counter() - t0)
+            assert r.status_code in (201, 202, 503), r.text
+            t0 = time.perf_counter()
+            http.get(f"{svc.url}/healthz")
+            healthz.append(time.perf_counter() - t0)
+            time.sleep(0.05)
+        return out
+
+    with httpx.Client(timeout=300) as http:
+        alone = plain_posts(http, lambda: True, 20)
+    healthz.clear()
+    codes: list[int] = []
+    took: list[float] = []
+    lock = threading.Lock()
+
+    def post_hand(i: int) -> None:
+        body = {**hand, "hand": {**hand["hand"],
+                                 "urdf": hand["hand"]["urdf"] + f"<!-- variant {i} -->"},
+                "solver": {"time_limit": 1.0}}
+        t0 = time.perf_counter()
+        r = httpx.post(f"{svc.url}/v1/plans", params={"wait": 0}, json=body, timeout=600)
+        with lock:
+            codes.append(r.status_code)
+            took.append(time.perf_counter() - t0)
+
+    with cf.ThreadPoolExecutor(n) as pool:
+        futures = [pool.submit(post_hand, i) for i in range(n)]
+        time.sleep(0.2)
+        with httpx.Client(timeout=300) as http:
+            loaded = plain_posts(http, lambda: all(f.done() for f in futures), 5)
+    return {"hand_posts": n, "hand_answers": {c: codes.count(c) for c in sorted(set(codes))},
+            "hand_post_median_s": round(statistics.median(took), 3),
+            "hand_post_max_s": round(max(took), 3),
+            "plain_post_alone_median_s": round(statistics.median(alone), 4),
+            "plain_post_alone_max_s": round(max(alone), 4),
+            "plain_posts_during": len(loaded),
+            "plain_post_during_median_s": round(statistics.median(loaded), 4),
+            "plain_post_during_p90_s": round(statistics.quantiles(loaded, n=10)[-1], 4),
+            "plain_post_during_max_s": round(max(loaded), 4),
+            "healthz_during_median_s": round(statistics.median(healthz), 4),
+            "healthz_during_max_s": round(max(healthz), 4)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("what", choices=["healthz", "deadlines", "results", "clients",
-                                            "simulations"])
+                                            "simulations", "models"])
     parser.add_argument("--src", type=Path)
     parser.add_argument("--joints", type=int, default=400)
     parser.add_argument("-n", type=int)
     args = parser.parse_args()
-    env = {"DEXROLL_MAX_QUEUE": "32"} if args.what == "clients" else {}
+    # models: a queue the timed plain POSTs do not fill (the hand POSTs' 503s are then
+    # the model checks' own)
+    env = {"DEXROLL_MAX_QUEUE": "32"} if args.what == "clients" else \
+        {"DEXROLL_MAX_QUEUE": "1000"} if args.what == "models" else {}
     svc = Service(args.src, **env)
     try:
         if args.what == "healthz":
@@ -281,6 +343,8 @@ def main() -> None:
             out = bench_deadlines(svc, args.n or 20)
         elif args.what == "results":
             out = bench_results(svc, args.n or 40)
+        elif args.what == "models":
+            out = bench_models(svc, args.n or 24)
         elif args.what == "simulations":
             out = bench_simulations(svc, args.n or 40)
         else:

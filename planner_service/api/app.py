@@ -35,6 +35,7 @@ from ..settings import Settings
 from .access import Access
 from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
 from .routes import health, models, plans, simulation, view
+from .submission import ModelSubmissions
 
 __all__ = ["BodyLimit", "create_app"]
 
@@ -104,9 +105,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                                      settings.sim_time_limit, settings.sim_cpu_seconds)
         app.state.store, app.state.dispatcher = store, dispatcher
         app.state.checker, app.state.simulations = checker, simulations
+        app.state.model_submissions = submissions = ModelSubmissions(settings.model_checkers,
+                                                                settings.max_queue)
         try:
             yield
         finally:
+            submissions.close()
             simulations.close()
             checker.close()
             dispatcher.stop()

@@ -5,19 +5,62 @@ up)."""
 
 from __future__ import annotations
 
+import asyncio
 import logging
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 from pydantic import ValidationError
 
 from dexroll_client.models import AnyPlanResult, JobState, PlanRequest, WarmStartModel
 
 from ..jobs.store import Store
-from ..models_check import ModelChecker, request_models
+from ..models_check import CheckerBusyError, ModelChecker, request_models
 from ..planners import RESULT, request_errors
 
-__all__ = ["StoreUnavailableError", "model_errors", "resolve_warm_start", "submission_errors"]
+__all__ = [
+    "ModelSubmissions",
+    "StoreUnavailableError",
+    "model_errors",
+    "resolve_warm_start",
+    "submission_errors",
+]
 
 log = logging.getLogger("dexroll.service")
+
+T = TypeVar("T")
+
+
+class ModelSubmissions:
+    """Where the checks of a submission that carries a model (a URDF, an MJCF) run: threads
+    of their own (one more than the checker processes: one loads a checked model in this
+    process while the others wait on their checkers), at most ``bound`` submissions waiting
+    for them (beyond: CheckerBusyError, a 503 with Retry-After). A submission without a model
+    never waits behind them: its checks run in the event loop's default threads."""
+
+    def __init__(self, checkers: int, bound: int) -> None:
+        self._pool = ThreadPoolExecutor(checkers + 1, thread_name_prefix="dexroll-models")
+        self._lock = threading.Lock()
+        self._waiting = 0
+        self.bound = bound
+
+    async def run(self, fn: Callable[..., T], *args: object) -> T:
+        """``fn(*args)`` in these threads (CheckerBusyError when ``bound`` wait already)."""
+        with self._lock:
+            if self._waiting >= self.bound:
+                raise CheckerBusyError(f"{self.bound} requests with models are waiting for "
+                                       "their checks")
+            self._waiting += 1
+        try:
+            return await asyncio.get_running_loop().run_in_executor(self._pool, fn, *args)
+        finally:
+            with self._lock:
+                self._waiting -= 1
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
 
 
 class StoreUnavailableError(Exception):
