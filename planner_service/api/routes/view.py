@@ -15,6 +15,7 @@ from dexroll_client.models import Job, JobState
 
 from ...planners import REQUEST, RESULT, ProblemError
 from ...view import NoPlanError, has_plan, view_html
+from ...view.page import content_security_policy
 from ..access import OwnerDep
 from ..deps import ERROR_RESPONSES, ServiceError, StoreDep
 
@@ -24,7 +25,7 @@ router = APIRouter()
 
 #: Pages kept ready (the last ones asked for), by job id and end time.
 CACHED_PAGES = 8
-_pages: OrderedDict[tuple[str, float | None], str] = OrderedDict()
+_pages: OrderedDict[tuple[str, float | None], tuple[str, str]] = OrderedDict()
 _lock = threading.Lock()
 
 
@@ -53,7 +54,11 @@ VIEW_RESPONSES: dict[int | str, dict[str, Any]] = {
     **{code: {"description": r["description"], "content": _ERROR_JSON}
        for code, r in ERROR_RESPONSES.items()},
     200: {"content": {"text/html": {"schema": {"type": "string"}}},
-          "description": "one self-contained page (no other request)"},
+          "description": "one self-contained page (no other request)",
+          "headers": {"Content-Security-Policy": {
+              "description": "default-src 'none': the page's own inline scripts and style "
+                             "(by their SHA-256 hashes) and a data: icon, nothing else",
+              "schema": {"type": "string"}}}},
     409: {"description": "the job has not finished, or ended without a plan",
           "content": _ERROR_JSON}}
 
@@ -74,10 +79,10 @@ def view_plan(job_id: str, store: StoreDep, owner: OwnerDep) -> HTMLResponse:
                            headers={"Retry-After": "1"})
     key = (row.id, row.finished_at)
     with _lock:
-        page = _pages.get(key)
-        if page is not None:
+        cached = _pages.get(key)
+        if cached is not None:
             _pages.move_to_end(key)
-    if page is None:
+    if cached is None:
         if row.result is None:
             raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without "
                                                "a plan to show")
@@ -87,8 +92,10 @@ def view_plan(job_id: str, store: StoreDep, owner: OwnerDep) -> HTMLResponse:
         except (NoPlanError, ProblemError) as exc:
             raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without "
                                                f"a plan to show: {exc}") from exc
+        cached = page, content_security_policy(page, header=True)
         with _lock:
-            _pages[key] = page
+            _pages[key] = cached
             while len(_pages) > CACHED_PAGES:
                 _pages.popitem(last=False)
-    return HTMLResponse(page)
+    page, policy = cached
+    return HTMLResponse(page, headers={"Content-Security-Policy": policy})
