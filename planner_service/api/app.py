@@ -107,9 +107,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.state.checker, app.state.simulations = checker, simulations
         app.state.model_submissions = submissions = ModelSubmissions(settings.model_checkers,
                                                                 settings.max_queue)
+        # the viewer's pages are built (a request's models loaded) under the same limits,
+        # in a process of their own started by the first view asked for
+        app.state.viewer = viewer = ModelChecker(settings.model_limits(), 1, lazy=True)
         try:
             yield
         finally:
+            viewer.close()
             submissions.close()
             simulations.close()
             checker.close()
