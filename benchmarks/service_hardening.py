@@ -81,6 +81,19 @@ class Service:
             time.sleep(0.2)
         raise RuntimeError("service not ready")
 
+    def cpu_and_wait_s(self) -> tuple[float, float]:
+        """The API process's CPU time so far and the time its threads waited for a CPU
+        (run queue: /proc/<pid>/task/*/schedstat), both in seconds."""
+        cpu = wait = 0.0
+        for task in Path(f"/proc/{self.proc.pid}/task").iterdir():
+            try:
+                run, delay, _ = (task / "schedstat").read_text().split()
+            except (OSError, ValueError):
+                continue
+            cpu += int(run) / 1e9
+            wait += int(delay) / 1e9
+        return cpu, wait
+
     def rss_mb(self) -> float:
         for line in Path(f"/proc/{self.proc.pid}/status").read_text().splitlines():
             if line.startswith("VmRSS:"):
@@ -239,13 +252,13 @@ def bench_simulations(svc: Service, n: int) -> dict[str, Any]:
             codes.append(code)
 
     paths = ["/healthz", "/readyz", "/v1/plans", f"/v1/plans/{job['id']}", "/v1/models"]
-    latencies: dict[str, list[float]] = {p: [] for p in [*paths, "POST /v1/plans"]}
     triangle = json.loads((ROOT / "examples" / "triangle.json").read_text())
-    with cf.ThreadPoolExecutor(n) as pool:
-        futures = [pool.submit(simulate, i) for i in range(n)]
-        time.sleep(0.5)
+
+    def timed_rounds(until: Any) -> dict[str, list[float]]:
+        """Every route timed in turn, round after round, until ``until()``."""
+        latencies: dict[str, list[float]] = {p: [] for p in [*paths, "POST /v1/plans"]}
         with httpx.Client(timeout=60) as http:
-            while not all(f.done() for f in futures):
+            while not until():
                 for path in paths:
                     t0 = time.perf_counter()
                     assert http.get(f"{svc.url}{path}").status_code == 200, path
@@ -254,12 +267,39 @@ def bench_simulations(svc: Service, n: int) -> dict[str, Any]:
                 http.post(f"{svc.url}/v1/plans", params={"wait": 0}, json=triangle)
                 latencies["POST /v1/plans"].append(time.perf_counter() - t0)
                 time.sleep(0.1)
+        return latencies
+
+    # the same rounds without simulations first, for 5 s: the machine's own noise; the
+    # API process's CPU time and its threads' wait for a CPU (run queue) in each phase
+    quiet_until = time.monotonic() + 5.0
+    cpu0, wait0, t0 = *svc.cpu_and_wait_s(), time.perf_counter()
+    quiet = timed_rounds(lambda: time.monotonic() > quiet_until)
+    cpu1, wait1, t1 = *svc.cpu_and_wait_s(), time.perf_counter()
+    load_before = os.getloadavg()[0]
+    with cf.ThreadPoolExecutor(n) as pool:
+        futures = [pool.submit(simulate, i) for i in range(n)]
+        time.sleep(0.5)
+        latencies = timed_rounds(lambda: all(f.done() for f in futures))
+    cpu2, wait2, t2 = *svc.cpu_and_wait_s(), time.perf_counter()
+    api = {"api_cpu_share_without": round((cpu1 - cpu0) / (t1 - t0), 3),
+           "api_runqueue_wait_share_without": round((wait1 - wait0) / (t1 - t0), 3),
+           "api_cpu_share_during": round((cpu2 - cpu1) / (t2 - t1), 3),
+           "api_runqueue_wait_share_during": round((wait2 - wait1) / (t2 - t1), 3)}
     t0 = time.perf_counter()
     while httpx.get(f"{svc.url}/readyz", timeout=60).json()["simulations"]["running"]:
         time.sleep(0.1)
     idle_s = time.perf_counter() - t0
+    def worst(lat: dict[str, list[float]]) -> float:
+        return round(max(max(v) for v in lat.values() if v), 4)
+
+    over = sum(x > 0.1 for v in latencies.values() for x in v)
     return {"simulations": n, "answers": {c: codes.count(c) for c in sorted(set(codes))},
             "pool_idle_after_clients_left_s": round(idle_s, 2),
+            "load_average_1min": round(load_before, 2), **api,
+            "worst_without_simulations_s": worst(quiet), "worst_during_s": worst(latencies),
+            "answers_over_100ms_during": f"{over} of {sum(map(len, latencies.values()))}",
+            "answers_over_100ms_without": f"{sum(x > 0.1 for v in quiet.values() for x in v)}"
+                                          f" of {sum(map(len, quiet.values()))}",
             **{f"{p}_max_s": round(max(v), 4) for p, v in latencies.items() if v},
             **{f"{p}_median_s": round(statistics.median(v), 4)
                for p, v in latencies.items() if v}}
