@@ -23,8 +23,10 @@ Every reason comes back as ``(field, reason)`` under the model's own field (``ur
 (:data:`COUNTERS`) and a loader (:data:`LOADERS`); MJCF registers both.
 
 Other work that loads a request's models runs in such processes too, under the same
-limits (:meth:`ModelChecker.call` of a :class:`Task`: the viewer's page of a plan, its
-fingers' geometry loaded from their URDFs).
+limits (:meth:`ModelChecker.call` of a :class:`Task`): the rest of a request's checks once
+its models passed (its fingers loaded, the inverse kinematics of its grasp), and the
+viewer's page of a plan (its fingers' geometry loaded from their URDFs). The API process
+never loads a model a request carries.
 """
 
 from __future__ import annotations
@@ -64,6 +66,7 @@ __all__ = [
     "check_model",
     "file_references",
     "parse_tree",
+    "request_errors_of",
     "request_models",
     "without_file_references",
 ]
@@ -314,7 +317,19 @@ def check_model(model: ModelText, limits: ModelLimits) -> FieldErrors:
 
 #: Work a checker process may be given besides a model's checks, by name: the module and
 #: function that do it (imported in the checker process when first asked for).
-TASKS: dict[str, tuple[str, str]] = {"view": ("planner_service.view", "page_of_job")}
+TASKS: dict[str, tuple[str, str]] = {
+    "view": ("planner_service.view", "page_of_job"),
+    "request_errors": ("planner_service.models_check", "request_errors_of"),
+}
+
+
+def request_errors_of(request_json: str) -> FieldErrors:
+    """Every error of a request (:func:`~planner_service.planners.request_errors`) whose
+    models passed their checks, in a checker process: its models loaded there, with this
+    process's own fingers, never the API's (whose cache a request without a model uses)."""
+    from .planners import REQUEST, request_errors
+
+    return request_errors(REQUEST.validate_json(request_json))
 
 
 @dataclass(frozen=True)

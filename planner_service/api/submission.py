@@ -17,7 +17,14 @@ from pydantic import ValidationError
 from dexroll_client.models import AnyPlanResult, JobState, PlanRequest, WarmStartModel
 
 from ..jobs.store import Store
-from ..models_check import CheckerBusyError, ModelChecker, request_models
+from ..models_check import (
+    CheckerBusyError,
+    ModelChecker,
+    Task,
+    TaskError,
+    TaskLimitError,
+    request_models,
+)
 from ..planners import RESULT, request_errors
 
 __all__ = [
@@ -152,5 +159,29 @@ def submission_errors(body: PlanRequest, store: Store, checker: ModelChecker | N
     body, errors = resolve_warm_start(body, store, owner)
     if errors:  # check the rest of the request too: every bad field at once
         body = body.model_copy(update={"warm_start": None})
-    more = request_errors(body)
+    more = _checked_elsewhere(body, checker)
+    if more is None:  # no model of its own: the API's fingers (built-in ones)
+        more = request_errors(body)
     return body, errors + (_from_job(job_id, more) if job_id is not None else more)
+
+
+def _checked_elsewhere(body: PlanRequest, checker: ModelChecker | None
+                       ) -> list[tuple[str, str]] | None:
+    """The errors of a request carrying models, found in a checker process (its models
+    loaded there, under the checker's limits: a request without a model never waits for
+    the API's fingers while a hand is loaded); None for a request without a model (or
+    without a checker)."""
+    models = request_models(body)
+    if checker is None or not models:
+        return None
+    try:
+        errors: list[tuple[str, str]] = checker.call(
+            Task("request_errors", (body.model_dump_json(),)))
+    except TaskLimitError as exc:
+        where = models[0]
+        return [(f"{where.where}.{where.field}", f"checking the request with this model: "
+                                                 f"{exc}")]
+    except TaskError as exc:
+        raise RuntimeError(f"the request's checks failed: {exc.kind}: {exc.message}") \
+            from exc
+    return [(str(field), str(reason)) for field, reason in errors]
