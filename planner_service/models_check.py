@@ -511,14 +511,16 @@ class ModelChecker:
                 self._cache.popitem(last=False)
         return list(errors)
 
-    def call(self, task: Task) -> Any:
-        """The value of ``task`` run in a checker process, under the checker's time and
-        memory limits: TaskLimitError past them (the process is replaced), TaskError when
-        the task raised, CheckerBusyError when no checker process came free."""
+    def call(self, task: Task, time_limit: float | None = None) -> Any:
+        """The value of ``task`` run in a checker process, under the checker's memory limit
+        and its time limit (or ``time_limit`` [s]): TaskLimitError past them (the process
+        is replaced), TaskError when the task raised, CheckerBusyError when no checker
+        process came free."""
+        limit = self.limits.time_limit if time_limit is None else time_limit
         proc = self._take()
         try:
             proc.conn.send(task)
-            if proc.conn.poll(self.limits.time_limit):
+            if proc.conn.poll(limit):
                 status, value, detail = proc.conn.recv()
                 self._idle.put(proc)
                 if status == "ok":
@@ -526,7 +528,7 @@ class ModelChecker:
                 if status == "error":
                     raise TaskError(str(value), detail)
                 raise TaskLimitError(detail)
-            reason = f"it took longer than the {self.limits.time_limit:g} s allowed"
+            reason = f"it took longer than the {limit:g} s allowed"
         except (EOFError, OSError, BrokenPipeError):
             reason = (f"its process died (beyond its {self.limits.memory_bytes >> 20} MB "
                       "memory limit?)")

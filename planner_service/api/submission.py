@@ -28,8 +28,10 @@ from ..models_check import (
 from ..planners import RESULT, request_errors
 
 __all__ = [
+    "REQUEST_CHECK_SECONDS",
     "ModelSubmissions",
     "StoreUnavailableError",
+    "checked_apart",
     "model_errors",
     "resolve_warm_start",
     "submission_errors",
@@ -41,11 +43,12 @@ T = TypeVar("T")
 
 
 class ModelSubmissions:
-    """Where the checks of a submission that carries a model (a URDF, an MJCF) run: threads
-    of their own (one more than the checker processes: one loads a checked model in this
-    process while the others wait on their checkers), at most ``bound`` submissions waiting
-    for them (beyond: CheckerBusyError, a 503 with Retry-After). A submission without a model
-    never waits behind them: its checks run in the event loop's default threads."""
+    """Where the checks of a submission checked apart (:func:`checked_apart`: a model, a
+    grasp search) wait for a checker process: threads of their own (one more than the
+    checker processes: one reads the store for a warm start while the others wait), at
+    most ``bound`` submissions waiting (beyond: CheckerBusyError, a 503 with Retry-After).
+    Any other submission never waits behind them: its checks run in the event loop's
+    default threads."""
 
     def __init__(self, checkers: int, bound: int) -> None:
         self._pool = ThreadPoolExecutor(checkers + 1, thread_name_prefix="dexroll-models")
@@ -165,22 +168,35 @@ def submission_errors(body: PlanRequest, store: Store, checker: ModelChecker | N
     return body, errors + (_from_job(job_id, more) if job_id is not None else more)
 
 
+#: The time a checker process has for the rest of a request's checks once its models
+#: passed theirs [s] (at least the model checks' own): a grasp search takes seconds
+#: (docs/hands.md: 0.4-5 s measured), more on a loaded machine.
+REQUEST_CHECK_SECONDS = 30.0
+
+
+def checked_apart(body: PlanRequest) -> bool:
+    """Whether a request's checks run in a checker process: it carries a model (a URDF,
+    an MJCF), or its checks search a grasp (seconds of the interpreter). Such requests
+    wait in threads of their own (:class:`ModelSubmissions`), never in the API's."""
+    return bool(request_models(body)) or getattr(body, "grasp", None) is not None
+
+
 def _checked_elsewhere(body: PlanRequest, checker: ModelChecker | None
                        ) -> list[tuple[str, str]] | None:
-    """The errors of a request carrying models, found in a checker process (its models
-    loaded there, under the checker's limits: a request without a model never waits for
-    the API's fingers while a hand is loaded); None for a request without a model (or
-    without a checker)."""
-    models = request_models(body)
-    if checker is None or not models:
+    """The errors of a request checked apart (:func:`checked_apart`), found in a checker
+    process (its models loaded and its grasp searched there, under the checker's memory
+    limit: a request checked in the API never waits for the API's fingers meanwhile);
+    None for any other request (or without a checker)."""
+    if checker is None or not checked_apart(body):
         return None
     try:
         errors: list[tuple[str, str]] = checker.call(
-            Task("request_errors", (body.model_dump_json(),)))
+            Task("request_errors", (body.model_dump_json(),)),
+            max(checker.limits.time_limit, REQUEST_CHECK_SECONDS))
     except TaskLimitError as exc:
-        where = models[0]
-        return [(f"{where.where}.{where.field}", f"checking the request with this model: "
-                                                 f"{exc}")]
+        models = request_models(body)
+        field = f"{models[0].where}.{models[0].field}" if models else "grasp"
+        return [(field, f"checking the request: {exc}")]
     except TaskError as exc:
         raise RuntimeError(f"the request's checks failed: {exc.kind}: {exc.message}") \
             from exc

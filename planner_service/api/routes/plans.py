@@ -20,7 +20,7 @@ from fastapi.responses import StreamingResponse
 from dexroll_client.models import FieldError, Job, JobList, JobState, PlanRequest
 
 from ...jobs.store import IdempotencyConflictError, JobRow, StorageError, Store
-from ...models_check import CheckerBusyError, request_models
+from ...models_check import CheckerBusyError
 from ...planners import RESULT
 from ..access import OwnerDep
 from ..body import JSONBodyRoute
@@ -33,7 +33,12 @@ from ..deps import (
     StoreDep,
     store_fault_error,
 )
-from ..submission import ModelSubmissions, StoreUnavailableError, submission_errors
+from ..submission import (
+    ModelSubmissions,
+    StoreUnavailableError,
+    checked_apart,
+    submission_errors,
+)
 from .view import JobLinks, LinkedJob, with_links
 
 __all__ = ["job_model", "router"]
@@ -132,11 +137,11 @@ async def submit_plan(
         raise refused
     # cheap checks (no NLP), in a thread: a finger's URDF and the inverse kinematics
     # of its initial grasp take milliseconds; a warm start's job id is replaced by
-    # that job's plan (the new job is self-contained). A request carrying a model is
-    # checked in threads of its own (its model checked in a checker process, then
-    # loaded): requests without one never wait behind those
+    # that job's plan (the new job is self-contained). A request carrying a model or
+    # searching a grasp is checked in a checker process, waiting in threads of its own:
+    # the others never wait behind those
     models: ModelSubmissions = request.app.state.model_submissions
-    run = models.run if request_models(body) else asyncio.to_thread
+    run = models.run if checked_apart(body) else asyncio.to_thread
     try:
         body, errors = await run(submission_errors, body, store, checker, owner)
     except CheckerBusyError as exc:
