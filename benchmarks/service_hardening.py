@@ -6,6 +6,7 @@ loopback: run by hand, print one JSON line per measurement.
     python benchmarks/service_hardening.py results     # 40 concurrent GETs of a large result
     python benchmarks/service_hardening.py clients     # 200 concurrent clients: lost/dup jobs
     python benchmarks/service_hardening.py simulations # 40 long simulations: API latency
+    python benchmarks/service_hardening.py models      # 24 hand URDFs: a plain POST's latency
 
 ``--src DIR`` runs the service from another checkout (``git worktree add /tmp/base <rev>``)
 to measure the code before a change with the same interpreter and packages.
@@ -79,6 +80,19 @@ class Service:
                 pass
             time.sleep(0.2)
         raise RuntimeError("service not ready")
+
+    def cpu_and_wait_s(self) -> tuple[float, float]:
+        """The API process's CPU time so far and the time its threads waited for a CPU
+        (run queue: /proc/<pid>/task/*/schedstat), both in seconds."""
+        cpu = wait = 0.0
+        for task in Path(f"/proc/{self.proc.pid}/task").iterdir():
+            try:
+                run, delay, _ = (task / "schedstat").read_text().split()
+            except (OSError, ValueError):
+                continue
+            cpu += int(run) / 1e9
+            wait += int(delay) / 1e9
+        return cpu, wait
 
     def rss_mb(self) -> float:
         for line in Path(f"/proc/{self.proc.pid}/status").read_text().splitlines():
@@ -238,13 +252,13 @@ def bench_simulations(svc: Service, n: int) -> dict[str, Any]:
             codes.append(code)
 
     paths = ["/healthz", "/readyz", "/v1/plans", f"/v1/plans/{job['id']}", "/v1/models"]
-    latencies: dict[str, list[float]] = {p: [] for p in [*paths, "POST /v1/plans"]}
     triangle = json.loads((ROOT / "examples" / "triangle.json").read_text())
-    with cf.ThreadPoolExecutor(n) as pool:
-        futures = [pool.submit(simulate, i) for i in range(n)]
-        time.sleep(0.5)
+
+    def timed_rounds(until: Any) -> dict[str, list[float]]:
+        """Every route timed in turn, round after round, until ``until()``."""
+        latencies: dict[str, list[float]] = {p: [] for p in [*paths, "POST /v1/plans"]}
         with httpx.Client(timeout=60) as http:
-            while not all(f.done() for f in futures):
+            while not until():
                 for path in paths:
                     t0 = time.perf_counter()
                     assert http.get(f"{svc.url}{path}").status_code == 200, path
@@ -253,26 +267,127 @@ def bench_simulations(svc: Service, n: int) -> dict[str, Any]:
                 http.post(f"{svc.url}/v1/plans", params={"wait": 0}, json=triangle)
                 latencies["POST /v1/plans"].append(time.perf_counter() - t0)
                 time.sleep(0.1)
+        return latencies
+
+    # the same rounds without simulations first, for 5 s: the machine's own noise; the
+    # API process's CPU time and its threads' wait for a CPU (run queue) in each phase
+    quiet_until = time.monotonic() + 5.0
+    cpu0, wait0, t0 = *svc.cpu_and_wait_s(), time.perf_counter()
+    quiet = timed_rounds(lambda: time.monotonic() > quiet_until)
+    cpu1, wait1, t1 = *svc.cpu_and_wait_s(), time.perf_counter()
+    load_before = os.getloadavg()[0]
+    with cf.ThreadPoolExecutor(n) as pool:
+        futures = [pool.submit(simulate, i) for i in range(n)]
+        time.sleep(0.5)
+        latencies = timed_rounds(lambda: all(f.done() for f in futures))
+    cpu2, wait2, t2 = *svc.cpu_and_wait_s(), time.perf_counter()
+    api = {"api_cpu_share_without": round((cpu1 - cpu0) / (t1 - t0), 3),
+           "api_runqueue_wait_share_without": round((wait1 - wait0) / (t1 - t0), 3),
+           "api_cpu_share_during": round((cpu2 - cpu1) / (t2 - t1), 3),
+           "api_runqueue_wait_share_during": round((wait2 - wait1) / (t2 - t1), 3)}
     t0 = time.perf_counter()
     while httpx.get(f"{svc.url}/readyz", timeout=60).json()["simulations"]["running"]:
         time.sleep(0.1)
     idle_s = time.perf_counter() - t0
+    def worst(lat: dict[str, list[float]]) -> float:
+        return round(max(max(v) for v in lat.values() if v), 4)
+
+    over = sum(x > 0.1 for v in latencies.values() for x in v)
     return {"simulations": n, "answers": {c: codes.count(c) for c in sorted(set(codes))},
             "pool_idle_after_clients_left_s": round(idle_s, 2),
+            "load_average_1min": round(load_before, 2), **api,
+            "worst_without_simulations_s": worst(quiet), "worst_during_s": worst(latencies),
+            "answers_over_100ms_during": f"{over} of {sum(map(len, latencies.values()))}",
+            "answers_over_100ms_without": f"{sum(x > 0.1 for v in quiet.values() for x in v)}"
+                                          f" of {sum(map(len, quiet.values()))}",
             **{f"{p}_max_s": round(max(v), 4) for p, v in latencies.items() if v},
             **{f"{p}_median_s": round(statistics.median(v), 4)
                for p, v in latencies.items() if v}}
 
 
+def bench_models(svc: Service, n: int) -> dict[str, Any]:
+    """``n`` concurrent POSTs of a whole hand's URDF, each text distinct (a comment: every
+    one checked by the model checker and loaded), while a plain POST (the triangle, no
+    model, ``wait=0``) is timed in turn; the plain POST's latency alone first (issue 25:
+    24 of them delayed it by 1.4-1.9 s)."""
+    hand = json.loads((ROOT / "examples" / "hand_from_urdf.json").read_text())
+    triangle = json.loads((ROOT / "examples" / "triangle.json").read_text())
+
+    healthz: list[float] = []
+    # a one-finger request with the built-in finger: no model either, but its checks use
+    # the process's fingers (the cache a hand's load holds)
+    finger = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
+    fingers: list[float] = []
+
+    def plain_posts(http: httpx.Client, until: Any, at_least: int) -> list[float]:
+        out: list[float] = []
+        while len(out) < at_least or not until():
+            t0 = time.perf_counter()
+            r = http.post(f"{svc.url}/v1/plans", params={"wait": 0}, json=triangle)
+            out.append(time.perf_counter() - t0)
+            assert r.status_code in (201, 202, 503), r.text
+            t0 = time.perf_counter()
+            http.get(f"{svc.url}/healthz")
+            healthz.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            r = http.post(f"{svc.url}/v1/plans", params={"wait": 0}, json=finger)
+            fingers.append(time.perf_counter() - t0)
+            assert r.status_code in (201, 202, 503), r.text
+            time.sleep(0.05)
+        return out
+
+    with httpx.Client(timeout=300) as http:
+        alone = plain_posts(http, lambda: True, 20)
+    healthz.clear()
+    fingers_alone = list(fingers)
+    fingers.clear()
+    codes: list[int] = []
+    took: list[float] = []
+    lock = threading.Lock()
+
+    def post_hand(i: int) -> None:
+        body = {**hand, "hand": {**hand["hand"],
+                                 "urdf": hand["hand"]["urdf"] + f"<!-- variant {i} -->"},
+                "solver": {"time_limit": 1.0}}
+        t0 = time.perf_counter()
+        r = httpx.post(f"{svc.url}/v1/plans", params={"wait": 0}, json=body, timeout=600)
+        with lock:
+            codes.append(r.status_code)
+            took.append(time.perf_counter() - t0)
+
+    with cf.ThreadPoolExecutor(n) as pool:
+        futures = [pool.submit(post_hand, i) for i in range(n)]
+        time.sleep(0.2)
+        with httpx.Client(timeout=300) as http:
+            loaded = plain_posts(http, lambda: all(f.done() for f in futures), 5)
+    return {"hand_posts": n, "hand_answers": {c: codes.count(c) for c in sorted(set(codes))},
+            "hand_post_median_s": round(statistics.median(took), 3),
+            "hand_post_max_s": round(max(took), 3),
+            "plain_post_alone_median_s": round(statistics.median(alone), 4),
+            "plain_post_alone_max_s": round(max(alone), 4),
+            "plain_posts_during": len(loaded),
+            "plain_post_during_median_s": round(statistics.median(loaded), 4),
+            "plain_post_during_p90_s": round(statistics.quantiles(loaded, n=10)[-1], 4),
+            "plain_post_during_max_s": round(max(loaded), 4),
+            "builtin_finger_post_alone_median_s": round(statistics.median(fingers_alone), 4),
+            "builtin_finger_post_during_median_s": round(statistics.median(fingers), 4),
+            "builtin_finger_post_during_max_s": round(max(fingers), 4),
+            "healthz_during_median_s": round(statistics.median(healthz), 4),
+            "healthz_during_max_s": round(max(healthz), 4)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("what", choices=["healthz", "deadlines", "results", "clients",
-                                            "simulations"])
+                                            "simulations", "models"])
     parser.add_argument("--src", type=Path)
     parser.add_argument("--joints", type=int, default=400)
     parser.add_argument("-n", type=int)
     args = parser.parse_args()
-    env = {"DEXROLL_MAX_QUEUE": "32"} if args.what == "clients" else {}
+    # models: a queue the timed plain POSTs do not fill (the hand POSTs' 503s are then
+    # the model checks' own)
+    env = {"DEXROLL_MAX_QUEUE": "32"} if args.what == "clients" else \
+        {"DEXROLL_MAX_QUEUE": "1000"} if args.what == "models" else {}
     svc = Service(args.src, **env)
     try:
         if args.what == "healthz":
@@ -281,6 +396,8 @@ def main() -> None:
             out = bench_deadlines(svc, args.n or 20)
         elif args.what == "results":
             out = bench_results(svc, args.n or 40)
+        elif args.what == "models":
+            out = bench_models(svc, args.n or 24)
         elif args.what == "simulations":
             out = bench_simulations(svc, args.n or 40)
         else:

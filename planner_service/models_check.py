@@ -21,12 +21,19 @@ Every reason comes back as ``(field, reason)`` under the model's own field (``ur
 ``tip_frame``), for the caller to prefix with where the model is in the request
 (:func:`request_models`). Generic over model kinds: a kind is a tree counter
 (:data:`COUNTERS`) and a loader (:data:`LOADERS`); MJCF registers both.
+
+Other work that loads a request's models runs in such processes too, under the same
+limits (:meth:`ModelChecker.call` of a :class:`Task`): the rest of a request's checks once
+its models passed (its fingers loaded, the inverse kinematics of its grasp), and the
+viewer's page of a plan (its fingers' geometry loaded from their URDFs). The API process
+never loads a model a request carries.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import importlib
 import json
 import logging
 import multiprocessing as mp
@@ -47,14 +54,19 @@ from pydantic import BaseModel
 __all__ = [
     "COUNTERS",
     "LOADERS",
+    "TASKS",
     "CheckerBusyError",
     "ModelChecker",
     "ModelLimits",
     "ModelText",
+    "Task",
+    "TaskError",
+    "TaskLimitError",
     "TreeSize",
     "check_model",
     "file_references",
     "parse_tree",
+    "request_errors_of",
     "request_models",
     "without_file_references",
 ]
@@ -303,6 +315,55 @@ def check_model(model: ModelText, limits: ModelLimits) -> FieldErrors:
     return LOADERS[model.kind](model.text, dict(model.params))
 
 
+#: Work a checker process may be given besides a model's checks, by name: the module and
+#: function that do it (imported in the checker process when first asked for).
+TASKS: dict[str, tuple[str, str]] = {
+    "view": ("planner_service.view", "page_of_job"),
+    "request_errors": ("planner_service.models_check", "request_errors_of"),
+}
+
+
+def request_errors_of(request_json: str) -> FieldErrors:
+    """Every error of a request (:func:`~planner_service.planners.request_errors`) whose
+    models passed their checks, in a checker process: its models loaded there, with this
+    process's own fingers, never the API's (whose cache a request without a model uses)."""
+    from .planners import REQUEST, request_errors
+
+    return request_errors(REQUEST.validate_json(request_json))
+
+
+@dataclass(frozen=True)
+class Task:
+    """One call of a :data:`TASKS` function with ``args`` in a checker process."""
+
+    name: str
+    args: tuple[Any, ...]
+
+
+class TaskError(Exception):
+    """The task raised: ``kind`` names its exception's type, ``message`` says why."""
+
+    def __init__(self, kind: str, message: str) -> None:
+        super().__init__(message)
+        self.kind, self.message = kind, message
+
+
+class TaskLimitError(Exception):
+    """The task went past the checker's time or memory limit (its process replaced)."""
+
+
+def _run_task(task: Task, lim: ModelLimits) -> tuple[str, Any, str]:
+    """(status, value, detail) of a task in this process: ("ok", result, ""), ("error",
+    exception type name, message) or ("limit", None, reason)."""
+    try:
+        module, name = TASKS[task.name]
+        return "ok", getattr(importlib.import_module(module), name)(*task.args), ""
+    except MemoryError:
+        return "limit", None, f"it needs more than the {lim.memory_bytes >> 20} MB allowed"
+    except Exception as exc:  # the task's own refusal: the caller decides
+        return "error", type(exc).__name__, str(exc)
+
+
 #: A small valid model of each kind, loaded once before a checker reports ready (the
 #: MJCF's load imports MuJoCo, whose kinematics checks an MJCF, before the memory limit).
 _WARM_UP = {"urdf": '<robot name="warm-up"><link name="fingertip"/></robot>',
@@ -337,6 +398,9 @@ def _checker_main(conn: Connection, limits: dict[str, Any], parent: int) -> None
             model = conn.recv()
         except (EOFError, OSError, KeyboardInterrupt):
             return
+        if isinstance(model, Task):
+            conn.send(_run_task(model, lim))
+            continue
         try:
             errors = check_model(model, lim)
         except MemoryError:
@@ -386,7 +450,7 @@ class ModelChecker:
     START_TIMEOUT = 60.0
 
     def __init__(self, limits: ModelLimits | None = None, processes: int = 1,
-                 cache_size: int = 256) -> None:
+                 cache_size: int = 256, lazy: bool = False) -> None:
         self.limits = limits or ModelLimits()
         self._ctx = mp.get_context("spawn")
         self._idle: queue.Queue[_Proc] = queue.Queue()
@@ -395,7 +459,15 @@ class ModelChecker:
         self._cache: OrderedDict[str, FieldErrors] = OrderedDict()
         self._cache_size = cache_size
         self._closed = False
-        for _ in range(processes):
+        #: processes still to start (``lazy``: when first needed)
+        self._unstarted = processes
+        if not lazy:
+            self._start()
+
+    def _start(self) -> None:
+        with self._lock:
+            n, self._unstarted = self._unstarted, 0
+        for _ in range(n):
             self._add()
 
     def _add(self) -> None:
@@ -439,8 +511,35 @@ class ModelChecker:
                 self._cache.popitem(last=False)
         return list(errors)
 
+    def call(self, task: Task, time_limit: float | None = None) -> Any:
+        """The value of ``task`` run in a checker process, under the checker's memory limit
+        and its time limit (or ``time_limit`` [s]): TaskLimitError past them (the process
+        is replaced), TaskError when the task raised, CheckerBusyError when no checker
+        process came free."""
+        limit = self.limits.time_limit if time_limit is None else time_limit
+        proc = self._take()
+        try:
+            proc.conn.send(task)
+            if proc.conn.poll(limit):
+                status, value, detail = proc.conn.recv()
+                self._idle.put(proc)
+                if status == "ok":
+                    return value
+                if status == "error":
+                    raise TaskError(str(value), detail)
+                raise TaskLimitError(detail)
+            reason = f"it took longer than the {limit:g} s allowed"
+        except (EOFError, OSError, BrokenPipeError):
+            reason = (f"its process died (beyond its {self.limits.memory_bytes >> 20} MB "
+                      "memory limit?)")
+        log.warning("%s task refused: %s", task.name, reason)
+        self._drop(proc)
+        raise TaskLimitError(reason)
+
     def _take(self) -> _Proc:
         """An idle checker process, alive and ready (a dead one is replaced)."""
+        if self._unstarted:
+            self._start()
         for _ in range(3):
             try:
                 proc = self._idle.get(timeout=self.START_TIMEOUT)

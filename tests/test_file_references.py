@@ -18,6 +18,7 @@ from typing import Any
 import httpx
 import numpy as np
 import pinocchio as pin
+import pytest
 from conftest import Server
 
 from ocp import load_finger
@@ -111,3 +112,42 @@ def test_the_services_viewer_opens_no_file_a_request_names(live_server: Server,
         r = http.get(f"/v1/plans/{job['id']}/view")
         assert r.status_code == 200 and "<html" in r.text.lower()
     assert not was_read(path)
+
+
+def test_the_viewer_loads_under_the_model_checkers_limits(server_factory: Any) -> None:
+    """The service's page of a plan is built (its request's models loaded) in a process
+    of its own under the model checker's limits: past the time limit (0.02 s here: the
+    finger's model and geometry loaded, its links posed at every sample) a 409 naming the
+    limit, the service answering; the page built in a process whose address space is
+    capped."""
+    from planner_service.models_check import ModelChecker, Task, TaskError
+
+    server = server_factory(DEXROLL_MODEL_CHECK_SECONDS="0.02", DEXROLL_WORKERS="1")
+    request = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
+    request["n_intervals"] = 16
+    with httpx.Client(base_url=server.url, timeout=300) as http:
+        job = http.post("/v1/plans", params={"wait": 240}, json=request).json()
+        assert job["state"] == "succeeded", job
+        r = http.get(f"/v1/plans/{job['id']}/view")
+        assert r.status_code == 409, r.text[:300]
+        assert r.json()["error"] == "not_viewable"
+        assert "longer than the 0.02 s allowed" in r.json()["message"]
+        assert http.get("/healthz").status_code == 200
+        stored = http.get(f"/v1/plans/{job['id']}").json()
+    # the same page in a viewer process of this test's (under the default limits): built
+    # there, with the process's address space capped as the model checker's are
+    viewer = ModelChecker(ModelLimits(), lazy=True)
+    try:
+        page = viewer.call(Task("view", (json.dumps(stored["result"]), json.dumps(request),
+                                         "job")))
+        assert "<html" in page
+        (proc,) = viewer._all
+        limits = Path(f"/proc/{proc.process.pid}/limits").read_text()
+        (line,) = [x for x in limits.splitlines() if x.startswith("Max address space")]
+        assert line.split()[3] != "unlimited", line
+        with pytest.raises(TaskError) as raised:  # the task's own refusal comes back
+            viewer.call(Task("view", ('{"planner": "one_finger"}', json.dumps(request),
+                                      "job")))
+        assert raised.value.kind == "ValidationError"
+    finally:
+        viewer.close()

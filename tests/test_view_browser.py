@@ -42,6 +42,19 @@ class Visit:
     shots: dict[str, np.ndarray] = field(default_factory=dict)
     duration: float = 0.0
     failure: str | None = None
+    #: the directive that refused a script added to the page afterwards (None: it ran)
+    refused_by: str | None = None
+
+
+#: Adds an inline script the page's policy does not name; what refused it (or null).
+INJECT = """() => new Promise(done => {
+  document.addEventListener("securitypolicyviolation",
+                            e => done(e.effectiveDirective), {once: true});
+  const s = document.createElement("script");
+  s.textContent = "window.injected = true";
+  document.body.appendChild(s);
+  setTimeout(() => done(window.injected ? null : "not run, no report"), 2000);
+})"""
 
 
 def visit(context: Any, url: str, times: dict[str, float]) -> Visit:
@@ -58,7 +71,10 @@ def visit(context: Any, url: str, times: dict[str, float]) -> Visit:
         page.evaluate("t => window.dexroll.setTime(t)", frac * v.duration)
         png = canvas.screenshot()
         v.shots[name] = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=float)
+    errors = list(v.errors)  # the page's own (a policy violation is a console error)
+    v.refused_by = page.evaluate(INJECT)
     page.close()
+    v.errors = errors
     return v
 
 
@@ -87,13 +103,14 @@ def served(browser: Any, tmp_path_factory: pytest.TempPathFactory
             assert job["state"] == "succeeded", job
             page = http.get(job["links"]["view"])
             assert page.status_code == 200
+            policy = page.headers["content-security-policy"]
         seen = visit(browser, server.url + job["links"]["view"], TIMES)
     finally:
         server.stop()
     (folder / "plan.html").write_text(page.text, encoding="utf-8")
     (folder / "job.json").write_text(json.dumps(job), encoding="utf-8")
     (folder / "request.json").write_text(json.dumps(raw), encoding="utf-8")
-    yield seen, folder, server.url
+    yield seen, folder, policy
 
 
 def differs(a: np.ndarray, b: np.ndarray) -> float:
@@ -103,8 +120,13 @@ def differs(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_the_served_view_draws_without_errors(served: tuple[Visit, Path, str]) -> None:
-    seen = served[0]
+    """With the service's Content-Security-Policy on: no violation (a console error), the
+    page drawn, and a script it does not name refused."""
+    seen, _, policy = served
+    assert policy.startswith("default-src 'none'; script-src 'sha256-")
+    assert "unsafe" not in policy and "frame-ancestors 'none'" in policy
     assert seen.failure is None and seen.errors == []
+    assert seen.refused_by == "script-src-elem"
     assert seen.duration == pytest.approx(2.0)
     # the page is the only request: three.js and the plan are inlined
     assert len(seen.requests) == 1 and seen.requests[0].endswith("/view")
@@ -134,6 +156,7 @@ def test_the_standalone_file_draws_the_same_offline(browser: Any,
     finally:
         browser.set_offline(False)
     assert alone.failure is None and alone.errors == []
+    assert alone.refused_by == "script-src-elem"  # the page's own <meta> policy
     assert alone.requests == [(folder / "plan.html").as_uri()]
     for name in TIMES:
         assert differs(alone.shots[name], seen.shots[name]) < 0.001, name

@@ -67,10 +67,22 @@ def _missing(old: Any, new: Any, where: str) -> list[str]:
     return [] if old == new else [f"{where}: {old!r}, now {new!r}"]
 
 
+def _corrected(baseline: dict[str, Any]) -> dict[str, Any]:
+    """The baseline with what it stated and the service never did put right: a one-finger
+    body without ``planner`` was always read as a ball_on_palm request (the discriminator's
+    default), so the field is required and has no default (issue 25, item 7)."""
+    out = json.loads(json.dumps(baseline))
+    one_finger = out["components"]["schemas"]["OneFingerRequest"]
+    one_finger["properties"]["planner"].pop("default")
+    one_finger["required"] = ["planner", *one_finger["required"]]
+    return out
+
+
 def test_the_published_contract_only_grows() -> None:
     new = create_app(Settings()).openapi()
-    assert _missing(BASELINE["paths"], new["paths"], "paths") == []
-    old_schemas, new_schemas = BASELINE["components"]["schemas"], new["components"]["schemas"]
+    baseline = _corrected(BASELINE)
+    assert _missing(baseline["paths"], new["paths"], "paths") == []
+    old_schemas, new_schemas = baseline["components"]["schemas"], new["components"]["schemas"]
     assert set(old_schemas) <= set(new_schemas)
     for name, schema in old_schemas.items():
         assert _missing(schema, new_schemas[name], name) == [], name

@@ -35,6 +35,7 @@ from ..settings import Settings
 from .access import Access
 from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
 from .routes import health, models, plans, simulation, view
+from .submission import ModelSubmissions
 
 __all__ = ["BodyLimit", "create_app"]
 
@@ -104,9 +105,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                                      settings.sim_time_limit, settings.sim_cpu_seconds)
         app.state.store, app.state.dispatcher = store, dispatcher
         app.state.checker, app.state.simulations = checker, simulations
+        app.state.model_submissions = submissions = ModelSubmissions(settings.model_checkers,
+                                                                settings.max_queue)
+        # the viewer's pages are built (a request's models loaded) under the same limits,
+        # in a process of their own started by the first view asked for
+        app.state.viewer = viewer = ModelChecker(settings.model_limits(), 1, lazy=True)
         try:
             yield
         finally:
+            viewer.close()
+            submissions.close()
             simulations.close()
             checker.close()
             dispatcher.stop()

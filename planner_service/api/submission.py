@@ -5,19 +5,72 @@ up)."""
 
 from __future__ import annotations
 
+import asyncio
 import logging
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 from pydantic import ValidationError
 
 from dexroll_client.models import AnyPlanResult, JobState, PlanRequest, WarmStartModel
 
 from ..jobs.store import Store
-from ..models_check import ModelChecker, request_models
+from ..models_check import (
+    CheckerBusyError,
+    ModelChecker,
+    Task,
+    TaskError,
+    TaskLimitError,
+    request_models,
+)
 from ..planners import RESULT, request_errors
 
-__all__ = ["StoreUnavailableError", "model_errors", "resolve_warm_start", "submission_errors"]
+__all__ = [
+    "REQUEST_CHECK_SECONDS",
+    "ModelSubmissions",
+    "StoreUnavailableError",
+    "checked_apart",
+    "model_errors",
+    "resolve_warm_start",
+    "submission_errors",
+]
 
 log = logging.getLogger("dexroll.service")
+
+T = TypeVar("T")
+
+
+class ModelSubmissions:
+    """Where the checks of a submission checked apart (:func:`checked_apart`: a model, a
+    grasp search) wait for a checker process: threads of their own (one more than the
+    checker processes: one reads the store for a warm start while the others wait), at
+    most ``bound`` submissions waiting (beyond: CheckerBusyError, a 503 with Retry-After).
+    Any other submission never waits behind them: its checks run in the event loop's
+    default threads."""
+
+    def __init__(self, checkers: int, bound: int) -> None:
+        self._pool = ThreadPoolExecutor(checkers + 1, thread_name_prefix="dexroll-models")
+        self._lock = threading.Lock()
+        self._waiting = 0
+        self.bound = bound
+
+    async def run(self, fn: Callable[..., T], *args: object) -> T:
+        """``fn(*args)`` in these threads (CheckerBusyError when ``bound`` wait already)."""
+        with self._lock:
+            if self._waiting >= self.bound:
+                raise CheckerBusyError(f"{self.bound} requests with models are waiting for "
+                                       "their checks")
+            self._waiting += 1
+        try:
+            return await asyncio.get_running_loop().run_in_executor(self._pool, fn, *args)
+        finally:
+            with self._lock:
+                self._waiting -= 1
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
 
 
 class StoreUnavailableError(Exception):
@@ -109,5 +162,42 @@ def submission_errors(body: PlanRequest, store: Store, checker: ModelChecker | N
     body, errors = resolve_warm_start(body, store, owner)
     if errors:  # check the rest of the request too: every bad field at once
         body = body.model_copy(update={"warm_start": None})
-    more = request_errors(body)
+    more = _checked_elsewhere(body, checker)
+    if more is None:  # no model of its own: the API's fingers (built-in ones)
+        more = request_errors(body)
     return body, errors + (_from_job(job_id, more) if job_id is not None else more)
+
+
+#: The time a checker process has for the rest of a request's checks once its models
+#: passed theirs [s] (at least the model checks' own): a grasp search takes seconds
+#: (docs/hands.md: 0.4-5 s measured), more on a loaded machine.
+REQUEST_CHECK_SECONDS = 30.0
+
+
+def checked_apart(body: PlanRequest) -> bool:
+    """Whether a request's checks run in a checker process: it carries a model (a URDF,
+    an MJCF), or its checks search a grasp (seconds of the interpreter). Such requests
+    wait in threads of their own (:class:`ModelSubmissions`), never in the API's."""
+    return bool(request_models(body)) or getattr(body, "grasp", None) is not None
+
+
+def _checked_elsewhere(body: PlanRequest, checker: ModelChecker | None
+                       ) -> list[tuple[str, str]] | None:
+    """The errors of a request checked apart (:func:`checked_apart`), found in a checker
+    process (its models loaded and its grasp searched there, under the checker's memory
+    limit: a request checked in the API never waits for the API's fingers meanwhile);
+    None for any other request (or without a checker)."""
+    if checker is None or not checked_apart(body):
+        return None
+    try:
+        errors: list[tuple[str, str]] = checker.call(
+            Task("request_errors", (body.model_dump_json(),)),
+            max(checker.limits.time_limit, REQUEST_CHECK_SECONDS))
+    except TaskLimitError as exc:
+        models = request_models(body)
+        field = f"{models[0].where}.{models[0].field}" if models else "grasp"
+        return [(field, f"checking the request: {exc}")]
+    except TaskError as exc:
+        raise RuntimeError(f"the request's checks failed: {exc.kind}: {exc.message}") \
+            from exc
+    return [(str(field), str(reason)) for field, reason in errors]

@@ -60,6 +60,7 @@ class BallOnPalmAdapter(PlannerAdapter[BallOnPalmRequest, BallOnPalmProblem, Sol
                                        PlanResult]):
     planner = "ball_on_palm"
     result_type = PlanResult
+    uses_fingers = False
 
     def to_problem(self, request: BallOnPalmRequest, fingers: FingerCache
                    ) -> BallOnPalmProblem:

@@ -9,6 +9,7 @@ the core's solution to the wire result, and names the columns of the plan's warm
 
 from __future__ import annotations
 
+import contextlib
 from abc import ABC, abstractmethod
 from typing import Generic, TypeVar
 
@@ -53,6 +54,9 @@ class PlannerAdapter(ABC, Generic[RequestT, ProblemT, SolutionT, ResultT]):
     method: str | None = None
     #: The planner's wire result (also that of an invalid request or a failed planner).
     result_type: type[ResultT]
+    #: Whether its requests' checks use the process's fingers (and hold their lock, which
+    #: a check loading a request's hand holds for its load and inverse kinematics).
+    uses_fingers: bool = True
 
     def fields(self, request: RequestT) -> FieldMap:
         """The core's field paths of this request's problem -> the request's wire paths."""
@@ -85,7 +89,7 @@ class PlannerAdapter(ABC, Generic[RequestT, ProblemT, SolutionT, ResultT]):
     def request_errors(self, request: RequestT, fingers: FingerCache) -> FieldErrors:
         """Everything wrong with a (schema-valid) request, in wire fields; [] when it can
         be planned. Cheap: no NLP is built."""
-        with fingers.lock:
+        with fingers.lock if self.uses_fingers else contextlib.nullcontext():
             try:
                 problem = self.to_problem(request, fingers)
             except ProblemError as exc:

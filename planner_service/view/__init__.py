@@ -33,6 +33,7 @@ __all__ = [
     "build_scene",
     "has_plan",
     "page_html",
+    "page_of_job",
     "read_result",
     "scene_of",
     "tracks_of",
@@ -54,3 +55,14 @@ def view_html(result: AnyPlanResult, request: PlanRequest | None = None, title: 
               ) -> str:
     """The standalone page of a plan (see :func:`scene_of`)."""
     return page_html(scene_of(result, request, title))
+
+
+def page_of_job(result_json: str, request_json: str, title: str) -> str:
+    """The page of a stored job (its result's and its request's JSON): what the service's
+    viewer runs in a model checker's process, under its time and memory limits
+    (:meth:`~planner_service.models_check.ModelChecker.call`): the request's finger
+    models are loaded here."""
+    from ..planners import REQUEST, RESULT
+
+    return view_html(RESULT.validate_json(result_json), REQUEST.validate_json(request_json),
+                     title)

@@ -1,9 +1,15 @@
 """The viewer's page: one self-contained HTML file (the scene as JSON, three.js and the
 viewer's script inlined), the same whether the service serves it or ``dexroll view``
-writes it. Nothing is fetched: it works offline, from a file or an e-mail."""
+writes it. Nothing is fetched: it works offline, from a file or an e-mail.
+
+The page carries its own Content-Security-Policy (a ``<meta>`` element; the service sends
+it as a header too): nothing may be fetched or run but its own inline scripts and style,
+named by their SHA-256 hashes (:func:`content_security_policy`)."""
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import html
 import json
 import re
@@ -11,7 +17,7 @@ from functools import cache
 from importlib import resources
 from typing import Any
 
-__all__ = ["THREE_VERSION", "page_html"]
+__all__ = ["THREE_VERSION", "content_security_policy", "page_html"]
 
 #: The three.js release bundled in ``static/three.min.js`` (``js/package.json``).
 THREE_VERSION = "0.187.0"
@@ -23,8 +29,9 @@ def _static(name: str) -> str:
 
 
 def _json_safe(text: str) -> str:
-    """JSON that cannot close the <script> element it is inlined in."""
-    return text.replace("</", "<\\/").replace("<!--", "<\\u0021--")
+    """JSON that cannot close the <script> element it is inlined in, nor open one (every
+    ``<`` escaped: the same JSON)."""
+    return text.replace("<", "\\u003c")
 
 
 def _script_safe(text: str) -> str:
@@ -57,11 +64,46 @@ body { display: flex; flex-direction: column; }
 """
 
 
+#: A colour the page's style may name (the scene's palette: #rgb or #rrggbb).
+_COLOR = re.compile(r"#[0-9a-fA-F]{3}(?:[0-9a-fA-F]{3})?")
+#: The page's inline scripts that run (not its JSON data) and its style element.
+_SCRIPT = re.compile(r"<script>(.*?)</script>", re.DOTALL)
+_STYLE = re.compile(r"<style>(.*?)</style>", re.DOTALL)
+
+
+def _sha256(text: str) -> str:
+    return "'sha256-" + base64.b64encode(hashlib.sha256(text.encode()).digest()).decode() + "'"
+
+
+def content_security_policy(page: str, header: bool = False) -> str:
+    """The policy of a viewer page: nothing by default; its inline scripts and its style
+    element by their hashes; its icon (a ``data:`` image); no base URL, no form target.
+    ``header``: as the service sends it (with ``frame-ancestors``, which a ``<meta>``
+    cannot carry)."""
+    scripts = " ".join(_sha256(m) for m in _SCRIPT.findall(page))
+    styles = " ".join(_sha256(m) for m in _STYLE.findall(page))
+    policy = (f"default-src 'none'; script-src {scripts}; style-src {styles}; "
+              "img-src data:; base-uri 'none'; form-action 'none'")
+    return policy + "; frame-ancestors 'none'" if header else policy
+
+
 def page_html(scene: dict[str, Any]) -> str:
-    """The page of a scene (:func:`~.scene.build_scene`)."""
+    """The page of a scene (:func:`~.scene.build_scene`), with its policy."""
+    page = _page(scene)
+    meta = (f'<meta http-equiv="Content-Security-Policy" '
+            f'content="{html.escape(content_security_policy(page))}">\n')
+    return page.replace("<title>", meta + "<title>", 1)
+
+
+def _page(scene: dict[str, Any]) -> str:
     title = scene.get("title") or f"{scene['planner']} plan"
-    legend = "".join(f'<span><i style="background:{c["color"]}"></i>{html.escape(c["name"])}'
-                     f' contact</span>' for c in scene["contacts"])
+    legend = "".join(f'<span><i class="contact-{i}"></i>{html.escape(c["name"])}'
+                     f' contact</span>' for i, c in enumerate(scene["contacts"]))
+    # the contacts' colours as rules of the style element (an attribute's style would
+    # need the policy's 'unsafe-hashes')
+    colors = "".join(f"#legend i.contact-{i} {{ background: {c['color']}; }}\n"
+                     for i, c in enumerate(scene["contacts"])
+                     if _COLOR.fullmatch(str(c["color"])))
     notes = "; ".join(scene.get("notes", []))
     grid = f"; palm grid {scene['palm']['grid'] * 1e3:g} mm" if scene.get("palm") else ""
     data = _json_safe(json.dumps(scene, separators=(",", ":"), allow_nan=False))
@@ -73,7 +115,7 @@ def page_html(scene: dict[str, Any]) -> str:
 <meta name="generator" content="dexroll viewer (three.js {THREE_VERSION})">
 <title>{html.escape(title)} - dexroll</title>
 <link rel="icon" href="{_ICON}">
-<style>{_CSS}</style>
+<style>{_CSS}{colors}</style>
 </head>
 <body>
 <div id="view">

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, Strict, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, Strict, model_validator
 
 __all__ = [
     "BUILTIN_FINGERS",
@@ -31,6 +31,7 @@ __all__ = [
     "PLANNERS",
     "Count",
     "NlpPointModel",
+    "OptionalCount",
     "Real",
 ]
 
@@ -65,11 +66,23 @@ MAX_MOTION_KNOTS = 1000
 MAX_WARM_START_COLUMNS = 7 + MAX_FINGERS * (5 + MAX_FINGER_JOINTS)
 
 
+def _integral(value: object) -> object:
+    """A JSON number without a fractional part (``60.0``) as the integer it is."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
 #: A request's real number: a JSON number, never a boolean (pydantic's lax mode would read
 #: ``false`` as 0; strict floats take integers, not booleans or strings), and its integer
-#: count (strict: not a boolean, not 2.0).
+#: count: JSON Schema's ``integer`` (what openapi.json says), any number with a zero
+#: fractional part (``60`` and ``60.0`` alike: JSON has one number type, and a client's
+#: encoder may write either), never a boolean, a string or ``60.5``.
 Real = Annotated[float, Strict()]
-Count = Annotated[int, Strict()]
+Count = Annotated[int, Strict(), BeforeValidator(_integral)]
+#: An optional count (``Count | None``, the integral float read before the union: pydantic
+#: then keeps a field's bounds on the integer in the JSON schema).
+OptionalCount = Annotated[Annotated[int, Strict()] | None, BeforeValidator(_integral)]
 
 
 class _Request(BaseModel):

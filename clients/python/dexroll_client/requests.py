@@ -8,9 +8,17 @@ Import from :mod:`dexroll_client.models` (it re-exports everything).
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import Discriminator, Field, Tag, ValidationInfo, field_validator, model_validator
+from pydantic import (
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from dexroll_client.common import (
     MAX_DURATION,
@@ -28,6 +36,7 @@ from dexroll_client.common import (
     MIN_SIZE,
     Count,
     NlpPointModel,
+    OptionalCount,
     Real,
     _planner_of,
     _Request,
@@ -493,11 +502,22 @@ class ForcesModel(_Request):
                     "than atan(mu))")
 
 
+def _planner_required(schema: dict[str, Any]) -> None:
+    """The JSON schema of a request the wire tells apart by its ``planner`` only: the field
+    required and without a default (a body without it is a ball_on_palm request; a
+    Python caller naming the class has chosen its planner already)."""
+    schema["required"] = ["planner", *(r for r in schema.get("required", [])
+                                      if r != "planner")]
+    schema["properties"]["planner"].pop("default", None)
+
+
 class OneFingerRequest(_PalmRequest):
     """Roll a ball on the palm with one flat fingertip pressing on it, keeping the grasp
     inside the friction cone (paper, section 3). The plan holds the palm contact, the
     finger contact and the finger's joint angles (at ``sample_times`` or ``sample_rate``
     too, with its ``joint_trajectory``; not with the greedy method)."""
+
+    model_config = ConfigDict(json_schema_extra=_planner_required)
 
     planner: Literal["one_finger"] = Field(
         default="one_finger",
@@ -661,7 +681,7 @@ class FingertipModel(_Request):
     finger: FingerModelSpec | None = Field(
         default=None, description="the finger (a built-in one or a URDF, and its mount); "
                                   "give this or `hand_finger`")
-    hand_finger: Count | None = Field(
+    hand_finger: OptionalCount = Field(
         default=None, ge=0, lt=MAX_FINGERS, validate_default=True,
         description="index of a finger of the request's `hand` (0-based, in the hand's "
                     "order; requires `hand`); give this or `finger`")

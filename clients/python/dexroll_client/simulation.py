@@ -11,7 +11,7 @@ from typing import Any, Literal
 
 from pydantic import Field
 
-from dexroll_client.common import Count, Real, _Request, _Response
+from dexroll_client.common import OptionalCount, Real, _Request, _Response
 
 __all__ = [
     "ContactExecutionModel",
@@ -78,7 +78,7 @@ class SimulationOptions(_Request):
     impratio: Real | None = Field(default=None, gt=0.0, le=1000.0,
                                   description="MuJoCo's ratio of frictional to normal "
                                               "constraint impedance (default 10)")
-    noslip_iterations: Count | None = Field(default=None, ge=0, le=100,
+    noslip_iterations: OptionalCount = Field(default=None, ge=0, le=100,
                                             description="MuJoCo's no-slip solver "
                                                         "iterations (default 3)")
     use_plan_forces: bool | None = Field(default=None,
@@ -91,7 +91,7 @@ class SimulationOptions(_Request):
     settle: Real | None = Field(default=None, ge=0.0, le=5.0,
                                 description="the grasp is held before t = 0 for this "
                                             "long [s] (default 0.2)")
-    record_every: Count | None = Field(default=None, ge=1, le=100_000,
+    record_every: OptionalCount = Field(default=None, ge=1, le=100_000,
                                        description="steps between the report's series "
                                                    "rows (default 10)")
     tolerances: SimulationTolerances = Field(default_factory=SimulationTolerances)

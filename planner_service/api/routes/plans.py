@@ -14,7 +14,7 @@ from contextlib import suppress
 from datetime import UTC, datetime
 from typing import Annotated
 
-from fastapi import APIRouter, Header, Query, Response
+from fastapi import APIRouter, Header, Query, Request, Response
 from fastapi.responses import StreamingResponse
 
 from dexroll_client.models import FieldError, Job, JobList, JobState, PlanRequest
@@ -33,7 +33,12 @@ from ..deps import (
     StoreDep,
     store_fault_error,
 )
-from ..submission import StoreUnavailableError, submission_errors
+from ..submission import (
+    ModelSubmissions,
+    StoreUnavailableError,
+    checked_apart,
+    submission_errors,
+)
 from .view import JobLinks, LinkedJob, with_links
 
 __all__ = ["job_model", "router"]
@@ -109,6 +114,7 @@ def _row(store: Store, job_id: str, owner: str | None) -> JobRow:
              responses={202: {"model": LinkedJob, "description": "accepted; poll Location"}})
 async def submit_plan(
     body: PlanRequest,
+    request: Request,
     owner: OwnerDep,
     settings: SettingsDep,
     store: StoreDep,
@@ -131,10 +137,13 @@ async def submit_plan(
         raise refused
     # cheap checks (no NLP), in a thread: a finger's URDF and the inverse kinematics
     # of its initial grasp take milliseconds; a warm start's job id is replaced by
-    # that job's plan (the new job is self-contained)
+    # that job's plan (the new job is self-contained). A request carrying a model or
+    # searching a grasp is checked in a checker process, waiting in threads of its own:
+    # the others never wait behind those
+    models: ModelSubmissions = request.app.state.model_submissions
+    run = models.run if checked_apart(body) else asyncio.to_thread
     try:
-        body, errors = await asyncio.to_thread(submission_errors, body, store, checker,
-                                               owner)
+        body, errors = await run(submission_errors, body, store, checker, owner)
     except CheckerBusyError as exc:
         raise ServiceError(503, "checker_busy", f"the service is checking other model files: "
                            f"{exc}", headers={"Retry-After": "2"}) from exc

@@ -16,6 +16,8 @@ from __future__ import annotations
 import asyncio
 import importlib.util
 import math
+import threading
+from collections import OrderedDict
 from typing import Any
 
 from fastapi import APIRouter, Request
@@ -66,6 +68,34 @@ def simulation_steps(duration: float, options: SimulationOptions) -> int:
     dt = options.timestep if options.timestep is not None else DEFAULT_TIMESTEP
     settle = options.settle if options.settle is not None else DEFAULT_SETTLE
     return round(settle / dt) + math.ceil(duration / dt - 1e-9)
+
+
+#: Plan horizons (or why a plan has none to execute) by job id and end time: a flood of
+#: simulations of one plan parses its result once (a parse holds the interpreter for tens
+#: of milliseconds, which every other route of the API process waits for).
+_durations: OrderedDict[tuple[str, float | None], float | ServiceError] = OrderedDict()
+_durations_lock = threading.Lock()
+_CACHED_DURATIONS = 64
+
+
+def _cached_plan_duration(job_id: str, finished_at: float | None, result_json: str) -> float:
+    """:func:`_plan_duration`, computed once per finished job (the others asking for it
+    meanwhile wait for that one)."""
+    key = (job_id, finished_at)
+    with _durations_lock:
+        value = _durations.get(key)
+        if value is None:
+            try:
+                value = _plan_duration(job_id, result_json)
+            except ServiceError as exc:
+                value = exc
+            _durations[key] = value
+            while len(_durations) > _CACHED_DURATIONS:
+                _durations.popitem(last=False)
+    if isinstance(value, ServiceError):  # a fresh error each time (its own traceback)
+        raise ServiceError(value.status, value.error, value.message, value.detail,
+                           value.headers)
+    return value
 
 
 def _plan_duration(job_id: str, result_json: str) -> float:
@@ -140,7 +170,8 @@ async def simulate_plan(job_id: str, request: Request, store: StoreDep, owner: O
         raise ServiceError(503, "simulation_unavailable",
                            "this service was installed without MuJoCo: pip install "
                            "'dexroll[sim]'")
-    duration = await asyncio.to_thread(_plan_duration, job_id, row.result)
+    duration = await asyncio.to_thread(_cached_plan_duration, job_id, row.finished_at,
+                                       row.result)
     if duration > MAX_SIMULATED_DURATION:
         raise ServiceError(409, "too_long", f"job {job_id}: a plan of {duration:g} s "
                                             f"is longer than the "

@@ -7,14 +7,15 @@ import threading
 from collections import OrderedDict
 from typing import Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from pydantic import BaseModel, Field
 
 from dexroll_client.models import Job, JobState
 
-from ...planners import REQUEST, RESULT, ProblemError
-from ...view import NoPlanError, has_plan, view_html
+from ...models_check import CheckerBusyError, ModelChecker, Task, TaskError, TaskLimitError
+from ...view import has_plan
+from ...view.page import content_security_policy
 from ..access import OwnerDep
 from ..deps import ERROR_RESPONSES, ServiceError, StoreDep
 
@@ -24,7 +25,7 @@ router = APIRouter()
 
 #: Pages kept ready (the last ones asked for), by job id and end time.
 CACHED_PAGES = 8
-_pages: OrderedDict[tuple[str, float | None], str] = OrderedDict()
+_pages: OrderedDict[tuple[str, float | None], tuple[str, str]] = OrderedDict()
 _lock = threading.Lock()
 
 
@@ -53,18 +54,25 @@ VIEW_RESPONSES: dict[int | str, dict[str, Any]] = {
     **{code: {"description": r["description"], "content": _ERROR_JSON}
        for code, r in ERROR_RESPONSES.items()},
     200: {"content": {"text/html": {"schema": {"type": "string"}}},
-          "description": "one self-contained page (no other request)"},
-    409: {"description": "the job has not finished, or ended without a plan",
+          "description": "one self-contained page (no other request)",
+          "headers": {"Content-Security-Policy": {
+              "description": "default-src 'none': the page's own inline scripts and style "
+                             "(by their SHA-256 hashes) and a data: icon, nothing else",
+              "schema": {"type": "string"}}}},
+    409: {"description": "the job has not finished, or ended without a plan, or its plan "
+                         "cannot be drawn within the service's model limits",
           "content": _ERROR_JSON}}
 
 
 @router.get("/v1/plans/{job_id}/view", response_class=HTMLResponse,
             responses=VIEW_RESPONSES)
-def view_plan(job_id: str, store: StoreDep, owner: OwnerDep) -> HTMLResponse:
+def view_plan(job_id: str, request: Request, store: StoreDep, owner: OwnerDep
+              ) -> HTMLResponse:
     """A finished job's plan as an animated 3D page: the palm, the object, the fingers
     from their own models, the contacts and their traces, a timeline. The page is
     self-contained (three.js and the plan inlined): save it to view it offline. 409 while
-    the job runs, or when it ended without a plan."""
+    the job runs, or when it ended without a plan. The page is built in a process of its
+    own under the model checker's time and memory limits (409 past them)."""
     row = store.get(job_id, owner)  # with API keys, another owner's job is unknown here
     if row is None:
         raise ServiceError(404, "not_found", f"no job {job_id!r}")
@@ -74,21 +82,39 @@ def view_plan(job_id: str, store: StoreDep, owner: OwnerDep) -> HTMLResponse:
                            headers={"Retry-After": "1"})
     key = (row.id, row.finished_at)
     with _lock:
-        page = _pages.get(key)
-        if page is not None:
+        cached = _pages.get(key)
+        if cached is not None:
             _pages.move_to_end(key)
-    if page is None:
+    if cached is None:
         if row.result is None:
             raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without "
                                                "a plan to show")
-        try:
-            result = RESULT.validate_json(row.result)
-            page = view_html(result, REQUEST.validate_json(row.request), f"job {row.id}")
-        except (NoPlanError, ProblemError) as exc:
-            raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without "
-                                               f"a plan to show: {exc}") from exc
+        page = _page(request.app.state.viewer, job_id, row.state, row.result, row.request)
+        cached = page, content_security_policy(page, header=True)
         with _lock:
-            _pages[key] = page
+            _pages[key] = cached
             while len(_pages) > CACHED_PAGES:
                 _pages.popitem(last=False)
-    return HTMLResponse(page)
+    page, policy = cached
+    return HTMLResponse(page, headers={"Content-Security-Policy": policy})
+
+
+def _page(viewer: ModelChecker, job_id: str, state: str, result: str, plan_request: str
+          ) -> str:
+    """The page of a job, built in a viewer process (the request's models are loaded
+    there, under the model checker's limits)."""
+    try:
+        page: str = viewer.call(Task("view", (result, plan_request, f"job {job_id}")))
+    except TaskError as exc:
+        if exc.kind not in ("NoPlanError", "ProblemError"):
+            raise ServiceError(500, "internal_error", f"the viewer failed: {exc.kind}") \
+                from exc
+        raise ServiceError(409, "no_plan", f"job {job_id} ended ({state}) without a plan "
+                                           f"to show: {exc.message}") from exc
+    except TaskLimitError as exc:
+        raise ServiceError(409, "not_viewable", f"job {job_id}'s plan cannot be drawn "
+                                                f"within the model limits: {exc}") from exc
+    except CheckerBusyError as exc:
+        raise ServiceError(503, "viewer_busy", f"the viewer is busy: {exc}",
+                           headers={"Retry-After": "2"}) from exc
+    return page
