@@ -1,6 +1,7 @@
-"""Finger gaiting (ocp/gait, docs/gait.md): laws of a fingertip's swing, of the hold while
-it is lifted, and of a gait plan that rolls, re-places three fingertips and rolls again,
-on the built-in Allegro-class hand (capsule tips, a 60 mm ball of 50 g)."""
+"""Finger gaiting (ocp/gait, docs/gait.md): laws of a fingertip's swing and of the hold
+while it is lifted, on the built-in Allegro-class hand (capsule tips, a 60 mm ball of
+50 g). A whole gait, planned, certified and executed in MuJoCo, is
+tests/test_gait_service.py's (through the service's doors)."""
 
 from __future__ import annotations
 
@@ -12,10 +13,9 @@ import pytest
 
 from ocp.gait.bodies import tip_body
 from ocp.gait.checks import swing_checks
-from ocp.gait.planner import plan_gait
 from ocp.gait.step import contact_of, replace_finger
 from ocp.gait.swing import SwingPlan
-from ocp.geometry.rotations import axis_angle_rotation, rotation_angle_between
+from ocp.geometry.rotations import axis_angle_rotation
 from ocp.robots.allegro import NOMINAL_Q, load_allegro
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
 from ocp.spec.motion import ObjectPose, Tracking
@@ -139,57 +139,3 @@ def test_a_fingertip_the_others_cannot_hold_without_is_refused_at_once() -> None
                         LOAD)
     assert st.status == "infeasible" and st.swing is None
     assert "thumb" in st.message and "friction cones" in st.message
-
-
-@pytest.fixture(scope="module")
-def gait() -> object:
-    return plan_gait(TEMPLATE, QS, (0.0, -1.0, 0.0), math.radians(12.0),
-                     roll_step=math.radians(6.0))
-
-
-def test_a_gait_rolls_replaces_three_fingertips_and_rolls_on(gait: object) -> None:
-    g = gait
-    assert g.status == "solved" and g.certificate.passed, (g.message,
-                                                           g.certificate.failures)
-    kinds = [p.kind for p in g.phases]
-    assert kinds == ["roll"] + ["unload", "swing", "load"] * 3 + ["roll"]
-    assert [p.lifted for p in g.phases if p.kind == "swing"] == [0, 1, 2]
-    for a, b in zip(g.phases, g.phases[1:], strict=False):
-        assert a.end == pytest.approx(b.start)
-        # joint positions and rates continuous across every switch, at rest there
-        qa, va, _ = g.joints(a.end - 1e-9)
-        qb, vb, _ = g.joints(b.start + 1e-9)
-        assert np.abs(qa - qb).max() < 1e-6 and np.abs(va).max() < 1e-5
-        assert np.abs(vb).max() < 1e-5
-    # the object turned by the request, within the rolls' tracking tolerance
-    R_end = g.rolls[-1].object_rotation[-1]
-    target = axis_angle_rotation((0.0, -1.0, 0.0), math.radians(12.0))
-    assert float(rotation_angle_between(R_end[None], target[None])[0]) <= math.radians(1.0) + 1e-6
-    assert math.degrees(g.turned) == pytest.approx(12.0)
-
-
-def test_the_gait_executes_in_mujoco_lifting_and_landing_as_planned(gait: object) -> None:
-    """The plan's joints followed by MuJoCo's servos, its forces fed forward: the ball
-    follows the plan, no planned contact is lost, and each re-placed fingertip is off the
-    ball while the plan carries it clear and back on it in the next roll."""
-    from planner_service.execution.gait import gait_execution_plan
-    from sim import simulate
-
-    g = gait
-    report = simulate(gait_execution_plan(g, TEMPLATE))
-    assert report.passed, report.failures
-    assert all(c.lost_time == 0.0 and c.unplanned_touch_time == 0.0
-               for c in report.contacts)
-    t = np.asarray(report.series["t"])
-    force = report.series["normal_force"]
-    names = ("index", "middle", "ring", "thumb")
-    for ph in g.phases:
-        if ph.kind == "swing":
-            sw = g.steps[ph.index].swing
-            clear = [(t >= ph.start + x) & (t <= ph.start + x + 0.01) for x in sw.t
-                     if sw.segment(float(x)) == "clear"]
-            mask = np.any(clear, axis=0)
-            assert mask.any() and np.all(np.asarray(force[names[ph.lifted]])[mask] == 0.0)
-    last_roll = g.phases[-1]
-    during = (t > last_roll.start + 0.1) & (t < last_roll.end - 0.1)
-    assert all(np.all(np.asarray(force[nm])[during] > 0.0) for nm in names)

@@ -85,13 +85,55 @@ def test_a_gait_is_planned_and_executed_over_http(live_server: Server) -> None:
                 act = np.array(c.active)[inside]
                 assert act.min() == 0.0
                 assert np.all(np.linalg.norm(np.array(c.force)[inside], axis=1) == 0.0)
-        # joints continuous: no jump between samples beyond what the rates allow
+        # joints continuous, at rest at every switch: no jump between samples beyond what
+        # the rates allow, zero rates where a phase ends
         q = np.array([p.positions for p in jt.points])
         qd = np.array([p.velocities for p in jt.points])
         assert np.all(np.abs(np.diff(q, axis=0)) <= np.abs(qd).max() * np.diff(t)[:, None]
                       + 1e-9)
+        for p in gait.phases:
+            at = int(np.argmin(np.abs(t - p.end)))
+            assert abs(t[at] - p.end) < 1e-9 and np.abs(qd[at]).max() < 1e-6
+        # the ball turned by the request about its axis, its centre held (tracking 1 mm,
+        # 1 deg)
+        R = _matrix(gait.samples.object_orientation_wxyz[-1])
+        want = _axis_angle((0.0, -1.0, 0.0), math.radians(8.0))
+        assert math.degrees(math.acos(min(1.0, (np.trace(want.T @ R) - 1) / 2))) <= 1.0
+        pos = np.array(gait.samples.object_position)
+        assert np.linalg.norm(pos - pos[0], axis=1).max() <= 1e-3
         report = client.simulate(job.id)
         # the viewer draws it: the contacts' activity is in the page's scene
         page = client.http.get(f"/v1/plans/{job.id}/view")
         assert page.status_code == 200 and '"active":[1.0' in page.text
+    # executed in MuJoCo: no contact lost, no touch while a fingertip is carried clear,
+    # and each re-placed fingertip off the ball (no normal force) while it is
     assert report.passed, report.failures
+    assert all(c.lost_time == 0.0 and c.unplanned_touch_time == 0.0
+               for c in report.contacts)
+    assert report.series is not None
+    ts = np.array(report.series.t)
+    for p in gait.phases:
+        if p.kind != "swing":
+            continue
+        c = next(c for c in gait.samples.contacts if c.name == p.lifted_finger)
+        clear = t[(np.array(c.active) == 0.0)]
+        clear = clear[(clear > p.start) & (clear < p.end)]
+        mask = (ts >= clear.min() + 0.01) & (ts <= clear.max() - 0.01)
+        force = np.array(report.series.normal_force[p.lifted_finger])
+        assert mask.any() and np.all(force[mask] == 0.0)
+    last = gait.phases[-1]
+    during = (ts > last.start + 0.1) & (ts < last.end - 0.1)
+    assert all(np.all(np.array(f)[during] > 0.0) for f in report.series.normal_force.values())
+
+
+def _matrix(wxyz: list[float]) -> np.ndarray:
+    w, x, y, z = wxyz
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _axis_angle(axis: tuple[float, float, float], angle: float) -> np.ndarray:
+    k = np.asarray(axis) / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K

@@ -129,6 +129,9 @@ class ContactExecutionModel(_Response):
     normal_force_error_max: float | None = Field(
         default=None, description="worst |simulated - planned| normal force [N] (null: the "
                                   "plan states no forces)")
+    unplanned_touch_time: float = Field(
+        default=0.0, description="time the fingertip touched the object while the plan has "
+                                 "it lifted clear (a gait) [s]")
 
 
 class SimulationSeriesModel(_Response):
