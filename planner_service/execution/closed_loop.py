@@ -1,0 +1,144 @@
+"""Closed-loop execution of a request's plan: ``ocp``'s re-planner
+(:class:`ocp.solve.replan.Replanner`) as the controller of ``sim``'s closed loop
+(:func:`sim.closed_loop.simulate_closed_loop`), and the open-loop run on the same
+disturbances beside it (docs/simulation.md, "Closed loop").
+
+:func:`first_plan` plans a request in this process and keeps what the loop needs: the
+wire result (for the simulator's models), the core's problem as one
+:class:`~ocp.spec.grasp.ManipulationProblem` and its plan. :class:`ReplanController` turns
+each measurement into the core's, re-plans, and hands the simulator the rest of the
+motion. :func:`compare` runs both loops and reports them side by side.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ocp.geometry.rotations import quaternion_wxyz
+from ocp.one_finger import OneFingerPlanner, OneFingerProblem
+from ocp.solution import ManipulationSolution
+from ocp.solve.estimate import Measurement
+from ocp.solve.replan import ReplanOptions, Replanner
+from ocp.spec.grasp import ManipulationProblem, contact_charts
+
+__all__ = ["FirstPlan", "ReplanController", "compare", "first_plan"]
+
+
+@dataclass(frozen=True)
+class FirstPlan:
+    """A request planned in this process: the wire ``result``, the core's ``problem``
+    (one-finger requests as the general problem) and its ``plan``."""
+
+    result: Any
+    problem: ManipulationProblem
+    plan: ManipulationSolution
+
+
+def first_plan(request: Any) -> FirstPlan:
+    """Plan ``request`` here (the service's own adapters and fingers). ValueError when it
+    is not a plan with fingers of the direct-collocation planner."""
+    from ..planners import solve, to_problem
+
+    result, solution = solve(request)
+    problem = to_problem(request)
+    if isinstance(problem, OneFingerProblem):
+        problem = OneFingerPlanner.manipulation_problem(problem)
+    plan = getattr(solution, "plan", solution)
+    if not isinstance(problem, ManipulationProblem) or not isinstance(
+            plan, ManipulationSolution) or not problem.fingers:
+        raise ValueError("closed loop: only plans with fingers made by direct collocation "
+                         "(planner one_finger with method collocation, or manipulation) "
+                         "are re-planned")
+    return FirstPlan(result, problem, plan)
+
+
+class ReplanController:
+    """The controller of sim's closed loop: each measurement estimated into the grasp's
+    state and the rest of the motion re-planned (:class:`Replanner`); the new plan as the
+    simulator's reference (joints, rates and contact points at 4 samples per interval)."""
+
+    def __init__(self, first: FirstPlan, base: Any, options: ReplanOptions | None = None
+                 ) -> None:
+        self.replanner = Replanner(first.problem, first.plan, options=options)
+        self.base = base
+        m = self.replanner.model
+        problem = self.replanner.problem
+        self.prm = m.params(np.asarray(problem.object.dimensions, dtype=float),
+                            contact_charts(problem))
+        self.columns = {id(c): j for j, c in enumerate(m.point_contacts)}
+
+    def fragment(self, sol: ManipulationSolution, t0: float) -> Any:
+        """The simulator's plan of ``sol`` (the rest of the motion from ``t0``)."""
+        from dataclasses import replace
+
+        from sim import ContactSpec, FingerReference
+
+        m = self.replanner.model
+        n = sol.stats.n_intervals if sol.stats is not None else 16
+        ts = np.linspace(0.0, sol.duration, 4 * n + 1)
+        s = sol.sample(ts)
+        refs, points = [], {}
+        for spec, tip in zip(self.base.fingers, m.fingertips, strict=True):
+            refs.append(FingerReference(s.x[:, tip.q_cols], s.x_dot[:, tip.q_cols]))
+            j = self.columns[id(tip)]
+            points[spec.name] = np.array([
+                np.asarray(m.cartesian(x, self.prm)[4])[:, j] for x in s.x])
+        contacts = tuple(
+            ContactSpec(c.name, c.body, c.finger, points[c.finger], None)
+            if c.finger in points else
+            ContactSpec(c.name, c.body, c.finger, np.repeat(c.point[:1], ts.size, axis=0))
+            for c in self.base.contacts)
+        return replace(self.base, t=ts + t0, object_position=s.object_position,
+                       object_wxyz=quaternion_wxyz(s.object_rotation),
+                       references=tuple(refs), contacts=contacts)
+
+    def __call__(self, meas: Any) -> tuple[Any, Any]:
+        from sim.closed_loop import ControlEvent
+
+        r = self.replanner.replan(meas.t, Measurement(
+            meas.q, meas.object_position, meas.object_wxyz, meas.q_dot,
+            meas.object_velocity, meas.object_omega))
+        est = r.estimate
+        details: dict[str, Any] = {
+            "iterations": r.iterations, "solve_time": r.solve_time,
+            "estimate_time": r.estimate_time}
+        if est is not None:
+            details.update(fingertip_shift=list(est.fingertip_shift),
+                           object_shift=est.object_shift, object_turn=est.object_turn)
+        frag = self.fragment(r.plan, r.t) if r.status == "replanned" and r.plan else None
+        return frag, ControlEvent(r.t, r.status, r.wall_time, r.message, details)
+
+
+def _summary(report: Any) -> dict[str, Any]:
+    d = report.to_dict()
+    lost = {c["name"]: c["lost_time"] for c in d["contacts"]}
+    return {"passed": d["passed"],
+            "position_final_mm": 1e3 * d["position_error"]["final"],
+            "position_worst_mm": 1e3 * d["position_error"]["max"],
+            "angle_final_deg": math.degrees(d["angle_error"]["final"]),
+            "angle_worst_deg": math.degrees(d["angle_error"]["max"]),
+            "contacts_lost_s": lost,
+            "recovered": bool(d["position_error"]["final"] <= 1e-3
+                              and d["angle_error"]["final"] <= math.radians(2.0)
+                              and not any(v > 0 for v in lost.values()))}
+
+
+def compare(first: FirstPlan, base: Any, rate: float, options: Any = None,
+            disturbances: Any = None, replan: ReplanOptions | None = None
+            ) -> dict[str, Any]:
+    """``base`` (the simulator's plan of ``first``) executed open loop and closed loop
+    (re-planning at ``rate`` [Hz]) in the same disturbed world: both reports, each one's
+    summary (``recovered``: final error within 1 mm and 2 deg, no contact lost) and the
+    controller's timing."""
+    from sim.closed_loop import simulate_closed_loop, simulate_disturbed
+
+    open_report = simulate_disturbed(base, options, disturbances)
+    closed = simulate_closed_loop(base, ReplanController(first, base, replan), rate,
+                                  options, disturbances)
+    return {"disturbances": None if disturbances is None else disturbances.to_dict(),
+            "open_loop": {"summary": _summary(open_report), "report": open_report.to_dict()},
+            "closed_loop": {"summary": _summary(closed.report), **closed.to_dict()}}
