@@ -31,6 +31,7 @@ values), same cache.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
@@ -55,7 +56,7 @@ class ReplanOptions:
     tracking tolerances are dropped (``relax_tracking``), and the estimate's options."""
 
     max_iter: int = 30
-    time_limit: float = 1.0
+    time_limit: float = 10.0
     min_horizon: float = 0.3
     relax_tracking: bool = True
     estimate: EstimateOptions = field(default_factory=EstimateOptions)
@@ -105,6 +106,27 @@ class Replanner:
         self.model = planner.model(problem)
         self.plan, self.start = first, 0.0
         self.history: list[Replan] = []
+
+    def prepare(self, times: Sequence[float]) -> float:
+        """Build, before the loop, every NLP the re-plans at ``times`` will use (one per
+        structure: the via-points still ahead change it) and its warm-start solver, by a
+        one-iteration attempt from the first plan; the wall time [s] it took."""
+        from ocp.solve.planner import GraspStructure
+
+        t0 = time.perf_counter()
+        seen: set[GraspStructure] = set()
+        for t in times:
+            if self.problem.duration - t < self.options.min_horizon or t <= 0:
+                continue
+            rest = self.problem.remaining(t)
+            key = GraspStructure.of(rest)
+            if key in seen:
+                continue
+            seen.add(key)
+            x, u = self.state_at(t)
+            attempt(rest, x0=x, u0=u, warm=shifted(self.plan, t),
+                    options=AttemptOptions(max_iter=1), planner=self.planner)
+        return time.perf_counter() - t0
 
     def state_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The current plan's state and input at time ``t`` (the first plan's clock)."""
