@@ -246,12 +246,12 @@ def estimate_state(problem: ManipulationProblem, m: GraspModel, measured: Measur
                         "deg from any pose the grasp allows (limits "
                         f"{o.max_object_shift * 1e3:g} mm, "
                         f"{np.degrees(o.max_object_turn):.3g} deg): dropped or lifted")
-    for c in m.contacts:  # off a pad's edge, past a pole, a joint past its limit
-        lo, hi, _ = c.bounds(problem)
-        xb = x[c.xs]
+    for block in m.contacts:  # off a pad's edge, past a pole, a joint past its limit
+        lo, hi, _ = block.bounds(problem)
+        xb = x[block.xs]
         out = np.flatnonzero((xb < np.asarray(lo) - 1e-9) | (xb > np.asarray(hi) + 1e-9))
         if out.size:
-            problems.append(f"{c.label(problem)}: state {int(out[0])} of its block "
+            problems.append(f"{block.label(problem)}: state {int(out[0])} of its block "
                             f"({xb[out[0]]:.4g}) outside [{lo[out[0]]:.4g}, "
                             f"{hi[out[0]]:.4g}]: off the fingertip's surface or past a "
                             "joint limit")
