@@ -1,0 +1,92 @@
+"""The closed-loop family (issue 28, docs/simulation.md "Closed loop"): each plan executed
+open loop and closed loop (re-planned from the measured state at RATE in simulated time)
+in the same disturbed world: no disturbance, a 3 mm push mid-motion, friction times 0.7,
+a ball 1 mm larger in diameter. Prints a Markdown table and writes every run's summary
+and controller timing as JSON.
+
+    PYTHONPATH=. .venv/bin/python benchmarks/closed_loop.py [--out FILE] [--only NAME]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from ocp.solve.replan import ReplanOptions  # noqa: E402
+from planner_service.execution import execution_plan  # noqa: E402
+from planner_service.execution.closed_loop import compare, first_plan  # noqa: E402
+from planner_service.planners import REQUEST  # noqa: E402
+from sim.disturbances import Disturbances, Kick  # noqa: E402
+
+#: (name, request, mid-motion push (time, displacement: in the plane the contacts allow
+#: the object to slide in: the palm's plane, the pads' planes))
+PLANS = [
+    ("experiment 1", "docs/viewer-experiment1.json", Kick(3.0, (0.003, 0.0, 0.0))),
+    ("experiment 2", "examples/experiment2_two_fingers.json", Kick(2.0, (0.0, 0.003, 0.0))),
+    ("three fingers", "examples/three_finger_turn.json", Kick(1.5, (0.0, 0.0, 0.003))),
+    ("four fingers (Allegro)", "examples/allegro_turn.json", None),
+]
+
+
+def variants(push: Kick | None) -> list[tuple[str, Disturbances]]:
+    out = [("none", Disturbances())]
+    if push is not None:
+        out.append(("push 3 mm", Disturbances(pushes=(push,))))
+    out += [("friction x0.7", Disturbances(friction_scale=0.7)),
+            ("ball +1 mm (diameter)", Disturbances(size_change=0.5e-3))]
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", default="closed_loop.json")
+    ap.add_argument("--only", action="append", default=[])
+    ap.add_argument("--rate", type=float, default=4.0)
+    ap.add_argument("--iterations", type=int, default=30)
+    args = ap.parse_args()
+    rows: list[dict[str, Any]] = []
+    for name, path, push in PLANS:
+        if args.only and name not in args.only:
+            continue
+        request = REQUEST.validate_python(json.loads((ROOT / path).read_text()))
+        t0 = time.perf_counter()
+        first = first_plan(request)
+        plan_time = time.perf_counter() - t0
+        base = execution_plan(first.result, request)
+        for label, dist in variants(push):
+            t1 = time.perf_counter()
+            out = compare(first, base, args.rate, disturbances=dist,
+                          replan=ReplanOptions(max_iter=args.iterations))
+            c = out["closed_loop"]["control"]
+            walls = [e["wall_time"] for e in out["closed_loop"]["events"]
+                     if e["status"] != "kept"]
+            its = [e["iterations"] for e in out["closed_loop"]["events"]
+                   if e["status"] != "kept"]
+            row = {"plan": name, "disturbance": label, "first_plan_s": plan_time,
+                   "open": out["open_loop"]["summary"],
+                   "closed": out["closed_loop"]["summary"], "control": c,
+                   "setup_s": out["closed_loop"]["setup_time"],
+                   "iterations_median": statistics.median(its) if its else None,
+                   "wall_times": walls, "run_s": time.perf_counter() - t1}
+            rows.append(row)
+            o, k = row["open"], row["closed"]
+            print(f"| {name} | {label} | {o['position_final_mm']:.2f} / "
+                  f"{o['angle_final_deg']:.2f} | {'yes' if o['recovered'] else 'no'} | "
+                  f"{k['position_final_mm']:.2f} / {k['angle_final_deg']:.2f} | "
+                  f"{'yes' if k['recovered'] else 'no'} | {c['statuses']} | "
+                  f"{1e3 * (c['wall_time_median'] or 0):.0f} | "
+                  f"{row['iterations_median']} |", flush=True)
+            Path(args.out).write_text(json.dumps(rows, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
