@@ -78,10 +78,15 @@ def main() -> int:
                    "wall_times": walls, "run_s": time.perf_counter() - t1}
             rows.append(row)
             o, k = row["open"], row["closed"]
-            print(f"| {name} | {label} | {o['position_final_mm']:.2f} / "
-                  f"{o['angle_final_deg']:.2f} | {'yes' if o['recovered'] else 'no'} | "
-                  f"{k['position_final_mm']:.2f} / {k['angle_final_deg']:.2f} | "
-                  f"{'yes' if k['recovered'] else 'no'} | {c['statuses']} | "
+
+            def goal(s: dict[str, Any]) -> str:
+                a = s["goal_angle_deg"]
+                return f"{s['goal_position_mm']:.2f} / {'free' if a is None else f'{a:.2f}'}"
+
+            print(f"| {name} | {label} | {goal(o)} | {'yes' if o['recovered'] else 'no'} | "
+                  f"{goal(k)} | {'yes' if k['recovered'] else 'no'} | "
+                  f"{k['position_worst_mm']:.2f} / {k['angle_worst_deg']:.2f} | "
+                  f"{c['statuses']} | "
                   f"{1e3 * (c['wall_time_median'] or 0):.0f} | "
                   f"{row['iterations_median']} |", flush=True)
             Path(args.out).write_text(json.dumps(rows, indent=1) + "\n")

@@ -34,8 +34,8 @@ from .report import SimReport
 from .run import Simulation, StepRows, _linear, hermite
 from .spec import ExecutionPlan, FloatArray
 
-__all__ = ["ClosedLoopReport", "ControlEvent", "SimMeasurement", "simulate_closed_loop",
-           "simulate_disturbed"]
+__all__ = ["ClosedLoopReport", "ControlEvent", "SimMeasurement", "run_disturbed",
+           "simulate_closed_loop", "simulate_disturbed"]
 
 
 @dataclass(frozen=True)
@@ -78,11 +78,13 @@ Controller = Callable[[SimMeasurement], tuple[ExecutionPlan | None, ControlEvent
 @dataclass(frozen=True)
 class ClosedLoopReport:
     """A closed-loop run: the simulation's ``report`` (errors against the first plan),
-    the control ``rate`` [Hz], every controller call (``events``)."""
+    the control ``rate`` [Hz], every controller call (``events``), the object's final
+    pose (position, wxyz)."""
 
     report: SimReport
     rate: float
     events: tuple[ControlEvent, ...]
+    final_pose: FloatArray
 
     @property
     def wall_times(self) -> FloatArray:
@@ -103,6 +105,7 @@ class ClosedLoopReport:
 
     def to_dict(self) -> dict[str, Any]:
         return {"report": self.report.to_dict(), "control": self.timing(),
+                "final_pose": self.final_pose.tolist(),
                 "events": [e.to_dict() for e in self.events]}
 
 
@@ -117,10 +120,17 @@ def _world(plan: ExecutionPlan, options: SimOptions | None, dist: Disturbances
 def simulate_disturbed(plan: ExecutionPlan, options: SimOptions | None = None,
                        disturbances: Disturbances | None = None) -> SimReport:
     """``plan`` executed open loop in the disturbed world (errors against ``plan``)."""
+    return run_disturbed(plan, options, disturbances)[0]
+
+
+def run_disturbed(plan: ExecutionPlan, options: SimOptions | None = None,
+                  disturbances: Disturbances | None = None) -> tuple[SimReport, FloatArray]:
+    """:func:`simulate_disturbed`'s report and the object's final pose (position, wxyz)."""
     dist = disturbances or Disturbances()
     world, o = _world(plan, options, dist)
     sim = Simulation(world, o)
-    return sim.run(dist.hook(sim))
+    report = sim.run(dist.hook(sim))
+    return report, sim.data.qpos[sim.object_qpos:sim.object_qpos + 7].copy()
 
 
 def _set_reference(sim: Simulation, rows: StepRows, k: int, frag: ExecutionPlan) -> None:
@@ -181,4 +191,4 @@ def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: floa
             _set_reference(sim, rows, k, frag)
 
     report = sim.run(hook)
-    return ClosedLoopReport(report, rate, tuple(events))
+    return ClosedLoopReport(report, rate, tuple(events), d.qpos[oq:oq + 7].copy())

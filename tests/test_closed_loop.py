@@ -94,6 +94,8 @@ def test_the_closed_loop_recovers_from_a_push_the_open_loop_keeps(first: tuple,
     opened, closed = out["open_loop"]["summary"], out["closed_loop"]["summary"]
     assert opened["position_final_mm"] > 2.0
     assert closed["position_final_mm"] < opened["position_final_mm"] / 3
+    assert closed["goal_position_mm"] < opened["goal_position_mm"] / 3
+    assert closed["goal_angle_deg"] is not None  # a desired motion: its end's orientation
     assert not closed["contact_lost_after_kicks"]
     statuses = out["closed_loop"]["control"]["statuses"]
     assert "unexplained" not in statuses and statuses.get("replanned", 0) >= 4, statuses

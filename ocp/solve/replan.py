@@ -22,10 +22,11 @@ constant length would need a terminal cost or a goal past the task's end. The gr
 kept, so the NLP is the cached one (its intervals shorten with the horizon), and near the
 end (less than ``min_horizon`` left) the last plan is executed to its end.
 
-A desired motion's hard tracking tolerances are dropped in the re-plans (the weighted
-tracking terms stay): a pushed object starts outside them, and a plan that must be within
-1 mm of the desired path from its first instant does not exist. Same NLP (the bounds are
-values), same cache.
+A desired motion's hard tracking tolerances are kept in a re-plan from an object within
+half of each of them from the desired pose, and dropped otherwise (the weighted tracking
+terms stay): a pushed object starts outside them, and a plan that must be within 1 mm of
+the desired path from its first instant does not exist. Same NLP either way (the bounds
+are values), same cache.
 """
 
 from __future__ import annotations
@@ -39,26 +40,40 @@ import numpy as np
 
 from ocp.solution import ManipulationSolution
 from ocp.solve.attempt import AttemptOptions, attempt, shifted
-from ocp.solve.estimate import EstimateOptions, Measurement, StateEstimate, estimate_state
+from ocp.solve.estimate import (
+    EstimateOptions,
+    Measurement,
+    StateEstimate,
+    _rotation,
+    estimate_state,
+)
 from ocp.spec.grasp import ManipulationProblem
 from ocp.spec.problem import ProblemError
 
 if TYPE_CHECKING:
     from ocp.solve.planner import ManipulationPlanner
 
-__all__ = ["Replan", "ReplanOptions", "Replanner"]
+__all__ = ["STRICT_FRACTION", "Replan", "ReplanOptions", "Replanner"]
+
+#: A re-plan keeps the desired motion's hard tracking tolerances when the measured object
+#: is within this fraction of each of them from the desired pose (else they are dropped).
+STRICT_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
 class ReplanOptions:
     """A re-plan's budget (IPOPT iterations ``max_iter``, wall time ``time_limit`` [s]),
     ``min_horizon`` [s] (less left: no re-plan, the plan goes on), whether the hard
-    tracking tolerances are dropped (``relax_tracking``), and the estimate's options."""
+    tracking tolerances are dropped (``relax_tracking``), whether the object on a palm is
+    to end in the first plan's final orientation too (``hold_final_pose``: its chart
+    point and contact angle added to the goal, where the problem's goal leaves them
+    free), and the estimate's options."""
 
     max_iter: int = 30
     time_limit: float = 10.0
     min_horizon: float = 0.3
     relax_tracking: bool = True
+    hold_final_pose: bool = False
     estimate: EstimateOptions = field(default_factory=EstimateOptions)
 
 
@@ -97,11 +112,22 @@ class Replanner:
         self.options = options or ReplanOptions()
         n = first.stats.n_intervals if first.stats is not None else problem.n_intervals
         problem = problem.with_intervals(n)
+        #: the problem with its hard tracking tolerances (re-plans from within them)
+        self.strict: ManipulationProblem | None = None
         tr = problem.tracking
-        if self.options.relax_tracking and (tr.position_tolerance is not None
-                                            or tr.orientation_tolerance is not None):
+        if self.options.relax_tracking and problem.motion is not None and (
+                tr.position_tolerance is not None or tr.orientation_tolerance is not None):
+            self.strict = problem
             problem = replace(problem, tracking=replace(
                 problem.tracking, position_tolerance=None, orientation_tolerance=None))
+        if self.options.hold_final_pose and problem.palm is not None and first.contacts:
+            end = np.asarray(first.contacts[0].eta)[-1]
+            goal = dict(problem.palm.goal)
+            for k, name in enumerate(("x", "y", "u", "v", "psi")):
+                goal.setdefault(name, float(end[k]))
+            problem = replace(problem, palm=replace(problem.palm, goal=goal))
+        if self.strict is not None:
+            self.strict = replace(self.strict, palm=problem.palm)
         self.problem, self.planner = problem, planner
         self.model = planner.model(problem)
         self.plan, self.start = first, 0.0
@@ -134,6 +160,24 @@ class Replanner:
         x, u = self.plan.interpolate([s])
         return x[0], u[0]
 
+    def _rest(self, t: float, measured: Measurement) -> ManipulationProblem:
+        """The rest of the problem at ``t``: with the hard tracking tolerances when the
+        measured object is well within them of the desired pose at ``t`` (within
+        :data:`STRICT_FRACTION` of each), without them otherwise (a pushed object)."""
+        strict = self.strict
+        if strict is None or strict.motion is None:
+            return self.problem.remaining(t)
+        R_d, p_d = strict.motion.at([t])
+        R_m = _rotation(measured.object_wxyz)
+        dp = float(np.linalg.norm(np.asarray(measured.object_position, dtype=float) - p_d[0]))
+        c = (np.trace(R_d[0].T @ R_m) - 1.0) / 2.0
+        da = float(np.arccos(np.clip(c, -1.0, 1.0)))
+        tr = strict.tracking
+        inside = (tr.position_tolerance is None
+                  or dp <= STRICT_FRACTION * tr.position_tolerance) and \
+            (tr.orientation_tolerance is None or da <= STRICT_FRACTION * tr.orientation_tolerance)
+        return (strict if inside else self.problem).remaining(t)
+
     def replan(self, t: float, measured: Measurement) -> Replan:
         """Re-plan the rest of the motion from ``measured`` at time ``t``."""
         o = self.options
@@ -151,7 +195,7 @@ class Replanner:
                          estimate_time=t_est, message="; ".join(est.problems))
             self.history.append(out)
             return out
-        rest = self.problem.remaining(t)
+        rest = self._rest(t, measured)
         warm = shifted(self.plan, min(max(t - self.start, 0.0), self.plan.duration * 0.999))
         try:
             sol = attempt(rest, x0=est.x, u0=est.u, warm=warm,

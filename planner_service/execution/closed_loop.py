@@ -18,14 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from ocp.geometry.rotations import quaternion_wxyz
+from ocp.geometry.rotations import quaternion_matrix, quaternion_wxyz
 from ocp.one_finger import OneFingerPlanner, OneFingerProblem
 from ocp.solution import ManipulationSolution
 from ocp.solve.estimate import Measurement
 from ocp.solve.replan import Replanner, ReplanOptions
 from ocp.spec.grasp import ManipulationProblem, contact_charts
 
-__all__ = ["FirstPlan", "ReplanController", "compare", "first_plan", "summary"]
+__all__ = ["FirstPlan", "ReplanController", "compare", "first_plan", "goal_of", "summary"]
 
 
 @dataclass(frozen=True)
@@ -119,11 +119,27 @@ class ReplanController:
 SETTLE_AFTER_KICK = 0.1
 
 
-def summary(report: Any, disturbances: Any = None) -> dict[str, Any]:
-    """A run's figures side by side: passed, final and worst errors [mm, deg], each
-    contact's lost time [s], and ``recovered``: final errors within the report's
-    tolerances and no contact lost (none touching at a recorded time) from
-    :data:`SETTLE_AFTER_KICK` after the last push or impulse on."""
+def goal_of(first: FirstPlan) -> tuple[np.ndarray, np.ndarray | None]:
+    """The task's goal pose: a desired motion's end (position, rotation); otherwise the
+    first plan's final position (at the goal the problem states: a palm's (x, y)) and its
+    final orientation only for a grasp without a palm (a palm's goal leaves the ball's
+    orientation free: rolling to the same point by another path turns it otherwise)."""
+    problem, plan = first.problem, first.plan
+    if problem.motion is not None:
+        R, p = problem.motion.at([problem.duration])
+        return np.asarray(p[0]), np.asarray(R[0])
+    return np.asarray(plan.object_position[-1]), \
+        None if problem.palm is not None else np.asarray(plan.object_rotation[-1])
+
+
+def summary(report: Any, disturbances: Any = None, final_pose: Any = None,
+            goal: tuple[np.ndarray, np.ndarray | None] | None = None) -> dict[str, Any]:
+    """A run's figures side by side: passed, final and worst errors against the first
+    plan [mm, deg], each contact's lost time [s]; with the final pose and the task's
+    ``goal``, the final errors against the goal (``goal_angle_deg`` None when the task
+    leaves the orientation free); ``recovered``: the final errors (against the goal when
+    given) within the report's tolerances and no contact lost (none touching at a
+    recorded time) from :data:`SETTLE_AFTER_KICK` after the last push or impulse on."""
     d = report.to_dict()
     lost = {c["name"]: c["lost_time"] for c in d["contacts"]}
     kicks = [] if disturbances is None else \
@@ -134,16 +150,26 @@ def summary(report: Any, disturbances: Any = None) -> dict[str, Any]:
     lost_late = {name: bool(np.any(np.asarray(f, dtype=float)[late] <= 1e-6))
                  for name, f in d["series"]["normal_force"].items()}
     tol = d["tolerances"]
-    return {"passed": d["passed"],
-            "position_final_mm": 1e3 * d["position_error"]["final"],
-            "position_worst_mm": 1e3 * d["position_error"]["max"],
-            "angle_final_deg": math.degrees(d["angle_error"]["final"]),
-            "angle_worst_deg": math.degrees(d["angle_error"]["max"]),
-            "contacts_lost_s": lost,
-            "contact_lost_after_kicks": any(lost_late.values()),
-            "recovered": bool(d["position_error"]["final"] <= tol["position"]
-                              and d["angle_error"]["final"] <= tol["angle"]
-                              and not any(lost_late.values()))}
+    pos, ang = d["position_error"]["final"], d["angle_error"]["final"]
+    out: dict[str, Any] = {
+        "passed": d["passed"],
+        "position_final_mm": 1e3 * pos,
+        "position_worst_mm": 1e3 * d["position_error"]["max"],
+        "angle_final_deg": math.degrees(ang),
+        "angle_worst_deg": math.degrees(d["angle_error"]["max"]),
+        "contacts_lost_s": lost,
+        "contact_lost_after_kicks": any(lost_late.values())}
+    if final_pose is not None and goal is not None:
+        fp = np.asarray(final_pose, dtype=float)
+        pos = float(np.linalg.norm(fp[:3] - goal[0]))
+        R = np.asarray(quaternion_matrix(fp[3:] / np.linalg.norm(fp[3:])))
+        ang = 0.0 if goal[1] is None else float(np.arccos(np.clip(
+            (np.trace(goal[1].T @ R) - 1.0) / 2.0, -1.0, 1.0)))
+        out["goal_position_mm"] = 1e3 * pos
+        out["goal_angle_deg"] = None if goal[1] is None else math.degrees(ang)
+    out["recovered"] = bool(pos <= tol["position"] and ang <= tol["angle"]
+                            and not any(lost_late.values()))
+    return out
 
 
 def compare(first: FirstPlan, base: Any, rate: float, options: Any = None,
@@ -153,16 +179,18 @@ def compare(first: FirstPlan, base: Any, rate: float, options: Any = None,
     (re-planning at ``rate`` [Hz]) in the same disturbed world: both reports, each one's
     summary (``recovered``: final error within 1 mm and 2 deg, no contact lost) and the
     controller's timing."""
-    from sim.closed_loop import simulate_closed_loop, simulate_disturbed
+    from sim.closed_loop import run_disturbed, simulate_closed_loop
 
-    open_report = simulate_disturbed(base, options, disturbances)
+    open_report, open_final = run_disturbed(base, options, disturbances)
+    goal = goal_of(first)
     controller = ReplanController(first, base, replan)
     period = 1.0 / rate
     setup = controller.replanner.prepare(
         [k * period for k in range(1, int(first.plan.duration / period) + 1)])
     closed = simulate_closed_loop(base, controller, rate, options, disturbances)
     return {"disturbances": None if disturbances is None else disturbances.to_dict(),
-            "open_loop": {"summary": summary(open_report, disturbances),
+            "open_loop": {"summary": summary(open_report, disturbances, open_final, goal),
                           "report": open_report.to_dict()},
-            "closed_loop": {"summary": summary(closed.report, disturbances),
+            "closed_loop": {"summary": summary(closed.report, disturbances,
+                                               closed.final_pose, goal),
                             "setup_time": setup, **closed.to_dict()}}
