@@ -67,13 +67,16 @@ class ReplanOptions:
     tracking tolerances are dropped (``relax_tracking``), whether the object on a palm is
     to end in the first plan's final orientation too (``hold_final_pose``: its chart
     point and contact angle added to the goal, where the problem's goal leaves them
-    free), and the estimate's options."""
+    free), whether IPOPT starts from the shifted plan's multipliers too (``warm_duals``;
+    else from its primal point alone, with IPOPT's own initial barrier), and the
+    estimate's options."""
 
     max_iter: int = 30
     time_limit: float = 10.0
     min_horizon: float = 0.3
     relax_tracking: bool = True
     hold_final_pose: bool = False
+    warm_duals: bool = True
     estimate: EstimateOptions = field(default_factory=EstimateOptions)
 
 
@@ -197,6 +200,8 @@ class Replanner:
             return out
         rest = self._rest(t, measured)
         warm = shifted(self.plan, min(max(t - self.start, 0.0), self.plan.duration * 0.999))
+        if not o.warm_duals:
+            warm = replace(warm, nlp_point=None)
         try:
             sol = attempt(rest, x0=est.x, u0=est.u, warm=warm,
                           options=AttemptOptions(max_iter=o.max_iter, time_limit=o.time_limit),
