@@ -217,7 +217,8 @@ class Replanner:
         ipopt = stats.ipopt_time if stats is not None else 0.0
         if not sol.converged:
             out = Replan(t, "not_converged", sol, est, wall, ipopt, t_est, its,
-                         f"IPOPT: {stats.raw_status if stats else sol.status.value}")
+                         f"{sol.status.value} (IPOPT: "
+                         f"{stats.raw_status if stats else '-'})")
         else:
             self.plan, self.start = sol, t
             out = Replan(t, "replanned", sol, est, wall, ipopt, t_est, its)

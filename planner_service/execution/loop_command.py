@@ -125,7 +125,7 @@ def main(args: argparse.Namespace) -> int:
             first = first_plan(request)
             base = execution_plan(first.result, request)
             data = compare(first, base, args.rate, options, dist,
-                           ReplanOptions(max_iter=args.replan_iterations))
+                           ReplanOptions(max_iter=args.replan_iterations, time_limit=60.0))
         else:
             result, _ = read_result(path)
             report = simulate_disturbed(execution_plan(result, request), options, dist)
