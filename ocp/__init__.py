@@ -35,6 +35,9 @@ if TYPE_CHECKING:
     from ocp.ball_on_palm import PALM_NX, BallOnPalmPlanner, certify_palm_plan, palm_model
     from ocp.certify.certificate import Certificate, Check, CheckKind, TolerancePolicy
     from ocp.contacts import FingertipContact, FreeFingertip, FreeObject, SupportContact
+    from ocp.gait.planner import GaitPhase, GaitPlan, plan_gait
+    from ocp.gait.samples import GaitSamples, gait_samples, gait_times
+    from ocp.gait.step import GaitStep, contact_of, replace_finger
     from ocp.geometry.rotations import quaternion_wxyz
     from ocp.geometry.surfaces import SURFACES, Surface
     from ocp.methods.greedy import GreedyResult, greedy_plan
@@ -76,6 +79,11 @@ if TYPE_CHECKING:
 
 #: public name -> the module that defines it
 _EXPORTS = {
+    "GaitPhase": "ocp.gait.planner", "GaitPlan": "ocp.gait.planner",
+    "plan_gait": "ocp.gait.planner", "GaitStep": "ocp.gait.step",
+    "contact_of": "ocp.gait.step", "replace_finger": "ocp.gait.step",
+    "GaitSamples": "ocp.gait.samples", "gait_samples": "ocp.gait.samples",
+    "gait_times": "ocp.gait.samples",
     "BallOnPalmPlanner": "ocp.ball_on_palm",
     "Certificate": "ocp.certify.certificate", "Check": "ocp.certify.certificate",
     "CheckKind": "ocp.certify.certificate", "TolerancePolicy": "ocp.certify.certificate",
@@ -136,6 +144,10 @@ __all__ = [
     "FingertipContact",
     "FreeFingertip",
     "FreeObject",
+    "GaitPhase",
+    "GaitPlan",
+    "GaitSamples",
+    "GaitStep",
     "GraspSample",
     "GreedyResult",
     "Hand",
@@ -162,6 +174,9 @@ __all__ = [
     "ViaPoint",
     "attempt",
     "certify_palm_plan",
+    "contact_of",
+    "gait_samples",
+    "gait_times",
     "goal_errors",
     "greedy_plan",
     "guess_loops",
@@ -172,8 +187,10 @@ __all__ = [
     "node_times",
     "palm_model",
     "plan",
+    "plan_gait",
     "quaternion_wxyz",
     "reference_input",
+    "replace_finger",
     "rotation_symmetric",
     "shifted",
     "simulate_guess",

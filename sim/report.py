@@ -58,6 +58,8 @@ class ContactReport:
     normal_force_max: float
     planned_normal_force_mean: float | None = None
     normal_force_error_max: float | None = None
+    #: time [s] the fingertip touched the object while the plan has it lifted
+    unplanned_touch_time: float = 0.0
 
 
 @dataclass
@@ -80,6 +82,9 @@ class SimReport:
     mujoco_version: str
     notes: list[str] = field(default_factory=list)
     series: dict[str, Any] = field(default_factory=dict)
+    #: executed on the user's own model (:mod:`.user_model`): its scene's and drive's
+    #: settings, the torques needed against the actuators' ranges; None: dexroll's scene
+    model: dict[str, Any] | None = None
 
     @staticmethod
     def assess(*, mode: str, options: SimOptions, contacts: list[ContactReport],
@@ -100,6 +105,10 @@ class SimReport:
                 failures.append(f"contact {c.name} lost for {c.lost_time:.4g} s "
                                 f"({c.loss_events} times, first at t = "
                                 f"{c.first_loss_at:.4g} s)")
+            if c.unplanned_touch_time > tol.contact_loss:
+                failures.append(f"fingertip {c.name} touched the object for "
+                                f"{c.unplanned_touch_time:.4g} s while the plan has it "
+                                "lifted")
         series = {"t": series_t.tolist(), "position_error": series_position.tolist(),
                   "angle_error": series_angle.tolist(),
                   "normal_force": {c.name: series_force[j].tolist()
@@ -127,6 +136,8 @@ class SimReport:
                          f"{c.slip_distance * 1e3:.3f} mm, normal force "
                          f"{c.normal_force_min:.3g}..{c.normal_force_max:.3g} N")
         lines += [f"  {f}" for f in self.failures]
+        if self.model is not None:
+            lines += _model_summary(self.model)
         return "\n".join(lines)
 
     def to_dict(self, series: bool = True) -> dict[str, Any]:
@@ -134,6 +145,35 @@ class SimReport:
         if not series:
             out.pop("series")
         return _finite(out)
+
+
+def _model_summary(model: dict[str, Any]) -> list[str]:
+    """The lines of a run on the user's model: what was changed, the contacts' settings
+    that differ from the file's, the torques needed against the actuators."""
+    lines = [f"model        the user's MJCF: {len(model['meshes_removed'])} mesh geoms "
+             f"removed, timestep {model['timestep']:g} s (file {model['file_timestep']:g} "
+             f"s), {model['integrator']}, cone {model['cone']}, impratio "
+             f"{model['impratio']:g}, hand {model['hand_mass']:.3g} kg"]
+    for t in model["fingertip_contacts"]:
+        if t["differs"]:
+            diff = ", ".join(f"{k} {t['file'][k]} -> {t['with_object'][k]}"
+                             for k in t["differs"])
+            lines.append(f"  contact {t['geom']}: {diff} (file -> with the object)")
+    kinds: dict[str, int] = {}
+    for e in model["drive"]:
+        kinds[e["kind"]] = kinds.get(e["kind"], 0) + 1
+    lines.append("  drive      " + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())))
+    for e in model.get("torque", []):
+        rng = e.get("torque_range")
+        if rng is not None and (e["feedforward_max"] > max(abs(rng[0]), abs(rng[1]))
+                                or e.get("saturated_fraction", 0.0) > 0):
+            lines.append(f"  torque     {e['joint']}: needs {e['feedforward_max']:.3g} N m, "
+                         f"range {rng[0]:.3g}..{rng[1]:.3g}, at its limit "
+                         f"{100 * e.get('saturated_fraction', 0.0):.0f}% of the plan")
+    if model.get("unplanned_contacts"):
+        lines.append("  unplanned  " + ", ".join(
+            f"{b} up to {f:.3g} N" for b, f in model["unplanned_contacts"].items()))
+    return lines
 
 
 def _finite(x: Any) -> Any:

@@ -22,6 +22,14 @@ __all__ = ["Simulation", "StepRows", "hermite", "simulate", "slerp"]
 
 #: A contact whose normal force is at most this [N] is not touching.
 TOUCH_FORCE = 1e-6
+#: A planned contact counts as touching (its loss a failure) where its ``active`` share is
+#: at least this (a gait's force ramps end at zero: the last part of an unloading may lose
+#: the contact early, as planned).
+ACTIVE_SHARE = 0.5
+#: A fingertip's squeeze and grip go linearly from none at this activity to all at 1 (a
+#: gait's lift-off and approach are at a quarter: no squeeze while it leaves or reaches
+#: the object; at the loss threshold a third of it keeps the contact as planned).
+SQUEEZE_FROM = 0.25
 #: The report's time series has at most about this many rows (a long plan is recorded
 #: less often than ``record_every`` asks).
 MAX_SERIES = 5000
@@ -166,6 +174,9 @@ class Simulation:
         torques = [np.zeros((n, f.nq)) for f in plan.fingers]
         notes: list[str] = []
         point_of = {c.finger: c.point for c in plan.contacts if c.finger is not None}
+        # a lifted fingertip (finger gaiting) gets no squeeze and no grip
+        active_of = {c.finger: c.active for c in plan.contacts
+                     if c.finger is not None and c.active is not None}
         jacp = np.zeros((3, m.nv))
         for i in range(n):
             for idx, ref in zip(self.fingers, plan.references, strict=True):
@@ -179,13 +190,15 @@ class Simulation:
                 p = d.site_xpos[idx.tip_site].copy() if point is None else point[i]
                 mujoco.mj_jac(m, d, jacp, None, p, idx.tip_body)
                 J = jacp[:, idx.dofs]
-                offsets[k][i] = _damped_pinv(J) @ (o.squeeze * normal)
+                share = float(active_of[f.name][i]) if f.name in active_of else 1.0
+                share = min(max((share - SQUEEZE_FROM) / (1.0 - SQUEEZE_FROM), 0.0), 1.0)
+                offsets[k][i] = _damped_pinv(J) @ (share * o.squeeze * normal)
                 if o.use_plan_forces and ref.joint_torques is not None:
                     torques[k][i] = ref.joint_torques[i]
                 elif o.use_plan_forces and ref.contact_force is not None:
                     torques[k][i] = J.T @ ref.contact_force[i]
                 else:
-                    torques[k][i] = J.T @ (o.grip_force * normal)
+                    torques[k][i] = J.T @ (share * o.grip_force * normal)
         for f, ref in zip(plan.fingers, plan.references, strict=True):
             if o.use_plan_forces and ref.joint_torques is not None:
                 notes.append(f"{f.name}: the plan's joint torques as feed-forward")
@@ -330,7 +343,14 @@ class Simulation:
         inside = t_end > 0.5 * dt
         contacts = []
         for j, spec in enumerate(plan.contacts):
-            lost_all = ~(normal_force[:, j] > TOUCH_FORCE)
+            touching = normal_force[:, j] > TOUCH_FORCE
+            # planned touching (finger gaiting: not while its fingertip is lifted, nor in
+            # the ends of the force ramps around it, where the force goes to zero)
+            on = np.ones(n_steps, dtype=bool) if spec.active is None else \
+                _linear(plan.t, spec.active[:, None], t_end)[:, 0] >= ACTIVE_SHARE
+            lifted = np.zeros(n_steps, dtype=bool) if spec.active is None else \
+                _linear(plan.t, spec.active[:, None], t_end)[:, 0] <= 0.0
+            lost_all = ~touching & on
             lost = lost_all[during]
             events = int(np.sum(lost[1:] & ~lost[:-1]) + (1 if lost.size and lost[0] else 0))
             first = float(t_end[during][np.argmax(lost)]) if lost.any() else None
@@ -350,7 +370,9 @@ class Simulation:
                 planned_normal_force_mean=None if planned is None or not planned.size
                 else float(np.mean(planned)),
                 normal_force_error_max=None if planned is None or not planned.size
-                else float(np.max(np.abs(f - planned)))))
+                else float(np.max(np.abs(f[on[during]] - planned[on[during]]),
+                                  initial=0.0)),
+                unplanned_touch_time=float(np.sum((touching & lifted)[inside]) * dt)))
         # every record_every-th step, thinned to at most MAX_SERIES rows
         every = max(o.record_every, math.ceil(n_steps / MAX_SERIES))
         rec = np.arange(0, n_steps, every)

@@ -155,13 +155,16 @@ class FingerSpec:
 class ContactSpec:
     """A planned contact: its name, the body touching the object ('palm' or 'finger'),
     the finger's name (None for the palm), the planned contact point [m] and the object's
-    outward normal there (None: not known) at the plan's times (rows)."""
+    outward normal there (None: not known) at the plan's times (rows); ``active``: at
+    those times, 1 where the plan has it touching, 0 where its fingertip is lifted
+    (finger gaiting; between: a force ramp), None: touching throughout."""
 
     name: str
     body: str
     finger: str | None
     point: FloatArray
     normal: FloatArray | None = None
+    active: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -255,7 +258,8 @@ class ExecutionPlan:
                                                      strict=True)],
             "contacts": [{"name": c.name, "body": c.body, "finger": c.finger,
                           "point": c.point.tolist(),
-                          "normal": None if c.normal is None else c.normal.tolist()}
+                          "normal": None if c.normal is None else c.normal.tolist(),
+                          "active": None if c.active is None else c.active.tolist()}
                          for c in self.contacts],
             "palm_half_extent": self.palm_half_extent, "mu": self.mu,
             "torsional_friction": self.torsional_friction, "gravity": list(self.gravity),
@@ -290,7 +294,8 @@ class ExecutionPlan:
                                      float(o.get("mass", DEFAULT_MASS))),
             _a(raw["object_position"]), _a(raw["object_wxyz"]), tuple(fingers), tuple(refs),
             tuple(ContactSpec(str(c["name"]), str(c["body"]), c.get("finger"), _a(c["point"]),
-                              None if c.get("normal") is None else _a(c["normal"]))
+                              None if c.get("normal") is None else _a(c["normal"]),
+                              None if c.get("active") is None else _a(c["active"]))
                   for c in raw["contacts"]),
             raw.get("palm_half_extent"), float(raw["mu"]), raw.get("torsional_friction"),
             (g[0], g[1], g[2]), tuple(raw.get("notes", ())))

@@ -157,7 +157,8 @@ def test_the_service_folders_keep_their_places() -> None:
 # transcription (collocation, parameters, the grasp model, the NLP from blocks); the
 # solution; solve (IPOPT, guesses and strategies, the pipeline, the certification of a
 # plan); the front ends (ball_on_palm, one_finger) on the pipeline; methods (greedy) on
-# everything. Each layer imports only the layers listed for it (and itself, and certify).
+# everything; gait (finger gaiting) on the pipeline. Each layer imports only the layers
+# listed for it (and itself, and certify).
 
 CORE_LAYERS: dict[str, set[str]] = {
     "certify": set(),
@@ -173,6 +174,7 @@ CORE_LAYERS: dict[str, set[str]] = {
     "presets": {"robots", "spec", "ball_on_palm", "one_finger"},
     "methods": {"geometry", "robots", "spec", "contacts", "transcription", "solution", "solve",
                 "ball_on_palm", "one_finger"},
+    "gait": {"geometry", "robots", "spec", "contacts", "transcription", "solution", "solve"},
 }
 
 

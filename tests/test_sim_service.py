@@ -77,6 +77,20 @@ def test_the_doors_refuse_what_cannot_be_executed(live_server: Server,
             client.simulate(job.id)
 
 
+def test_a_plan_without_a_hand_model_is_not_executed_on_one(live_server: Server,
+                                                            finger_job: str) -> None:
+    """``{"model": "request"}`` runs the plan on the request's own MJCF hand
+    (docs/simulation.md, "On your own model"); a plan whose request has none is a 409
+    saying so (the run on an MJCF hand: tests/test_user_model.py)."""
+    r = httpx.post(f"{live_server.url}/v1/plans/{finger_job}/simulation",
+                   json={"model": "request"}, timeout=60)
+    assert r.status_code == 409, r.text
+    assert "needs the plan's request with its `hand`" in r.text
+    r = httpx.post(f"{live_server.url}/v1/plans/{finger_job}/simulation",
+                   json={"model": "file"}, timeout=60)
+    assert r.status_code == 422
+
+
 def test_the_command_line_simulates_a_jobs_json(live_server: Server, finger_job: str,
                                                 tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:

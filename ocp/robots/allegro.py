@@ -222,18 +222,23 @@ def mjcf_text() -> str:
     return "\n".join(out) + "\n"
 
 
-def load_allegro(fmt: str = "urdf") -> WholeHand:
+def load_allegro(fmt: str = "urdf",
+                 sides: tuple[tuple[float, float, float] | None, ...] | None = None
+                 ) -> WholeHand:
     """The built-in Allegro-class hand (:class:`~ocp.robots.whole_hand.WholeHand`) from its
     shipped URDF or MJCF, its fingertips the capsule caps of :data:`TIP_NAMES` with the
-    charts of :data:`TIP_SIDES`, mounted at the palm frame."""
+    charts of :data:`TIP_SIDES` (or ``sides[i]`` where given: a searched grasp's),
+    mounted at the palm frame."""
     from importlib import resources
 
     from ocp.robots import models
 
     file = {"urdf": "allegro_hand.urdf", "mjcf": "allegro_hand.xml"}[fmt]
     text = resources.files(models).joinpath(file).read_text(encoding="utf-8")
+    chosen = [s if sides is None or sides[i] is None else sides[i]
+              for i, s in enumerate(TIP_SIDES)]
     return load_whole_hand(text, fmt, [TipSpec(n, side=s) for n, s in zip(
-        TIP_NAMES, TIP_SIDES, strict=True)], name="allegro")
+        TIP_NAMES, chosen, strict=True)], name="allegro")
 
 
 if __name__ == "__main__":  # pragma: no cover - regenerates the shipped files

@@ -130,13 +130,15 @@ class Rolled:
 
 
 def roll(f: Any, q0: ArrayLike, centre: ArrayLike, radius: float, axis: ArrayLike,
-         max_turn: float = math.pi, margin: float = 0.0) -> Rolled:
+         max_turn: float = math.pi, margin: float = 0.0, step: float = STEP) -> Rolled:
     """Finger ``f``'s motion, fixed by rolling without slip or spin, from joints ``q0``
     while the ball of ``radius`` at ``centre`` turns about ``axis`` (through its centre)
     by up to ``max_turn`` [rad]: midpoint steps of at most :data:`STEP`, until a joint
     passes its limit, the contact comes within ``margin`` [m, an arc] of its cap's seam
     (the planner keeps ``pad_margin``, 2 mm) or the system turns singular (a fold of the
-    finger's motion: a joint rate without bound)."""
+    finger's motion: a joint rate without bound). A larger ``step`` (a search's coarse
+    roll) allows each joint ``0.01 step / STEP`` rad per step and the tip's distance from
+    the ball to drift by ``1 um (step / STEP)^2``."""
     c = np.asarray(centre, dtype=float)
     a = np.asarray(axis, dtype=float)
     a = a / np.linalg.norm(a)
@@ -146,19 +148,22 @@ def roll(f: Any, q0: ArrayLike, centre: ArrayLike, radius: float, axis: ArrayLik
     s0 = prev = tip_state(f, q, c, radius)
     theta = ball_arc = tip_arc = 0.0
     n_ball = s0.n.copy()  # the contact's direction in the ball's frame
-    h = min(STEP, max_turn)
+    h = min(step, max_turn)
+    dq_max, gap_tol = 0.01 * step / STEP, 1e-6 * (step / STEP) ** 2
 
     def stop(why: str) -> Rolled:
         return Rolled(theta, why, ball_arc, tip_arc, _angle(s0.n, prev.n), q)
 
-    while theta < max_turn - 1e-12:
+    while theta < max_turn - 1e-9:  # (a last step below 1e-9 rad is no step)
         qd1, cond = joint_rates(f, q, c, radius, a)
-        if cond > 1e6 or h < 1e-6:
+        if cond > 1e6 or (h < 1e-6 and max_turn - theta > 2e-6):
             return stop("singular")
+        if h < 1e-6:  # within 2e-6 rad of the whole turn: done
+            break
         qd2, _ = joint_rates(f, q + h / 2 * qd1, c, radius, a)
         q_new = q + h * qd2
         s = tip_state(f, q_new, c, radius)
-        if float(np.abs(q_new - q).max()) > 0.01 or abs(s.gap) > abs(s0.gap) + 1e-6:
+        if float(np.abs(q_new - q).max()) > dq_max or abs(s.gap) > abs(s0.gap) + gap_tol:
             h /= 2  # a fast joint (near a fold of the finger's motion): smaller steps
             continue
         out = np.flatnonzero((q_new < f.lower) | (q_new > f.upper))
@@ -171,7 +176,7 @@ def roll(f: Any, q0: ArrayLike, centre: ArrayLike, radius: float, axis: ArrayLik
         ball_arc += radius * _angle(n_ball, nb)
         tip_arc += r * _angle(prev.m, s.m)
         n_ball, prev, q = nb, s, q_new
-        h = min(STEP, 2 * h, max_turn - theta)
+        h = min(step, 2 * h, max_turn - theta)
     return stop("")
 
 

@@ -29,8 +29,8 @@ from ..plans.models import SceneModels, infer_models, models_from_request
 from ..plans.shapes import pad_thickness
 from ..plans.tracks import NoPlanError, PlanTracks, tracks_of
 
-__all__ = ["NotExecutableError", "execution_plan", "plan_forces", "simulate_result",
-           "with_rate_breaks"]
+__all__ = ["NotExecutableError", "execution_plan", "finger_spec", "plan_forces",
+           "simulate_result", "user_model", "with_rate_breaks"]
 
 #: Friction coefficient when neither the request nor the result states it.
 DEFAULT_MU = 0.5
@@ -42,7 +42,12 @@ class NotExecutableError(ValueError):
 
 
 def _q_dot(result: AnyPlanResult) -> list[np.ndarray]:
-    """Each finger's joint rates at the trajectory's times."""
+    """Each finger's joint rates at the trajectory's times (a gait's: its joint
+    trajectory's, every finger's columns together: split by the caller)."""
+    if isinstance(result, ManipulationResult) and result.trajectory is None and \
+            result.gait is not None and result.joint_trajectory is not None:
+        return [np.asarray([p.velocities for p in result.joint_trajectory.points],
+                           dtype=float)]
     if isinstance(result, FingerPlanResult) and result.trajectory is not None:
         return [np.asarray(result.trajectory.q_dot, dtype=float)]
     if isinstance(result, ManipulationResult) and result.trajectory is not None:
@@ -111,22 +116,31 @@ def _mu(request: PlanRequest | None, tracks: PlanTracks) -> tuple[float, str | N
     return DEFAULT_MU, f"friction: not known, mu = {DEFAULT_MU}"
 
 
+def finger_spec(name: str, model: Any) -> Any:
+    """The simulator's finger (a ``sim.FingerSpec``) of a finger model
+    (:class:`~ocp.robots.finger.FingerModel`): its joints, base, tip frame and tip."""
+    from sim import FingerSpec, JointSpec, TipShape
+
+    joints = tuple(JointSpec(
+        j.name, j.kind, (float(j.axis[0]), float(j.axis[1]), float(j.axis[2])),
+        np.asarray(j.placement_rotation, dtype=float),
+        np.asarray(j.placement_translation, dtype=float),
+        _limit(model.lower[j.index_q]), _limit(model.upper[j.index_q]))
+        for j in model.chain)
+    return FingerSpec(name, joints, np.asarray(model.base_rotation, dtype=float),
+                      np.asarray(model.base_position, dtype=float),
+                      np.asarray(model.tip_rotation, dtype=float),
+                      np.asarray(model.tip_translation, dtype=float),
+                      _tip_shape(model, TipShape), name)
+
+
 def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
                    ) -> Any:
     """The simulator's plan (a :class:`sim.ExecutionPlan`) of a wire result, with its
     request's models when given (inferred from the result otherwise, as the viewer
     does). :class:`NotExecutableError` when there is nothing a hand executes;
     ProblemError when the request's fingers cannot be loaded."""
-    from sim import (
-        DEFAULT_MASS,
-        ContactSpec,
-        ExecutionPlan,
-        FingerReference,
-        FingerSpec,
-        JointSpec,
-        ObjectSpec,
-        TipShape,
-    )
+    from sim import DEFAULT_MASS, ContactSpec, ExecutionPlan, FingerReference, ObjectSpec
 
     try:
         tracks = tracks_of(result)
@@ -139,6 +153,9 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
         raise NotExecutableError("the plan is not finite")
     models: SceneModels = infer_models(tracks) if request is None \
         else models_from_request(request, tracks)
+    if isinstance(result, ManipulationResult) and result.trajectory is None and \
+            result.gait is not None and result.gait.samples is not None:
+        return _gait_plan(result, request, tracks, models)
     rates = _q_dot(result)
     forces = plan_forces(result)
     fingers, refs = [], []
@@ -146,18 +163,7 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
         if model is None:
             raise NotExecutableError(f"finger {track.name}: no model known (give the "
                                      "plan's request)")
-        joints = tuple(JointSpec(
-            j.name, j.kind, (float(j.axis[0]), float(j.axis[1]), float(j.axis[2])),
-            np.asarray(j.placement_rotation, dtype=float),
-            np.asarray(j.placement_translation, dtype=float),
-            _limit(model.lower[j.index_q]), _limit(model.upper[j.index_q]))
-            for j in model.chain)
-        fingers.append(FingerSpec(
-            track.name, joints, np.asarray(model.base_rotation, dtype=float),
-            np.asarray(model.base_position, dtype=float),
-            np.asarray(model.tip_rotation, dtype=float),
-            np.asarray(model.tip_translation, dtype=float),
-            _tip_shape(model, TipShape), track.name))
+        fingers.append(finger_spec(track.name, model))
         torques, force = forces[k] if k < len(forces) else (None, None)
         refs.append(FingerReference(track.q, rates[k], torques, force))
     contacts = tuple(ContactSpec(c.name, c.body, c.name if c.body == "finger" else None,
@@ -184,6 +190,39 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
     plan = with_rate_breaks(plan, result)
     plan.check()
     return plan
+
+
+def _gait_plan(result: ManipulationResult, request: PlanRequest | None, tracks: PlanTracks,
+               models: SceneModels) -> Any:
+    """The simulator's plan of a gait result (docs/gait.md): its samples, the request's
+    models and load."""
+    from ocp import GaitSamples
+
+    from .gait import samples_execution_plan
+
+    gs = result.gait.samples if result.gait is not None else None
+    load = getattr(request, "forces", None)
+    if gs is None or load is None or any(m is None for m in models.fingers):
+        raise NotExecutableError("a gait is executed with its request (its fingers and "
+                                 "load): give the request (dexroll simulate --request)")
+    qd = _q_dot(result)[0]
+    acc = np.zeros_like(qd)
+
+    def stack(attr: str) -> np.ndarray:
+        return np.stack([np.asarray(getattr(c, attr), dtype=float) for c in gs.contacts],
+                        axis=1)
+
+    smp = GaitSamples(tracks.t, np.hstack([f.q for f in tracks.fingers]), qd, acc,
+                      tracks.object_position, tracks.object_wxyz, stack("point"),
+                      stack("normal"), stack("force"),
+                      np.asarray([c.active for c in gs.contacts], dtype=float).T,
+                      np.stack([f.tip_position for f in tracks.fingers], axis=1),
+                      np.stack([f.tip_wxyz for f in tracks.fingers], axis=1))
+    mu, mu_note = _mu(request, tracks)
+    return samples_execution_plan(
+        smp, tuple(f.name for f in tracks.fingers), tuple(models.fingers), models.shape,
+        tuple(models.dimensions), float(load.mass), mu, tuple(load.gravity),
+        (*models.notes, *([mu_note] if mu_note else [])))
 
 
 def with_rate_breaks(plan: Any, result: AnyPlanResult) -> Any:
@@ -231,11 +270,70 @@ def with_rate_breaks(plan: Any, result: AnyPlanResult) -> Any:
                                   for c in plan.contacts))
 
 
+def user_model(request: PlanRequest | None, plan: Any, text: str | None = None) -> Any:
+    """The user's hand model a plan is executed on (a ``sim.user_model.UserModel``): the
+    MJCF ``text`` (default: the request's ``hand.mjcf``), the tip of each of the plan's
+    fingers (the request's ``hand.tips[hand_finger].name``; the built-in allegro's tip
+    links) and the request's ``mount``. NotExecutableError when the request has no hand
+    model to take them from."""
+    from sim.user_model import UserModel
+
+    hand = getattr(request, "hand", None)
+    if hand is None:
+        raise NotExecutableError("executing on a hand model needs the plan's request with "
+                                 "its `hand` (the fingertips' names)")
+    if text is None:
+        if hand.mjcf is None:
+            raise NotExecutableError("the request's hand is not an MJCF model: give the "
+                                     "model file (dexroll simulate --model FILE)")
+        text = hand.mjcf
+    if hand.tips is not None:
+        names = [t.name for t in hand.tips]
+    elif hand.builtin == "allegro":
+        from ..planners.cache import load_hand_model
+
+        names = list(load_hand_model(hand).tip_names)
+    else:
+        raise NotExecutableError(f"the {hand.builtin} hand's fingers are not a hand model's")
+    tips = []
+    for f in getattr(request, "fingers", []):
+        if f.hand_finger is None:
+            raise NotExecutableError("a finger not of the request's hand cannot be executed "
+                                     "on its model")
+        tips.append(names[f.hand_finger])
+    if len(tips) != len(plan.fingers):
+        raise NotExecutableError(f"{len(tips)} fingers in the request, {len(plan.fingers)} "
+                                 "in the plan")
+    R, p = np.eye(3), np.zeros(3)
+    if hand.mount is not None:  # the rotation vector's matrix (Rodrigues)
+        w = np.asarray(hand.mount.rotation, dtype=float)
+        angle = float(np.linalg.norm(w))
+        if angle > 0.0:
+            k = w / angle
+            K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+            R = np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
+        p = np.asarray(hand.mount.position, dtype=float)
+    return UserModel(text, tuple(tips), np.asarray(R, dtype=float), p)
+
+
 def simulate_result(result: AnyPlanResult, request: PlanRequest | None = None,
-                    options: dict[str, Any] | None = None) -> Any:
+                    options: dict[str, Any] | None = None,
+                    model: str | None = None) -> Any:
     """Execute a wire result's plan in MuJoCo: the :class:`sim.SimReport`. ``options``:
-    :class:`sim.SimOptions` fields (ValueError naming a bad one)."""
+    :class:`sim.SimOptions` fields (ValueError naming a bad one), and ``model``:
+    "request" to execute it on the request's own MJCF hand (its actuators, masses and
+    contact settings: ``sim.user_model``), or an MJCF text to execute it on; None:
+    dexroll's scene."""
     from sim import SimOptions, simulate
 
-    sim_options = SimOptions.from_dict(options or {})
-    return simulate(execution_plan(result, request), sim_options)
+    raw = dict(options or {})
+    model = raw.pop("model", None) if model is None else model
+    sim_options = SimOptions.from_dict(raw)
+    plan = execution_plan(result, request)
+    if model is None or model == "scene":
+        return simulate(plan, sim_options)
+    from sim.user_model import simulate_on_model
+
+    return simulate_on_model(plan, user_model(request, plan,
+                                              None if model == "request" else model),
+                             sim_options)

@@ -49,6 +49,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--kv", type=float, help="servo damping [N m s/rad] (default 2)")
     parser.add_argument("--mass", type=float, metavar="KG",
                         help="the object's mass [kg] (default: the plan's, else 0.05)")
+    parser.add_argument("--model", metavar="FILE",
+                        help="execute on this MJCF hand model (its bodies, masses, "
+                             "actuators, contact settings; meshes stripped), its fingertips "
+                             "named as in --request's hand; 'request': the request's own "
+                             "hand.mjcf")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="any other option of sim.SimOptions (JSON value), e.g. "
                              "--set condim=6 --set timestep=0.001")
@@ -105,7 +110,10 @@ def main(args: argparse.Namespace) -> int:
         if args.request:
             raw = json.loads(Path(args.request).read_text(encoding="utf-8"))
             request = REQUEST.validate_python(raw)
-        report = simulate_result(result, request, options_of(args))
+        model = getattr(args, "model", None)
+        if model is not None and model != "request":
+            model = Path(model).read_text(encoding="utf-8")
+        report = simulate_result(result, request, options_of(args), model)
     except ValidationError as exc:
         reasons = "; ".join(f"{f}: {r}" for f, r in validation_errors(exc)[:5])
         print(f"{args.request} is not a valid request: {reasons}", file=sys.stderr)

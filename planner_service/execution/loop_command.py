@@ -106,6 +106,9 @@ def main(args: argparse.Namespace) -> int:
 
     path = Path(args.result)
     try:
+        if getattr(args, "model", None) is not None:
+            raise ValueError("--model: disturbances and the closed loop run on dexroll's "
+                             "own scene only, not yet on a model of one's own")
         dist = disturbances_of(args)
         options = SimOptions.from_dict(options_of(args))
         if not (math.isfinite(args.rate) and args.rate > 0):

@@ -100,9 +100,18 @@ def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
                                (soft if hard == resource.RLIM_INFINITY else min(soft, hard),
                                 hard))
         try:
-            plan = execution_plan(RESULT.validate_json(result_json),
-                                  REQUEST.validate_json(request_json))
-            report = simulate(plan, SimOptions.from_dict(options))
+            request = REQUEST.validate_json(request_json)
+            plan = execution_plan(RESULT.validate_json(result_json), request)
+            options = dict(options)
+            if options.pop("model", "scene") == "request":  # the request's own hand file
+                from sim.user_model import simulate_on_model
+
+                from ..execution import user_model
+
+                report = simulate_on_model(plan, user_model(request, plan),
+                                           SimOptions.from_dict(options))
+            else:
+                report = simulate(plan, SimOptions.from_dict(options))
             reply: tuple[str, Any] = ("ok", report.to_dict())
         except (NotExecutableError, ProblemError) as exc:
             reply = ("not_executable", str(exc))

@@ -47,6 +47,7 @@ class FingerCache:
         self.lock = threading.RLock()
         self._fingers: dict[tuple[Any, ...], FingerModel] = {}
         self._hands: dict[tuple[Any, ...], Hand] = {}
+        self._grasps: dict[str, Any] = {}
         self._planner: OneFingerPlanner | None = None
 
     @property
@@ -114,6 +115,51 @@ class FingerCache:
             self._make_room(len(hand.fingers))
             self._hands[key] = hand
             return hand
+
+
+    def hand_with_sides(self, spec: HandModel,
+                        sides: tuple[tuple[float, float, float] | None, ...]) -> Any:
+        """The request's hand with its capsule tips' chart ``side`` s replaced where
+        ``sides[i]`` is given (a searched grasp's: each contact on its chart's equator):
+        the built-in allegro's, or a model's tips read from its geometry whose ``side`` the
+        request left out (others keep theirs)."""
+        if spec.builtin == "allegro":
+            key: tuple[Any, ...] = ("allegro", "sides", sides)
+            with self.lock:
+                cached: Any = self._hands.get(key)
+                if cached is None:
+                    from ocp.robots.allegro import load_allegro
+
+                    cached = load_allegro("urdf", sides)
+                    self._make_room(len(cached.fingers))
+                    self._hands[key] = cached
+                return cached
+        if spec.tips is None:
+            return self.hand(spec)
+        tips = [t.model_copy(update={"side": list(s)})
+                if s is not None and t.surface is None and t.side is None else t
+                for t, s in zip(spec.tips, sides, strict=False)]
+        tips += spec.tips[len(tips):]
+        return self.hand(spec.model_copy(update={"tips": tips}))
+
+    def grasp(self, key: str, search: Any) -> Any:
+        """A grasp search's outcome by its request's ``key`` (the search is deterministic:
+        its request's POST check and its worker each run it once), ``search()`` when not
+        kept; the last 32 are kept, a GraspNotFound too."""
+        with self.lock:
+            got = self._grasps.get(key)
+        if got is None:
+            try:
+                got = search()
+            except ValueError as exc:  # GraspNotFound: kept as the answer
+                got = exc
+            with self.lock:
+                if len(self._grasps) >= 32:
+                    self._grasps.pop(next(iter(self._grasps)))
+                self._grasps[key] = got
+        if isinstance(got, Exception):
+            raise got
+        return got
 
 
 def _load(spec: FingerModelSpec, where: str) -> FingerModel:

@@ -102,6 +102,8 @@ def wire_field(loc: Sequence[int | str]) -> str:
         parts = parts[1:]
     if len(parts) > 1 and parts[0] == "motion" and parts[1] in _MOTION_TAGS:
         del parts[1]  # the tag of the motion's kind (also a manipulation request's)
+    if len(parts) > 1 and parts[0] == "grasp" and parts[1] in ("auto", "search"):
+        del parts[1]  # the tag of a grasp's form: the shorthand 'auto' or the object
     return ".".join(parts)
 
 

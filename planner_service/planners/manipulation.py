@@ -11,6 +11,9 @@ import numpy as np
 from dexroll_client.models import (
     ContactTrajectoryModel,
     FingerJointsModel,
+    GraspFingerModel,
+    GraspSearchModel,
+    GraspUsedModel,
     ManipulationCertificateModel,
     ManipulationRequest,
     ManipulationResult,
@@ -49,6 +52,7 @@ from .common import (
     solver_options,
 )
 from .fields import FieldErrors, FieldMap, Rule
+from .gait import gait_errors, solve_gait
 from .samples import joint_trajectory_block, requested_times, samples_block
 
 __all__ = [
@@ -127,11 +131,125 @@ def _nominal_q(request: ManipulationRequest, hand: Any
     return None
 
 
+def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
+                  obj: ObjectSpec, palm: Palm | None, start: ObjectPose | None,
+                  motion: DesiredMotion | None,
+                  from_joints: list[tuple[int, FingerModel, tuple[float, ...] | None, str, str]],
+                  info: list[tuple[int | None, list[tuple[float, ...]]]]
+                  ) -> list[tuple[str, str]] | tuple[list[Any], GraspUsedModel]:
+    """The request's ``grasp`` search (:func:`ocp.robots.first_grasp.first_grasp`): the
+    fingers' joints (``from_joints`` with every searched q filled in, the models those of
+    the hand with the found tip sides) and the wire account of it; or the reasons, as
+    (field, reason), why there is none."""
+    import json
+    import time
+
+    from ocp.robots.first_grasp import GraspNotFoundError, desired_turns, first_grasp
+    from ocp.robots.grasp_reach import _tip
+
+    if palm is not None:
+        return [("grasp", "a grasp search places fingertips on a ball held by the fingers "
+                          "alone: not with a palm")]
+    if obj.shape != "sphere":
+        return [("grasp", f"a grasp search is for a ball (object.shape 'sphere'), not "
+                          f"{obj.shape!r}")]
+    if start is None:
+        return [("initial_pose", "required by `grasp`: where the ball is held")]
+    if len(from_joints) != len(request.fingers):
+        return []  # some finger could not be placed: its own error says why
+    if all(q is not None for _, _, q, _, _ in from_joints):
+        return [("grasp", "every finger gives `initial_q`: nothing to search (drop "
+                          "`grasp`, or a finger's `initial_q`)")]
+    opts = request.grasp if not isinstance(request.grasp, str) else None
+    search = opts.search if opts is not None else GraspSearchModel()
+    turns = desired_turns(motion) if motion is not None and search.maximise_reach else []
+    radius = float(obj.dimensions[0])
+    centre = np.asarray(start.position, dtype=float)
+    models = [m for _, m, _, _, _ in from_joints]
+    names = [n for _, _, _, n, _ in from_joints]
+    key = json.dumps([request.hand.model_dump_json() if request.hand else None,
+                      [f.model_dump_json(include={"finger", "hand_finger", "initial_q",
+                                                  "q_seed", "name"})
+                       for f in request.fingers],
+                      request.object.model_dump_json(), list(start.position),
+                      [(t.axis.tolist(), t.angle) for t in turns], request.mu,
+                      request.pad_margin, search.model_dump_json()])
+
+    def run() -> Any:
+        t0 = time.perf_counter()
+        got = first_grasp(models, centre, radius, turns, request.mu,
+                          fixed=[q for _, _, q, _, _ in from_joints],
+                          seeds=[s for _, s in info], samples=search.samples,
+                          keep=search.candidates, min_gap=search.min_gap,
+                          margin=request.pad_margin, seed=search.seed, names=names)
+        return got, time.perf_counter() - t0
+
+    try:
+        found, took = cache.grasp(key, run)
+    except GraspNotFoundError as exc:
+        return list(exc.errors)
+    # each searched capsule's chart side: its contact's direction across the cap's axis
+    sides: list[tuple[float, float, float] | None] = []
+    for (_, m, q, _, _), ct in zip(from_joints, found.contacts, strict=True):
+        side = None
+        _, axis, _ = _tip(m)
+        if q is None and axis is not None:
+            v = ct.link_direction - (ct.link_direction @ axis) * axis
+            if np.linalg.norm(v) > math.sin(math.radians(10.0)):
+                v = v / np.linalg.norm(v)
+                side = (float(v[0]), float(v[1]), float(v[2]))
+        sides.append(side)
+    used_sides = list(sides)
+    if request.hand is not None and hand is not None and any(sides):
+        per_hand: list[tuple[float, float, float] | None] = [None] * len(hand.fingers)
+        for (hf, _), side in zip(info, sides, strict=True):
+            if hf is not None and side is not None:
+                per_hand[hf] = side
+        builtin = request.hand.builtin
+        if builtin == "allegro" or (builtin is None and request.hand.tips is not None):
+            variant = cache.hand_with_sides(request.hand, tuple(per_hand))
+            for k, (hf, _) in enumerate(info):
+                if hf is not None:
+                    place, _, q, name, field = from_joints[k]
+                    from_joints[k] = (place, variant.fingers[hf], q, name, field)
+                    tip = request.hand.tips[hf] if request.hand.tips else None
+                    if tip is not None and (tip.side is not None or tip.surface is not None):
+                        used_sides[k] = None  # the request's own tip kept
+        else:
+            used_sides = [None] * len(sides)
+    else:
+        used_sides = [None] * len(sides) if request.hand is None else used_sides
+    filled = [(place, m, tuple(float(x) for x in ct.q), name, field)
+              for (place, m, _, name, field), ct in zip(from_joints, found.contacts,
+                                                         strict=True)]
+    fingers = [GraspFingerModel(
+        name=name, searched=q is None, q=[float(x) for x in ct.q],
+        contact_point=[float(x) for x in centre + radius * ct.normal],
+        contact_normal=[float(x) for x in ct.normal],
+        tip_side=None if side is None else list(side),
+        reach=ct.reach, stop=(ct.stop or None) if ct.reach is not None else None)
+        for (_, _, q, name, _), ct, side in zip(from_joints, found.contacts, used_sides,
+                                                strict=True)]
+    return filled, GraspUsedModel(
+        fingers=fingers, reach=found.reach, requested_turn=found.requested,
+        closure=found.closure, grasp_angle=found.grasp_angle, tip_gap=found.gap,
+        candidates=list(found.candidates), combinations=found.combinations,
+        search_time=took)
+
+
 def manipulation_problem(request: ManipulationRequest, cache: FingerCache
                          ) -> ManipulationProblem:
     """The core's problem of a manipulation request; ProblemError naming the wire fields
     the core cannot even be given (a finger that does not load, a hand finger that does
-    not exist, duplicate names, a motion step without an axis)."""
+    not exist, duplicate names, a motion step without an axis, a `grasp` search that
+    finds nothing)."""
+    return problem_and_grasp(request, cache)[0]
+
+
+def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
+                      ) -> tuple[ManipulationProblem, GraspUsedModel | None]:
+    """:func:`manipulation_problem` and the grasp its ``grasp`` search found (None: no
+    search)."""
     errors: list[tuple[str, str]] = []
     hand: Any = None  # Hand (flat pads) or WholeHand
     if request.hand is not None:
@@ -140,8 +258,11 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
         except ProblemError as exc:
             errors += exc.errors
     tips: list[Fingertip | None] = []
-    #: fingers whose contact comes from joint angles: (place, model, q, name, field)
-    from_joints: list[tuple[int, FingerModel, tuple[float, ...], str, str]] = []
+    #: fingers whose contact comes from joint angles: (place, model, q, name, field); q
+    #: None: searched (``grasp``)
+    from_joints: list[tuple[int, FingerModel, tuple[float, ...] | None, str, str]] = []
+    #: per finger: (its hand_finger or None, its seeds for a search)
+    search_info: list[tuple[int | None, list[tuple[float, ...]]]] = []
     names: dict[str, int] = {}
     for i, f in enumerate(request.fingers):
         where = f"fingers[{i}]"
@@ -169,7 +290,14 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
                     nominal = _nominal_q(request, hand)
                     if nominal is not None:
                         default_seed = nominal[f.hand_finger]
+        search_info.append((f.hand_finger if f.finger is None else None,
+                            [q for q in (default_seed, None if f.q_seed is None else
+                                         tuple(f.q_seed)) if q is not None]))
         name = f.name or default_name
+        if request.grasp is not None and f.initial is not None:
+            errors.append((f"{where}.initial", "with `grasp`, a finger starts from "
+                                               "`initial_q` or is searched: drop `initial` "
+                                               "and `chart_rotation`"))
         if name == "palm":
             errors.append((f"{where}.name", "'palm' names the palm contact; choose another"))
         elif name in names:
@@ -183,7 +311,14 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
                                   name))
         elif model is not None:  # the contact where the joints put the tip
             q0 = tuple(f.initial_q) if f.initial_q is not None else default_seed
-            if q0 is None:
+            searched = request.grasp is not None and f.initial_q is None
+            if searched and not model.tip_surface.round:
+                errors.append((f"{where}.hand_finger" if f.hand_finger is not None else
+                               f"{where}.finger", "a `grasp` search needs a round fingertip "
+                                                  "(sphere or capsule), not a flat pad"))
+            elif searched:
+                from_joints.append((len(tips), model, None, name, f"{where}.initial_q"))
+            elif q0 is None:
                 errors.append((f"{where}.initial", "give `initial` and `chart_rotation`, or "
                                                    "`initial_q` (this finger has no nominal "
                                                    "grasp)"))
@@ -212,6 +347,14 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
         motion_start = _palm_pose(obj, palm)
     motion, motion_errors = _motion(request, motion_start)
     errors += motion_errors
+    grasp_used: GraspUsedModel | None = None
+    if request.grasp is not None and not errors:
+        outcome = _search_grasp(request, cache, hand, obj, palm, motion_start, motion,
+                                from_joints, search_info)
+        if isinstance(outcome, list):
+            errors += outcome
+        else:
+            from_joints, grasp_used = outcome
     if from_joints and not errors:
         if motion_start is None:
             errors.append(("initial_pose", "required to place the object among fingertips "
@@ -220,7 +363,8 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
             try:
                 found = fingertips_from_joints(
                     tuple(m for _, m, _, _, _ in from_joints),
-                    tuple(q for _, _, q, _, _ in from_joints), obj, motion_start,
+                    tuple(q for _, _, q, _, _ in from_joints if q is not None), obj,
+                    motion_start,
                     tuple(n for _, _, _, n, _ in from_joints),
                     tuple(w for _, _, _, _, w in from_joints))
             except ProblemError as exc:
@@ -232,6 +376,12 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
         raise ProblemError(errors)
     tr = request.tracking
     forces = force_spec(request.forces)
+    return _problem(request, obj, tips, palm, start, motion, tr, forces), grasp_used
+
+
+def _problem(request: ManipulationRequest, obj: ObjectSpec, tips: list[Fingertip | None],
+             palm: Palm | None, start: ObjectPose | None, motion: DesiredMotion | None,
+             tr: Any, forces: Any) -> ManipulationProblem:
     return ManipulationProblem(
         object=obj, fingers=tuple(t for t in tips if t is not None), duration=request.duration,
         palm=palm,
@@ -281,21 +431,42 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
                            [(tip.name or f"finger{i}", tuple(tip.finger.joint_names))
                             for i, tip in enumerate(problem.fingers)])
 
+    def request_errors(self, request: ManipulationRequest, fingers: FingerCache
+                       ) -> FieldErrors:
+        errors = super().request_errors(request, fingers)
+        if request.gait is not None:
+            try:
+                with fingers.lock:
+                    problem = manipulation_problem(request, fingers)
+            except ProblemError:
+                return errors  # the errors name why there is no problem
+            errors += [e for e in gait_errors(request, problem) if e not in errors]
+        return errors
+
     def solve(self, request: ManipulationRequest, planners: Planners
-              ) -> tuple[ManipulationResult, ManipulationSolution]:
+              ) -> tuple[ManipulationResult, Any]:
         warm = warm_start_of(request)
         fingers, fields = planners.fingers, self.fields(request)
         with fingers.lock:  # the hand and fingers, by the cache's rules
-            problem = manipulation_problem(request, fingers)
+            problem, grasp = problem_and_grasp(request, fingers)
             planner = fingers.manipulation
         errors = fields.errors(problem.errors())
         if errors:
             raise ProblemError(errors)
+        if request.gait is not None:  # finger gaiting: rolls and re-placements
+            errors = gait_errors(request, problem)
+            if errors:
+                raise ProblemError(errors)
+            gait_res, gait = solve_gait(request, problem, planner)
+            return gait_res.model_copy(update={"grasp": grasp}), gait
         try:
             sol = planner.solve(problem, warm)
         except ProblemError as exc:
             raise ProblemError(fields.errors(exc.errors)) from exc
-        return self.to_result(request, problem, sol), sol
+        result = self.to_result(request, problem, sol)
+        if grasp is not None:
+            result = result.model_copy(update={"grasp": grasp})
+        return result, sol
 
     def to_result(self, request: ManipulationRequest, problem: ManipulationProblem,
                   solution: ManipulationSolution) -> ManipulationResult:
@@ -308,7 +479,7 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
             general = fingers.manipulation
         return general.prepare(problem)
 
-    def summary(self, result: ManipulationResult, solution: ManipulationSolution) -> str:
+    def summary(self, result: ManipulationResult, solution: Any) -> str:
         return manipulation_summary(result)
 
 
@@ -427,6 +598,16 @@ def manipulation_summary(result: ManipulationResult) -> str:
         worst_goal = max(result.goal_error.values())
         lines.append(f"goal error   {worst_goal:.3g} (worst of {len(result.goal_error)} "
                      "palm targets)")
+    g = result.grasp
+    if g is not None:
+        reach = ""
+        if g.reach is not None:
+            least = min(g.fingers, key=lambda f: f.reach if f.reach is not None else 1e9)
+            stop = f", {least.stop}" if least.stop else ""
+            reach = (f": reach {math.degrees(g.reach):.3g} of {math.degrees(g.requested_turn):.3g}"
+                     f" deg toward the motion (least: {least.name}{stop})")
+        lines.append(f"grasp        searched in {g.search_time:.2g} s{reach}, closure "
+                     f"{g.closure:.2g}; its joints and tip sides: the result's `grasp`")
     c = result.certificate
     if t is not None and t.tracking_position_error and t.tracking_angle_error:
         tol = c.tolerances if c is not None else {}
@@ -437,6 +618,16 @@ def manipulation_summary(result: ManipulationResult) -> str:
         lines.append(f"tracking     {mark}{max(t.tracking_position_error) * 1e3:.3g} mm, "
                      f"{math.degrees(max(t.tracking_angle_error)):.3g} deg worst{bounds}"
                      + ("" if certified else " (the last iterate's, not a plan's)"))
+    gt = result.gait
+    if gt is not None:
+        moves = ", ".join(p.lifted_finger or "" for p in gt.phases if p.kind == "swing")
+        lines.append(f"gait         {mark}turned {math.degrees(gt.turned):.1f} deg in {gt.rolls} "
+                     f"roll(s) and {gt.replacements} re-placement(s) ({moves or 'none'}); "
+                     f"{gt.phases[-1].end if gt.phases else 0.0:.2f} s, planned in "
+                     f"{gt.wall_time:.1f} s")
+        if gt.never_lifted:
+            lines.append(f"  never lifted: {', '.join(gt.never_lifted)} (the others cannot "
+                         "hold the ball without it)")
     if c is not None:
         lines.append("certificate  " + ("PASSED" if c.passed else "FAILED"))
         slips = [v for k, v in c.values.items() if k.startswith("max_slip_speed_")]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +39,9 @@ class ContactTrack:
     body: str
     point: FloatArray
     normal: FloatArray
+    #: per sample, 1 touching, 0 its fingertip lifted clear (a gait; between: a ramp);
+    #: None: touching throughout
+    active: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -93,7 +97,8 @@ def has_plan(result: AnyPlanResult) -> bool:
     """Whether a result holds a plan to show (cheap: :func:`tracks_of` reads it)."""
     if isinstance(result, PlanResult):
         return result.grid is not None
-    return getattr(result, "trajectory", None) is not None
+    return getattr(result, "trajectory", None) is not None or \
+        getattr(getattr(result, "gait", None), "samples", None) is not None
 
 
 def tracks_of(result: AnyPlanResult) -> PlanTracks:
@@ -127,6 +132,9 @@ def tracks_of(result: AnyPlanResult) -> PlanTracks:
             grasp, _cone(grasp, tr.cone_margin))
     if isinstance(result, ManipulationResult):
         m = result.trajectory
+        gs = result.gait.samples if result.gait is not None else None
+        if m is None and gs is not None and result.joint_trajectory is not None:
+            return _gait_tracks(result, gs, status, message)
         if m is None:
             raise NoPlanError(f"the result holds no plan (status {status}: {message})")
         grasp = _a(m.grasp_angle)
@@ -138,3 +146,23 @@ def tracks_of(result: AnyPlanResult) -> PlanTracks:
                               _a(f.tip_orientation_wxyz)) for f in m.fingers),
             grasp, _cone(grasp, m.cone_margin))
     raise NoPlanError(f"no viewer for a {type(result).__name__}")
+
+
+def _gait_tracks(result: ManipulationResult, gs: Any, status: str, message: str
+                 ) -> PlanTracks:
+    """A gait's plan (docs/gait.md): its samples, the joints from its joint trajectory
+    (named ``<finger>/<joint>``)."""
+    jt = result.joint_trajectory
+    assert jt is not None
+    q_all = _a([p.positions for p in jt.points])
+    fingers = []
+    for f in gs.fingers:
+        cols = [i for i, nm in enumerate(jt.joint_names) if nm.startswith(f"{f.name}/")]
+        fingers.append(FingerTrack(f.name, tuple(jt.joint_names[i].split("/", 1)[1]
+                                                 for i in cols), q_all[:, cols],
+                                   _a(f.tip_position), _a(f.tip_orientation_wxyz)))
+    return PlanTracks(
+        "manipulation", status, message, _a(gs.t), _a(gs.object_position),
+        _a(gs.object_orientation_wxyz),
+        tuple(ContactTrack(c.name, "finger", _a(c.point), _a(c.normal), _a(c.active))
+              for c in gs.contacts), tuple(fingers), None, None)

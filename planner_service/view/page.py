@@ -84,6 +84,7 @@ def page_html(scene: dict[str, Any]) -> str:
   <div id="legend">{legend}<span class="dim">object axes: x red, y green, z blue{grid}</span></div>
   <div class="dim">{html.escape(notes)}</div>
   <div id="grasp"></div>
+  <div id="lifted"></div>
  </div>
  <div id="message" hidden></div>
 </div>

@@ -100,7 +100,8 @@ def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "") -> dic
         on_object = np.einsum("kji,kj->ki", R_obj, ct.point - c)
         contacts.append({"name": ct.name, "body": ct.body, "color": colors[ct.name],
                          "point": _flat(ct.point), "normal": _flat(ct.normal, 5),
-                         "trace": _flat(on_object)})
+                         "trace": _flat(on_object),
+                         "active": None if ct.active is None else _flat(ct.active, 3)})
     points = [c + s * max(semi) for s in (-1.0, 1.0)]
     for i, (f, model) in enumerate(zip(tracks.fingers, models.fingers, strict=True)):
         R_tip = quaternion_matrices(f.tip_wxyz)

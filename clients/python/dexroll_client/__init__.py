@@ -31,6 +31,14 @@ from dexroll_client.errors import (
     TransportError,
     UnauthorizedError,
 )
+from dexroll_client.gait import (
+    GaitContactModel,
+    GaitFingerModel,
+    GaitModel,
+    GaitPhaseModel,
+    GaitResultModel,
+    GaitSamplesModel,
+)
 from dexroll_client.models import (
     AnyPlanResult,
     BallOnPalmRequest,
@@ -51,6 +59,8 @@ from dexroll_client.models import (
     FingertipModel,
     FingerTrajectoryModel,
     ForcesModel,
+    GraspModel,
+    GraspUsedModel,
     HandInfo,
     HandModel,
     Job,
@@ -108,6 +118,14 @@ __all__ = [
     "FingerTrajectoryModel",
     "FingertipModel",
     "ForcesModel",
+    "GaitContactModel",
+    "GaitFingerModel",
+    "GaitModel",
+    "GaitPhaseModel",
+    "GaitResultModel",
+    "GaitSamplesModel",
+    "GraspModel",
+    "GraspUsedModel",
     "HandInfo",
     "HandModel",
     "InvalidRequestError",

@@ -32,6 +32,7 @@ from dexroll_client.common import (
     _planner_of,
     _Request,
 )
+from dexroll_client.gait import GaitModel
 from dexroll_client.results import (
     CollocationModel,
     FingerPlanResult,
@@ -46,6 +47,8 @@ __all__ = [
     "FingerContactModel",
     "FingerModelSpec",
     "FingertipModel",
+    "GraspModel",
+    "GraspSearchModel",
     "HandModel",
     "HandTipModel",
     "ManipulationRequest",
@@ -815,6 +818,43 @@ class TrackingModel(_Request):
                     "one at every instant [rad]; null: none")
 
 
+class GraspSearchModel(_Request):
+    """How the first grasp is searched (docs/hands.md, "A first grasp for any hand")."""
+
+    samples: int = Field(
+        default=1500, ge=50, le=20000,
+        description="joint vectors drawn per searched finger within its limits (its nominal "
+                    "grasp and `q_seed` first); those whose round tip comes near the ball "
+                    "with its cap facing it are pulled onto it")
+    candidates: int = Field(
+        default=8, ge=1, le=16,
+        description="contacts per finger weighed in combinations: its farthest-reaching "
+                    "toward the motion and as many of its most distinct normals")
+    min_gap: Real = Field(default=0.001, ge=0.0, le=0.05,
+                          description="least distance between two fingertips [m]")
+    maximise_reach: bool = Field(
+        default=True,
+        description="roll every candidate through the motion's turns and take the grasp "
+                    "whose least finger reach toward them is largest (then the most "
+                    "closed); false: the most closed grasp (contacts opposing best)")
+    seed: int = Field(default=0, ge=0, le=2**31 - 1,
+                      description="the random draw's seed (the same request, the same grasp)")
+
+
+def _grasp_kind(value: object) -> str:
+    """The tag of a request's ``grasp``: the shorthand 'auto' (any string) or the object."""
+    return "auto" if isinstance(value, str) else "search"
+
+
+class GraspModel(_Request):
+    """A first grasp found for the request: the joint angles of every finger that gives
+    neither `initial_q` nor `initial`, every chosen fingertip touching the ball, the
+    contacts in force closure."""
+
+    search: GraspSearchModel = Field(default_factory=GraspSearchModel,
+                                     description="the search's settings")
+
+
 class ManipulationRequest(PlanRequestBase):
     """Manipulate an object with any grasp: an optional flat palm carrying it and one or
     more flat fingertips rolling on it (paper, sections 3 and 4, and beyond). Without a
@@ -839,6 +879,20 @@ class ManipulationRequest(PlanRequestBase):
                                        description="the desired object motion (required "
                                                    "without a palm)")
     tracking: TrackingModel = Field(default_factory=TrackingModel)
+    grasp: Annotated[Annotated[Literal["auto"], Tag("auto")]
+                     | Annotated[GraspModel, Tag("search")],
+                     Discriminator(_grasp_kind)] | None = Field(
+        default=None,
+        description="find the initial grasp (a ball held by round fingertips, no palm): "
+                    "joint angles of every finger without `initial_q` or `initial` that put "
+                    "its tip on the ball with the contacts opposing each other (force "
+                    "closure), maximising the rolled reach toward `motion`; the result's "
+                    "`grasp` says which was used. 'auto': {\"search\": {}}; null: the "
+                    "fingers' `initial_q` (or the hand's nominal grasp)")
+    gait: GaitModel | None = Field(
+        default=None, description="turn the ball by `motion`'s one rotation step farther "
+                                   "than rolling can: rolls and fingertip re-placements "
+                                   "(docs/gait.md); null: one rolling plan")
     forces: ForcesModel | None = Field(
         default=None, description="plan the contact forces for this load and grip; null (the "
                                   "default): a kinematic plan")

@@ -14,6 +14,7 @@ from typing import Annotated, Literal
 from pydantic import Discriminator, Field, Tag
 
 from dexroll_client.common import NlpPointModel, _planner_of, _Response
+from dexroll_client.gait import GaitResultModel
 
 __all__ = [
     "AnyPlanResult",
@@ -30,6 +31,8 @@ __all__ = [
     "FingerSamplesModel",
     "FingerStatsModel",
     "FingerTrajectoryModel",
+    "GraspFingerModel",
+    "GraspUsedModel",
     "JointTrajectoryModel",
     "JointTrajectoryPointModel",
     "ManipulationCertificateModel",
@@ -524,6 +527,50 @@ class ManipulationStatsModel(FingerStatsModel):
     n_intervals: int = Field(description="collocation intervals of the returned plan")
 
 
+class GraspFingerModel(_Response):
+    """One finger of a searched grasp."""
+
+    name: str = Field(description="the finger's contact name")
+    searched: bool = Field(description="its joints were searched (false: given as "
+                                       "`initial_q`)")
+    q: list[float] = Field(description="its joint angles at t = 0 [rad; m for a slide "
+                                       "joint]: `fingers[i].initial_q`")
+    contact_point: list[float] = Field(description="the contact on the ball, palm frame [m]")
+    contact_normal: list[float] = Field(description="the ball's outward normal there, palm "
+                                                    "frame")
+    tip_side: list[float] | None = Field(
+        default=None, description="a capsule tip: the `side` of its chart (tip link frame) "
+                                  "the plan used, the contact's direction across the cap's "
+                                  "axis (`hand.tips[i].side`); null: the hand's own")
+    reach: float | None = Field(
+        default=None, description="how far [rad] this finger rolls toward the motion's "
+                                  "turns from this grasp (up to the whole turn); null: not "
+                                  "rolled")
+    stop: str | None = Field(default=None, description="what stops that roll: a joint "
+                                                       "limit, the cap's seam, singular")
+
+
+class GraspUsedModel(_Response):
+    """The initial grasp a request's `grasp` search found and the plan started from."""
+
+    source: Literal["search"] = Field(default="search", description="where it came from")
+    fingers: list[GraspFingerModel]
+    reach: float | None = Field(default=None, description="the turn [rad] the grasp allows "
+                                                          "toward the motion: the least "
+                                                          "finger's reach")
+    requested_turn: float = Field(description="the motion's turns in all [rad] (0: none)")
+    closure: float = Field(
+        description="how well the contacts oppose: for 3 or more, the least over "
+                    "directions u of max_i n_i . u (> 0: the pushes alone balance any "
+                    "force); for 2, minus the sine of the grasp angle")
+    grasp_angle: float = Field(description="the planner's grasp angle Phi* [rad] (force "
+                                           "closure: below atan(mu))")
+    tip_gap: float = Field(description="the least distance between two fingertips [m]")
+    candidates: list[int] = Field(description="candidate contacts found per finger")
+    combinations: int = Field(description="combinations weighed")
+    search_time: float = Field(description="the search's wall time [s]")
+
+
 class ManipulationResult(PlanResultBase):
     """A manipulation plan, or why there is none. ``trajectory``: the collocation points
     (nodes and midpoints)."""
@@ -542,6 +589,12 @@ class ManipulationResult(PlanResultBase):
         default=None, description=JOINT_TRAJECTORY_DESCRIPTION)
     collocation: CollocationModel | None = Field(default=None,
                                                  description=COLLOCATION_DESCRIPTION)
+    grasp: GraspUsedModel | None = Field(
+        default=None, description="the initial grasp the request's `grasp` search found "
+                                  "(null: none was searched)")
+    gait: GaitResultModel | None = Field(
+        default=None, description="the gait's phases (a request with `gait`; null: one "
+                                  "rolling plan)")
 
 
 #: A plan of any planner, told apart by its ``planner`` field (results stored before it

@@ -41,6 +41,12 @@ class SimulationOptions(_Request):
     """How the plan is executed (defaults: docs/simulation.md). Unset fields take the
     simulator's defaults."""
 
+    model: Literal["scene", "request"] | None = Field(
+        default=None, description="scene (default): dexroll's scene of the plan's models "
+                                  "(docs/simulation.md); request: the request's own MJCF "
+                                  "hand (`hand.mjcf`) with its bodies, masses, actuators and "
+                                  "contact settings (meshes stripped), driven through its "
+                                  "actuators (mode servo)")
     mode: Literal["servo", "kinematic", "replay"] = Field(
         default="servo", description="servo: the joints follow the plan through position "
                                      "servos; kinematic: the joints are set to the plan; "
@@ -153,3 +159,9 @@ class SimulationReport(_Response):
                              description="where the models, mass, friction and grip came "
                                          "from")
     series: SimulationSeriesModel | None = None
+    model: dict[str, Any] | None = Field(
+        default=None, description="executed on the request's own hand model: every setting "
+                                  "of the scene and the drive, the fingertip contacts' "
+                                  "settings against the file's, each joint's feed-forward "
+                                  "torque against its actuator's range (null: dexroll's "
+                                  "scene)")

@@ -253,13 +253,20 @@
   function update() {
     const [k, a] = sampleAt(now);
     place(object, data.object.pose, k, a);
+    const lifted = [];
     data.contacts.forEach((c, i) => {
       vec(c.point, k, a, markers[i].position);
+      // a gait's fingertip off the ball: no contact marker, no cone
+      const on = !c.active || c.active[k] >= 0.5;
+      if (!on) lifted.push(c.name);
+      markers[i].visible = on;
       if (cones.length) {
         cones[i].position.copy(markers[i].position);
         cones[i].quaternion.setFromUnitVectors(down, vec(c.normal, k, a, nv).normalize());
+        cones[i].visible = on && el("show-cones").checked;
       }
     });
+    el("lifted").textContent = lifted.length ? "lifted: " + lifted.join(", ") : "";
     for (const tr of traces) tr.geometry.setDrawRange(0, k + 1);
     for (const tip of tips) place(tip.group, tip.pose, k, a);
     for (const l of links) if (l.pose.p.length > 3) place(l.mesh, l.pose, k, a);

@@ -1,0 +1,101 @@
+"""Finger gaiting on the wire (docs/gait.md): the request's ``gait`` option and the
+result's ``gait`` block."""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import Field
+
+from dexroll_client.common import Real, _Request, _Response
+
+__all__ = ["GaitContactModel", "GaitFingerModel", "GaitModel", "GaitPhaseModel",
+           "GaitResultModel", "GaitSamplesModel"]
+
+
+class GaitModel(_Request):
+    """Turn the ball farther than rolling can, by rolling and re-placing fingertips: the
+    motion's one rotation step (its axis and angle) is made by rolls of at most
+    ``roll_step``, each followed by the re-placement of every fingertip the others can
+    hold the ball without (unload, swing clear, land, load). Needs ``forces`` (the holds
+    carry the ball's weight), a ball, round fingertips and no palm."""
+
+    roll_step: Real = Field(default=math.radians(10.0), gt=0.0, le=math.pi / 2,
+                            description="the largest turn of one roll [rad]")
+    swing_duration: Real = Field(default=0.8, ge=0.1, le=10.0,
+                                 description="a fingertip's swing from lift-off to "
+                                             "touch-down [s]")
+    hold_time: Real = Field(default=0.2, ge=0.01, le=5.0,
+                            description="the unloading before a lift-off and the loading "
+                                        "after a touch-down, each [s]")
+    clearance: Real = Field(default=0.003, ge=0.0, le=0.05,
+                            description="the least distance [m] between a swinging "
+                                        "fingertip's surface and the ball's, and (or the "
+                                        "gaps it starts and lands with, if smaller) the "
+                                        "other fingertips'")
+
+
+class GaitPhaseModel(_Response):
+    """One phase of a gait."""
+
+    kind: Literal["roll", "unload", "swing", "load"] = Field(
+        description="roll: every fingertip rolls the ball; unload: the forces move off the "
+                    "fingertip about to lift; swing: it moves clear and lands; load: back")
+    start: float = Field(description="[s] from the plan's start")
+    end: float = Field(description="[s]")
+    touching: list[bool] = Field(description="per finger (the request's order), whether "
+                                             "its tip touches the ball")
+    lifted_finger: str | None = Field(default=None, description="the finger re-placed "
+                                                                "(null in a roll)")
+
+
+Rows = list[list[float]]
+
+
+class GaitContactModel(_Response):
+    """A fingertip's contact over the gait (rows: the samples' times)."""
+
+    name: str
+    active: list[float] = Field(description="1 touching, 0 lifted clear of the ball, between: "
+                                            "its force ramping, or lifting off and landing")
+    point: Rows = Field(description="where the line of centres meets the ball [m], palm "
+                                    "frame (the contact while it touches)")
+    normal: Rows = Field(description="the ball's outward normal there")
+    force: Rows = Field(description="the planned force the fingertip applies to the ball "
+                                    "[N], palm frame (zero while lifted)")
+
+
+class GaitFingerModel(_Response):
+    """A finger's tip frame over the gait (its joints: the result's joint_trajectory)."""
+
+    name: str
+    tip_position: Rows
+    tip_orientation_wxyz: Rows
+
+
+class GaitSamplesModel(_Response):
+    """The gait at the joint trajectory's times: the ball's pose, every fingertip's
+    contact and activity, every tip frame's pose (palm frame)."""
+
+    t: list[float]
+    object_position: Rows
+    object_orientation_wxyz: Rows
+    contacts: list[GaitContactModel]
+    fingers: list[GaitFingerModel]
+
+
+class GaitResultModel(_Response):
+    """What a gait did: its phases, the turn made, the rolls and re-placements, and the
+    fingers the others could not hold the ball without (they rolled throughout)."""
+
+    phases: list[GaitPhaseModel]
+    turned: float = Field(description="the turn made [rad] (the request's when solved)")
+    rolls: int
+    replacements: int
+    never_lifted: list[str] = Field(default_factory=list,
+                                    description="fingers that could not be lifted")
+    wall_time: float = Field(description="planning the whole gait [s]")
+    samples: GaitSamplesModel | None = Field(default=None, description="the gait at the "
+                                                                       "joint trajectory's "
+                                                                       "times")

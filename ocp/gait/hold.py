@@ -1,0 +1,118 @@
+"""Holding the still object with the fingertips that touch it (docs/gait.md, "The hold").
+
+While a fingertip is re-placed the object is held still by the others. Its load is then
+quasi-static and the geometry fixed, so the planned forces of a held grasp are one small
+convex-like problem: the rows of the rolling plan's forces (:func:`~ocp.transcription.loads.
+load_rows`: equilibrium with the weight, every normal force at least the minimum, every
+force inside its friction cone narrowed by the margin) at one point, solved once.
+
+Between two holds of the same geometry the forces move along the straight line from one
+solution to the other: equilibrium is linear and the cones are convex, so every force on
+the line holds the object (the unloading of a fingertip before it lifts: from the grasp's
+forces to the forces without it, its own force going to zero with the ramp; the loading
+after it lands, the reverse).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from ocp.transcription.loads import LOAD_VARS, load_cost, load_rows
+from ocp.transcription.values import load_bounds
+
+__all__ = ["Hold", "HoldResiduals", "hold_forces", "hold_residuals"]
+
+FloatArray = NDArray[np.float64]
+
+_OPTIONS: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
+                            "ipopt.tol": 1e-10, "ipopt.constr_viol_tol": 1e-10,
+                            "ipopt.max_iter": 300}
+_SOLVERS: dict[int, tuple[ca.Function, ca.Function, FloatArray, FloatArray]] = {}
+
+
+@dataclass(frozen=True)
+class Hold:
+    """A still object held by contacts: their points and the object's outward normals
+    there (palm frame, one row each), the object's centre and rotation (palm frame)."""
+
+    points: FloatArray
+    normals: FloatArray
+    centre: FloatArray
+    rotation: FloatArray
+
+    def local(self) -> tuple[FloatArray, FloatArray]:
+        """(points, normals) in the object frame, one column each."""
+        R = self.rotation
+        return R.T @ (self.points - self.centre).T, R.T @ self.normals.T
+
+
+@dataclass(frozen=True)
+class HoldResiduals:
+    """How well forces hold the object [N, N m]: the equilibrium's residual (force and
+    moment, the larger), the least normal force's margin over the minimum (negative:
+    below it), the least cone margin (mu_m f_n - |f_t|; negative: outside)."""
+
+    equilibrium: float
+    normal_margin: float
+    cone_margin: float
+
+
+def _solver(nc: int) -> tuple[ca.Function, ca.Function, FloatArray, FloatArray]:
+    if nc not in _SOLVERS:
+        fl = ca.SX.sym("fl", LOAD_VARS * nc)
+        P, N, R = ca.SX.sym("P", 3, nc), ca.SX.sym("N", 3, nc), ca.SX.sym("R", 3, 3)
+        q, L = ca.SX.sym("load", 8), ca.SX.sym("L")
+        rows, fn = load_rows(P, N, R, fl, q, L)
+        g = ca.vertcat(*[e for e, _, _ in rows])
+        lo = np.concatenate([np.full(int(e.numel()), a) for e, a, _ in rows])
+        hi = np.concatenate([np.full(int(e.numel()), b) for e, _, b in rows])
+        p = ca.vertcat(ca.vec(P), ca.vec(N), ca.vec(R), q, L)
+        solver = ca.nlpsol(f"hold{nc}", "ipopt", {"x": fl, "p": p, "f": load_cost(fl, fn),
+                                                  "g": g}, _OPTIONS)
+        _SOLVERS[nc] = (solver, ca.Function("rows", [fl, p], [g]), lo, hi)
+    return _SOLVERS[nc]
+
+
+def hold_forces(hold: Hold, load: FloatArray, L: float) -> FloatArray | None:
+    """The planned forces [N] (palm frame, one row per contact) that hold the still object
+    with the least effort (:func:`~ocp.transcription.loads.load_cost`), or None when these
+    contacts cannot hold it (no forces inside the cones balance the weight). ``load``: the
+    load parameters (:func:`~ocp.transcription.values.load_parameters`), ``L`` the object's
+    length scale. Hard point contacts: a soft finger's torsion is not used."""
+    nc = len(hold.points)
+    if nc == 0:
+        return None
+    P, N = hold.local()
+    solver, rows, lo, hi = _solver(nc)
+    load = np.array(load, dtype=float)
+    load[4] = 0.0  # hard point contacts: no torsion (conservative; the residuals' model)
+    p = np.concatenate([P.ravel(order="F"), N.ravel(order="F"),
+                        hold.rotation.ravel(order="F"), load, [L]])
+    bound = load_bounds(nc, 1).ravel()
+    res = solver(x0=np.zeros(LOAD_VARS * nc), p=p, lbx=-bound, ubx=bound, lbg=lo, ubg=hi)
+    g = np.asarray(rows(res["x"], p)).ravel()
+    if not solver.stats()["success"] or np.max(np.maximum(lo - g, g - hi)) > 1e-7:
+        return None
+    fl = np.asarray(res["x"]).reshape(nc, LOAD_VARS)
+    F0 = float(load[5])
+    return (hold.rotation @ (fl[:, :3].T * F0)).T
+
+
+def hold_residuals(hold: Hold, forces: FloatArray, load: FloatArray, min_normal: FloatArray
+                   ) -> HoldResiduals:
+    """The residuals of ``forces`` [N] (palm frame, per contact) holding the object with
+    the weight ``load[0:3]`` [N]: the wrench's (about the centre), the normal forces over
+    ``min_normal`` [N] per contact, and the cones (``load[6]``: tan(atan(mu) - margin)).
+    Hard point contacts (the torsion is not checked here)."""
+    r = hold.points - hold.centre
+    wrench_f = forces.sum(axis=0) + load[0:3]
+    wrench_m = np.cross(r, forces).sum(axis=0)
+    fn = -np.einsum("ij,ij->i", forces, hold.normals)
+    ft = np.linalg.norm(forces + fn[:, None] * hold.normals, axis=1)
+    return HoldResiduals(float(max(np.abs(wrench_f).max(), np.abs(wrench_m).max())),
+                         float(np.min(fn - min_normal)), float(np.min(load[6] * fn - ft)))

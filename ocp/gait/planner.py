@@ -1,0 +1,276 @@
+"""Finger gaiting by rolling and re-placing: turn a ball farther than its grasp can roll
+it (docs/gait.md, "The gait").
+
+The strategy, **roll and reset**: roll the ball by a step about the requested axis (the
+rolling planner, every fingertip touching: :class:`~ocp.solve.planner.
+ManipulationPlanner`), then re-place each fingertip that the others can hold without at
+the contact it had when the step began, relative to the palm (a ball turned about its
+centre fills the same space, so the joints it had then touch it again: the grasp, and its
+rolled reach, recur), and roll again, until the turn is made. A fingertip the others cannot
+hold the ball without (the built-in hand's thumb, the only one opposing the three fingers)
+keeps rolling: it bounds the turn.
+
+The plan is phases stitched at rest (docs/gait.md says why): rolls (smooth timing: start
+and end at rest), and per re-placed fingertip unload, swing, load (:mod:`ocp.gait.step`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ocp.certify.certificate import Certificate, Check, CheckKind
+from ocp.gait.hold import hold_forces
+from ocp.gait.step import GaitStep, contact_of, grasp_hold, replace_finger
+from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
+from ocp.solution import ManipulationSolution
+from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
+from ocp.spec.motion import DesiredMotion, ObjectPose
+from ocp.transcription.values import load_parameters
+
+__all__ = ["GaitPhase", "GaitPlan", "plan_gait"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class GaitPhase:
+    """One phase of a gait: ``kind`` (roll, unload, swing, load), its times [s], which
+    fingertips touch the object, the lifted finger's index (None in a roll)."""
+
+    kind: str
+    start: float
+    end: float
+    touching: tuple[bool, ...]
+    lifted: int | None = None
+    index: int = 0  # the roll's or the step's index in the plan's lists
+
+
+@dataclass
+class GaitPlan:
+    """A gait: its phases, the rolls' plans and the gait steps, the certificate of every
+    phase and switch, the status (``"solved"``, ``"infeasible"``, ``"failed"``) and why
+    not, the turn made [rad], the planning's wall time [s]."""
+
+    status: str
+    message: str
+    phases: list[GaitPhase] = field(default_factory=list)
+    rolls: list[ManipulationSolution] = field(default_factory=list)
+    steps: list[GaitStep] = field(default_factory=list)
+    certificate: Certificate = field(default_factory=lambda: Certificate(()))
+    turned: float = 0.0
+    wall_time: float = 0.0
+    nq: tuple[int, ...] = ()
+    #: the fingers the others cannot hold the ball without: they roll throughout
+    never_lifted: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "solved" and self.certificate.passed
+
+    @property
+    def duration(self) -> float:
+        return self.phases[-1].end if self.phases else 0.0
+
+    def joints(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(q, q_dot, q_ddot) of every finger's joints (concatenated) at time ``t``: the
+        phase's own motion (a roll's returned polynomials, a swing's cubics; still in
+        unload and load)."""
+        ph = next((p for p in self.phases if t <= p.end), self.phases[-1])
+        if ph.kind == "roll":
+            jt = self.rolls[ph.index].joint_trajectory(np.array([t - ph.start]))
+            return jt.positions[0], jt.velocities[0], jt.accelerations[0]
+        step = self.steps[ph.index]
+        q = self._before(ph.index)
+        zero = np.zeros_like(q)
+        if ph.kind == "swing" and step.swing is not None:
+            qk, vk, ak = step.swing.sample(t - ph.start)
+            cut = np.cumsum((0, *self.nq))
+            k = step.finger
+            q, v, a = q.copy(), zero.copy(), zero.copy()
+            q[cut[k]:cut[k + 1]], v[cut[k]:cut[k + 1]], a[cut[k]:cut[k + 1]] = qk[0], vk[0], ak[0]
+            return q, v, a
+        if ph.kind == "load":
+            q = np.concatenate(step.q_after)
+        return q, zero, zero
+
+    def _before(self, i: int) -> FloatArray:
+        """Every finger's joints before gait step ``i``."""
+        step = self.steps[i]
+        return np.concatenate([step.swing.spec.q_start if k == step.finger and step.swing
+                               else q for k, q in enumerate(_before_of(self, i))])
+
+
+def _before_of(plan: GaitPlan, i: int) -> tuple[FloatArray, ...]:
+    step = plan.steps[i]
+    q_after = step.q_after
+    k = step.finger
+    assert step.swing is not None
+    return tuple(step.swing.spec.q_start if j == k else q for j, q in enumerate(q_after))
+
+
+def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
+                  pose: ObjectPose, target: FloatArray, centre: FloatArray,
+                  duration: float) -> ManipulationProblem:
+    fingers = tuple(f.finger for f in template.fingers)
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
+    tips = fingertips_from_joints(fingers, qs, template.object, pose, names,
+                                  tuple(f"fingers[{i}].initial_q" for i in range(len(qs))))
+    q0, q1 = pose.orientation, quaternion_wxyz(target)
+    motion = DesiredMotion((0.0, duration),
+                           ((q0[0], q0[1], q0[2], q0[3]),
+                            (float(q1[0]), float(q1[1]), float(q1[2]), float(q1[3]))),
+                           (pose.position, (float(centre[0]), float(centre[1]),
+                                            float(centre[2]))))
+    return replace(template, fingers=tips, initial_pose=pose, motion=motion,
+                   duration=duration)
+
+
+#: A roll the fingers' rolled reach shortens stops this far before the reach: the larger
+#: of a degree and a tenth of it (docs/hands.md: turns 1 deg inside the reach were planned,
+#: 3 deg beyond were not).
+REACH_MARGIN = math.radians(1.0)
+REACH_SHARE = 0.1
+#: The least roll worth planning [rad]: a gait whose fingers cannot roll farther stops.
+MIN_ROLL = math.radians(0.5)
+
+
+def _rolled_reach(template: ManipulationProblem, qs: tuple[FloatArray, ...],
+                  centre: FloatArray, rho: float, axis: FloatArray, upto: float
+                  ) -> tuple[float, str, str]:
+    """(the turn [rad] the grasp at joints ``qs`` rolls about ``axis`` before its first
+    finger stops, at most ``upto``; that finger's name, why it stops): each 4-joint round
+    fingertip's motion rolled (:func:`~ocp.robots.grasp_reach.roll`, the seam kept
+    ``pad_margin`` away)."""
+    from ocp.robots.grasp_reach import roll
+    from ocp.robots.turn_reach import rolls
+
+    best = (upto, "", "")
+    for i, (tip, q) in enumerate(zip(template.fingers, qs, strict=True)):
+        if not rolls(tip.finger):
+            continue
+        r = roll(tip.finger, q, centre, rho, axis, upto, template.pad_margin)
+        if r.why and r.reach < best[0]:  # a stop (a joint limit, the seam, a fold)
+            best = (r.reach, tip.name or f"finger{i}", r.why)
+    return best
+
+
+def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, angle: float,
+              roll_step: float = math.radians(10.0), seconds_per_radian: float = 8.0,
+              planner: Any = None, swing: dict[str, Any] | None = None,
+              hold_time: float = 0.2, max_rolls: int = 40, warm: bool = False) -> GaitPlan:
+    """Turn the ball of ``template`` (a grasp of round fingertips on a ball, with
+    ``forces``: the holds need the object's weight) by ``angle`` [rad] about ``axis``
+    (palm frame) from the joints ``qs`` (one array per finger), rolling by at most
+    ``roll_step`` at a time and re-placing fingertips in between (the module's doc).
+    ``swing``: fields of :class:`~ocp.gait.swing.SwingSpec` (duration, clearance);
+    ``hold_time``: the unloading and loading around each swing [s]."""
+    from ocp.solve.planner import ManipulationPlanner
+
+    t_wall = time.perf_counter()
+    planner = planner or ManipulationPlanner()
+    if template.forces is None:
+        return GaitPlan("infeasible", "a gait needs the object's load (forces): the other "
+                                      "fingertips must hold it while one is lifted")
+    ax = np.asarray(axis, dtype=float)
+    ax = ax / np.linalg.norm(ax)
+    pose0 = template.initial_pose or ObjectPose()
+    R0, centre = pose0.rotation, np.asarray(pose0.position, dtype=float)
+    fingers = tuple(f.finger for f in template.fingers)
+    nf = len(fingers)
+    load = load_parameters(template)
+    rho = float(template.object.dimensions[0])
+    q_now = tuple(np.asarray(q, dtype=float) for q in qs)
+    pose = pose0
+    plan = GaitPlan("solved", "", nq=tuple(int(f.nq) for f in fingers))
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
+    # the fingers the others cannot hold the ball without (they roll throughout)
+    never_lifted = {names[k] for k in range(nf) if hold_forces(grasp_hold(
+        fingers, q_now, [i for i in range(nf) if i != k], centre, rho, R0), load, rho) is None}
+    checks: list[Check] = []
+    t, done = 0.0, 0.0
+    while done < angle - 1e-12 and len(plan.rolls) < max_rolls:
+        step = min(roll_step, angle - done)
+        reach, who, why = _rolled_reach(template, q_now, np.asarray(pose.position, float),
+                                        rho, ax, step)
+        if why and reach < step - 1e-6:  # a finger stops short: roll to just before it
+            step = reach - max(REACH_MARGIN, REACH_SHARE * reach)
+            if step < MIN_ROLL:
+                plan.status = "infeasible"
+                plan.message = (f"finger {who!r} ({why}) stops the turn after "
+                                f"{math.degrees(done + max(reach, 0.0)):.1f} deg of "
+                                f"{math.degrees(angle):.1f} deg about "
+                                f"({', '.join(f'{c:.3g}' for c in ax)}) and cannot be "
+                                "re-placed (the others cannot hold the ball without it)"
+                                if who in never_lifted else
+                                f"finger {who!r} ({why}) stops the turn after "
+                                f"{math.degrees(done + max(reach, 0.0)):.1f} deg even "
+                                "from its re-placed contact")
+                break
+        target = axis_angle_rotation(ax, done + step) @ R0
+        dur = max(1.0, seconds_per_radian * step)
+        prob = _roll_problem(template, q_now, pose, target, centre, dur)
+        sol = planner.solve(prob, plan.rolls[-1] if warm and plan.rolls else None)
+        r = len(plan.rolls)
+        plan.rolls.append(sol)
+        plan.phases.append(GaitPhase("roll", t, t + dur, (True,) * nf, None, r))
+        checks += [replace(c, name=f"roll{r}_{c.name}",
+                           time=None if c.time is None else c.time + t)
+                   for c in sol.certificate.checks]
+        if not (sol.ok and sol.certificate.passed):
+            plan.status = "failed" if plan.rolls[:-1] or sol.ok else "infeasible"
+            plan.message = (f"roll {r} ({math.degrees(done):.1f} to "
+                            f"{math.degrees(done + step):.1f} deg) was not certified: "
+                            f"{sol.status}; " + "; ".join(sol.certificate.failures[:3]))
+            break
+        jt = sol.joint_trajectory(np.array([dur]))
+        q_end = np.split(jt.positions[0], np.cumsum(plan.nq)[:-1])
+        checks.append(Check(f"switch_rate_roll{r}", float(np.abs(jt.velocities[0]).max()),
+                            1e-9, CheckKind.PHYSICS, time=t + dur))
+        t += dur
+        done += step
+        pose = ObjectPose(tuple(quaternion_wxyz(sol.object_rotation[-1])),
+                          tuple(sol.object_position[-1]))
+        q_start = q_now
+        q_now = tuple(q_end)
+        if done >= angle - 1e-12:
+            break
+        for k in range(nf):  # re-place every fingertip the others can hold without
+            _, n_back = contact_of(fingers[k], q_start[k], centre, rho)
+            gs = replace_finger(fingers, q_now, k, n_back, q_start[k],
+                                np.asarray(pose.position, dtype=float), rho, pose.rotation,
+                                load, swing, hold_time)
+            if gs.status == "infeasible" and gs.swing is None:
+                never_lifted.add(names[k])
+                continue  # it keeps rolling
+            i = len(plan.steps)
+            plan.steps.append(gs)
+            if not gs.ok or gs.swing is None:
+                plan.status, plan.message = "failed", f"gait step {i}: {gs.message}"
+                break
+            touching = tuple(j != k for j in range(nf))
+            t1, t2 = t + gs.unload, t + gs.unload + gs.swing.duration
+            plan.phases += [GaitPhase("unload", t, t1, (True,) * nf, k, i),
+                            GaitPhase("swing", t1, t2, touching, k, i),
+                            GaitPhase("load", t2, t2 + gs.load_time, (True,) * nf, k, i)]
+            fmin = template.forces.min_normal_force
+            checks += gs.checks(f"step{i}", t, load, fmin)
+            jump = float(np.abs(gs.swing.Q[0] - q_now[k]).max())
+            checks.append(Check(f"switch_position_step{i}", jump, 1e-12, CheckKind.PHYSICS,
+                                time=t))
+            q_now = gs.q_after
+            t = t2 + gs.load_time
+        if plan.status != "solved":
+            break
+    plan.turned = done
+    plan.never_lifted = tuple(nm for nm in names if nm in never_lifted)
+    if plan.status == "solved" and done < angle - 1e-9:
+        plan.status, plan.message = "failed", f"{max_rolls} rolls did not make the turn"
+    plan.certificate = Certificate.of(checks)
+    plan.wall_time = time.perf_counter() - t_wall
+    return plan

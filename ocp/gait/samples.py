@@ -1,0 +1,115 @@
+"""A gait at given times (docs/gait.md): every finger's joints, the object's pose, each
+fingertip's contact (point, normal, planned force) and its activity, and the tips'
+poses; what the wire result carries and what the simulator executes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ocp.gait.planner import GaitPlan
+from ocp.gait.step import contact_of
+from ocp.geometry.rotations import quaternion_wxyz
+
+__all__ = ["TRANSITION", "GaitSamples", "gait_samples", "gait_times"]
+
+FloatArray = NDArray[np.float64]
+
+#: A contact's activity in a swing's lift-off and approach: planned to leave or reach the
+#: object there, neither touching (1) nor lifted clear of it (0).
+TRANSITION = 0.25
+
+
+@dataclass(frozen=True)
+class GaitSamples:
+    """A gait at the times ``t`` [s] (rows): every finger's joint angles, rates and
+    accelerations (the fingers' columns one after the other), the object's centre and
+    orientation (w, x, y, z), per fingertip (axis 1) its contact's point and the object's
+    outward normal there (palm frame; where the line of centres meets the ball, also when
+    lifted), the force it applies to the object [N] (zero when lifted) and its activity
+    (1 touching, 0 lifted clear, between: the force ramps and the lift-off and approach,
+    :data:`TRANSITION` at least), and each tip frame's pose."""
+
+    t: FloatArray
+    q: FloatArray
+    q_dot: FloatArray
+    q_ddot: FloatArray
+    object_position: FloatArray
+    object_wxyz: FloatArray
+    point: FloatArray
+    normal: FloatArray
+    force: FloatArray
+    active: FloatArray
+    tip_position: FloatArray
+    tip_wxyz: FloatArray
+
+
+def gait_times(gait: GaitPlan, rate: float) -> FloatArray:
+    """Times at ``rate`` [Hz] over the gait, and every switch."""
+    t = np.linspace(0.0, gait.duration, max(2, int(np.ceil(gait.duration * rate)) + 1))
+    edges = [p.start for p in gait.phases] + [gait.duration]
+    return np.unique(np.concatenate([t, edges]))
+
+
+def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
+    """The gait planned from the grasp ``problem`` at the times ``ts`` (increasing)."""
+    if not gait.phases:
+        raise ValueError("the gait has no phases")
+    fingers = tuple(f.finger for f in problem.fingers)
+    nf = len(fingers)
+    cut = np.cumsum((0, *gait.nq))
+    rho = float(problem.object.dimensions[0])
+    n = ts.size
+    Q, QD, QDD = (np.zeros((n, int(cut[-1]))) for _ in range(3))
+    pos, wxyz = np.zeros((n, 3)), np.zeros((n, 4))
+    force = np.zeros((n, nf, 3))
+    active = np.ones((n, nf))
+    pose = problem.initial_pose
+    last = (np.asarray(pose.position, dtype=float), pose.rotation)
+    phase_of = np.array([next((j for j, p in enumerate(gait.phases) if t <= p.end + 1e-12),
+                              len(gait.phases) - 1) for t in ts])
+    for j, ph in enumerate(gait.phases):
+        if ph.kind == "roll":
+            sol = gait.rolls[ph.index]
+            end = (sol.object_position[-1], sol.object_rotation[-1])
+        rows = np.flatnonzero(phase_of == j)
+        if not rows.size:
+            if ph.kind == "roll":
+                last = end
+            continue
+        tl = ts[rows] - ph.start
+        if ph.kind == "roll":  # the roll's own polynomials, every time at once
+            jt = sol.joint_trajectory(tl)
+            Q[rows], QD[rows], QDD[rows] = jt.positions, jt.velocities, jt.accelerations
+            smp = sol.sample(tl)
+            pos[rows], wxyz[rows] = smp.object_position, quaternion_wxyz(smp.object_rotation)
+            force[rows] = sol.forces(tl)[0]
+            last = end
+            continue
+        for r, t in zip(rows, ts[rows], strict=True):
+            Q[r], QD[r], QDD[r] = gait.joints(float(t))
+        pos[rows], wxyz[rows] = last[0], quaternion_wxyz(last[1])
+        step = gait.steps[ph.index]
+        k = step.finger
+        s = np.clip(tl / max(ph.end - ph.start, 1e-12), 0.0, 1.0)
+        if ph.kind == "swing":
+            force[rows] = np.insert(step.forces[1], k, 0.0, axis=0)
+            assert step.swing is not None
+            active[rows, k] = [0.0 if step.swing.segment(float(x)) == "clear"
+                               else TRANSITION for x in tl]
+        else:
+            force[rows] = np.array([step.ramp_forces(ph.kind, float(x)) for x in s])
+            active[rows, k] = np.maximum(1.0 - s if ph.kind == "unload" else s, TRANSITION)
+    points, normals = np.zeros((n, nf, 3)), np.zeros((n, nf, 3))
+    tip_p, tip_q = np.zeros((n, nf, 3)), np.zeros((n, nf, 4))
+    for i in range(n):
+        for c, f in enumerate(fingers):
+            qc = Q[i, cut[c]:cut[c + 1]]
+            points[i, c], normals[i, c] = contact_of(f, qc, pos[i], rho)
+            R, p = f.fingertip_pose_pin(qc)
+            tip_p[i, c], tip_q[i, c] = p, quaternion_wxyz(R)
+    return GaitSamples(ts, Q, QD, QDD, pos, wxyz, points, normals, force, active, tip_p,
+                       tip_q)

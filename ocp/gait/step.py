@@ -1,0 +1,164 @@
+"""One gait step: a fingertip re-placed on the still object while the others hold it
+(docs/gait.md). Three phases: **unload** (nothing moves; the forces go along a straight
+line from the grasp's to the forces without this fingertip, its own to zero), **swing**
+(:mod:`ocp.gait.swing`; the others hold with the forces without it), **load** (nothing
+moves; back to forces with every fingertip, the landed one's from zero)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ocp.certify.certificate import Check, CheckKind
+from ocp.gait.bodies import tip_body
+from ocp.gait.checks import hold_checks, swing_checks
+from ocp.gait.hold import Hold, hold_forces
+from ocp.gait.swing import SwingPlan, SwingSpec, plan_swing
+
+__all__ = ["GaitStep", "contact_of", "grasp_hold", "replace_finger"]
+
+FloatArray = NDArray[np.float64]
+
+#: Samples of each force ramp the certificate checks.
+RAMP_SAMPLES = 11
+
+
+def contact_of(finger: Any, q: FloatArray, centre: FloatArray, radius: float
+               ) -> tuple[FloatArray, FloatArray]:
+    """(point, outward normal) of a round fingertip's contact on a ball, palm frame: where
+    the line of centres meets the ball."""
+    R, p = finger.fingertip_pose_pin(q)
+    a = p + R @ tip_body(finger).a
+    n = (a - centre) / np.linalg.norm(a - centre)
+    return centre + radius * n, n
+
+
+def grasp_hold(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
+          centre: FloatArray, radius: float, rotation: FloatArray) -> Hold:
+    """The still ball held by the fingertips ``which`` of a grasp at joints ``qs``."""
+    pn = [contact_of(fingers[i], qs[i], centre, radius) for i in which]
+    return Hold(np.array([p for p, _ in pn]), np.array([n for _, n in pn]), centre,
+                rotation)
+
+
+@dataclass(frozen=True)
+class GaitStep:
+    """Fingertip ``finger`` re-placed: the holds and their forces [N] (palm frame, one row
+    per contact in ``which``) before, during and after the swing, the swing, the phases'
+    durations, and why not (``status`` ``"solved"``, ``"infeasible"``: the others cannot
+    hold the object, or the swing was not found)."""
+
+    finger: int
+    status: str
+    message: str
+    swing: SwingPlan | None
+    holds: tuple[Hold, ...] = ()
+    forces: tuple[FloatArray, ...] = ()
+    which: tuple[tuple[int, ...], ...] = ()
+    unload: float = 0.2
+    load_time: float = 0.2
+    q_after: tuple[FloatArray, ...] = field(default_factory=tuple)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "solved"
+
+    @property
+    def duration(self) -> float:
+        return self.unload + (self.swing.duration if self.swing else 0.0) + self.load_time
+
+    def ramp_forces(self, which: str, s: float) -> FloatArray:
+        """The forces of every contact of the grasp (a row each, zeros for the lifted one)
+        at the fraction ``s`` of the ``"unload"`` or ``"load"`` ramp."""
+        full_before, lifted, full_after = self.forces
+        n = len(self.which[0])
+        k = self.which[0].index(self.finger)
+        mid = np.insert(lifted, k, 0.0, axis=0)
+        assert len(mid) == n
+        if which == "unload":
+            return (1 - s) * full_before + s * mid
+        return (1 - s) * mid + s * full_after
+
+    def checks(self, label: str, t0: float, load: FloatArray, min_normal: float
+               ) -> list[Check]:
+        """The step's laws: the swing's (:func:`~ocp.gait.checks.swing_checks`), and at
+        samples of the ramps and the swing the hold's with the forces there: every held
+        contact at least ``min_normal`` [N], the lifting (landing) one at least the ramp's
+        share of it, zero at the lift-off (touch-down)."""
+        if not self.ok or self.swing is None:
+            return [Check(f"gait_step_{label}", 1.0, 0.0, CheckKind.PHYSICS,
+                          reason=self.message)]
+        out: list[Check] = []
+        n = len(self.which[0])
+        k = self.which[0].index(self.finger)
+        ts_swing = t0 + self.unload
+        t_load = ts_swing + self.swing.duration
+        for name, hold, start, dur in (("unload", self.holds[0], t0, self.unload),
+                                       ("load", self.holds[2], t_load, self.load_time)):
+            for s in np.linspace(0.0, 1.0, RAMP_SAMPLES):
+                F = self.ramp_forces(name, float(s))
+                share = (1 - s) if name == "unload" else s
+                fmin = np.full(n, min_normal)
+                fmin[k] = share * min_normal
+                out += hold_checks(hold, F, load, fmin, f"{name}_{label}",
+                                   float(start + s * dur))
+            edge = self.ramp_forces(name, 1.0 if name == "unload" else 0.0)[k]
+            out.append(Check(f"{'liftoff' if name == 'unload' else 'touchdown'}_force_"
+                             f"{label}", float(np.linalg.norm(edge)), 1e-12,
+                             CheckKind.PHYSICS, time=float(start + (dur if name == "unload"
+                                                                    else 0.0))))
+        out += hold_checks(self.holds[1], self.forces[1], load,
+                           np.full(n - 1, min_normal), f"swing_{label}", ts_swing)
+        out += swing_checks(self.swing, label, ts_swing)
+        return out
+
+
+def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
+                   landing_normal: FloatArray, q_target: FloatArray, centre: FloatArray,
+                   radius: float, rotation: FloatArray, load: FloatArray,
+                   swing: dict[str, Any] | None = None, hold_time: float = 0.2
+                   ) -> GaitStep:
+    """Re-place fingertip ``k`` of a grasp of a still ball (``fingers`` at the joints
+    ``qs``, every tip touching) at the contact whose outward normal is ``landing_normal``
+    (palm frame), its joints seeded by ``q_target``. ``load``: the load parameters
+    (:func:`~ocp.transcription.values.load_parameters`); ``swing``: fields of the
+    :class:`~ocp.gait.swing.SwingSpec` (duration, clearance, ...); ``hold_time``: the
+    unloading's and the loading's duration [s]. A grasp whose other
+    fingertips cannot hold the object is ``infeasible`` at once, naming the finger."""
+    L = radius
+    allf = list(range(len(fingers)))
+    rest = [i for i in allf if i != k]
+    before = grasp_hold(fingers, qs, allf, centre, radius, rotation)
+    during = grasp_hold(fingers, qs, rest, centre, radius, rotation)
+    name = fingers[k].joint_names[0].rsplit("_", 1)[0] if fingers[k].joint_names else str(k)
+    F_before = hold_forces(before, load, L)
+    F_during = hold_forces(during, load, L)
+    if F_before is None or F_during is None:
+        why = ("the grasp cannot hold the object" if F_before is None else
+               f"the other fingertips cannot hold the object with {name} lifted (no forces "
+               "inside their friction cones balance its weight)")
+        return GaitStep(k, "infeasible", why, None)
+    others = []
+    for i in rest:
+        R, p = fingers[i].fingertip_pose_pin(qs[i])
+        a, b = tip_body(fingers[i]).placed(R, p)
+        others.append((a, b, tip_body(fingers[i]).r))
+    spec = SwingSpec(fingers[k], np.asarray(qs[k], dtype=float),
+                     np.asarray(q_target, dtype=float), np.asarray(landing_normal, float),
+                     np.asarray(centre, dtype=float), float(radius), tuple(others),
+                     **(swing or {}))
+    plan = plan_swing(spec)
+    if not plan.ok:
+        return GaitStep(k, plan.status, plan.message, plan)
+    q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)
+    after = grasp_hold(fingers, q_after, allf, centre, radius, rotation)
+    F_after = hold_forces(after, load, L)
+    if F_after is None:
+        return GaitStep(k, "infeasible", f"the grasp with {name} landed cannot hold the "
+                                         "object", plan)
+    return GaitStep(k, "solved", "", plan, (before, during, after),
+                    (F_before, F_during, F_after), (tuple(allf), tuple(rest), tuple(allf)),
+                    hold_time, hold_time, q_after)

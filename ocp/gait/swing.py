@@ -1,0 +1,355 @@
+"""The swing of a fingertip: lifted off the still object, carried clear, landed elsewhere
+(docs/gait.md, "The swing").
+
+One finger moves; the object and the other fingers are still (they hold the object:
+:mod:`ocp.gait.hold`). The finger's joints are a jerk-driven triple integrator on a grid
+(states q, q_dot, q_ddot at the nodes, a constant jerk on each interval, integrated
+exactly), so the joint angles are cubic, the rates quadratic and the accelerations
+continuous and piecewise linear: the acceleration limit holds everywhere where it holds
+at the nodes, and the swing starts and ends at rest with zero acceleration (its switches
+to the neighbouring phases are continuous up to the accelerations).
+
+The rows (at the nodes; the certificate samples the returned cubic densely):
+
+* **lift-off** (the first ``lift`` intervals): the cap's centre moves along the object's
+  normal at the contact it leaves (two tangential rows zero, the normal one >= 0), the
+  tip's body never inside the object;
+* **clear** (between lift-off and approach): the tip's body (sphere or capsule,
+  :mod:`ocp.gait.bodies`) at least ``clearance`` from the object;
+* **approach** (the last ``lift`` intervals): along the landing normal to the landing
+  point, never inside the object;
+* **touch-down**: the cap's centre exactly over the landing point at the tip's radius
+  (its surface touches the object there), the contact on the cap (not its cylinder), at
+  rest (zero relative normal speed: the object is still);
+* **the other fingertips**: the tip's body at least ``min(clearance, 90 % of the gap at
+  the start and at the landing)`` from each of theirs, at every node;
+* joint limits (backed off as the rolling plan's), velocity limits, the acceleration
+  limit.
+
+The objective: the jerk's integral (squared, scaled), and the landing joints near the
+target's (the landing point fixes the cap's centre; a 4-joint finger keeps one degree of
+freedom there).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from ocp.contacts.base import backed_off_joint_limits
+from ocp.gait.bodies import TipBody, point_segment_distance, tip_body
+
+__all__ = ["SwingPlan", "SwingSpec", "plan_swing"]
+
+FloatArray = NDArray[np.float64]
+
+#: Points of the moving tip's segment at which its distance to another tip is kept.
+SEGMENT_SAMPLES = 5
+_IPOPT: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
+                          "ipopt.tol": 1e-9, "ipopt.constr_viol_tol": 1e-10,
+                          "ipopt.max_iter": 500}
+
+
+@dataclass(frozen=True)
+class SwingSpec:
+    """One fingertip's swing. ``finger``: its model (:class:`~ocp.robots.finger.
+    FingerModel`, a sphere or capsule tip); ``q_start``: its joints, touching the object;
+    ``q_target``: joints near the landing (the seed; its cap need not touch);
+    ``landing_normal``: the object's outward normal where it lands (palm frame); the
+    object, a ball of ``radius`` at ``centre`` (palm frame, still); ``others``: the other
+    fingertips' bodies as palm-frame segments (a, b, r), still."""
+
+    finger: Any
+    q_start: FloatArray
+    q_target: FloatArray
+    landing_normal: FloatArray
+    centre: FloatArray
+    radius: float
+    others: tuple[tuple[FloatArray, FloatArray, float], ...] = ()
+    duration: float = 0.8
+    n_intervals: int = 24
+    #: intervals of the lift-off and of the approach, each
+    lift_intervals: int = 4
+    clearance: float = 0.003
+    max_joint_acceleration: float = 20.0
+    #: the landing contact's least arc from the cap's seam [m]
+    cap_margin: float = 0.002
+
+    @property
+    def body(self) -> TipBody:
+        return tip_body(self.finger)
+
+    def start_normal(self) -> FloatArray:
+        """The object's outward normal where the tip leaves it (through the cap's centre)."""
+        R, p = self.finger.fingertip_pose_pin(self.q_start)
+        a = p + R @ self.body.a
+        return (a - self.centre) / np.linalg.norm(a - self.centre)
+
+    def landing_point(self) -> FloatArray:
+        """Where the cap's centre is at touch-down (palm frame)."""
+        n = np.asarray(self.landing_normal, dtype=float)
+        return self.centre + (self.radius + self.body.r) * n / np.linalg.norm(n)
+
+    def required_gaps(self) -> tuple[float, ...]:
+        """The least distance kept from each other tip: ``clearance``, or 90 % of the gap
+        at the start or at the landing if smaller."""
+        out = []
+        for a1, b1, r1 in self.others:
+            gaps = [_body_gap(self.finger, self.body, q, a1, b1, r1)
+                    for q in (self.q_start, self.q_target)]
+            out.append(min(self.clearance, 0.9 * min(gaps)))
+        return tuple(out)
+
+
+def _body_gap(finger: Any, body: TipBody, q: FloatArray, a1: FloatArray, b1: FloatArray,
+              r1: float) -> float:
+    from ocp.gait.bodies import segment_distance
+
+    R, p = finger.fingertip_pose_pin(q)
+    a0, b0 = body.placed(R, p)
+    return segment_distance(a0, b0, a1, b1) - body.r - r1
+
+
+@dataclass(frozen=True)
+class SwingPlan:
+    """A swing's joint motion on its grid (nodes at ``t``): angles ``Q``, rates ``V``,
+    accelerations ``A`` (rows = nodes), the jerk ``J`` of each interval; the status
+    (``"solved"`` or why not) and IPOPT's iterations and time."""
+
+    spec: SwingSpec
+    status: str
+    message: str
+    t: FloatArray
+    Q: FloatArray
+    V: FloatArray
+    A: FloatArray
+    J: FloatArray
+    iterations: int
+    solve_time: float
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "solved"
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1])
+
+    def sample(self, t: Any) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(q, q_dot, q_ddot) at times ``t`` [s from the swing's start]: the returned cubic
+        itself (rows = times)."""
+        tt = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        h = self.duration / (len(self.t) - 1)
+        k = np.minimum((tt / h).astype(int), len(self.t) - 2)
+        s = (tt - self.t[k])[:, None]
+        q, v, a, j = self.Q[k], self.V[k], self.A[k], self.J[k]
+        return (q + v * s + a * s**2 / 2 + j * s**3 / 6, v + a * s + j * s**2 / 2, a + j * s)
+
+    def segment(self, t: float) -> str:
+        """Which part of the swing ``t`` is in: ``lift``, ``clear`` or ``approach``."""
+        h = self.duration / (len(self.t) - 1)
+        k = self.spec.lift_intervals * h
+        if t < k:
+            return "lift"
+        if t > self.duration - k:
+            return "approach"
+        return "clear"
+
+
+def _tangents(n: FloatArray) -> tuple[FloatArray, FloatArray]:
+    e = np.eye(3)[int(np.argmin(np.abs(n)))]
+    t1 = np.cross(n, e)
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(n, t1)
+
+
+def _lifted(finger: Any, body: TipBody, q: FloatArray, centre: FloatArray, rho: float,
+            height: float) -> FloatArray:
+    """``q`` moved (a few Gauss-Newton steps, least joint motion) so that the cap's centre
+    is ``height`` farther from the object along the line of centres: the guess's lift."""
+    q = np.array(q, dtype=float)
+    for _ in range(5):
+        R, p = finger.fingertip_pose_pin(q)
+        a = p + R @ body.a
+        d = a - centre
+        dist = float(np.linalg.norm(d))
+        want = rho + body.r + height
+        if abs(dist - want) < 1e-6:
+            break
+        J = finger.frame_jacobian_pin(q)
+        Jc = J[:3] - np.cross(R @ body.a, J[3:].T).T
+        target = d / dist * (want - dist)
+        q = np.clip(q + np.linalg.lstsq(Jc, target, rcond=None)[0], finger.lower,
+                    finger.upper)
+    return q
+
+
+def _guess(spec: SwingSpec) -> FloatArray:
+    """Joint angles at the nodes: lift along the normal, carry at the clearance plus 2 mm,
+    approach along the landing normal (each joint-space straight, then lifted)."""
+    f, body, n, K = spec.finger, spec.body, spec.n_intervals, spec.lift_intervals
+    up = spec.clearance + 0.002
+    q0 = np.asarray(spec.q_start, dtype=float)
+    q1 = np.asarray(spec.q_target, dtype=float)
+    s = np.linspace(0.0, 1.0, n + 1)
+    ease = s * s * s * (10 - 15 * s + 6 * s * s)
+    Q = q0 + ease[:, None] * (q1 - q0)
+    for k in range(1, n):
+        h = up * min(1.0, k / K, (n - k) / K)
+        Q[k] = _lifted(f, body, Q[k], spec.centre, spec.radius, h)
+    return Q
+
+
+#: The swing NLPs built, by (finger, intervals, lift intervals, other tips): the
+#: geometry, the times and the margins are parameters.
+_SOLVERS: dict[tuple[int, int, int, int], tuple[Any, FloatArray, FloatArray, Any]] = {}
+
+
+def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
+               ) -> tuple[Any, FloatArray, FloatArray, Any]:
+    """(solver, lbg, ubg, the finger it is for) of the swing NLP of finger ``f`` (see the
+    module's doc), built once; the parameters in :func:`_swing_params`' order."""
+    key = (id(f), n, K, n_others)
+    if key in _SOLVERS and _SOLVERS[key][3] is f:
+        return _SOLVERS[key]
+    nq = int(f.nq)
+    P = ca.SX.sym("p", 2 * nq + 31 + 8 * n_others)
+    q_start, q_target = P[0:nq], P[nq:2 * nq]
+    o = 2 * nq
+    T, clearance, cap_sin, rho = P[o], P[o + 1], P[o + 2], P[o + 3]
+    centre, a_start, n0, t0a, t0b = (P[o + 4 + 3 * i:o + 7 + 3 * i] for i in range(5))
+    a_land, n1, t1a, t1b = (P[o + 19 + 3 * i:o + 22 + 3 * i] for i in range(4))
+    oth = ca.reshape(P[o + 31:], 8, n_others) if n_others else None
+    h = T / n
+    Q, V, A = (ca.SX.sym(s, nq, n + 1) for s in ("Q", "V", "A"))
+    Jn = ca.SX.sym("J", nq, n)
+    Vp, Ap, Jp = V / T, A / T**2, Jn / T**3  # variables scaled by the duration
+    a_loc, b_loc = ca.DM(body.a), ca.DM(body.b)
+    capsule = bool(np.linalg.norm(body.b - body.a) > 0)
+    r = body.r
+    L = rho + r
+    rows: list[tuple[Any, float, float]] = []
+
+    def add(e: Any, lo: float, hi: float) -> None:
+        rows.append((e, lo, hi))
+
+    add(Q[:, 0] - q_start, 0.0, 0.0)
+    for k in range(n):  # exact integration of the jerk
+        qk, vk, ak, jk = Q[:, k], Vp[:, k], Ap[:, k], Jp[:, k]
+        add((Q[:, k + 1] - (qk + h * vk + h * h / 2 * ak + h**3 / 6 * jk)), 0.0, 0.0)
+        add((Vp[:, k + 1] - (vk + h * ak + h * h / 2 * jk)) * T, 0.0, 0.0)
+        add((Ap[:, k + 1] - (ak + h * jk)) * T * T, 0.0, 0.0)
+    for k in range(1, n + 1):
+        R, p = f.fk(Q[:, k])
+        a, b = p + R @ a_loc, p + R @ b_loc
+        dist = point_segment_distance(centre, a, b) - L
+        if k == n:  # touch-down: the cap's centre over the landing point, on the cap
+            add((a - a_land) / L, 0.0, 0.0)
+            if capsule:
+                u = (b - a) / float(np.linalg.norm(body.b - body.a))
+                add(ca.dot(centre - a, u) / L + cap_sin, -np.inf, 0.0)
+            continue
+        if k in (K, n - K):  # the clear part's ends
+            add((dist - clearance) / L, 0.0, np.inf)
+        if k <= K:  # lift-off along the normal
+            d = a - a_start
+            add(ca.vertcat(ca.dot(d, t0a), ca.dot(d, t0b)) / L, 0.0, 0.0)
+            add(ca.dot(d, n0) / L, 0.0, np.inf)
+            add(dist / L, 0.0, np.inf)
+        elif k >= n - K:  # approach along the landing normal
+            d = a - a_land
+            add(ca.vertcat(ca.dot(d, t1a), ca.dot(d, t1b)) / L, 0.0, 0.0)
+            add(ca.dot(d, n1) / L, 0.0, np.inf)
+            add(dist / L, 0.0, np.inf)
+        else:
+            add((dist - clearance) / L, 0.0, np.inf)
+        for j in range(n_others):
+            assert oth is not None
+            a1, b1, r1, need = oth[0:3, j], oth[3:6, j], oth[6, j], oth[7, j]
+            for s in np.linspace(0.0, 1.0, SEGMENT_SAMPLES if capsule else 1):
+                x = a + float(s) * (b - a)
+                add((point_segment_distance(x, a1, b1) - r - r1 - need) / L, 0.0, np.inf)
+    jref = 20.0 * n  # the jerk's scale in the effort
+    cost = h / T * ca.sumsqr(Jp / jref) + 10.0 * ca.sumsqr(Q[:, n] - q_target)
+    w = ca.vertcat(ca.vec(Q), ca.vec(V), ca.vec(A), ca.vec(Jn))
+    g = ca.vertcat(*[e for e, _, _ in rows])
+    lbg = np.concatenate([np.full(int(e.numel()), lo) for e, lo, _ in rows])
+    ubg = np.concatenate([np.full(int(e.numel()), hi) for e, _, hi in rows])
+    solver = ca.nlpsol("swing", "ipopt", {"x": w, "p": P, "f": cost, "g": g}, _IPOPT)
+    _SOLVERS[key] = (solver, lbg, ubg, f)
+    return _SOLVERS[key]
+
+
+def _swing_params(spec: SwingSpec) -> FloatArray:
+    body = spec.body
+    n0 = spec.start_normal()
+    n1 = np.asarray(spec.landing_normal, dtype=float)
+    n1 = n1 / np.linalg.norm(n1)
+    R0, p0 = spec.finger.fingertip_pose_pin(spec.q_start)
+    cap_sin = float(np.sin(spec.cap_margin / body.r))
+    others = [np.concatenate([a1, b1, [r1, need]]) for (a1, b1, r1), need
+              in zip(spec.others, spec.required_gaps(), strict=True)]
+    return np.concatenate([spec.q_start, spec.q_target,
+                           [spec.duration, spec.clearance, cap_sin, spec.radius],
+                           spec.centre, p0 + R0 @ body.a, n0, *_tangents(n0),
+                           spec.landing_point(), n1, *_tangents(n1),
+                           np.concatenate(others, axis=None) if others else []])
+
+
+def plan_swing(spec: SwingSpec) -> SwingPlan:
+    """Solve the swing's NLP (see the module's doc; built once per finger and grid)."""
+    f, body = spec.finger, spec.body
+    nq, n, K = int(f.nq), spec.n_intervals, spec.lift_intervals
+    T = float(spec.duration)
+    h = T / n
+    solver, lbg, ubg, _ = _swing_nlp(f, body, n, K, len(spec.others))
+    vs, as_, js = 1.0 / T, 1.0 / T**2, 1.0 / T**3
+    lo_q, hi_q = backed_off_joint_limits(f)
+    vmax = np.asarray(f.velocity_limit, dtype=float)
+    amax = spec.max_joint_acceleration
+    lbq, ubq = np.tile(lo_q, (n + 1, 1)), np.tile(hi_q, (n + 1, 1))
+    lbq[0], ubq[0] = np.minimum(lo_q, spec.q_start), np.maximum(hi_q, spec.q_start)
+    lbv, ubv = np.tile(-vmax / vs, (n + 1, 1)), np.tile(vmax / vs, (n + 1, 1))
+    lbv[0] = ubv[0] = lbv[-1] = ubv[-1] = 0.0
+    lba, uba = np.full((n + 1, nq), -amax / as_), np.full((n + 1, nq), amax / as_)
+    lba[0] = uba[0] = lba[-1] = uba[-1] = 0.0
+    bj = np.full((n, nq), np.inf)
+    lbw = np.concatenate([lbq.ravel(), lbv.ravel(), lba.ravel(), -bj.ravel()])
+    ubw = np.concatenate([ubq.ravel(), ubv.ravel(), uba.ravel(), bj.ravel()])
+
+    Qg = np.clip(_guess(spec), lbq, ubq)
+    Vg = np.gradient(Qg, h, axis=0)
+    Vg[0] = Vg[-1] = 0.0
+    Ag = np.gradient(Vg, h, axis=0)
+    Ag[0] = Ag[-1] = 0.0
+    Jg = np.diff(Ag, axis=0) / h
+    w0 = np.concatenate([Qg.ravel(), (Vg / vs).ravel(), (Ag / as_).ravel(),
+                         (Jg / js).ravel()])
+    t_start = time.perf_counter()
+    res = solver(x0=np.clip(w0, lbw, ubw), p=_swing_params(spec), lbx=lbw, ubx=ubw,
+                 lbg=lbg, ubg=ubg)
+    elapsed = time.perf_counter() - t_start
+    st = solver.stats()
+    x = np.asarray(res["x"]).ravel()
+    m = nq * (n + 1)
+    Qs = x[:m].reshape(n + 1, nq)
+    Vs = x[m:2 * m].reshape(n + 1, nq) * vs
+    As = x[2 * m:3 * m].reshape(n + 1, nq) * as_
+    Js = x[3 * m:].reshape(n, nq) * js
+    ok = bool(st["success"])
+    status = "solved" if ok else "infeasible" if "Infeasible" in st["return_status"] \
+        else "failed"
+    message = "" if ok else (f"the swing of {_name(spec)} was not found: IPOPT "
+                             f"{st['return_status']}")
+    return SwingPlan(spec, status, message, np.linspace(0.0, T, n + 1), Qs, Vs, As, Js,
+                     int(st["iter_count"]), elapsed)
+
+
+def _name(spec: SwingSpec) -> str:
+    names = getattr(spec.finger, "joint_names", ())
+    return f"the finger of {names[0]}" if names else "the finger"

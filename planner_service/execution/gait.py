@@ -1,0 +1,51 @@
+"""A gait's execution in MuJoCo (docs/gait.md, "Executed"): the simulator's plan of a
+:class:`~ocp.gait.planner.GaitPlan`, every fingertip's contact with its planned activity
+(lifted in its swing, its force ramped in the unloading and loading around it)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ocp import GaitPlan, GaitSamples, gait_samples, gait_times
+
+from . import finger_spec
+
+__all__ = ["gait_execution_plan", "samples_execution_plan"]
+
+
+def gait_execution_plan(gait: GaitPlan, problem: Any, rate: float = 200.0) -> Any:
+    """The simulator's plan (a :class:`sim.ExecutionPlan`) of ``gait``, planned from the
+    grasp ``problem`` (its fingers, object, friction and load), sampled at ``rate`` [Hz]
+    and at every switch."""
+    smp = gait_samples(gait, problem, gait_times(gait, rate))
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(problem.fingers))
+    load = problem.forces
+    return samples_execution_plan(smp, names, tuple(f.finger for f in problem.fingers),
+                                  problem.object.shape,
+                                  tuple(float(d) for d in problem.object.dimensions),
+                                  float(load.mass), float(problem.mu), tuple(load.gravity))
+
+
+def samples_execution_plan(smp: GaitSamples, names: tuple[str, ...], models: tuple[Any, ...],
+                           shape: str, dimensions: tuple[float, ...], mass: float, mu: float,
+                           gravity: tuple[float, ...], notes: tuple[str, ...] = ()) -> Any:
+    """The simulator's plan of a gait's samples: the fingertips' planned forces fed
+    forward (J^T f); a lifted fingertip has no force, no squeeze and no grip (its
+    contact's ``active``)."""
+    from sim import ContactSpec, ExecutionPlan, FingerReference, ObjectSpec
+
+    cut = np.cumsum((0, *(int(m.nq) for m in models)))
+    specs = tuple(finger_spec(nm, m) for nm, m in zip(names, models, strict=True))
+    refs = tuple(FingerReference(smp.q[:, cut[k]:cut[k + 1]], smp.q_dot[:, cut[k]:cut[k + 1]],
+                                 None, smp.force[:, k]) for k in range(len(models)))
+    contacts = tuple(ContactSpec(nm, "finger", nm, smp.point[:, k], smp.normal[:, k],
+                                 smp.active[:, k]) for k, nm in enumerate(names))
+    plan = ExecutionPlan(smp.t, ObjectSpec(shape, dimensions, mass), smp.object_position,
+                         smp.object_wxyz, specs, refs, contacts, None, mu, None,
+                         (float(gravity[0]), float(gravity[1]), float(gravity[2])),
+                         ("a gait: planned lift-offs and touch-downs (contacts' activity)",
+                          *notes))
+    plan.check()
+    return plan

@@ -1,0 +1,154 @@
+"""Finger gaiting through the manipulation planner's doors (docs/gait.md): a request with
+``gait`` is planned by :func:`ocp.gait.planner.plan_gait` from the request's grasp, and
+answered with the gait's phases, the joint trajectory over the whole plan and the
+certificate of every phase and switch."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from dexroll_client.models import (
+    DurationModel,
+    GaitContactModel,
+    GaitFingerModel,
+    GaitPhaseModel,
+    GaitResultModel,
+    GaitSamplesModel,
+    JointTrajectoryModel,
+    JointTrajectoryPointModel,
+    ManipulationCertificateModel,
+    ManipulationRequest,
+    ManipulationResult,
+    ManipulationStatsModel,
+    PlanStatus,
+)
+from ocp.gait.planner import GaitPlan, plan_gait
+from ocp.gait.samples import gait_samples, gait_times
+from ocp.spec.grasp import ManipulationProblem
+
+from .common import finger_certificate, rows
+from .fields import FieldErrors
+
+__all__ = ["DEFAULT_GAIT_RATE", "gait_errors", "gait_result", "solve_gait"]
+
+#: The joint trajectory's rate [Hz] of a gait without the request's ``sample_rate``.
+DEFAULT_GAIT_RATE = 100.0
+
+
+def gait_errors(request: ManipulationRequest, problem: ManipulationProblem) -> FieldErrors:
+    """Why a request's ``gait`` cannot be planned, as (wire field, reason)."""
+    if request.gait is None:
+        return []
+    errs: FieldErrors = []
+    m = request.motion
+    steps = getattr(m, "steps", None)
+    if m is None or steps is None or len(steps) != 1:
+        errs.append(("motion", "a gait turns the ball by one rotation step: give `motion` as "
+                               "`steps` with one step (its axis and angle)"))
+    elif any(abs(x) > 0.0 for x in steps[0].translation) or steps[0].angle <= 0.0:
+        errs.append(("motion.steps", "a gait's step turns the ball about its centre: a "
+                                     "positive angle, no translation"))
+    if request.forces is None:
+        errs.append(("forces", "a gait needs the ball's load: the other fingertips hold it "
+                               "while one is lifted"))
+    if problem.object.shape != "sphere":
+        errs.append(("object.shape", "a gait re-places fingertips on a ball ('sphere')"))
+    if request.palm is not None:
+        errs.append(("palm", "a gait is planned for a ball held by fingertips alone"))
+    if len(problem.fingers) < 3:
+        errs.append(("fingers", "a gait lifts one fingertip while the others hold the ball: "
+                                f"at least three fingertips, got {len(problem.fingers)}"))
+    for i, tip in enumerate(problem.fingers):
+        kind = tip.finger.tip_surface.kind
+        if kind not in ("sphere", "capsule"):
+            errs.append((f"fingers[{i}]", f"a gait needs sphere or capsule fingertips "
+                                          f"(their clearance), not a {kind}"))
+    if problem.timing != "smooth":
+        errs.append(("timing", "a gait's rolls start and end at rest: the smooth timing"))
+    return errs
+
+
+def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, planner: Any
+               ) -> tuple[ManipulationResult, GaitPlan]:
+    """Plan the request's gait from the problem's grasp (its fingertips' joints)."""
+    g = request.gait
+    m = request.motion
+    assert g is not None and m is not None and hasattr(m, "steps")
+    step = m.steps[0]
+    qs = tuple(np.asarray(tip.q_seed, dtype=float) for tip in problem.fingers)
+    gait = plan_gait(problem, qs, step.axis, float(step.angle), roll_step=float(g.roll_step),
+                     seconds_per_radian=float(step.duration) / float(step.angle),
+                     planner=planner,
+                     swing={"duration": float(g.swing_duration),
+                            "clearance": float(g.clearance)},
+                     hold_time=float(g.hold_time))
+    rate = float(getattr(request, "sample_rate", None) or DEFAULT_GAIT_RATE)
+    return gait_result(gait, problem, rate), gait
+
+
+def _status(gait: GaitPlan) -> PlanStatus:
+    if gait.status == "solved":
+        return PlanStatus.SOLVED if gait.certificate.passed else PlanStatus.INACCURATE
+    if gait.status == "infeasible":
+        return PlanStatus.INFEASIBLE
+    last = gait.rolls[-1] if gait.rolls and gait.phases and \
+        gait.phases[-1].kind == "roll" else None
+    if last is not None and not last.ok:
+        return PlanStatus(last.status.value)
+    return PlanStatus.INFEASIBLE
+
+
+def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float
+                ) -> ManipulationResult:
+    """The wire result of a gait: its phases, the joints at ``rate`` [Hz] over the whole
+    plan (ROS 2's JointTrajectory), the certificate."""
+    names = [tip.name or f"finger{i}" for i, tip in enumerate(problem.fingers)]
+    joint_names = [f"{nm}/{j}" for nm, tip in zip(names, problem.fingers, strict=True)
+                   for j in tip.finger.joint_names]
+    jt, samples = None, None
+    if gait.phases:
+        smp = gait_samples(gait, problem, gait_times(gait, rate))
+        points = []
+        for i, t in enumerate(smp.t.tolist()):
+            sec = math.floor(t)
+            points.append(JointTrajectoryPointModel(
+                positions=smp.q[i].tolist(), velocities=smp.q_dot[i].tolist(),
+                accelerations=smp.q_ddot[i].tolist(),
+                time_from_start=DurationModel(sec=sec, nanosec=min(round((t - sec) * 1e9),
+                                                                   999_999_999)), t=t))
+        jt = JointTrajectoryModel(joint_names=joint_names, points=points, rate_breaks=[])
+        samples = GaitSamplesModel(
+            t=smp.t.tolist(), object_position=rows(smp.object_position),
+            object_orientation_wxyz=rows(smp.object_wxyz),
+            contacts=[GaitContactModel(name=nm, active=smp.active[:, k].tolist(),
+                                       point=rows(smp.point[:, k]),
+                                       normal=rows(smp.normal[:, k]),
+                                       force=rows(smp.force[:, k]))
+                      for k, nm in enumerate(names)],
+            fingers=[GaitFingerModel(name=nm, tip_position=rows(smp.tip_position[:, k]),
+                                     tip_orientation_wxyz=rows(smp.tip_wxyz[:, k]))
+                     for k, nm in enumerate(names)])
+    block = GaitResultModel(
+        phases=[GaitPhaseModel(kind=p.kind, start=p.start, end=p.end,
+                               touching=list(p.touching),
+                               lifted_finger=None if p.lifted is None else names[p.lifted])
+                for p in gait.phases],
+        turned=gait.turned, rolls=len(gait.rolls), replacements=len(gait.steps),
+        never_lifted=list(gait.never_lifted), wall_time=gait.wall_time, samples=samples)
+    iterations = sum(r.iterations for r in gait.rolls) + \
+        sum(s.swing.iterations for s in gait.steps if s.swing is not None)
+    build = sum(r.build_time for r in gait.rolls)
+    solve = sum(r.ipopt_time for r in gait.rolls) + \
+        sum(s.swing.solve_time for s in gait.steps if s.swing is not None)
+    cert = finger_certificate(ManipulationCertificateModel, gait.certificate) \
+        if gait.certificate.checks else None
+    return ManipulationResult(
+        status=_status(gait), message=gait.message,
+        stats=ManipulationStatsModel(raw_status=gait.rolls[-1].raw_status if gait.rolls
+                                     else "", iterations=iterations,
+                                     build_time=build, solve_time=solve, refinements=0,
+                                     n_intervals=problem.n_intervals),
+        certificate=cert, joint_trajectory=jt, gait=block)

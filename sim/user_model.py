@@ -1,0 +1,628 @@
+"""Executing a plan on the user's own MJCF hand: its bodies, masses, joints (limits,
+damping, armature), actuators and contact settings, as MuJoCo reads the file
+(docs/simulation.md, "On your own model").
+
+The scene is the user's MJCF with three changes, each reported: every mesh geom removed
+(meshes are files the service never reads: their collisions and, on a body without an
+``<inertial>``, their mass go with them; named in the report) and the mesh assets with
+them, keyframes dropped (the object adds a free joint); the physics step and gravity the
+simulator's and the plan's (the file's are reported); the object added as a free body at
+the plan's initial pose (the plan's shape and mass; its friction the plan's ``mu`` and
+the simulator's torsional and rolling friction, its ``condim`` the simulator's; its
+``solmix`` tiny, so that each contact takes the hand geom's ``solref`` and ``solimp``).
+MuJoCo mixes a contact pair's settings (the larger ``condim`` and friction, ``solref``
+and ``solimp`` weighted by ``solmix``; a higher ``priority`` wins): the report lists, per
+fingertip geom, the file's settings, the pair's, and which differ. A ``mount`` places the
+model's world frame in the palm frame (a body wrapping the world's bodies).
+
+The controller drives the model's own actuators (joint transmissions), per joint:
+
+* an affine actuator (MuJoCo's ``position``, ``velocity``, ``general`` with affine bias:
+  force ``gain ctrl + b0 + b1 L + b2 L_dot``, ``L = gear q``) gets the control that
+  makes its force, at the reference, the feed-forward torque: ``ctrl = (tau_ff +
+  Kp q_ref + Kv q_dot_ref - gear b0) / (gear gain)`` with ``Kp = -gear^2 b1``, ``Kv =
+  -gear^2 b2`` (a position servo: the reference offset ``tau_ff / kp``);
+* a motor (no bias): PD plus feed-forward in the loop, ``(tau_ff + kp (q_ref - q) + kv
+  (q_dot_ref - q_dot)) / (gear gain)``, ``kp``, ``kv`` the simulator's options;
+* no actuator (or another kind): the joint is left passive (reported).
+
+``tau_ff`` = the plan's joint torques (its contact forces through ``J^T``; a plan
+without forces: the simulator's grip force pushing each fingertip into the object along
+the planned normal), plus what the model itself needs to follow the reference: gravity
+and Coriolis less its passive forces (joint damping, springs, gravity compensation) at
+``(q_ref, q_dot_ref)``, by MuJoCo (``qfrc_bias - qfrc_passive``; the links' inertia
+``M q_ddot`` is left out). Control ranges and force ranges are the file's: the report
+gives each joint's largest feed-forward torque against its actuator's force range, the
+steps at the range's end, and the control clipped (a position servo whose reference
+offset would leave its control range). The grip ramps up while the object is held at its
+initial pose (the first half of ``settle``), then it is let go.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from .options import SimOptions
+from .report import ContactReport, ErrorSummary, SimReport
+from .run import MAX_SERIES, TOUCH_FORCE, _angle_between, _damped_pinv, _linear, hermite, slerp
+from .scene import quat_of_matrix
+from .spec import ExecutionPlan, FloatArray
+
+__all__ = ["OBJECT", "UserModel", "UserModelSimulation", "simulate_on_model", "user_scene"]
+
+#: The object's body, joint and geom in the scene (not a name a hand file uses).
+OBJECT = "dexroll_object"
+#: The object's ``solmix``: each contact takes the hand geom's solref and solimp.
+OBJECT_SOLMIX = 1e-6
+#: MuJoCo's defaults of what a file may leave out.
+_MJ_TIMESTEP, _MJ_GRAVITY = 0.002, (0.0, 0.0, -9.81)
+
+
+@dataclass(frozen=True)
+class UserModel:
+    """The user's hand: its MJCF ``text``, per finger of the plan the body or site its
+    tip is (``tips``, in the plan's finger order), and the pose of the model's world frame
+    in the palm frame (``mount``: rotation, position)."""
+
+    text: str
+    tips: tuple[str, ...]
+    mount_rotation: FloatArray = field(default_factory=lambda: np.eye(3))
+    mount_position: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+
+def _v(x: Any) -> str:
+    return " ".join(f"{float(v):.17g}" for v in np.asarray(x, dtype=float).ravel())
+
+
+def _floats(text: str | None, default: tuple[float, ...]) -> tuple[float, ...]:
+    return default if text is None else tuple(float(v) for v in text.split())
+
+
+def user_scene(plan: ExecutionPlan, model: UserModel, options: SimOptions
+               ) -> tuple[str, dict[str, Any]]:
+    """The scene's MJCF (module docstring) and what was changed in the file: meshes
+    removed (the geoms, where), keyframes dropped, the file's step and gravity."""
+    root = ET.fromstring(model.text)
+    parents = {c: p for p in root.iter() for c in p}
+    removed: list[str] = []
+    massless: set[str] = set()
+    for geom in list(root.iter("geom")):
+        parent = parents[geom]
+        if parent.tag == "default":
+            continue
+        if "mesh" in geom.attrib or geom.get("type") in ("mesh", "hfield") \
+                or "hfield" in geom.attrib:
+            body = parent.get("name", "(unnamed body)")
+            removed.append(f"{body}/{geom.get('name') or geom.get('mesh') or 'geom'}")
+            if parent.find("inertial") is None:
+                massless.add(body)
+            parent.remove(geom)
+    keyframes = [k for k in root.iter("keyframe")]
+    for k in keyframes:
+        root.remove(k)
+    opt = root.find("option")
+    if opt is None:
+        opt = ET.Element("option")
+        root.insert(1 if root.find("compiler") is not None else 0, opt)
+    file_step = float(opt.get("timestep", _MJ_TIMESTEP))
+    file_gravity = _floats(opt.get("gravity"), _MJ_GRAVITY)
+    opt.set("timestep", f"{options.timestep:.17g}")
+    opt.set("gravity", _v(plan.gravity))
+    world = root.find("worldbody")
+    if world is None:
+        raise ValueError("the model has no <worldbody>")
+    if not (np.allclose(model.mount_rotation, np.eye(3)) and
+            np.allclose(model.mount_position, 0.0)):
+        mount = ET.Element("body", name="dexroll_mount", pos=_v(model.mount_position),
+                           quat=_v(quat_of_matrix(model.mount_rotation)))
+        for child in list(world):
+            if child.tag in ("body", "geom", "site", "camera", "light", "frame"):
+                world.remove(child)
+                mount.append(child)
+        world.append(mount)
+    torsion = options.torsional_friction if options.torsional_friction is not None else \
+        plan.torsional_friction if plan.torsional_friction is not None else \
+        options.DEFAULT_TORSIONAL
+    obj = ET.SubElement(world, "body", name=OBJECT, pos=_v(plan.object_position[0]),
+                        quat=_v(plan.object_wxyz[0] / np.linalg.norm(plan.object_wxyz[0])))
+    ET.SubElement(obj, "freejoint", name=OBJECT)
+    mass = options.object_mass if options.object_mass is not None else plan.object.mass
+    a, b, c = plan.object.semi_axes
+    shape = "sphere" if plan.object.shape == "sphere" else "ellipsoid"
+    ET.SubElement(obj, "geom", name=OBJECT, type=shape,
+                  size=_v([a] if shape == "sphere" else [a, b, c]), mass=f"{mass:.17g}",
+                  contype="1", conaffinity="1", condim=str(options.condim),
+                  friction=_v([plan.mu, torsion, options.rolling_friction]),
+                  solmix=f"{OBJECT_SOLMIX:.17g}", priority="0", margin="0", gap="0",
+                  rgba="0.9 0.5 0.1 1")
+    changes = {"meshes_removed": removed,
+               "bodies_without_inertial_that_lost_mesh_geoms": sorted(massless),
+               "keyframes_dropped": len(keyframes),
+               "file_timestep": file_step, "file_gravity": list(file_gravity)}
+    _strip_files(root)
+    return ET.tostring(root, encoding="unicode"), changes
+
+
+def _strip_files(root: ET.Element) -> None:
+    """What names files the scene does not have: mesh, height-field and skin assets, file
+    textures (and materials' references to them), the compiler's directories; a body left
+    without mass gets MuJoCo's least (``boundmass``, ``boundinertia``)."""
+    for asset in root.iter("asset"):
+        for el in list(asset):
+            if el.tag in ("mesh", "hfield", "skin") or (el.tag == "texture" and
+                                                        "file" in el.attrib):
+                asset.remove(el)
+    for parent in list(root.iter()):
+        for el in list(parent):
+            if el.tag == "skin":
+                parent.remove(el)
+    for mat in root.iter("material"):
+        mat.attrib.pop("texture", None)
+    for geom in root.iter("geom"):  # default classes' mesh geoms
+        geom.attrib.pop("mesh", None)
+        if geom.get("type") in ("mesh", "hfield"):
+            geom.set("type", "sphere")
+            geom.set("size", "0.005")
+    compiler = root.find("compiler")
+    if compiler is None:
+        compiler = ET.Element("compiler")
+        root.insert(0, compiler)
+    compiler.set("boundmass", "1e-6")
+    compiler.set("boundinertia", "1e-12")
+    for k in ("meshdir", "texturedir", "assetdir"):
+        compiler.attrib.pop(k, None)
+
+
+@dataclass
+class _Joint:
+    name: str
+    qpos: int
+    dof: int
+    actuator: int  # -1: none usable
+    kind: str      # "affine", "motor", "passive"
+    gain: float = 0.0
+    b0: float = 0.0
+    Kp: float = 0.0
+    Kv: float = 0.0
+    gear: float = 1.0
+    note: str = ""
+
+
+def _joint_drive(m: Any, jid: int, name: str) -> _Joint:
+    """How joint ``jid`` is driven by the model's actuators (the first on it)."""
+    qpos, dof = int(m.jnt_qposadr[jid]), int(m.jnt_dofadr[jid])
+    ids = [a for a in range(m.nu) if int(m.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+           and int(m.actuator_trnid[a, 0]) == jid]
+    if not ids:
+        return _Joint(name, qpos, dof, -1, "passive", note="no actuator: left passive")
+    a = ids[0]
+    more = f" ({len(ids) - 1} more on it unused)" if len(ids) > 1 else ""
+    gear = float(m.actuator_gear[a, 0])
+    gaintype, biastype = int(m.actuator_gaintype[a]), int(m.actuator_biastype[a])
+    gain = float(m.actuator_gainprm[a, 0])
+    if gaintype != int(mujoco.mjtGain.mjGAIN_FIXED) or gain == 0.0 or gear == 0.0 \
+            or int(m.actuator_dyntype[a]) != int(mujoco.mjtDyn.mjDYN_NONE):
+        return _Joint(name, qpos, dof, -1, "passive",
+                      note=f"actuator {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a)!r}"
+                           " has activation dynamics or a non-fixed gain: not driven, the "
+                           "joint left passive")
+    b = m.actuator_biasprm[a]
+    if biastype == int(mujoco.mjtBias.mjBIAS_NONE) or (b[1] == 0.0 and b[2] == 0.0):
+        return _Joint(name, qpos, dof, a, "motor", gain, float(b[0]) if biastype else 0.0,
+                      gear=gear, note="motor: PD + feed-forward in the loop" + more)
+    if biastype != int(mujoco.mjtBias.mjBIAS_AFFINE):
+        return _Joint(name, qpos, dof, -1, "passive", note="actuator bias not affine: "
+                                                           "joint left passive")
+    return _Joint(name, qpos, dof, a, "affine", gain, float(b[0]),
+                  Kp=-gear * gear * float(b[1]) + 0.0, Kv=-gear * gear * float(b[2]) + 0.0,
+                  gear=gear,
+                  note="affine servo: the reference offset that gives the feed-forward "
+                       "torque at its gain" + more)
+
+
+def _geom_settings(m: Any, g: int) -> dict[str, Any]:
+    return {"condim": int(m.geom_condim[g]),
+            "friction": [float(x) for x in m.geom_friction[g]],
+            "solref": [float(x) for x in m.geom_solref[g]],
+            "solimp": [float(x) for x in m.geom_solimp[g]],
+            "margin": float(m.geom_margin[g]), "priority": int(m.geom_priority[g])}
+
+
+def _pair_settings(m: Any, g: int, o: int) -> dict[str, Any]:
+    """MuJoCo's mix of the settings of the contact of geoms ``g`` (the hand's) and ``o``
+    (the object's)."""
+    pg, po = int(m.geom_priority[g]), int(m.geom_priority[o])
+    if pg != po:
+        win = g if pg > po else o
+        s = _geom_settings(m, win)
+        s["margin"] = float(max(m.geom_margin[g], m.geom_margin[o]))
+        return s
+    w = float(m.geom_solmix[g]) / max(float(m.geom_solmix[g] + m.geom_solmix[o]), 1e-15)
+    return {"condim": int(max(m.geom_condim[g], m.geom_condim[o])),
+            "friction": [float(x) for x in np.maximum(m.geom_friction[g],
+                                                      m.geom_friction[o])],
+            "solref": [float(x) for x in w * m.geom_solref[g] + (1 - w) * m.geom_solref[o]],
+            "solimp": [float(x) for x in w * m.geom_solimp[g] + (1 - w) * m.geom_solimp[o]],
+            "margin": float(max(m.geom_margin[g], m.geom_margin[o])),
+            "priority": pg}
+
+
+def _differs(a: Any, b: Any) -> bool:
+    return not np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float),
+                           rtol=1e-6, atol=1e-9)
+
+
+class UserModelSimulation:
+    """A plan on the user's model in MuJoCo (module docstring), ready to :meth:`run`;
+    ``xml`` the scene, ``model`` and ``data`` MuJoCo's, ``settings`` what the report
+    states of the scene and the drive."""
+
+    def __init__(self, plan: ExecutionPlan, model: UserModel,
+                 options: SimOptions | None = None) -> None:
+        plan.check()
+        self.plan, self.user, self.options = plan, model, options or SimOptions()
+        self.options.check()
+        if self.options.mode != "servo":
+            raise ValueError("on the user's model the joints are driven by its actuators: "
+                             "mode must be 'servo'")
+        if len(model.tips) != len(plan.fingers):
+            raise ValueError(f"{len(model.tips)} tips named for {len(plan.fingers)} fingers")
+        self.xml, changes = user_scene(plan, model, self.options)
+        try:
+            self.model = mujoco.MjModel.from_xml_string(self.xml)
+        except ValueError as exc:
+            raise ValueError(f"MuJoCo cannot compile the model: {exc}") from exc
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        ident = mujoco.mjtObj
+        self.object_body = mujoco.mj_name2id(m, ident.mjOBJ_BODY, OBJECT)
+        self.object_geom = mujoco.mj_name2id(m, ident.mjOBJ_GEOM, OBJECT)
+        jo = mujoco.mj_name2id(m, ident.mjOBJ_JOINT, OBJECT)
+        self.object_qpos, self.object_dof = int(m.jnt_qposadr[jo]), int(m.jnt_dofadr[jo])
+        self.joints: list[list[_Joint]] = []
+        self.tip_bodies: list[int] = []
+        self.contact_of_geom: dict[int, int] = {}
+        contact_of_finger = {c.finger: k for k, c in enumerate(plan.contacts)
+                             if c.finger is not None}
+        for f, tip in zip(plan.fingers, model.tips, strict=True):
+            joints = []
+            for j in f.joints:
+                jid = mujoco.mj_name2id(m, ident.mjOBJ_JOINT, j.name)
+                if jid < 0:
+                    raise ValueError(f"finger {f.name}: the model has no joint {j.name!r}")
+                joints.append(_joint_drive(m, jid, j.name))
+            self.joints.append(joints)
+            body = mujoco.mj_name2id(m, ident.mjOBJ_BODY, tip)
+            if body < 0:
+                site = mujoco.mj_name2id(m, ident.mjOBJ_SITE, tip)
+                if site < 0:
+                    raise ValueError(f"finger {f.name}: the model has no body or site "
+                                     f"{tip!r}")
+                body = int(m.site_bodyid[site])
+            self.tip_bodies.append(body)
+            k = contact_of_finger.get(f.name)
+            for g in range(m.ngeom):
+                touches = bool(m.geom_contype[g] or m.geom_conaffinity[g])
+                if int(m.geom_bodyid[g]) == body and touches and k is not None:
+                    self.contact_of_geom[g] = k
+        self.settings = self._settings(changes)
+
+    def _settings(self, changes: dict[str, Any]) -> dict[str, Any]:
+        m, o = self.model, self.options
+        tips = []
+        for g, k in sorted(self.contact_of_geom.items()):
+            file_s = _geom_settings(m, g)
+            pair = _pair_settings(m, g, self.object_geom)
+            body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g]))
+            tips.append({"geom": mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)
+                         or f"{body}'s geom {g}", "geom_id": g,
+                         "contact": self.plan.contacts[k].name,
+                         "file": file_s, "with_object": pair,
+                         "differs": [key for key in file_s if _differs(file_s[key],
+                                                                        pair[key])]})
+        drive = []
+        for f, joints in zip(self.plan.fingers, self.joints, strict=True):
+            for j in joints:
+                entry: dict[str, Any] = {"finger": f.name, "joint": j.name, "kind": j.kind,
+                                         "note": j.note}
+                if j.actuator >= 0:
+                    a = j.actuator
+                    entry.update({
+                        "actuator": mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a),
+                        "gear": j.gear, "gain": j.gain, "kp": j.Kp if j.kind == "affine"
+                        else o.kp, "kv": j.Kv if j.kind == "affine" else o.kv,
+                        "ctrlrange": [float(x) for x in m.actuator_ctrlrange[a]]
+                        if m.actuator_ctrllimited[a] else None,
+                        "forcerange": [float(x) for x in m.actuator_forcerange[a]]
+                        if m.actuator_forcelimited[a] else None})
+                entry.update({"damping": float(m.dof_damping[j.dof]),
+                              "armature": float(m.dof_armature[j.dof]),
+                              "range": [float(x) for x in m.jnt_range[
+                                  mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j.name)]]})
+                drive.append(entry)
+        hand_mass = float(sum(m.body_mass[b] for b in range(1, m.nbody)
+                              if b != self.object_body))
+        integrators = {int(v): k for k, v in mujoco.mjtIntegrator.__members__.items()}
+        cones = {int(v): k for k, v in mujoco.mjtCone.__members__.items()}
+        return {
+            "source": "the user's MJCF (meshes stripped)", **changes,
+            "timestep": float(m.opt.timestep), "gravity": [float(x) for x in m.opt.gravity],
+            "integrator": integrators.get(int(m.opt.integrator), str(m.opt.integrator)),
+            "cone": cones.get(int(m.opt.cone), str(m.opt.cone)),
+            "impratio": float(m.opt.impratio),
+            "noslip_iterations": int(m.opt.noslip_iterations),
+            "solver_iterations": int(m.opt.iterations),
+            "hand_mass": hand_mass,
+            "object": {"mass": float(m.body_mass[self.object_body]),
+                       **_geom_settings(m, self.object_geom),
+                       "solmix": float(m.geom_solmix[self.object_geom])},
+            "fingertip_contacts": tips, "drive": drive}
+
+    # -- the reference --------------------------------------------------------------------
+    def _feedforward(self) -> tuple[list[FloatArray], list[FloatArray], list[str]]:
+        """At the plan's times, per finger: the squeeze's joint offset and the feed-forward
+        torque (module docstring); notes on which the plan gave."""
+        plan, o, m = self.plan, self.options, self.model
+        d = mujoco.MjData(m)
+        n = plan.t.size
+        offsets = [np.zeros((n, f.nq)) for f in plan.fingers]
+        torques = [np.zeros((n, f.nq)) for f in plan.fingers]
+        contact_of = {c.finger: c for c in plan.contacts if c.finger is not None}
+        jacp = np.zeros((3, m.nv))
+        centre = np.asarray(plan.object_position, dtype=float)
+        for i in range(n):
+            d.qpos[:] = m.qpos0
+            d.qvel[:] = 0.0
+            for joints, ref in zip(self.joints, plan.references, strict=True):
+                for k, j in enumerate(joints):
+                    d.qpos[j.qpos] = ref.q[i, k]
+                    d.qvel[j.dof] = ref.q_dot[i, k]
+            oq = self.object_qpos
+            d.qpos[oq:oq + 3] = centre[i] + 10.0  # away: no contact in this evaluation
+            mujoco.mj_forward(m, d)
+            model_needs = d.qfrc_bias - d.qfrc_passive
+            for f_i, (f, joints, ref, body) in enumerate(zip(
+                    plan.fingers, self.joints, plan.references, self.tip_bodies,
+                    strict=True)):
+                dofs = [j.dof for j in joints]
+                c = contact_of.get(f.name)
+                point = c.point[i] if c is not None else d.xpos[body]
+                if c is not None and c.normal is not None:
+                    n_out = np.asarray(c.normal[i], dtype=float)
+                else:
+                    n_out = point - centre[i]
+                    n_out = n_out / max(float(np.linalg.norm(n_out)), 1e-12)
+                mujoco.mj_jac(m, d, jacp, None, point, body)
+                J = jacp[:, dofs]
+                offsets[f_i][i] = _damped_pinv(J) @ (-o.squeeze * n_out)
+                if o.use_plan_forces and ref.joint_torques is not None:
+                    contact = ref.joint_torques[i]
+                elif o.use_plan_forces and ref.contact_force is not None:
+                    contact = J.T @ ref.contact_force[i]
+                else:
+                    contact = J.T @ (-o.grip_force * n_out)
+                torques[f_i][i] = contact + model_needs[dofs]
+        notes = []
+        for f, ref in zip(plan.fingers, plan.references, strict=True):
+            if o.use_plan_forces and ref.joint_torques is not None:
+                src = "the plan's joint torques"
+            elif o.use_plan_forces and ref.contact_force is not None:
+                src = "J^T of the plan's contact force"
+            else:
+                src = (f"a grip of {o.grip_force:g} N along the planned normal (J^T f; the "
+                       "plan states no forces)")
+            notes.append(f"{f.name}: feed-forward = {src} + the model's gravity, Coriolis "
+                         f"and passive forces at the reference; squeeze "
+                         f"{o.squeeze * 1e3:g} mm")
+        return offsets, torques, notes
+
+    # -- the run --------------------------------------------------------------------------
+    def run(self) -> SimReport:
+        plan, o, m, d = self.plan, self.options, self.model, self.data
+        start = time.perf_counter()
+        dt = o.timestep
+        t0, T = float(plan.t[0]), plan.duration
+        n_settle = round(o.settle / dt)
+        n_plan = math.ceil(T / dt - 1e-9)
+        ts: FloatArray = t0 + dt * np.arange(-n_settle, n_plan + 1, dtype=float)
+        plan_time = ts - t0
+        ramp = np.clip((plan_time + o.settle) / max(o.settle / 2, dt), 0.0, 1.0) \
+            if o.settle > 0 else np.ones_like(ts)
+        pin_object = plan_time < -o.settle / 2
+        offsets, torques, notes = self._feedforward()
+        q_ref, qd_ref, tau = [], [], []
+        for ref, off, trq in zip(plan.references, offsets, torques, strict=True):
+            q, qd = hermite(plan.t, ref.q, ref.q_dot, ts)
+            qd[plan_time < 0] = 0.0
+            q_ref.append(q + ramp[:, None] * _linear(plan.t, off, ts))
+            qd_ref.append(qd)
+            # the model's own needs at once, the grip's ramped
+            tau.append(ramp[:, None] * _linear(plan.t, trq, ts))
+        # the affine actuators' controls, precomputed; clipped to their ranges
+        flat = [(j, q[:, k], qd[:, k], tq[:, k]) for joints, q, qd, tq in
+                zip(self.joints, q_ref, qd_ref, tau, strict=True)
+                for k, j in enumerate(joints)]
+        ctrl_pre: dict[int, FloatArray] = {}
+        clipped: dict[str, float] = {}
+        demand: dict[str, float] = {}
+        for j, q, qd, tq in flat:
+            demand[j.name] = float(np.max(np.abs(tq[plan_time >= 0]), initial=0.0))
+            if j.kind != "affine":
+                continue
+            u = (tq + j.Kp * q + j.Kv * qd - j.gear * j.b0) / (j.gear * j.gain)
+            a = j.actuator
+            if m.actuator_ctrllimited[a]:
+                lo, hi = m.actuator_ctrlrange[a]
+                cu = np.clip(u, lo, hi)
+                taken = np.abs(u - cu) * abs(j.gear * j.gain)  # torque the clip takes away
+                clipped[j.name] = float(np.max(taken[plan_time >= 0], initial=0.0))
+                u = cu
+            ctrl_pre[j.dof] = u
+        pos_ref = _linear(plan.t, plan.object_position, ts)
+        quat_ref = slerp(plan.t, plan.object_wxyz, ts)
+
+        mujoco.mj_resetData(m, d)
+        for joints, q in zip(self.joints, q_ref, strict=True):
+            for k, j in enumerate(joints):
+                d.qpos[j.qpos] = q[0, k]
+        oq, od = self.object_qpos, self.object_dof
+        d.qpos[oq:oq + 3] = pos_ref[0]
+        d.qpos[oq + 3:oq + 7] = quat_ref[0]
+        mujoco.mj_forward(m, d)
+        planned_dofs = {j.dof for joints in self.joints for j in joints}
+        # actuators of joints the plan does not move hold their initial angles
+        for a in range(m.nu):
+            if int(m.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT):
+                jid = int(m.actuator_trnid[a, 0])
+                if int(m.jnt_dofadr[jid]) not in planned_dofs and m.actuator_biastype[a]:
+                    d.ctrl[a] = d.qpos[m.jnt_qposadr[jid]] * float(m.actuator_gear[a, 0])
+
+        n_steps = ts.size - 1
+        nc = len(plan.contacts)
+        obj_pose = np.zeros((n_steps, 7))
+        normal_force = np.zeros((n_steps, nc))
+        slip_speed = np.zeros((n_steps, nc))
+        other_force: dict[str, float] = {}
+        saturated = {j.name: 0 for j, _, _, _ in flat}
+        jac_a, jac_b = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+        f6 = np.zeros(6)
+        motors = [(j, q, qd, tq) for j, q, qd, tq in flat if j.kind == "motor"]
+        act_of = self._actuator_of
+        limited = [(j, float(m.actuator_forcerange[j.actuator, 1]),
+                    float(m.actuator_forcerange[j.actuator, 0])) for j, _, _, _ in flat
+                   if j.actuator >= 0 and m.actuator_forcelimited[j.actuator]]
+        for k in range(n_steps):
+            for dof, u in ctrl_pre.items():
+                d.ctrl[act_of[dof]] = u[k]
+            for j, q, qd, tq in motors:
+                u = (tq[k] + o.kp * (q[k] - d.qpos[j.qpos]) + o.kv * (qd[k] - d.qvel[j.dof])
+                     - j.gear * j.b0) / (j.gear * j.gain)
+                d.ctrl[j.actuator] = u
+            if pin_object[k]:
+                d.qpos[oq:oq + 3] = pos_ref[k]
+                d.qpos[oq + 3:oq + 7] = quat_ref[k]
+                d.qvel[od:od + 6] = 0.0
+            mujoco.mj_step(m, d)
+            if plan_time[k + 1] >= 0:
+                for jl, hi, lo in limited:
+                    force = float(d.actuator_force[jl.actuator])
+                    if force >= hi - 1e-9 or force <= lo + 1e-9:
+                        saturated[jl.name] += 1
+            obj_pose[k] = d.qpos[oq:oq + 7]
+            for i in range(d.ncon):
+                con = d.contact[i]
+                g1, g2 = int(con.geom1), int(con.geom2)
+                if g1 == self.object_geom:
+                    other = g2
+                elif g2 == self.object_geom:
+                    other = g1
+                else:
+                    continue
+                mujoco.mj_contactForce(m, d, i, f6)
+                if f6[0] <= TOUCH_FORCE:
+                    continue
+                j_c = self.contact_of_geom.get(other)
+                if j_c is None:
+                    if plan_time[k + 1] >= 0:
+                        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY,
+                                                 int(m.geom_bodyid[other])) or "world"
+                        other_force[body] = max(other_force.get(body, 0.0), float(f6[0]))
+                    continue
+                normal_force[k, j_c] += f6[0]
+                p = con.pos
+                mujoco.mj_jac(m, d, jac_a, None, p, self.object_body)
+                v = jac_a @ d.qvel
+                body_id = int(m.geom_bodyid[other])
+                if body_id > 0:
+                    mujoco.mj_jac(m, d, jac_b, None, p, body_id)
+                    v = v - jac_b @ d.qvel
+                nrm = con.frame[:3]
+                vt = v - float(nrm @ v) * nrm
+                slip_speed[k, j_c] = max(slip_speed[k, j_c], float(np.linalg.norm(vt)))
+        wall = time.perf_counter() - start
+        t_end = plan_time[1:]
+        pos_err = np.linalg.norm(obj_pose[:, :3] - pos_ref[1:], axis=1)
+        ang_err = _angle_between(obj_pose[:, 3:], quat_ref[1:])
+        during = t_end >= 0
+        inside = t_end > 0.5 * dt
+        contacts = []
+        for jc, spec in enumerate(plan.contacts):
+            lost_all = ~(normal_force[:, jc] > TOUCH_FORCE)
+            lost = lost_all[during]
+            events = int(np.sum(lost[1:] & ~lost[:-1]) + (1 if lost.size and lost[0] else 0))
+            first = float(t_end[during][np.argmax(lost)]) if lost.any() else None
+            fn = normal_force[during, jc]
+            contacts.append(ContactReport(
+                spec.name, spec.body, lost_time=float(np.sum(lost_all[inside]) * dt),
+                loss_events=events, first_loss_at=first,
+                slip_distance=float(np.sum(slip_speed[during, jc]) * dt),
+                max_slip_speed=float(np.max(slip_speed[during, jc], initial=0.0)),
+                normal_force_min=float(np.min(fn, initial=math.inf)),
+                normal_force_mean=float(np.mean(fn)) if fn.size else 0.0,
+                normal_force_max=float(np.max(fn, initial=0.0))))
+        every = max(o.record_every, math.ceil(n_steps / MAX_SERIES))
+        rec = np.arange(0, n_steps, every)
+        if rec[-1] != n_steps - 1:
+            rec = np.append(rec, n_steps - 1)
+        rec = rec[t_end[rec] >= -o.settle]
+        steps_in_plan = max(int(np.sum(during)), 1)
+        torque = []
+        for j, _, _, _ in flat:
+            entry: dict[str, Any] = {"joint": j.name, "kind": j.kind,
+                                     "feedforward_max": demand[j.name]}
+            if j.actuator >= 0 and m.actuator_forcelimited[j.actuator]:
+                lo, hi = (float(x) * j.gear for x in m.actuator_forcerange[j.actuator])
+                entry.update({"torque_range": [lo, hi],
+                              "saturated_fraction": saturated[j.name] / steps_in_plan})
+            if j.name in clipped:
+                entry["torque_lost_to_ctrlrange_max"] = clipped[j.name]
+            torque.append(entry)
+        short = [e for e in torque if e.get("torque_range") is not None and
+                 e["feedforward_max"] > max(abs(e["torque_range"][0]),
+                                            abs(e["torque_range"][1]))]
+        short_notes = [f"joint {e['joint']}: the plan needs up to {e['feedforward_max']:.3g} "
+                       f"N m, its actuator gives {e['torque_range'][0]:.3g}.."
+                       f"{e['torque_range'][1]:.3g} N m" for e in short]
+        clip_notes = [f"joint {e['joint']}: its control range takes away up to "
+                      f"{e['torque_lost_to_ctrlrange_max']:.3g} N m of the feed-forward"
+                      for e in torque if e.get("torque_lost_to_ctrlrange_max", 0.0) > 1e-6]
+        drive_notes = [f"{e['finger']}/{e['joint']}: {e['note']}" for e in
+                       self.settings["drive"] if e["kind"] == "passive"]
+        settings = dict(self.settings, torque=torque,
+                        unplanned_contacts={b: f for b, f in sorted(other_force.items())})
+        changed = sorted({key for t in settings["fingertip_contacts"] for key in t["differs"]})
+        extra = [f"on the user's model: {len(settings['meshes_removed'])} mesh geoms "
+                 "removed; timestep "
+                 f"{settings['timestep']:g} s (the file's {settings['file_timestep']:g} s), "
+                 "gravity the plan's"]
+        if changed:
+            extra.append("fingertip contact settings that differ from the file's (with the "
+                         f"object): {', '.join(changed)}")
+        report = SimReport.assess(
+            mode="servo (the model's actuators)", options=o, contacts=contacts,
+            position=ErrorSummary.of(pos_err[during], t_end[during]),
+            angle=ErrorSummary.of(ang_err[during], t_end[during]),
+            series_t=t_end[rec], series_position=pos_err[rec], series_angle=ang_err[rec],
+            series_force=normal_force[rec].T, wall_time=wall, steps=n_steps, duration=T,
+            notes=[*plan.notes, *extra, *notes, *drive_notes, *short_notes, *clip_notes],
+            mujoco_version=mujoco.__version__)
+        report.model = settings
+        return report
+
+    @property
+    def _actuator_of(self) -> dict[int, int]:
+        return {j.dof: j.actuator for joints in self.joints for j in joints
+                if j.actuator >= 0}
+
+
+def simulate_on_model(plan: ExecutionPlan, model: UserModel,
+                      options: SimOptions | None = None) -> SimReport:
+    """Execute ``plan`` on the user's ``model`` in MuJoCo (module docstring)."""
+    return UserModelSimulation(plan, model, options).run()

@@ -1,0 +1,145 @@
+"""A first grasp for any hand (issue 24, item 2): ``ocp.robots.first_grasp`` and the
+request's ``grasp`` option, with the built-in hand and with ``examples/own_hand.xml`` (a
+whole-hand MJCF of our own in the Menagerie's style: posed root, degrees, default
+classes, absent meshes). Laws, not a run's numbers: every tip on the ball, the contacts in
+force closure by the planner's own test, the tips apart, the joints within their limits,
+the reported reach the chosen joints' own roll; nothing found is a 422 naming the finger."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from conftest import Server
+
+from dexroll_client.models import ManipulationRequest
+from ocp.geometry.grasp import force_angles
+from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, load_allegro
+from ocp.robots.first_grasp import GraspNotFoundError, desired_turns, first_grasp
+from ocp.robots.grasp_reach import roll, tip_state, tips_gap
+from planner_service.planners import request_errors
+from planner_service.planners.cache import FingerCache
+from planner_service.planners.manipulation import problem_and_grasp
+
+ROOT = Path(__file__).resolve().parents[1]
+OWN_TIPS = ("ff_tip", "mf_tip", "rf_tip", "th_tip")
+CACHE = FingerCache()
+
+
+def own_hand_request(angle: float = 0.2618, **extra: Any) -> dict[str, Any]:
+    """examples/allegro_turn.json on examples/own_hand.xml, the grasp searched."""
+    body = json.loads((ROOT / "examples" / "allegro_turn.json").read_text())
+    body["hand"] = {"mjcf": (ROOT / "examples" / "own_hand.xml").read_text(),
+                    "tips": [{"name": n} for n in OWN_TIPS]}
+    body["motion"]["steps"][0]["angle"] = angle
+    body["grasp"] = "auto"
+    body.update(extra)
+    return body
+
+
+def _assert_a_grasp(fingers: Any, qs: Any, centre: Any, radius: float, mu: float) -> None:
+    for f, q in zip(fingers, qs, strict=True):
+        assert f.within_limits(q)
+        assert abs(tip_state(f, q, centre, radius).gap) < 1e-6  # the tip on the ball
+    assert tips_gap(fingers, qs) >= 1e-3
+    normals = np.array([tip_state(f, q, centre, radius).n for f, q in zip(fingers, qs,
+                                                                           strict=True)])
+    phi, _, onto = force_angles((np.asarray(centre) + radius * normals)[None], normals[None])
+    assert onto[0] and phi[0] < math.atan(mu)
+
+
+def test_a_grasp_of_any_hand_without_its_nominal_grasp() -> None:
+    hand = load_allegro()
+    got = first_grasp(hand.fingers, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, mu=0.5)
+    _assert_a_grasp(hand.fingers, got.q, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, 0.5)
+    assert got.closure > 0.0 and got.reach is None
+
+
+def test_two_fingers_oppose_within_the_friction_cone() -> None:
+    hand = load_allegro()
+    fingers = (hand.fingers[1], hand.fingers[3])
+    got = first_grasp(fingers, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, mu=0.5)
+    _assert_a_grasp(fingers, got.q, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, 0.5)
+
+
+def test_a_ball_out_of_reach_names_every_finger() -> None:
+    hand = load_allegro()
+    with pytest.raises(GraspNotFoundError) as exc:
+        first_grasp(hand.fingers, (0.5, 0.0, 0.5), NOMINAL_RADIUS, samples=200)
+    assert [f for f, _ in exc.value.errors] == [f"fingers[{i}]" for i in range(4)]
+    assert "cannot touch the ball" in exc.value.errors[0][1]
+
+
+def test_the_request_option_on_our_mjcf_reports_the_grasp_it_used() -> None:
+    request = ManipulationRequest.model_validate(own_hand_request())
+    assert request_errors(request, CACHE) == []
+    problem, grasp = problem_and_grasp(request, CACHE)
+    assert grasp is not None and all(f.searched for f in grasp.fingers)
+    fingers = [tip.finger for tip in problem.fingers]
+    qs = [np.array(f.q) for f in grasp.fingers]
+    centre = request.initial_pose.position  # type: ignore[union-attr]
+    _assert_a_grasp(fingers, qs, centre, NOMINAL_RADIUS, request.mu)
+    # the contacts the result names are where the joints put the tips
+    for f, q, g in zip(fingers, qs, grasp.fingers, strict=True):
+        s = tip_state(f, q, centre, NOMINAL_RADIUS)
+        assert np.allclose(s.contact, g.contact_point, atol=1e-6)
+        assert g.tip_side is not None  # each cap's chart centred on its contact
+    # the reach it reports is the chosen joints' own roll toward the motion (the least
+    # finger's), up to the whole turn
+    turns = desired_turns(problem.motion)
+    assert grasp.requested_turn == pytest.approx(0.2618)
+    rolled = [roll(f, q, centre, NOMINAL_RADIUS, turns[0].axis, turns[0].angle,
+                   request.pad_margin).reach for f, q in zip(fingers, qs, strict=True)]
+    assert grasp.reach == pytest.approx(min(rolled), abs=1e-9)
+    # the joints given back in a request without `grasp` are the same grasp
+    plain = own_hand_request(grasp=None)
+    for k, g in enumerate(grasp.fingers):
+        plain["fingers"][k]["initial_q"] = g.q
+        plain["hand"]["tips"][k]["side"] = g.tip_side
+    assert request_errors(ManipulationRequest.model_validate(plain), CACHE) == []
+
+
+def test_the_builtin_hand_takes_the_searched_tip_sides() -> None:
+    body = own_hand_request(grasp={"search": {"maximise_reach": False}})
+    body["hand"] = {"builtin": "allegro"}
+    request = ManipulationRequest.model_validate(body)
+    problem, grasp = problem_and_grasp(request, CACHE)
+    assert grasp is not None and grasp.reach is None and grasp.closure > 0.0
+    centre = request.initial_pose.position  # type: ignore[union-attr]
+    for tip, g in zip(problem.fingers, grasp.fingers, strict=True):
+        assert g.tip_side is not None
+        # each contact on its cap chart's equator: across the chart's poles
+        pole = np.asarray(tip.finger.tip_surface.R)[:, 2]  # the poles' axis, tip frame
+        m = tip_state(tip.finger, g.q, centre, NOMINAL_RADIUS).m
+        assert abs(float(pole @ m)) < 1e-6
+    assert request_errors(request, CACHE) == []
+
+
+@pytest.mark.parametrize(("change", "field", "words"), [
+    (lambda b: b.update(grasp={"search": {"samples": 5}}), "grasp.search.samples",
+     "greater than or equal to 50"),
+    (lambda b: b.update(initial_pose={"position": [0.5, 0, 0.5]}), "fingers[2]",
+     "cannot touch the ball"),
+    (lambda b: b["object"].update(shape="ellipsoid", dimensions=[0.03, 0.02]),
+     "grasp", "for a ball"),
+    (lambda b: b["fingers"][1].update(initial={"x_f": 0, "y_f": 0, "u_f": 0, "v_f": 0,
+                                                "psi_f": 0}, chart_rotation=[0, 0, 0]),
+     "fingers[1].initial", "with `grasp`"),
+])
+def test_bad_grasp_requests_are_422_naming_the_field(live_server: Server, change: Any,
+                                                     field: str, words: str) -> None:
+    body = copy.deepcopy(own_hand_request())
+    body["hand"] = {"builtin": "allegro"}  # (the checker's model text: tested above)
+    change(body)
+    r = httpx.post(f"{live_server.url}/v1/plans", params={"wait": 0},
+                   content=json.dumps(body), headers={"content-type": "application/json"},
+                   timeout=60)
+    assert r.status_code == 422, r.text
+    fields = {d["field"]: d["reason"] for d in r.json()["detail"]}
+    assert words in fields[field], fields

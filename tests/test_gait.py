@@ -1,0 +1,195 @@
+"""Finger gaiting (ocp/gait, docs/gait.md): laws of a fingertip's swing, of the hold while
+it is lifted, and of a gait plan that rolls, re-places three fingertips and rolls again,
+on the built-in Allegro-class hand (capsule tips, a 60 mm ball of 50 g)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from ocp.gait.bodies import tip_body
+from ocp.gait.checks import swing_checks
+from ocp.gait.planner import plan_gait
+from ocp.gait.step import contact_of, replace_finger
+from ocp.gait.swing import SwingPlan
+from ocp.geometry.rotations import axis_angle_rotation, rotation_angle_between
+from ocp.robots.allegro import NOMINAL_Q, load_allegro
+from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
+from ocp.spec.motion import ObjectPose, Tracking
+from ocp.spec.problem import ForceSpec, ObjectSpec
+from ocp.transcription.values import load_parameters
+
+HAND = load_allegro("urdf")
+FINGERS = tuple(HAND.fingers)
+RHO = 0.03
+CENTRE = np.array([0.03, 0.0, 0.07])
+POSE = ObjectPose(position=tuple(CENTRE))
+OBJ = ObjectSpec("sphere", (RHO,))
+QS = tuple(np.array(q, dtype=float) for q in NOMINAL_Q)
+TEMPLATE = ManipulationProblem(
+    object=OBJ, fingers=fingertips_from_joints(FINGERS, QS, OBJ, POSE,
+                                               ("index", "middle", "ring", "thumb"),
+                                               ("q0", "q1", "q2", "q3")),
+    duration=1.0, initial_pose=POSE, n_intervals=12, forces=ForceSpec(mass=0.05),
+    tracking=Tracking(position_tolerance=0.001, orientation_tolerance=math.radians(1.0)))
+LOAD = load_parameters(TEMPLATE)
+
+
+def landing(k: int, degrees: float) -> np.ndarray:
+    """Finger k's contact normal turned about the palm's z through the ball's centre."""
+    _, n = contact_of(FINGERS[k], QS[k], CENTRE, RHO)
+    return axis_angle_rotation((0.0, 0.0, 1.0), math.radians(degrees)) @ n
+
+
+@pytest.fixture(scope="module")
+def step() -> object:
+    """The middle fingertip re-placed 10 deg around the ball, the others holding."""
+    return replace_finger(FINGERS, QS, 1, landing(1, 10.0), QS[1], CENTRE, RHO, np.eye(3),
+                          LOAD)
+
+
+def cap_distance(q: np.ndarray, k: int = 1) -> float:
+    """The capsule's surface from the ball's (its segment against the centre; our own
+    arithmetic, Pinocchio's kinematics)."""
+    body = tip_body(FINGERS[k])
+    R, p = FINGERS[k].fingertip_pose_pin(q)
+    a, b = p + R @ body.a, p + R @ body.b
+    s = np.clip((CENTRE - a) @ (b - a) / max((b - a) @ (b - a), 1e-18), 0.0, 1.0)
+    return float(np.linalg.norm(CENTRE - (a + s * (b - a)))) - RHO - body.r
+
+
+def test_a_swing_lifts_carries_clear_and_lands_where_asked(step: object) -> None:
+    st = step
+    assert st.ok, st.message
+    sw = st.swing
+    cert = st.checks("s", 0.0, LOAD, 0.5)
+    assert all(c.passed for c in cert), [c.failure for c in cert if not c.passed]
+    t = np.linspace(0.0, sw.duration, 801)
+    q, v, a = sw.sample(t)
+    d = np.array([cap_distance(qi) for qi in q])
+    clear = np.array([sw.segment(x) == "clear" for x in t])
+    assert d[clear].min() >= sw.spec.clearance - 1e-5  # clear of the ball by the margin
+    assert d.min() >= -1e-5  # never inside it
+    assert abs(d[-1]) < 1e-6 and abs(d[0]) < 1e-5  # touching at both ends
+    assert d.max() > sw.spec.clearance  # it did leave the ball
+    # the contact moved 10 deg around the ball (the landing normal)
+    _, n_end = contact_of(FINGERS[1], q[-1], CENTRE, RHO)
+    assert math.degrees(math.acos(np.clip(n_end @ landing(1, 10.0), -1, 1))) < 1e-3
+    # at rest with zero acceleration at both ends; rates and accelerations are the
+    # positions' derivatives (central differences of the returned cubic)
+    assert np.abs(v[[0, -1]]).max() < 1e-12 and np.abs(a[[0, -1]]).max() < 1e-12
+    h = t[1] - t[0]
+    assert np.abs((q[2:] - q[:-2]) / (2 * h) - v[1:-1]).max() < 1e-3
+    assert np.abs((v[2:] - v[:-2]) / (2 * h) - a[1:-1]).max() < 1e-2
+    # continuous accelerations: no jump across the grid's nodes
+    eps = 1e-9
+    for tk in sw.t[1:-1]:
+        assert np.abs(sw.sample(tk - eps)[2] - sw.sample(tk + eps)[2]).max() < 1e-5
+    lo, hi = np.asarray(FINGERS[1].lower), np.asarray(FINGERS[1].upper)
+    assert np.all(q >= lo) and np.all(q <= hi)
+    assert np.abs(a).max() <= sw.spec.max_joint_acceleration * (1 + 1e-9)
+
+
+def test_the_hold_balances_the_weight_inside_the_cones_and_unloads_to_zero(
+        step: object) -> None:
+    st = step
+    weight = LOAD[0:3]
+    for name in ("unload", "load"):
+        for s in np.linspace(0.0, 1.0, 7):
+            F = st.ramp_forces(name, float(s))
+            hold = st.holds[0] if name == "unload" else st.holds[2]
+            assert np.allclose(F.sum(axis=0), -weight, atol=1e-7)
+            r = hold.points - hold.centre
+            assert np.abs(np.cross(r, F).sum(axis=0)).max() < 1e-8
+            fn = -np.einsum("ij,ij->i", F, hold.normals)
+            ft = np.linalg.norm(F + fn[:, None] * hold.normals, axis=1)
+            assert np.all(ft <= 0.5 * fn + 1e-9)  # inside the friction cones (mu 0.5)
+    assert np.linalg.norm(st.ramp_forces("unload", 1.0)[1]) == 0.0  # lifts with no force
+    assert np.linalg.norm(st.ramp_forces("load", 0.0)[1]) == 0.0  # lands with none
+    assert np.all(np.linalg.norm(st.forces[1], axis=1) > 0.4)  # three hold it
+
+
+def test_a_swing_through_the_object_fails_the_certificate_naming_phase_and_time(
+        step: object) -> None:
+    sw = step.swing
+    # the same swing with its clear part pushed 25 mm (linearised) towards the ball's centre
+    body = tip_body(FINGERS[1])
+    Q = sw.Q.copy()
+    mid = len(Q) // 2
+    R, p = FINGERS[1].fingertip_pose_pin(Q[mid])
+    J = FINGERS[1].frame_jacobian_pin(Q[mid])
+    Jc = J[:3] - np.cross(R @ body.a, J[3:].T).T
+    n = (p + R @ body.a - CENTRE) / np.linalg.norm(p + R @ body.a - CENTRE)
+    dq = np.linalg.lstsq(Jc, -0.025 * n, rcond=None)[0]
+    bump = np.sin(np.linspace(0.0, math.pi, len(Q)))[:, None] ** 4
+    bad = dataclasses.replace(sw, Q=Q + bump * dq, V=sw.V, A=sw.A, J=sw.J)
+    assert isinstance(bad, SwingPlan)
+    failed = [c for c in swing_checks(bad, "step3", 7.0) if not c.passed]
+    names = {c.name for c in failed}
+    assert "swing_clearance_step3" in names and "swing_penetration_step3" in names
+    worst = next(c for c in failed if c.name == "swing_penetration_step3")
+    assert 7.0 < worst.time < 7.0 + sw.duration and "at t =" in worst.failure
+
+
+def test_a_fingertip_the_others_cannot_hold_without_is_refused_at_once() -> None:
+    st = replace_finger(FINGERS, QS, 3, landing(3, 10.0), QS[3], CENTRE, RHO, np.eye(3),
+                        LOAD)
+    assert st.status == "infeasible" and st.swing is None
+    assert "thumb" in st.message and "friction cones" in st.message
+
+
+@pytest.fixture(scope="module")
+def gait() -> object:
+    return plan_gait(TEMPLATE, QS, (0.0, -1.0, 0.0), math.radians(12.0),
+                     roll_step=math.radians(6.0))
+
+
+def test_a_gait_rolls_replaces_three_fingertips_and_rolls_on(gait: object) -> None:
+    g = gait
+    assert g.status == "solved" and g.certificate.passed, (g.message,
+                                                           g.certificate.failures)
+    kinds = [p.kind for p in g.phases]
+    assert kinds == ["roll"] + ["unload", "swing", "load"] * 3 + ["roll"]
+    assert [p.lifted for p in g.phases if p.kind == "swing"] == [0, 1, 2]
+    for a, b in zip(g.phases, g.phases[1:], strict=False):
+        assert a.end == pytest.approx(b.start)
+        # joint positions and rates continuous across every switch, at rest there
+        qa, va, _ = g.joints(a.end - 1e-9)
+        qb, vb, _ = g.joints(b.start + 1e-9)
+        assert np.abs(qa - qb).max() < 1e-6 and np.abs(va).max() < 1e-5
+        assert np.abs(vb).max() < 1e-5
+    # the object turned by the request, within the rolls' tracking tolerance
+    R_end = g.rolls[-1].object_rotation[-1]
+    target = axis_angle_rotation((0.0, -1.0, 0.0), math.radians(12.0))
+    assert float(rotation_angle_between(R_end[None], target[None])[0]) <= math.radians(1.0) + 1e-6
+    assert math.degrees(g.turned) == pytest.approx(12.0)
+
+
+def test_the_gait_executes_in_mujoco_lifting_and_landing_as_planned(gait: object) -> None:
+    """The plan's joints followed by MuJoCo's servos, its forces fed forward: the ball
+    follows the plan, no planned contact is lost, and each re-placed fingertip is off the
+    ball while the plan carries it clear and back on it in the next roll."""
+    from planner_service.execution.gait import gait_execution_plan
+    from sim import simulate
+
+    g = gait
+    report = simulate(gait_execution_plan(g, TEMPLATE))
+    assert report.passed, report.failures
+    assert all(c.lost_time == 0.0 and c.unplanned_touch_time == 0.0
+               for c in report.contacts)
+    t = np.asarray(report.series["t"])
+    force = report.series["normal_force"]
+    names = ("index", "middle", "ring", "thumb")
+    for ph in g.phases:
+        if ph.kind == "swing":
+            sw = g.steps[ph.index].swing
+            clear = [(t >= ph.start + x) & (t <= ph.start + x + 0.01) for x in sw.t
+                     if sw.segment(float(x)) == "clear"]
+            mask = np.any(clear, axis=0)
+            assert mask.any() and np.all(np.asarray(force[names[ph.lifted]])[mask] == 0.0)
+    last_roll = g.phases[-1]
+    during = (t > last_roll.start + 0.1) & (t < last_roll.end - 0.1)
+    assert all(np.all(np.asarray(force[nm])[during] > 0.0) for nm in names)

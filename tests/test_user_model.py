@@ -1,0 +1,174 @@
+"""Executing a plan on the user's own MJCF model (issue 24, item 4: ``sim/user_model.py``)
+with ``examples/own_hand.xml`` (ours, in the Menagerie's style: position actuators of
+kp 10 N m/rad, joint damping 1, inertials, absent meshes). No plan is solved here: a
+grasp held still (the built-in hand's nominal joints, the ball where they touch it) is
+executed for a short time. Laws: the scene keeps the file's masses, joints and actuators;
+at the reference each position servo's force is the feed-forward torque (the model's
+gravity and passive forces plus the grip's J^T f) and a motor's is the same through its
+PD; what the scene changes of the contact settings is what MuJoCo's mixing rules give;
+a plan needing more torque than the actuators give is reported with the numbers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco")
+
+from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_Q, NOMINAL_RADIUS  # noqa: E402
+from ocp.robots.grasp_reach import tip_state  # noqa: E402
+from ocp.robots.whole_hand import TipSpec, load_whole_hand  # noqa: E402
+from sim import (  # noqa: E402
+    ContactSpec,
+    ExecutionPlan,
+    FingerReference,
+    FingerSpec,
+    JointSpec,
+    ObjectSpec,
+    SimOptions,
+    TipShape,
+)
+from sim.user_model import OBJECT, UserModel, UserModelSimulation  # noqa: E402
+
+OWN = (Path(__file__).resolve().parents[1] / "examples" / "own_hand.xml").read_text()
+TIPS = ("ff_tip", "mf_tip", "rf_tip", "th_tip")
+NAMES = ("ff", "mf", "rf", "th")
+
+
+def held_plan(duration: float = 0.1) -> ExecutionPlan:
+    """The nominal grasp held still: every finger's joints constant, the ball where the
+    tips touch it (the contacts and normals from the hand's own kinematics)."""
+    hand = load_whole_hand(OWN, "mjcf", [TipSpec(t) for t in TIPS])
+    t = np.array([0.0, duration])
+    fingers, refs, contacts = [], [], []
+    for name, f, q in zip(NAMES, hand.fingers, NOMINAL_Q, strict=True):
+        s = tip_state(f, q, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS)
+        joints = tuple(JointSpec(n, "revolute", (0.0, 1.0, 0.0), np.eye(3), np.zeros(3))
+                       for n in f.joint_names)
+        fingers.append(FingerSpec(name, joints, np.eye(3), np.zeros(3), np.eye(3),
+                                  np.zeros(3), TipShape("sphere", (0.012,)), name))
+        refs.append(FingerReference(np.tile(q, (2, 1)), np.zeros((2, 4))))
+        contacts.append(ContactSpec(name, "finger", name, np.tile(s.contact, (2, 1)),
+                                    np.tile(s.n, (2, 1))))
+    return ExecutionPlan(t, ObjectSpec("sphere", (NOMINAL_RADIUS,), 0.05),
+                         np.tile(NOMINAL_OBJECT_POSITION, (2, 1)),
+                         np.tile([1.0, 0, 0, 0], (2, 1)), tuple(fingers), tuple(refs),
+                         tuple(contacts), None, 0.5)
+
+
+def _file_model() -> Any:
+    import xml.etree.ElementTree as ET
+
+    from sim.user_model import _strip_files
+
+    root = ET.fromstring(OWN)
+    for parent in list(root.iter()):
+        for el in list(parent):
+            if el.tag == "geom" and "mesh" in el.attrib:
+                parent.remove(el)
+    _strip_files(root)
+    return mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+
+
+def test_the_scene_is_the_files_bodies_joints_and_actuators() -> None:
+    sim = UserModelSimulation(held_plan(), UserModel(OWN, TIPS))
+    m, f = sim.model, _file_model()
+    obj = sim.object_body
+    for b in range(1, f.nbody):
+        name = mujoco.mj_id2name(f, mujoco.mjtObj.mjOBJ_BODY, b)
+        sb = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+        assert m.body_mass[sb] == pytest.approx(f.body_mass[b])
+    assert m.nu == f.nu == 16
+    assert np.allclose(m.actuator_gainprm[:, 0], f.actuator_gainprm[:, 0])
+    assert np.allclose(m.actuator_forcerange, f.actuator_forcerange)
+    assert np.allclose(m.dof_damping[:16], f.dof_damping)
+    assert m.body_mass[obj] == pytest.approx(0.05)
+    s = sim.settings
+    assert len(s["meshes_removed"]) == OWN.count(' mesh="')  # every mesh geom
+    assert s["file_timestep"] == 0.002 and s["timestep"] == SimOptions().timestep
+    assert {d["kind"] for d in s["drive"]} == {"affine"}
+    assert all(d["kp"] == 10.0 for d in s["drive"])
+
+
+@pytest.mark.parametrize("condim", [3, 4])
+def test_the_contact_settings_reported_are_mujocos_mix(condim: int) -> None:
+    sim = UserModelSimulation(held_plan(), UserModel(OWN, TIPS), SimOptions(condim=condim))
+    m = sim.model
+    og = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, OBJECT)
+    for t in sim.settings["fingertip_contacts"]:
+        g = t["geom_id"]
+        assert t["with_object"]["condim"] == max(m.geom_condim[g], m.geom_condim[og])
+        assert np.allclose(t["with_object"]["friction"],
+                           np.maximum(m.geom_friction[g], m.geom_friction[og]))
+        assert np.allclose(t["with_object"]["solref"], m.geom_solref[g], atol=1e-6)
+        # the file's tips are condim 3: only a condim above it differs
+        assert t["differs"] == ([] if condim == 3 else ["condim"])
+    assert len(sim.settings["fingertip_contacts"]) == 4
+
+
+@pytest.mark.parametrize("kind", ["position", "motor"])
+def test_at_the_reference_each_actuator_gives_the_feedforward_torque(kind: str) -> None:
+    text = OWN if kind == "position" else OWN.replace(
+        '<position kp="10" inheritrange="1"', '<motor').replace("<position ", "<motor ")
+    sim = UserModelSimulation(held_plan(), UserModel(text, TIPS),
+                              SimOptions(settle=0.0, squeeze=0.0))
+    _, torques, _ = sim._feedforward()
+    m, d = sim.model, mujoco.MjData(sim.model)
+    for joints, ref in zip(sim.joints, sim.plan.references, strict=True):
+        for k, j in enumerate(joints):
+            d.qpos[j.qpos] = ref.q[0, k]
+    d.qpos[sim.object_qpos:sim.object_qpos + 3] = 10.0
+    for joints, ref, tau in zip(sim.joints, sim.plan.references, torques, strict=True):
+        for k, j in enumerate(joints):
+            if j.kind == "affine":
+                d.ctrl[j.actuator] = (tau[0, k] + j.Kp * ref.q[0, k] - j.gear * j.b0) / (
+                    j.gear * j.gain)
+            else:  # at the reference the PD adds nothing
+                d.ctrl[j.actuator] = (tau[0, k] - j.gear * j.b0) / (j.gear * j.gain)
+    mujoco.mj_forward(m, d)
+    for joints, tau in zip(sim.joints, torques, strict=True):
+        for k, j in enumerate(joints):
+            lo, hi = m.actuator_forcerange[j.actuator]
+            assert d.qfrc_actuator[j.dof] == pytest.approx(np.clip(tau[0, k], lo, hi),
+                                                           abs=1e-9)
+    # the feed-forward holds the hand still against gravity and its springs and pushes
+    # each tip into the ball: with no ball, the tips accelerate toward where it was
+    assert np.all(np.isfinite(d.qacc))
+
+
+def test_a_plan_needing_more_torque_than_the_actuators_give_says_so() -> None:
+    weak = OWN.replace('forcerange="-0.7 0.7"', 'forcerange="-0.01 0.01"')
+    report = UserModelSimulation(held_plan(0.05), UserModel(weak, TIPS),
+                                 SimOptions(settle=0.02)).run()
+    short = [n for n in report.notes if "the plan needs up to" in n]
+    assert short and "its actuator gives -0.01..0.01 N m" in short[0]
+    torque = report.model["torque"]  # type: ignore[index]
+    assert all(e["torque_range"] == [-0.01, 0.01] for e in torque)
+    assert any(e["saturated_fraction"] > 0 for e in torque)
+    assert "model" in report.to_dict() and "torque" in report.summary()
+
+
+def test_the_requests_hand_names_each_fingers_tip_and_mount() -> None:
+    from dexroll_client.models import ManipulationRequest
+    from planner_service.execution import NotExecutableError, user_model
+
+    body: dict[str, Any] = {
+        "planner": "manipulation", "object": {"shape": "sphere", "dimensions": [0.03]},
+        "hand": {"mjcf": OWN, "tips": [{"name": t} for t in TIPS],
+                 "mount": {"position": [0.0, 0.0, 0.01], "rotation": [0.0, 0.0, 0.1]}},
+        "fingers": [{"hand_finger": 3}, {"hand_finger": 1}],
+        "initial_pose": {"position": [0.03, 0.0, 0.07]}, "duration": 1.0}
+    request = ManipulationRequest.model_validate(body)
+    plan = held_plan()
+    two = ExecutionPlan(plan.t, plan.object, plan.object_position, plan.object_wxyz,
+                        plan.fingers[:2], plan.references[:2], plan.contacts[:2], None, 0.5)
+    got = user_model(request, two)
+    assert got.tips == ("th_tip", "mf_tip") and got.text == OWN
+    assert np.allclose(got.mount_position, [0.0, 0.0, 0.01])
+    assert np.allclose(got.mount_rotation[:2, :2], [[np.cos(0.1), -np.sin(0.1)],
+                                                    [np.sin(0.1), np.cos(0.1)]])
+    with pytest.raises(NotExecutableError):
+        user_model(request, plan)  # 2 fingers asked, 4 planned
