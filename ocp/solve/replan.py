@@ -47,7 +47,7 @@ from ocp.solve.estimate import (
     _rotation,
     estimate_state,
 )
-from ocp.spec.grasp import ManipulationProblem
+from ocp.spec.grasp import ManipulationProblem, contact_charts
 from ocp.spec.problem import ProblemError
 
 if TYPE_CHECKING:
@@ -133,6 +133,9 @@ class Replanner:
             self.strict = replace(self.strict, palm=problem.palm)
         self.problem, self.planner = problem, planner
         self.model = planner.model(problem)
+        #: the grasp model's parameters (the object's shape, the contacts' charts)
+        self.params = self.model.params(np.asarray(problem.object.dimensions, dtype=float),
+                                        contact_charts(problem))
         self.plan, self.start = first, 0.0
         self.history: list[Replan] = []
 

@@ -18,12 +18,16 @@ from typing import Any
 
 import numpy as np
 
-from ocp.geometry.rotations import quaternion_matrix, quaternion_wxyz
-from ocp.one_finger import OneFingerPlanner, OneFingerProblem
-from ocp.solution import ManipulationSolution
-from ocp.solve.estimate import Measurement
-from ocp.solve.replan import Replanner, ReplanOptions
-from ocp.spec.grasp import ManipulationProblem, contact_charts
+from ocp import (
+    ManipulationProblem,
+    ManipulationSolution,
+    Measurement,
+    OneFingerPlanner,
+    OneFingerProblem,
+    Replanner,
+    ReplanOptions,
+    quaternion_wxyz,
+)
 
 __all__ = ["FirstPlan", "ReplanController", "compare", "first_plan", "goal_of", "summary"]
 
@@ -66,9 +70,7 @@ class ReplanController:
         self.replanner = Replanner(first.problem, first.plan, options=options)
         self.base = base
         m = self.replanner.model
-        problem = self.replanner.problem
-        self.prm = m.params(np.asarray(problem.object.dimensions, dtype=float),
-                            contact_charts(problem))
+        self.prm = self.replanner.params
         self.columns = {id(c): j for j, c in enumerate(m.point_contacts)}
 
     def fragment(self, sol: ManipulationSolution, t0: float) -> Any:
@@ -132,6 +134,14 @@ def goal_of(first: FirstPlan) -> tuple[np.ndarray, np.ndarray | None]:
         None if problem.palm is not None else np.asarray(plan.object_rotation[-1])
 
 
+def _matrix(wxyz: Any) -> np.ndarray:
+    """The rotation matrix of a quaternion (w, x, y, z)."""
+    w, x, y, z = np.asarray(wxyz, dtype=float) / np.linalg.norm(wxyz)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
 def summary(report: Any, disturbances: Any = None, final_pose: Any = None,
             goal: tuple[np.ndarray, np.ndarray | None] | None = None) -> dict[str, Any]:
     """A run's figures side by side: passed, final and worst errors against the first
@@ -162,7 +172,7 @@ def summary(report: Any, disturbances: Any = None, final_pose: Any = None,
     if final_pose is not None and goal is not None:
         fp = np.asarray(final_pose, dtype=float)
         pos = float(np.linalg.norm(fp[:3] - goal[0]))
-        R = np.asarray(quaternion_matrix(fp[3:] / np.linalg.norm(fp[3:])))
+        R = _matrix(fp[3:])
         ang = 0.0 if goal[1] is None else float(np.arccos(np.clip(
             (np.trace(goal[1].T @ R) - 1.0) / 2.0, -1.0, 1.0)))
         out["goal_position_mm"] = 1e3 * pos

@@ -121,7 +121,7 @@ def main(args: argparse.Namespace) -> int:
             raise ValueError("--closed-loop needs the plan's --request (the re-planner "
                              "plans it again here)")
         if args.closed_loop:
-            from ocp.solve.replan import ReplanOptions
+            from ocp import ReplanOptions
 
             from .closed_loop import compare, first_plan
 
