@@ -113,6 +113,8 @@ def main(args: argparse.Namespace) -> int:
         options = SimOptions.from_dict(options_of(args))
         if not (math.isfinite(args.rate) and args.rate > 0):
             raise ValueError("--rate must be positive")
+        if args.replan_iterations < 1:
+            raise ValueError("--replan-iterations must be at least 1")
         request = None
         if args.request:
             raw = json.loads(Path(args.request).read_text(encoding="utf-8"))
