@@ -54,6 +54,7 @@ if TYPE_CHECKING:
         status_from_ipopt,
     )
     from ocp.solve.attempt import AttemptOptions, attempt, shifted
+    from ocp.solve.estimate import EstimateOptions, Measurement, StateEstimate, estimate_state
     from ocp.solve.guesses import (
         guess_loops,
         reference_input,
@@ -62,6 +63,7 @@ if TYPE_CHECKING:
     )
     from ocp.solve.ipopt import IPOPT_OPTIONS
     from ocp.solve.planner import ManipulationPlanner
+    from ocp.solve.replan import Replan, Replanner, ReplanOptions
     from ocp.spec.grasp import Fingertip, ManipulationProblem, Palm, hand_fingertips
     from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
     from ocp.spec.problem import (
@@ -99,6 +101,11 @@ _EXPORTS = {
     "ManipulationPlanner": "ocp.solve.planner",
     "AttemptOptions": "ocp.solve.attempt", "attempt": "ocp.solve.attempt",
     "shifted": "ocp.solve.attempt",
+    # re-planning from a measured state (docs/replanning.md)
+    "EstimateOptions": "ocp.solve.estimate", "Measurement": "ocp.solve.estimate",
+    "StateEstimate": "ocp.solve.estimate", "estimate_state": "ocp.solve.estimate",
+    "Replan": "ocp.solve.replan", "Replanner": "ocp.solve.replan",
+    "ReplanOptions": "ocp.solve.replan",
     "FingertipContact": "ocp.contacts", "FreeFingertip": "ocp.contacts",
     "FreeObject": "ocp.contacts", "SupportContact": "ocp.contacts",
     "Fingertip": "ocp.spec.grasp", "ManipulationProblem": "ocp.spec.grasp",
@@ -138,6 +145,7 @@ __all__ = [
     "Check",
     "CheckKind",
     "DesiredMotion",
+    "EstimateOptions",
     "FingerContact",
     "FingerModel",
     "Fingertip",
@@ -154,6 +162,7 @@ __all__ = [
     "ManipulationPlanner",
     "ManipulationProblem",
     "ManipulationSolution",
+    "Measurement",
     "MotionStep",
     "ObjectPose",
     "ObjectSpec",
@@ -162,8 +171,12 @@ __all__ = [
     "Palm",
     "PalmSolution",
     "ProblemError",
+    "Replan",
+    "ReplanOptions",
+    "Replanner",
     "Solution",
     "SolverOptions",
+    "StateEstimate",
     "Status",
     "Structure",
     "SupportContact",
@@ -175,6 +188,7 @@ __all__ = [
     "attempt",
     "certify_palm_plan",
     "contact_of",
+    "estimate_state",
     "gait_samples",
     "gait_times",
     "goal_errors",

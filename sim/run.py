@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -17,7 +18,7 @@ from .report import ContactReport, ErrorSummary, SimReport
 from .scene import mjcf
 from .spec import ExecutionPlan, FloatArray
 
-__all__ = ["Simulation", "hermite", "simulate", "slerp"]
+__all__ = ["Simulation", "StepRows", "hermite", "simulate", "slerp"]
 
 #: A contact whose normal force is at most this [N] is not touching.
 TOUCH_FORCE = 1e-6
@@ -110,6 +111,19 @@ class _FingerIndex:
     tip_site: int
 
 
+@dataclass
+class StepRows:
+    """The controller's rows at every step (times ``ts`` on the plan's clock plus its
+    t0): per finger the servo's set point ``ctrl``, the torque feed-forward ``tau``, the
+    reference angles ``q_ref`` and rates ``qd_ref`` (steps x joints)."""
+
+    ts: FloatArray
+    ctrl: list[FloatArray]
+    tau: list[FloatArray]
+    q_ref: list[FloatArray]
+    qd_ref: list[FloatArray]
+
+
 class Simulation:
     """A plan's scene in MuJoCo, ready to run (:meth:`run`); ``model`` and ``data`` are
     MuJoCo's, ``xml`` the scene's MJCF."""
@@ -147,12 +161,13 @@ class Simulation:
                 self.contact_of_geom[gid] = k
 
     # -- the reference, the grip ----------------------------------------------------------
-    def _feedforward(self) -> tuple[list[FloatArray], list[FloatArray], list[str]]:
-        """At the plan's times, per finger: the squeeze's joint offset and the torque
-        feed-forward (the plan's torques or J^T of its contact force when it has them and
-        ``use_plan_forces``; else J^T of the grip force along the pad's normal); and notes
-        on which was used."""
-        plan, o, m = self.plan, self.options, self.model
+    def _feedforward(self, plan: ExecutionPlan | None = None
+                     ) -> tuple[list[FloatArray], list[FloatArray], list[str]]:
+        """At the plan's times (``plan``: another plan of this scene, e.g. a re-plan),
+        per finger: the squeeze's joint offset and the torque feed-forward (the plan's
+        torques or J^T of its contact force when it has them and ``use_plan_forces``; else
+        J^T of the grip force along the pad's normal); and notes on which was used."""
+        plan, o, m = plan or self.plan, self.options, self.model
         d = mujoco.MjData(m)
         n = plan.t.size
         offsets = [np.zeros((n, f.nq)) for f in plan.fingers]
@@ -213,7 +228,12 @@ class Simulation:
         return out
 
     # -- the run --------------------------------------------------------------------------
-    def run(self) -> SimReport:
+    def run(self, hook: Callable[[int, float, StepRows], None] | None = None
+            ) -> SimReport:
+        """Run the plan. ``hook(k, t, rows)``, when given, is called before every step
+        ``k`` (``t`` its start on the plan's clock) with the controller's rows from that
+        step on, which it may change (a re-plan, sim/closed_loop.py), and may change
+        ``data`` (a push, sim/disturbances.py)."""
         plan, o, m, d = self.plan, self.options, self.model, self.data
         start = time.perf_counter()
         dt = o.timestep
@@ -259,7 +279,10 @@ class Simulation:
         ctrl_rows = [np.ascontiguousarray(c) for c in ctrl]
         replay = o.mode == "replay"
         kinematic = o.mode in ("kinematic", "replay")
+        rows = StepRows(ts, ctrl_rows, tau, q_ref, qd_ref)
         for k in range(n_steps):
+            if hook is not None:
+                hook(k, float(plan_time[k]), rows)
             for idx, c, trq, q, qd in zip(self.fingers, ctrl_rows, tau, q_ref, qd_ref,
                                           strict=True):
                 d.ctrl[idx.actuators] = c[k]

@@ -236,3 +236,34 @@ def test_a_tracking_grasp_replans_its_remaining_motion() -> None:
     angle = np.arccos(np.clip((np.trace(R_end[0].T @ sol.object_rotation[-1]) - 1) / 2,
                               -1, 1))
     assert angle <= math.radians(1)
+
+
+def test_a_measured_ball_on_the_palm_is_estimated_or_refused(first: tuple) -> None:
+    """The palm grasp's state from a measurement (ocp.estimate_state): the ball measured
+    0.3 mm into the palm and 1 mm along x, the joints 1 mrad off: explained, on closure,
+    the ball back on the palm (its measured x kept) and taken by attempt as x0; measured
+    5 mm above the palm, it is not a state of the grasp (lifted: unexplained)."""
+    from ocp import Measurement, estimate_state
+    from ocp.geometry.rotations import quaternion_wxyz
+
+    problem, sol = first
+    m = PLANNER.model(problem)
+    s = sol.sample([0.5])
+    tip = m.fingertips[0]
+    x, u = s.x[0], s.u[0]
+
+    def measured(dp: tuple[float, float, float]) -> Measurement:
+        return Measurement([x[tip.q_cols] + 1e-3], s.object_position[0] + np.asarray(dp),
+                           quaternion_wxyz(s.object_rotation[0]), [u[tip.qd_cols]])
+
+    est = estimate_state(problem, m, measured((1e-3, 0.0, -3e-4)), x, u)
+    assert est.explained, est.problems
+    assert est.closure <= 1e-9 and est.u is not None
+    assert est.object_shift == pytest.approx(3e-4, abs=2e-5)  # back onto the palm
+    assert est.x[0] == pytest.approx(x[0] + 1e-3, abs=2e-5)  # the palm contact's x
+    rest = replace(problem, duration=problem.duration - 0.5)
+    new = attempt(rest, x0=est.x, u0=est.u, warm=shifted(sol, 0.5),
+                  options=AttemptOptions(max_iter=50), planner=PLANNER)
+    assert_close(new.X[0], est.x, atol=1e-12 * (1 + np.abs(est.x)))
+    lifted = estimate_state(problem, m, measured((0.0, 0.0, 5e-3)), x, u)
+    assert not lifted.explained and any("object" in p for p in lifted.problems)

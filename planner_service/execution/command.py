@@ -57,6 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="any other option of sim.SimOptions (JSON value), e.g. "
                              "--set condim=6 --set timestep=0.001")
+    from . import loop_command
+
+    loop_command.add_arguments(parser)
 
 
 def options_of(args: argparse.Namespace) -> dict[str, Any]:
@@ -91,6 +94,10 @@ def main(args: argparse.Namespace) -> int:
     except ImportError as exc:  # mujoco: the sim extra
         print(f"simulation needs MuJoCo: pip install 'dexroll[sim]' ({exc})", file=sys.stderr)
         return EXIT_INVALID
+    from . import loop_command
+
+    if loop_command.wanted(args):  # disturbances, the closed loop
+        return loop_command.main(args)
 
     from ..planners import REQUEST, ProblemError, validation_errors
     from ..plans import read_result

@@ -1,0 +1,163 @@
+"""``dexroll simulate`` with disturbances and in closed loop (docs/simulation.md,
+"Disturbances" and "Closed loop").
+
+``--push``, ``--impulse``, ``--friction-scale``, ``--size-change``, ``--mass-scale`` and
+``--pose-noise`` disturb an open-loop run as well as a closed-loop one; ``--closed-loop``
+(with ``--request``: the plan is made again here, the re-planner needs the problem and
+its NLP) runs the re-planning controller at ``--rate`` and the open-loop run on the same
+disturbances beside it, and writes both to the report.
+
+Exit codes: as ``dexroll simulate``; in closed loop 0 when the closed loop recovered (it
+ends within the tolerances of the task's goal, 1 mm and 2 deg by default, with no
+contact lost from 0.1 s after the last push on), 1 when it did not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+__all__ = ["add_arguments", "disturbances_of", "main", "wanted"]
+
+EXIT_PASSED, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("disturbances and closed loop")
+    g.add_argument("--push", action="append", default=[], metavar="TIME,DX,DY,DZ",
+                   help="displace the object by (DX, DY, DZ) metres in the palm frame at "
+                        "TIME seconds (a kinematic shift: its position set, its velocity "
+                        "kept); repeatable")
+    g.add_argument("--impulse", action="append", default=[], metavar="TIME,PX,PY,PZ",
+                   help="an impulse [N s] on the object at TIME (its velocity changed by "
+                        "p / m); repeatable")
+    g.add_argument("--friction-scale", type=float, metavar="S",
+                   help="every contact's friction coefficient times S (the plan keeps "
+                        "its own)")
+    g.add_argument("--size-change", type=float, metavar="MM",
+                   help="added to each of the object's semi-axes [mm] (a ball 1 mm "
+                        "larger in diameter: 0.5)")
+    g.add_argument("--mass-scale", type=float, metavar="S", help="the object's mass times S")
+    g.add_argument("--pose-noise", metavar="MM,DEG",
+                   help="standard deviations of the noise on the measured object pose "
+                        "(closed loop)")
+    g.add_argument("--seed", type=int, default=0, help="the noise's seed (default 0)")
+    g.add_argument("--closed-loop", action="store_true",
+                   help="re-plan from the measured state at --rate (needs --request) and "
+                        "compare with the open-loop run on the same disturbances")
+    g.add_argument("--rate", type=float, default=4.0, metavar="HZ",
+                   help="the controller's rate in simulated time (default 4 Hz)")
+    g.add_argument("--replan-iterations", type=int, default=30, metavar="N",
+                   help="IPOPT iterations per re-plan (default 30)")
+
+
+def disturbances_of(args: argparse.Namespace) -> Any:
+    """The :class:`sim.disturbances.Disturbances` of the command line (ValueError naming
+    a bad one)."""
+    from sim.disturbances import Disturbances, parse_kick
+
+    noise = (0.0, 0.0)
+    if args.pose_noise:
+        parts = str(args.pose_noise).split(",")
+        if len(parts) != 2:
+            raise ValueError(f"--pose-noise {args.pose_noise!r}: expected MM,DEG")
+        noise = (float(parts[0]) * 1e-3, math.radians(float(parts[1])))
+    d = Disturbances(
+        tuple(parse_kick(p) for p in args.push), tuple(parse_kick(p) for p in args.impulse),
+        1.0 if args.friction_scale is None else args.friction_scale,
+        0.0 if args.size_change is None else args.size_change * 1e-3,
+        1.0 if args.mass_scale is None else args.mass_scale, noise, args.seed)
+    d.check()
+    return d
+
+
+def wanted(args: argparse.Namespace) -> bool:
+    """Whether the command line asks for a disturbance or the closed loop."""
+    return bool(args.closed_loop or args.push or args.impulse or args.pose_noise
+                or args.friction_scale is not None or args.size_change is not None
+                or args.mass_scale is not None)
+
+
+def _line(name: str, s: dict[str, Any]) -> str:
+    lost = sum(v for v in s["contacts_lost_s"].values())
+    ga = s.get("goal_angle_deg")
+    goal = f"{s['goal_position_mm']:.3f} mm, " + ("orientation free" if ga is None
+                                                  else f"{ga:.2f} deg")
+    return (f"{name:<12} from the goal {goal}; from the plan: final "
+            f"{s['position_final_mm']:.3f} mm, {s['angle_final_deg']:.2f} deg, worst "
+            f"{s['position_worst_mm']:.3f} mm, {s['angle_worst_deg']:.2f} deg; contacts "
+            f"lost {lost:.4g} s; recovered {'yes' if s['recovered'] else 'no'}")
+
+
+def main(args: argparse.Namespace) -> int:
+    from pydantic import ValidationError
+
+    from sim import SimOptions
+    from sim.closed_loop import simulate_disturbed
+
+    from ..planners import REQUEST, ProblemError, validation_errors
+    from ..plans import read_result
+    from . import NotExecutableError, execution_plan
+    from .command import options_of
+
+    path = Path(args.result)
+    try:
+        if getattr(args, "model", None) is not None:
+            raise ValueError("--model: disturbances and the closed loop run on dexroll's "
+                             "own scene only, not yet on a model of one's own")
+        dist = disturbances_of(args)
+        options = SimOptions.from_dict(options_of(args))
+        if not (math.isfinite(args.rate) and args.rate > 0):
+            raise ValueError("--rate must be positive")
+        if args.replan_iterations < 1:
+            raise ValueError("--replan-iterations must be at least 1")
+        request = None
+        if args.request:
+            raw = json.loads(Path(args.request).read_text(encoding="utf-8"))
+            request = REQUEST.validate_python(raw)
+        if args.closed_loop and request is None:
+            raise ValueError("--closed-loop needs the plan's --request (the re-planner "
+                             "plans it again here)")
+        if args.closed_loop:
+            from ocp import ReplanOptions
+
+            from .closed_loop import compare, first_plan
+
+            first = first_plan(request)
+            base = execution_plan(first.result, request)
+            data = compare(first, base, args.rate, options, dist,
+                           ReplanOptions(max_iter=args.replan_iterations, time_limit=60.0))
+        else:
+            result, _ = read_result(path)
+            report = simulate_disturbed(execution_plan(result, request), options, dist)
+            data = {**report.to_dict(), "disturbances": dist.to_dict()}
+    except ValidationError as exc:
+        reasons = "; ".join(f"{f}: {r}" for f, r in validation_errors(exc)[:5])
+        print(f"{args.request} is not a valid request: {reasons}", file=sys.stderr)
+        return EXIT_INVALID
+    except ProblemError as exc:
+        print(f"the request cannot be planned: {exc.errors}", file=sys.stderr)
+        return EXIT_INVALID
+    except (OSError, ValueError, NotExecutableError) as exc:
+        print(str(exc), file=sys.stderr)
+        return EXIT_INVALID
+    stem = path.name.removesuffix(".json")
+    out = Path(args.output) if args.output else Path(f"{stem}.sim.json")
+    out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    if not args.closed_loop:
+        print(report.summary())
+        print(f"report       {out}")
+        return EXIT_PASSED if report.passed else EXIT_FAILED
+    c = data["closed_loop"]["control"]
+    print(_line("open loop", data["open_loop"]["summary"]))
+    print(_line("closed loop", data["closed_loop"]["summary"]))
+    med, factor = c["wall_time_median"], c["real_time_factor"]
+    timing = "-" if med is None else f"{med * 1e3:.0f} ms ({factor:.2f} x the period)"
+    print(f"controller   {c['rate']:g} Hz in simulated time, {c['calls']} calls "
+          f"{c['statuses']}; re-plan wall time median {timing}")
+    print(f"report       {out}")
+    return EXIT_PASSED if data["closed_loop"]["summary"]["recovered"] else EXIT_FAILED

@@ -1,0 +1,194 @@
+"""Closed-loop execution: a controller re-plans from the measured state while MuJoCo runs
+(docs/simulation.md, "Closed loop").
+
+:func:`simulate_disturbed` runs a plan open loop under :class:`~.disturbances.Disturbances`;
+:func:`simulate_closed_loop` runs it with a controller called at ``rate`` [Hz] of
+simulated time: at each control instant the simulation is paused, the controller gets the
+measurement (:class:`SimMeasurement`: the joints' angles and rates, the object's pose with
+the disturbances' noise, its twist) and answers with the rest of the motion (an
+:class:`~.spec.ExecutionPlan` whose times are on the first plan's clock) or None (the
+current reference goes on). The new reference replaces the servos' set points from that
+step on: zero latency in simulated time; the controller's own wall time is measured and
+reported beside (how far from real time it is on this machine). Errors are measured
+against the first plan, as in an open-loop run: the goal does not move.
+
+Like the rest of ``sim``, nothing here knows the planner: the service's adapter
+(``planner_service.execution.closed_loop``) makes the controller from ``ocp``'s
+re-planner.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from .disturbances import Disturbances
+from .options import SimOptions
+from .report import SimReport
+from .run import Simulation, StepRows, _linear, hermite
+from .spec import ExecutionPlan, FloatArray
+
+__all__ = ["ClosedLoopReport", "ControlEvent", "SimMeasurement", "run_disturbed",
+           "simulate_closed_loop", "simulate_disturbed"]
+
+
+@dataclass(frozen=True)
+class SimMeasurement:
+    """What the controller measures at time ``t`` (the plan's clock): per finger the
+    joint angles ``q`` and rates ``q_dot``; the object's position [m] and orientation
+    (w, x, y, z) with the disturbances' noise, its linear and angular velocity (palm
+    frame; not noisy)."""
+
+    t: float
+    q: list[FloatArray]
+    q_dot: list[FloatArray]
+    object_position: FloatArray
+    object_wxyz: FloatArray
+    object_velocity: FloatArray
+    object_omega: FloatArray
+
+
+@dataclass(frozen=True)
+class ControlEvent:
+    """One call of the controller: its time, what it answered (``status``, the
+    controller's word: "replanned", "unexplained", ...), its wall time [s] and a
+    ``message``; ``details``: the controller's own numbers."""
+
+    t: float
+    status: str
+    wall_time: float
+    message: str = ""
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"t": self.t, "status": self.status, "wall_time": self.wall_time,
+                "message": self.message, **self.details}
+
+
+#: A controller: (measurement) -> (the rest of the motion or None, its event).
+Controller = Callable[[SimMeasurement], tuple[ExecutionPlan | None, ControlEvent]]
+
+
+@dataclass(frozen=True)
+class ClosedLoopReport:
+    """A closed-loop run: the simulation's ``report`` (errors against the first plan),
+    the control ``rate`` [Hz], every controller call (``events``), the object's final
+    pose (position, wxyz)."""
+
+    report: SimReport
+    rate: float
+    events: tuple[ControlEvent, ...]
+    final_pose: FloatArray
+
+    @property
+    def wall_times(self) -> FloatArray:
+        return np.array([e.wall_time for e in self.events if e.status != "kept"])
+
+    def timing(self) -> dict[str, Any]:
+        w = self.wall_times
+        period = 1.0 / self.rate
+        counts: dict[str, int] = {}
+        for e in self.events:
+            counts[e.status] = counts.get(e.status, 0) + 1
+        med = float(np.median(w)) if w.size else None
+        return {"rate": self.rate, "period": period, "calls": len(self.events),
+                "statuses": counts,
+                "wall_time_median": med,
+                "wall_time_max": float(np.max(w)) if w.size else None,
+                "real_time_factor": None if med is None else med / period}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"report": self.report.to_dict(), "control": self.timing(),
+                "final_pose": self.final_pose.tolist(),
+                "events": [e.to_dict() for e in self.events]}
+
+
+def _world(plan: ExecutionPlan, options: SimOptions | None, dist: Disturbances
+           ) -> tuple[ExecutionPlan, SimOptions]:
+    o = options or SimOptions()
+    if o.object_mass is not None and dist.mass_scale != 1.0:
+        o = replace(o, object_mass=o.object_mass * dist.mass_scale)
+    return dist.scene_plan(plan), o
+
+
+def simulate_disturbed(plan: ExecutionPlan, options: SimOptions | None = None,
+                       disturbances: Disturbances | None = None) -> SimReport:
+    """``plan`` executed open loop in the disturbed world (errors against ``plan``)."""
+    return run_disturbed(plan, options, disturbances)[0]
+
+
+def run_disturbed(plan: ExecutionPlan, options: SimOptions | None = None,
+                  disturbances: Disturbances | None = None) -> tuple[SimReport, FloatArray]:
+    """:func:`simulate_disturbed`'s report and the object's final pose (position, wxyz)."""
+    dist = disturbances or Disturbances()
+    world, o = _world(plan, options, dist)
+    sim = Simulation(world, o)
+    report = sim.run(dist.hook(sim))
+    return report, sim.data.qpos[sim.object_qpos:sim.object_qpos + 7].copy()
+
+
+def _set_reference(sim: Simulation, rows: StepRows, k: int, frag: ExecutionPlan) -> None:
+    """The servos' rows from step ``k`` on from the re-plan ``frag`` (its times on the
+    plan's clock; held at its end)."""
+    o = sim.options
+    offsets, torques, _ = sim._feedforward(frag)
+    ts = rows.ts[k:]
+    t = frag.t + float(sim.plan.t[0])
+    for i, ref in enumerate(frag.references):
+        q, qd = hermite(t, ref.q, ref.q_dot, ts)
+        target = q + _linear(t, offsets[i], ts)
+        rows.q_ref[i][k:] = target
+        rows.qd_ref[i][k:] = qd
+        rows.ctrl[i][k:] = target + (o.kv / o.kp) * qd
+        rows.tau[i][k:] = _linear(t, torques[i], ts)
+
+
+def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: float,
+                         options: SimOptions | None = None,
+                         disturbances: Disturbances | None = None) -> ClosedLoopReport:
+    """``plan`` executed with ``controller`` called every 1 / ``rate`` s of simulated time
+    (from one period after t = 0 to the end) in the disturbed world; errors against
+    ``plan``."""
+    if not (math.isfinite(rate) and rate > 0):
+        raise ValueError("rate must be positive")
+    dist = disturbances or Disturbances()
+    world, o = _world(plan, options, dist)
+    sim = Simulation(world, o)
+    kick = dist.hook(sim)
+    measure = dist.noise()
+    d = sim.data
+    oq, od = sim.object_qpos, sim.object_dof
+    period = 1.0 / rate
+    every = max(1, round(period / o.timestep))
+    events: list[ControlEvent] = []
+    T = plan.duration
+
+    def hook(k: int, t: float, rows: StepRows) -> None:
+        kick(k, t, rows)
+        if t <= 0.5 * o.timestep or t >= T - 0.5 * o.timestep:
+            return
+        if round(t / o.timestep) % every:
+            return
+        quat = d.qpos[oq + 3:oq + 7].copy()
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, quat)
+        p, q = measure(d.qpos[oq:oq + 3].copy(), quat)
+        meas = SimMeasurement(
+            t, [d.qpos[f.qpos].copy() for f in sim.fingers],
+            [d.qvel[f.dofs].copy() for f in sim.fingers], p, q,
+            d.qvel[od:od + 3].copy(), R.reshape(3, 3) @ d.qvel[od + 3:od + 6])
+        start = time.perf_counter()
+        frag, event = controller(meas)
+        wall = time.perf_counter() - start
+        events.append(replace(event, wall_time=wall))
+        if frag is not None:
+            _set_reference(sim, rows, k, frag)
+
+    report = sim.run(hook)
+    return ClosedLoopReport(report, rate, tuple(events), d.qpos[oq:oq + 7].copy())
