@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 from ocp.transcription.loads import LOAD_VARS, load_cost, load_rows
 from ocp.transcription.values import load_bounds
 
-__all__ = ["Hold", "HoldResiduals", "hold_forces", "hold_residuals"]
+__all__ = ["HOLD_MARGINS", "Hold", "HoldResiduals", "deep_hold_forces", "hold_forces",
+           "hold_residuals"]
 
 FloatArray = NDArray[np.float64]
 
@@ -101,6 +102,28 @@ def hold_forces(hold: Hold, load: FloatArray, L: float) -> FloatArray | None:
     fl = np.asarray(res["x"]).reshape(nc, LOAD_VARS)
     F0 = float(load[5])
     return (hold.rotation @ (fl[:, :3].T * F0)).T
+
+
+#: Extra narrowings of the friction cones [rad] a hold's forces are tried with, the
+#: largest that holds the object first (:func:`deep_hold_forces`).
+HOLD_MARGINS = (0.3, 0.2, 0.15, 0.1, 0.05, 0.0)
+
+
+def deep_hold_forces(hold: Hold, load: FloatArray, L: float
+                     ) -> tuple[FloatArray | None, float]:
+    """(forces, the extra margin [rad] they keep inside the cones): :func:`hold_forces`
+    with each cone narrowed by the largest of :data:`HOLD_MARGINS` that still holds the
+    object (least-effort forces ride the cones' edges, which a servo-driven hand does
+    not deliver exactly: docs/gait.md); (None, 0) when none holds it."""
+    mu_m = float(load[6])
+    for extra in HOLD_MARGINS:
+        narrowed = np.array(load, dtype=float)
+        narrowed[6] = np.tan(max(np.arctan(mu_m) - extra, 1e-3))
+        narrowed[7] = load[7] * narrowed[6] / mu_m
+        F = hold_forces(hold, narrowed, L)
+        if F is not None:
+            return F, extra
+    return None, 0.0
 
 
 def hold_residuals(hold: Hold, forces: FloatArray, load: FloatArray, min_normal: FloatArray

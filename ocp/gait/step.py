@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Check, CheckKind
 from ocp.gait.bodies import tip_body
 from ocp.gait.checks import hold_checks, swing_checks
-from ocp.gait.hold import Hold, hold_forces
+from ocp.gait.hold import Hold, deep_hold_forces
 from ocp.gait.swing import SwingPlan, SwingSpec, plan_swing
 
 __all__ = ["GaitStep", "contact_of", "grasp_hold", "replace_finger"]
@@ -134,8 +134,8 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     before = grasp_hold(fingers, qs, allf, centre, radius, rotation)
     during = grasp_hold(fingers, qs, rest, centre, radius, rotation)
     name = fingers[k].joint_names[0].rsplit("_", 1)[0] if fingers[k].joint_names else str(k)
-    F_before = hold_forces(before, load, L)
-    F_during = hold_forces(during, load, L)
+    F_before, _ = deep_hold_forces(before, load, L)
+    F_during, _ = deep_hold_forces(during, load, L)
     if F_before is None or F_during is None:
         why = ("the grasp cannot hold the object" if F_before is None else
                f"the other fingertips cannot hold the object with {name} lifted (no forces "
@@ -155,7 +155,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         return GaitStep(k, plan.status, plan.message, plan)
     q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)
     after = grasp_hold(fingers, q_after, allf, centre, radius, rotation)
-    F_after = hold_forces(after, load, L)
+    F_after, _ = deep_hold_forces(after, load, L)
     if F_after is None:
         return GaitStep(k, "infeasible", f"the grasp with {name} landed cannot hold the "
                                          "object", plan)
