@@ -53,8 +53,10 @@ PLANS = {
     "experiment2": ROOT / "examples" / "experiment2_two_fingers.json",
     **{p.stem: p for p in sorted((ROOT / "examples").glob("*.json"))
        if json.loads(p.read_text(encoding="utf-8")).get("planner") in
-       ("one_finger", "manipulation") and p.stem != "experiment2_two_fingers"},
+       ("one_finger", "manipulation") and p.stem != "experiment2_two_fingers"
+       and "gait" not in json.loads(p.read_text(encoding="utf-8"))},
 }
+# (a gait is executed by tests/test_gait_service.py)
 
 
 #: Examples that tests/test_cli.py plans by the command line (every one but the two
