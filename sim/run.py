@@ -9,6 +9,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -323,62 +324,19 @@ class Simulation:
                 if f6[0] <= TOUCH_FORCE:
                     continue
                 normal_force[k, j] += f6[0]
-                p = con.pos
-                mujoco.mj_jac(m, d, jac_a, None, p, self.object_body)
-                v = jac_a @ d.qvel
-                body = int(m.geom_bodyid[other])
-                if body > 0:
-                    mujoco.mj_jac(m, d, jac_b, None, p, body)
-                    v = v - jac_b @ d.qvel
-                nrm = con.frame[:3]
-                vt = v - float(nrm @ v) * nrm
-                slip_speed[k, j] = max(slip_speed[k, j], float(np.linalg.norm(vt)))
+                slip_speed[k, j] = max(slip_speed[k, j],
+                                       contact_slip(m, d, con, self.object_body, other,
+                                                    jac_a, jac_b))
         wall = time.perf_counter() - start
         # errors at the end of every step, against the plan at that time
         t_end = plan_time[1:]
         pos_err = np.linalg.norm(obj_pose[:, :3] - pos_ref[1:], axis=1)
         ang_err = _angle_between(obj_pose[:, 3:], quat_ref[1:])
         during = t_end >= 0
-        # the steps inside the plan's horizon (the one ending at t = 0 is the settling's)
-        inside = t_end > 0.5 * dt
-        contacts = []
-        for j, spec in enumerate(plan.contacts):
-            touching = normal_force[:, j] > TOUCH_FORCE
-            # planned touching (finger gaiting: not while its fingertip is lifted, nor in
-            # the ends of the force ramps around it, where the force goes to zero)
-            on = np.ones(n_steps, dtype=bool) if spec.active is None else \
-                _linear(plan.t, spec.active[:, None], t_end)[:, 0] >= ACTIVE_SHARE
-            lifted = np.zeros(n_steps, dtype=bool) if spec.active is None else \
-                _linear(plan.t, spec.active[:, None], t_end)[:, 0] <= 0.0
-            lost_all = ~touching & on
-            lost = lost_all[during]
-            events = int(np.sum(lost[1:] & ~lost[:-1]) + (1 if lost.size and lost[0] else 0))
-            first = float(t_end[during][np.argmax(lost)]) if lost.any() else None
-            f = normal_force[during, j]
-            planned = planned_force.get(j)
-            if planned is not None:
-                planned = planned[1:][during]
-            contacts.append(ContactReport(
-                spec.name, spec.body, lost_time=float(np.sum(lost_all[inside]) * dt),
-                loss_events=events,
-                first_loss_at=first,
-                slip_distance=float(np.sum(slip_speed[during, j]) * dt),
-                max_slip_speed=float(np.max(slip_speed[during, j], initial=0.0)),
-                normal_force_min=float(np.min(f, initial=math.inf)),
-                normal_force_mean=float(np.mean(f)) if f.size else 0.0,
-                normal_force_max=float(np.max(f, initial=0.0)),
-                planned_normal_force_mean=None if planned is None or not planned.size
-                else float(np.mean(planned)),
-                normal_force_error_max=None if planned is None or not planned.size
-                else float(np.max(np.abs(f[on[during]] - planned[on[during]]),
-                                  initial=0.0)),
-                unplanned_touch_time=float(np.sum((touching & lifted)[inside]) * dt)))
-        # every record_every-th step, thinned to at most MAX_SERIES rows
-        every = max(o.record_every, math.ceil(n_steps / MAX_SERIES))
-        rec = np.arange(0, n_steps, every)
-        if rec[-1] != n_steps - 1:
-            rec = np.append(rec, n_steps - 1)
-        rec = rec[t_end[rec] >= -o.settle]
+        contacts = [contact_report(spec, plan.t, normal_force[:, j], slip_speed[:, j],
+                                   t_end, dt, planned_force.get(j))
+                    for j, spec in enumerate(plan.contacts)]
+        rec = recorded_steps(t_end, o)
         report = SimReport.assess(
             mode=o.mode, options=o, contacts=contacts,
             position=ErrorSummary.of(pos_err[during], t_end[during]),
@@ -388,6 +346,74 @@ class Simulation:
             duration=T, notes=[*plan.notes, *notes],
             mujoco_version=mujoco.__version__)
         return report
+
+
+def contact_slip(m: Any, d: Any, con: Any, object_body: int, other: int,
+                 jac_a: FloatArray, jac_b: FloatArray) -> float:
+    """The tangential speed [m/s] of the object's material point relative to the touching
+    body's at MuJoCo contact ``con`` (``other``: the touching geom; ``jac_a``, ``jac_b``:
+    3 x nv work arrays)."""
+    p = con.pos
+    mujoco.mj_jac(m, d, jac_a, None, p, object_body)
+    v = jac_a @ d.qvel
+    body = int(m.geom_bodyid[other])
+    if body > 0:
+        mujoco.mj_jac(m, d, jac_b, None, p, body)
+        v = v - jac_b @ d.qvel
+    nrm = con.frame[:3]
+    return float(np.linalg.norm(v - float(nrm @ v) * nrm))
+
+
+def contact_report(spec: Any, plan_t: FloatArray, normal_force: FloatArray,
+                   slip_speed: FloatArray, t_end: FloatArray, dt: float,
+                   planned: FloatArray | None = None) -> ContactReport:
+    """One planned contact's report from its normal force and slip speed at the end of
+    every step (``t_end`` [s] from the plan's start; negative: settling), ``planned``: its
+    planned normal force at the steps' starts and the last end (None: not stated). A
+    contact is lost where it has no force and the plan has it touching (``spec.active``
+    at least :data:`ACTIVE_SHARE`: finger gaiting's lifted tips and force ramps excepted);
+    a touch where the plan has its fingertip lifted clear is an unplanned touch."""
+    during = t_end >= 0
+    # the steps inside the plan's horizon (the one ending at t = 0 is the settling's)
+    inside = t_end > 0.5 * dt
+    n_steps = t_end.size
+    touching = normal_force > TOUCH_FORCE
+    # planned touching (finger gaiting: not while its fingertip is lifted, nor in the ends
+    # of the force ramps around it, where the force goes to zero)
+    share = None if spec.active is None else _linear(plan_t, spec.active[:, None], t_end)[:, 0]
+    on = np.ones(n_steps, dtype=bool) if share is None else share >= ACTIVE_SHARE
+    lifted = np.zeros(n_steps, dtype=bool) if share is None else share <= 0.0
+    lost_all = ~touching & on
+    lost = lost_all[during]
+    events = int(np.sum(lost[1:] & ~lost[:-1]) + (1 if lost.size and lost[0] else 0))
+    first = float(t_end[during][np.argmax(lost)]) if lost.any() else None
+    f = normal_force[during]
+    if planned is not None:
+        planned = planned[1:][during]
+    return ContactReport(
+        spec.name, spec.body, lost_time=float(np.sum(lost_all[inside]) * dt),
+        loss_events=events, first_loss_at=first,
+        slip_distance=float(np.sum(slip_speed[during]) * dt),
+        max_slip_speed=float(np.max(slip_speed[during], initial=0.0)),
+        normal_force_min=float(np.min(f, initial=math.inf)),
+        normal_force_mean=float(np.mean(f)) if f.size else 0.0,
+        normal_force_max=float(np.max(f, initial=0.0)),
+        planned_normal_force_mean=None if planned is None or not planned.size
+        else float(np.mean(planned)),
+        normal_force_error_max=None if planned is None or not planned.size
+        else float(np.max(np.abs(f[on[during]] - planned[on[during]]), initial=0.0)),
+        unplanned_touch_time=float(np.sum((touching & lifted)[inside]) * dt))
+
+
+def recorded_steps(t_end: FloatArray, o: SimOptions) -> np.ndarray:
+    """The steps of the report's series: every ``record_every``-th, thinned to at most
+    :data:`MAX_SERIES` rows, the last one, none before the settling."""
+    n_steps = t_end.size
+    every = max(o.record_every, math.ceil(n_steps / MAX_SERIES))
+    rec = np.arange(0, n_steps, every)
+    if rec[-1] != n_steps - 1:
+        rec = np.append(rec, n_steps - 1)
+    return rec[t_end[rec] >= -o.settle]
 
 
 def simulate(plan: ExecutionPlan, options: SimOptions | None = None) -> SimReport:

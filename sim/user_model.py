@@ -50,8 +50,18 @@ import mujoco
 import numpy as np
 
 from .options import SimOptions
-from .report import ContactReport, ErrorSummary, SimReport
-from .run import MAX_SERIES, TOUCH_FORCE, _angle_between, _damped_pinv, _linear, hermite, slerp
+from .report import ErrorSummary, SimReport
+from .run import (
+    TOUCH_FORCE,
+    _angle_between,
+    _damped_pinv,
+    _linear,
+    contact_report,
+    contact_slip,
+    hermite,
+    recorded_steps,
+    slerp,
+)
 from .scene import quat_of_matrix
 from .spec import ExecutionPlan, FloatArray
 
@@ -536,42 +546,17 @@ class UserModelSimulation:
                         other_force[body] = max(other_force.get(body, 0.0), float(f6[0]))
                     continue
                 normal_force[k, j_c] += f6[0]
-                p = con.pos
-                mujoco.mj_jac(m, d, jac_a, None, p, self.object_body)
-                v = jac_a @ d.qvel
-                body_id = int(m.geom_bodyid[other])
-                if body_id > 0:
-                    mujoco.mj_jac(m, d, jac_b, None, p, body_id)
-                    v = v - jac_b @ d.qvel
-                nrm = con.frame[:3]
-                vt = v - float(nrm @ v) * nrm
-                slip_speed[k, j_c] = max(slip_speed[k, j_c], float(np.linalg.norm(vt)))
+                slip_speed[k, j_c] = max(slip_speed[k, j_c],
+                                         contact_slip(m, d, con, self.object_body, other,
+                                                      jac_a, jac_b))
         wall = time.perf_counter() - start
         t_end = plan_time[1:]
         pos_err = np.linalg.norm(obj_pose[:, :3] - pos_ref[1:], axis=1)
         ang_err = _angle_between(obj_pose[:, 3:], quat_ref[1:])
         during = t_end >= 0
-        inside = t_end > 0.5 * dt
-        contacts = []
-        for jc, spec in enumerate(plan.contacts):
-            lost_all = ~(normal_force[:, jc] > TOUCH_FORCE)
-            lost = lost_all[during]
-            events = int(np.sum(lost[1:] & ~lost[:-1]) + (1 if lost.size and lost[0] else 0))
-            first = float(t_end[during][np.argmax(lost)]) if lost.any() else None
-            fn = normal_force[during, jc]
-            contacts.append(ContactReport(
-                spec.name, spec.body, lost_time=float(np.sum(lost_all[inside]) * dt),
-                loss_events=events, first_loss_at=first,
-                slip_distance=float(np.sum(slip_speed[during, jc]) * dt),
-                max_slip_speed=float(np.max(slip_speed[during, jc], initial=0.0)),
-                normal_force_min=float(np.min(fn, initial=math.inf)),
-                normal_force_mean=float(np.mean(fn)) if fn.size else 0.0,
-                normal_force_max=float(np.max(fn, initial=0.0))))
-        every = max(o.record_every, math.ceil(n_steps / MAX_SERIES))
-        rec = np.arange(0, n_steps, every)
-        if rec[-1] != n_steps - 1:
-            rec = np.append(rec, n_steps - 1)
-        rec = rec[t_end[rec] >= -o.settle]
+        contacts = [contact_report(spec, plan.t, normal_force[:, jc], slip_speed[:, jc],
+                                   t_end, dt) for jc, spec in enumerate(plan.contacts)]
+        rec = recorded_steps(t_end, o)
         steps_in_plan = max(int(np.sum(during)), 1)
         torque = []
         for j, _, _, _ in flat:

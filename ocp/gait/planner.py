@@ -100,18 +100,12 @@ class GaitPlan:
         return q, zero, zero
 
     def _before(self, i: int) -> FloatArray:
-        """Every finger's joints before gait step ``i``."""
+        """Every finger's joints before gait step ``i`` (concatenated): those after it,
+        but the re-placed finger's where its swing began."""
         step = self.steps[i]
-        return np.concatenate([step.swing.spec.q_start if k == step.finger and step.swing
-                               else q for k, q in enumerate(_before_of(self, i))])
-
-
-def _before_of(plan: GaitPlan, i: int) -> tuple[FloatArray, ...]:
-    step = plan.steps[i]
-    q_after = step.q_after
-    k = step.finger
-    assert step.swing is not None
-    return tuple(step.swing.spec.q_start if j == k else q for j, q in enumerate(q_after))
+        assert step.swing is not None
+        return np.concatenate([step.swing.spec.q_start if k == step.finger else q
+                               for k, q in enumerate(step.q_after)])
 
 
 def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],

@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.contacts.base import backed_off_joint_limits
-from ocp.gait.bodies import TipBody, point_segment_distance, tip_body
+from ocp.gait.bodies import TipBody, point_segment_distance, segment_distance, tip_body
 
 __all__ = ["SwingPlan", "SwingSpec", "plan_swing"]
 
@@ -108,8 +108,6 @@ class SwingSpec:
 
 def _body_gap(finger: Any, body: TipBody, q: FloatArray, a1: FloatArray, b1: FloatArray,
               r1: float) -> float:
-    from ocp.gait.bodies import segment_distance
-
     R, p = finger.fingertip_pose_pin(q)
     a0, b0 = body.placed(R, p)
     return segment_distance(a0, b0, a1, b1) - body.r - r1

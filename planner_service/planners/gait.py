@@ -5,20 +5,16 @@ certificate of every phase and switch."""
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
 from dexroll_client.models import (
-    DurationModel,
     GaitContactModel,
     GaitFingerModel,
     GaitPhaseModel,
     GaitResultModel,
     GaitSamplesModel,
-    JointTrajectoryModel,
-    JointTrajectoryPointModel,
     ManipulationCertificateModel,
     ManipulationRequest,
     ManipulationResult,
@@ -27,10 +23,12 @@ from dexroll_client.models import (
 )
 from ocp.gait.planner import GaitPlan, plan_gait
 from ocp.gait.samples import gait_samples, gait_times
+from ocp.solution import JointTrajectory
 from ocp.spec.grasp import ManipulationProblem
 
 from .common import finger_certificate, rows
 from .fields import FieldErrors
+from .samples import joint_trajectory_model
 
 __all__ = ["DEFAULT_GAIT_RATE", "gait_errors", "gait_result", "solve_gait"]
 
@@ -111,15 +109,8 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float
     jt, samples = None, None
     if gait.phases:
         smp = gait_samples(gait, problem, gait_times(gait, rate))
-        points = []
-        for i, t in enumerate(smp.t.tolist()):
-            sec = math.floor(t)
-            points.append(JointTrajectoryPointModel(
-                positions=smp.q[i].tolist(), velocities=smp.q_dot[i].tolist(),
-                accelerations=smp.q_ddot[i].tolist(),
-                time_from_start=DurationModel(sec=sec, nanosec=min(round((t - sec) * 1e9),
-                                                                   999_999_999)), t=t))
-        jt = JointTrajectoryModel(joint_names=joint_names, points=points, rate_breaks=[])
+        jt = joint_trajectory_model(JointTrajectory(tuple(joint_names), smp.t, smp.q,
+                                                    smp.q_dot, smp.q_ddot))
         samples = GaitSamplesModel(
             t=smp.t.tolist(), object_position=rows(smp.object_position),
             object_orientation_wxyz=rows(smp.object_wxyz),

@@ -28,7 +28,7 @@ from ocp.solution import ManipulationSolution, fixed_rate_times
 
 from .common import rows
 
-__all__ = ["joint_trajectory_block", "requested_times", "samples_block"]
+__all__ = ["joint_trajectory_block", "joint_trajectory_model", "requested_times", "samples_block"]
 
 
 def requested_times(request: Any) -> NDArray[np.float64] | None:
@@ -87,6 +87,12 @@ def joint_trajectory_block(plan: ManipulationSolution | None,
     jt = plan.joint_trajectory(plan.t if times is None else times)
     if not _finite(jt.positions, jt.velocities, jt.accelerations):
         return None
+    return joint_trajectory_model(jt)
+
+
+def joint_trajectory_model(jt: Any) -> JointTrajectoryModel:
+    """The wire form of the core's :class:`~ocp.solution.JointTrajectory` (its
+    ``to_dict``: ROS 2's fields)."""
     d = jt.to_dict()
     return JointTrajectoryModel(
         joint_names=d["joint_names"],
