@@ -4,7 +4,7 @@ and the tolerances a run passes against (docs/simulation.md states and explains 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 __all__ = ["MODES", "SimOptions", "Tolerances"]
@@ -45,7 +45,8 @@ class SimOptions:
     each joint has ``armature`` [kg m^2] (the finger models carry no inertias), gravity on
     the links compensated.
 
-    Grip: the fingertips' references are moved ``squeeze`` [m] into the object along the
+    Grip: the fingertips' references are moved ``squeeze`` [m] (None: the plan's own,
+    ``ExecutionPlan.squeeze``, else :data:`DEFAULT_SQUEEZE`) into the object along the
     pad's normal, and each fingertip pushes with ``grip_force`` [N] along its normal as
     torque feed-forward (``J^T f``); a plan with its own forces or joint torques uses
     those instead of ``grip_force`` (``use_plan_forces``). The object weighs
@@ -70,13 +71,25 @@ class SimOptions:
     kv: float = 2.0
     link_mass: float = 0.02
     armature: float = 1e-3
-    squeeze: float = 0.5e-3
+    squeeze: float | None = None
     grip_force: float = 1.0
     use_plan_forces: bool = True
     object_mass: float | None = None
     settle: float = 0.2
     record_every: int = 10
     tolerances: Tolerances = Tolerances()
+
+    #: the squeeze [m] when neither the options nor the plan (``ExecutionPlan.squeeze``)
+    #: give one
+    DEFAULT_SQUEEZE = 0.5e-3
+
+    def resolved(self, plan: Any) -> SimOptions:
+        """These options for ``plan``: the squeeze the options give, else the plan's own,
+        else :data:`DEFAULT_SQUEEZE`."""
+        if self.squeeze is not None:
+            return self
+        own = getattr(plan, "squeeze", None)
+        return replace(self, squeeze=self.DEFAULT_SQUEEZE if own is None else float(own))
 
     #: torsional friction [m] when neither the options nor the plan give one: the
     #: torque about the normal a contact resists per newton of normal force
@@ -93,7 +106,10 @@ class SimOptions:
         for name in ("impratio", "kp"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive")
-        for name in ("kv", "squeeze", "grip_force", "settle", "link_mass", "armature",
+        if self.squeeze is not None and not (math.isfinite(self.squeeze) and
+                                             self.squeeze >= 0):
+            raise ValueError("squeeze must be finite and >= 0")
+        for name in ("kv", "grip_force", "settle", "link_mass", "armature",
                      "rolling_friction"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):

@@ -131,7 +131,7 @@ class Simulation:
 
     def __init__(self, plan: ExecutionPlan, options: SimOptions | None = None) -> None:
         plan.check()
-        self.plan, self.options = plan, options or SimOptions()
+        self.plan, self.options = plan, (options or SimOptions()).resolved(plan)
         self.options.check()
         self.xml = mjcf(plan, self.options)
         self.model = mujoco.MjModel.from_xml_string(self.xml)

@@ -200,6 +200,9 @@ class ExecutionPlan:
     torsional_friction: float | None = None
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     notes: tuple[str, ...] = field(default=())
+    #: the grip's squeeze [m] this plan is executed with unless the options give one
+    #: (None: :data:`SimOptions.DEFAULT_SQUEEZE`)
+    squeeze: float | None = None
 
     @property
     def duration(self) -> float:

@@ -277,7 +277,7 @@ class UserModelSimulation:
     def __init__(self, plan: ExecutionPlan, model: UserModel,
                  options: SimOptions | None = None) -> None:
         plan.check()
-        self.plan, self.user, self.options = plan, model, options or SimOptions()
+        self.plan, self.user, self.options = plan, model, (options or SimOptions()).resolved(plan)
         self.options.check()
         if self.options.mode != "servo":
             raise ValueError("on the user's model the joints are driven by its actuators: "

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from ocp.gait.bodies import tip_body
+from ocp.geometry.bodies import tip_body
 from ocp.gait.checks import swing_checks
 from ocp.gait.step import contact_of, replace_finger
 from ocp.gait.swing import SwingPlan

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Check, CheckKind
-from ocp.gait.bodies import point_segment_distance, segment_distance
+from ocp.geometry.bodies import point_segment_distance, segment_distance
 from ocp.gait.hold import Hold, hold_residuals
 from ocp.gait.swing import SwingPlan
 

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Check, CheckKind
-from ocp.gait.bodies import tip_body
+from ocp.geometry.bodies import tip_body
 from ocp.gait.checks import hold_checks, swing_checks
 from ocp.gait.hold import Hold, deep_hold_forces
 from ocp.gait.swing import SwingPlan, SwingSpec, plan_swing

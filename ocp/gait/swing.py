@@ -15,7 +15,7 @@ The rows (at the nodes; the certificate samples the returned cubic densely):
   normal at the contact it leaves (two tangential rows zero, the normal one >= 0), the
   tip's body never inside the object;
 * **clear** (between lift-off and approach): the tip's body (sphere or capsule,
-  :mod:`ocp.gait.bodies`) at least ``clearance`` from the object;
+  :mod:`ocp.geometry.bodies`) at least ``clearance`` from the object;
 * **approach** (the last ``lift`` intervals): along the landing normal to the landing
   point, never inside the object;
 * **touch-down**: the cap's centre exactly over the landing point at the tip's radius
@@ -23,8 +23,10 @@ The rows (at the nodes; the certificate samples the returned cubic densely):
   rest (zero relative normal speed: the object is still);
 * **the other fingertips**: the tip's body at least ``min(clearance, 90 % of the gap at
   the start and at the landing)`` from each of theirs, at every node;
-* joint limits (backed off as the rolling plan's), velocity limits, the acceleration
-  limit.
+* joint limits (backed off as the rolling plan's) and velocity limits at the nodes, and
+  between them exactly: each interval's cubic lies in the convex hull of its Bezier
+  control points, bounded by the limits themselves (the rate's quadratic likewise); the
+  acceleration limit.
 
 The objective: the jerk's integral (squared, scaled), and the landing joints near the
 target's (the landing point fixes the cap's centre; a 4-joint finger keeps one degree of
@@ -42,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.contacts.base import backed_off_joint_limits
-from ocp.gait.bodies import TipBody, point_segment_distance, segment_distance, tip_body
+from ocp.geometry.bodies import TipBody, point_segment_distance, segment_distance, tip_body
 
 __all__ = ["SwingPlan", "SwingSpec", "plan_swing"]
 
@@ -242,6 +244,17 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
         add((Q[:, k + 1] - (qk + h * vk + h * h / 2 * ak + h**3 / 6 * jk)), 0.0, 0.0)
         add((Vp[:, k + 1] - (vk + h * ak + h * h / 2 * jk)) * T, 0.0, 0.0)
         add((Ap[:, k + 1] - (ak + h * jk)) * T * T, 0.0, 0.0)
+    # the whole cubic inside the limits: its Bezier control points are (convex hull)
+    lo_q, hi_q = np.asarray(f.lower, dtype=float), np.asarray(f.upper, dtype=float)
+    vmax = np.asarray(f.velocity_limit, dtype=float)
+    for k in range(n):
+        qk, vk, ak = Q[:, k], Vp[:, k], Ap[:, k]
+        for ctrl in (qk + h / 3 * vk, qk + 2 * h / 3 * vk + h * h / 6 * ak):
+            for i in range(nq):
+                add(ctrl[i], lo_q[i], hi_q[i])
+        mid_v = vk + h / 2 * ak  # the rate's middle control point
+        for i in range(nq):
+            add(mid_v[i] / vmax[i], -1.0, 1.0)
     for k in range(1, n + 1):
         R, p = f.fk(Q[:, k])
         a, b = p + R @ a_loc, p + R @ b_loc

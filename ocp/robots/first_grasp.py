@@ -10,7 +10,8 @@ joint origin of the finger kept outside the ball; of those, contacts with distin
 are kept. Per candidate, when the motion turns the ball, the finger is rolled
 (:func:`~ocp.robots.grasp_reach.roll`) through the turns up to the whole turn: how far it
 gets is its reach toward the motion. Then every combination of one candidate per finger is
-scored (:func:`first_grasp`): tips at least ``min_gap`` apart; the normals' *closure* (the
+scored (:func:`first_grasp`): tips' bodies (a capsule's cylinder too) at least ``min_gap``
+apart; the normals' *closure* (the
 least over directions u of ``max_i n_i . u``: > 0 iff the inward normals positively span
 space, so that normal pushes alone hold the ball against any force; two fingers: minus
 the sine of their grasp angle); of the combinations closed by :data:`GOOD_CLOSURE` (else
@@ -35,6 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ocp.geometry.bodies import segments_distance, tip_body
 from ocp.robots.grasp_reach import _tip, grasp_on_ball, roll, tip_state
 
 __all__ = [
@@ -334,12 +336,12 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
     n = len(fingers)
     N = np.stack([np.array([per[i][k].normal for k in range(len(per[i]))])[combos[:, i]]
                   for i in range(n)], axis=1)
-    C = np.stack([np.array([per[i][k].centre for k in range(len(per[i]))])[combos[:, i]]
-                  for i in range(n)], axis=1)
-    radii = np.array([_tip(f)[2] for f in fingers])
+    ends = [_body_ends(f, per[i]) for i, f in enumerate(fingers)]
     gap = np.full(len(combos), np.inf)
     for a, b in itertools.combinations(range(n), 2):
-        gap = np.minimum(gap, np.linalg.norm(C[:, a] - C[:, b], axis=1) - radii[a] - radii[b])
+        (a0, b0, r0), (a1, b1, r1) = ends[a], ends[b]
+        ka, kb = combos[:, a], combos[:, b]
+        gap = np.minimum(gap, segments_distance(a0[ka], b0[ka], a1[kb], b1[kb]) - r0 - r1)
     clo = np.concatenate([closure(N[k:k + 4096]) for k in range(0, len(combos), 4096)]) \
         if n >= 2 else np.zeros(len(combos))
     least = np.zeros(len(combos))
@@ -379,6 +381,14 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
     raise GraspNotFoundError([("grasp", f"no combination's grasp angle is below atan(mu) = "
                                    f"{math.degrees(math.atan(mu)):.3g} deg (mu {mu}) with a "
                                    "grasp map onto; raise mu or give more fingers")])
+
+
+def _body_ends(f: Any, cands: Sequence[FingerContact]) -> tuple[FloatArray, FloatArray, float]:
+    """The ends of finger ``f``'s tip body (:mod:`ocp.geometry.bodies`: a capsule's whole
+    segment) at each candidate's joints (palm frame, one row each) and its radius."""
+    body = tip_body(f)
+    ends = [body.placed(*f.fingertip_pose_pin(np.asarray(ct.q, dtype=float))) for ct in cands]
+    return np.array([e[0] for e in ends]), np.array([e[1] for e in ends]), body.r
 
 
 def _fine(f: Any, ct: FingerContact, centre: FloatArray, radius: float,

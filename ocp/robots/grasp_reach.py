@@ -32,6 +32,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ocp.geometry.bodies import segment_distance, tip_body
+
 __all__ = ["GraspSearch", "Rolled", "TipState", "cap_bound", "contact_sides", "grasp_on_ball",
            "roll", "search_grasp", "tip_state", "tips_gap"]
 
@@ -240,14 +242,17 @@ def grasp_on_ball(f: Any, q_start: ArrayLike, centre: ArrayLike, radius: float,
 
 
 def tips_gap(fingers: Sequence[Any], qs: Sequence[ArrayLike]) -> float:
-    """The least distance [m] between two round tips at joints ``qs`` (< 0: overlap)."""
-    cs = []
+    """The least distance [m] between two round tips' bodies at joints ``qs`` (< 0:
+    overlap): a capsule's whole body, its cylinder too, not its cap's sphere alone
+    (:mod:`ocp.geometry.bodies`)."""
+    segs = []
     for f, q in zip(fingers, qs, strict=True):
         R_l, p_l = f.fingertip_pose_pin(np.asarray(q, dtype=float))
-        pc, _, r = _tip(f)
-        cs.append((p_l + R_l @ pc, r))
-    return min((float(np.linalg.norm(ci - cj)) - ri - rj
-                for k, (ci, ri) in enumerate(cs) for cj, rj in cs[k + 1:]), default=math.inf)
+        body = tip_body(f)
+        segs.append((*body.placed(R_l, p_l), body.r))
+    return min((segment_distance(a0, b0, a1, b1) - r0 - r1
+                for k, (a0, b0, r0) in enumerate(segs) for a1, b1, r1 in segs[k + 1:]),
+               default=math.inf)
 
 
 def contact_sides(fingers: Sequence[Any], qs: Sequence[ArrayLike], centre: ArrayLike,

@@ -12,7 +12,12 @@ from ocp import GaitPlan, GaitSamples, gait_samples, gait_times
 
 from . import finger_spec
 
-__all__ = ["gait_execution_plan", "samples_execution_plan"]
+__all__ = ["GAIT_SQUEEZE", "gait_execution_plan", "samples_execution_plan"]
+
+#: A gait's squeeze [m] (the simulator's default is 0.5 mm): a fifth, measured in
+#: docs/gait.md "Executed" (the fingertips' unbalanced squeezes turn the ball while it
+#: rolls; a gait rolls many times).
+GAIT_SQUEEZE = 1e-4
 
 
 def gait_execution_plan(gait: GaitPlan, problem: Any, rate: float = 200.0) -> Any:
@@ -32,8 +37,8 @@ def samples_execution_plan(smp: GaitSamples, names: tuple[str, ...], models: tup
                            shape: str, dimensions: tuple[float, ...], mass: float, mu: float,
                            gravity: tuple[float, ...], notes: tuple[str, ...] = ()) -> Any:
     """The simulator's plan of a gait's samples: the fingertips' planned forces fed
-    forward (J^T f); a lifted fingertip has no force, no squeeze and no grip (its
-    contact's ``active``)."""
+    forward (J^T f), the squeeze :data:`GAIT_SQUEEZE` unless the options give one; a
+    lifted fingertip has no force, no squeeze and no grip (its contact's ``active``)."""
     from sim import ContactSpec, ExecutionPlan, FingerReference, ObjectSpec
 
     cut = np.cumsum((0, *(int(m.nq) for m in models)))
@@ -46,6 +51,6 @@ def samples_execution_plan(smp: GaitSamples, names: tuple[str, ...], models: tup
                          smp.object_wxyz, specs, refs, contacts, None, mu, None,
                          (float(gravity[0]), float(gravity[1]), float(gravity[2])),
                          ("a gait: planned lift-offs and touch-downs (contacts' activity)",
-                          *notes))
+                          *notes), squeeze=GAIT_SQUEEZE)
     plan.check()
     return plan
