@@ -139,3 +139,31 @@ def test_a_fingertip_the_others_cannot_hold_without_is_refused_at_once() -> None
                         LOAD)
     assert st.status == "infeasible" and st.swing is None
     assert "thumb" in st.message and "friction cones" in st.message
+
+
+def test_tip_bodies_distance_is_the_least_over_their_segments_and_counts_cylinders() -> None:
+    """The closed-form segment distance is a distance between points of the segments
+    (never above the least over dense samples) and within the samples' spacing of it;
+    two capsule tips whose caps are apart but whose cylinders cross overlap."""
+    from ocp.geometry.bodies import points_segment_distance, segments_distance
+    from ocp.robots.grasp_reach import tips_gap
+
+    rng = np.random.default_rng(7)
+    a0, b0, a1, b1 = rng.normal(size=(4, 300, 3))
+    b0[::5] = a0[::5]  # points
+    b1[::7] = a1[::7] + 0.5 * (b0[::7] - a0[::7])  # parallel
+    got = segments_distance(a0, b0, a1, b1)
+    s = np.linspace(0.0, 1.0, 2001)[:, None]
+    for k in range(300):
+        brute = min(points_segment_distance(a0[k] + s * (b0[k] - a0[k]), a1[k], b1[k]).min(),
+                    points_segment_distance(a1[k] + s * (b1[k] - a1[k]), a0[k], b0[k]).min())
+        assert brute - 2e-3 <= got[k] <= brute + 1e-12
+    # the index and middle tips bent toward each other (abduction -27 and +27 deg): their
+    # caps' centres more than two radii apart, their capsules' cylinders crossing
+    f = FINGERS[:2]
+    q = [np.array(NOMINAL_Q[0], dtype=float), np.array(NOMINAL_Q[1], dtype=float)]
+    q[0][0], q[1][0] = math.radians(-27.0), math.radians(27.0)
+    caps = [fi.fingertip_pose_pin(qi) for fi, qi in zip(f, q, strict=True)]
+    centres = [p + R @ tip_body(fi).a for fi, (R, p) in zip(f, caps, strict=True)]
+    assert float(np.linalg.norm(centres[0] - centres[1])) > 2 * tip_body(f[0]).r
+    assert tips_gap(f, q) < -5e-3
