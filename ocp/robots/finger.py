@@ -45,6 +45,7 @@ from ocp.robots.arrays import readonly as _readonly
 from ocp.robots.arrays import rotation as _rotation
 from ocp.robots.arrays import vector3 as _vector3
 from ocp.robots.ik import IKResult, inverse_kinematics, inverse_kinematics_batch
+from ocp.robots.urdf_frames import kinematic_urdf
 
 from . import models as _models
 
@@ -435,7 +436,7 @@ def load_finger(
     else:
         text, source = Path(urdf).read_text(encoding="utf-8"), str(urdf)
     try:
-        model = pin.buildModelFromXML(text)
+        model = pin.buildModelFromXML(kinematic_urdf(text))
     except (RuntimeError, ValueError) as exc:
         raise ValueError(f"cannot build a model from the URDF ({source}): {exc}") from exc
     if base_rotation is None:

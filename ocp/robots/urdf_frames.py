@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["rpy_matrix", "urdf_disagreements", "urdf_link_poses"]
+__all__ = ["kinematic_urdf", "rpy_matrix", "urdf_disagreements", "urdf_link_poses"]
 
 FloatArray = NDArray[np.float64]
 Pose = tuple[FloatArray, FloatArray]
@@ -32,6 +32,22 @@ def rpy_matrix(rpy: FloatArray) -> FloatArray:
     return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
                      [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
                      [-sp, cp * sr, cp * cr]])
+
+
+def kinematic_urdf(text: str) -> str:
+    """The URDF without its links' ``<collision>`` and ``<visual>`` elements: what
+    Pinocchio's kinematic model is built from (it reads no geometry; urdfdom prints an
+    error for each geometry outside the URDF specification, such as the ``<capsule>``
+    the fingertips' readers take, :mod:`ocp.robots.whole_hand`). Text that does not parse
+    is returned as it is (Pinocchio names the fault)."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return text
+    for link in root.iter("link"):
+        for child in [c for c in link if c.tag in ("collision", "visual")]:
+            link.remove(child)
+    return ET.tostring(root, encoding="unicode")
 
 
 def _vec(el: ET.Element | None, attr: str, default: tuple[float, ...]) -> FloatArray:

@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.tips import TipSurface, capsule_tip, sphere_tip
 from ocp.robots.mjcf_frames import MjcfReadError, build_mjcf, mujoco_disagreements, site_pose
-from ocp.robots.urdf_frames import urdf_disagreements
+from ocp.robots.urdf_frames import kinematic_urdf, urdf_disagreements
 
 __all__ = ["DEFAULT_VELOCITY", "HandModelError", "TipSpec", "WholeHand", "load_whole_hand",
            "model_problems", "tip_geometry"]
@@ -263,7 +263,7 @@ def _build(text: str, fmt: str) -> tuple[Any, str]:
     import pinocchio as pin
 
     if fmt == "urdf":
-        return pin.buildModelFromXML(text), text
+        return pin.buildModelFromXML(kinematic_urdf(text)), text
     return build_mjcf(text)
 
 
