@@ -143,3 +143,31 @@ def test_bad_grasp_requests_are_422_naming_the_field(live_server: Server, change
     assert r.status_code == 422, r.text
     fields = {d["field"]: d["reason"] for d in r.json()["detail"]}
     assert words in fields[field], fields
+
+
+def test_a_gait_searches_a_grasp_in_which_every_fingertip_can_be_lifted() -> None:
+    """With `gait` the search prefers a grasp whose every fingertip the others hold the
+    ball without (a gait re-places each): 180 deg about the palm's z at mu = 1, where the
+    grasp of the largest reach alone keeps the thumb (docs/gait.md)."""
+    from ocp.gait.step import liftable
+    from ocp.transcription.values import load_parameters
+
+    body = json.loads((ROOT / "examples" / "allegro_gait.json").read_text())
+    body.update(mu=1.0, grasp="auto")
+    body["motion"]["steps"][0].update(axis=[0, 0, 1], angle=math.pi, duration=25.2)
+    body["duration"] = 25.2
+    request = ManipulationRequest.model_validate(body)
+    problem, grasp = problem_and_grasp(request, CACHE)
+    assert grasp is not None
+    fingers = [tip.finger for tip in problem.fingers]
+    qs = [np.array(f.q) for f in grasp.fingers]
+    centre = np.asarray(request.initial_pose.position)  # type: ignore[union-attr]
+    _assert_a_grasp(fingers, qs, centre, NOMINAL_RADIUS, request.mu)
+    load = load_parameters(problem)
+    assert all(liftable(fingers, qs, centre, NOMINAL_RADIUS, np.eye(3), load))
+    # the same search without the gait's preference: the largest reach, the thumb held
+    body.pop("gait")
+    plain, plain_grasp = problem_and_grasp(ManipulationRequest.model_validate(body), CACHE)
+    assert plain_grasp is not None and plain_grasp.reach >= grasp.reach  # type: ignore[operator]
+    plain_qs = [np.array(f.q) for f in plain_grasp.fingers]
+    assert not all(liftable(fingers, plain_qs, centre, NOMINAL_RADIUS, np.eye(3), load))

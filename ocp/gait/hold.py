@@ -26,7 +26,7 @@ from ocp.transcription.loads import LOAD_VARS, load_cost, load_rows
 from ocp.transcription.values import load_bounds
 
 __all__ = ["HOLD_MARGINS", "Hold", "HoldResiduals", "deep_hold_forces", "hold_forces",
-           "hold_residuals"]
+           "hold_residuals", "liftable"]
 
 FloatArray = NDArray[np.float64]
 
@@ -139,3 +139,4 @@ def hold_residuals(hold: Hold, forces: FloatArray, load: FloatArray, min_normal:
     ft = np.linalg.norm(forces + fn[:, None] * hold.normals, axis=1)
     return HoldResiduals(float(max(np.abs(wrench_f).max(), np.abs(wrench_m).max())),
                          float(np.min(fn - min_normal)), float(np.min(load[6] * fn - ft)))
+

@@ -25,8 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate, Check, CheckKind
-from ocp.gait.hold import hold_forces
-from ocp.gait.step import GaitStep, contact_of, grasp_hold, replace_finger
+from ocp.gait.step import GaitStep, contact_of, liftable, replace_finger
 from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
 from ocp.solution import ManipulationSolution
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
@@ -233,8 +232,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     plan = GaitPlan("solved", "", nq=tuple(int(f.nq) for f in fingers))
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
     # the fingers the others cannot hold the ball without (they roll throughout)
-    never_lifted = {names[k] for k in range(nf) if hold_forces(grasp_hold(
-        fingers, q_now, [i for i in range(nf) if i != k], centre, rho, R0), load, rho) is None}
+    never_lifted = {names[k] for k, ok in enumerate(liftable(fingers, q_now, centre, rho, R0,
+                                                             load)) if not ok}
     checks: list[Check] = []
     t, done = 0.0, 0.0
     while done < angle - 1e-12 and len(plan.rolls) < max_rolls:

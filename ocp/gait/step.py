@@ -15,10 +15,10 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Check, CheckKind
 from ocp.geometry.bodies import tip_body
 from ocp.gait.checks import hold_checks, swing_checks
-from ocp.gait.hold import Hold, deep_hold_forces
+from ocp.gait.hold import Hold, deep_hold_forces, hold_forces
 from ocp.gait.swing import SwingPlan, SwingSpec, plan_swing
 
-__all__ = ["GaitStep", "contact_of", "grasp_hold", "replace_finger"]
+__all__ = ["GaitStep", "contact_of", "grasp_hold", "liftable", "replace_finger"]
 
 FloatArray = NDArray[np.float64]
 
@@ -42,6 +42,20 @@ def grasp_hold(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list
     pn = [contact_of(fingers[i], qs[i], centre, radius) for i in which]
     return Hold(np.array([p for p, _ in pn]), np.array([n for _, n in pn]), centre,
                 rotation)
+
+
+def liftable(fingers: Any, qs: Any, centre: FloatArray, radius: float, rotation: FloatArray,
+             load: FloatArray) -> tuple[bool, ...]:
+    """Per fingertip of a grasp of a still ball (``fingers`` at the joints ``qs``, every
+    tip touching the ball of ``radius`` at ``centre``): whether the others hold it
+    without that one (:func:`hold_forces` with the load parameters ``load``), so that it
+    can be re-placed."""
+    n = len(fingers)
+    qs = tuple(np.asarray(q, dtype=float) for q in qs)
+    centre = np.asarray(centre, dtype=float)
+    return tuple(hold_forces(grasp_hold(tuple(fingers), qs, [i for i in range(n) if i != k],
+                                        centre, radius, rotation), load, radius) is not None
+                 for k in range(n))
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -291,13 +291,18 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
                 fixed: Sequence[ArrayLike | None] | None = None,
                 seeds: Sequence[Sequence[ArrayLike]] | None = None, samples: int = 1500,
                 keep: int = 8, min_gap: float = 1e-3, margin: float = 0.002,
-                seed: int = 0, names: Sequence[str] | None = None) -> FirstGrasp:
+                seed: int = 0, names: Sequence[str] | None = None,
+                prefer: Callable[[tuple[FingerContact, ...]], bool] | None = None
+                ) -> FirstGrasp:
     """A first grasp of the ball of ``radius`` at ``centre`` by the round tips of
     ``fingers`` (module docstring): per finger its joints ``fixed[i]`` when given, else
     searched (``samples`` joint vectors, ``seeds[i]`` first); the combination with the
     largest least reach through ``turns`` (:func:`desired_turns`; none: the most closed
     grasp), tips ``min_gap`` [m] apart, contacts ``margin`` [m] from the caps' seams.
-    :class:`GraspNotFoundError` naming ``fingers[i]`` or ``grasp`` when there is none."""
+    ``prefer``: of the grasps passing the planner's grasp-angle test, in that order, the
+    first it accepts (a gait's: every fingertip liftable); the first of all when it
+    accepts none. :class:`GraspNotFoundError` naming ``fingers[i]`` or ``grasp`` when
+    there is none."""
     from ocp.geometry.grasp import force_angles
 
     c = np.asarray(centre, dtype=float)
@@ -365,19 +370,27 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
     pool = good if good.any() else ok
     order = np.lexsort((-clo, -least))  # by reach, then closure (last key first)
     chosen = [k for k in order if pool[k]]
-    for k in chosen[:20]:  # the planner's own test: the grasp angle below atan(mu)
-        contacts = tuple(per[i][combos[k, i]] for i in range(n))
+    first: tuple[int, tuple[FingerContact, ...], float] | None = None
+    for k in chosen[:20 if prefer is None else 60]:  # the planner's own test: the grasp
+        contacts = tuple(per[i][combos[k, i]] for i in range(n))  # angle below atan(mu)
         pts = np.array([c + radius * ct.normal for ct in contacts])[None]
         nrm = np.array([ct.normal for ct in contacts])[None]
         phi, _, onto = force_angles(pts, nrm) if n >= 2 else (np.zeros(1), None,
                                                                np.ones(1, dtype=bool))
         if n < 2 or (bool(onto[0]) and float(phi[0]) < math.atan(mu)):
-            if turns:  # the chosen grasp's reach at the planner's check's step
-                contacts = tuple(_fine(f, ct, c, radius, turns, margin)
-                                 for f, ct in zip(fingers, contacts, strict=True))
-            return FirstGrasp(contacts, float(clo[k]), float(gap[k]),
-                              float(phi[0]) if n >= 2 else 0.0, requested,
-                              tuple(len(p) for p in per), len(combos))
+            angle = float(phi[0]) if n >= 2 else 0.0
+            if first is None:
+                first = (k, contacts, angle)
+            if prefer is None or prefer(contacts):
+                first = (k, contacts, angle)
+                break
+    if first is not None:
+        k, contacts, angle = first
+        if turns:  # the chosen grasp's reach at the planner's check's step
+            contacts = tuple(_fine(f, ct, c, radius, turns, margin)
+                             for f, ct in zip(fingers, contacts, strict=True))
+        return FirstGrasp(contacts, float(clo[k]), float(gap[k]), angle, requested,
+                          tuple(len(p) for p in per), len(combos))
     raise GraspNotFoundError([("grasp", f"no combination's grasp angle is below atan(mu) = "
                                    f"{math.degrees(math.atan(mu)):.3g} deg (mu {mu}) with a "
                                    "grasp map onto; raise mu or give more fingers")])

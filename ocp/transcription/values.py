@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 
 from ocp.geometry.grasp import cone_cosine
 from ocp.spec.grasp import ManipulationProblem, contact_charts
-from ocp.spec.problem import CONTACT_COORDS
+from ocp.spec.problem import CONTACT_COORDS, ForceSpec
 from ocp.transcription.collocation import node_times
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.nlp_blocks import LOAD_PARAMS, LOAD_VARS, TORSION_SHARE, BlockNLP
@@ -40,11 +40,8 @@ def scales(problem: ManipulationProblem, m: GraspModel) -> tuple[FloatArray, Flo
 
 def force_scale(problem: ManipulationProblem) -> float:
     """The planned forces' scale [N]: the weight, or the grip of all contacts if larger."""
-    fs = problem.forces
-    if fs is None:
-        return 1.0
-    weight = fs.mass * float(np.linalg.norm(fs.gravity))
-    return max(weight, problem.n_contacts * fs.min_normal_force, 1e-6)
+    return 1.0 if problem.forces is None else \
+        float(load_vector(problem.forces, problem.mu, problem.n_contacts)[5])
 
 
 def load_bounds(n_load: int, k: int) -> FloatArray:
@@ -59,12 +56,18 @@ def load_bounds(n_load: int, k: int) -> FloatArray:
 
 def load_parameters(problem: ManipulationProblem) -> FloatArray:
     """The NLP's load parameters (:data:`~ocp.transcription.nlp_blocks.LOAD_PARAMS`)."""
-    fs = problem.forces
+    return load_vector(problem.forces, problem.mu, problem.n_contacts)
+
+
+def load_vector(fs: ForceSpec | None, mu: float, n_contacts: int) -> FloatArray:
+    """:func:`load_parameters` of a grasp of ``n_contacts`` contacts with the planned
+    forces ``fs`` and the friction coefficient ``mu`` (no problem needed)."""
     if fs is None:
         return np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0])
     weight = fs.mass * np.asarray(fs.gravity, dtype=float)
-    mu_m = math.tan(math.atan(problem.mu) - fs.cone_margin)
-    F0 = force_scale(problem)
+    mu_m = math.tan(math.atan(mu) - fs.cone_margin)
+    F0 = max(fs.mass * float(np.linalg.norm(fs.gravity)), n_contacts * fs.min_normal_force,
+             1e-6)
     out = np.array([*weight, fs.min_normal_force, fs.torsional_friction, F0, mu_m,
                     CONE_SMOOTHING * mu_m * fs.min_normal_force / F0])
     assert out.size == LOAD_PARAMS

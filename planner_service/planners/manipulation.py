@@ -173,7 +173,21 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                        for f in request.fingers],
                       request.object.model_dump_json(), list(start.position),
                       [(t.axis.tolist(), t.angle) for t in turns], request.mu,
-                      request.pad_margin, search.model_dump_json()])
+                      request.pad_margin, search.model_dump_json(),
+                      request.gait is not None,
+                      request.forces.model_dump_json() if request.forces else None])
+
+    prefer = None
+    if request.gait is not None:  # a gait re-places fingertips: each one liftable
+        from ocp.gait.step import liftable
+        from ocp.transcription.values import load_vector
+
+        load = load_vector(force_spec(request.forces), request.mu, len(models))
+        rotation = np.asarray(start.rotation, dtype=float)
+
+        def prefer(contacts: tuple[Any, ...]) -> bool:
+            return all(liftable(models, [ct.q for ct in contacts], centre, radius, rotation,
+                                load))
 
     def run() -> Any:
         t0 = time.perf_counter()
@@ -181,7 +195,8 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                           fixed=[q for _, _, q, _, _ in from_joints],
                           seeds=[s for _, s in info], samples=search.samples,
                           keep=search.candidates, min_gap=search.min_gap,
-                          margin=request.pad_margin, seed=search.seed, names=names)
+                          margin=request.pad_margin, seed=search.seed, names=names,
+                          prefer=prefer)
         return got, time.perf_counter() - t0
 
     try:
