@@ -226,7 +226,7 @@ def test_a_gaits_contact_schedule_is_on_the_timeline(browser: Any, tmp_path: Pat
 
     def pixel(name: str, t: float) -> np.ndarray:
         x, y = page.evaluate("([n, t]) => window.dexroll.schedulePoint(n, t)", [name, t])
-        return shot[int(round(y)), int(x)]
+        return shot[round(y), int(x)]
 
     for p in gait.phases:
         mid = (p.start + p.end) / 2

@@ -40,7 +40,7 @@ from ocp.spec.grasp import ManipulationProblem
 from ocp.spec.motion import ObjectPose
 from ocp.transcription.values import load_parameters
 
-__all__ = ["GaitOutlook", "MAX_ROLLS", "gait_outlook"]
+__all__ = ["MAX_ROLLS", "GaitOutlook", "gait_outlook"]
 
 FloatArray = NDArray[np.float64]
 
