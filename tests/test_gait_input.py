@@ -78,6 +78,31 @@ def test_a_grasp_no_fingertip_of_which_can_be_lifted_is_infeasible(live_server: 
     assert "index, middle, thumb" in msg and "rolling alone" in msg
 
 
+def test_a_ball_too_heavy_to_lift_a_finger_off_names_it(live_server: Server) -> None:
+    """At mu = 0.15 the index, middle and thumb hold the 50 g ball without the ring finger,
+    squeezing it; not a 0.5 kg one within the plan's bound on the forces (each component
+    20 times the weight). The ring finger then rolls through the whole turn, and its joint
+    stops it before 20 deg about -y: the answer names the ring finger, the hold's law and
+    the weight; the same turn of the 50 g ball passes the same laws."""
+    from ocp.gait.feasibility import gait_outlook
+
+    body = copy.deepcopy(EXAMPLE)
+    body["mu"] = 0.15
+    body["forces"]["mass"] = 0.5
+    res = _infeasible(_post(live_server, body))
+    assert res["gait"]["never_lifted"] == ["ring", "thumb"]
+    msg = res["message"]
+    assert msg.startswith("finger 'ring' (joint limit (ring_j") and "of 20.0 deg" in msg
+    assert "cannot hold the ball: no forces inside their friction cones" in msg
+    assert "its weight of 4.91 N" in msg
+    light, qs = _grasp(mu=0.15, mass=0.05)
+    outlook = gait_outlook(light, qs, (0, -1, 0), math.radians(20), math.radians(10))
+    assert outlook.feasible and outlook.never_lifted == ("thumb",)
+    heavy, qs = _grasp(mu=0.15, mass=0.5)
+    assert gait_outlook(heavy, qs, (0, -1, 0), math.radians(20),
+                        math.radians(10)).message == msg
+
+
 def test_a_turn_beyond_the_never_lifted_fingers_reach_names_its_limit(
         live_server: Server) -> None:
     """At mu = 0.5 the built-in hand's thumb cannot be lifted (docs/gait.md), so it rolls
@@ -139,7 +164,7 @@ def test_too_little_friction_for_the_grasp_is_infeasible(live_server: Server) ->
     assert res["message"].startswith("no fingertip can be lifted")
 
 
-def _grasp(mu: float) -> tuple[Any, tuple[Any, ...]]:
+def _grasp(mu: float, mass: float = 0.05) -> tuple[Any, tuple[Any, ...]]:
     """The example's grasp (the built-in hand's nominal joints on the 60 mm, 50 g ball)."""
     from ocp.robots.allegro import NOMINAL_Q, load_allegro
     from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
@@ -153,4 +178,4 @@ def _grasp(mu: float) -> tuple[Any, tuple[Any, ...]]:
                                   ("index", "middle", "ring", "thumb"),
                                   tuple(f"fingers[{i}].initial_q" for i in range(4)))
     return ManipulationProblem(object=ball, fingers=tips, duration=1.0, initial_pose=pose,
-                               n_intervals=16, forces=ForceSpec(mass=0.05), mu=mu), qs
+                               n_intervals=16, forces=ForceSpec(mass=mass), mu=mu), qs

@@ -7,8 +7,12 @@ each) and then answered ``infeasible``. The same laws, asked once at the start, 
 requests no sequence of rolls and re-placements within the limits can serve at once
 (hundreds of ms: small hold problems and the fingers' rolled reach, no NLP of a roll):
 
-- **the hold**: the fingertips must hold the still ball (its weight inside their friction
-  cones, every normal force at least the minimum: :func:`~ocp.gait.hold.hold_forces`);
+- **the hold**: the fingertips must hold the still ball (its weight balanced by forces
+  inside their friction cones and the plan's bound, every normal force at least the
+  minimum: :func:`~ocp.gait.hold.hold_forces`). The bound (each force component within
+  ``LOAD_BOUND`` times the larger of the weight and the contacts' least grip) is what
+  makes a ball too heavy: with little friction three fingertips hold a light ball by
+  squeezing it harder, relative to its weight, than they may a heavy one;
 - **a lift**: a finger can be lifted only when the others hold the ball without it; a gait
   with no such finger is no gait;
 - **the never-lifted fingers' reach**: a finger that cannot be lifted rolls through the
@@ -38,7 +42,7 @@ from ocp.gait.planner import MIN_ROLL, REACH_MARGIN, REACH_SHARE, plan_gait
 from ocp.gait.step import grasp_hold
 from ocp.spec.grasp import ManipulationProblem
 from ocp.spec.motion import ObjectPose
-from ocp.transcription.values import load_parameters
+from ocp.transcription.values import LOAD_BOUND, load_parameters
 
 __all__ = ["MAX_ROLLS", "GaitOutlook", "gait_outlook"]
 
@@ -115,20 +119,23 @@ def gait_outlook(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any,
     load = load_parameters(template)
     weight = float(np.linalg.norm(load[0:3]))
     cones = (f"no forces inside their friction cones (mu {template.mu:g} less the cone "
-             f"margin {fs.cone_margin:g} rad) balance its weight of {weight:.3g} N with every "
-             f"normal force at least {fs.min_normal_force:g} N")
+             f"margin {fs.cone_margin:g} rad), each component within the plan's bound of "
+             f"{LOAD_BOUND * float(load[5]):.3g} N, balance its weight of {weight:.3g} N with "
+             f"every normal force at least {fs.min_normal_force:g} N")
 
     def holds(which: list[int]) -> bool:
         return hold_forces(grasp_hold(fingers, q, which, centre, rho, R0), load, rho) \
             is not None
 
-    if fs.torsional_friction == 0.0 and not holds(list(range(nf))):
-        return GaitOutlook(names, 0.0, 0.0, 0,
-                           f"the fingertips ({', '.join(names)}) cannot hold the ball in "
-                           f"their grasp: {cones}")
     held = [k for k in range(nf) if not holds([i for i in range(nf) if i != k])]
     never = tuple(names[k] for k in held)
     free = [k for k in range(nf) if k not in held]
+    # the grasp's own hold: refused only when no fewer fingertips hold the ball either (a
+    # solver's failure on the whole grasp where three of its fingertips hold it is not a law)
+    if fs.torsional_friction == 0.0 and not free and not holds(list(range(nf))):
+        return GaitOutlook(names, 0.0, 0.0, 0,
+                           f"the fingertips ({', '.join(names)}) cannot hold the ball in "
+                           f"their grasp: {cones}")
     reach, who, why = _reach(template, q, held, centre, rho, ax, angle)
     if not free:
         alone = (f"rolling alone, finger {who!r} ({why}) stops the turn after "
