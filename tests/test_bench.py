@@ -8,6 +8,7 @@ import importlib.util
 import io
 import json
 import math
+import re
 import sys
 import types
 from pathlib import Path
@@ -31,6 +32,7 @@ from planner_service.bench.rows import (
     differences,
     peer_status,
     row_from_peer,
+    row_from_result,
 )
 from planner_service.bench.runners import Scheduler, affinity_key
 from planner_service.bench.suite import (
@@ -103,6 +105,7 @@ def test_every_family_draws_its_own_planner_and_methods() -> None:
                         "full_goal": {"ball_on_palm"}, "one_finger": {"one_finger"},
                         "two_fingers": {"manipulation"}, "three_fingers": {"manipulation"},
                         "four_finger_round": {"manipulation"},
+                        "four_finger_gait": {"manipulation"},
                         "paper": {"one_finger", "manipulation"}}
     methods = {(u.family, u.method) for u in units(problems)}
     assert ("one_finger", "greedy") in methods and ("paper", "greedy") in methods
@@ -410,7 +413,10 @@ def test_quick_suite_solves_are_certified(quick_run: tuple[int, Path]) -> None:
         if r["expected"] == "solved":
             assert r["ok"], (r["problem_id"], r["method"], r["message"])
         assert r["worker_pid"] and r["peak_rss_mb"] > 0
-    ours = [r for r in rows if r["method"] in OURS]
+    # a gait no sequence within its limits makes is answered before any NLP (no iterations,
+    # no certificate: tests/test_gait_input.py); the others were planned
+    ours = [r for r in rows if r["method"] in OURS and
+            not (r["family"] == "four_finger_gait" and r["status"] == "infeasible")]
     # a plan stopped at its time limit has no certificate (the deadline skips it); on a
     # loaded machine a family expected 'any' may end so
     assert ours and all(r["iterations"] and (r["certificate"] or r["status"] == "time_limit")
@@ -462,3 +468,60 @@ def test_a_live_service_gives_the_same_rows(quick_run: tuple[int, Path], live_se
               if (r["problem_id"], r["method"]) in both]
     assert mine == theirs
     assert all(r["peak_rss_mb"] is None and r["worker_pid"] for r in doc["rows"])
+
+
+def test_gait_family_turns_the_ball_farther_than_rolling_about_random_axes() -> None:
+    """four_finger_gait: the built-in hand's four fingertips, one rotation step of 45-180
+    deg about a random axis (no translation), the rolls' speed 8 s per radian, the quick
+    suite at the hand's mu = 0.5 and the full one at mu = 1.0 (docs/benchmarks.md)."""
+    for name, mu, count in (("quick", 0.5, 2), ("full", 1.0, 20)):
+        problems = expand(load_suite(name), families=["four_finger_gait"])
+        assert len(problems) == count
+        axes = []
+        for p in problems:
+            r = p.request
+            assert r["mu"] == mu and r["gait"] and r["forces"]["mass"] > 0
+            assert len(r["fingers"]) == 4 and r["hand"] == {"builtin": "allegro"}
+            (step,) = r["motion"]["steps"]
+            assert 45.0 <= math.degrees(step["angle"]) <= 180.0 and "translation" not in step
+            assert step["duration"] == r["duration"] == pytest.approx(8.0 * step["angle"])
+            assert np.linalg.norm(step["axis"]) == pytest.approx(1.0)
+            axes.append(step["axis"])
+        assert len({tuple(np.round(a, 6)) for a in axes}) == count
+
+
+def test_quick_gait_rows_are_typed_answers_naming_the_thumbs_limit(
+        quick_run: tuple[int, Path]) -> None:
+    """At mu = 0.5 the thumb cannot be lifted (the others cannot hold the ball without
+    it), so it rolls through the whole turn: each row is infeasible at once, the message
+    names its joint and the turn it allows, less than the turn asked, none made."""
+    rows = [r for r in _rows(quick_run[1]) if r["family"] == "four_finger_gait"]
+    assert len(rows) == 2
+    for r in rows:
+        assert r["status"] == "infeasible" and not r["ok"] and r["expected"] == "unsolved"
+        m = re.search(r"finger 'thumb' \(joint limit \(thumb_j\d\)\) stops the turn after "
+                      r"([0-9.]+) deg of ([0-9.]+) deg", r["message"])
+        assert m is not None, r["message"]
+        assert float(m.group(1)) < float(m.group(2)) == round(r["turn_asked_deg"], 1)
+        assert r["turn_made_deg"] == 0.0 and r["exec_status"] is None
+
+
+def test_a_certified_gaits_row_is_executed_in_mujoco() -> None:
+    """A gait row's executed column: the stored gait (tests/data/gait_small_*.json, the
+    example turned 8 deg, planned once; tests/test_view_browser.py draws it) executed in
+    MuJoCo on its own forces as every row with forces is; the turn asked and made."""
+    pytest.importorskip("mujoco")
+    from planner_service.bench.suite import Unit
+    from planner_service.planners import RESULT
+
+    data = Path(__file__).resolve().parent / "data"
+    request = json.loads((data / "gait_small_request.json").read_text())
+    result = RESULT.validate_json((data / "gait_small_result.json").read_text())
+    unit = Unit("four_finger_gait", "stored", "collocation", "manipulation", request, "any")
+    row = row_from_result(unit, result, None, None, None)
+    assert row["ok"] and row["turn_asked_deg"] == pytest.approx(8.0, abs=1e-4)
+    assert row["turn_made_deg"] == pytest.approx(row["turn_asked_deg"], abs=1e-9)
+    assert row["exec_status"] in ("passed", "failed"), row["exec_message"]
+    assert math.isfinite(row["exec_position_error_max"])
+    assert math.isfinite(row["exec_angle_error_max"]) and row["exec_contacts_lost"] >= 0
+    assert (row["exec_status"] == "passed") == (row["exec_message"] == "")

@@ -76,6 +76,7 @@ def test_the_scene_has_every_pose_at_every_sample(plans: dict[str, Any], planner
                                            raw.get("palm") is not None)
     if planner != "manipulation":
         assert scene["palm"]["half_extent"] > 0
+    assert scene["phases"] is None  # a rolling plan: no contact schedule on the timeline
 
 
 @cache
@@ -230,3 +231,25 @@ def test_the_service_links_and_serves_the_view(live_server: Any) -> None:
         assert http.get(job["links"]["view"]).text == r.text  # cached, the same page
         missing = http.get("/v1/plans/no-such-job/view")
         assert missing.status_code == 404 and missing.json()["error"] == "not_found"
+
+
+def test_a_gaits_scene_carries_its_contact_schedule() -> None:
+    """The stored gait (tests/data/gait_small_*.json; drawn in the browser by
+    tests/test_view_browser.py): the scene's phases are the result's, tiling the plan's
+    time, and each contact's activity is given at every sample."""
+    from planner_service.planners import RESULT
+
+    data = ROOT / "tests" / "data"
+    result = RESULT.validate_json((data / "gait_small_result.json").read_text())
+    request = REQUEST.validate_json((data / "gait_small_request.json").read_text())
+    scene = scene_of(result, request)
+    assert result.gait is not None
+    assert [(p["kind"], p["lifted"]) for p in scene["phases"]] == \
+        [(p.kind, p.lifted_finger) for p in result.gait.phases]
+    starts = [p["start"] for p in scene["phases"]]
+    ends = [p["end"] for p in scene["phases"]]
+    assert starts[0] == scene["t"][0] and ends[-1] == pytest.approx(scene["t"][-1], abs=1e-6)
+    assert starts[1:] == pytest.approx(ends[:-1], abs=1e-6)
+    n = len(scene["t"])
+    assert all(len(c["active"]) == n for c in scene["contacts"])
+    assert 'id="schedule"' in view_html(result, request)

@@ -183,3 +183,58 @@ def test_round_fingertips_draw_without_errors(browser: Any, tmp_path: Path) -> N
     file.write_text(page_html(scene), encoding="utf-8")
     seen = visit(browser, file.as_uri(), {"start": 0.0})
     assert seen.failure is None and seen.errors == []
+
+
+#: A gait planned once (tests/data/gait_small_request.json: examples/allegro_gait.json
+#: turned 8 deg in two rolls of 4 deg, index, middle and ring re-placed; 20 Hz samples) and
+#: its result as the service returned it: still a valid result of today's schema.
+GAIT_REQUEST = ROOT / "tests" / "data" / "gait_small_request.json"
+GAIT_RESULT = ROOT / "tests" / "data" / "gait_small_result.json"
+
+
+def test_a_gaits_contact_schedule_is_on_the_timeline(browser: Any, tmp_path: Path) -> None:
+    """One row per fingertip under the timeline, in its contact's colour where it touches
+    and blank while it is lifted clear (its activity in the result's samples), the
+    phases named above it; the lifted finger named during its swing."""
+    from planner_service.planners import REQUEST, RESULT
+    from planner_service.view import view_html
+
+    result = RESULT.validate_json(GAIT_RESULT.read_text())  # the stored result's schema
+    request = REQUEST.validate_json(GAIT_REQUEST.read_text())
+    gait = result.gait
+    assert gait is not None and gait.samples is not None
+    swings = [p for p in gait.phases if p.kind == "swing"]
+    assert [p.lifted_finger for p in swings] == ["index", "middle", "ring"]
+    file = tmp_path / "gait.html"
+    file.write_text(view_html(result, request), encoding="utf-8")
+    page = browser.new_page()
+    errors: list[str] = []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(f"uncaught: {e}"))
+    open_view(page, file.as_uri())
+    scene = json.loads(page.locator("#dexroll-scene").text_content())
+    colors = {c["name"]: np.array([int(c["color"][i:i + 2], 16) for i in (1, 3, 5)],
+                                  dtype=float) for c in scene["contacts"]}
+    # the lifted finger named while it is carried clear
+    for p in swings:
+        page.evaluate("t => window.dexroll.setTime(t)", (p.start + p.end) / 2)
+        assert page.locator("#phase").text_content() == f"swing ({p.lifted_finger} lifted clear)"
+        assert page.locator("#lifted").text_content() == f"lifted: {p.lifted_finger}"
+    page.evaluate("t => window.dexroll.setTime(t)", 0.0)
+    shot = np.asarray(Image.open(io.BytesIO(page.locator("#schedule").screenshot()))
+                      .convert("RGB"), dtype=float)
+
+    def pixel(name: str, t: float) -> np.ndarray:
+        x, y = page.evaluate("([n, t]) => window.dexroll.schedulePoint(n, t)", [name, t])
+        return shot[round(y), int(x)]
+
+    for p in gait.phases:
+        mid = (p.start + p.end) / 2
+        for name, color in colors.items():
+            got = pixel(name, mid)
+            if p.kind == "swing" and name == p.lifted_finger:
+                assert np.abs(got - 255.0).max() <= 8, (p.kind, name, got)  # blank
+            elif p.kind in ("roll", "swing"):
+                assert np.abs(got - color).max() <= 8, (p.kind, name, got, color)
+    assert errors == []
+    page.close()

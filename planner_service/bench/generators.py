@@ -20,7 +20,10 @@ Generators (``GENERATORS``):
   pad within ``pad_offset`` [m] of its centre, and a random palm goal as for
   ``ball_translation``; a grasp the finger cannot take (``request_errors``) is redrawn;
 * ``hand_tracking``: a built-in hand holding the ball in the air (``template``: the hand,
-  its fingers, the initial pose) turning it by ``angle_deg`` about a random axis.
+  its fingers, the initial pose) turning it by ``angle_deg`` about a random axis;
+* ``hand_gait``: the same, farther than rolling can, by finger gaiting (``template``: the
+  hand, its fingers, the initial pose, ``forces`` and ``gait``; docs/gait.md): one rotation
+  step of ``angle_deg`` about a random axis, ``seconds_per_radian`` its rolls' speed.
 
 Orientation goals whose chart latitude |u| would lie beyond the chart's pole limit
 (pi/2 - pole_margin, less ``pole_slack_deg``) are expressed in a rotated object chart
@@ -282,6 +285,26 @@ def hand_tracking(rng: np.random.Generator, params: dict[str, Any]) -> Draw:
                      f"{[round(float(c), 3) for c in axis]}"]
 
 
+def hand_gait(rng: np.random.Generator, params: dict[str, Any]) -> Draw:
+    """The template's hand turns the ball by a random rotation by finger gaiting: one
+    rotation step (no translation) over ``seconds_per_radian`` [s] per radian of its
+    angle, the request's duration (docs/gait.md: the step's duration over its angle sets
+    the rolls' speed)."""
+    request = _template(params)
+    request["planner"] = "manipulation"
+    request.setdefault("gait", {})
+    if "forces" not in request:
+        raise GeneratorError("hand_gait: the template needs `forces` (a gait's holds carry "
+                             "the ball's weight)")
+    axis, angle = random_rotation(rng, _range(params, "angle_deg", (45.0, 180.0)))
+    duration = float(params.get("seconds_per_radian", 8.0)) * angle
+    request["duration"] = duration
+    request["motion"] = {"kind": "steps", "steps": [
+        {"duration": duration, "axis": [float(c) for c in axis], "angle": angle}]}
+    return request, [f"gait {math.degrees(angle):.1f} deg about "
+                     f"{[round(float(c), 3) for c in axis]}"]
+
+
 #: The generators, by the name a suite's family gives.
 GENERATORS: dict[str, GeneratorFn] = {
     "ball_translation": ball_translation,
@@ -289,4 +312,5 @@ GENERATORS: dict[str, GeneratorFn] = {
     "ball_full_goal": ball_full_goal,
     "one_finger_grasp": one_finger_grasp,
     "hand_tracking": hand_tracking,
+    "hand_gait": hand_gait,
 }

@@ -38,7 +38,8 @@ __all__ = [
 FIELDS: tuple[str, ...] = (
     "family", "problem_id", "method", "planner", "expected", "status", "certificate_passed",
     "ok", "solve_time", "build_time", "wall_time", "iterations", "refinements",
-    "n_intervals", "goal_error_max", "cert_slip_speed_max", "cert_spin_rate_max",
+    "n_intervals", "goal_error_max", "turn_asked_deg", "turn_made_deg",
+    "cert_slip_speed_max", "cert_spin_rate_max",
     "cert_closure_position_max", "cert_closure_orientation_max", "cert_position_defect_max",
     "cert_angle_defect_max", "cert_cone_margin_min", "failures", "message", "worker_pid",
     "peak_rss_mb", "exec_status", "exec_position_error_max", "exec_angle_error_max",
@@ -124,6 +125,11 @@ def row_from_result(unit: Unit, result: Any, wall_time: float | None,
                    n_intervals=getattr(stats, "n_intervals", None))
     if result.goal_error:
         row["goal_error_max"] = _finite(max(result.goal_error.values()))
+    gait = getattr(result, "gait", None)
+    if gait is not None:  # a gait: the turn asked (its one rotation step) and made
+        step = unit.request["motion"]["steps"][0]
+        row.update(turn_asked_deg=math.degrees(float(step["angle"])),
+                   turn_made_deg=math.degrees(float(gait.turned)))
     cert = result.certificate
     if cert is not None:
         values = getattr(cert, "values", None)

@@ -5,6 +5,8 @@ certificate of every phase and switch."""
 
 from __future__ import annotations
 
+import math
+import time
 from typing import Any
 
 import numpy as np
@@ -21,6 +23,7 @@ from dexroll_client.models import (
     ManipulationStatsModel,
     PlanStatus,
 )
+from ocp.gait.feasibility import MAX_ROLLS, gait_outlook
 from ocp.gait.planner import GaitPlan, plan_gait
 from ocp.gait.samples import gait_samples, gait_times
 from ocp.solution import JointTrajectory
@@ -66,6 +69,15 @@ def gait_errors(request: ManipulationRequest, problem: ManipulationProblem) -> F
                                           f"(their clearance), not a {kind}"))
     if problem.timing != "smooth":
         errs.append(("timing", "a gait's rolls start and end at rest: the smooth timing"))
+    if request.gait is not None and steps is not None and len(steps) == 1 and \
+            steps[0].angle > 0.0:
+        need = math.ceil(float(steps[0].angle) / float(request.gait.roll_step) - 1e-9)
+        if need > MAX_ROLLS:
+            errs.append(("gait.roll_step",
+                         f"{math.degrees(steps[0].angle):.1f} deg in rolls of at most "
+                         f"{math.degrees(request.gait.roll_step):.2f} deg take {need} rolls; "
+                         f"a gait plans at most {MAX_ROLLS}: a roll_step of at least "
+                         f"{steps[0].angle / MAX_ROLLS:.4g} rad"))
     return errs
 
 
@@ -77,6 +89,13 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
     assert g is not None and m is not None and hasattr(m, "steps")
     step = m.steps[0]
     qs = tuple(np.asarray(tip.q_seed, dtype=float) for tip in problem.fingers)
+    t0 = time.perf_counter()
+    outlook = gait_outlook(problem, qs, step.axis, float(step.angle), float(g.roll_step))
+    if not outlook.feasible:  # answered before any roll is planned
+        gait = GaitPlan("infeasible", outlook.message, never_lifted=outlook.never_lifted,
+                        nq=tuple(int(tip.finger.nq) for tip in problem.fingers),
+                        wall_time=time.perf_counter() - t0)
+        return gait_result(gait, problem, DEFAULT_GAIT_RATE), gait
     gait = plan_gait(problem, qs, step.axis, float(step.angle), roll_step=float(g.roll_step),
                      seconds_per_radian=float(step.duration) / float(step.angle),
                      planner=planner,

@@ -48,7 +48,11 @@ def scene_of(result: AnyPlanResult, request: PlanRequest | None = None, title: s
     :class:`NoPlanError` when the result holds no plan."""
     tracks = tracks_of(result)
     models = infer_models(tracks) if request is None else models_from_request(request, tracks)
-    return build_scene(tracks, models, title)
+    gait = getattr(result, "gait", None)
+    phases = None if gait is None or not gait.phases else [
+        {"kind": p.kind, "start": p.start, "end": p.end, "lifted": p.lifted_finger}
+        for p in gait.phases]
+    return build_scene(tracks, models, title, phases)
 
 
 def view_html(result: AnyPlanResult, request: PlanRequest | None = None, title: str = ""

@@ -61,6 +61,7 @@ body { display: flex; flex-direction: column; }
 #slider { flex: 1; }
 #clock { font-variant-numeric: tabular-nums; min-width: 13em; }
 #grasp { font-variant-numeric: tabular-nums; }
+#schedule { display: block; width: 100%; cursor: pointer; background: #fff; }
 """
 
 
@@ -127,6 +128,7 @@ def _page(scene: dict[str, Any]) -> str:
   <div class="dim">{html.escape(notes)}</div>
   <div id="grasp"></div>
   <div id="lifted"></div>
+  <div id="phase"></div>
  </div>
  <div id="message" hidden></div>
 </div>
@@ -143,6 +145,7 @@ def _page(scene: dict[str, Any]) -> str:
  <label><input id="show-cones" type="checkbox" checked> friction cones</label>
  <label><input id="show-axes" type="checkbox" checked> axes</label>
 </div>
+<canvas id="schedule" aria-label="contact schedule" hidden></canvas>
 <script id="dexroll-scene" type="application/json">{data}</script>
 <script>/* three.js {THREE_VERSION}, MIT licence (three.LICENSE beside this viewer) */
 {_script_safe(_static("three.min.js"))}</script>

@@ -21,7 +21,12 @@ as three.js takes them, arrays flattened row by row:
   the fingertip's ``pose`` per sample (that frame's) and the trace of its contact on it
   (in that frame);
 * ``bodies``: the fingers' link shapes (:mod:`.robot`), each with its ``pose`` per sample
-  (one sample: fixed).
+  (one sample: fixed);
+* ``phases``: a gait's contact schedule (docs/gait.md; null for other plans): each phase's
+  ``kind`` (roll, unload, swing, load), ``start`` and ``end`` [s] and ``lifted`` (the
+  re-placed finger's name; null in a roll). With the contacts' ``active`` (per sample: 1
+  touching, 0 lifted clear, between in a ramp) the page draws the schedule on its
+  timeline, one row per contact.
 """
 
 from __future__ import annotations
@@ -87,8 +92,10 @@ def _round_tip(tip: Any) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
             R_c, p - half * axis)
 
 
-def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "") -> dict[str, Any]:
-    """The scene of a plan drawn with ``models`` (see the module for its layout)."""
+def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "",
+                phases: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+    """The scene of a plan drawn with ``models`` (see the module for its layout);
+    ``phases``: a gait's (kind, start, end, lifted), its contact schedule."""
     R_obj = quaternion_matrices(tracks.object_wxyz)
     c = tracks.object_position
     semi = _semi_axes(models.shape, models.dimensions)
@@ -165,5 +172,10 @@ def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "") -> dic
         "contacts": contacts,
         "fingertips": fingertips,
         "bodies": [{k: v for k, v in b.items() if k != "static_name"} for b in bodies],
+        "phases": None if phases is None else [
+            {"kind": str(p["kind"]), "start": round(float(p["start"]), 6),
+             "end": round(float(p["end"]), 6),
+             "lifted": None if p.get("lifted") is None else str(p["lifted"])}
+            for p in phases],
         "units": {"length": "m", "angle": "rad", "time": "s"},
     }

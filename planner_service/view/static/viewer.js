@@ -2,7 +2,8 @@
 // pose at every sample, palm frame, metres, quaternions x y z w) with three.js (the global
 // THREE of three.min.js). It interpolates between samples (positions linearly, rotations
 // by slerp) and computes nothing else. window.dexroll is the page's handle for scripts and
-// tests: ready, duration, setTime(s), time(), play(), pause(), playing().
+// tests: ready, duration, setTime(s), time(), play(), pause(), playing(), and for a gait
+// schedulePoint(contact, s): where the timeline's schedule draws a contact at time s.
 (function () {
   "use strict";
   const T = window.THREE;
@@ -232,6 +233,83 @@
     place(m, b.pose, 0, 0);
   }
 
+  // -- a gait's contact schedule under the timeline: a row per contact, its colour where
+  // it touches (faded in its force ramps, none while lifted clear), the phases above ----
+  const phases = data.phases || null;
+  const sched = el("schedule");
+  const ROW = 16;
+  const HEAD = 18;
+  const LABEL = 76;
+  const PHASE_FILL = { roll: "#e7f0fd", unload: "#f1f3f5", swing: "#fff0d9", load: "#f1f3f5" };
+  const schedX = (s) => LABEL + ((s - t0) / Math.max(t1 - t0, 1e-9)) *
+    Math.max((sched.width || 800) - LABEL - 8, 1);
+  const schedY = (i) => HEAD + i * ROW + ROW / 2;
+  function drawSchedule() {
+    if (!phases) return;
+    const w = sched.clientWidth || 800;
+    const h = HEAD + data.contacts.length * ROW + 4;
+    if (sched.width !== w) sched.width = w;
+    if (sched.height !== h) sched.height = h;
+    const g = sched.getContext("2d");
+    g.clearRect(0, 0, w, h);
+    g.fillStyle = "#ffffff";
+    g.fillRect(0, 0, w, h);
+    g.font = "11px system-ui, sans-serif";
+    g.textBaseline = "middle";
+    for (const p of phases) {  // the phases: shaded, named, their boundaries
+      const a = schedX(p.start);
+      const b = schedX(p.end);
+      g.fillStyle = PHASE_FILL[p.kind] || "#f1f3f5";
+      g.fillRect(a, 0, b - a, HEAD - 2);
+      g.fillStyle = "#1d232f";
+      const name = p.kind === "roll" ? "roll" : p.kind === "swing" ? p.lifted + " lifted" : "";
+      if (name && g.measureText(name).width < b - a - 4) g.fillText(name, a + 2, HEAD / 2);
+    }
+    data.contacts.forEach((c, i) => {
+      const y = schedY(i) - ROW / 2 + 2;
+      g.globalAlpha = 1;
+      g.fillStyle = "#1d232f";
+      g.fillText(c.name, 4, schedY(i));
+      g.fillStyle = c.color;
+      for (let k = 0; k + 1 < n; k++) {
+        const act = c.active ? Math.min(c.active[k], c.active[k + 1]) : 1;
+        if (act <= 0) continue;
+        g.globalAlpha = act;
+        g.fillRect(schedX(times[k]), y, schedX(times[k + 1]) - schedX(times[k]) + 0.5, ROW - 4);
+      }
+      g.globalAlpha = 1;
+    });
+    g.strokeStyle = "#868e96";
+    g.lineWidth = 1;
+    for (const p of phases) {
+      const x = Math.round(schedX(p.start)) + 0.5;
+      g.beginPath(); g.moveTo(x, 0); g.lineTo(x, h); g.stroke();
+    }
+    const x = Math.round(schedX(now)) + 0.5;  // the time shown
+    g.strokeStyle = "#1d232f";
+    g.lineWidth = 2;
+    g.beginPath(); g.moveTo(x, 0); g.lineTo(x, h); g.stroke();
+  }
+  function phaseAt(s) {
+    if (!phases) return null;
+    for (const p of phases) if (s <= p.end) return p;
+    return phases[phases.length - 1];
+  }
+  if (phases) {  // sized before the first resize: the 3D view takes what is left
+    sched.hidden = false;
+    sched.width = sched.clientWidth || 800;
+    sched.height = HEAD + data.contacts.length * ROW + 4;
+    sched.addEventListener("click", (e) => {
+      const r = sched.getBoundingClientRect();
+      const f = (e.clientX - r.left - LABEL) / Math.max(sched.width - LABEL - 8, 1);
+      api.setTime(t0 + Math.min(Math.max(f, 0), 1) * (t1 - t0));
+    });
+    api.schedulePoint = (name, s) => {
+      const i = data.contacts.findIndex((c) => c.name === name);
+      return i < 0 ? null : [schedX(s), schedY(i)];
+    };
+  }
+
   // -- time ------------------------------------------------------------------------------
   let now = t0;
   let playing = false;
@@ -267,6 +345,10 @@
       }
     });
     el("lifted").textContent = lifted.length ? "lifted: " + lifted.join(", ") : "";
+    const ph = phaseAt(now);
+    el("phase").textContent = !ph ? "" : ph.lifted ?
+      ph.kind + " (" + ph.lifted + (ph.kind === "swing" ? " lifted clear)" : ")") : ph.kind;
+    drawSchedule();
     for (const tr of traces) tr.geometry.setDrawRange(0, k + 1);
     for (const tip of tips) place(tip.group, tip.pose, k, a);
     for (const l of links) if (l.pose.p.length > 3) place(l.mesh, l.pose, k, a);
@@ -282,6 +364,7 @@
   }
 
   function resize() {
+    if (phases) drawSchedule();  // its height first
     const w = view.clientWidth || 800;
     const h = view.clientHeight || 600;
     renderer.setSize(w, h);
