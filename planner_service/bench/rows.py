@@ -166,8 +166,12 @@ def execute(unit: Unit, result: Any) -> dict[str, Any]:
         from planner_service.planners import REQUEST
 
         # a plan with its own forces is executed on them alone (no squeeze or grip of the
-        # simulator's own); one without, with the simulator's grip
-        own = {"squeeze": 0.0, "grip_force": 0.0} if unit.request.get("forces") else None
+        # simulator's own; a gait with its own squeeze, docs/gait.md); one without, with
+        # the simulator's grip
+        own = None
+        if unit.request.get("forces"):
+            own = {"grip_force": 0.0} if unit.request.get("gait") else \
+                {"squeeze": 0.0, "grip_force": 0.0}
         report = simulate_result(result, REQUEST.validate_python(unit.request), own)
     except Exception as exc:  # a failure is a row's field, never a crash of the benchmark
         return {"exec_status": "error", "exec_message": f"{type(exc).__name__}: {exc}",
