@@ -60,6 +60,10 @@ class ContactReport:
     normal_force_error_max: float | None = None
     #: time [s] the fingertip touched the object while the plan has it lifted
     unplanned_touch_time: float = 0.0
+    #: the largest distance [m] between the touching bodies at a step counted as a loss
+    #: (a flicker of a stiff contact: micrometres; a fingertip let go: millimetres; None:
+    #: no loss, or not measured)
+    lost_separation_max: float | None = None
 
 
 @dataclass
@@ -102,9 +106,11 @@ class SimReport:
                             f"{math.degrees(tol.angle):.3g} deg")
         for c in contacts:
             if c.lost_time > tol.contact_loss:
+                apart = "" if c.lost_separation_max is None else \
+                    f"; apart by at most {c.lost_separation_max * 1e3:.3g} mm"
                 failures.append(f"contact {c.name} lost for {c.lost_time:.4g} s "
                                 f"({c.loss_events} times, first at t = "
-                                f"{c.first_loss_at:.4g} s)")
+                                f"{c.first_loss_at:.4g} s{apart})")
             if c.unplanned_touch_time > tol.contact_loss:
                 failures.append(f"fingertip {c.name} touched the object for "
                                 f"{c.unplanned_touch_time:.4g} s while the plan has it "

@@ -31,6 +31,8 @@ ACTIVE_SHARE = 0.5
 #: gait's lift-off and approach are at a quarter: no squeeze while it leaves or reaches
 #: the object; at the loss threshold a third of it keeps the contact as planned).
 SQUEEZE_FROM = 0.25
+#: How far apart [m] a lost contact's bodies are measured, at most (a loss's separation).
+SEPARATION_MAX = 0.01
 #: The report's time series has at most about this many rows (a long plan is recorded
 #: less often than ``record_every`` asks).
 MAX_SERIES = 5000
@@ -277,6 +279,10 @@ class Simulation:
         slip_speed = np.zeros((n_steps, nc))
         jac_a, jac_b = np.zeros((3, m.nv)), np.zeros((3, m.nv))
         f6 = np.zeros(6)
+        separation = np.zeros((n_steps, nc))
+        pair_geoms = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM,
+                                        "palm" if c.body == "palm" else f"{c.finger}/pad")
+                      for c in plan.contacts]
         ctrl_rows = [np.ascontiguousarray(c) for c in ctrl]
         replay = o.mode == "replay"
         kinematic = o.mode in ("kinematic", "replay")
@@ -327,6 +333,10 @@ class Simulation:
                 slip_speed[k, j] = max(slip_speed[k, j],
                                        contact_slip(m, d, con, self.object_body, other,
                                                     jac_a, jac_b))
+            for j, g in enumerate(pair_geoms):  # how far apart where none touches
+                if normal_force[k, j] <= TOUCH_FORCE and g >= 0:
+                    separation[k, j] = mujoco.mj_geomDistance(m, d, g, self.object_geom,
+                                                              SEPARATION_MAX, None)
         wall = time.perf_counter() - start
         # errors at the end of every step, against the plan at that time
         t_end = plan_time[1:]
@@ -334,7 +344,7 @@ class Simulation:
         ang_err = _angle_between(obj_pose[:, 3:], quat_ref[1:])
         during = t_end >= 0
         contacts = [contact_report(spec, plan.t, normal_force[:, j], slip_speed[:, j],
-                                   t_end, dt, planned_force.get(j))
+                                   t_end, dt, planned_force.get(j), separation[:, j])
                     for j, spec in enumerate(plan.contacts)]
         rec = recorded_steps(t_end, o)
         report = SimReport.assess(
@@ -366,13 +376,17 @@ def contact_slip(m: Any, d: Any, con: Any, object_body: int, other: int,
 
 def contact_report(spec: Any, plan_t: FloatArray, normal_force: FloatArray,
                    slip_speed: FloatArray, t_end: FloatArray, dt: float,
-                   planned: FloatArray | None = None) -> ContactReport:
+                   planned: FloatArray | None = None,
+                   separation: FloatArray | None = None) -> ContactReport:
     """One planned contact's report from its normal force and slip speed at the end of
     every step (``t_end`` [s] from the plan's start; negative: settling), ``planned``: its
     planned normal force at the steps' starts and the last end (None: not stated). A
     contact is lost where it has no force and the plan has it touching (``spec.active``
     at least :data:`ACTIVE_SHARE`: finger gaiting's lifted tips and force ramps excepted);
-    a touch where the plan has its fingertip lifted clear is an unplanned touch."""
+    a touch where the plan has its fingertip lifted clear is an unplanned touch.
+    ``separation`` [m]: the distance between the touching bodies at each step where they
+    do not touch (up to :data:`SEPARATION_MAX`; None: not measured), whose largest over
+    the losses the report gives."""
     during = t_end >= 0
     # the steps inside the plan's horizon (the one ending at t = 0 is the settling's)
     inside = t_end > 0.5 * dt
@@ -402,7 +416,9 @@ def contact_report(spec: Any, plan_t: FloatArray, normal_force: FloatArray,
         else float(np.mean(planned)),
         normal_force_error_max=None if planned is None or not planned.size
         else float(np.max(np.abs(f[on[during]] - planned[on[during]]), initial=0.0)),
-        unplanned_touch_time=float(np.sum((touching & lifted)[inside]) * dt))
+        unplanned_touch_time=float(np.sum((touching & lifted)[inside]) * dt),
+        lost_separation_max=None if separation is None or not lost_all[inside].any()
+        else float(np.max(separation[inside][lost_all[inside]])))
 
 
 def recorded_steps(t_end: FloatArray, o: SimOptions) -> np.ndarray:

@@ -132,6 +132,10 @@ class ContactExecutionModel(_Response):
     unplanned_touch_time: float = Field(
         default=0.0, description="time the fingertip touched the object while the plan has "
                                  "it lifted clear (a gait) [s]")
+    lost_separation_max: float | None = Field(
+        default=None, description="the largest distance between the touching bodies at a "
+                                  "step counted as a loss [m] (micrometres: a stiff "
+                                  "contact's flicker; null: no loss)")
 
 
 class SimulationSeriesModel(_Response):
