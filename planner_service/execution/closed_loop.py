@@ -29,7 +29,8 @@ from ocp import (
     quaternion_wxyz,
 )
 
-__all__ = ["FirstPlan", "ReplanController", "compare", "first_plan", "goal_of", "summary"]
+__all__ = ["FirstPlan", "ReplanController", "compare", "first_plan", "goal_of",
+           "replannable", "stored_first_plan", "summary"]
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,43 @@ def first_plan(request: Any) -> FirstPlan:
                          "(planner one_finger with method collocation, or manipulation) "
                          "are re-planned")
     return FirstPlan(result, problem, plan)
+
+
+def replannable(request: Any, result: Any) -> str | None:
+    """Why a stored plan cannot be re-planned (None: it can): only a plan with fingers made
+    by direct collocation (planner ``one_finger`` with method ``collocation``, or
+    ``manipulation`` without a ``gait``) whose result holds its ``collocation`` block has
+    the one NLP a re-plan re-solves."""
+    planner = getattr(request, "planner", None)
+    if planner == "ball_on_palm":
+        return "a ball-on-palm plan has no fingers: nothing to re-plan from joint angles"
+    if planner == "one_finger" and getattr(request, "method", "collocation") != "collocation":
+        return ("a plan of the greedy method is its steps, not one NLP: re-plan a plan of "
+                "method 'collocation'")
+    if planner == "manipulation" and getattr(request, "gait", None) is not None:
+        return ("a gait's plan is a sequence of NLPs (rolls, holds, re-placements), not one: "
+                "re-plan a rolling plan (no `gait`)")
+    if planner not in ("one_finger", "manipulation"):
+        return f"planner {planner!r} has no re-plannable structure"
+    if getattr(result, "collocation", None) is None:
+        return "its result has no `collocation` block (no plan, or not one NLP's)"
+    return None
+
+
+def stored_first_plan(request: Any, result: Any) -> FirstPlan:
+    """The :class:`FirstPlan` of a stored job: its ``request`` planned again here, warm from
+    the stored ``result``'s ``collocation`` block (its primal-dual point: IPOPT starts at
+    the stored plan's optimum, a few iterations), and the stored ``result`` itself as the
+    executed plan's. ValueError when it is not re-plannable (:func:`replannable`)."""
+    from dexroll_client.models import WarmStartModel
+
+    why = replannable(request, result)
+    if why is not None:
+        raise ValueError(why)
+    block = result.collocation.model_dump()
+    warm = request.model_copy(update={"warm_start": WarmStartModel.model_validate(block)})
+    again = first_plan(warm)
+    return FirstPlan(result, again.problem, again.plan)
 
 
 class ReplanController:
