@@ -143,7 +143,9 @@ class _Functions:
         self.tips = ca.Function("tips", [x], [ca.horzcat(*tips) if tips else ca.SX(3, 0)])
         #: each fingertip's contact point (palm frame) and its Jacobian, fingertip order
         cols = [m.point_contacts.index(tip) for tip in m.fingertips]
-        pts = ca.vertcat(*[points[:, j] for j in cols]) if cols else ca.SX(0, 1)
+        # the path's points are on the object's surface, in its frame: to the palm frame
+        pts = ca.vertcat(*[p_po + R_po @ points[:, j] for j in cols]) if cols else \
+            ca.SX(0, 1)
         self.points = ca.Function("points", [x, prm], [pts, ca.jacobian(pts, x)])
         obj_v = ca.jtimes(p_po, x, m.dynamics(x, u, prm))
         obj_R = ca.jtimes(ca.vec(R_po), x, m.dynamics(x, u, prm))

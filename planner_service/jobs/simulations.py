@@ -101,18 +101,33 @@ def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
                                 hard))
         try:
             request = REQUEST.validate_json(request_json)
-            plan = execution_plan(RESULT.validate_json(result_json), request)
+            result = RESULT.validate_json(result_json)
+            plan = execution_plan(result, request)
             options = dict(options)
-            if options.pop("model", "scene") == "request":  # the request's own hand file
+            disturbed = options.pop("disturbances", None)
+            loop = options.pop("closed_loop", None)
+            if loop is not None:
+                reply: tuple[str, Any] = _closed_loop(request, result, plan, options,
+                                                      disturbed, loop)
+            elif disturbed is not None:
+                from sim.closed_loop import simulate_disturbed
+                from sim.disturbances import Disturbances
+
+                options.pop("model", None)
+                dist = Disturbances.from_dict(disturbed)
+                report = simulate_disturbed(plan, SimOptions.from_dict(options), dist)
+                reply = ("ok", {**report.to_dict(), "disturbances": dist.to_dict()})
+            elif options.pop("model", "scene") == "request":  # the request's own hand file
                 from sim.user_model import simulate_on_model
 
                 from ..execution import user_model
 
                 report = simulate_on_model(plan, user_model(request, plan),
                                            SimOptions.from_dict(options))
+                reply = ("ok", report.to_dict())
             else:
                 report = simulate(plan, SimOptions.from_dict(options))
-            reply: tuple[str, Any] = ("ok", report.to_dict())
+                reply = ("ok", report.to_dict())
         except (NotExecutableError, ProblemError) as exc:
             reply = ("not_executable", str(exc))
         except ValueError as exc:  # an option the simulator refuses (solref vs timestep)
@@ -123,8 +138,34 @@ def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
         conn.send(reply)
 
 
+def _closed_loop(request: Any, result: Any, plan: Any, options: dict[str, Any],
+                 disturbed: dict[str, Any] | None, loop: dict[str, Any]) -> tuple[str, Any]:
+    """The closed loop and the open loop in the same disturbed world (as ``dexroll
+    simulate --closed-loop``): ("ok", the closed loop's report with ``disturbances``,
+    ``open_loop`` and ``closed_loop`` beside it), or ("not_replannable", why)."""
+    from ocp import ReplanOptions
+    from sim import SimOptions
+    from sim.disturbances import Disturbances
+
+    from ..execution.closed_loop import compare, replannable, stored_first_plan
+
+    why = replannable(request, result)
+    if why is not None:
+        return ("not_replannable", f"closed_loop: {why}")
+    options.pop("model", None)
+    dist = Disturbances.from_dict(disturbed)
+    first = stored_first_plan(request, result)
+    data = compare(first, plan, float(loop["rate"]), SimOptions.from_dict(options), dist,
+                   ReplanOptions(max_iter=int(loop["max_iter"]), time_limit=60.0))
+    closed = dict(data["closed_loop"])
+    report = closed.pop("report")
+    return ("ok", {**report, "disturbances": data["disturbances"],
+                   "open_loop": data["open_loop"], "closed_loop": closed})
+
+
 #: How a process's reply other than a report is answered: (status, retry-after).
-_REPLIES = {"not_executable": (409, None), "invalid_options": (422, None),
+_REPLIES = {"not_executable": (409, None), "not_replannable": (409, None),
+            "invalid_options": (422, None),
             "simulation_unavailable": (503, None), "simulation_failed": (500, None)}
 
 
