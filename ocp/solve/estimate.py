@@ -281,10 +281,10 @@ def estimate_state(problem: ManipulationProblem, m: GraspModel, measured: Measur
     contact_shift: list[float | None] = [None] * len(c_meas)
     if c_rows.size:
         est_points = np.asarray(f.points(x, prm)[0]).ravel()
-        for i, c in enumerate(c_meas):
-            if c is None:
+        for i, point in enumerate(c_meas):
+            if point is None:
                 continue
-            d = float(np.linalg.norm(est_points[3 * i:3 * i + 3] - c))
+            d = float(np.linalg.norm(est_points[3 * i:3 * i + 3] - point))
             contact_shift[i] = d
             if d > o.max_contact_shift:
                 problems.append(f"finger {i}: its measured contact is {d * 1e3:.2f} mm from "
