@@ -17,9 +17,10 @@ recently re-planned is dropped).
 
 The first re-plan of a plan in a process builds its re-planner: the request planned again,
 warm from the stored plan's ``collocation`` block (IPOPT starts at the stored optimum),
-which builds the NLP, and the NLP of every other structure its re-plans will meet (a
-via-point passed changes it: :meth:`~ocp.solve.replan.Replanner.prepare`); seconds
-(``stats.setup_time``). Only then does the service send the
+which builds the NLP; seconds (``stats.setup_time``). Not every structure its later
+re-plans meet (:meth:`~ocp.solve.replan.Replanner.prepare`): a plan with via-points meets
+a new one almost every call (docs/replanning.md, "Through the service"), more than the
+planner's NLP cache keeps. Only then does the service send the
 stored plan: a call whose plan the process holds sends the measurement alone.
 
 A call waits for its process's previous one (at most ``DEXROLL_REPLAN_QUEUE`` wait: 503
@@ -203,12 +204,8 @@ def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float
                     conn.send(("not_replannable", f"its request cannot be planned again "
                                                   f"here: {exc}"))
                     continue
-                replanner = Replanner(first.problem, first.plan, options=ReplanOptions())
-                # every structure the re-plans will meet (a via-point passed changes it):
-                # built now, so that no later call pays a build
-                T = float(first.problem.duration)
-                replanner.prepare([T * k / 200 for k in range(1, 200)])
-                session = _Session(first, replanner)
+                session = _Session(first, Replanner(first.problem, first.plan,
+                                                    options=ReplanOptions()))
                 sessions[key] = session
                 while len(sessions) > cache_size:
                     sessions.popitem(last=False)
