@@ -40,6 +40,7 @@ import time
 import zlib
 from collections import OrderedDict
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection, wait
 from typing import Any
@@ -287,6 +288,10 @@ class ReplanPool:
         self._lock = threading.Lock()
         self._waiting = 0
         self._closed = False
+        #: the threads the API's calls wait in (never the event loop's default executor,
+        #: which the other routes' store reads share)
+        self.executor = ThreadPoolExecutor(max_workers=processes + max_waiting + 1,
+                                           thread_name_prefix="dexroll-replan")
 
     def stats(self) -> dict[str, int]:
         with self._lock:
@@ -302,6 +307,7 @@ class ReplanPool:
                         slot.proc.conn.send(None)
                     slot.proc.kill()
                     slot.proc = None
+        self.executor.shutdown(wait=False, cancel_futures=True)
 
     def call(self, key: Key, body_json: str, time_limit: float,
              fetch: Callable[[], tuple[str, str]]) -> str:

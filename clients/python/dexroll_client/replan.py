@@ -75,9 +75,10 @@ class ReplanRequest(_Request):
     max_iter: Count = Field(default=30, ge=1, le=500,
                             description="IPOPT iterations of the re-plan (its budget: the "
                                         "outcome is then the same on a loaded machine)")
-    time_limit: Real = Field(default=2.0, gt=0.0, le=60.0,
+    time_limit: Real = Field(default=10.0, gt=0.0, le=60.0,
                              description="wall-clock limit of the re-plan's IPOPT call [s] "
-                                         "(a safety; capped by the service)")
+                                         "(a safety: the budget is `max_iter`; capped by "
+                                         "the service's DEXROLL_REPLAN_TIME_LIMIT)")
     certify: bool = Field(default=False,
                           description="check the re-plan's certificate (tens of ms more): "
                                       "`stats.certified` then says whether it passed")

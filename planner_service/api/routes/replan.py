@@ -93,8 +93,9 @@ async def replan_plan(job_id: str, body: ReplanRequest, request: Request, store:
 
     pool: ReplanPool = request.app.state.replans
     try:
-        answer = await asyncio.to_thread(pool.call, (job_id, row.finished_at),
-                                         body.model_dump_json(), body.time_limit, fetch)
+        answer = await asyncio.get_running_loop().run_in_executor(
+            pool.executor, pool.call, (job_id, row.finished_at), body.model_dump_json(),
+            body.time_limit, fetch)
     except ReplanRefusedError as exc:
         raise _refused(exc) from exc
     # the process's JSON as it wrote it (a ReplanResult): not parsed again here
