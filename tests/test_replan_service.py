@@ -165,6 +165,13 @@ def test_unknown_and_unreplannable_plans(live_server: Server,
         with pytest.raises(ConflictError, match="no fingers") as err:
             client.replan(palm.id, measured(result, 0.5))
         assert err.value.error == "not_replannable"
+        # the greedy method's plan is its steps: answered by the re-plan process
+        request = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
+        greedy = client.plan({**request, "n_intervals": 16, "method": "greedy"}, timeout=120)
+        assert greedy.state.value == "succeeded", greedy.message
+        with pytest.raises(ConflictError, match="greedy") as err:
+            client.replan(greedy.id, measured(result, 0.5))
+        assert err.value.error == "not_replannable"
 
 
 def test_a_pushed_closed_loop_through_the_service_ends_nearer_the_goal(
