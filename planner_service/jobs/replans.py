@@ -41,7 +41,6 @@ import zlib
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, replace
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
@@ -71,91 +70,6 @@ class ReplanRefusedError(Exception):
         self.detail, self.retry_after = detail or [], retry_after
 
 
-@dataclass
-class _Session:
-    first: Any  # planner_service.execution.closed_loop.FirstPlan
-    replanner: Any  # ocp.solve.replan.Replanner
-
-
-def _shape_errors(body: Any, replanner: Any) -> list[tuple[str, str]]:
-    """What does not fit the plan in a (schema-valid) re-plan request, fields named."""
-    import numpy as np
-
-    m = replanner.model
-    n = len(m.fingertips)
-    errors: list[tuple[str, str]] = []
-    joints = [int(np.arange(m.nx)[tip.q_cols].size) for tip in m.fingertips]
-    for name in ("q", "q_dot"):
-        value = getattr(body, name)
-        if value is None:
-            continue
-        if len(value) != n:
-            errors.append((name, f"{len(value)} fingers measured, the plan has {n}"))
-            continue
-        for i, (row, k) in enumerate(zip(value, joints, strict=True)):
-            if len(row) != k:
-                errors.append((f"{name}[{i}]", f"{len(row)} joints, finger {i} of the plan "
-                                               f"has {k}"))
-    if body.contact_points is not None and len(body.contact_points) != n:
-        errors.append(("contact_points", f"{len(body.contact_points)} given, the plan has "
-                                         f"{n} fingers"))
-    if float(np.linalg.norm(body.object_wxyz)) < 1e-6:
-        errors.append(("object_wxyz", "not a rotation: a zero quaternion"))
-    if (body.object_velocity is None) != (body.object_omega is None):
-        name = "object_omega" if body.object_omega is None else "object_velocity"
-        errors.append((name, "give object_velocity and object_omega together (or neither)"))
-    duration = float(replanner.problem.duration)
-    if body.t > duration + 1e-9:
-        errors.append(("t", f"{body.t:g} s is after the plan's end ({duration:g} s)"))
-    return errors
-
-
-def _answer(job_id: str, body: Any, session: _Session, r: Any, setup: float,
-            certify: bool) -> dict[str, Any]:
-    """The wire ReplanResult (as a dict) of one :class:`~ocp.solve.replan.Replan`."""
-    import numpy as np
-
-    from ocp.geometry.rotations import quaternion_wxyz
-    from ocp.solution import fixed_rate_times
-
-    from ..planners.samples import joint_trajectory_block, samples_block
-
-    rp = session.replanner
-    m = rp.model
-    plan = r.plan if r.status == "replanned" else None
-    out: dict[str, Any] = {"job_id": job_id, "status": r.status, "message": r.message,
-                           "t": r.t}
-    if plan is not None:
-        times = plan.t if body.sample_rate is None else fixed_rate_times(
-            plan.duration, body.sample_rate)
-        jt = joint_trajectory_block(plan, None if body.sample_rate is None else times)
-        smp = samples_block(plan, np.asarray(times, dtype=float))
-        out.update(duration=float(plan.duration),
-                   joint_trajectory=None if jt is None else jt.model_dump(mode="json"),
-                   samples=None if smp is None else smp.model_dump(mode="json"))
-    est = r.estimate
-    if est is not None:
-        _, _, _, R, p = m.path(est.x, rp.params)
-        out["estimate"] = {
-            "q": [np.asarray(est.x)[tip.q_cols].tolist() for tip in m.fingertips],
-            "object_position": np.asarray(p, dtype=float).ravel().tolist(),
-            "object_wxyz": quaternion_wxyz(np.asarray(R, dtype=float)).reshape(-1, 4)[0].tolist(),
-            "fingertip_shift": list(est.fingertip_shift),
-            "object_shift": est.object_shift, "object_turn": est.object_turn,
-            "contact_shift": list(est.contact_shift) if body.contact_points is not None
-            else None}
-    solved = r.plan
-    stats = solved.stats if solved is not None else None
-    out["stats"] = {
-        "iterations": r.iterations, "wall_time": r.wall_time, "solve_time": r.solve_time,
-        "estimate_time": r.estimate_time, "setup_time": setup,
-        "converged": None if solved is None else bool(solved.converged),
-        "certified": None if solved is None or not certify
-        else bool(solved.certificate.passed),
-        "raw_status": None if stats is None else stats.raw_status}
-    return out
-
-
 def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float) -> None:
     """A re-plan process: answer each ("replan", key, body JSON, result JSON or None,
     request JSON or None) with ("ok", ReplanResult dict), ("need", None) (no re-planner
@@ -168,13 +82,11 @@ def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float
                             format="%(asctime)s %(levelname)s [replan %(process)d] %(name)s: "
                                    "%(message)s")
     from dexroll_client.replan import ReplanRequest, ReplanResult
-    from ocp import Measurement, Replanner, ReplanOptions
-    from ocp.spec.problem import ProblemError
 
-    from ..execution.closed_loop import replannable, stored_first_plan
+    from ..execution.closed_loop import ReplanSession, replannable
     from ..planners import REQUEST, RESULT
 
-    sessions: OrderedDict[Key, _Session] = OrderedDict()
+    sessions: OrderedDict[Key, ReplanSession] = OrderedDict()
     conn.send(("ready", None))
     while True:
         try:
@@ -200,42 +112,21 @@ def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float
                     conn.send(("not_replannable", why))
                     continue
                 try:
-                    first = stored_first_plan(request, result)
-                except (ValueError, ProblemError) as exc:
+                    session = ReplanSession(request, result)
+                except ValueError as exc:
                     conn.send(("not_replannable", f"its request cannot be planned again "
                                                   f"here: {exc}"))
                     continue
-                session = _Session(first, Replanner(first.problem, first.plan,
-                                                    options=ReplanOptions()))
                 sessions[key] = session
                 while len(sessions) > cache_size:
                     sessions.popitem(last=False)
                 setup = time.perf_counter() - t0
                 log.info("re-planner of job %s built in %.2f s", key[0], setup)
             sessions.move_to_end(key)
-            rp = session.replanner
-            errors = _shape_errors(body, rp)
-            if errors:
-                conn.send(("invalid", errors))
-                continue
-            if body.restart or body.t < rp.start - 1e-9:
-                rp.reset()
-            rp.options = replace(rp.options, max_iter=body.max_iter,
-                                 time_limit=min(body.time_limit, time_cap),
-                                 certify=body.certify)
-            r = rp.replan(body.t, Measurement(
-                body.q, body.object_position, body.object_wxyz, body.q_dot,
-                body.object_velocity, body.object_omega, body.contact_points))
-            if r.status == "unexplained":
-                est = r.estimate
-                conn.send(("unexplained", list(zip(est.fields, est.problems, strict=True))))
-                continue
-            if r.status == "refused":
-                conn.send(("unexplained", [("q", r.message)]))
-                continue
-            answer = ReplanResult.model_validate(
-                _answer(key[0], body, session, r, setup, body.certify))
-            conn.send(("ok", answer.model_dump_json()))
+            kind, payload = session.replan(key[0], body, setup, time_cap)
+            if kind == "ok":
+                payload = ReplanResult.model_validate(payload).model_dump_json()
+            conn.send((kind, payload))
         except ValueError as exc:  # a measurement the estimate refuses (shapes)
             conn.send(("invalid", [("q", str(exc))]))
         except Exception as exc:  # a typed answer, never a dead process

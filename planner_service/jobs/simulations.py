@@ -107,8 +107,10 @@ def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
             disturbed = options.pop("disturbances", None)
             loop = options.pop("closed_loop", None)
             if loop is not None:
-                reply: tuple[str, Any] = _closed_loop(request, result, plan, options,
-                                                      disturbed, loop)
+                from ..execution.closed_loop import closed_loop_report
+
+                reply: tuple[str, Any] = closed_loop_report(request, result, plan, options,
+                                                            disturbed, loop)
             elif disturbed is not None:
                 from sim.closed_loop import simulate_disturbed
                 from sim.disturbances import Disturbances
@@ -136,31 +138,6 @@ def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
             log.exception("simulation failed")
             reply = ("simulation_failed", f"the simulation failed: {exc!r}")
         conn.send(reply)
-
-
-def _closed_loop(request: Any, result: Any, plan: Any, options: dict[str, Any],
-                 disturbed: dict[str, Any] | None, loop: dict[str, Any]) -> tuple[str, Any]:
-    """The closed loop and the open loop in the same disturbed world (as ``dexroll
-    simulate --closed-loop``): ("ok", the closed loop's report with ``disturbances``,
-    ``open_loop`` and ``closed_loop`` beside it), or ("not_replannable", why)."""
-    from ocp import ReplanOptions
-    from sim import SimOptions
-    from sim.disturbances import Disturbances
-
-    from ..execution.closed_loop import compare, replannable, stored_first_plan
-
-    why = replannable(request, result)
-    if why is not None:
-        return ("not_replannable", f"closed_loop: {why}")
-    options.pop("model", None)
-    dist = Disturbances.from_dict(disturbed)
-    first = stored_first_plan(request, result)
-    data = compare(first, plan, float(loop["rate"]), SimOptions.from_dict(options), dist,
-                   ReplanOptions(max_iter=int(loop["max_iter"]), time_limit=60.0))
-    closed = dict(data["closed_loop"])
-    report = closed.pop("report")
-    return ("ok", {**report, "disturbances": data["disturbances"],
-                   "open_loop": data["open_loop"], "closed_loop": closed})
 
 
 #: How a process's reply other than a report is answered: (status, retry-after).
