@@ -30,6 +30,11 @@
 | DEXROLL_SIM_TIME_LIMIT | 120 | wall time of one simulation before it is stopped [s] |
 | DEXROLL_SIM_CPU_SECONDS | 120 | CPU time of one simulation before it is stopped [s] |
 | DEXROLL_SIM_MAX_STEPS | 500000 | physics steps one simulation may ask for (else 422) |
+| DEXROLL_REPLAN_PROCESSES | 1 | processes that answer POST .../replan (never a worker's) |
+| DEXROLL_REPLAN_CACHE | 8 | plans whose re-planner each re-plan process keeps |
+| DEXROLL_REPLAN_QUEUE | 8 | re-plans waiting before POST .../replan answers 503 |
+| DEXROLL_REPLAN_TIME_LIMIT | 10 | cap on a re-plan's own time_limit [s] |
+| DEXROLL_REPLAN_SETUP_LIMIT | 300 | a plan's first re-plan: building its re-planner [s] |
 | DEXROLL_API_KEYS | (none) | `owner:key` pairs (or bare keys), comma-separated |
 | DEXROLL_API_KEYS_FILE | (none) | a file of `owner:key` lines, read at start |
 | DEXROLL_ALLOWED_HOSTS | 127.0.0.1,localhost,::1 | Host headers served (`*`: any) |
@@ -94,6 +99,12 @@ class Settings(BaseSettings):
     sim_time_limit: float = Field(default=120.0, gt=0.0, le=86_400.0)
     sim_cpu_seconds: float = Field(default=120.0, gt=0.0, le=86_400.0)
     sim_max_steps: int = Field(default=500_000, ge=1_000, le=1_000_000_000)
+    # re-plans from a measured state (planner_service.jobs.replans)
+    replan_processes: int = Field(default=1, ge=1, le=64)
+    replan_cache: int = Field(default=8, ge=1, le=1_000)
+    replan_queue: int = Field(default=8, ge=0, le=10_000)
+    replan_time_limit: float = Field(default=10.0, gt=0.0, le=600.0)
+    replan_setup_limit: float = Field(default=300.0, gt=0.0, le=86_400.0)
     # who may use the service (planner_service.api.access)
     api_keys: str = ""
     api_keys_file: Path | None = None

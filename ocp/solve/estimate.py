@@ -59,6 +59,9 @@ class Measurement:
     q_dot: Sequence[Any] | None = None
     object_velocity: Any = None
     object_omega: Any = None
+    #: each finger's measured contact location [m], palm frame (a tactile sensor's), or
+    #: None for a finger (or all) not measured
+    contact_points: Sequence[Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -67,7 +70,9 @@ class EstimateOptions:
     position ``sigma_p`` [m] and orientation ``sigma_r`` [rad], the rates likewise) and the
     limits beyond which a measurement is not explained: a fingertip moved more than
     ``max_fingertip_shift`` [m] to touch, the object moved more than ``max_object_shift``
-    [m] or ``max_object_turn`` [rad] to a pose the grasp allows."""
+    [m] or ``max_object_turn`` [rad] to a pose the grasp allows; a measured contact
+    location weighs ``sigma_c`` [m], and one more than ``max_contact_shift`` [m] from the
+    estimated contact point is not explained either (the contact is elsewhere)."""
 
     sigma_q: float = 1e-3
     sigma_p: float = 5e-4
@@ -78,6 +83,8 @@ class EstimateOptions:
     max_fingertip_shift: float = 3e-3
     max_object_shift: float = 3e-3
     max_object_turn: float = 0.1
+    sigma_c: float = 1e-3
+    max_contact_shift: float = 3e-3
     max_iter: int = 30
     tol: float = 1e-12
 
@@ -88,7 +95,11 @@ class StateEstimate:
     nearest to the measurement; ``explained`` whether the grasp explains it (``problems``
     say why not); ``fingertip_shift`` [m] per finger (how far its tip moved to touch),
     ``object_shift`` [m] and ``object_turn`` [rad] (the object's pose against the
-    measured one), ``closure`` (the largest closure residual left), ``iterations``."""
+    measured one), ``contact_shift`` [m] per finger (the estimated contact point against
+    a measured one; None for a finger whose contact was not measured), ``closure`` (the
+    largest closure residual left), ``iterations``; ``fields`` names, for each of
+    ``problems``, the measurement it is about (``q[i]``, ``object_position``,
+    ``object_wxyz``, ``contact_points[i]``)."""
 
     x: FloatArray
     u: FloatArray | None
@@ -99,6 +110,8 @@ class StateEstimate:
     closure: float
     iterations: int
     problems: tuple[str, ...] = field(default=())
+    fields: tuple[str, ...] = field(default=())
+    contact_shift: tuple[float | None, ...] = field(default=())
 
 
 class _Functions:
@@ -108,7 +121,7 @@ class _Functions:
         x = ca.SX.sym("x", m.nx)
         u = ca.SX.sym("u", m.nu)
         prm = ca.SX.sym("p", m.n_params)
-        closure, _, _, R_po, p_po = m.path(x, prm)
+        closure, points, _, R_po, p_po = m.path(x, prm)
         c = [closure]
         if isinstance(m.object, FreeObject):
             qo = x[m.object.x0 + 3:m.object.x0 + 7]
@@ -128,6 +141,12 @@ class _Functions:
             _, p_fk = tip.finger.fk(x[tip.q_cols])
             tips.append(p_fk)
         self.tips = ca.Function("tips", [x], [ca.horzcat(*tips) if tips else ca.SX(3, 0)])
+        #: each fingertip's contact point (palm frame) and its Jacobian, fingertip order
+        cols = [m.point_contacts.index(tip) for tip in m.fingertips]
+        # the path's points are on the object's surface, in its frame: to the palm frame
+        pts = ca.vertcat(*[p_po + R_po @ points[:, j] for j in cols]) if cols else \
+            ca.SX(0, 1)
+        self.points = ca.Function("points", [x, prm], [pts, ca.jacobian(pts, x)])
         obj_v = ca.jtimes(p_po, x, m.dynamics(x, u, prm))
         obj_R = ca.jtimes(ca.vec(R_po), x, m.dynamics(x, u, prm))
         omega = vee_skew(ca.reshape(obj_R, 3, 3) @ R_po.T)
@@ -201,6 +220,12 @@ def estimate_state(problem: ManipulationProblem, m: GraspModel, measured: Measur
     for cols, q in zip(q_cols, q_meas, strict=True):
         x[cols] = q
     x_guess = x.copy()
+    c_meas = _contact_points(measured, len(m.fingertips))
+    c_rows = np.concatenate([np.arange(3 * i, 3 * i + 3) for i, c in enumerate(c_meas)
+                             if c is not None]).astype(int) if any(
+        c is not None for c in c_meas) else np.zeros(0, dtype=int)
+    c_vals = np.concatenate([c for c in c_meas if c is not None]) if c_rows.size else \
+        np.zeros(0)
     w_pose = np.array([1 / o.sigma_p] * 3 + [1 / o.sigma_r] * 3)
     eps = 1e-2  # the contact coordinates nothing measures: near the guess
 
@@ -213,6 +238,10 @@ def estimate_state(problem: ManipulationProblem, m: GraspModel, measured: Measur
             J = np.zeros((cols.size, m.nx))
             J[np.arange(cols.size), cols] = 1 / o.sigma_q
             jac.append(J)
+        if c_rows.size:
+            cres, cjac = f.points(x, prm)
+            rows.append((np.asarray(cres).ravel()[c_rows] - c_vals) / o.sigma_c)
+            jac.append(np.asarray(cjac)[c_rows] / o.sigma_c)
         rows.append(eps * (x - x_guess))
         jac.append(eps * np.eye(m.nx))
         return np.concatenate(rows), np.vstack(jac)
@@ -235,17 +264,34 @@ def estimate_state(problem: ManipulationProblem, m: GraspModel, measured: Measur
     pres = np.asarray(f.pose(x, prm, R_meas)[0]).ravel()
     obj_shift = float(np.linalg.norm(pres[:3] - p_meas))
     obj_turn = float(np.linalg.norm(pres[3:]))
-    problems = []
+    problems, fields = [], []
     for i, s in enumerate(shift):
         if s > o.max_fingertip_shift:
             problems.append(f"finger {i}: its fingertip is {s * 1e3:.2f} mm from any pose "
                             f"touching the object (limit {o.max_fingertip_shift * 1e3:g} "
                             "mm): contact lost")
+            fields.append(f"q[{i}]")
     if obj_shift > o.max_object_shift or obj_turn > o.max_object_turn:
         problems.append(f"object: {obj_shift * 1e3:.2f} mm and {np.degrees(obj_turn):.2f} "
                         "deg from any pose the grasp allows (limits "
                         f"{o.max_object_shift * 1e3:g} mm, "
                         f"{np.degrees(o.max_object_turn):.3g} deg): dropped or lifted")
+        fields.append("object_position" if obj_shift > o.max_object_shift
+                      else "object_wxyz")
+    contact_shift: list[float | None] = [None] * len(c_meas)
+    if c_rows.size:
+        est_points = np.asarray(f.points(x, prm)[0]).ravel()
+        for i, point in enumerate(c_meas):
+            if point is None:
+                continue
+            d = float(np.linalg.norm(est_points[3 * i:3 * i + 3] - point))
+            contact_shift[i] = d
+            if d > o.max_contact_shift:
+                problems.append(f"finger {i}: its measured contact is {d * 1e3:.2f} mm from "
+                                "any contact point the grasp explains (limit "
+                                f"{o.max_contact_shift * 1e3:g} mm): the contact is "
+                                "elsewhere")
+                fields.append(f"contact_points[{i}]")
     for block in m.contacts:  # off a pad's edge, past a pole, a joint past its limit
         lo, hi, _ = block.bounds(problem)
         xb = x[block.xs]
@@ -255,13 +301,45 @@ def estimate_state(problem: ManipulationProblem, m: GraspModel, measured: Measur
                             f"({xb[out[0]]:.4g}) outside [{lo[out[0]]:.4g}, "
                             f"{hi[out[0]]:.4g}]: off the fingertip's surface or past a "
                             "joint limit")
+            fields.append(_block_field(m, block))
     if not np.isfinite(closure) or closure > 1e-7:
         problems.append(f"closure not reached (residual {closure:.3g})")
+        fields.append("q")
     u = None
     if measured.q_dot is not None or u_guess is not None:
         u = _rates(m, f, prm, x, measured, u_guess, o)
     return StateEstimate(x, u, not problems, tuple(float(s) for s in shift), obj_shift,
-                         obj_turn, closure, it, tuple(problems))
+                         obj_turn, closure, it, tuple(problems), tuple(fields),
+                         tuple(contact_shift))
+
+
+def _contact_points(measured: Measurement, n: int) -> list[FloatArray | None]:
+    """The measured contact locations, one per finger (None: not measured); ValueError
+    naming a bad one."""
+    raw = measured.contact_points
+    if raw is None:
+        return [None] * n
+    if len(raw) != n:
+        raise ValueError(f"contact_points: {len(raw)} given, the grasp has {n} fingers")
+    out: list[FloatArray | None] = []
+    for i, c in enumerate(raw):
+        if c is None:
+            out.append(None)
+            continue
+        a = np.asarray(c, dtype=float).ravel()
+        if a.size != 3 or not np.all(np.isfinite(a)):
+            raise ValueError(f"contact_points[{i}]: expected a finite point (x, y, z) [m]")
+        out.append(a)
+    return out
+
+
+def _block_field(m: GraspModel, block: Any) -> str:
+    """The measurement a contact block's state out of its bounds is about: a fingertip's
+    joints, else the object's pose."""
+    for i, tip in enumerate(m.fingertips):
+        if tip is block:
+            return f"q[{i}]"
+    return "object_position"
 
 
 def _rates(m: GraspModel, f: _Functions, prm: FloatArray, x: FloatArray,

@@ -68,8 +68,9 @@ class ReplanOptions:
     to end in the first plan's final orientation too (``hold_final_pose``: its chart
     point and contact angle added to the goal, where the problem's goal leaves them
     free), whether IPOPT starts from the shifted plan's multipliers too (``warm_duals``;
-    else from its primal point alone, with IPOPT's own initial barrier), and the
-    estimate's options."""
+    else from its primal point alone, with IPOPT's own initial barrier), whether each
+    re-plan is certified (``certify``: a converged re-plan is then ``solved`` only with a
+    passed certificate), and the estimate's options."""
 
     max_iter: int = 30
     time_limit: float = 10.0
@@ -77,6 +78,7 @@ class ReplanOptions:
     relax_tracking: bool = True
     hold_final_pose: bool = False
     warm_duals: bool = True
+    certify: bool = False
     estimate: EstimateOptions = field(default_factory=EstimateOptions)
 
 
@@ -137,7 +139,13 @@ class Replanner:
         self.params = self.model.params(np.asarray(problem.object.dimensions, dtype=float),
                                         contact_charts(problem))
         self.plan, self.start = first, 0.0
+        #: the first plan (:meth:`reset` goes back to it)
+        self.first = first
         self.history: list[Replan] = []
+
+    def reset(self) -> None:
+        """Back to the first plan (a controller that starts the motion again)."""
+        self.plan, self.start = self.first, 0.0
 
     def prepare(self, times: Sequence[float]) -> float:
         """Build, before the loop, every NLP the re-plans at ``times`` will use (one per
@@ -207,7 +215,8 @@ class Replanner:
             warm = replace(warm, nlp_point=None)
         try:
             sol = attempt(rest, x0=est.x, u0=est.u, warm=warm,
-                          options=AttemptOptions(max_iter=o.max_iter, time_limit=o.time_limit),
+                          options=AttemptOptions(max_iter=o.max_iter, time_limit=o.time_limit,
+                                                 certify=o.certify),
                           planner=self.planner)
         except ProblemError as exc:
             out = Replan(t, "refused", None, est, time.perf_counter() - t0,

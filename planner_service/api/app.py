@@ -7,6 +7,7 @@ GET  /v1/plans           jobs, newest first, paginated (?limit=&offset=)
 DELETE /v1/plans/{id}    cancel a queued or running job
 GET  /v1/models          built-in objects, fingers (with URDFs), hands and planners
 POST /v1/plans/{id}/simulation  execute a finished plan in MuJoCo; GET: the stored report
+POST /v1/plans/{id}/replan      the rest of a finished plan re-planned from a measured state
 GET  /healthz, /readyz   liveness; readiness (store writable, a worker ready)
 
 Every error is an ``ErrorBody`` (no traceback ever leaves the service); an invalid request
@@ -27,6 +28,7 @@ from typing import Any
 from fastapi import FastAPI
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from ..jobs.replans import ReplanPool
 from ..jobs.simulations import SimulationPool
 from ..jobs.store import Store
 from ..jobs.workers import Dispatcher
@@ -34,7 +36,7 @@ from ..models_check import ModelChecker
 from ..settings import Settings
 from .access import Access
 from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
-from .routes import health, models, plans, simulation, view
+from .routes import health, models, plans, replan, simulation, view
 from .submission import ModelSubmissions
 
 __all__ = ["BodyLimit", "create_app"]
@@ -103,6 +105,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         checker = ModelChecker(settings.model_limits(), settings.model_checkers)
         simulations = SimulationPool(settings.sim_processes, settings.sim_queue,
                                      settings.sim_time_limit, settings.sim_cpu_seconds)
+        app.state.replans = replans = ReplanPool(
+            settings.replan_processes, settings.replan_cache, settings.replan_queue,
+            settings.replan_time_limit, settings.replan_setup_limit)
         app.state.store, app.state.dispatcher = store, dispatcher
         app.state.checker, app.state.simulations = checker, simulations
         app.state.model_submissions = submissions = ModelSubmissions(settings.model_checkers,
@@ -114,6 +119,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             yield
         finally:
             viewer.close()
+            replans.close()
             submissions.close()
             simulations.close()
             checker.close()
@@ -124,7 +130,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   description=__doc__, responses=ERROR_RESPONSES)
     app.state.settings, app.state.notifier = settings, Notifier()
     add_error_handlers(app)
-    for routes in (plans, models, health, view, simulation):
+    for routes in (plans, models, health, view, simulation, replan):
         app.include_router(routes.router)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     # outermost: a request from a host not served, or without a key, goes no further

@@ -29,7 +29,8 @@ from ocp import (
     quaternion_wxyz,
 )
 
-__all__ = ["FirstPlan", "ReplanController", "compare", "first_plan", "goal_of", "summary"]
+__all__ = ["FirstPlan", "ReplanController", "ReplanSession", "closed_loop_report", "compare",
+           "first_plan", "goal_of", "replannable", "stored_first_plan", "summary"]
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,43 @@ def first_plan(request: Any) -> FirstPlan:
                          "(planner one_finger with method collocation, or manipulation) "
                          "are re-planned")
     return FirstPlan(result, problem, plan)
+
+
+def replannable(request: Any, result: Any) -> str | None:
+    """Why a stored plan cannot be re-planned (None: it can): only a plan with fingers made
+    by direct collocation (planner ``one_finger`` with method ``collocation``, or
+    ``manipulation`` without a ``gait``) whose result holds its ``collocation`` block has
+    the one NLP a re-plan re-solves."""
+    planner = getattr(request, "planner", None)
+    if planner == "ball_on_palm":
+        return "a ball-on-palm plan has no fingers: nothing to re-plan from joint angles"
+    if planner == "one_finger" and getattr(request, "method", "collocation") != "collocation":
+        return ("a plan of the greedy method is its steps, not one NLP: re-plan a plan of "
+                "method 'collocation'")
+    if planner == "manipulation" and getattr(request, "gait", None) is not None:
+        return ("a gait's plan is a sequence of NLPs (rolls, holds, re-placements), not one: "
+                "re-plan a rolling plan (no `gait`)")
+    if planner not in ("one_finger", "manipulation"):
+        return f"planner {planner!r} has no re-plannable structure"
+    if getattr(result, "collocation", None) is None:
+        return "its result has no `collocation` block (no plan, or not one NLP's)"
+    return None
+
+
+def stored_first_plan(request: Any, result: Any) -> FirstPlan:
+    """The :class:`FirstPlan` of a stored job: its ``request`` planned again here, warm from
+    the stored ``result``'s ``collocation`` block (its primal-dual point: IPOPT starts at
+    the stored plan's optimum, a few iterations), and the stored ``result`` itself as the
+    executed plan's. ValueError when it is not re-plannable (:func:`replannable`)."""
+    from dexroll_client.models import WarmStartModel
+
+    why = replannable(request, result)
+    if why is not None:
+        raise ValueError(why)
+    block = result.collocation.model_dump()
+    warm = request.model_copy(update={"warm_start": WarmStartModel.model_validate(block)})
+    again = first_plan(warm)
+    return FirstPlan(result, again.problem, again.plan)
 
 
 class ReplanController:
@@ -204,3 +242,155 @@ def compare(first: FirstPlan, base: Any, rate: float, options: Any = None,
             "closed_loop": {"summary": summary(closed.report, disturbances,
                                                closed.final_pose, goal),
                             "setup_time": setup, **closed.to_dict()}}
+
+
+def closed_loop_report(request: Any, result: Any, plan: Any, options: dict[str, Any],
+                       disturbed: dict[str, Any] | None, loop: dict[str, Any]
+                       ) -> tuple[str, Any]:
+    """The simulation door's closed loop (``planner_service.jobs.simulations``): a stored
+    job's ``plan`` (the simulator's, of ``result``) executed closed loop and open loop in
+    the same disturbed world, as ``dexroll simulate --closed-loop``: ("ok", the closed
+    loop's report with ``disturbances``, ``open_loop`` and ``closed_loop`` beside it), or
+    ("not_replannable", why)."""
+    from sim import SimOptions
+    from sim.disturbances import Disturbances
+
+    why = replannable(request, result)
+    if why is not None:
+        return ("not_replannable", f"closed_loop: {why}")
+    options = {k: v for k, v in options.items() if k != "model"}
+    dist = Disturbances.from_dict(disturbed)
+    first = stored_first_plan(request, result)
+    data = compare(first, plan, float(loop["rate"]), SimOptions.from_dict(options), dist,
+                   ReplanOptions(max_iter=int(loop["max_iter"]), time_limit=60.0))
+    closed = dict(data["closed_loop"])
+    report = closed.pop("report")
+    return ("ok", {**report, "disturbances": data["disturbances"],
+                   "open_loop": data["open_loop"], "closed_loop": closed})
+
+
+class ReplanSession:
+    """A stored plan's re-planner in the service's re-plan process
+    (``planner_service.jobs.replans``; docs/replanning.md "Through the service"): the plan
+    planned again warm from its stored result (:func:`stored_first_plan`) and its
+    :class:`Replanner`, which keeps the plan being executed (the last re-plan) from call to
+    call. ValueError when the request cannot be planned again here."""
+
+    def __init__(self, request: Any, result: Any) -> None:
+        from ocp import ProblemError
+
+        try:
+            self.first = stored_first_plan(request, result)
+        except ProblemError as exc:
+            raise ValueError(str(exc.errors)) from exc
+        self.replanner = Replanner(self.first.problem, self.first.plan,
+                                   options=ReplanOptions())
+
+    def shape_errors(self, body: Any) -> list[tuple[str, str]]:
+        """What does not fit the plan in a (schema-valid) re-plan request
+        (``dexroll_client.replan.ReplanRequest``), fields named."""
+        rp = self.replanner
+        m = rp.model
+        n = len(m.fingertips)
+        errors: list[tuple[str, str]] = []
+        joints = [int(np.arange(m.nx)[tip.q_cols].size) for tip in m.fingertips]
+        for name in ("q", "q_dot"):
+            value = getattr(body, name)
+            if value is None:
+                continue
+            if len(value) != n:
+                errors.append((name, f"{len(value)} fingers measured, the plan has {n}"))
+                continue
+            for i, (row, k) in enumerate(zip(value, joints, strict=True)):
+                if len(row) != k:
+                    errors.append((f"{name}[{i}]", f"{len(row)} joints, finger {i} of the "
+                                                   f"plan has {k}"))
+        if body.contact_points is not None and len(body.contact_points) != n:
+            errors.append(("contact_points", f"{len(body.contact_points)} given, the plan "
+                                             f"has {n} fingers"))
+        if float(np.linalg.norm(body.object_wxyz)) < 1e-6:
+            errors.append(("object_wxyz", "not a rotation: a zero quaternion"))
+        if (body.object_velocity is None) != (body.object_omega is None):
+            name = "object_omega" if body.object_omega is None else "object_velocity"
+            errors.append((name, "give object_velocity and object_omega together (or "
+                                 "neither)"))
+        duration = float(rp.problem.duration)
+        if body.t > duration + 1e-9:
+            errors.append(("t", f"{body.t:g} s is after the plan's end ({duration:g} s)"))
+        return errors
+
+    def replan(self, job_id: str, body: Any, setup: float, time_cap: float
+               ) -> tuple[str, Any]:
+        """One re-plan from ``body`` (a ``ReplanRequest``): ("ok", the wire
+        ``ReplanResult`` as a dict), ("invalid", [(field, reason)]) for a measurement that
+        does not fit the plan, ("unexplained", [(field, reason)]) for a state the grasp
+        cannot explain. ``setup``: the seconds this call spent building the session;
+        ``time_cap``: the service's cap on the IPOPT call's time limit."""
+        from dataclasses import replace
+
+        errors = self.shape_errors(body)
+        if errors:
+            return ("invalid", errors)
+        rp = self.replanner
+        if body.restart or body.t < rp.start - 1e-9:
+            rp.reset()
+        rp.options = replace(rp.options, max_iter=body.max_iter,
+                             time_limit=min(body.time_limit, time_cap),
+                             certify=body.certify)
+        r = rp.replan(body.t, Measurement(
+            body.q, body.object_position, body.object_wxyz, body.q_dot,
+            body.object_velocity, body.object_omega, body.contact_points))
+        if r.status == "unexplained" and r.estimate is not None:
+            return ("unexplained", list(zip(r.estimate.fields, r.estimate.problems,
+                                            strict=True)))
+        if r.status == "refused":
+            return ("unexplained", [("q", r.message)])
+        return ("ok", self._answer(job_id, body, r, setup))
+
+    def _answer(self, job_id: str, body: Any, r: Any, setup: float) -> dict[str, Any]:
+        """The wire ReplanResult (as a dict) of one :class:`~ocp.solve.replan.Replan`."""
+        from ..planners.samples import joint_trajectory_block, samples_block
+
+        rp = self.replanner
+        m = rp.model
+        plan = r.plan if r.status == "replanned" else None
+        out: dict[str, Any] = {"job_id": job_id, "status": r.status, "message": r.message,
+                               "t": r.t}
+        if plan is not None:
+            times = plan.t if body.sample_rate is None else _rate_times(
+                float(plan.duration), float(body.sample_rate))
+            jt = joint_trajectory_block(plan, None if body.sample_rate is None else times)
+            smp = samples_block(plan, np.asarray(times, dtype=float))
+            out.update(duration=float(plan.duration),
+                       joint_trajectory=None if jt is None else jt.model_dump(mode="json"),
+                       samples=None if smp is None else smp.model_dump(mode="json"))
+        est = r.estimate
+        if est is not None:
+            _, _, _, R, p = m.path(est.x, rp.params)
+            wxyz = quaternion_wxyz(np.asarray(R, dtype=float)).reshape(-1, 4)[0]
+            out["estimate"] = {
+                "q": [np.asarray(est.x)[tip.q_cols].tolist() for tip in m.fingertips],
+                "object_position": np.asarray(p, dtype=float).ravel().tolist(),
+                "object_wxyz": wxyz.tolist(),
+                "fingertip_shift": list(est.fingertip_shift),
+                "object_shift": est.object_shift, "object_turn": est.object_turn,
+                "contact_shift": list(est.contact_shift) if body.contact_points is not None
+                else None}
+        solved = r.plan
+        stats = solved.stats if solved is not None else None
+        out["stats"] = {
+            "iterations": r.iterations, "wall_time": r.wall_time,
+            "solve_time": r.solve_time, "estimate_time": r.estimate_time,
+            "setup_time": setup,
+            "converged": None if solved is None else bool(solved.converged),
+            "certified": None if solved is None or not body.certify
+            else bool(solved.certificate.passed),
+            "raw_status": None if stats is None else stats.raw_status}
+        return out
+
+
+def _rate_times(duration: float, rate: float) -> np.ndarray:
+    """k / rate for every k with k / rate < duration, then the duration itself (as a
+    request's ``sample_rate`` samples a plan)."""
+    t = np.arange(math.ceil(duration * rate) + 1) / rate
+    return np.append(t[t < duration - 1e-12], duration)

@@ -101,18 +101,35 @@ def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
                                 hard))
         try:
             request = REQUEST.validate_json(request_json)
-            plan = execution_plan(RESULT.validate_json(result_json), request)
+            result = RESULT.validate_json(result_json)
+            plan = execution_plan(result, request)
             options = dict(options)
-            if options.pop("model", "scene") == "request":  # the request's own hand file
+            disturbed = options.pop("disturbances", None)
+            loop = options.pop("closed_loop", None)
+            if loop is not None:
+                from ..execution.closed_loop import closed_loop_report
+
+                reply: tuple[str, Any] = closed_loop_report(request, result, plan, options,
+                                                            disturbed, loop)
+            elif disturbed is not None:
+                from sim.closed_loop import simulate_disturbed
+                from sim.disturbances import Disturbances
+
+                options.pop("model", None)
+                dist = Disturbances.from_dict(disturbed)
+                report = simulate_disturbed(plan, SimOptions.from_dict(options), dist)
+                reply = ("ok", {**report.to_dict(), "disturbances": dist.to_dict()})
+            elif options.pop("model", "scene") == "request":  # the request's own hand file
                 from sim.user_model import simulate_on_model
 
                 from ..execution import user_model
 
                 report = simulate_on_model(plan, user_model(request, plan),
                                            SimOptions.from_dict(options))
+                reply = ("ok", report.to_dict())
             else:
                 report = simulate(plan, SimOptions.from_dict(options))
-            reply: tuple[str, Any] = ("ok", report.to_dict())
+                reply = ("ok", report.to_dict())
         except (NotExecutableError, ProblemError) as exc:
             reply = ("not_executable", str(exc))
         except ValueError as exc:  # an option the simulator refuses (solref vs timestep)
@@ -124,7 +141,8 @@ def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
 
 
 #: How a process's reply other than a report is answered: (status, retry-after).
-_REPLIES = {"not_executable": (409, None), "invalid_options": (422, None),
+_REPLIES = {"not_executable": (409, None), "not_replannable": (409, None),
+            "invalid_options": (422, None),
             "simulation_unavailable": (503, None), "simulation_failed": (500, None)}
 
 

@@ -86,6 +86,7 @@ from dexroll_client.models import (
     PlanResult,
     WarmStartModel,
 )
+from dexroll_client.replan import ReplanRequest, ReplanResult
 from dexroll_client.simulation import SimulationOptions, SimulationReport
 
 __all__ = ["DEFAULT_TIMEOUT", "MAX_WAIT", "RETRIES", "AsyncDexrollClient", "DexrollClient",
@@ -101,6 +102,9 @@ _WAIT_MARGIN = 10.0
 _CANCEL_READ_TIMEOUT = 20.0
 #: A plan's execution in MuJoCo runs while the request waits [s].
 _SIMULATE_READ_TIMEOUT = 300.0
+#: A plan's first re-plan builds its re-planner (the service's DEXROLL_REPLAN_SETUP_LIMIT)
+#: while the request waits [s].
+_REPLAN_READ_TIMEOUT = 330.0
 
 #: Retries of a request that got no response and is safe to send again (see the module),
 #: and the first backoff [s] (doubled each retry; the pause is drawn in [0, backoff]).
@@ -226,6 +230,20 @@ def _simulate_call(job_id: str, options: SimulationOptions | Mapping[str, Any] |
     return _Call("POST", f"{_job_path(job_id)}/simulation",
                  json=model.model_dump(mode="json", exclude_none=True),
                  min_read_timeout=_SIMULATE_READ_TIMEOUT)
+
+
+def _replan_call(job_id: str, measured: ReplanRequest | Mapping[str, Any] | None,
+                 fields: Mapping[str, Any]) -> _Call:
+    if measured is None:
+        model = ReplanRequest.model_validate(dict(fields))
+    elif isinstance(measured, ReplanRequest):
+        model = measured.model_copy(update=dict(fields)) if fields else measured
+        model = ReplanRequest.model_validate(model.model_dump())
+    else:
+        model = ReplanRequest.model_validate({**measured, **fields})
+    return _Call("POST", f"{_job_path(job_id)}/replan",
+                 json=model.model_dump(mode="json", exclude_none=True),
+                 min_read_timeout=_REPLAN_READ_TIMEOUT)
 
 
 def _cancel_call(job_id: str) -> _Call:
@@ -503,6 +521,20 @@ class DexrollClient:
         without a plan a hand executes, NotFoundError for an unknown id."""
         return self._run(_one(_simulate_call(job_id, options, fields), SimulationReport))
 
+    def replan(self, job_id: str,
+               measured: ReplanRequest | Mapping[str, Any] | None = None,
+               **fields: Any) -> ReplanResult:
+        """Re-plan the rest of a finished job's plan from a measured state
+        (``POST /v1/plans/{id}/replan``, docs/replanning.md "Through the service"):
+        ``measured`` (or keyword fields, e.g. ``t=1.0, q=[[...]], object_position=[...],
+        object_wxyz=[...]``) a :class:`~dexroll_client.replan.ReplanRequest`. The answer's
+        ``status`` says whether to follow its ``joint_trajectory`` (``replanned``) or keep
+        the current one. InvalidRequestError (422) for a measurement that does not fit the
+        plan or a state the grasp cannot explain (``error`` ``unexplained_state``, the
+        field in ``detail``), ConflictError for a plan that cannot be re-planned,
+        NotFoundError for an unknown id."""
+        return self._run(_one(_replan_call(job_id, measured, fields), ReplanResult))
+
     def simulation(self, job_id: str) -> SimulationReport:
         """A job's latest simulation report (NotFoundError: none yet)."""
         return self._run(_one(_Call("GET", f"{_job_path(job_id)}/simulation"),
@@ -644,6 +676,12 @@ class AsyncDexrollClient:
         """See :meth:`DexrollClient.simulate`."""
         return await self._run(_one(_simulate_call(job_id, options, fields),
                                     SimulationReport))
+
+    async def replan(self, job_id: str,
+                     measured: ReplanRequest | Mapping[str, Any] | None = None,
+                     **fields: Any) -> ReplanResult:
+        """See :meth:`DexrollClient.replan`."""
+        return await self._run(_one(_replan_call(job_id, measured, fields), ReplanResult))
 
     async def simulation(self, job_id: str) -> SimulationReport:
         """See :meth:`DexrollClient.simulation`."""

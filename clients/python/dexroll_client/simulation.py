@@ -7,15 +7,31 @@ Import from :mod:`dexroll_client.simulation`.
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field
 
-from dexroll_client.common import OptionalCount, Real, _Request, _Response
+from dexroll_client.common import (
+    MAX_DURATION,
+    Count,
+    OptionalCount,
+    Real,
+    _Request,
+    _Response,
+)
 
 __all__ = [
+    "ClosedLoopBlock",
+    "ClosedLoopOptions",
     "ContactExecutionModel",
+    "ControlEventModel",
+    "ControlTimingModel",
+    "DisturbanceOptions",
     "ErrorSummaryModel",
+    "KickModel",
+    "LoopSummaryModel",
+    "OpenLoopBlock",
+    "PoseNoiseModel",
     "SimulationOptions",
     "SimulationReport",
     "SimulationSeriesModel",
@@ -35,6 +51,60 @@ class SimulationTolerances(_Request):
     contact_loss: Real = Field(default=0.0, ge=0.0, le=3600.0,
                                description="time a planned contact may be lost, in all, "
                                            "after settling [s]")
+
+
+class KickModel(_Request):
+    """A push or an impulse on the object at a time of the plan's clock, palm frame."""
+
+    time: Real = Field(ge=0.0, le=MAX_DURATION, description="when [s] (the plan's clock)")
+    vector: Annotated[list[Annotated[Real, Field(ge=-0.1, le=0.1)]],
+                      Field(min_length=3, max_length=3)] = Field(
+        description="a push: the displacement [m] (a kinematic shift: the object's position "
+                    "set that far in one step, its velocity kept); an impulse: [N s] (its "
+                    "velocity changed by p / m)")
+
+
+class PoseNoiseModel(_Request):
+    """Gaussian noise on the object's pose as the closed loop's controller measures it."""
+
+    position: Real = Field(default=0.0, ge=0.0, le=0.1,
+                           description="standard deviation of the position [m]")
+    angle: Real = Field(default=0.0, ge=0.0, le=math.pi,
+                        description="standard deviation of the orientation [rad]")
+
+
+class DisturbanceOptions(_Request):
+    """What the world does that the plan did not expect (docs/simulation.md,
+    "Disturbances"; the command line's ``--push``, ``--impulse``, ``--friction-scale``,
+    ``--size-change``, ``--mass-scale``, ``--pose-noise``, ``--seed``): open and closed
+    loop alike."""
+
+    pushes: list[KickModel] = Field(default_factory=list, max_length=100,
+                                    description="the object displaced (`vector` [m])")
+    impulses: list[KickModel] = Field(default_factory=list, max_length=100,
+                                      description="impulses on the object (`vector` [N s])")
+    friction_scale: Real = Field(default=1.0, gt=0.0, le=10.0,
+                                 description="every contact's friction coefficient times "
+                                             "this (the plan keeps its own)")
+    size_change: Real = Field(default=0.0, gt=-0.05, lt=0.05,
+                              description="added to each of the object's semi-axes [m] (a "
+                                          "ball 1 mm larger in diameter: 0.0005)")
+    mass_scale: Real = Field(default=1.0, gt=0.0, le=100.0,
+                             description="the object's mass times this")
+    pose_noise: PoseNoiseModel = Field(default_factory=PoseNoiseModel,
+                                       description="noise on the measured pose (closed loop)")
+    seed: Count = Field(default=0, ge=0, le=2**31 - 1, description="the noise's seed")
+
+
+class ClosedLoopOptions(_Request):
+    """Re-plan from the measured state while MuJoCo runs (docs/simulation.md, "Closed
+    loop"; the command line's ``--closed-loop``): the open-loop run in the same disturbed
+    world beside it."""
+
+    rate: Real = Field(default=4.0, gt=0.0, le=50.0,
+                       description="the controller's rate in simulated time [Hz]")
+    max_iter: Count = Field(default=30, ge=1, le=500,
+                            description="IPOPT iterations per re-plan")
 
 
 class SimulationOptions(_Request):
@@ -95,10 +165,31 @@ class SimulationOptions(_Request):
                                        description="steps between the report's series "
                                                    "rows (default 10)")
     tolerances: SimulationTolerances = Field(default_factory=SimulationTolerances)
+    disturbances: DisturbanceOptions | None = Field(
+        default=None, description="pushes, impulses, friction, size and mass changes, pose "
+                                  "noise (null: none); the report then has `disturbances`")
+    closed_loop: ClosedLoopOptions | None = Field(
+        default=None, description="re-plan from the measured state at `rate` (a plan with "
+                                  "fingers by direct collocation, on dexroll's scene with "
+                                  "servos): the report is the closed loop's, with "
+                                  "`open_loop` (the same world, open loop) and `closed_loop` "
+                                  "(the controller's calls and timing) beside it")
 
     def simulator_options(self) -> dict[str, Any]:
-        """The fields set, as the simulator's option names (``sim.SimOptions``)."""
-        return self.model_dump(exclude_none=True)
+        """The fields set, as the simulator's option names (``sim.SimOptions``); the
+        disturbances and the closed loop as their own keys (``sim.disturbances``)."""
+        out = self.model_dump(exclude_none=True, exclude={"disturbances", "closed_loop"})
+        if self.disturbances is not None:
+            d = self.disturbances
+            out["disturbances"] = {
+                "pushes": [k.model_dump() for k in d.pushes],
+                "impulses": [k.model_dump() for k in d.impulses],
+                "friction_scale": d.friction_scale, "size_change": d.size_change,
+                "mass_scale": d.mass_scale,
+                "pose_noise": [d.pose_noise.position, d.pose_noise.angle], "seed": d.seed}
+        if self.closed_loop is not None:
+            out["closed_loop"] = self.closed_loop.model_dump()
+        return out
 
 
 class ErrorSummaryModel(_Response):
@@ -146,6 +237,75 @@ class SimulationSeriesModel(_Response):
                                                              "[N]")
 
 
+class LoopSummaryModel(_Response):
+    """A disturbed run's figures (open or closed loop), side by side."""
+
+    passed: bool = Field(description="the run's report passed (against the first plan)")
+    position_final_mm: float = Field(description="final distance from the first plan [mm]")
+    position_worst_mm: float = Field(description="worst distance from the first plan [mm]")
+    angle_final_deg: float = Field(description="final angle from the first plan [deg]")
+    angle_worst_deg: float = Field(description="worst angle from the first plan [deg]")
+    contacts_lost_s: dict[str, float] = Field(description="each contact's lost time [s]")
+    contact_lost_after_kicks: bool = Field(description="a contact lost from 0.1 s after the "
+                                                       "last push or impulse on")
+    goal_position_mm: float | None = Field(default=None,
+                                           description="final distance from the task's goal "
+                                                       "[mm]")
+    goal_angle_deg: float | None = Field(default=None,
+                                         description="final angle from the task's goal [deg] "
+                                                     "(null: the task leaves it free)")
+    recovered: bool = Field(description="ends within the tolerances of the goal, no contact "
+                                        "lost after the kicks")
+
+
+class ControlTimingModel(_Response):
+    """The closed loop's controller: its rate and the re-plans' wall time."""
+
+    rate: float = Field(description="[Hz] in simulated time")
+    period: float = Field(description="[s]")
+    calls: int
+    statuses: dict[str, int] = Field(description="calls by status (replanned, "
+                                                 "not_converged, unexplained, kept, refused)")
+    wall_time_median: float | None = Field(default=None, description="[s]")
+    wall_time_max: float | None = Field(default=None, description="[s]")
+    real_time_factor: float | None = Field(default=None,
+                                           description="median wall time over the period "
+                                                       "(above 1: slower than real time)")
+
+
+class ControlEventModel(_Response):
+    """One controller call."""
+
+    t: float = Field(description="simulated time [s]")
+    status: str
+    wall_time: float = Field(description="[s]")
+    message: str = ""
+    iterations: int | None = None
+    solve_time: float | None = None
+    estimate_time: float | None = None
+    fingertip_shift: list[float] | None = None
+    object_shift: float | None = None
+    object_turn: float | None = None
+
+
+class ClosedLoopBlock(_Response):
+    """The closed loop's own figures (its report is the top level's)."""
+
+    summary: LoopSummaryModel
+    control: ControlTimingModel
+    events: list[ControlEventModel]
+    setup_time: float = Field(description="building the re-planner's NLPs before the run, "
+                                          "and the first plan re-solved warm [s]")
+    final_pose: list[float] = Field(description="the object's final position and wxyz")
+
+
+class OpenLoopBlock(_Response):
+    """The open-loop run in the same disturbed world."""
+
+    summary: LoopSummaryModel
+    report: SimulationReport
+
+
 class SimulationReport(_Response):
     """How closely a plan's object followed the plan when a hand executed it in MuJoCo."""
 
@@ -172,3 +332,13 @@ class SimulationReport(_Response):
                                   "settings against the file's, each joint's feed-forward "
                                   "torque against its actuator's range (null: dexroll's "
                                   "scene)")
+    disturbances: dict[str, Any] | None = Field(
+        default=None, description="the disturbances of the run, as applied (null: none)")
+    open_loop: OpenLoopBlock | None = Field(
+        default=None, description="with `closed_loop`: the open-loop run in the same world")
+    closed_loop: ClosedLoopBlock | None = Field(
+        default=None, description="with `closed_loop`: the controller's summary, calls and "
+                                  "timing (this report is the closed loop's run)")
+
+
+OpenLoopBlock.model_rebuild()

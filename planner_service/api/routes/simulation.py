@@ -137,6 +137,26 @@ async def _outcome(request: Request, pool: SimulationPool, result_json: str,
         raise _refused(exc) from exc
 
 
+def _loop_errors(options: SimulationOptions, duration: float) -> list[tuple[str, str]]:
+    """What the disturbances and the closed loop cannot do with these options and a plan
+    of ``duration`` [s], fields named."""
+    errors: list[tuple[str, str]] = []
+    d = options.disturbances
+    if (d is not None or options.closed_loop is not None) and options.model == "request":
+        errors.append(("model", "disturbances and the closed loop run on dexroll's own "
+                                "scene only, not yet on the request's hand model"))
+    if options.closed_loop is not None and options.mode != "servo":
+        errors.append(("mode", "the closed loop drives the joints through their servos: "
+                               "mode 'servo'"))
+    if d is not None:
+        for name in ("pushes", "impulses"):
+            for i, k in enumerate(getattr(d, name)):
+                if k.time > duration:
+                    errors.append((f"disturbances.{name}[{i}].time",
+                                   f"{k.time:g} s is after the plan's end ({duration:g} s)"))
+    return errors
+
+
 def _refused(exc: SimulationRefusedError) -> ServiceError:
     headers = None if exc.retry_after is None else {"Retry-After": str(exc.retry_after)}
     return ServiceError(exc.status, exc.error, exc.message, headers=headers)
@@ -155,7 +175,11 @@ async def simulate_plan(job_id: str, request: Request, store: StoreDep, owner: O
     as the job's latest (`GET` answers it). The run happens in the service's simulation
     processes, at most `DEXROLL_SIM_MAX_STEPS` physics steps ((settle + the plan's
     duration) / timestep), stopped past its time or CPU budget or when the client
-    leaves."""
+    leaves. `disturbances` disturb the run (pushes, impulses, friction, size, mass, pose
+    noise); `closed_loop` re-plans from the measured state at its rate while it runs and
+    runs the open loop in the same world beside it: the report is the closed loop's, with
+    `open_loop` and `closed_loop` (each one's summary against the task's goal: `recovered`;
+    the controller's calls and timing) as `dexroll simulate --closed-loop` writes them."""
     row = await asyncio.to_thread(store.get, job_id, owner)
     if row is None:
         raise ServiceError(404, "not_found", f"no job {job_id!r}")
@@ -187,6 +211,10 @@ async def simulate_plan(job_id: str, request: Request, store: StoreDep, owner: O
                   f"(DEXROLL_SIM_MAX_STEPS): a timestep of at least {smallest:.3g} s")
         raise ServiceError(422, "invalid_request", f"timestep: {reason}",
                            [FieldError(field="timestep", reason=reason)])
+    errors = _loop_errors(options, duration)
+    if errors:
+        raise ServiceError(422, "invalid_request", "; ".join(f"{f}: {r}" for f, r in errors),
+                           [FieldError(field=f, reason=r) for f, r in errors])
     pool: SimulationPool = request.app.state.simulations
     report = await _outcome(request, pool, row.result, row.request,
                             options.simulator_options())

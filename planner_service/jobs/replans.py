@@ -1,0 +1,286 @@
+"""Re-plans from a measured state (``POST /v1/plans/{id}/replan``) in processes of their
+own, each keeping the re-planners of the plans it re-planned last (issue 28, part 3;
+docs/replanning.md "Through the service").
+
+Why not the solver workers: a worker runs one plan at a time, and a plan may take
+minutes; a controller's re-plan queued behind it would wait those minutes, and IPOPT
+cannot be interrupted to take it in between. Why not the API process: a re-plan holds
+the interpreter for its whole IPOPT call (tens of milliseconds to seconds), which every
+other route would wait for, and a crash in CasADi would take the API down. So re-plans
+have processes of their own (``DEXROLL_REPLAN_PROCESSES``, one by default), spawned at the
+first re-plan: each keeps, per plan (job id and end time), a
+:class:`~ocp.solve.replan.Replanner`: the plan's problem, the NLP of its structure with
+its warm-start solver, and the plan being executed (the last re-plan), so that the
+controller's next call is warm-started from it. A plan's re-plans always go to the same
+process (its job id hashed), which holds ``DEXROLL_REPLAN_CACHE`` plans at most (the least
+recently re-planned is dropped).
+
+The first re-plan of a plan in a process builds its re-planner: the request planned again,
+warm from the stored plan's ``collocation`` block (IPOPT starts at the stored optimum),
+which builds the NLP; seconds (``stats.setup_time``). Not every structure its later
+re-plans meet (:meth:`~ocp.solve.replan.Replanner.prepare`): a plan with via-points meets
+a new one almost every call (docs/replanning.md, "Through the service"), more than the
+planner's NLP cache keeps. Only then does the service send the
+stored plan: a call whose plan the process holds sends the measurement alone.
+
+A call waits for its process's previous one (at most ``DEXROLL_REPLAN_QUEUE`` wait: 503
+beyond); past its deadline (its time limit plus, on a first call, the setup's
+``DEXROLL_REPLAN_SETUP_LIMIT``) the process is killed and replaced, and the call refused
+(503).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing as mp
+import os
+import threading
+import time
+import zlib
+from collections import OrderedDict
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from multiprocessing.connection import Connection, wait
+from typing import Any
+
+__all__ = ["ReplanPool", "ReplanRefusedError"]
+
+log = logging.getLogger("dexroll.replans")
+
+#: Time a new re-plan process may take to import CasADi and the planners [s].
+START_TIMEOUT = 120.0
+#: Added to a call's IPOPT time limit for the estimate, the answer's samples and the
+#: pipes [s].
+CALL_MARGIN = 5.0
+
+#: (job id, the job's end time): a plan as a process keeps it.
+Key = tuple[str, float | None]
+
+
+class ReplanRefusedError(Exception):
+    """A re-plan not answered: ``status`` and ``error`` as the API answers, ``detail``
+    [(field, reason)] for a 422, ``retry_after`` [s] when a retry may succeed."""
+
+    def __init__(self, status: int, error: str, message: str,
+                 detail: list[tuple[str, str]] | None = None,
+                 retry_after: int | None = None) -> None:
+        super().__init__(message)
+        self.status, self.error, self.message = status, error, message
+        self.detail, self.retry_after = detail or [], retry_after
+
+
+def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float) -> None:
+    """A re-plan process: answer each ("replan", key, body JSON, result JSON or None,
+    request JSON or None) with ("ok", ReplanResult dict), ("need", None) (no re-planner
+    of that plan here yet: send the stored plan), or (error kind, payload)."""
+    from .lifeline import die_with_parent
+
+    die_with_parent(parent)
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO,
+                            format="%(asctime)s %(levelname)s [replan %(process)d] %(name)s: "
+                                   "%(message)s")
+    from dexroll_client.replan import ReplanRequest, ReplanResult
+
+    from ..execution.closed_loop import ReplanSession, replannable
+    from ..planners import REQUEST, RESULT
+
+    sessions: OrderedDict[Key, ReplanSession] = OrderedDict()
+    conn.send(("ready", None))
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        if msg is None:
+            return
+        _, key, body_json, result_json, request_json = msg
+        try:
+            body = ReplanRequest.model_validate_json(body_json)
+            setup = 0.0
+            session = sessions.get(key)
+            if session is None:
+                if result_json is None:
+                    conn.send(("need", None))
+                    continue
+                t0 = time.perf_counter()
+                request = REQUEST.validate_json(request_json)
+                result = RESULT.validate_json(result_json)
+                why = replannable(request, result)
+                if why is not None:
+                    conn.send(("not_replannable", why))
+                    continue
+                try:
+                    session = ReplanSession(request, result)
+                except ValueError as exc:
+                    conn.send(("not_replannable", f"its request cannot be planned again "
+                                                  f"here: {exc}"))
+                    continue
+                sessions[key] = session
+                while len(sessions) > cache_size:
+                    sessions.popitem(last=False)
+                setup = time.perf_counter() - t0
+                log.info("re-planner of job %s built in %.2f s", key[0], setup)
+            sessions.move_to_end(key)
+            kind, payload = session.replan(key[0], body, setup, time_cap)
+            if kind == "ok":
+                payload = ReplanResult.model_validate(payload).model_dump_json()
+            conn.send((kind, payload))
+        except ValueError as exc:  # a measurement the estimate refuses (shapes)
+            conn.send(("invalid", [("q", str(exc))]))
+        except Exception as exc:  # a typed answer, never a dead process
+            log.exception("re-plan failed")
+            conn.send(("replan_failed", f"the re-plan failed: {exc!r}"))
+
+
+class _Process:
+    def __init__(self, ctx: Any, cache_size: int, time_cap: float) -> None:
+        self.conn, child = ctx.Pipe()
+        self.process = ctx.Process(target=_replan_main, name="dexroll-replan", daemon=True,
+                                   args=(child, os.getpid(), cache_size, time_cap))
+        self.process.start()
+        child.close()
+
+    def kill(self) -> None:
+        with contextlib.suppress(Exception):
+            self.process.kill()
+            self.process.join(timeout=5)
+            self.conn.close()
+
+
+class _Slot:
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.proc: _Process | None = None
+
+
+#: How each reply other than an answer is refused: (status, error).
+_REPLIES = {"invalid": (422, "invalid_request"), "unexplained": (422, "unexplained_state"),
+            "not_replannable": (409, "not_replannable"),
+            "replan_failed": (503, "replan_failed")}
+
+
+class ReplanPool:
+    """``processes`` re-plan processes (started at their first call), each keeping
+    ``cache_size`` plans' re-planners; ``max_waiting`` calls wait at most; a call's IPOPT
+    time limit is capped at ``time_cap`` [s], a first call's setup given ``setup_limit``
+    [s]."""
+
+    #: Retry-After of a busy pool [s].
+    RETRY_AFTER = 1
+
+    def __init__(self, processes: int = 1, cache_size: int = 8, max_waiting: int = 8,
+                 time_cap: float = 10.0, setup_limit: float = 300.0) -> None:
+        self.cache_size, self.max_waiting = cache_size, max_waiting
+        self.time_cap, self.setup_limit = time_cap, setup_limit
+        self._ctx = mp.get_context("spawn")
+        self._slots = [_Slot() for _ in range(processes)]
+        self._lock = threading.Lock()
+        self._waiting = 0
+        self._closed = False
+        #: the threads the API's calls wait in (never the event loop's default executor,
+        #: which the other routes' store reads share)
+        self.executor = ThreadPoolExecutor(max_workers=processes + max_waiting + 1,
+                                           thread_name_prefix="dexroll-replan")
+
+    def stats(self) -> dict[str, int]:
+        with self._lock:
+            return {"waiting": self._waiting, "processes": len(self._slots)}
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+        for slot in self._slots:
+            with slot.lock:
+                if slot.proc is not None:
+                    with contextlib.suppress(OSError, BrokenPipeError):
+                        slot.proc.conn.send(None)
+                    slot.proc.kill()
+                    slot.proc = None
+        self.executor.shutdown(wait=False, cancel_futures=True)
+
+    def call(self, key: Key, body_json: str, time_limit: float,
+             fetch: Callable[[], tuple[str, str]]) -> str:
+        """One re-plan of the plan ``key`` (blocking: run it in a thread): its answer (the
+        ReplanResult's JSON, as the process wrote it), or
+        ReplanRefusedError. ``fetch`` gives the stored (result, request) JSON when the
+        process does not hold the plan yet."""
+        with self._lock:
+            if self._closed:
+                raise ReplanRefusedError(503, "shutting_down", "the service is stopping",
+                                         retry_after=self.RETRY_AFTER)
+            if self._waiting >= self.max_waiting:
+                raise ReplanRefusedError(
+                    503, "replans_busy", f"{self._waiting} re-plans wait already (at most "
+                                         f"{self.max_waiting}: DEXROLL_REPLAN_QUEUE)",
+                    retry_after=self.RETRY_AFTER)
+            self._waiting += 1
+        slot = self._slots[zlib.crc32(key[0].encode()) % len(self._slots)]
+        with slot.lock:
+            with self._lock:
+                self._waiting -= 1
+            if slot.proc is None or not slot.proc.process.is_alive():
+                slot.proc = self._start()
+            budget = min(time_limit, self.time_cap) + CALL_MARGIN
+            kind, payload = self._exchange(slot, (key, body_json, None, None), budget)
+            if kind == "need":
+                result_json, request_json = fetch()
+                kind, payload = self._exchange(
+                    slot, (key, body_json, result_json, request_json),
+                    budget + self.setup_limit)
+        if kind == "ok":
+            return str(payload)
+        status, error = _REPLIES.get(kind, (503, "replan_failed"))
+        if kind in ("invalid", "unexplained"):
+            detail = [(str(f), str(r)) for f, r in payload]
+            message = "; ".join(f"{f}: {r}" for f, r in detail)
+            if kind == "unexplained":
+                message = f"the grasp cannot explain the measured state: {message}"
+            raise ReplanRefusedError(status, error, message, detail)
+        raise ReplanRefusedError(status, error, str(payload))
+
+    def _start(self) -> _Process:
+        proc = _Process(self._ctx, self.cache_size, self.time_cap)
+        if not proc.conn.poll(START_TIMEOUT):
+            proc.kill()
+            raise ReplanRefusedError(503, "replan_unavailable",
+                                     "the re-plan process did not start",
+                                     retry_after=self.RETRY_AFTER)
+        kind, message = proc.conn.recv()
+        if kind != "ready":
+            proc.kill()
+            raise ReplanRefusedError(503, "replan_unavailable", str(message))
+        return proc
+
+    def _exchange(self, slot: _Slot, msg: tuple[Any, ...], budget: float
+                  ) -> tuple[str, Any]:
+        """Send one message to the slot's process and wait at most ``budget`` [s] for its
+        reply; past it the process is killed (and replaced at the next call)."""
+        proc = slot.proc
+        assert proc is not None
+        try:
+            proc.conn.send(("replan", *msg))
+        except (OSError, BrokenPipeError) as exc:
+            proc.kill()
+            slot.proc = None
+            raise ReplanRefusedError(503, "replan_failed", "the re-plan process is gone; "
+                                     "it is replaced at the next call",
+                                     retry_after=self.RETRY_AFTER) from exc
+        ready = wait([proc.conn, proc.process.sentinel], timeout=budget)
+        if proc.conn in ready:
+            with contextlib.suppress(EOFError, OSError):
+                kind, payload = proc.conn.recv()
+                return str(kind), payload
+        code = proc.process.exitcode
+        proc.kill()
+        slot.proc = None
+        if not ready:
+            raise ReplanRefusedError(
+                503, "replan_time_limit", f"the re-plan did not answer within {budget:g} s "
+                "(its time limit and margin, and a first call's setup: "
+                "DEXROLL_REPLAN_SETUP_LIMIT); its process was replaced",
+                retry_after=self.RETRY_AFTER)
+        raise ReplanRefusedError(503, "replan_failed", f"the re-plan process died (exit "
+                                                       f"code {code}); it is replaced",
+                                 retry_after=self.RETRY_AFTER)
