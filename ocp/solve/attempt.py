@@ -44,7 +44,7 @@ from ocp.solve.assemble import assemble_solution, planned_forces
 from ocp.solve.certify import certify_grasp
 from ocp.solve.guesses import Guess, Strategy, epigraph_guess, strategy_for
 from ocp.solve.ipopt import NLP as _NLP
-from ocp.solve.ipopt import warm_solver
+from ocp.solve.ipopt import kkt_residuals, warm_solver
 from ocp.spec.grasp import ManipulationProblem, contact_charts, support_goal_errors
 from ocp.spec.problem import ProblemError
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
@@ -213,11 +213,16 @@ def finish(s: Setup, runs: list[IpoptRun], solve_time: float, deadline: float,
     sol = assemble_solution(problem, m, status, best.raw, col, traj, s.prm, cert, goal_error)
     iterations = sum(r.iterations for r in runs)
     ipopt_time = sum(r.time for r in runs)
+    primal = dual = None
+    if best.point is not None:
+        pt = best.point
+        primal, dual = kkt_residuals(nlp, pt.w, s.p, pt.lam_g, pt.lam_x, s.lbx, s.ubx)
     stats = SolverStats(raw_status=best.raw, iterations=iterations, attempts=len(runs),
                         build_time=s.build_time, solve_time=solve_time,
                         certificate_time=cert_time, objective=best.objective,
                         cache_hit=s.cache_hit, n_intervals=len(s.t_nodes) - 1,
-                        ipopt_time=ipopt_time, solver=best.solver)
+                        ipopt_time=ipopt_time, solver=best.solver,
+                        primal_infeasibility=primal, dual_infeasibility=dual)
     return replace(sol, stats=stats, nlp_point=best.point)
 
 

@@ -20,7 +20,8 @@ from ocp.solution import Status
 from ocp.transcription.nlp_blocks import BlockNLP
 
 __all__ = ["FATROP_OPTIONS", "IPOPT_OPTIONS", "IPOPT_WARM_OPTIONS", "NLP", "SOLVERS",
-           "StopCallback", "StructuredSolver", "ipopt_solver", "warm_solver"]
+           "StopCallback", "StructuredSolver", "ipopt_solver", "kkt_residuals",
+           "warm_solver"]
 
 #: The NLP solvers a planner may choose (``ManipulationPlanner(solver=...)``).
 SOLVERS = ("ipopt", "fatrop")
@@ -142,6 +143,42 @@ class NLP(BlockNLP):
     compiled: bool = False
     #: the solver chosen (:data:`SOLVERS`): "fatrop" runs IPOPT as its fallback
     solver_name: str = "ipopt"
+    #: (the solver it was made from, (w, p, lam_g, lam_x) -> (g, the Lagrangian's
+    #: gradient)): :func:`kkt_residuals`' function, made on first use (again when a
+    #: compiled solver replaces the virtual machine's)
+    kkt: tuple[Any, ca.Function] | None = None
+
+
+def _kkt_function(ipopt: ca.Function, nlp: NLP) -> ca.Function:
+    """(w, p, lam_g, lam_x) -> (g, grad f + J^T lam_g + lam_x) from the IPOPT solver's own
+    functions (compiled when it is): the block-assembled constraint Jacobian and the
+    objective's gradient. A reverse sweep through the oracle instead (no Jacobian) cost
+    as much as the Jacobian on experiment 1 (docs/performance.md)."""
+    w = ca.MX.sym("w", nlp.pack.nnz_out(0))
+    p = ca.MX.sym("p", nlp.params.size)
+    lam_g = ca.MX.sym("lam_g", len(nlp.lbg))
+    lam_x = ca.MX.sym("lam_x", w.numel())
+    g, jac = ipopt.get_function("nlp_jac_g")(w, p)
+    grad = ipopt.get_function("nlp_grad_f")(w, p)[1]
+    return ca.Function("kkt_residuals", [w, p, lam_g, lam_x],
+                       [g, grad + ca.mtimes(jac.T, lam_g) + lam_x])
+
+
+def kkt_residuals(nlp: NLP, w: np.ndarray, p: np.ndarray, lam_g: np.ndarray,
+                  lam_x: np.ndarray, lbx: np.ndarray, ubx: np.ndarray
+                  ) -> tuple[float, float]:
+    """How far a primal-dual point of ``nlp`` is from a KKT point, in the NLP's units:
+    (primal infeasibility: the largest violation of the rows' bounds ``lbg``/``ubg`` and
+    of the variables' ``lbx``/``ubx``; dual infeasibility: the largest entry of
+    ``grad f + J^T lam_g + lam_x``, CasADi's sign convention of the multipliers). The
+    point a solver returns, whatever stopped it (an iteration budget, a deadline)."""
+    ipopt = nlp.solver.fallback if isinstance(nlp.solver, StructuredSolver) else nlp.solver
+    if nlp.kkt is None or nlp.kkt[0] is not ipopt:
+        nlp.kkt = (ipopt, _kkt_function(ipopt, nlp))
+    g, grad = (np.asarray(a).ravel() for a in nlp.kkt[1](w, p, lam_g, lam_x))
+    primal = max(float(np.max(np.maximum(nlp.lbg - g, g - nlp.ubg), initial=0.0)),
+                 float(np.max(np.maximum(lbx - w, w - ubx), initial=0.0)))
+    return primal, float(np.max(np.abs(grad), initial=0.0))
 
 
 class StructuredSolver:
