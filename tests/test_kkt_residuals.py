@@ -96,3 +96,20 @@ def test_a_fixed_iteration_replan_says_how_far_it_is(first: tuple) -> None:
     assert full.converged
     assert full.stats.primal_infeasibility <= 1e-9 < one.stats.primal_infeasibility
     assert full.stats.dual_infeasibility < one.stats.dual_infeasibility
+
+
+def test_the_bench_names_each_family_s_solver() -> None:
+    """The bench's row carries the solver whose point the plan is, and a family's summary
+    (the report's ``solver`` column) names it, with counts when its problems differ."""
+    from planner_service.bench.report import summarise
+
+    def row(solver: str | None) -> dict[str, object]:
+        return {"family": "f", "method": "collocation", "ok": True, "expected": "solved",
+                "status": "solved", "solve_time": 1.0, "iterations": 3, "solver": solver}
+
+    (one,) = summarise([row("ipopt"), row("ipopt")])
+    assert one["solver"] == "ipopt"
+    (mixed,) = summarise([row("fatrop"), row("fatrop"), row("ipopt (fatrop: Failed)")])
+    assert mixed["solver"] == "fatrop 2, ipopt (fatrop: Failed) 1"
+    (none,) = summarise([row(None)])
+    assert none["solver"] is None

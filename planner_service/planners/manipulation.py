@@ -558,6 +558,7 @@ def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = No
             build_time=timing[0] if math.isfinite(timing[0]) else 0.0,
             solve_time=timing[1] if math.isfinite(timing[1]) else 0.0,
             refinements=sol.refinements, n_intervals=max((len(sol.t) - 1) // 2, 0),
+            solver=sol.stats.solver if sol.stats is not None else None,
             primal_infeasibility=_finite_or_none(sol.primal_infeasibility),
             dual_infeasibility=_finite_or_none(sol.dual_infeasibility)),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
