@@ -113,3 +113,20 @@ def test_the_bench_names_each_family_s_solver() -> None:
     assert mixed["solver"] == "fatrop 2, ipopt (fatrop: Failed) 1"
     (none,) = summarise([row(None)])
     assert none["solver"] is None
+
+
+def test_a_warm_push_is_a_choice_of_the_attempt(first: tuple) -> None:
+    """``AttemptOptions(warm_push=...)``: a warm solver of its own (kept for the next
+    attempt), converging to the same plan as the library's warm start, certified."""
+    problem, sol = first
+    moved = replace(problem, palm=replace(problem.palm, goal={
+        k: v + (0.002 if k == "x" else 0.0) for k, v in problem.palm.goal.items()}))
+    usual = attempt(moved, warm=sol, planner=PLANNER, options=AttemptOptions(certify=True))
+    pushed = attempt(moved, warm=sol, planner=PLANNER,
+                     options=AttemptOptions(certify=True, warm_push=1e-6))
+    nlp = setup(PLANNER, moved).nlp
+    assert (1e-6, nlp.compiled) in nlp.warm_solvers
+    assert nlp.warm_solvers[(1e-6, nlp.compiled)] is not nlp.warm_solver
+    assert usual.status is pushed.status is Status.SOLVED
+    assert pushed.stats.objective == pytest.approx(usual.stats.objective, rel=1e-6)
+    np.testing.assert_allclose(pushed.X, usual.X, atol=1e-4)

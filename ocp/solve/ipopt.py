@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -73,7 +73,9 @@ IPOPT_OPTIONS: dict[str, Any] = {
 #: (a warm start with :class:`~ocp.transcription.collocation.NlpPoint`): take the given multipliers,
 #: start the barrier near the previous solution's, and do not push the point away from
 #: its active bounds. Measured on experiment 1 with its goal moved 2 mm: 6 iterations
-#: instead of 14 (docs/performance.md).
+#: instead of 14 (docs/performance.md). Pushes of 1e-6 (``AttemptOptions(warm_push=1e-6)``)
+#: took fewer iterations on re-plans toward a moved goal or from a moved start (the Allegro
+#: 24 -> 10), more from a plan's own optimum (3 -> 7): :func:`warm_solver`'s ``push``.
 IPOPT_WARM_OPTIONS: dict[str, Any] = {
     "ipopt.warm_start_init_point": "yes",
     "ipopt.mu_init": 1e-6,
@@ -139,6 +141,10 @@ class NLP(BlockNLP):
     #: fingerprint of this NLP (structure, grid, fingers' models), for warm starts
     fingerprint: str
     warm_solver: ca.Function | StructuredSolver | None = None
+    #: the warm-start solvers with other pushes than :data:`IPOPT_WARM_OPTIONS`', by (push,
+    #: ``compiled``) (:func:`warm_solver`), made on first use (again once compiled)
+    warm_solvers: dict[tuple[float, bool], ca.Function | StructuredSolver] = \
+        field(default_factory=dict)
     #: whether ``solver`` runs compiled code (``compile_dir``)
     compiled: bool = False
     #: the solver chosen (:data:`SOLVERS`): "fatrop" runs IPOPT as its fallback
@@ -233,12 +239,15 @@ def _fatrop(block: BlockNLP, name: str, warm: bool = False) -> ca.Function:
                       "error_on_fail": False, "expand": True})
 
 
-def warm_solver(nlp: NLP) -> ca.Function | StructuredSolver:
+def warm_solver(nlp: NLP, push: float | None = None) -> ca.Function | StructuredSolver:
     """The solver of a warm start from a previous primal-dual point of ``nlp``: IPOPT with
     :data:`IPOPT_WARM_OPTIONS` (behind fatrop, warm-barrier, when the NLP's solver is
-    fatrop)."""
-    ipopt = ca.nlpsol("manipulation_warm", "ipopt", nlp.oracle,
-                      {**nlp.options, **IPOPT_WARM_OPTIONS})
+    fatrop); ``push``: how far the point and its bound multipliers are pushed into the
+    interior instead of the options' 1e-9 (IPOPT's ``warm_start_*_push`` and ``_frac``)."""
+    opts = dict(IPOPT_WARM_OPTIONS)
+    if push is not None:
+        opts.update({k: float(push) for k in opts if k.endswith(("_push", "_frac"))})
+    ipopt = ca.nlpsol("manipulation_warm", "ipopt", nlp.oracle, {**nlp.options, **opts})
     if nlp.stages is None:
         return ipopt
     fatrop = _fatrop(nlp, "manipulation_warm_fatrop", True) \
