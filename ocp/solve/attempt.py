@@ -164,16 +164,18 @@ def run(s: Setup, w0: FloatArray, point: NlpPoint | None, deadline: float,
         w0 = w0.copy()
         w0[aux] = np.clip(point.w[aux], s.lbx[aux], s.ubx[aux])
         key = (float(warm_push or 0.0), nlp.compiled)
-        if warm_push is None and nlp.warm_solver is None or \
-                warm_push is not None and key not in nlp.warm_solvers:
-            t_build = time.perf_counter()
-            made = warm_solver(nlp, warm_push)
-            if warm_push is None:
-                nlp.warm_solver = made
-            else:
-                nlp.warm_solvers[key] = made
-            s.build_time += time.perf_counter() - t_build
-        solver = nlp.warm_solver if warm_push is None else nlp.warm_solvers[key]
+        if warm_push is None:
+            if nlp.warm_solver is None:
+                t_build = time.perf_counter()
+                nlp.warm_solver = warm_solver(nlp)
+                s.build_time += time.perf_counter() - t_build
+            solver = nlp.warm_solver
+        else:
+            if key not in nlp.warm_solvers:
+                t_build = time.perf_counter()
+                nlp.warm_solvers[key] = warm_solver(nlp, warm_push)
+                s.build_time += time.perf_counter() - t_build
+            solver = nlp.warm_solvers[key]
         duals = {"lam_x0": point.lam_x, "lam_g0": point.lam_g}
     nlp.stop.arm(deadline, max_iter)
     t0 = time.perf_counter()

@@ -57,7 +57,7 @@ def _method_order(method: str) -> int:
 def _solvers(rows: Sequence[Row]) -> str | None:
     """The NLP solvers of a family's rows: one name, or each with its count ("fatrop 18,
     ipopt (fatrop: ...) 2") when they differ; None when no row names one."""
-    names = [r.get("solver") for r in rows if r.get("solver")]
+    names = [str(r["solver"]) for r in rows if r.get("solver")]
     if not names:
         return None
     counts: dict[str, int] = {}
