@@ -128,6 +128,14 @@ class SolverStats:
     #: The NLP solver whose point is the plan: "ipopt", "fatrop", or "ipopt (fatrop: its
     #: status)" when IPOPT took over from a fatrop that did not succeed (issue 27).
     solver: str = "ipopt"
+    #: How far from a KKT point the returned plan is, in the NLP's own (scaled) units,
+    #: evaluated at the returned primal-dual point whatever stopped the solver (converged,
+    #: an iteration budget, a deadline): the largest violation of a constraint row's or
+    #: a variable's bounds, and the largest entry of the Lagrangian's gradient
+    #: ``grad f + J^T lam_g + lam_x``. None where not evaluated (the ball-on-palm planner;
+    #: a point with non-finite values).
+    primal_infeasibility: float | None = None
+    dual_infeasibility: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -427,6 +435,17 @@ class ManipulationSolution:
     def refinements(self) -> int:
         """Grid refinements after the first solve (``stats.refinements``)."""
         return self.stats.refinements if self.stats is not None else 0
+
+    @property
+    def primal_infeasibility(self) -> float | None:
+        """The returned point's largest bound violation (``stats.primal_infeasibility``)."""
+        return self.stats.primal_infeasibility if self.stats is not None else None
+
+    @property
+    def dual_infeasibility(self) -> float | None:
+        """The returned point's largest Lagrangian-gradient entry
+        (``stats.dual_infeasibility``)."""
+        return self.stats.dual_infeasibility if self.stats is not None else None
 
     @property
     def converged(self) -> bool:

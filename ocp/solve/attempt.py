@@ -44,7 +44,7 @@ from ocp.solve.assemble import assemble_solution, planned_forces
 from ocp.solve.certify import certify_grasp
 from ocp.solve.guesses import Guess, Strategy, epigraph_guess, strategy_for
 from ocp.solve.ipopt import NLP as _NLP
-from ocp.solve.ipopt import warm_solver
+from ocp.solve.ipopt import kkt_residuals, warm_solver
 from ocp.spec.grasp import ManipulationProblem, contact_charts, support_goal_errors
 from ocp.spec.problem import ProblemError
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
@@ -71,6 +71,12 @@ class AttemptOptions:
     max_iter: int | None = None
     time_limit: float | None = None
     certify: bool = False
+    #: a warm start's push into the interior (IPOPT's ``warm_start_bound_push`` and its
+    #: kin; None: :data:`~ocp.solve.ipopt.IPOPT_WARM_OPTIONS`' 1e-9). 1e-6 took fewer
+    #: iterations toward a moved goal or from a moved start (the Allegro hand: 10 instead
+    #: of 24), more from the warm plan's own optimum (7 instead of 3; docs/performance.md
+    #: "Controller speed")
+    warm_push: float | None = None
 
 
 @dataclass
@@ -146,22 +152,31 @@ def initial_point(s: Setup, guess: Guess) -> FloatArray:
 
 
 def run(s: Setup, w0: FloatArray, point: NlpPoint | None, deadline: float,
-        max_iter: int) -> IpoptRun:
+        max_iter: int, warm_push: float | None = None) -> IpoptRun:
     """One IPOPT call from ``w0`` within ``max_iter`` iterations and the ``deadline``
     (``time.perf_counter()``). ``point``: a previous primal-dual point of this very NLP
     (its multipliers start IPOPT's, with a warm-start barrier; its epigraph and force
-    variables replace ``w0``'s)."""
+    variables replace ``w0``'s; ``warm_push``: :class:`AttemptOptions`')."""
     nlp = s.nlp
     solver, duals = nlp.solver, {}
     if point is not None:
         aux = nlp.aux_indices()
         w0 = w0.copy()
         w0[aux] = np.clip(point.w[aux], s.lbx[aux], s.ubx[aux])
-        if nlp.warm_solver is None:
-            t_build = time.perf_counter()
-            nlp.warm_solver = warm_solver(nlp)
-            s.build_time += time.perf_counter() - t_build
-        solver, duals = nlp.warm_solver, {"lam_x0": point.lam_x, "lam_g0": point.lam_g}
+        key = (float(warm_push or 0.0), nlp.compiled)
+        if warm_push is None:
+            if nlp.warm_solver is None:
+                t_build = time.perf_counter()
+                nlp.warm_solver = warm_solver(nlp)
+                s.build_time += time.perf_counter() - t_build
+            solver = nlp.warm_solver
+        else:
+            if key not in nlp.warm_solvers:
+                t_build = time.perf_counter()
+                nlp.warm_solvers[key] = warm_solver(nlp, warm_push)
+                s.build_time += time.perf_counter() - t_build
+            solver = nlp.warm_solvers[key]
+        duals = {"lam_x0": point.lam_x, "lam_g0": point.lam_g}
     nlp.stop.arm(deadline, max_iter)
     t0 = time.perf_counter()
     res = solver(x0=w0, p=s.p, lbx=s.lbx, ubx=s.ubx, lbg=nlp.lbg, ubg=nlp.ubg, **duals)
@@ -213,11 +228,16 @@ def finish(s: Setup, runs: list[IpoptRun], solve_time: float, deadline: float,
     sol = assemble_solution(problem, m, status, best.raw, col, traj, s.prm, cert, goal_error)
     iterations = sum(r.iterations for r in runs)
     ipopt_time = sum(r.time for r in runs)
+    primal = dual = None
+    if best.point is not None:
+        pt = best.point
+        primal, dual = kkt_residuals(nlp, pt.w, s.p, pt.lam_g, pt.lam_x, s.lbx, s.ubx)
     stats = SolverStats(raw_status=best.raw, iterations=iterations, attempts=len(runs),
                         build_time=s.build_time, solve_time=solve_time,
                         certificate_time=cert_time, objective=best.objective,
                         cache_hit=s.cache_hit, n_intervals=len(s.t_nodes) - 1,
-                        ipopt_time=ipopt_time, solver=best.solver)
+                        ipopt_time=ipopt_time, solver=best.solver,
+                        primal_infeasibility=primal, dual_infeasibility=dual)
     return replace(sol, stats=stats, nlp_point=best.point)
 
 
@@ -304,7 +324,7 @@ def attempt(problem: ManipulationProblem, *, x0: Any = None, u0: Any = None,
     else:
         guess = next(iter(s.strategy.own_guesses(planner, problem, m, s.nlp, s.x0,
                                                  s.t_nodes)))
-    r = run(s, initial_point(s, guess), point, deadline, max_iter)
+    r = run(s, initial_point(s, guess), point, deadline, max_iter, opts.warm_push)
     return finish(s, [r], time.perf_counter() - t_loop, deadline, opts.certify)
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +20,8 @@ from ocp.solution import Status
 from ocp.transcription.nlp_blocks import BlockNLP
 
 __all__ = ["FATROP_OPTIONS", "IPOPT_OPTIONS", "IPOPT_WARM_OPTIONS", "NLP", "SOLVERS",
-           "StopCallback", "StructuredSolver", "ipopt_solver", "warm_solver"]
+           "StopCallback", "StructuredSolver", "ipopt_solver", "kkt_residuals",
+           "warm_solver"]
 
 #: The NLP solvers a planner may choose (``ManipulationPlanner(solver=...)``).
 SOLVERS = ("ipopt", "fatrop")
@@ -72,7 +73,9 @@ IPOPT_OPTIONS: dict[str, Any] = {
 #: (a warm start with :class:`~ocp.transcription.collocation.NlpPoint`): take the given multipliers,
 #: start the barrier near the previous solution's, and do not push the point away from
 #: its active bounds. Measured on experiment 1 with its goal moved 2 mm: 6 iterations
-#: instead of 14 (docs/performance.md).
+#: instead of 14 (docs/performance.md). Pushes of 1e-6 (``AttemptOptions(warm_push=1e-6)``)
+#: took fewer iterations on re-plans toward a moved goal or from a moved start (the Allegro
+#: 24 -> 10), more from a plan's own optimum (3 -> 7): :func:`warm_solver`'s ``push``.
 IPOPT_WARM_OPTIONS: dict[str, Any] = {
     "ipopt.warm_start_init_point": "yes",
     "ipopt.mu_init": 1e-6,
@@ -138,10 +141,50 @@ class NLP(BlockNLP):
     #: fingerprint of this NLP (structure, grid, fingers' models), for warm starts
     fingerprint: str
     warm_solver: ca.Function | StructuredSolver | None = None
+    #: the warm-start solvers with other pushes than :data:`IPOPT_WARM_OPTIONS`', by (push,
+    #: ``compiled``) (:func:`warm_solver`), made on first use (again once compiled)
+    warm_solvers: dict[tuple[float, bool], ca.Function | StructuredSolver] = \
+        field(default_factory=dict)
     #: whether ``solver`` runs compiled code (``compile_dir``)
     compiled: bool = False
     #: the solver chosen (:data:`SOLVERS`): "fatrop" runs IPOPT as its fallback
     solver_name: str = "ipopt"
+    #: (the solver it was made from, (w, p, lam_g, lam_x) -> (g, the Lagrangian's
+    #: gradient)): :func:`kkt_residuals`' function, made on first use (again when a
+    #: compiled solver replaces the virtual machine's)
+    kkt: tuple[Any, ca.Function] | None = None
+
+
+def _kkt_function(ipopt: ca.Function, nlp: NLP) -> ca.Function:
+    """(w, p, lam_g, lam_x) -> (g, grad f + J^T lam_g + lam_x) from the IPOPT solver's own
+    functions (compiled when it is): the block-assembled constraint Jacobian and the
+    objective's gradient. A reverse sweep through the oracle instead (no Jacobian) cost
+    as much as the Jacobian on experiment 1 (docs/performance.md)."""
+    w = ca.MX.sym("w", nlp.pack.nnz_out(0))
+    p = ca.MX.sym("p", nlp.params.size)
+    lam_g = ca.MX.sym("lam_g", len(nlp.lbg))
+    lam_x = ca.MX.sym("lam_x", w.numel())
+    g, jac = ipopt.get_function("nlp_jac_g")(w, p)
+    grad = ipopt.get_function("nlp_grad_f")(w, p)[1]
+    return ca.Function("kkt_residuals", [w, p, lam_g, lam_x],
+                       [g, grad + ca.mtimes(jac.T, lam_g) + lam_x])
+
+
+def kkt_residuals(nlp: NLP, w: np.ndarray, p: np.ndarray, lam_g: np.ndarray,
+                  lam_x: np.ndarray, lbx: np.ndarray, ubx: np.ndarray
+                  ) -> tuple[float, float]:
+    """How far a primal-dual point of ``nlp`` is from a KKT point, in the NLP's units:
+    (primal infeasibility: the largest violation of the rows' bounds ``lbg``/``ubg`` and
+    of the variables' ``lbx``/``ubx``; dual infeasibility: the largest entry of
+    ``grad f + J^T lam_g + lam_x``, CasADi's sign convention of the multipliers). The
+    point a solver returns, whatever stopped it (an iteration budget, a deadline)."""
+    ipopt = nlp.solver.fallback if isinstance(nlp.solver, StructuredSolver) else nlp.solver
+    if nlp.kkt is None or nlp.kkt[0] is not ipopt:
+        nlp.kkt = (ipopt, _kkt_function(ipopt, nlp))
+    g, grad = (np.asarray(a).ravel() for a in nlp.kkt[1](w, p, lam_g, lam_x))
+    primal = max(float(np.max(np.maximum(nlp.lbg - g, g - nlp.ubg), initial=0.0)),
+                 float(np.max(np.maximum(lbx - w, w - ubx), initial=0.0)))
+    return primal, float(np.max(np.abs(grad), initial=0.0))
 
 
 class StructuredSolver:
@@ -196,12 +239,15 @@ def _fatrop(block: BlockNLP, name: str, warm: bool = False) -> ca.Function:
                       "error_on_fail": False, "expand": True})
 
 
-def warm_solver(nlp: NLP) -> ca.Function | StructuredSolver:
+def warm_solver(nlp: NLP, push: float | None = None) -> ca.Function | StructuredSolver:
     """The solver of a warm start from a previous primal-dual point of ``nlp``: IPOPT with
     :data:`IPOPT_WARM_OPTIONS` (behind fatrop, warm-barrier, when the NLP's solver is
-    fatrop)."""
-    ipopt = ca.nlpsol("manipulation_warm", "ipopt", nlp.oracle,
-                      {**nlp.options, **IPOPT_WARM_OPTIONS})
+    fatrop); ``push``: how far the point and its bound multipliers are pushed into the
+    interior instead of the options' 1e-9 (IPOPT's ``warm_start_*_push`` and ``_frac``)."""
+    opts = dict(IPOPT_WARM_OPTIONS)
+    if push is not None:
+        opts.update({k: float(push) for k in opts if k.endswith(("_push", "_frac"))})
+    ipopt = ca.nlpsol("manipulation_warm", "ipopt", nlp.oracle, {**nlp.options, **opts})
     if nlp.stages is None:
         return ipopt
     fatrop = _fatrop(nlp, "manipulation_warm_fatrop", True) \

@@ -54,6 +54,20 @@ def _method_order(method: str) -> int:
     return METHODS.index(method) if method in METHODS else len(METHODS)
 
 
+def _solvers(rows: Sequence[Row]) -> str | None:
+    """The NLP solvers of a family's rows: one name, or each with its count ("fatrop 18,
+    ipopt (fatrop: ...) 2") when they differ; None when no row names one."""
+    names = [str(r["solver"]) for r in rows if r.get("solver")]
+    if not names:
+        return None
+    counts: dict[str, int] = {}
+    for n in names:
+        counts[n] = counts.get(n, 0) + 1
+    if len(counts) == 1:
+        return names[0]
+    return ", ".join(f"{n} {c}" for n, c in sorted(counts.items(), key=lambda kv: -kv[1]))
+
+
 def summarise(rows: Sequence[Row], families: Sequence[str] = ()) -> list[dict[str, Any]]:
     """One entry per (family, method), in the order of ``families`` (the suite's; others
     after them, by name) then in ``METHODS`` order. Times over every
@@ -86,6 +100,7 @@ def summarise(rows: Sequence[Row], families: Sequence[str] = ()) -> list[dict[st
             "build_time_max": max(build) if build else None,
             "wall_time_median": float(np.median(wall)) if wall else None,
             "iterations_median": float(np.median(iters)) if iters else None,
+            "solver": _solvers(g),
             "peak_rss_mb_max": max(_values(g, "peak_rss_mb"), default=None),
         }
         for key, _, worst_is_max in _RESIDUALS:
@@ -228,17 +243,17 @@ def _fmt(x: float | None, spec: str = ".2e") -> str:
 
 
 def _table(summary: Sequence[dict[str, Any]]) -> list[str]:
-    head = ["family", "method", "n", "success", "solve median", "p90", "max", "build (sum)",
-            "iterations median"] + [title for _, title, _ in _RESIDUALS] + \
+    head = ["family", "method", "solver", "n", "success", "solve median", "p90", "max",
+            "build (sum)", "iterations median"] + [title for _, title, _ in _RESIDUALS] + \
         ["executed (worst mm, deg)"]
     lines = ["| " + " | ".join(head) + " |",
-             "|" + "|".join(["---"] * 2 + ["---:"] * (len(head) - 2)) + "|"]
+             "|" + "|".join(["---"] * 3 + ["---:"] * (len(head) - 3)) + "|"]
     for s in summary:
         rate = "–" if s["success_rate"] is None else \
             f"{s['ok']}/{s['count']} ({100 * s['success_rate']:.0f} %)"
         if s["unavailable"]:
             rate += f" ({s['unavailable']} unavailable)"
-        cells = [s["family"], s["method"], str(s["count"]), rate,
+        cells = [s["family"], s["method"], s.get("solver") or "–", str(s["count"]), rate,
                  _fmt_time(s["solve_time_median"]), _fmt_time(s["solve_time_p90"]),
                  _fmt_time(s["solve_time_max"]), _fmt_time(s["build_time_sum"]),
                  _fmt(s["iterations_median"], ".0f")]

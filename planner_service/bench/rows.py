@@ -38,7 +38,7 @@ __all__ = [
 FIELDS: tuple[str, ...] = (
     "family", "problem_id", "method", "planner", "expected", "status", "certificate_passed",
     "ok", "solve_time", "build_time", "wall_time", "iterations", "refinements",
-    "n_intervals", "goal_error_max", "turn_asked_deg", "turn_made_deg",
+    "n_intervals", "solver", "goal_error_max", "turn_asked_deg", "turn_made_deg",
     "cert_slip_speed_max", "cert_spin_rate_max",
     "cert_closure_position_max", "cert_closure_orientation_max", "cert_position_defect_max",
     "cert_angle_defect_max", "cert_cone_margin_min", "failures", "message", "worker_pid",
@@ -91,6 +91,15 @@ def _peak_rss_mb() -> float:
     return rss / (1024.0 * 1024.0) if sys.platform == "darwin" else rss / 1024.0
 
 
+def _solver(unit: Unit, stats: Any) -> str | None:
+    """The NLP solver of a result: its stats' ``solver`` where the planner reports one (the
+    manipulation planner), else IPOPT, which every other planner of ours solves with; the
+    greedy method solves no NLP."""
+    if unit.method == "greedy":
+        return None
+    return getattr(stats, "solver", None) or "ipopt"
+
+
 def _base(unit: Unit) -> dict[str, Any]:
     row: dict[str, Any] = dict.fromkeys(FIELDS)
     row.update(family=unit.family, problem_id=unit.problem_id, method=unit.method,
@@ -122,7 +131,8 @@ def row_from_result(unit: Unit, result: Any, wall_time: float | None,
         row.update(solve_time=_finite(stats.solve_time), build_time=_finite(stats.build_time),
                    iterations=int(stats.iterations),
                    refinements=int(getattr(stats, "refinements", 0) or 0),
-                   n_intervals=getattr(stats, "n_intervals", None))
+                   n_intervals=getattr(stats, "n_intervals", None),
+                   solver=_solver(unit, stats))
     if result.goal_error:
         row["goal_error_max"] = _finite(max(result.goal_error.values()))
     gait = getattr(result, "gait", None)
@@ -196,6 +206,7 @@ def row_from_peer(unit: Unit, outcome: Any, wall_time: float | None, worker_pid:
                solve_time=_finite(outcome.solve_time), build_time=_finite(outcome.build_time),
                iterations=None if outcome.iterations is None else int(outcome.iterations),
                goal_error_max=_finite(outcome.goal_error), certificate=cert,
+               solver=getattr(outcome, "solver", None) or "ipopt",
                certificate_passed=passed, wall_time=wall_time, worker_pid=worker_pid,
                peak_rss_mb=peak_rss_mb)
     row.update(residuals(cert))

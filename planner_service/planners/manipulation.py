@@ -572,7 +572,10 @@ def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = No
             raw_status=sol.raw_status, iterations=sol.iterations,
             build_time=timing[0] if math.isfinite(timing[0]) else 0.0,
             solve_time=timing[1] if math.isfinite(timing[1]) else 0.0,
-            refinements=sol.refinements, n_intervals=max((len(sol.t) - 1) // 2, 0)),
+            refinements=sol.refinements, n_intervals=max((len(sol.t) - 1) // 2, 0),
+            solver=sol.stats.solver if sol.stats is not None else None,
+            primal_infeasibility=_finite_or_none(sol.primal_infeasibility),
+            dual_infeasibility=_finite_or_none(sol.dual_infeasibility)),
         goal_error={k: float(v) for k, v in sol.goal_error.items() if math.isfinite(v)},
         certificate=cert, trajectory=trajectory,
         chart_rotation=list(sol.object_chart_rotation)
@@ -580,6 +583,10 @@ def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = No
         samples=samples_block(sol, times) if trajectory else None,
         joint_trajectory=joint_trajectory_block(sol, times) if trajectory else None,
         collocation=collocation)
+
+
+def _finite_or_none(value: float | None) -> float | None:
+    return value if value is not None and math.isfinite(value) else None
 
 
 def manipulation_summary(result: ManipulationResult) -> str:

@@ -525,6 +525,20 @@ class ManipulationCertificateModel(FingerCertificateModel):
 class ManipulationStatsModel(FingerStatsModel):
     iterations: int = Field(description="IPOPT iterations, refinements included")
     n_intervals: int = Field(description="collocation intervals of the returned plan")
+    solver: str | None = Field(
+        default=None, description="the NLP solver whose point is the plan: 'ipopt', "
+                                  "'fatrop', or 'ipopt (fatrop: its status)' when IPOPT "
+                                  "took over; null when not reported")
+    primal_infeasibility: float | None = Field(
+        default=None, description="the returned NLP point's largest violation of a "
+                                  "constraint's or variable's bounds (the NLP's scaled "
+                                  "units), whatever stopped the solver (converged, an "
+                                  "iteration budget, the time limit); null when not "
+                                  "evaluated")
+    dual_infeasibility: float | None = Field(
+        default=None, description="the returned NLP point's largest entry of the "
+                                  "Lagrangian's gradient (grad f + J^T lam_g + lam_x); "
+                                  "null when not evaluated")
 
 
 class GraspFingerModel(_Response):
