@@ -20,7 +20,7 @@ from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
 from ocp.robots.finger import load_finger
 from ocp.solution import Status
 from ocp.solve.planner import ManipulationPlanner, ManipulationProblem
-from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ProblemError
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ProblemError, ViaPoint
 
 PLANNER = ManipulationPlanner()
 ROOT = Path(__file__).resolve().parents[1]
@@ -267,3 +267,35 @@ def test_a_measured_ball_on_the_palm_is_estimated_or_refused(first: tuple) -> No
     assert_close(new.X[0], est.x, atol=1e-12 * (1 + np.abs(est.x)))
     lifted = estimate_state(problem, m, measured((0.0, 0.0, 5e-3)), x, u)
     assert not lifted.explained and any("object" in p for p in lifted.problems)
+
+
+def test_the_rest_of_a_problem_keeps_its_segments_intervals() -> None:
+    """A shrinking horizon keeps each via-point segment's intervals (the passed ones' go to
+    the segment under way): the NLP's structure changes only when a via-point is passed,
+    and the grid's size never."""
+    base = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)),
+                             initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2),
+                             via_points=(ViaPoint(2.0, {"x": 0.03}),
+                                         ViaPoint(4.0, {"x": 0.03, "y": 0.03})),
+                             goal={"x": 0.0, "y": 0.0}, duration=6.0, n_intervals=60)
+    finger = FingerContact(initial=(0.0, 0.0, 0.2, 0.0, 0.0),
+                           chart_rotation=(0.0, 0.0, math.pi),
+                           q_seed=tuple(math.radians(a) for a in (0, 30, 0, 30, 0, 30)))
+    problem = OneFingerPlanner.manipulation_problem(
+        OneFingerProblem(base=base, finger=load_finger(), contact=finger, mu=0.5))
+    counts, _ = problem.segments()
+    assert counts == (20, 20, 20)
+    seen = set()
+    for t in np.arange(0.05, 5.9, 0.05):
+        rest = problem.remaining(float(t))
+        got, bounds = rest.segments()
+        assert sum(got) == 60 and bounds[-1] == pytest.approx(6.0 - t)
+        ahead = [k for k in range(3) if k * 2.0 + 2.0 > t + 1e-9]
+        assert got == (sum(counts[:ahead[0] + 1]), *counts[ahead[0] + 1:])
+        seen.add(got)
+    assert seen == {(20, 20, 20), (40, 20), (60,)}
+    # a rest of a rest: the same allocation as the rest of the whole at the same time
+    assert problem.remaining(1.0).remaining(2.5).segments()[0] == \
+        problem.remaining(3.5).segments()[0]
+    # a refinement (another grid size) splits in proportion again (1 s and 2 s left)
+    assert problem.remaining(3.0).with_intervals(30).segments()[0] == (10, 20)

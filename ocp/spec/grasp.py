@@ -175,6 +175,10 @@ class ManipulationProblem:
     #: The motion's contact phases (:mod:`ocp.spec.phases`): which fingertips touch the
     #: object when. None: one phase, every fingertip touching throughout.
     phases: tuple[ContactPhase, ...] | None = None
+    #: Intervals per segment between the palm's via-points, kept as they were by a
+    #: re-plan's :meth:`remaining` (so that the shrinking horizon keeps its NLP's
+    #: structure); None: in proportion to the segments' durations.
+    segment_counts: tuple[int, ...] | None = None
 
     @property
     def ramp_time_fraction(self) -> float:
@@ -206,7 +210,11 @@ class ManipulationProblem:
         """(intervals per segment, segment boundary times): via-points split the grid."""
         if self.palm is not None:
             base = self.palm_problem()
-            return base.segment_intervals(), base.segment_times
+            times = base.segment_times
+            if self.segment_counts is not None and len(self.segment_counts) == times.size - 1 \
+                    and sum(self.segment_counts) == self.n_intervals:
+                return tuple(self.segment_counts), times
+            return base.segment_intervals(), times
         return (self.n_intervals,), np.array([0.0, self.duration])
 
     def schedule(self) -> tuple[tuple[int, tuple[bool, ...]], ...] | None:
@@ -222,7 +230,9 @@ class ManipulationProblem:
         """The rest of this problem ``dt`` seconds in (a shrinking horizon: re-planning
         part-way): the duration shortened, the desired motion followed from its pose at
         ``dt`` on (its ``t0``), the palm's via-points still ahead moved back by ``dt``
-        (those passed dropped), the contact phases still ahead; the same grid size. Its
+        (those passed dropped) with the intervals each segment had (a passed segment's go
+        to the segment under way: the NLP's structure changes only when a via-point is
+        passed), the contact phases still ahead; the same grid size. Its
         initial state is the measured one (:func:`ocp.solve.attempt.attempt`'s ``x0``)."""
         if not (math.isfinite(dt) and 0.0 < dt < self.duration):
             raise ValueError(f"dt must be in (0, {self.duration}) s, got {dt}")
@@ -230,7 +240,12 @@ class ManipulationProblem:
         motion = None if self.motion is None else \
             replace(self.motion, t0=self.motion.t0 + dt)
         palm = self.palm
-        if palm is not None:
+        counts = None
+        if palm is not None:  # the segments ahead keep their intervals; the passed ones'
+            now, bounds = self.segments()  # go to the segment under way
+            ahead = [k for k in range(len(now)) if bounds[k + 1] > dt + eps]
+            passed = sum(now[:ahead[0]]) if ahead else 0
+            counts = tuple(now[k] + (passed if k == ahead[0] else 0) for k in ahead)
             palm = replace(palm, via_points=tuple(
                 replace(vp, time=vp.time - dt) for vp in palm.via_points if vp.time > dt + eps))
         phases = self.phases
@@ -243,10 +258,10 @@ class ManipulationProblem:
                 t = end
             phases = tuple(kept)
         return replace(self, duration=self.duration - dt, motion=motion, palm=palm,
-                       phases=phases)
+                       phases=phases, segment_counts=counts)
 
     def with_intervals(self, n: int) -> ManipulationProblem:
-        return replace(self, n_intervals=n)
+        return replace(self, n_intervals=n, segment_counts=None)
 
     def palm_only(self) -> ManipulationProblem:
         """The object on this problem's palm alone (its grid, goals, limits and solver
