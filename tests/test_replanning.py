@@ -84,6 +84,12 @@ def test_a_moving_start_keeps_the_measured_state_and_rates(first: tuple) -> None
     assert_close(new.U[0], now.u[0], atol=1e-9 * (1 + np.abs(now.u[0])))
     palm = new.contacts[0].eta[-1]
     assert_close(palm[:2], [GOAL["x"], GOAL["y"]], atol=1e-6)
+    # cold (no warm start: the palm's sub-plan guesses from rest), the same laws
+    cold = attempt(rest, x0=now.x[0], u0=now.u[0],
+                   options=AttemptOptions(max_iter=200, certify=True), planner=PLANNER)
+    assert cold.status is Status.SOLVED and cold.certificate.passed, cold.stats
+    assert_close(cold.X[0], now.x[0], atol=1e-12 * (1 + np.abs(now.x[0])))
+    assert_close(cold.U[0], now.u[0], atol=1e-9 * (1 + np.abs(now.u[0])))
 
 
 def test_the_receding_horizon_loop_of_the_docs(first: tuple) -> None:

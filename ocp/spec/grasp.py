@@ -265,9 +265,11 @@ class ManipulationProblem:
 
     def palm_only(self) -> ManipulationProblem:
         """The object on this problem's palm alone (its grid, goals, limits and solver
-        options; the palm's tolerances): its plan seeds a finger grasp's initial guess."""
+        options; the palm's tolerances): its plan seeds a finger grasp's initial guess
+        (from rest: a moving start's input is the grasp's, its phases the fingertips')."""
         return replace(self, fingers=(), motion=None, forces=None, tracking=Tracking(),
-                       object_effort_weight=1.0, tolerances=PALM_TOLERANCES)
+                       object_effort_weight=1.0, tolerances=PALM_TOLERANCES,
+                       initial_input=None, phases=None)
 
     def errors(self) -> list[tuple[str, str]]:
         """Every reason the problem is invalid, as (field, reason)."""
