@@ -83,13 +83,18 @@ class SimOptions:
     #: give one
     DEFAULT_SQUEEZE = 0.5e-3
 
-    def resolved(self, plan: Any) -> SimOptions:
-        """These options for ``plan``: the squeeze the options give, else the plan's own,
-        else :data:`DEFAULT_SQUEEZE`."""
+    def squeeze_for(self, plan: Any) -> float:
+        """The squeeze [m] for ``plan``: the options', else the plan's own, else
+        :data:`DEFAULT_SQUEEZE`."""
         if self.squeeze is not None:
-            return self
+            return float(self.squeeze)
         own = getattr(plan, "squeeze", None)
-        return replace(self, squeeze=self.DEFAULT_SQUEEZE if own is None else float(own))
+        return self.DEFAULT_SQUEEZE if own is None else float(own)
+
+    def resolved(self, plan: Any) -> SimOptions:
+        """These options for ``plan``, its squeeze (:meth:`squeeze_for`) filled in."""
+        return self if self.squeeze is not None else \
+            replace(self, squeeze=self.squeeze_for(plan))
 
     #: torsional friction [m] when neither the options nor the plan give one: the
     #: torque about the normal a contact resists per newton of normal force

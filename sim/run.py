@@ -195,7 +195,7 @@ class Simulation:
                 J = jacp[:, idx.dofs]
                 share = float(active_of[f.name][i]) if f.name in active_of else 1.0
                 share = min(max((share - SQUEEZE_FROM) / (1.0 - SQUEEZE_FROM), 0.0), 1.0)
-                offsets[k][i] = _damped_pinv(J) @ (share * o.squeeze * normal)
+                offsets[k][i] = _damped_pinv(J) @ (share * o.squeeze_for(plan) * normal)
                 if o.use_plan_forces and ref.joint_torques is not None:
                     torques[k][i] = ref.joint_torques[i]
                 elif o.use_plan_forces and ref.contact_force is not None:
@@ -209,7 +209,7 @@ class Simulation:
                 notes.append(f"{f.name}: J^T of the plan's contact force as feed-forward")
             else:
                 notes.append(f"{f.name}: grip {o.grip_force:g} N along the pad's normal "
-                             f"(J^T f) and a squeeze of {o.squeeze * 1e3:g} mm")
+                             f"(J^T f) and a squeeze of {o.squeeze_for(plan) * 1e3:g} mm")
         return offsets, torques, notes
 
     def _planned_normal_forces(self, ts: FloatArray) -> dict[int, FloatArray]:

@@ -411,7 +411,7 @@ class UserModelSimulation:
                     n_out = n_out / max(float(np.linalg.norm(n_out)), 1e-12)
                 mujoco.mj_jac(m, d, jacp, None, point, body)
                 J = jacp[:, dofs]
-                offsets[f_i][i] = _damped_pinv(J) @ (-o.squeeze * n_out)
+                offsets[f_i][i] = _damped_pinv(J) @ (-o.squeeze_for(plan) * n_out)
                 if o.use_plan_forces and ref.joint_torques is not None:
                     contact = ref.joint_torques[i]
                 elif o.use_plan_forces and ref.contact_force is not None:
@@ -430,7 +430,7 @@ class UserModelSimulation:
                        "plan states no forces)")
             notes.append(f"{f.name}: feed-forward = {src} + the model's gravity, Coriolis "
                          f"and passive forces at the reference; squeeze "
-                         f"{o.squeeze * 1e3:g} mm")
+                         f"{o.squeeze_for(plan) * 1e3:g} mm")
         return offsets, torques, notes
 
     # -- the run --------------------------------------------------------------------------

@@ -167,7 +167,7 @@ def test_a_gait_searches_a_grasp_in_which_every_fingertip_can_be_lifted() -> Non
     assert all(liftable(fingers, qs, centre, NOMINAL_RADIUS, np.eye(3), load))
     # the same search without the gait's preference: the largest reach, the thumb held
     body.pop("gait")
-    plain, plain_grasp = problem_and_grasp(ManipulationRequest.model_validate(body), CACHE)
+    _, plain_grasp = problem_and_grasp(ManipulationRequest.model_validate(body), CACHE)
     assert plain_grasp is not None and plain_grasp.reach >= grasp.reach  # type: ignore[operator]
     plain_qs = [np.array(f.q) for f in plain_grasp.fingers]
     assert not all(liftable(fingers, plain_qs, centre, NOMINAL_RADIUS, np.eye(3), load))

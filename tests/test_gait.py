@@ -11,10 +11,10 @@ import math
 import numpy as np
 import pytest
 
-from ocp.geometry.bodies import tip_body
 from ocp.gait.checks import swing_checks
 from ocp.gait.step import contact_of, replace_finger
 from ocp.gait.swing import SwingPlan
+from ocp.geometry.bodies import tip_body
 from ocp.geometry.rotations import axis_angle_rotation
 from ocp.robots.allegro import NOMINAL_Q, load_allegro
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints

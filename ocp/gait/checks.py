@@ -14,9 +14,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Check, CheckKind
-from ocp.geometry.bodies import point_segment_distance, segment_distance
 from ocp.gait.hold import Hold, hold_residuals
 from ocp.gait.swing import SwingPlan
+from ocp.geometry.bodies import point_segment_distance, segment_distance
 
 __all__ = ["DENSE_SAMPLES", "hold_checks", "swing_checks"]
 

@@ -26,7 +26,7 @@ from ocp.transcription.loads import LOAD_VARS, load_cost, load_rows
 from ocp.transcription.values import load_bounds
 
 __all__ = ["HOLD_MARGINS", "Hold", "HoldResiduals", "deep_hold_forces", "hold_forces",
-           "hold_residuals", "liftable"]
+           "hold_residuals"]
 
 FloatArray = NDArray[np.float64]
 

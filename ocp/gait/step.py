@@ -13,10 +13,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Check, CheckKind
-from ocp.geometry.bodies import tip_body
 from ocp.gait.checks import hold_checks, swing_checks
 from ocp.gait.hold import Hold, deep_hold_forces, hold_forces
 from ocp.gait.swing import SwingPlan, SwingSpec, plan_swing
+from ocp.geometry.bodies import tip_body
 
 __all__ = ["GaitStep", "contact_of", "grasp_hold", "liftable", "replace_finger"]
 
