@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
+
+from ocp import presets
+from ocp.one_finger import FingerContact
+from ocp.spec.grasp import ManipulationProblem
+from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ViaPoint
 
 
 def _as_float_array(x: Any) -> np.ndarray:
@@ -50,3 +56,18 @@ def assert_close(actual: Any, expected: Any, atol: Any, rtol: float = 0.0,
             f"error={err[worst]:.3e}, tolerance={tol[worst]:.3e}\n"
             f"actual:\n{a}\nexpected:\n{e}"
         )
+
+
+def experiment1(goal: dict[str, float], duration: float = 2.0, n_intervals: int = 16,
+                via_points: tuple[ViaPoint, ...] = ()) -> ManipulationProblem:
+    """The paper's experiment-1 grasp: the built-in finger pressing the 25 mm ball on the
+    palm, rolled to the palm ``goal`` (through ``via_points``) in ``duration`` seconds,
+    mu = 0.5."""
+    base = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)),
+                             initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2), goal=goal,
+                             duration=duration, n_intervals=n_intervals,
+                             via_points=via_points)
+    contact = FingerContact(initial=(0.0, 0.0, 0.2, 0.0, 0.0),
+                            chart_rotation=(0.0, 0.0, math.pi),
+                            q_seed=tuple(math.radians(a) for a in (0, 30, 0, 30, 0, 30)))
+    return presets.one_finger(base, contact, mu=0.5)

@@ -6,20 +6,17 @@ itself gives at that point."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import casadi as ca
 import numpy as np
 import pytest
+from helpers import experiment1
 
 from ocp import AttemptOptions, attempt
-from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
-from ocp.robots.finger import load_finger
 from ocp.solution import Status
 from ocp.solve.attempt import setup
 from ocp.solve.planner import ManipulationPlanner, ManipulationProblem
-from ocp.spec.problem import BallOnPalmProblem, ObjectSpec
 from planner_service.planners.manipulation import result_from_manipulation_solution
 
 PLANNER = ManipulationPlanner()
@@ -27,15 +24,7 @@ PLANNER = ManipulationPlanner()
 
 def palm_and_finger(dx: float = 0.0) -> ManipulationProblem:
     """Experiment 1's grasp rolling the ball 13 mm (+ ``dx`` in x), 16 intervals."""
-    base = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)),
-                             initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2),
-                             goal={"x": 0.012 + dx, "y": 0.006}, duration=2.0,
-                             n_intervals=16)
-    contact = FingerContact(initial=(0.0, 0.0, 0.2, 0.0, 0.0),
-                            chart_rotation=(0.0, 0.0, math.pi),
-                            q_seed=tuple(math.radians(a) for a in (0, 30, 0, 30, 0, 30)))
-    return OneFingerPlanner.manipulation_problem(
-        OneFingerProblem(base=base, finger=load_finger(), contact=contact, mu=0.5))
+    return experiment1({"x": 0.012 + dx, "y": 0.006})
 
 
 @pytest.fixture(scope="module")

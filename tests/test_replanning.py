@@ -13,14 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import assert_close
+from helpers import assert_close, experiment1
 
 from ocp import AttemptOptions, attempt, shifted
-from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
-from ocp.robots.finger import load_finger
 from ocp.solution import Status
 from ocp.solve.planner import ManipulationPlanner, ManipulationProblem
-from ocp.spec.problem import BallOnPalmProblem, ObjectSpec, ProblemError, ViaPoint
+from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
 
 PLANNER = ManipulationPlanner()
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,14 +28,7 @@ GOAL = {"x": 0.012, "y": 0.006}
 def palm_and_finger(duration: float = 2.0) -> ManipulationProblem:
     """The paper's experiment-1 grasp (the built-in finger pressing the ball on the palm)
     rolling the ball 13 mm over the palm, 16 intervals, the smooth timing."""
-    base = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)),
-                             initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2), goal=GOAL,
-                             duration=duration, n_intervals=16)
-    contact = FingerContact(initial=(0.0, 0.0, 0.2, 0.0, 0.0),
-                            chart_rotation=(0.0, 0.0, math.pi),
-                            q_seed=tuple(math.radians(a) for a in (0, 30, 0, 30, 0, 30)))
-    return OneFingerPlanner.manipulation_problem(
-        OneFingerProblem(base=base, finger=load_finger(), contact=contact, mu=0.5))
+    return experiment1(GOAL, duration=duration)
 
 
 @pytest.fixture(scope="module")
@@ -279,16 +270,9 @@ def test_the_rest_of_a_problem_keeps_its_segments_intervals() -> None:
     """A shrinking horizon keeps each via-point segment's intervals (the passed ones' go to
     the segment under way): the NLP's structure changes only when a via-point is passed,
     and the grid's size never."""
-    base = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)),
-                             initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2),
-                             via_points=(ViaPoint(2.0, {"x": 0.03}),
-                                         ViaPoint(4.0, {"x": 0.03, "y": 0.03})),
-                             goal={"x": 0.0, "y": 0.0}, duration=6.0, n_intervals=60)
-    finger = FingerContact(initial=(0.0, 0.0, 0.2, 0.0, 0.0),
-                           chart_rotation=(0.0, 0.0, math.pi),
-                           q_seed=tuple(math.radians(a) for a in (0, 30, 0, 30, 0, 30)))
-    problem = OneFingerPlanner.manipulation_problem(
-        OneFingerProblem(base=base, finger=load_finger(), contact=finger, mu=0.5))
+    problem = experiment1({"x": 0.0, "y": 0.0}, duration=6.0, n_intervals=60,
+                          via_points=(ViaPoint(2.0, {"x": 0.03}),
+                                      ViaPoint(4.0, {"x": 0.03, "y": 0.03})))
     counts, _ = problem.segments()
     assert counts == (20, 20, 20)
     seen = set()

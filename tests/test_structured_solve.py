@@ -5,22 +5,19 @@ with IPOPT as its fallback)."""
 
 from __future__ import annotations
 
-import math
 from functools import partial
 from typing import Any
 
 import casadi as ca
 import numpy as np
 import pytest
+from helpers import experiment1
 from nlp_signature import CASES, build
 
-from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
-from ocp.robots.finger import load_finger
 from ocp.solve.attempt import setup
 from ocp.solve.ipopt import FATROP_OPTIONS, StructuredSolver
 from ocp.solve.planner import ManipulationPlanner
 from ocp.spec.grasp import ManipulationProblem
-from ocp.spec.problem import BallOnPalmProblem, ObjectSpec
 from ocp.transcription.nlp_blocks import build_manipulation_nlp
 
 STAGED = partial(build_manipulation_nlp, stage_order=True)
@@ -93,14 +90,7 @@ def test_the_stage_order_has_fatrop_s_structure(name: str) -> None:
 
 
 def _experiment1() -> ManipulationProblem:
-    base = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)),
-                             initial=(0.0, 0.0, 0.0, 0.0, -math.pi / 2),
-                             goal={"x": 0.012, "y": 0.006}, duration=2.0, n_intervals=32)
-    finger = FingerContact(initial=(0.0, 0.0, 0.2, 0.0, 0.0),
-                           chart_rotation=(0.0, 0.0, math.pi),
-                           q_seed=tuple(math.radians(a) for a in (0, 30, 0, 30, 0, 30)))
-    return OneFingerPlanner.manipulation_problem(
-        OneFingerProblem(base=base, finger=load_finger(), contact=finger, mu=0.5))
+    return experiment1({"x": 0.012, "y": 0.006}, n_intervals=32)
 
 
 def _same_plans(a: Any, b: Any) -> None:
