@@ -19,7 +19,7 @@ from .report import ContactReport, ErrorSummary, SimReport
 from .scene import mjcf
 from .spec import ExecutionPlan, FloatArray
 
-__all__ = ["Simulation", "StepRows", "hermite", "simulate", "slerp"]
+__all__ = ["Simulation", "StepRows", "hermite", "simulate", "slerp", "step_grid"]
 
 #: A contact whose normal force is at most this [N] is not touching.
 TOUCH_FORCE = 1e-6
@@ -239,16 +239,8 @@ class Simulation:
         ``data`` (a push, sim/disturbances.py)."""
         plan, o, m, d = self.plan, self.options, self.model, self.data
         start = time.perf_counter()
-        dt = o.timestep
-        t0, T = float(plan.t[0]), plan.duration
-        n_settle = round(o.settle / dt)
-        n_plan = math.ceil(T / dt - 1e-9)
-        # the time of each step's start
-        ts: FloatArray = t0 + dt * np.arange(-n_settle, n_plan + 1, dtype=float)
-        plan_time = ts - t0
-        ramp = np.clip((plan_time + o.settle) / max(o.settle / 2, dt), 0.0, 1.0) \
-            if o.settle > 0 else np.ones_like(ts)
-        pin_object = plan_time < -o.settle / 2
+        dt, T = o.timestep, plan.duration
+        ts, plan_time, ramp, pin_object = step_grid(plan, o)
         offsets, torques, notes = self._feedforward()
         q_ref, qd_ref, ctrl, tau = [], [], [], []
         for ref, off, trq in zip(plan.references, offsets, torques, strict=True):
@@ -356,6 +348,23 @@ class Simulation:
             duration=T, notes=[*plan.notes, *notes],
             mujoco_version=mujoco.__version__)
         return report
+
+
+def step_grid(plan: ExecutionPlan, o: SimOptions
+              ) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray]:
+    """The simulation's steps: each one's start ``ts`` [s] on the plan's clock, from the
+    settling's start to the plan's end; the same from the plan's start (negative while
+    settling); the grip's ramp (0 to 1 over the settling's first half); and where the
+    object is held in place (that first half)."""
+    dt = o.timestep
+    t0 = float(plan.t[0])
+    n_settle = round(o.settle / dt)
+    n_plan = math.ceil(plan.duration / dt - 1e-9)
+    ts: FloatArray = t0 + dt * np.arange(-n_settle, n_plan + 1, dtype=float)
+    plan_time = ts - t0
+    ramp = np.clip((plan_time + o.settle) / max(o.settle / 2, dt), 0.0, 1.0) \
+        if o.settle > 0 else np.ones_like(ts)
+    return ts, plan_time, ramp, plan_time < -o.settle / 2
 
 
 def contact_slip(m: Any, d: Any, con: Any, object_body: int, other: int,

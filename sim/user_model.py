@@ -40,7 +40,6 @@ initial pose (the first half of ``settle``), then it is let go.
 
 from __future__ import annotations
 
-import math
 import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -61,6 +60,7 @@ from .run import (
     hermite,
     recorded_steps,
     slerp,
+    step_grid,
 )
 from .scene import quat_of_matrix
 from .spec import ExecutionPlan, FloatArray
@@ -437,15 +437,8 @@ class UserModelSimulation:
     def run(self) -> SimReport:
         plan, o, m, d = self.plan, self.options, self.model, self.data
         start = time.perf_counter()
-        dt = o.timestep
-        t0, T = float(plan.t[0]), plan.duration
-        n_settle = round(o.settle / dt)
-        n_plan = math.ceil(T / dt - 1e-9)
-        ts: FloatArray = t0 + dt * np.arange(-n_settle, n_plan + 1, dtype=float)
-        plan_time = ts - t0
-        ramp = np.clip((plan_time + o.settle) / max(o.settle / 2, dt), 0.0, 1.0) \
-            if o.settle > 0 else np.ones_like(ts)
-        pin_object = plan_time < -o.settle / 2
+        dt, T = o.timestep, plan.duration
+        ts, plan_time, ramp, pin_object = step_grid(plan, o)
         offsets, torques, notes = self._feedforward()
         q_ref, qd_ref, tau = [], [], []
         for ref, off, trq in zip(plan.references, offsets, torques, strict=True):
