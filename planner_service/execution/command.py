@@ -20,9 +20,19 @@ from typing import Any
 
 from pydantic import ValidationError
 
-__all__ = ["add_arguments", "main", "options_of"]
+__all__ = ["add_arguments", "input_error", "input_errors", "main", "options_of",
+           "report_path", "request_of"]
 
 EXIT_PASSED, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
+
+
+def input_errors() -> tuple[type[Exception], ...]:
+    """What a command's input may raise: each an exit 2 with :func:`input_error`'s line
+    (imported when one is raised: the command line starts without the planners)."""
+    from ..planners import ProblemError
+    from . import NotExecutableError
+
+    return (ValidationError, ProblemError, OSError, ValueError, NotExecutableError)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -88,6 +98,35 @@ def options_of(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
+def request_of(args: argparse.Namespace) -> Any:
+    """The plan's request from ``--request`` (None without it); pydantic's
+    ValidationError, OSError or ValueError when it cannot be read (:func:`input_errors`)."""
+    if not args.request:
+        return None
+    from ..planners import REQUEST
+
+    return REQUEST.validate_python(json.loads(Path(args.request).read_text(encoding="utf-8")))
+
+
+def input_error(exc: Exception, args: argparse.Namespace, unplannable: str) -> str:
+    """The line that says why the command's input cannot be executed (one of
+    :func:`input_errors`; ``unplannable``: what a ProblemError means here)."""
+    from ..planners import ProblemError, validation_errors
+
+    if isinstance(exc, ValidationError):
+        reasons = "; ".join(f"{f}: {r}" for f, r in validation_errors(exc)[:5])
+        return f"{args.request} is not a valid request: {reasons}"
+    if isinstance(exc, ProblemError):
+        return f"{unplannable}: {exc.errors}"
+    return str(exc)
+
+
+def report_path(args: argparse.Namespace) -> tuple[str, Path]:
+    """(the result file's stem, the report's path: ``-o`` or ``<stem>.sim.json``)."""
+    stem = Path(args.result).name.removesuffix(".json")
+    return stem, Path(args.output) if args.output else Path(f"{stem}.sim.json")
+
+
 def main(args: argparse.Namespace) -> int:
     try:
         from sim import plot
@@ -99,33 +138,22 @@ def main(args: argparse.Namespace) -> int:
     if loop_command.wanted(args):  # disturbances, the closed loop
         return loop_command.main(args)
 
-    from ..planners import REQUEST, ProblemError, validation_errors
     from ..plans import read_result
-    from . import NotExecutableError, simulate_result
+    from . import simulate_result
 
     path = Path(args.result)
     try:
         result, _ = read_result(path)
-        request = None
-        if args.request:
-            raw = json.loads(Path(args.request).read_text(encoding="utf-8"))
-            request = REQUEST.validate_python(raw)
+        request = request_of(args)
         model = getattr(args, "model", None)
         if model is not None and model != "request":
             model = Path(model).read_text(encoding="utf-8")
         report = simulate_result(result, request, options_of(args), model)
-    except ValidationError as exc:
-        reasons = "; ".join(f"{f}: {r}" for f, r in validation_errors(exc)[:5])
-        print(f"{args.request} is not a valid request: {reasons}", file=sys.stderr)
+    except input_errors() as exc:
+        print(input_error(exc, args, "the request's models cannot be loaded"),
+              file=sys.stderr)
         return EXIT_INVALID
-    except ProblemError as exc:
-        print(f"the request's models cannot be loaded: {exc.errors}", file=sys.stderr)
-        return EXIT_INVALID
-    except (OSError, ValueError, NotExecutableError) as exc:
-        print(str(exc), file=sys.stderr)
-        return EXIT_INVALID
-    stem = path.name.removesuffix(".json")
-    out = Path(args.output) if args.output else Path(f"{stem}.sim.json")
+    stem, out = report_path(args)
     data = report.to_dict()
     out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     print(report.summary())

@@ -94,15 +94,12 @@ def _line(name: str, s: dict[str, Any]) -> str:
 
 
 def main(args: argparse.Namespace) -> int:
-    from pydantic import ValidationError
-
     from sim import SimOptions
     from sim.closed_loop import simulate_disturbed
 
-    from ..planners import REQUEST, ProblemError, validation_errors
     from ..plans import read_result
-    from . import NotExecutableError, execution_plan
-    from .command import options_of
+    from . import execution_plan
+    from .command import input_error, input_errors, options_of, report_path, request_of
 
     path = Path(args.result)
     try:
@@ -115,10 +112,7 @@ def main(args: argparse.Namespace) -> int:
             raise ValueError("--rate must be positive")
         if args.replan_iterations < 1:
             raise ValueError("--replan-iterations must be at least 1")
-        request = None
-        if args.request:
-            raw = json.loads(Path(args.request).read_text(encoding="utf-8"))
-            request = REQUEST.validate_python(raw)
+        request = request_of(args)
         if args.closed_loop and request is None:
             raise ValueError("--closed-loop needs the plan's --request (the re-planner "
                              "plans it again here)")
@@ -135,18 +129,10 @@ def main(args: argparse.Namespace) -> int:
             result, _ = read_result(path)
             report = simulate_disturbed(execution_plan(result, request), options, dist)
             data = {**report.to_dict(), "disturbances": dist.to_dict()}
-    except ValidationError as exc:
-        reasons = "; ".join(f"{f}: {r}" for f, r in validation_errors(exc)[:5])
-        print(f"{args.request} is not a valid request: {reasons}", file=sys.stderr)
+    except input_errors() as exc:
+        print(input_error(exc, args, "the request cannot be planned"), file=sys.stderr)
         return EXIT_INVALID
-    except ProblemError as exc:
-        print(f"the request cannot be planned: {exc.errors}", file=sys.stderr)
-        return EXIT_INVALID
-    except (OSError, ValueError, NotExecutableError) as exc:
-        print(str(exc), file=sys.stderr)
-        return EXIT_INVALID
-    stem = path.name.removesuffix(".json")
-    out = Path(args.output) if args.output else Path(f"{stem}.sim.json")
+    _, out = report_path(args)
     out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     if not args.closed_loop:
         print(report.summary())
