@@ -51,6 +51,8 @@ from typing import Any, cast
 
 from pydantic import BaseModel
 
+from .jobs.lifeline import PipedChild
+
 __all__ = [
     "COUNTERS",
     "LOADERS",
@@ -417,13 +419,10 @@ class CheckerBusyError(Exception):
     """Every checker process stayed busy for longer than a check may take."""
 
 
-class _Proc:
+class _Proc(PipedChild):
     def __init__(self, ctx: Any, limits: ModelLimits) -> None:
-        self.conn, child = ctx.Pipe()
-        self.process = ctx.Process(target=_checker_main, name="dexroll-model-check",
-                                   args=(child, asdict(limits), os.getpid()), daemon=True)
-        self.process.start()
-        child.close()
+        super().__init__(ctx, _checker_main, "dexroll-model-check", asdict(limits),
+                         os.getpid())
         self.ready = False
 
     def wait_ready(self, timeout: float) -> bool:
@@ -433,12 +432,6 @@ class _Proc:
             except (EOFError, OSError):
                 return False
         return self.ready
-
-    def kill(self) -> None:
-        with contextlib.suppress(Exception):
-            self.process.kill()
-            self.process.join(timeout=5)
-            self.conn.close()
 
 
 class ModelChecker:

@@ -20,8 +20,10 @@ import os
 import signal
 import threading
 import time
+from collections.abc import Callable
+from typing import Any
 
-__all__ = ["WATCH_INTERVAL", "die_with_parent"]
+__all__ = ["WATCH_INTERVAL", "PipedChild", "die_with_parent"]
 
 #: How often the watchdog looks at the parent [s].
 WATCH_INTERVAL = 0.25
@@ -54,3 +56,22 @@ def die_with_parent(parent_pid: int | None = None, pdeathsig: bool = True) -> No
                 os._exit(1)
 
     threading.Thread(target=watch, name="dexroll-lifeline", daemon=True).start()
+
+
+class PipedChild:
+    """A daemon child process of the context ``ctx`` running ``target(conn, *args)``,
+    ``conn`` its end of a pipe whose other end is :attr:`conn` (the child's end closed
+    here once it has started); :meth:`kill` ends it, whatever state it is in."""
+
+    def __init__(self, ctx: Any, target: Callable[..., None], name: str, *args: Any) -> None:
+        self.conn, child = ctx.Pipe()
+        self.process = ctx.Process(target=target, name=name, daemon=True,
+                                   args=(child, *args))
+        self.process.start()
+        child.close()
+
+    def kill(self) -> None:
+        with contextlib.suppress(Exception):
+            self.process.kill()
+            self.process.join(timeout=5)
+            self.conn.close()

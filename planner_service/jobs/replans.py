@@ -44,6 +44,8 @@ from concurrent.futures import ThreadPoolExecutor
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from .lifeline import PipedChild
+
 __all__ = ["ReplanPool", "ReplanRefusedError"]
 
 log = logging.getLogger("dexroll.replans")
@@ -134,25 +136,10 @@ def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float
             conn.send(("replan_failed", f"the re-plan failed: {exc!r}"))
 
 
-class _Process:
-    def __init__(self, ctx: Any, cache_size: int, time_cap: float) -> None:
-        self.conn, child = ctx.Pipe()
-        self.process = ctx.Process(target=_replan_main, name="dexroll-replan", daemon=True,
-                                   args=(child, os.getpid(), cache_size, time_cap))
-        self.process.start()
-        child.close()
-
-    def kill(self) -> None:
-        with contextlib.suppress(Exception):
-            self.process.kill()
-            self.process.join(timeout=5)
-            self.conn.close()
-
-
 class _Slot:
     def __init__(self) -> None:
         self.lock = threading.Lock()
-        self.proc: _Process | None = None
+        self.proc: PipedChild | None = None
 
 
 #: How each reply other than an answer is refused: (status, error).
@@ -240,8 +227,9 @@ class ReplanPool:
             raise ReplanRefusedError(status, error, message, detail)
         raise ReplanRefusedError(status, error, str(payload))
 
-    def _start(self) -> _Process:
-        proc = _Process(self._ctx, self.cache_size, self.time_cap)
+    def _start(self) -> PipedChild:
+        proc = PipedChild(self._ctx, _replan_main, "dexroll-replan", os.getpid(),
+                          self.cache_size, self.time_cap)
         if not proc.conn.poll(START_TIMEOUT):
             proc.kill()
             raise ReplanRefusedError(503, "replan_unavailable",

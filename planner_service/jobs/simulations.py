@@ -35,6 +35,8 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from .lifeline import PipedChild
+
 __all__ = ["SimulationPool", "SimulationRefusedError", "SimulationTask"]
 
 log = logging.getLogger("dexroll.simulations")
@@ -157,21 +159,6 @@ def _settle(task: SimulationTask, outcome: dict[str, Any] | BaseException) -> No
             task.future.set_result(outcome)
 
 
-class _Process:
-    def __init__(self, ctx: Any, cpu_seconds: float) -> None:
-        self.conn, child = ctx.Pipe()
-        self.process = ctx.Process(target=_sim_main, name="dexroll-simulation", daemon=True,
-                                   args=(child, os.getpid(), cpu_seconds))
-        self.process.start()
-        child.close()
-
-    def kill(self) -> None:
-        with contextlib.suppress(Exception):
-            self.process.kill()
-            self.process.join(timeout=5)
-            self.conn.close()
-
-
 class SimulationPool:
     """``processes`` simulation slots (each a thread of the service and its process,
     started at the first simulation), ``max_queue`` simulations waiting at most, each run
@@ -231,8 +218,9 @@ class SimulationPool:
             thread.join(timeout=10)
 
     # -- a slot's thread ---------------------------------------------------------------------
-    def _start(self) -> _Process:
-        proc = _Process(self._ctx, self.cpu_seconds)
+    def _start(self) -> PipedChild:
+        proc = PipedChild(self._ctx, _sim_main, "dexroll-simulation", os.getpid(),
+                          self.cpu_seconds)
         if not proc.conn.poll(START_TIMEOUT):
             proc.kill()
             raise SimulationRefusedError(503, "simulation_unavailable",
@@ -244,7 +232,7 @@ class SimulationPool:
         return proc
 
     def _slot(self) -> None:
-        proc: _Process | None = None
+        proc: PipedChild | None = None
         try:
             while True:
                 task = self._tasks.get()
@@ -280,7 +268,7 @@ class SimulationPool:
                     proc.conn.send(None)
                 proc.kill()
 
-    def _run(self, proc: _Process, task: SimulationTask) -> dict[str, Any]:
+    def _run(self, proc: PipedChild, task: SimulationTask) -> dict[str, Any]:
         """One run in ``proc``: its report, or SimulationRefusedError (its process killed when
         it ran out of time, of CPU, or of anyone waiting)."""
         proc.conn.send((task.result_json, task.request_json, task.options))
