@@ -17,9 +17,9 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
-from dexroll_client.models import ErrorBody, FieldError
+from dexroll_client.models import ErrorBody, FieldError, JobState
 
-from ..jobs.store import Store
+from ..jobs.store import JobRow, Store
 from ..jobs.workers import Dispatcher
 from ..models_check import ModelChecker
 from ..planners.fields import wire_field
@@ -135,6 +135,23 @@ class ServiceError(Exception):
         self.status, self.error, self.message = status, error, message
         self.detail = detail or []
         self.headers = headers
+
+
+def finished_job(row: JobRow | None, job_id: str, action: str, plan: str | None = "a plan"
+                 ) -> JobRow:
+    """The job ``row`` (the store's ``get`` or ``head``) once it has finished: a 404
+    when there is none, a 409 ``not_finished`` while it runs (``action``: what may then
+    be done with it, e.g. "it can be simulated"), and a 409 ``no_plan`` when it ended
+    without ``plan`` (None: not checked here)."""
+    if row is None:
+        raise ServiceError(404, "not_found", f"no job {job_id!r}")
+    if not JobState(row.state).terminal:
+        raise ServiceError(409, "not_finished", f"job {job_id} is {row.state}: {action} "
+                                                "once it has finished",
+                           headers={"Retry-After": "1"})
+    if plan is not None and not row.result_bytes:
+        raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without {plan}")
+    return row
 
 
 def error_response(status: int, error: str, message: str,

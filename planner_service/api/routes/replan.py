@@ -21,13 +21,13 @@ from typing import Any
 from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
-from dexroll_client.models import ErrorBody, FieldError, JobState
+from dexroll_client.models import ErrorBody, FieldError
 from dexroll_client.replan import ReplanRequest, ReplanResult
 
 from ...jobs.replans import ReplanPool, ReplanRefusedError
 from ..access import OwnerDep
 from ..body import JSONBodyRoute
-from ..deps import ServiceError, StoreDep
+from ..deps import ServiceError, StoreDep, finished_job
 
 __all__ = ["router"]
 
@@ -72,15 +72,8 @@ async def replan_plan(job_id: str, body: ReplanRequest, request: Request, store:
     builds its re-planner (seconds: `stats.setup_time`); later ones are warm. A state the
     grasp cannot explain is a 422 (`unexplained_state`) naming the field, never planned
     through."""
-    row = await asyncio.to_thread(store.head, job_id, owner)
-    if row is None:
-        raise ServiceError(404, "not_found", f"no job {job_id!r}")
-    if not JobState(row.state).terminal:
-        raise ServiceError(409, "not_finished", f"job {job_id} is {row.state}: it can be "
-                                                "re-planned once it has finished",
-                           headers={"Retry-After": "1"})
-    if not row.result_bytes:
-        raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without a plan")
+    row = finished_job(await asyncio.to_thread(store.head, job_id, owner), job_id,
+                       "it can be re-planned")
     if row.planner in _NOT_REPLANNABLE:
         raise ServiceError(409, "not_replannable",
                            f"job {job_id}: {_NOT_REPLANNABLE[row.planner]}")

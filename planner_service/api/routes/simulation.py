@@ -23,7 +23,7 @@ from typing import Any
 from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
-from dexroll_client.models import ErrorBody, FieldError, JobState
+from dexroll_client.models import ErrorBody, FieldError
 from dexroll_client.simulation import SimulationOptions, SimulationReport
 
 from ...jobs.simulations import SimulationPool, SimulationRefusedError
@@ -32,7 +32,7 @@ from ...plans.tracks import tracks_of
 from ...view import NoPlanError
 from ..access import OwnerDep
 from ..body import JSONBodyRoute
-from ..deps import ServiceError, SettingsDep, StoreDep
+from ..deps import ServiceError, SettingsDep, StoreDep, finished_job
 
 __all__ = ["router", "simulation_steps"]
 
@@ -180,15 +180,9 @@ async def simulate_plan(job_id: str, request: Request, store: StoreDep, owner: O
     runs the open loop in the same world beside it: the report is the closed loop's, with
     `open_loop` and `closed_loop` (each one's summary against the task's goal: `recovered`;
     the controller's calls and timing) as `dexroll simulate --closed-loop` writes them."""
-    row = await asyncio.to_thread(store.get, job_id, owner)
-    if row is None:
-        raise ServiceError(404, "not_found", f"no job {job_id!r}")
-    if not JobState(row.state).terminal:
-        raise ServiceError(409, "not_finished", f"job {job_id} is {row.state}: it can be "
-                                                "simulated once it has finished",
-                           headers={"Retry-After": "1"})
-    if row.result is None:
-        raise ServiceError(409, "no_plan", f"job {job_id} ended ({row.state}) without a plan")
+    row = finished_job(await asyncio.to_thread(store.get, job_id, owner), job_id,
+                       "it can be simulated")
+    assert row.result is not None  # finished_job's no_plan
     options = options or SimulationOptions()
     if importlib.util.find_spec("mujoco") is None:
         raise ServiceError(503, "simulation_unavailable",

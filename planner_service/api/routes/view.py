@@ -11,13 +11,13 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from pydantic import BaseModel, Field
 
-from dexroll_client.models import Job, JobState
+from dexroll_client.models import Job
 
 from ...models_check import CheckerBusyError, ModelChecker, Task, TaskError, TaskLimitError
 from ...view import has_plan
 from ...view.page import content_security_policy
 from ..access import OwnerDep
-from ..deps import ERROR_RESPONSES, ServiceError, StoreDep
+from ..deps import ERROR_RESPONSES, ServiceError, StoreDep, finished_job
 
 __all__ = ["JobLinks", "LinkedJob", "router", "with_links"]
 
@@ -73,13 +73,8 @@ def view_plan(job_id: str, request: Request, store: StoreDep, owner: OwnerDep
     self-contained (three.js and the plan inlined): save it to view it offline. 409 while
     the job runs, or when it ended without a plan. The page is built in a process of its
     own under the model checker's time and memory limits (409 past them)."""
-    row = store.get(job_id, owner)  # with API keys, another owner's job is unknown here
-    if row is None:
-        raise ServiceError(404, "not_found", f"no job {job_id!r}")
-    if not JobState(row.state).terminal:
-        raise ServiceError(409, "not_finished", f"job {job_id} is {row.state}: its view is "
-                                                f"ready once it has finished",
-                           headers={"Retry-After": "1"})
+    # with API keys, another owner's job is unknown here
+    row = finished_job(store.get(job_id, owner), job_id, "its view is ready", plan=None)
     key = (row.id, row.finished_at)
     with _lock:
         cached = _pages.get(key)
