@@ -361,29 +361,25 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser.add_argument("--compile", type=Path, default=None,
                         help="compile the NLPs' functions, cached in this folder")
     args = parser.parse_args(argv)
-    if args.replan:
-        cases = [replan_case(c, args.repeats, args.compile) for c in args.cases.split(",")]
-        meta = {"date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-                "cpus": os.cpu_count(), "casadi": ca.__version__, "repeats": args.repeats,
-                "load": " / ".join(f"{x:.1f}" for x in os.getloadavg())}
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "replan.json").write_text(json.dumps({"meta": meta, "cases": cases},
-                                                         indent=1) + "\n")
-        md = replan_markdown(cases, meta)
-        (args.out / "replan.md").write_text(md)
-        print(md)
-        return cases
-    rows = [row for case in CASES for row in run_case(case, args.repeats)]
     meta = {"date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "cpus": os.cpu_count(), "python": platform.python_version(),
             "casadi": ca.__version__, "repeats": args.repeats}
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "warm_start.json").write_text(json.dumps({"meta": meta, "rows": rows},
-                                                         indent=2) + "\n")
-    md = markdown(rows, meta)
-    (args.out / "warm_start.md").write_text(md)
-    print(md)
+    if args.replan:
+        cases = [replan_case(c, args.repeats, args.compile) for c in args.cases.split(",")]
+        meta["load"] = " / ".join(f"{x:.1f}" for x in os.getloadavg())
+        _write(args.out / "replan", {"meta": meta, "cases": cases}, replan_markdown(cases, meta))
+        return cases
+    rows = [row for case in CASES for row in run_case(case, args.repeats)]
+    _write(args.out / "warm_start", {"meta": meta, "rows": rows}, markdown(rows, meta))
     return rows
+
+
+def _write(stem: Path, data: dict[str, Any], md: str) -> None:
+    """The run's figures as ``stem``.json and its table as ``stem``.md (printed)."""
+    stem.with_suffix(".json").write_text(json.dumps(data, indent=1) + "\n")
+    stem.with_suffix(".md").write_text(md)
+    print(md)
 
 
 if __name__ == "__main__":
