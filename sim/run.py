@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,7 +19,8 @@ from .report import ContactReport, ErrorSummary, SimReport
 from .scene import mjcf
 from .spec import ExecutionPlan, FloatArray
 
-__all__ = ["Simulation", "StepRows", "hermite", "simulate", "slerp", "step_grid"]
+__all__ = ["Simulation", "StepRows", "hermite", "object_contacts", "simulate", "slerp",
+           "step_grid"]
 
 #: A contact whose normal force is at most this [N] is not touching.
 TOUCH_FORCE = 1e-6
@@ -306,22 +307,11 @@ class Simulation:
             obj_pose[k] = d.qpos[oq:oq + 7]
             # the contacts of the step (found at its start; velocities at its end, the
             # ones the step moved the bodies with)
-            for i in range(d.ncon):
-                con = d.contact[i]
-                g1, g2 = int(con.geom1), int(con.geom2)
-                if g1 == self.object_geom:
-                    other = g2
-                elif g2 == self.object_geom:
-                    other = g1
-                else:
-                    continue
+            for con, other, fn in object_contacts(m, d, self.object_geom, f6):
                 j = self.contact_of_geom.get(other)
                 if j is None:
                     continue
-                mujoco.mj_contactForce(m, d, i, f6)
-                if f6[0] <= TOUCH_FORCE:
-                    continue
-                normal_force[k, j] += f6[0]
+                normal_force[k, j] += fn
                 slip_speed[k, j] = max(slip_speed[k, j],
                                        contact_slip(m, d, con, self.object_body, other,
                                                     jac_a, jac_b))
@@ -365,6 +355,21 @@ def step_grid(plan: ExecutionPlan, o: SimOptions
     ramp = np.clip((plan_time + o.settle) / max(o.settle / 2, dt), 0.0, 1.0) \
         if o.settle > 0 else np.ones_like(ts)
     return ts, plan_time, ramp, plan_time < -o.settle / 2
+
+
+def object_contacts(m: Any, d: Any, object_geom: int, f6: FloatArray
+                    ) -> Iterator[tuple[Any, int, float]]:
+    """The step's contacts of the object that push (normal force above
+    :data:`TOUCH_FORCE`): (MuJoCo's contact, the other geom, the normal force [N]);
+    ``f6`` a scratch array of 6."""
+    for i in range(d.ncon):
+        con = d.contact[i]
+        g1, g2 = int(con.geom1), int(con.geom2)
+        if object_geom not in (g1, g2):
+            continue
+        mujoco.mj_contactForce(m, d, i, f6)
+        if f6[0] > TOUCH_FORCE:
+            yield con, g2 if g1 == object_geom else g1, float(f6[0])
 
 
 def contact_slip(m: Any, d: Any, con: Any, object_body: int, other: int,

@@ -51,13 +51,13 @@ import numpy as np
 from .options import SimOptions
 from .report import ErrorSummary, SimReport
 from .run import (
-    TOUCH_FORCE,
     _angle_between,
     _damped_pinv,
     _linear,
     contact_report,
     contact_slip,
     hermite,
+    object_contacts,
     recorded_steps,
     slerp,
     step_grid,
@@ -519,26 +519,15 @@ class UserModelSimulation:
                     if force >= hi - 1e-9 or force <= lo + 1e-9:
                         saturated[jl.name] += 1
             obj_pose[k] = d.qpos[oq:oq + 7]
-            for i in range(d.ncon):
-                con = d.contact[i]
-                g1, g2 = int(con.geom1), int(con.geom2)
-                if g1 == self.object_geom:
-                    other = g2
-                elif g2 == self.object_geom:
-                    other = g1
-                else:
-                    continue
-                mujoco.mj_contactForce(m, d, i, f6)
-                if f6[0] <= TOUCH_FORCE:
-                    continue
+            for con, other, fn in object_contacts(m, d, self.object_geom, f6):
                 j_c = self.contact_of_geom.get(other)
                 if j_c is None:
                     if plan_time[k + 1] >= 0:
                         body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY,
                                                  int(m.geom_bodyid[other])) or "world"
-                        other_force[body] = max(other_force.get(body, 0.0), float(f6[0]))
+                        other_force[body] = max(other_force.get(body, 0.0), fn)
                     continue
-                normal_force[k, j_c] += f6[0]
+                normal_force[k, j_c] += fn
                 slip_speed[k, j_c] = max(slip_speed[k, j_c],
                                          contact_slip(m, d, con, self.object_body, other,
                                                       jac_a, jac_b))
