@@ -20,10 +20,10 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
-__all__ = ["WATCH_INTERVAL", "PipedChild", "die_with_parent"]
+__all__ = ["WATCH_INTERVAL", "PipedChild", "die_with_parent", "received"]
 
 #: How often the watchdog looks at the parent [s].
 WATCH_INTERVAL = 0.25
@@ -75,3 +75,16 @@ class PipedChild:
             self.process.kill()
             self.process.join(timeout=5)
             self.conn.close()
+
+
+def received(conn: Any) -> Iterator[Any]:
+    """The messages a child process receives on ``conn``, until its pipe closes or a
+    None (stop) arrives."""
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        if msg is None:
+            return
+        yield msg

@@ -44,7 +44,7 @@ from concurrent.futures import ThreadPoolExecutor
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from .lifeline import PipedChild
+from .lifeline import PipedChild, received
 
 __all__ = ["ReplanPool", "ReplanRefusedError"]
 
@@ -90,13 +90,7 @@ def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float
 
     sessions: OrderedDict[Key, ReplanSession] = OrderedDict()
     conn.send(("ready", None))
-    while True:
-        try:
-            msg = conn.recv()
-        except (EOFError, OSError, KeyboardInterrupt):
-            return
-        if msg is None:
-            return
+    for msg in received(conn):
         _, key, body_json, result_json, request_json = msg
         try:
             body = ReplanRequest.model_validate_json(body_json)

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from .lifeline import PipedChild
+from .lifeline import PipedChild, received
 
 __all__ = ["SimulationPool", "SimulationRefusedError", "SimulationTask"]
 
@@ -86,13 +86,7 @@ def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
         conn.send(("simulation_unavailable", f"MuJoCo is not installed: {exc}"))
         return
     conn.send(("ready", None))
-    while True:
-        try:
-            msg = conn.recv()
-        except (EOFError, OSError, KeyboardInterrupt):
-            return
-        if msg is None:
-            return
+    for msg in received(conn):
         result_json, request_json, options = msg
         usage = resource.getrusage(resource.RUSAGE_SELF)
         soft = math.ceil(usage.ru_utime + usage.ru_stime + cpu_seconds)
