@@ -15,7 +15,7 @@ from ocp.gait.checks import swing_checks
 from ocp.gait.step import contact_of, replace_finger
 from ocp.gait.swing import SwingPlan
 from ocp.geometry.bodies import tip_body
-from ocp.geometry.rotations import axis_angle_rotation
+from ocp.geometry.rotations import axis_angle_rotation, quaternion_matrix, quaternion_wxyz
 from ocp.robots.allegro import NOMINAL_Q, load_allegro
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
 from ocp.spec.motion import ObjectPose, Tracking
@@ -167,3 +167,54 @@ def test_tip_bodies_distance_is_the_least_over_their_segments_and_counts_cylinde
     centres = [p + R @ tip_body(fi).a for fi, (R, p) in zip(f, caps, strict=True)]
     assert float(np.linalg.norm(centres[0] - centres[1])) > 2 * tip_body(f[0]).r
     assert tips_gap(f, q) < -5e-3
+
+
+def test_a_swing_warm_started_from_the_last_is_the_same_swing(step: object) -> None:
+    """The next swing of a finger in a gait starts from the last one's primal-dual point
+    (the grasp recurs): the same motion as the cold solve, certified, from exactly the
+    finger's joints."""
+    st = step
+    again = replace_finger(FINGERS, QS, 1, landing(1, 10.0), QS[1], CENTRE, RHO, np.eye(3),
+                           LOAD, warm=st.swing)
+    assert again.ok, again.message
+    assert np.array_equal(again.swing.Q[0], QS[1])  # the switch is exact
+    assert np.abs(again.swing.Q - st.swing.Q).max() < 1e-6
+    cert = again.checks("s", 0.0, LOAD, 0.5)
+    assert all(c.passed for c in cert), [c.failure for c in cert if not c.passed]
+
+
+def test_a_roll_carried_to_a_turned_ball_keeps_its_motion_relative_to_the_palm() -> None:
+    """The warm start of a gait's next roll (ocp.gait.planner.carried): the previous
+    roll's joints and contacts unchanged, the ball's frame turned by C = R_then^T R_now:
+    its rotation R(t) C (quaternion product), its angular velocity the same in the palm
+    frame, its first state the new roll's."""
+    from ocp.gait.planner import _roll_problem, carried
+    from ocp.solve.planner import ManipulationPlanner
+
+    planner = ManipulationPlanner()
+    ax = np.array([0.0, 0.0, 1.0])
+    prob = _roll_problem(TEMPLATE, QS, POSE, axis_angle_rotation(ax, math.radians(3.0)),
+                         CENTRE, 1.0)
+    sol = planner.solve(prob)
+    assert sol.ok
+    R_now = axis_angle_rotation((1.0, 2.0, 0.5), 0.7)
+    turned = ObjectPose(tuple(float(c) for c in quaternion_wxyz(R_now).ravel()),
+                        tuple(CENTRE))
+    prob2 = _roll_problem(TEMPLATE, QS, turned, axis_angle_rotation(ax, math.radians(3.0))
+                          @ R_now, CENTRE, 1.0)
+    m = planner.model(prob2)
+    x0 = planner.initial_state(prob2)
+    ws = carried(sol, m, np.eye(3), R_now, x0)
+    obj = m.object
+    for k in range(len(ws.t)):
+        R_new = quaternion_matrix(ws.x[k, obj.xs][3:7])
+        R_old = quaternion_matrix(sol.X[k, obj.xs][3:7])
+        assert np.abs(R_new - R_old @ R_now).max() < 1e-12
+        w_new = R_new @ ws.u[k, obj.us][3:6]
+        w_old = R_old @ sol.U[k, obj.us][3:6]
+        assert np.abs(w_new - w_old).max() < 1e-12  # the same spin, palm frame
+    others = [c for c in range(ws.x.shape[1]) if c not in range(obj.xs.start, obj.xs.stop)]
+    assert np.array_equal(ws.x[:, others], sol.X[:, others])
+    assert np.abs(ws.x[0] - x0).max() < 1e-9  # it starts where the new roll does
+    sol2 = planner.solve(prob2, ws)
+    assert sol2.ok and sol2.certificate.passed

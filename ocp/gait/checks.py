@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Check, CheckKind
 from ocp.gait.hold import Hold, hold_residuals
 from ocp.gait.swing import SwingPlan
-from ocp.geometry.bodies import point_segment_distance, segment_distance
+from ocp.geometry.bodies import point_segment_distance, segments_distance
 
 __all__ = ["DENSE_SAMPLES", "hold_checks", "swing_checks"]
 
@@ -57,7 +57,7 @@ def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
         caps.append(ai)
         ends.append(bi)
         dist.append(point_segment_distance(sp.centre, ai, bi) - L)
-    caps_a, dist_a = np.array(caps), np.array(dist)
+    caps_a, ends_a, dist_a = np.array(caps), np.array(ends), np.array(dist)
     seg = np.array([plan.segment(float(t)) for t in ts])
     out: list[Check] = []
     clear = np.flatnonzero(seg == "clear")
@@ -86,8 +86,8 @@ def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
     out.append(_check(f"swing_rest_{label}", rest, 1e-9, CheckKind.PHYSICS, None, t0))
     for j, ((a1, b1, r1), need) in enumerate(zip(sp.others, sp.required_gaps(),
                                                  strict=True)):
-        gap = np.array([segment_distance(ai, bi, a1, b1) - body.r - r1
-                        for ai, bi in zip(caps, ends, strict=True)])
+        gap = segments_distance(caps_a, ends_a, np.broadcast_to(a1, caps_a.shape),
+                                np.broadcast_to(b1, caps_a.shape)) - body.r - r1
         k = int(np.argmin(gap))
         out.append(_check(f"swing_tip_gap_{label}_{j}", gap[k], need - DISTANCE_TOL,
                           CheckKind.PHYSICS, ts[k], t0, lower=True))

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.gait.planner import GaitPlan
-from ocp.gait.step import contact_of
+from ocp.geometry.bodies import tip_body
 from ocp.geometry.rotations import quaternion_wxyz
 
 __all__ = ["TRANSITION", "GaitSamples", "gait_samples", "gait_times"]
@@ -105,11 +105,13 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
             active[rows, k] = np.maximum(1.0 - s if ph.kind == "unload" else s, TRANSITION)
     points, normals = np.zeros((n, nf, 3)), np.zeros((n, nf, 3))
     tip_p, tip_q = np.zeros((n, nf, 3)), np.zeros((n, nf, 4))
-    for i in range(n):
-        for c, f in enumerate(fingers):
-            qc = Q[i, cut[c]:cut[c + 1]]
-            points[i, c], normals[i, c] = contact_of(f, qc, pos[i], rho)
-            R, p = f.fingertip_pose_pin(qc)
-            tip_p[i, c], tip_q[i, c] = p, quaternion_wxyz(R)
+    for c, f in enumerate(fingers):  # contact_of's line of centres, every sample at once
+        Rs = np.empty((n, 3, 3))
+        for i in range(n):
+            Rs[i], tip_p[i, c] = f.fingertip_pose_pin(Q[i, cut[c]:cut[c + 1]])
+        d = tip_p[:, c] + Rs @ tip_body(f).a - pos
+        normals[:, c] = d / np.linalg.norm(d, axis=1)[:, None]
+        points[:, c] = pos + rho * normals[:, c]
+        tip_q[:, c] = quaternion_wxyz(Rs)
     return GaitSamples(ts, Q, QD, QDD, pos, wxyz, points, normals, force, active, tip_p,
                        tip_q)

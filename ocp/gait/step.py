@@ -133,14 +133,15 @@ class GaitStep:
 def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                    landing_normal: FloatArray, q_target: FloatArray, centre: FloatArray,
                    radius: float, rotation: FloatArray, load: FloatArray,
-                   swing: dict[str, Any] | None = None, hold_time: float = 0.2
-                   ) -> GaitStep:
+                   swing: dict[str, Any] | None = None, hold_time: float = 0.2,
+                   warm: SwingPlan | None = None) -> GaitStep:
     """Re-place fingertip ``k`` of a grasp of a still ball (``fingers`` at the joints
     ``qs``, every tip touching) at the contact whose outward normal is ``landing_normal``
     (palm frame), its joints seeded by ``q_target``. ``load``: the load parameters
     (:func:`~ocp.transcription.values.load_parameters`); ``swing``: fields of the
     :class:`~ocp.gait.swing.SwingSpec` (duration, clearance, ...); ``hold_time``: the
-    unloading's and the loading's duration [s]. A grasp whose other
+    unloading's and the loading's duration [s]; ``warm``: this finger's previous swing
+    (:func:`~ocp.gait.swing.plan_swing`'s warm start). A grasp whose other
     fingertips cannot hold the object is ``infeasible`` at once, naming the finger."""
     L = radius
     allf = list(range(len(fingers)))
@@ -164,7 +165,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                      np.asarray(q_target, dtype=float), np.asarray(landing_normal, float),
                      np.asarray(centre, dtype=float), float(radius), tuple(others),
                      **(swing or {}))
-    plan = plan_swing(spec)
+    plan = plan_swing(spec, warm)
     if not plan.ok:
         return GaitStep(k, plan.status, plan.message, plan)
     q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)

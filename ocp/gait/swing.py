@@ -36,7 +36,7 @@ freedom there).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import casadi as ca
@@ -55,6 +55,14 @@ SEGMENT_SAMPLES = 5
 _IPOPT: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
                           "ipopt.tol": 1e-9, "ipopt.constr_viol_tol": 1e-10,
                           "ipopt.max_iter": 500}
+#: Added for a swing started from a previous swing's primal-dual point (the same finger's
+#: previous swing in a gait: the grasp recurs, so it is nearly this one's optimum).
+_IPOPT_WARM: dict[str, Any] = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
+                               "ipopt.warm_start_bound_push": 1e-9,
+                               "ipopt.warm_start_bound_frac": 1e-9,
+                               "ipopt.warm_start_slack_bound_push": 1e-9,
+                               "ipopt.warm_start_slack_bound_frac": 1e-9,
+                               "ipopt.warm_start_mult_bound_push": 1e-9}
 
 
 @dataclass(frozen=True)
@@ -131,6 +139,10 @@ class SwingPlan:
     J: FloatArray
     iterations: int
     solve_time: float
+    #: IPOPT's primal-dual point (scaled variables, multipliers of the bounds and rows):
+    #: the warm start of the next swing of this finger (:func:`plan_swing`)
+    point: tuple[FloatArray, FloatArray, FloatArray] | None = field(default=None,
+                                                                     repr=False)
 
     @property
     def ok(self) -> bool:
@@ -207,13 +219,14 @@ def _guess(spec: SwingSpec) -> FloatArray:
 
 #: The swing NLPs built, by (finger, intervals, lift intervals, other tips): the
 #: geometry, the times and the margins are parameters.
-_SOLVERS: dict[tuple[int, int, int, int], tuple[Any, FloatArray, FloatArray, Any]] = {}
+_SOLVERS: dict[tuple[int, int, int, int], tuple[Any, FloatArray, FloatArray, Any, Any]] = {}
 
 
 def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
-               ) -> tuple[Any, FloatArray, FloatArray, Any]:
-    """(solver, lbg, ubg, the finger it is for) of the swing NLP of finger ``f`` (see the
-    module's doc), built once; the parameters in :func:`_swing_params`' order."""
+               ) -> tuple[Any, FloatArray, FloatArray, Any, Any]:
+    """(solver, lbg, ubg, the finger it is for, the warm-start solver) of the swing NLP of
+    finger ``f`` (see the module's doc), built once; the parameters in
+    :func:`_swing_params`' order."""
     key = (id(f), n, K, n_others)
     if key in _SOLVERS and _SOLVERS[key][3] is f:
         return _SOLVERS[key]
@@ -291,8 +304,10 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
     g = ca.vertcat(*[e for e, _, _ in rows])
     lbg = np.concatenate([np.full(int(e.numel()), lo) for e, lo, _ in rows])
     ubg = np.concatenate([np.full(int(e.numel()), hi) for e, _, hi in rows])
-    solver = ca.nlpsol("swing", "ipopt", {"x": w, "p": P, "f": cost, "g": g}, _IPOPT)
-    _SOLVERS[key] = (solver, lbg, ubg, f)
+    nlp = {"x": w, "p": P, "f": cost, "g": g}
+    solver = ca.nlpsol("swing", "ipopt", nlp, _IPOPT)
+    warm = ca.nlpsol("swing_warm", "ipopt", nlp, {**_IPOPT, **_IPOPT_WARM})
+    _SOLVERS[key] = (solver, lbg, ubg, f, warm)
     return _SOLVERS[key]
 
 
@@ -312,13 +327,31 @@ def _swing_params(spec: SwingSpec) -> FloatArray:
                            np.concatenate(others, axis=None) if others else []])
 
 
-def plan_swing(spec: SwingSpec) -> SwingPlan:
-    """Solve the swing's NLP (see the module's doc; built once per finger and grid)."""
+def plan_swing(spec: SwingSpec, warm: SwingPlan | None = None) -> SwingPlan:
+    """Solve the swing's NLP (see the module's doc; built once per finger and grid).
+    ``warm``: an earlier swing of this finger on this grid (in a gait, the one before: the
+    grasp recurs), whose primal-dual point starts IPOPT; when that does not solve, the
+    swing is solved from its own guess."""
+    if warm is not None and warm.point is not None and warm.spec.finger is spec.finger \
+            and warm.spec.n_intervals == spec.n_intervals \
+            and warm.spec.lift_intervals == spec.lift_intervals \
+            and len(warm.spec.others) == len(spec.others):
+        out = _solve_swing(spec, warm.point)
+        if out.ok:
+            return out
+        cold = _solve_swing(spec, None)
+        return replace(cold, iterations=cold.iterations + out.iterations,
+                       solve_time=cold.solve_time + out.solve_time)
+    return _solve_swing(spec, None)
+
+
+def _solve_swing(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArray] | None
+                 ) -> SwingPlan:
     f, body = spec.finger, spec.body
     nq, n, K = int(f.nq), spec.n_intervals, spec.lift_intervals
     T = float(spec.duration)
     h = T / n
-    solver, lbg, ubg, _ = _swing_nlp(f, body, n, K, len(spec.others))
+    solver, lbg, ubg, _, warm_solver = _swing_nlp(f, body, n, K, len(spec.others))
     vs, as_, js = 1.0 / T, 1.0 / T**2, 1.0 / T**3
     lo_q, hi_q = backed_off_joint_limits(f)
     vmax = np.asarray(f.velocity_limit, dtype=float)
@@ -341,14 +374,21 @@ def plan_swing(spec: SwingSpec) -> SwingPlan:
     Jg = np.diff(Ag, axis=0) / h
     w0 = np.concatenate([Qg.ravel(), (Vg / vs).ravel(), (Ag / as_).ravel(),
                          (Jg / js).ravel()])
+    duals: dict[str, FloatArray] = {}
+    if point is not None:
+        solver = warm_solver
+        w0, duals = point[0], {"lam_x0": point[1], "lam_g0": point[2]}
     t_start = time.perf_counter()
     res = solver(x0=np.clip(w0, lbw, ubw), p=_swing_params(spec), lbx=lbw, ubx=ubw,
-                 lbg=lbg, ubg=ubg)
+                 lbg=lbg, ubg=ubg, **duals)
     elapsed = time.perf_counter() - t_start
     st = solver.stats()
     x = np.asarray(res["x"]).ravel()
     m = nq * (n + 1)
     Qs = x[:m].reshape(n + 1, nq)
+    # the first node is q_start by an equality row, met to IPOPT's 1e-10 or better: the
+    # returned swing starts exactly where the finger is (a switch's joints are continuous)
+    Qs[0] = spec.q_start
     Vs = x[m:2 * m].reshape(n + 1, nq) * vs
     As = x[2 * m:3 * m].reshape(n + 1, nq) * as_
     Js = x[3 * m:].reshape(n, nq) * js
@@ -358,7 +398,8 @@ def plan_swing(spec: SwingSpec) -> SwingPlan:
     message = "" if ok else (f"the swing of {_name(spec)} was not found: IPOPT "
                              f"{st['return_status']}")
     return SwingPlan(spec, status, message, np.linspace(0.0, T, n + 1), Qs, Vs, As, Js,
-                     int(st["iter_count"]), elapsed)
+                     int(st["iter_count"]), elapsed,
+                     (x, np.asarray(res["lam_x"]).ravel(), np.asarray(res["lam_g"]).ravel()))
 
 
 def _name(spec: SwingSpec) -> str:
