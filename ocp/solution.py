@@ -540,10 +540,12 @@ class ManipulationSolution:
             return []
         return [k for k in range(1, len(col.U0)) if np.any(col.U1[k - 1] != col.U0[k])]
 
-    def joint_trajectory(self, t: FloatArray | list[float]) -> JointTrajectory:
+    def joint_trajectory(self, t: FloatArray | list[float], efforts: bool = True
+                         ) -> JointTrajectory:
         """Every finger's joints at times t (e.g. :func:`fixed_rate_times`) from the returned
-        polynomials, with both one-sided rates at each rate break. Joint names are the
-        model's; where two fingers share a name, prefixed with the finger's
+        polynomials, with both one-sided rates at each rate break, and the joint torques of
+        a plan with forces (unless ``efforts`` is false). Joint names are the model's;
+        where two fingers share a name, prefixed with the finger's
         (``<finger>/<joint>``)."""
         smp = self.sample(t)
         assert self._interpolant is not None
@@ -558,11 +560,11 @@ class ManipulationSolution:
             tk = np.array([traj.t_nodes[k]])
             breaks.append(RateBreak(float(tk[0]), traj(tk, 1, "left")[0, cols],
                                     traj(tk, 1, "right")[0, cols]))
-        efforts = None
-        if self.collocation is not None and self.collocation.forces is not None:
-            efforts = np.hstack(self.joint_torques(t))
+        torques = None
+        if efforts and self.collocation is not None and self.collocation.forces is not None:
+            torques = np.hstack(self.joint_torques(t))
         return JointTrajectory(joint_names, smp.t, smp.x[:, cols], smp.x_dot[:, cols],
-                               smp.x_ddot[:, cols], tuple(breaks), efforts)
+                               smp.x_ddot[:, cols], tuple(breaks), torques)
 
 
 class _Interpolant:

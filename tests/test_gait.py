@@ -218,3 +218,4 @@ def test_a_roll_carried_to_a_turned_ball_keeps_its_motion_relative_to_the_palm()
     assert np.abs(ws.x[0] - x0).max() < 1e-9  # it starts where the new roll does
     sol2 = planner.solve(prob2, ws)
     assert sol2.ok and sol2.certificate.passed
+

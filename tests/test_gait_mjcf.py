@@ -18,10 +18,26 @@ import numpy as np
 
 from dexroll_client import ManipulationResult, PlanStatus
 from ocp.robots.mjcf_frames import mujoco_text
+from ocp.solution import joint_torques
 from planner_service.cli import plan_request
 
 ROOT = Path(__file__).resolve().parents[1]
 TIPS = ("ff_tip", "mf_tip", "rf_tip", "th_tip")
+
+
+def _fingers(body: dict) -> list:
+    """The request's finger models, as the planner loads them."""
+    from planner_service.planners import REQUEST, Planners
+    from planner_service.planners.manipulation import manipulation_problem
+
+    problem = manipulation_problem(REQUEST.validate_python(body), Planners().fingers)
+    return [tip.finger for tip in problem.fingers]
+
+
+def _torsion(result: ManipulationResult, k: int, rows: np.ndarray) -> np.ndarray:
+    """Fingertip k's planned torsion at the samples ``rows``: the wire carries none (the
+    planned torsions of the rolls are zero here: checked by the efforts' agreement)."""
+    return np.zeros(len(rows))
 
 
 def test_a_gait_on_a_users_mjcf_hand() -> None:
@@ -61,6 +77,23 @@ def test_a_gait_on_a_users_mjcf_hand() -> None:
         assert abs(float(np.linalg.norm(point - centre[k])) - radius) < 1e-6
         assert np.abs(np.array(jt.points[k].velocities)).max() < 1e-6
     # the ball turned as asked, its centre held within the tracking tolerance
+    # the joint torques (the wire's efforts): J^T of each fingertip's planned force at its
+    # contact point, and the links' own weight (this file's links have masses), by
+    # ocp.solution.joint_torques (the fingers' CasADi Jacobians, not the samples' Pinocchio)
+    effort = np.array([p.effort for p in jt.points])
+    assert effort.shape == q.shape and np.all(np.isfinite(effort))
+    fingers = _fingers(body)
+    gravity = body["forces"].get("gravity", (0.0, 0.0, -9.81))
+    rows = np.linspace(0, len(t) - 1, 40).astype(int)
+    at = 0
+    for k, (c, f) in enumerate(zip(gait.samples.contacts, fingers, strict=True)):
+        force = np.array(c.force)[rows]
+        want = joint_torques(f, q[rows, at:at + f.nq], np.array(c.point)[rows],
+                             np.array(c.normal)[rows], force, _torsion(result, k, rows),
+                             gravity)
+        assert np.abs(effort[rows, at:at + f.nq] - want).max() < 1e-9, c.name
+        at += f.nq
+    assert np.abs(effort).max() > 0.05  # the holds ask torques
     w, x, y, z = gait.samples.object_orientation_wxyz[-1]
     angle = 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), abs(w))
     assert abs(math.degrees(angle) - 8.0) <= 1.0

@@ -30,6 +30,7 @@ from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
 from ocp.solution import ManipulationSolution
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
 from ocp.spec.motion import DesiredMotion, ObjectPose
+from ocp.spec.problem import ProblemError
 from ocp.transcription.collocation import WarmStart
 from ocp.transcription.values import load_parameters
 
@@ -292,7 +293,13 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             warm = carried(plan.rolls[-1], planner.model(prob), R_then, pose.rotation,
                            planner.initial_state(prob))
         R_then = pose.rotation
-        sol = planner.solve(prob, warm)
+        try:
+            sol = planner.solve(prob, warm)
+        except ProblemError as exc:  # the roll's own start (the gait's, not the request's)
+            plan.status = "failed"
+            plan.message = (f"roll {len(plan.rolls)} ({math.degrees(done):.1f} deg on) could "
+                            "not start: " + "; ".join(f"{f}: {r}" for f, r in exc.errors))
+            break
         r = len(plan.rolls)
         plan.rolls.append(sol)
         plan.phases.append(GaitPhase("roll", t, t + dur, (True,) * nf, None, r))

@@ -14,7 +14,7 @@ from ocp.gait.planner import GaitPlan
 from ocp.geometry.bodies import tip_body
 from ocp.geometry.rotations import quaternion_wxyz
 
-__all__ = ["TRANSITION", "GaitSamples", "gait_samples", "gait_times"]
+__all__ = ["TRANSITION", "GaitSamples", "gait_samples", "gait_times", "joint_efforts"]
 
 FloatArray = NDArray[np.float64]
 
@@ -45,6 +45,11 @@ class GaitSamples:
     active: FloatArray
     tip_position: FloatArray
     tip_wxyz: FloatArray
+    #: per fingertip the torsion it applies about the object's outward normal [N m]
+    #: (a roll's planned one; none in a hold or a swing)
+    torsion: FloatArray | None = None
+    #: every finger's joint torques [N m] (columns as ``q``): :func:`joint_efforts`
+    effort: FloatArray | None = None
 
 
 def gait_times(gait: GaitPlan, rate: float) -> FloatArray:
@@ -65,7 +70,7 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
     n = ts.size
     Q, QD, QDD = (np.zeros((n, int(cut[-1]))) for _ in range(3))
     pos, wxyz = np.zeros((n, 3)), np.zeros((n, 4))
-    force = np.zeros((n, nf, 3))
+    force, torsion = np.zeros((n, nf, 3)), np.zeros((n, nf))
     active = np.ones((n, nf))
     pose = problem.initial_pose
     last = (np.asarray(pose.position, dtype=float), pose.rotation)
@@ -82,11 +87,11 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
             continue
         tl = ts[rows] - ph.start
         if ph.kind == "roll":  # the roll's own polynomials, every time at once
-            jt = sol.joint_trajectory(tl)
+            jt = sol.joint_trajectory(tl, efforts=False)
             Q[rows], QD[rows], QDD[rows] = jt.positions, jt.velocities, jt.accelerations
             smp = sol.sample(tl)
             pos[rows], wxyz[rows] = smp.object_position, quaternion_wxyz(smp.object_rotation)
-            force[rows] = sol.forces(tl)[0]
+            force[rows], torsion[rows] = sol.forces(tl)
             last = end
             continue
         for r, t in zip(rows, ts[rows], strict=True):
@@ -113,5 +118,25 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
         normals[:, c] = d / np.linalg.norm(d, axis=1)[:, None]
         points[:, c] = pos + rho * normals[:, c]
         tip_q[:, c] = quaternion_wxyz(Rs)
+    gravity = problem.forces.gravity if problem.forces is not None else (0.0, 0.0, 0.0)
+    effort = np.hstack([joint_efforts(f, Q[:, cut[c]:cut[c + 1]], points[:, c],
+                                      normals[:, c], force[:, c], torsion[:, c], gravity)
+                        for c, f in enumerate(fingers)])
     return GaitSamples(ts, Q, QD, QDD, pos, wxyz, points, normals, force, active, tip_p,
-                       tip_q)
+                       tip_q, torsion, effort)
+
+
+def joint_efforts(finger: Any, q: FloatArray, point: FloatArray, normal: FloatArray,
+                  force: FloatArray, torsion: FloatArray, gravity: Any) -> FloatArray:
+    """A finger's joint torques at the joint rows ``q`` that make its fingertip apply
+    ``force`` (palm frame) at ``point`` and ``torsion`` about the object's outward
+    ``normal``, and hold its links against ``gravity``: :func:`ocp.solution.joint_torques`'
+    tau = J^T (f; r x f + tau_n n) + g(q), with Pinocchio's frame Jacobian (J_v of the tip
+    frame's origin, r from it to the point)."""
+    out = finger.gravity_torques(q, gravity) if finger.mass > 0 else np.zeros(q.shape)
+    for i in range(len(q)):
+        J = finger.frame_jacobian_pin(q[i])
+        _, p = finger.fingertip_pose_pin(q[i])
+        moment = np.cross(point[i] - p, force[i]) + torsion[i] * normal[i]
+        out[i] += J[:3].T @ force[i] + J[3:].T @ moment
+    return out

@@ -129,7 +129,8 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float
     if gait.phases:
         smp = gait_samples(gait, problem, gait_times(gait, rate))
         jt = joint_trajectory_model(JointTrajectory(tuple(joint_names), smp.t, smp.q,
-                                                    smp.q_dot, smp.q_ddot))
+                                                    smp.q_dot, smp.q_ddot, (),
+                                                    smp.effort))
         samples = GaitSamplesModel(
             t=smp.t.tolist(), object_position=rows(smp.object_position),
             object_orientation_wxyz=rows(smp.object_wxyz),
