@@ -219,3 +219,33 @@ def test_a_roll_carried_to_a_turned_ball_keeps_its_motion_relative_to_the_palm()
     sol2 = planner.solve(prob2, ws)
     assert sol2.ok and sol2.certificate.passed
 
+
+
+def test_a_swing_between_close_neighbours_keeps_the_least_tip_gap() -> None:
+    """The middle fingertip 1.8 mm from the index (tests/data/gait_narrow_swing.json: a
+    gait's swing about the palm's -z) has no swing that keeps the clearance (3 mm, or 90 %
+    of the gap at its ends) from its neighbours; the step keeps MIN_TIP_GAP instead, the
+    clearance from the ball unchanged, and the swing is certified."""
+    import json
+    from pathlib import Path
+
+    from ocp.gait.swing import MIN_TIP_GAP, SwingSpec, plan_swing
+
+    d = json.loads((Path(__file__).parent / "data" / "gait_narrow_swing.json").read_text())
+    qs = tuple(np.array(q) for q in d["qs"])
+    k, centre, rho = d["finger"], np.array(d["centre"]), d["radius"]
+    normal, target = np.array(d["landing_normal"]), np.array(d["q_target"])
+    others = []
+    for i in (0, 2, 3):
+        R, p = FINGERS[i].fingertip_pose_pin(qs[i])
+        a, b = tip_body(FINGERS[i]).placed(R, p)
+        others.append((a, b, tip_body(FINGERS[i]).r))
+    spec = SwingSpec(FINGERS[k], qs[k], target, normal, centre, rho, tuple(others))
+    assert plan_swing(spec).status == "infeasible"
+    step = replace_finger(FINGERS, qs, k, normal, target, centre, rho, np.eye(3), LOAD)
+    assert step.ok, step.message
+    assert step.swing.spec.tip_gap == MIN_TIP_GAP
+    assert step.swing.spec.clearance == spec.clearance
+    assert max(step.swing.spec.required_gaps()) <= MIN_TIP_GAP + 1e-12
+    cert = step.checks("s", 0.0, LOAD, 0.5)
+    assert all(c.passed for c in cert), [c.failure for c in cert if not c.passed]

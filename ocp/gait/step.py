@@ -6,7 +6,7 @@ moves; back to forces with every fingertip, the landed one's from zero)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Check, CheckKind
 from ocp.gait.checks import hold_checks, swing_checks
 from ocp.gait.hold import Hold, deep_hold_forces, hold_forces
-from ocp.gait.swing import SwingPlan, SwingSpec, plan_swing
+from ocp.gait.swing import MIN_TIP_GAP, SwingPlan, SwingSpec, plan_swing
 from ocp.geometry.bodies import tip_body
 
 __all__ = ["GaitStep", "contact_of", "grasp_hold", "liftable", "replace_finger"]
@@ -166,6 +166,13 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                      np.asarray(centre, dtype=float), float(radius), tuple(others),
                      **(swing or {}))
     plan = plan_swing(spec, warm)
+    if plan.status == "infeasible" and spec.tip_gap is None \
+            and max(spec.required_gaps(), default=0.0) > MIN_TIP_GAP:
+        # the clearance kept from the neighbours too left no path: keep the least gap
+        narrow = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP),
+                            warm if warm is not None and warm.spec.tip_gap else None)
+        if narrow.ok:
+            plan = narrow
     if not plan.ok:
         return GaitStep(k, plan.status, plan.message, plan)
     q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)

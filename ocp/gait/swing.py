@@ -21,8 +21,10 @@ The rows (at the nodes; the certificate samples the returned cubic densely):
 * **touch-down**: the cap's centre exactly over the landing point at the tip's radius
   (its surface touches the object there), the contact on the cap (not its cylinder), at
   rest (zero relative normal speed: the object is still);
-* **the other fingertips**: the tip's body at least ``min(clearance, 90 % of the gap at
-  the start and at the landing)`` from each of theirs, at every node;
+* **the other fingertips**: the tip's body at least ``min(tip_gap, 90 % of the gap at
+  the start and at the landing)`` from each of theirs, at every node (``tip_gap``: the
+  clearance unless given; :func:`~ocp.gait.step.replace_finger` tries
+  :data:`MIN_TIP_GAP` when the clearance admits no swing);
 * joint limits (backed off as the rolling plan's) and velocity limits at the nodes, and
   between them exactly: each interval's cubic lies in the convex hull of its Bezier
   control points, bounded by the limits themselves (the rate's quadratic likewise); the
@@ -50,6 +52,9 @@ __all__ = ["SwingPlan", "SwingSpec", "plan_swing"]
 
 FloatArray = NDArray[np.float64]
 
+#: The least gap [m] from the other tips a swing falls back to when the clearance admits
+#: none (the middle fingertip between two neighbours 1.8 mm away: docs/gait.md).
+MIN_TIP_GAP = 1e-3
 #: Points of the moving tip's segment at which its distance to another tip is kept.
 SEGMENT_SAMPLES = 5
 _IPOPT: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
@@ -89,6 +94,9 @@ class SwingSpec:
     max_joint_acceleration: float = 20.0
     #: the landing contact's least arc from the cap's seam [m]
     cap_margin: float = 0.002
+    #: the least gap [m] kept from the other tips (None: ``clearance``), or 90 % of the
+    #: gap at the start or at the landing if smaller
+    tip_gap: float | None = None
 
     @property
     def body(self) -> TipBody:
@@ -106,13 +114,14 @@ class SwingSpec:
         return self.centre + (self.radius + self.body.r) * n / np.linalg.norm(n)
 
     def required_gaps(self) -> tuple[float, ...]:
-        """The least distance kept from each other tip: ``clearance``, or 90 % of the gap
-        at the start or at the landing if smaller."""
+        """The least distance kept from each other tip: ``tip_gap`` (None: ``clearance``),
+        or 90 % of the gap at the start or at the landing if smaller."""
         out = []
+        want = self.clearance if self.tip_gap is None else self.tip_gap
         for a1, b1, r1 in self.others:
             gaps = [_body_gap(self.finger, self.body, q, a1, b1, r1)
                     for q in (self.q_start, self.q_target)]
-            out.append(min(self.clearance, 0.9 * min(gaps)))
+            out.append(min(want, 0.9 * min(gaps)))
         return tuple(out)
 
 
