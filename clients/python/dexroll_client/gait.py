@@ -33,7 +33,8 @@ class GaitModel(_Request):
                             description="the least distance [m] between a swinging "
                                         "fingertip's surface and the ball's, and (or the "
                                         "gaps it starts and lands with, if smaller) the "
-                                        "other fingertips'")
+                                        "other fingertips' (1 mm from them when keeping "
+                                        "the clearance leaves the swing no path)")
 
 
 class GaitPhaseModel(_Response):
