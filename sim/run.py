@@ -259,7 +259,7 @@ class Simulation:
         the planned one, at least ``force_min`` where the contact counts as touching
         (activity :data:`ACTIVE_SHARE` and up; from none at :data:`SQUEEZE_FROM`)."""
         plan, m = self.plan, self.model
-        if self.options.force_control != "pi":
+        if self.options.force_control != "pi" or self.options.mode != "servo":
             return []
         d = mujoco.MjData(m)
         jacp = np.zeros((3, m.nv))
@@ -319,7 +319,8 @@ class Simulation:
                 f"{o.force_min:g} N while touching) along the planned normals of "
                 f"{', '.join(plan.contacts[lp.j].name for lp in loops)}, on top of the "
                 "servo" if loops else
-                "force control: PI asked, but no contact has a planned force: off")
+                f"force control: PI asked, but off ({o.mode} mode)" if o.mode != "servo"
+                else "force control: PI asked, but no contact has a planned force: off")
         else:
             notes.append("force control: off (the servo with the planned forces fed "
                          "forward)")

@@ -76,3 +76,6 @@ def test_force_control_is_resolved_per_plan_and_checked_by_name(gait_plan: objec
     wire = SimulationOptions.model_validate({"force_control": "off", "force_min": 0.3})
     assert SimOptions.from_dict(wire.simulator_options()).force_min == 0.3
     json.dumps(SimOptions(force_control="pi").to_dict())  # the report's options
+    # with the joints set to the plan there is nothing to feed back into
+    replayed = simulate(gait_plan, SimOptions(mode="replay", settle=0.0))  # type: ignore[arg-type]
+    assert "force control: PI asked, but off (replay mode)" in replayed.notes
