@@ -7,7 +7,7 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
-__all__ = ["MODES", "SimOptions", "Tolerances"]
+__all__ = ["FORCE_CONTROLS", "MODES", "SimOptions", "Tolerances"]
 
 #: 'servo': every joint follows the plan through a position servo (velocity feed-forward,
 #: the grip's or the plan's torques as torque feed-forward), the object free;
@@ -16,6 +16,10 @@ __all__ = ["MODES", "SimOptions", "Tolerances"]
 #: simulated: the report's errors are zero by construction, its contact forces those of
 #: the plan's own geometry).
 MODES = ("servo", "kinematic", "replay")
+
+#: 'off': the planned forces are fed forward only (J^T f); 'pi': contact-force feedback
+#: on top, per fingertip with a planned force (see :class:`SimOptions`).
+FORCE_CONTROLS = ("off", "pi")
 
 
 @dataclass(frozen=True)
@@ -53,6 +57,22 @@ class SimOptions:
     ``object_mass`` [kg] unless the plan states its mass (None: the plan's or the
     default); gravity is the plan's.
 
+    Force control (``force_control``, see :data:`FORCE_CONTROLS`; None: the plan's own,
+    ``ExecutionPlan.force_control``, else 'off'): with 'pi', each fingertip whose contact
+    has a planned force measures its contact's normal force in MuJoCo (the sum over the
+    fingertip's pad touching the object, at the end of the previous step), compares it
+    with the planned normal force and pushes the difference back along the planned
+    contact normal as joint torques ``J^T n u``, ``u`` a PI law: ``force_kp`` [N/N] times
+    the error plus ``force_ki`` [1/s] times its integral, ``u`` clipped to
+    ``±force_limit`` [N] and the integral held while clipped (anti-windup). The target
+    is the planned normal force, but at least ``force_min`` [N] (the planner's least
+    normal force) where the plan counts the contact as touching (activity 0.5 and up;
+    from none at 0.25), the difference fed forward. The feedback is off while the
+    fingertip is lifted (activity 0: its integral reset), full from activity 0.25 (the
+    lift-off and approach) up, and ramps with the grip while settling. The servo and the
+    squeeze stay as they are (the feedback adds to them); the report's notes say which
+    ran.
+
     Before the plan's t = 0 the hand holds the initial grasp for ``settle`` [s]: the grip
     ramps up with the object held in place during the first half, then the object is let
     go. Errors and contact losses count from t = 0. ``record_every`` steps are recorded
@@ -72,6 +92,11 @@ class SimOptions:
     link_mass: float = 0.02
     armature: float = 1e-3
     squeeze: float | None = None
+    force_control: str | None = None
+    force_kp: float = 0.1
+    force_ki: float = 400.0
+    force_limit: float = 3.0
+    force_min: float = 0.5
     grip_force: float = 1.0
     use_plan_forces: bool = True
     object_mass: float | None = None
@@ -91,10 +116,19 @@ class SimOptions:
         own = getattr(plan, "squeeze", None)
         return self.DEFAULT_SQUEEZE if own is None else float(own)
 
+    def force_control_for(self, plan: Any) -> str:
+        """The force control for ``plan``: the options', else the plan's own, else
+        'off'."""
+        if self.force_control is not None:
+            return self.force_control
+        own = getattr(plan, "force_control", None)
+        return "off" if own is None else str(own)
+
     def resolved(self, plan: Any) -> SimOptions:
-        """These options for ``plan``, its squeeze (:meth:`squeeze_for`) filled in."""
-        return self if self.squeeze is not None else \
-            replace(self, squeeze=self.squeeze_for(plan))
+        """These options for ``plan``, its squeeze (:meth:`squeeze_for`) and force control
+        (:meth:`force_control_for`) filled in."""
+        return replace(self, squeeze=self.squeeze_for(plan),
+                       force_control=self.force_control_for(plan))
 
     #: torsional friction [m] when neither the options nor the plan give one: the
     #: torque about the normal a contact resists per newton of normal force
@@ -111,11 +145,15 @@ class SimOptions:
         for name in ("impratio", "kp"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be positive")
+        if self.force_control is not None and self.force_control not in FORCE_CONTROLS:
+            raise ValueError(f"force_control must be one of {FORCE_CONTROLS} or None, "
+                             f"not {self.force_control!r}")
         if self.squeeze is not None and not (math.isfinite(self.squeeze) and
                                              self.squeeze >= 0):
             raise ValueError("squeeze must be finite and >= 0")
         for name in ("kv", "grip_force", "settle", "link_mass", "armature",
-                     "rolling_friction"):
+                     "rolling_friction", "force_kp", "force_ki", "force_limit",
+                     "force_min"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0")

@@ -116,6 +116,24 @@ class _FingerIndex:
 
 
 @dataclass
+class _ForceLoop:
+    """One fingertip's contact-force feedback (:meth:`Simulation._force_loops`): its
+    finger ``k``, its contact ``j``, per step the torques of a unit push along the
+    contact's normal ``unit`` (steps x joints), the feedback's ``weight``, the
+    ``target`` normal force [N] (the planned one, at least the floor) and ``extra``, the
+    target less the planned force (fed forward); ``integral`` the PI law's integral
+    term [N]."""
+
+    k: int
+    j: int
+    unit: FloatArray
+    weight: FloatArray
+    target: FloatArray
+    extra: FloatArray
+    integral: float = 0.0
+
+
+@dataclass
 class StepRows:
     """The controller's rows at every step (times ``ts`` on the plan's clock plus its
     t0): per finger the servo's set point ``ctrl``, the torque feed-forward ``tau``, the
@@ -231,6 +249,46 @@ class Simulation:
             out[j] = _linear(self.plan.t, fn[:, None], ts)[:, 0]
         return out
 
+    def _force_loops(self, ts: FloatArray, ramp: FloatArray,
+                     planned: dict[int, FloatArray]) -> list[_ForceLoop]:
+        """The contact-force feedback (``force_control`` 'pi'): per fingertip whose
+        contact has a planned normal force, at the steps ``ts``, the joint torques of a
+        unit push along the planned contact normal (J^T n at the plan's joints and
+        point), its weight (none where the fingertip is lifted, all from activity
+        :data:`SQUEEZE_FROM` on, times the grip's ``ramp``) and the target normal force:
+        the planned one, at least ``force_min`` where the contact counts as touching
+        (activity :data:`ACTIVE_SHARE` and up; from none at :data:`SQUEEZE_FROM`)."""
+        plan, m = self.plan, self.model
+        if self.options.force_control != "pi" or self.options.mode != "servo":
+            return []
+        d = mujoco.MjData(m)
+        jacp = np.zeros((3, m.nv))
+        loops = []
+        for j, c in enumerate(plan.contacts):
+            if j not in planned or c.finger is None or c.normal is None:
+                continue
+            k = next((k for k, f in enumerate(plan.fingers) if f.name == c.finger), None)
+            if k is None:
+                continue
+            idx, ref = self.fingers[k], plan.references[k]
+            unit = np.zeros((plan.t.size, len(idx.dofs)))
+            for i in range(plan.t.size):
+                d.qpos[idx.qpos] = ref.q[i]
+                mujoco.mj_kinematics(m, d)
+                mujoco.mj_comPos(m, d)
+                mujoco.mj_jac(m, d, jacp, None, c.point[i], idx.tip_body)
+                # the push into the object: against its outward normal
+                unit[i] = jacp[:, idx.dofs].T @ (-c.normal[i])
+            share = np.ones(ts.size) if c.active is None else \
+                _linear(plan.t, c.active[:, None], ts)[:, 0]
+            weight = np.clip(share / SQUEEZE_FROM, 0.0, 1.0) * ramp
+            floor = self.options.force_min * np.clip(
+                (share - SQUEEZE_FROM) / (ACTIVE_SHARE - SQUEEZE_FROM), 0.0, 1.0)
+            target = np.maximum(planned[j], floor)
+            loops.append(_ForceLoop(k, j, np.ascontiguousarray(_linear(plan.t, unit, ts)),
+                                    weight, target, target - planned[j]))
+        return loops
+
     # -- the run --------------------------------------------------------------------------
     def run(self, hook: Callable[[int, float, StepRows], None] | None = None
             ) -> SimReport:
@@ -253,6 +311,20 @@ class Simulation:
             ctrl.append(target + (o.kv / o.kp) * qd)
             tau.append(ramp[:, None] * _linear(plan.t, trq, ts))
         planned_force = self._planned_normal_forces(ts)
+        loops = self._force_loops(ts, ramp, planned_force)
+        if o.force_control == "pi":
+            notes.append(
+                f"force control: PI contact-force feedback (gains {o.force_kp:g} N/N, "
+                f"{o.force_ki:g} 1/s, at most {o.force_limit:g} N; at least "
+                f"{o.force_min:g} N while touching) along the planned normals of "
+                f"{', '.join(plan.contacts[lp.j].name for lp in loops)}, on top of the "
+                "servo" if loops else
+                f"force control: PI asked, but off ({o.mode} mode)" if o.mode != "servo"
+                else "force control: PI asked, but no contact has a planned force: off")
+        else:
+            notes.append("force control: off (the servo with the planned forces fed "
+                         "forward)")
+        tau_fb = [np.zeros(len(idx.dofs)) for idx in self.fingers]
         pos_ref = _linear(plan.t, plan.object_position, ts)
         quat_ref = slerp(plan.t, plan.object_wxyz, ts)
         vel_ref = np.gradient(pos_ref, dt, axis=0) if ts.size > 1 else np.zeros_like(pos_ref)
@@ -283,10 +355,24 @@ class Simulation:
         for k in range(n_steps):
             if hook is not None:
                 hook(k, float(plan_time[k]), rows)
-            for idx, c, trq, q, qd in zip(self.fingers, ctrl_rows, tau, q_ref, qd_ref,
-                                          strict=True):
+            for lp in loops:
+                w = lp.weight[k]
+                if w <= 0.0:
+                    lp.integral = 0.0
+                    tau_fb[lp.k][:] = 0.0
+                    continue
+                # the measured normal force: the previous step's
+                error = lp.target[k] - (normal_force[k - 1, lp.j] if k > 0 else 0.0)
+                integral = lp.integral + o.force_ki * error * dt
+                if abs(o.force_kp * error + integral) <= o.force_limit:
+                    lp.integral = integral  # held while clipped: anti-windup
+                u = min(max(o.force_kp * error + lp.integral, -o.force_limit),
+                        o.force_limit) + lp.extra[k]
+                np.multiply(lp.unit[k], w * u, out=tau_fb[lp.k])
+            for idx, c, trq, q, qd, fb in zip(self.fingers, ctrl_rows, tau, q_ref, qd_ref,
+                                              tau_fb, strict=True):
                 d.ctrl[idx.actuators] = c[k]
-                d.qfrc_applied[idx.dofs] = trq[k]
+                d.qfrc_applied[idx.dofs] = trq[k] + fb
                 if kinematic:
                     d.qpos[idx.qpos] = q[k]
                     d.qvel[idx.dofs] = qd[k]

@@ -203,6 +203,9 @@ class ExecutionPlan:
     #: the grip's squeeze [m] this plan is executed with unless the options give one
     #: (None: :data:`SimOptions.DEFAULT_SQUEEZE`)
     squeeze: float | None = None
+    #: the force control (``SimOptions.force_control``) this plan is executed with unless
+    #: the options give one (None: 'off')
+    force_control: str | None = None
 
     @property
     def duration(self) -> float:

@@ -431,6 +431,9 @@ class UserModelSimulation:
             notes.append(f"{f.name}: feed-forward = {src} + the model's gravity, Coriolis "
                          f"and passive forces at the reference; squeeze "
                          f"{o.squeeze_for(plan) * 1e3:g} mm")
+        notes.append("force control: off (the user's model is driven through its own "
+                     "actuators; contact-force feedback runs on dexroll's scene only)"
+                     if o.force_control == "pi" else "force control: off")
         return offsets, torques, notes
 
     # -- the run --------------------------------------------------------------------------

@@ -52,6 +52,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--squeeze", type=float, metavar="MM",
                         help="how far the fingertips' references go into the object "
                              "[mm] (default 0.5)")
+    parser.add_argument("--force-control", choices=("off", "pi"),
+                        help="pi: contact-force feedback on the plan's forces (a gait's "
+                             "default); off: the planned forces fed forward only (every "
+                             "other plan's default)")
     parser.add_argument("--grip-force", type=float, metavar="N",
                         help="each fingertip's push along its normal as torque "
                              "feed-forward [N] (default 1)")
@@ -87,6 +91,8 @@ def options_of(args: argparse.Namespace) -> dict[str, Any]:
         out["mode"] = args.mode
     if args.squeeze is not None:
         out["squeeze"] = args.squeeze * 1e-3
+    if args.force_control is not None:
+        out["force_control"] = args.force_control
     if args.grip_force is not None:
         out["grip_force"] = args.grip_force
     if args.kp is not None:

@@ -12,12 +12,19 @@ from ocp import GaitPlan, GaitSamples, gait_samples, gait_times
 
 from . import finger_spec
 
-__all__ = ["GAIT_SQUEEZE", "gait_execution_plan", "samples_execution_plan"]
+__all__ = ["GAIT_FORCE_CONTROL", "GAIT_SQUEEZE", "gait_execution_plan",
+           "samples_execution_plan"]
 
 #: A gait's squeeze [m] (the simulator's default is 0.5 mm): a fifth, measured in
 #: docs/gait.md "Executed" (the fingertips' unbalanced squeezes turn the ball while it
 #: rolls; a gait rolls many times).
 GAIT_SQUEEZE = 1e-4
+
+#: A gait's force control (``sim.SimOptions.force_control``; 'off' for every other plan):
+#: contact-force feedback on the planned forces, measured in docs/gait.md "Executed" (the
+#: servo alone delivers what the squeezes' geometry makes, and a lightly loaded contact
+#: flickers off).
+GAIT_FORCE_CONTROL = "pi"
 
 
 def gait_execution_plan(gait: GaitPlan, problem: Any, rate: float = 200.0) -> Any:
@@ -37,8 +44,9 @@ def samples_execution_plan(smp: GaitSamples, names: tuple[str, ...], models: tup
                            shape: str, dimensions: tuple[float, ...], mass: float, mu: float,
                            gravity: tuple[float, ...], notes: tuple[str, ...] = ()) -> Any:
     """The simulator's plan of a gait's samples: the fingertips' planned forces fed
-    forward (J^T f), the squeeze :data:`GAIT_SQUEEZE` unless the options give one; a
-    lifted fingertip has no force, no squeeze and no grip (its contact's ``active``)."""
+    forward (J^T f), the squeeze :data:`GAIT_SQUEEZE` and the force control
+    :data:`GAIT_FORCE_CONTROL` unless the options give them; a lifted fingertip has no
+    force, no squeeze, no grip and no force feedback (its contact's ``active``)."""
     from sim import ContactSpec, ExecutionPlan, FingerReference, ObjectSpec
 
     cut = np.cumsum((0, *(int(m.nq) for m in models)))
@@ -51,6 +59,7 @@ def samples_execution_plan(smp: GaitSamples, names: tuple[str, ...], models: tup
                          smp.object_wxyz, specs, refs, contacts, None, mu, None,
                          (float(gravity[0]), float(gravity[1]), float(gravity[2])),
                          ("a gait: planned lift-offs and touch-downs (contacts' activity)",
-                          *notes), squeeze=GAIT_SQUEEZE)
+                          *notes), squeeze=GAIT_SQUEEZE,
+                         force_control=GAIT_FORCE_CONTROL)
     plan.check()
     return plan

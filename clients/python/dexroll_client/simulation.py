@@ -125,6 +125,26 @@ class SimulationOptions(_Request):
                                  description="how far the fingertips' references go into "
                                              "the object along the pad's normal [m] "
                                              "(default 0.0005)")
+    force_control: Literal["off", "pi"] | None = Field(
+        default=None, description="off: the plan's forces fed forward only (J^T f); pi: "
+                                  "contact-force feedback on top, each fingertip's "
+                                  "measured normal force brought to the planned one by a "
+                                  "PI law along the planned normal (docs/simulation.md, "
+                                  "\"Force control\"); default: the plan's own (pi for "
+                                  "a gait), else off")
+    force_kp: Real | None = Field(default=None, ge=0.0, le=100.0,
+                                  description="force control's proportional gain [N/N] "
+                                              "(default 0.1)")
+    force_ki: Real | None = Field(default=None, ge=0.0, le=1e5,
+                                  description="force control's integral gain [1/s] "
+                                              "(default 400)")
+    force_limit: Real | None = Field(default=None, ge=0.0, le=1000.0,
+                                     description="force control's largest correction [N] "
+                                                 "(default 3)")
+    force_min: Real | None = Field(default=None, ge=0.0, le=100.0,
+                                   description="the least normal force [N] force control "
+                                               "holds a contact the plan has touching at "
+                                               "(default 0.5)")
     grip_force: Real | None = Field(default=None, ge=0.0, le=1000.0,
                                     description="each fingertip's push along its normal, "
                                                 "as torque feed-forward J^T f [N] "
