@@ -165,12 +165,13 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                      np.asarray(q_target, dtype=float), np.asarray(landing_normal, float),
                      np.asarray(centre, dtype=float), float(radius), tuple(others),
                      **(swing or {}))
+    if warm is not None and warm.spec.tip_gap is not None:
+        spec = replace(spec, tip_gap=warm.spec.tip_gap)  # its last swing needed it
     plan = plan_swing(spec, warm)
     if plan.status == "infeasible" and spec.tip_gap is None \
             and max(spec.required_gaps(), default=0.0) > MIN_TIP_GAP:
         # the clearance kept from the neighbours too left no path: keep the least gap
-        narrow = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP),
-                            warm if warm is not None and warm.spec.tip_gap else None)
+        narrow = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP))
         if narrow.ok:
             plan = narrow
     if not plan.ok:
