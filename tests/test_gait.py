@@ -249,3 +249,28 @@ def test_a_swing_between_close_neighbours_keeps_the_least_tip_gap() -> None:
     assert max(step.swing.spec.required_gaps()) <= MIN_TIP_GAP + 1e-12
     cert = step.checks("s", 0.0, LOAD, 0.5)
     assert all(c.passed for c in cert), [c.failure for c in cert if not c.passed]
+
+
+def test_a_rolls_clock_starts_and_ends_still_and_keeps_its_path() -> None:
+    """ocp.gait.warp.RollClock: s(tau) runs the plan's whole duration, never faster than
+    the plan (rates scaled by s' <= 1), from rest to rest with s' and the accelerations zero
+    at both ends; its rates and accelerations are the derivatives of its positions
+    (finite differences of a path q(s) run on it)."""
+    from ocp.gait.warp import RollClock
+
+    clock = RollClock.of(1.4)
+    tau = np.linspace(0.0, clock.length, 20001)
+    s, v, a = clock(tau)
+    assert s[0] == 0.0 and abs(s[-1] - 1.4) < 1e-12 and np.all(np.diff(s) >= 0.0)
+    assert v[0] == 0.0 and v[-1] == 0.0 and v.max() <= 1.0 + 1e-12
+    D = clock.duration  # a plan at rest at both ends, as a roll is: smoothstep in s
+    x = s / D
+    q0, q1, q2 = 3 * x**2 - 2 * x**3, (6 * x - 6 * x**2) / D, (6 - 12 * x) / D**2
+    q, qd, qdd = clock.joints(np.column_stack([q0, q0**2]),
+                              np.column_stack([q1, 2 * q0 * q1]),
+                              np.column_stack([q2, 2 * q1**2 + 2 * q0 * q2]), v, a)
+    assert np.abs(qd[[0, -1]]).max() < 1e-12 and np.abs(qdd[[0, -1]]).max() < 1e-12
+    h = tau[1] - tau[0]
+    assert np.abs(np.gradient(q, h, axis=0)[1:-1] - qd[1:-1]).max() < 1e-3
+    assert np.abs(np.gradient(qd, h, axis=0)[2:-2] - qdd[2:-2]).max() < 1e-2
+    assert abs(clock.tau_of(0.7) - (0.7 + clock.ramp / 2)) < 1e-6

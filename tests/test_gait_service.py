@@ -94,6 +94,16 @@ def test_a_gait_is_planned_and_executed_over_http(live_server: Server) -> None:
         for p in gait.phases:
             at = int(np.argmin(np.abs(t - p.end)))
             assert abs(t[at] - p.end) < 1e-9 and np.abs(qd[at]).max() < 1e-6
+        # ... and the accelerations continuous too: zero at every switch (a roll starts and
+        # ends still on its clock, a swing at rest, a hold is still), and no step between
+        # samples beyond what a bounded jerk allows
+        qdd = np.array([p.accelerations for p in jt.points])
+        for p in gait.phases:
+            for edge in (p.start, p.end):
+                at = int(np.argmin(np.abs(t - edge)))
+                assert abs(t[at] - edge) < 1e-9 and np.abs(qdd[at]).max() < 1e-6, edge
+        jerk = np.abs(np.diff(qdd, axis=0)).max(axis=1) / np.diff(t)
+        assert jerk.max() < 2000.0  # rad/s^3: a jump of 1 rad/s^2 in one 10 ms sample fails
         # the ball turned by the request about its axis, its centre held (tracking 1 mm,
         # 1 deg)
         R = _matrix(gait.samples.object_orientation_wxyz[-1])

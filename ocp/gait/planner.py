@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate, Check, CheckKind
 from ocp.gait.step import GaitStep, contact_of, liftable, replace_finger
+from ocp.gait.warp import RollClock
 from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
 from ocp.solution import ManipulationSolution
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
@@ -69,6 +70,9 @@ class GaitPlan:
     nq: tuple[int, ...] = ()
     #: the fingers the others cannot hold the ball without: they roll throughout
     never_lifted: tuple[str, ...] = ()
+    #: each roll's clock (:mod:`ocp.gait.warp`): its plan run so that it starts and ends
+    #: still (the joints' accelerations continuous with the holds')
+    clocks: list[RollClock] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -84,8 +88,8 @@ class GaitPlan:
         unload and load)."""
         ph = next((p for p in self.phases if t <= p.end), self.phases[-1])
         if ph.kind == "roll":
-            jt = self.rolls[ph.index].joint_trajectory(np.array([t - ph.start]))
-            return jt.positions[0], jt.velocities[0], jt.accelerations[0]
+            q, v, a = self.roll_joints(ph.index, np.array([t - ph.start]))
+            return q[0], v[0], a[0]
         step = self.steps[ph.index]
         q = self._before(ph.index)
         zero = np.zeros_like(q)
@@ -99,6 +103,21 @@ class GaitPlan:
         if ph.kind == "load":
             q = np.concatenate(step.q_after)
         return q, zero, zero
+
+    def clock(self, r: int) -> RollClock:
+        """Roll ``r``'s clock (its own, unwarped, for a plan made without)."""
+        if r < len(self.clocks):
+            return self.clocks[r]
+        return RollClock(self.rolls[r].duration, 0.0)
+
+    def roll_joints(self, r: int, tau: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(q, q_dot, q_ddot) rows of every finger's joints at the times ``tau`` from roll
+        ``r``'s start on the gait's clock (its plan's polynomials at the warped times)."""
+        clock = self.clock(r)
+        s, v, a = clock(tau)
+        jt = self.rolls[r].joint_trajectory(s, efforts=False)
+        return clock.joints(jt.positions, jt.velocities, jt.accelerations, v, a)
 
     def _before(self, i: int) -> FloatArray:
         """Every finger's joints before gait step ``i`` (concatenated): those after it,
@@ -167,6 +186,40 @@ def carried(sol: ManipulationSolution, model: Any, R_then: FloatArray, R_now: Fl
     X[:, cols.start + 3:cols.start + 7] = Q
     U[:, ucols.start + 3:ucols.start + 6] = U[:, ucols.start + 3:ucols.start + 6] @ C
     return WarmStart(np.asarray(sol.t, dtype=float), X, U)
+
+
+#: Samples per second of a roll's clock at which its joints' rates and accelerations are
+#: checked against their limits.
+CLOCK_SAMPLES = 200
+
+
+def _clock_checks(plan: GaitPlan, r: int, template: ManipulationProblem, t0: float
+                  ) -> list[Check]:
+    """Roll ``r`` on its clock (starting at ``t0``): still at both ends (rates and
+    accelerations zero: continuous with the holds'), its rates and accelerations within
+    the joints' limits, sampled densely."""
+    clock = plan.clock(r)
+    n = max(int(clock.length * CLOCK_SAMPLES), 2)
+    tau = np.linspace(0.0, clock.length, n + 1)
+    _, v, a = plan.roll_joints(r, tau)
+    out = []
+    for end, k in (("start", 0), ("end", -1)):
+        out.append(Check(f"switch_rate_roll{r}_{end}", float(np.abs(v[k]).max()), 1e-9,
+                         CheckKind.PHYSICS, time=t0 + float(tau[k])))
+        out.append(Check(f"switch_acceleration_roll{r}_{end}", float(np.abs(a[k]).max()),
+                         1e-9, CheckKind.PHYSICS, time=t0 + float(tau[k])))
+    vmax = np.concatenate([np.asarray(f.finger.velocity_limit, dtype=float)
+                           for f in template.fingers])
+    over_v = (np.abs(v) / vmax).max(axis=1)
+    k = int(np.argmax(over_v))
+    out.append(Check(f"roll{r}_clock_velocity", float(over_v[k]), 1.0 + 1e-9,
+                     CheckKind.LIMITS, time=t0 + float(tau[k])))
+    acc = np.abs(a).max(axis=1)
+    k = int(np.argmax(acc))
+    out.append(Check(f"roll{r}_clock_acceleration", float(acc[k]),
+                     template.max_joint_acceleration * (1 + 1e-9), CheckKind.LIMITS,
+                     time=t0 + float(tau[k])))
+    return out
 
 
 def _rolled_reach(template: ManipulationProblem, qs: tuple[FloatArray, ...],
@@ -302,9 +355,11 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             break
         r = len(plan.rolls)
         plan.rolls.append(sol)
-        plan.phases.append(GaitPhase("roll", t, t + dur, (True,) * nf, None, r))
+        clock = RollClock.of(dur)
+        plan.clocks.append(clock)
+        plan.phases.append(GaitPhase("roll", t, t + clock.length, (True,) * nf, None, r))
         checks += [replace(c, name=f"roll{r}_{c.name}",
-                           time=None if c.time is None else c.time + t)
+                           time=None if c.time is None else t + clock.tau_of(c.time))
                    for c in sol.certificate.checks]
         if not (sol.ok and sol.certificate.passed):
             plan.status = "failed" if plan.rolls[:-1] or sol.ok else "infeasible"
@@ -312,11 +367,10 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                             f"{math.degrees(done + step):.1f} deg) was not certified: "
                             f"{sol.status}; " + "; ".join(sol.certificate.failures[:3]))
             break
-        jt = sol.joint_trajectory(np.array([dur]))
-        q_end = np.split(jt.positions[0], np.cumsum(plan.nq)[:-1])
-        checks.append(Check(f"switch_rate_roll{r}", float(np.abs(jt.velocities[0]).max()),
-                            1e-9, CheckKind.PHYSICS, time=t + dur))
-        t += dur
+        checks += _clock_checks(plan, r, template, t)
+        q_end = np.split(plan.roll_joints(r, np.array([clock.length]))[0][0],
+                         np.cumsum(plan.nq)[:-1])
+        t += clock.length
         done += step
         pose = ObjectPose(tuple(quaternion_wxyz(sol.object_rotation[-1])),
                           tuple(sol.object_position[-1]))

@@ -86,12 +86,12 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
                 last = end
             continue
         tl = ts[rows] - ph.start
-        if ph.kind == "roll":  # the roll's own polynomials, every time at once
-            jt = sol.joint_trajectory(tl, efforts=False)
-            Q[rows], QD[rows], QDD[rows] = jt.positions, jt.velocities, jt.accelerations
-            smp = sol.sample(tl)
+        if ph.kind == "roll":  # the roll's own polynomials on its clock, every time at once
+            Q[rows], QD[rows], QDD[rows] = gait.roll_joints(ph.index, tl)
+            s = gait.clock(ph.index)(tl)[0]
+            smp = sol.sample(s)
             pos[rows], wxyz[rows] = smp.object_position, quaternion_wxyz(smp.object_rotation)
-            force[rows], torsion[rows] = sol.forces(tl)
+            force[rows], torsion[rows] = sol.forces(s)
             last = end
             continue
         for r, t in zip(rows, ts[rows], strict=True):
