@@ -274,3 +274,38 @@ def test_a_rolls_clock_starts_and_ends_still_and_keeps_its_path() -> None:
     assert np.abs(np.gradient(q, h, axis=0)[1:-1] - qd[1:-1]).max() < 1e-3
     assert np.abs(np.gradient(qd, h, axis=0)[2:-2] - qdd[2:-2]).max() < 1e-2
     assert abs(clock.tau_of(0.7) - (0.7 + clock.ramp / 2)) < 1e-6
+
+
+def test_a_hold_keeps_its_forces_deep_in_the_cones_but_not_large() -> None:
+    """The thumb lifted from the grasp searched for 90 deg about the palm's +z
+    (tests/data/gait_deep_hold.json): the deepest narrowing that holds the ball (0.2 rad)
+    asks 24.5 N of a fingertip, which MuJoCo's servos then drop to a roll's 0.5 N in 0.2 s;
+    the hold takes the deepest whose normal forces stay within HOLD_FORCE_FACTOR times the
+    ball's weight, and its forces hold the ball inside the narrowed cones."""
+    import json
+    from pathlib import Path
+
+    from ocp.gait.hold import (HOLD_FORCE_FACTOR, Hold, deep_hold_forces, hold_forces,
+                               hold_residuals)
+
+    d = json.loads((Path(__file__).parent / "data" / "gait_deep_hold.json").read_text())
+    hold = Hold(*(np.array(d[k]) for k in ("points", "normals", "centre", "rotation")))
+    load = np.array(d["load"])
+    weight = float(np.linalg.norm(load[0:3]))
+
+    def narrowed(extra: float) -> np.ndarray:
+        out = load.copy()
+        out[6] = math.tan(math.atan(load[6]) - extra)
+        out[7] = load[7] * out[6] / load[6]
+        return out
+
+    def top(F: np.ndarray) -> float:
+        return float((-np.einsum("ij,ij->i", F, hold.normals)).max())
+
+    deepest = hold_forces(hold, narrowed(0.2), RHO)
+    assert deepest is not None and top(deepest) > HOLD_FORCE_FACTOR * weight
+    F, extra = deep_hold_forces(hold, load, RHO)
+    assert F is not None and 0.0 < extra < 0.2
+    assert top(F) <= HOLD_FORCE_FACTOR * weight
+    res = hold_residuals(hold, F, narrowed(extra), np.full(len(F), float(load[3])))
+    assert res.equilibrium < 1e-6 and res.normal_margin > -1e-6 and res.cone_margin > -1e-6
