@@ -269,7 +269,8 @@ class ExecutionPlan:
                          for c in self.contacts],
             "palm_half_extent": self.palm_half_extent, "mu": self.mu,
             "torsional_friction": self.torsional_friction, "gravity": list(self.gravity),
-            "notes": list(self.notes),
+            "notes": list(self.notes), "squeeze": self.squeeze,
+            "force_control": self.force_control,
         }
 
     @staticmethod
@@ -304,6 +305,8 @@ class ExecutionPlan:
                               None if c.get("active") is None else _a(c["active"]))
                   for c in raw["contacts"]),
             raw.get("palm_half_extent"), float(raw["mu"]), raw.get("torsional_friction"),
-            (g[0], g[1], g[2]), tuple(raw.get("notes", ())))
+            (g[0], g[1], g[2]), tuple(raw.get("notes", ())),
+            squeeze=None if raw.get("squeeze") is None else float(raw["squeeze"]),
+            force_control=raw.get("force_control"))
         plan.check()
         return plan

@@ -285,8 +285,7 @@ def test_a_hold_keeps_its_forces_deep_in_the_cones_but_not_large() -> None:
     import json
     from pathlib import Path
 
-    from ocp.gait.hold import (HOLD_FORCE_FACTOR, Hold, deep_hold_forces, hold_forces,
-                               hold_residuals)
+    from ocp.gait.hold import HOLD_FORCE_FACTOR, Hold, deep_hold_forces, hold_forces, hold_residuals
 
     d = json.loads((Path(__file__).parent / "data" / "gait_deep_hold.json").read_text())
     hold = Hold(*(np.array(d[k]) for k in ("points", "normals", "centre", "rotation")))

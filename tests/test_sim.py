@@ -257,6 +257,10 @@ def test_the_scene_is_the_plans(plans: dict[str, tuple[AnyPlanResult, PlanReques
         assert d.site_xpos[idx.tip_site] == pytest.approx(track.tip_position[0], abs=1e-9)
     # the JSON form of the plan is the same plan: the same run, number for number
     again = ExecutionPlan.from_dict(json.loads(json.dumps(plan.to_dict())))
+    # ... with a plan's own squeeze and force control (a gait's) carried too
+    own = replace(plan, squeeze=1e-4, force_control="pi")
+    back = ExecutionPlan.from_dict(json.loads(json.dumps(own.to_dict())))
+    assert (back.squeeze, back.force_control) == (1e-4, "pi")
     options = SimOptions(settle=0.05)
     short = replace(plan, t=plan.t[:9], object_position=plan.object_position[:9],
                     object_wxyz=plan.object_wxyz[:9],
