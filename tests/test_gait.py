@@ -308,3 +308,23 @@ def test_a_hold_keeps_its_forces_deep_in_the_cones_but_not_large() -> None:
     assert top(F) <= HOLD_FORCE_FACTOR * weight
     res = hold_residuals(hold, F, narrowed(extra), np.full(len(F), float(load[3])))
     assert res.equilibrium < 1e-6 and res.normal_margin > -1e-6 and res.cone_margin > -1e-6
+
+
+def test_a_rolls_tip_gaps_are_the_least_over_its_samples_and_every_pair() -> None:
+    """ocp.gait.planner.tips_gaps, the gait certificate's check that rolling fingertips
+    stay apart: at the nominal grasp it is grasp_reach.tips_gap's least pair distance;
+    with the middle finger swung into the index it is negative (an overlap) at that
+    sample."""
+    from ocp.gait.planner import tips_gaps
+    from ocp.robots.grasp_reach import tips_gap
+
+    nq = tuple(int(f.nq) for f in FINGERS)
+    nominal = np.concatenate(QS)
+    into = [q.copy() for q in QS]
+    into[1][0] = FINGERS[1].upper[0]  # middle_j0 to its limit, toward the index...
+    into[0][0] = FINGERS[0].lower[0]  # ... and the index toward the middle
+    assert tips_gap(FINGERS, into) < 0.0  # the bodies overlap (this test's premise)
+    gap, at = tips_gaps(FINGERS, np.vstack([nominal, np.concatenate(into), nominal]), nq)
+    assert at == 1 and gap == pytest.approx(tips_gap(FINGERS, into), abs=1e-12)
+    gap0, _ = tips_gaps(FINGERS, nominal[None], nq)
+    assert gap0 == pytest.approx(tips_gap(FINGERS, QS), abs=1e-12) and gap0 > 0.0

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Certificate, Check, CheckKind
 from ocp.gait.step import GaitStep, contact_of, liftable, replace_finger
 from ocp.gait.warp import RollClock
+from ocp.geometry.bodies import segments_distance, tip_body
 from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
 from ocp.solution import ManipulationSolution
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
@@ -219,7 +220,38 @@ def _clock_checks(plan: GaitPlan, r: int, template: ManipulationProblem, t0: flo
     out.append(Check(f"roll{r}_clock_acceleration", float(acc[k]),
                      template.max_joint_acceleration * (1 + 1e-9), CheckKind.LIMITS,
                      time=t0 + float(tau[k])))
+    # the fingertips' bodies apart from each other while they roll (the rolling NLP has
+    # no rows for it; a swing's own check would find the overlap a roll left only later)
+    q = plan.roll_joints(r, tau[::TIP_GAP_STRIDE])[0]
+    gap, at = tips_gaps(tuple(f.finger for f in template.fingers), q, plan.nq)
+    out.append(Check(f"roll{r}_tip_gap", gap, -TIP_GAP_TOL, CheckKind.PHYSICS,
+                     lower_bound=True, time=t0 + float(tau[::TIP_GAP_STRIDE][at])))
     return out
+
+
+#: Every how many of a roll's clock samples its fingertips' gaps are measured (40 a
+#: second), and how far two tips' bodies may overlap [m] before the check fails.
+TIP_GAP_STRIDE = 5
+TIP_GAP_TOL = 1e-5
+
+
+def tips_gaps(fingers: tuple[Any, ...], q: FloatArray, nq: tuple[int, ...]
+              ) -> tuple[float, int]:
+    """(the least distance [m] between two fingertips' bodies over the joint rows ``q``
+    (every finger's, concatenated; < 0: overlap), the row where it is)."""
+    cut = np.cumsum((0, *nq))
+    segs = []
+    for c, f in enumerate(fingers):
+        body = tip_body(f)
+        ends = [body.placed(*f.fingertip_pose_pin(row[cut[c]:cut[c + 1]])) for row in q]
+        segs.append((np.array([e[0] for e in ends]), np.array([e[1] for e in ends]),
+                     body.r))
+    gaps = np.full(len(q), np.inf)
+    for i, (a0, b0, r0) in enumerate(segs):
+        for a1, b1, r1 in segs[i + 1:]:
+            gaps = np.minimum(gaps, segments_distance(a0, b0, a1, b1) - r0 - r1)
+    k = int(np.argmin(gaps))
+    return float(gaps[k]), k
 
 
 def _rolled_reach(template: ManipulationProblem, qs: tuple[FloatArray, ...],
