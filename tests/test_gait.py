@@ -362,3 +362,44 @@ def test_an_initial_grasp_a_few_nanoradians_off_its_fingers_reach_is_accepted() 
     with pytest.raises(ProblemError) as err:
         planner.initial_state(moved(1e-6))
     assert err.value.errors[0][0] == "fingers[3].initial" and IK_ACCEPT < 1e-6
+
+
+#: The grasp the search found for 90 deg about the palm's -z (examples/allegro_turn_90.json
+#: with that axis): its index and middle bodies 2.79 mm apart, closing as the ball turns.
+NEG_Z_GRASP = (np.array([-0.155391, 0.855795, 0.016562, 1.606769]),
+               np.array([0.354379, -0.041106, 1.579601, 0.576375]),
+               np.array([0.087103, 0.304557, 1.644007, 0.028379]),
+               np.array([1.119174, 0.677932, 0.880797, 0.569822]))
+
+
+def test_a_roll_is_cut_before_two_fingertips_come_closer_than_the_kept_gap() -> None:
+    """ocp.gait.planner._gap_reach: the fingers' rolled motion (every 4-joint finger's
+    fixed by the ball's, grasp_reach.roll) from the -z grasp brings the index's and the
+    middle's bodies into each other within 10 deg; the reach stops the roll where they
+    are ROLL_TIP_GAP apart: at it the gap is that (within the linear interpolation's
+    error), a degree on it is less."""
+    from ocp.gait.planner import ROLL_TIP_GAP, _gap_reach, tips_gaps
+    from ocp.robots.grasp_reach import roll
+
+    nq = tuple(int(f.nq) for f in FINGERS)
+    ax = np.array([0.0, 0.0, -1.0])
+    template = dataclasses.replace(TEMPLATE, fingers=fingertips_from_joints(
+        FINGERS, NEG_Z_GRASP, OBJ, POSE, ("index", "middle", "ring", "thumb"),
+        ("q0", "q1", "q2", "q3")))
+
+    def gap_after(turn: float) -> float:
+        moved = [roll(f, q, CENTRE, RHO, ax, turn) for f, q in zip(FINGERS, NEG_Z_GRASP,
+                                                                   strict=True)]
+        assert not any(m.why for m in moved)  # no finger stops: only the gap cuts
+        return tips_gaps(FINGERS, np.concatenate([m.q for m in moved])[None], nq)[0]
+
+    assert tips_gaps(FINGERS, np.concatenate(NEG_Z_GRASP)[None], nq)[0] > 2e-3
+    assert gap_after(math.radians(10.0)) < 0.0  # the whole roll: an overlap (the premise)
+    apart, need = _gap_reach(template, NEG_Z_GRASP, CENTRE, RHO, ax, math.radians(10.0))
+    assert need == ROLL_TIP_GAP
+    assert math.radians(1.0) < apart < math.radians(10.0)
+    assert gap_after(apart) == pytest.approx(need, abs=2e-5)
+    assert gap_after(apart + math.radians(1.0)) < need - 1e-4
+    # a turn the gap does not cut is returned whole
+    short, _ = _gap_reach(template, NEG_Z_GRASP, CENTRE, RHO, ax, apart * 0.9)
+    assert short == pytest.approx(apart * 0.9, abs=1e-15)

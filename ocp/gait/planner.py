@@ -146,6 +146,47 @@ def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
                    duration=duration)
 
 
+#: The least distance [m] a roll is planned to keep between two fingertips' bodies: the
+#: turn is cut where the fingers' rolled motion would bring two closer
+#: (:func:`_gap_reach`); a grasp that starts closer keeps 90 % of its gap.
+ROLL_TIP_GAP = 5e-4
+#: Points of a roll's predicted motion at which the tips' gaps are measured.
+GAP_REACH_SAMPLES = 10
+
+
+def _gap_reach(template: ManipulationProblem, qs: tuple[FloatArray, ...],
+               centre: FloatArray, rho: float, axis: FloatArray, upto: float
+               ) -> tuple[float, float]:
+    """(the turn [rad] about ``axis``, at most ``upto``, before the fingers' rolled motion
+    (:func:`~ocp.robots.grasp_reach.roll`, every finger's motion fixed by the ball's)
+    brings two fingertips' bodies closer than ``need``, the gap kept: ROLL_TIP_GAP or 90 %
+    of the grasp's own). Sampled at :data:`GAP_REACH_SAMPLES` points of the turn, the
+    crossing interpolated linearly; ``upto`` when some finger's motion is not fixed by the
+    ball's (the rolls' certificate measures their gaps still)."""
+    from ocp.robots.grasp_reach import roll
+    from ocp.robots.turn_reach import rolls
+
+    fingers = tuple(f.finger for f in template.fingers)
+    nq = tuple(len(q) for q in qs)
+    g0, _ = tips_gaps(fingers, np.concatenate(qs)[None], nq)
+    need = min(ROLL_TIP_GAP, 0.9 * g0)
+    if not all(rolls(f) for f in fingers) or not math.isfinite(g0):
+        return upto, need
+    h = upto / GAP_REACH_SAMPLES
+    q = [np.asarray(v, dtype=float) for v in qs]
+    g_prev, th = g0, 0.0
+    for _ in range(GAP_REACH_SAMPLES):
+        moved = [roll(f, qi, centre, rho, axis, h) for f, qi in zip(fingers, q, strict=True)]
+        if any(m.why for m in moved):  # a stop: the rolled reach cuts the turn there
+            return upto, need
+        q = [m.q for m in moved]
+        g, _ = tips_gaps(fingers, np.concatenate(q)[None], nq)
+        if g < need:
+            return th + h * (g_prev - need) / max(g_prev - g, 1e-12), need
+        g_prev, th = g, th + h
+    return upto, need
+
+
 #: A roll the fingers' rolled reach shortens stops this far before the reach: the larger
 #: of a degree and a tenth of it (docs/hands.md: turns 1 deg inside the reach were planned,
 #: 3 deg beyond were not).
@@ -370,6 +411,19 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 plan.message = _stopped(who, why, done + max(reach, 0.0), angle, ax,
                                         who in never_lifted)
                 break
+        # the tips' gaps: a turn that would bring two together stops before
+        apart, need = _gap_reach(template, q_now, np.asarray(pose.position, float), rho, ax,
+                                 step)
+        if apart < step:
+            if apart < MIN_ROLL:
+                plan.status = "infeasible"
+                plan.message = (f"two fingertips come within {need * 1e3:.2f} mm of each "
+                                f"other after {math.degrees(done + max(apart, 0.0)):.1f} "
+                                f"deg of {math.degrees(angle):.1f} deg about "
+                                f"({', '.join(f'{c:.3g}' for c in ax)}): the grasp cannot "
+                                "roll on")
+                break
+            step = apart
         target = axis_angle_rotation(ax, done + step) @ R0
         dur = max(1.0, seconds_per_radian * step)
         prob = _roll_problem(template, q_now, pose, target, centre, dur)
