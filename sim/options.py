@@ -18,8 +18,10 @@ __all__ = ["FORCE_CONTROLS", "MODES", "SimOptions", "Tolerances"]
 MODES = ("servo", "kinematic", "replay")
 
 #: 'off': the planned forces are fed forward only (J^T f); 'pi': contact-force feedback
-#: on top, per fingertip with a planned force (see :class:`SimOptions`).
-FORCE_CONTROLS = ("off", "pi")
+#: on top as joint torques, per fingertip with a planned force; 'admittance': the same
+#: feedback as a shift of the servo's set point along the contact normal (see
+#: :class:`SimOptions`).
+FORCE_CONTROLS = ("off", "pi", "admittance")
 
 
 @dataclass(frozen=True)
@@ -65,13 +67,28 @@ class SimOptions:
     contact normal as joint torques ``J^T n u``, ``u`` a PI law: ``force_kp`` [N/N] times
     the error plus ``force_ki`` [1/s] times its integral, ``u`` clipped to
     ``±force_limit`` [N] and the integral held while clipped (anti-windup). The target
-    is the planned normal force, but at least ``force_min`` [N] (the planner's least
-    normal force) where the plan counts the contact as touching (activity 0.5 and up;
-    from none at 0.25), the difference fed forward. The feedback is off while the
-    fingertip is lifted (activity 0: its integral reset), full from activity 0.25 (the
-    lift-off and approach) up, and ramps with the grip while settling. The servo and the
+    is the planned normal force, but at least ``force_min`` [N] where the plan counts the
+    contact as touching (activity 0.5 and up; from none at 0.25), the difference fed
+    forward: 0.65 N, a margin over the planner's least normal force (0.5 N; a contact
+    held at exactly that flickered off by fractions of a micrometre, docs/gait.md). The
+    feedback is off while the fingertip is lifted (activity 0: its integral reset), full
+    from activity 0.25 (the lift-off and approach) up, and ramps with the grip while
+    settling. The servo and the
     squeeze stay as they are (the feedback adds to them); the report's notes say which
     ran.
+
+    With 'admittance' (a gait's default) the same error (the same target, weight and
+    ramps) moves the servo's set point instead of adding a torque: the fingertip's set
+    point shifts along the planned normal into the object by ``d``, ``force_shift_ki``
+    [m/(N s)] times the integral of the error, kept within [0, ``force_shift_limit``]
+    [m] (it pushes in, never pulls out past the plan's own set point; reset while the
+    fingertip is lifted); the joints by ``J^T n d / |J^T n|^2``, which moves the tip by
+    ``d`` along the normal to first order. The floor's excess over the plan is fed
+    forward as torque. Why: a torque pushes against the stiff servo (at ``kp`` = 200
+    N m/rad and ``force_limit`` 3 N a fingertip moves some 25 um), so a contact the
+    others hold the object 30 um away from stays lost under 'pi'; a shifted set point
+    closes it. The shift's bound keeps the fingers from pushing the object around (at
+    0.5 mm a 90 deg gait drifted 0.7 mm and 2.2 deg).
 
     Before the plan's t = 0 the hand holds the initial grasp for ``settle`` [s]: the grip
     ramps up with the object held in place during the first half, then the object is let
@@ -96,7 +113,9 @@ class SimOptions:
     force_kp: float = 0.1
     force_ki: float = 400.0
     force_limit: float = 3.0
-    force_min: float = 0.5
+    force_min: float = 0.65
+    force_shift_ki: float = 2e-2
+    force_shift_limit: float = 2e-4
     grip_force: float = 1.0
     use_plan_forces: bool = True
     object_mass: float | None = None
@@ -153,7 +172,7 @@ class SimOptions:
             raise ValueError("squeeze must be finite and >= 0")
         for name in ("kv", "grip_force", "settle", "link_mass", "armature",
                      "rolling_friction", "force_kp", "force_ki", "force_limit",
-                     "force_min"):
+                     "force_min", "force_shift_ki", "force_shift_limit"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0")

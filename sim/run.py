@@ -122,7 +122,7 @@ class _ForceLoop:
     contact's normal ``unit`` (steps x joints), the feedback's ``weight``, the
     ``target`` normal force [N] (the planned one, at least the floor) and ``extra``, the
     target less the planned force (fed forward); ``integral`` the PI law's integral
-    term [N]."""
+    term [N], ``shift`` the admittance's set-point shift along the normal [m]."""
 
     k: int
     j: int
@@ -131,6 +131,7 @@ class _ForceLoop:
     target: FloatArray
     extra: FloatArray
     integral: float = 0.0
+    shift: float = 0.0
 
 
 @dataclass
@@ -259,7 +260,8 @@ class Simulation:
         the planned one, at least ``force_min`` where the contact counts as touching
         (activity :data:`ACTIVE_SHARE` and up; from none at :data:`SQUEEZE_FROM`)."""
         plan, m = self.plan, self.model
-        if self.options.force_control != "pi" or self.options.mode != "servo":
+        if self.options.force_control not in ("pi", "admittance") or \
+                self.options.mode != "servo":
             return []
         d = mujoco.MjData(m)
         jacp = np.zeros((3, m.nv))
@@ -312,7 +314,20 @@ class Simulation:
             tau.append(ramp[:, None] * _linear(plan.t, trq, ts))
         planned_force = self._planned_normal_forces(ts)
         loops = self._force_loops(ts, ramp, planned_force)
-        if o.force_control == "pi":
+        shifting = o.force_control == "admittance"
+        if o.force_control == "admittance":
+            notes.append(
+                f"force control: admittance (the servo's set point shifted along the "
+                f"planned normal by {o.force_shift_ki:g} m/(N s) times the integral of "
+                f"the normal force's error, at most {o.force_shift_limit * 1e3:g} mm; at "
+                f"least {o.force_min:g} N while touching) for "
+                f"{', '.join(plan.contacts[lp.j].name for lp in loops)}"
+                if loops else
+                f"force control: admittance asked, but off ({o.mode} mode)"
+                if o.mode != "servo"
+                else "force control: admittance asked, but no contact has a planned "
+                     "force: off")
+        elif o.force_control == "pi":
             notes.append(
                 f"force control: PI contact-force feedback (gains {o.force_kp:g} N/N, "
                 f"{o.force_ki:g} 1/s, at most {o.force_limit:g} N; at least "
@@ -325,6 +340,7 @@ class Simulation:
             notes.append("force control: off (the servo with the planned forces fed "
                          "forward)")
         tau_fb = [np.zeros(len(idx.dofs)) for idx in self.fingers]
+        shift = [np.zeros(len(idx.dofs)) for idx in self.fingers]  # admittance [rad]
         pos_ref = _linear(plan.t, plan.object_position, ts)
         quat_ref = slerp(plan.t, plan.object_wxyz, ts)
         vel_ref = np.gradient(pos_ref, dt, axis=0) if ts.size > 1 else np.zeros_like(pos_ref)
@@ -358,20 +374,29 @@ class Simulation:
             for lp in loops:
                 w = lp.weight[k]
                 if w <= 0.0:
-                    lp.integral = 0.0
+                    lp.integral = lp.shift = 0.0
                     tau_fb[lp.k][:] = 0.0
+                    shift[lp.k][:] = 0.0
                     continue
                 # the measured normal force: the previous step's
                 error = lp.target[k] - (normal_force[k - 1, lp.j] if k > 0 else 0.0)
+                if shifting:
+                    lp.shift = min(max(lp.shift + o.force_shift_ki * error * dt, 0.0),
+                                   o.force_shift_limit)
+                    unit = lp.unit[k]
+                    np.multiply(unit, w * lp.shift / max(float(unit @ unit), 1e-12),
+                                out=shift[lp.k])
+                    np.multiply(unit, w * lp.extra[k], out=tau_fb[lp.k])
+                    continue
                 integral = lp.integral + o.force_ki * error * dt
                 if abs(o.force_kp * error + integral) <= o.force_limit:
                     lp.integral = integral  # held while clipped: anti-windup
                 u = min(max(o.force_kp * error + lp.integral, -o.force_limit),
                         o.force_limit) + lp.extra[k]
                 np.multiply(lp.unit[k], w * u, out=tau_fb[lp.k])
-            for idx, c, trq, q, qd, fb in zip(self.fingers, ctrl_rows, tau, q_ref, qd_ref,
-                                              tau_fb, strict=True):
-                d.ctrl[idx.actuators] = c[k]
+            for idx, c, trq, q, qd, fb, sh in zip(self.fingers, ctrl_rows, tau, q_ref,
+                                                  qd_ref, tau_fb, shift, strict=True):
+                d.ctrl[idx.actuators] = c[k] + sh
                 d.qfrc_applied[idx.dofs] = trq[k] + fb
                 if kinematic:
                     d.qpos[idx.qpos] = q[k]

@@ -52,10 +52,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--squeeze", type=float, metavar="MM",
                         help="how far the fingertips' references go into the object "
                              "[mm] (default 0.5)")
-    parser.add_argument("--force-control", choices=("off", "pi"),
-                        help="pi: contact-force feedback on the plan's forces (a gait's "
-                             "default); off: the planned forces fed forward only (every "
-                             "other plan's default)")
+    parser.add_argument("--force-control", choices=("off", "pi", "admittance"),
+                        help="admittance: contact-force feedback on the plan's forces "
+                             "as a shift of the servo's set point (a gait's default); pi: "
+                             "the same feedback as joint torques; off: the planned forces "
+                             "fed forward only (every other plan's default)")
     parser.add_argument("--grip-force", type=float, metavar="N",
                         help="each fingertip's push along its normal as torque "
                              "feed-forward [N] (default 1)")

@@ -21,10 +21,11 @@ __all__ = ["GAIT_FORCE_CONTROL", "GAIT_SQUEEZE", "gait_execution_plan",
 GAIT_SQUEEZE = 1e-4
 
 #: A gait's force control (``sim.SimOptions.force_control``; 'off' for every other plan):
-#: contact-force feedback on the planned forces, measured in docs/gait.md "Executed" (the
-#: servo alone delivers what the squeezes' geometry makes, and a lightly loaded contact
-#: flickers off).
-GAIT_FORCE_CONTROL = "pi"
+#: contact-force feedback on the planned forces as a shift of the servos' set points,
+#: measured in docs/gait.md "Executed" (the servo alone delivers what the squeezes'
+#: geometry makes, and a lightly loaded contact flickers off; feedback as torque cannot
+#: bend the stiff servo far enough to close a 30 um gap).
+GAIT_FORCE_CONTROL = "admittance"
 
 
 def gait_execution_plan(gait: GaitPlan, problem: Any, rate: float = 200.0) -> Any:

@@ -125,13 +125,15 @@ class SimulationOptions(_Request):
                                  description="how far the fingertips' references go into "
                                              "the object along the pad's normal [m] "
                                              "(default 0.0005)")
-    force_control: Literal["off", "pi"] | None = Field(
+    force_control: Literal["off", "pi", "admittance"] | None = Field(
         default=None, description="off: the plan's forces fed forward only (J^T f); pi: "
                                   "contact-force feedback on top, each fingertip's "
                                   "measured normal force brought to the planned one by a "
-                                  "PI law along the planned normal (docs/simulation.md, "
-                                  "\"Force control\"); default: the plan's own (pi for "
-                                  "a gait), else off")
+                                  "PI law along the planned normal as joint torques; "
+                                  "admittance: the same error shifts the servo's set "
+                                  "point along the planned normal (docs/simulation.md, "
+                                  "\"Force control\"); default: the plan's own "
+                                  "(admittance for a gait), else off")
     force_kp: Real | None = Field(default=None, ge=0.0, le=100.0,
                                   description="force control's proportional gain [N/N] "
                                               "(default 0.1)")
@@ -144,7 +146,16 @@ class SimulationOptions(_Request):
     force_min: Real | None = Field(default=None, ge=0.0, le=100.0,
                                    description="the least normal force [N] force control "
                                                "holds a contact the plan has touching at "
-                                               "(default 0.5)")
+                                               "(default 0.65)")
+    force_shift_ki: Real | None = Field(default=None, ge=0.0, le=10.0,
+                                        description="admittance force control's gain: the "
+                                                    "set point's shift per unit force "
+                                                    "error and second [m/(N s)] (default "
+                                                    "0.02)")
+    force_shift_limit: Real | None = Field(default=None, ge=0.0, le=0.01,
+                                           description="admittance force control's largest "
+                                                       "shift into the object [m] (default "
+                                                       "0.0005)")
     grip_force: Real | None = Field(default=None, ge=0.0, le=1000.0,
                                     description="each fingertip's push along its normal, "
                                                 "as torque feed-forward J^T f [N] "
