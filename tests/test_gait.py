@@ -403,3 +403,43 @@ def test_a_roll_is_cut_before_two_fingertips_come_closer_than_the_kept_gap() -> 
     # a turn the gap does not cut is returned whole
     short, _ = _gap_reach(template, NEG_Z_GRASP, CENTRE, RHO, ax, apart * 0.9)
     assert short == pytest.approx(apart * 0.9, abs=1e-15)
+
+
+def test_a_swing_beside_a_close_neighbour_keeps_half_its_gap() -> None:
+    """After a roll cut where the index and middle came within ROLL_TIP_GAP and the index
+    was re-placed, the middle fingertip lifts 1.45 mm from it
+    (tests/data/gait_close_neighbour_swing.json: the full bench's four_finger_gait-009,
+    which failed here). Lifting along its normal closes on the index, so neither the
+    clearance nor MIN_TIP_GAP (1 mm) admits a swing; the last fallback keeps
+    NARROW_SHARE of the ends' gaps, and the swing is certified, the bodies apart
+    throughout."""
+    import json
+    from pathlib import Path
+
+    from ocp.gait.checks import swing_checks
+    from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, SwingSpec, plan_swing
+
+    d = json.loads((Path(__file__).parent / "data" / "gait_close_neighbour_swing.json")
+                   .read_text())
+    qs = tuple(np.array(q) for q in d["qs"])
+    k, centre, rho = d["finger"], np.array(d["centre"]), d["radius"]
+    normal, target = np.array(d["landing_normal"]), np.array(d["q_target"])
+    others = []
+    for i in (0, 2, 3):
+        R, p = FINGERS[i].fingertip_pose_pin(qs[i])
+        a, b = tip_body(FINGERS[i]).placed(R, p)
+        others.append((a, b, tip_body(FINGERS[i]).r))
+    spec = SwingSpec(FINGERS[k], qs[k], target, normal, centre, rho, tuple(others))
+    assert min(spec.required_gaps()) < 1.4e-3  # a neighbour within 1.5 mm (the premise)
+    assert plan_swing(spec).status == "infeasible"
+    assert plan_swing(dataclasses.replace(spec, tip_gap=MIN_TIP_GAP)).status == "infeasible"
+    step = replace_finger(FINGERS, qs, k, normal, target, centre, rho,
+                          np.array(d["rotation"]), LOAD)
+    assert step.ok, step.message
+    assert step.swing.spec.neighbour_share == NARROW_SHARE
+    need = step.swing.spec.required_gaps()
+    assert min(need) > 0.7e-3  # half of the 1.45 mm
+    cert = step.checks("s", 0.0, LOAD, 0.5)
+    assert all(c.passed for c in cert), [c.failure for c in cert if not c.passed]
+    gaps = [c for c in swing_checks(step.swing, "s", 0.0) if "tip_gap" in c.name]
+    assert gaps and all(c.value >= 0.7e-3 for c in gaps)

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Check, CheckKind
 from ocp.gait.checks import hold_checks, swing_checks
 from ocp.gait.hold import Hold, deep_hold_forces, hold_forces
-from ocp.gait.swing import MIN_TIP_GAP, SwingPlan, SwingSpec, plan_swing
+from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, SwingPlan, SwingSpec, plan_swing
 from ocp.geometry.bodies import tip_body
 
 __all__ = ["GaitStep", "contact_of", "grasp_hold", "liftable", "replace_finger"]
@@ -166,7 +166,9 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                      np.asarray(centre, dtype=float), float(radius), tuple(others),
                      **(swing or {}))
     if warm is not None and warm.spec.tip_gap is not None:
-        spec = replace(spec, tip_gap=warm.spec.tip_gap)  # its last swing needed it
+        # its last swing needed it
+        spec = replace(spec, tip_gap=warm.spec.tip_gap,
+                       neighbour_share=warm.spec.neighbour_share)
     plan = plan_swing(spec, warm)
     if plan.status == "infeasible" and spec.tip_gap is None \
             and max(spec.required_gaps(), default=0.0) > MIN_TIP_GAP:
@@ -174,6 +176,11 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         narrow = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP))
         if narrow.ok:
             plan = narrow
+    if plan.status == "infeasible" and spec.neighbour_share > NARROW_SHARE:
+        # a neighbour close at the start or the landing: keep half of that gap
+        closer = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP, neighbour_share=NARROW_SHARE))
+        if closer.ok:
+            plan = closer
     if not plan.ok:
         return GaitStep(k, plan.status, plan.message, plan)
     q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)

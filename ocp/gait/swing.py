@@ -55,6 +55,11 @@ FloatArray = NDArray[np.float64]
 #: The least gap [m] from the other tips a swing falls back to when the clearance admits
 #: none (the middle fingertip between two neighbours 1.8 mm away: docs/gait.md).
 MIN_TIP_GAP = 1e-3
+#: The share of a close neighbour's gap (at the start or at the landing) the last
+#: fallback keeps: a roll cut where two tips come within 0.5 mm leaves one to lift off
+#: from 0.5 mm, and lifting along its normal may close on the neighbour by more than the
+#: tenth the first two allow (docs/gait.md, "Rolls and tips").
+NARROW_SHARE = 0.5
 #: Points of the moving tip's segment at which its distance to another tip is kept.
 SEGMENT_SAMPLES = 5
 _IPOPT: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
@@ -94,9 +99,10 @@ class SwingSpec:
     max_joint_acceleration: float = 20.0
     #: the landing contact's least arc from the cap's seam [m]
     cap_margin: float = 0.002
-    #: the least gap [m] kept from the other tips (None: ``clearance``), or 90 % of the
-    #: gap at the start or at the landing if smaller
+    #: the least gap [m] kept from the other tips (None: ``clearance``), or
+    #: ``neighbour_share`` of the gap at the start or at the landing if smaller
     tip_gap: float | None = None
+    neighbour_share: float = 0.9
 
     @property
     def body(self) -> TipBody:
@@ -115,13 +121,13 @@ class SwingSpec:
 
     def required_gaps(self) -> tuple[float, ...]:
         """The least distance kept from each other tip: ``tip_gap`` (None: ``clearance``),
-        or 90 % of the gap at the start or at the landing if smaller."""
+        or ``neighbour_share`` of the gap at the start or at the landing if smaller."""
         out = []
         want = self.clearance if self.tip_gap is None else self.tip_gap
         for a1, b1, r1 in self.others:
             gaps = [_body_gap(self.finger, self.body, q, a1, b1, r1)
                     for q in (self.q_start, self.q_target)]
-            out.append(min(want, 0.9 * min(gaps)))
+            out.append(min(want, self.neighbour_share * min(gaps)))
         return tuple(out)
 
 
