@@ -13,7 +13,7 @@ import pytest
 
 from ocp.gait.checks import swing_checks
 from ocp.gait.step import contact_of, replace_finger
-from ocp.gait.swing import SwingPlan
+from ocp.gait.swing import SwingPlan, SwingSpec
 from ocp.geometry.bodies import tip_body
 from ocp.geometry.rotations import axis_angle_rotation, quaternion_matrix, quaternion_wxyz
 from ocp.robots.allegro import NOMINAL_Q, load_allegro
@@ -49,6 +49,33 @@ def step() -> object:
     """The middle fingertip re-placed 10 deg around the ball, the others holding."""
     return replace_finger(FINGERS, QS, 1, landing(1, 10.0), QS[1], CENTRE, RHO, np.eye(3),
                           LOAD)
+
+
+def spec_joints(d: dict) -> tuple[np.ndarray, ...]:
+    """Every finger's joints of a stored swing case."""
+    return tuple(np.array(q) for q in d["qs"])
+
+
+def stored_swing(name: str) -> tuple[dict, SwingSpec]:
+    """A swing case stored in tests/data (a gait's fingers' joints, the finger lifted,
+    its landing), and its SwingSpec with the defaults: the other tips where their joints
+    put them."""
+    import json
+    from pathlib import Path
+
+    d = json.loads((Path(__file__).parent / "data" / name).read_text())
+    qs = spec_joints(d)
+    k = d["finger"]
+    others = []
+    for i in range(len(FINGERS)):
+        if i == k:
+            continue
+        R, p = FINGERS[i].fingertip_pose_pin(qs[i])
+        a, b = tip_body(FINGERS[i]).placed(R, p)
+        others.append((a, b, tip_body(FINGERS[i]).r))
+    return d, SwingSpec(FINGERS[k], qs[k], np.array(d["q_target"]),
+                        np.array(d["landing_normal"]), np.array(d["centre"]), d["radius"],
+                        tuple(others))
 
 
 def cap_distance(q: np.ndarray, k: int = 1) -> float:
@@ -226,23 +253,12 @@ def test_a_swing_between_close_neighbours_keeps_the_least_tip_gap() -> None:
     gait's swing about the palm's -z) has no swing that keeps the clearance (3 mm, or 90 %
     of the gap at its ends) from its neighbours; the step keeps MIN_TIP_GAP instead, the
     clearance from the ball unchanged, and the swing is certified."""
-    import json
-    from pathlib import Path
+    from ocp.gait.swing import MIN_TIP_GAP, plan_swing
 
-    from ocp.gait.swing import MIN_TIP_GAP, SwingSpec, plan_swing
-
-    d = json.loads((Path(__file__).parent / "data" / "gait_narrow_swing.json").read_text())
-    qs = tuple(np.array(q) for q in d["qs"])
-    k, centre, rho = d["finger"], np.array(d["centre"]), d["radius"]
-    normal, target = np.array(d["landing_normal"]), np.array(d["q_target"])
-    others = []
-    for i in (0, 2, 3):
-        R, p = FINGERS[i].fingertip_pose_pin(qs[i])
-        a, b = tip_body(FINGERS[i]).placed(R, p)
-        others.append((a, b, tip_body(FINGERS[i]).r))
-    spec = SwingSpec(FINGERS[k], qs[k], target, normal, centre, rho, tuple(others))
+    d, spec = stored_swing("gait_narrow_swing.json")
     assert plan_swing(spec).status == "infeasible"
-    step = replace_finger(FINGERS, qs, k, normal, target, centre, rho, np.eye(3), LOAD)
+    step = replace_finger(FINGERS, spec_joints(d), d["finger"], spec.landing_normal,
+                          spec.q_target, spec.centre, spec.radius, np.eye(3), LOAD)
     assert step.ok, step.message
     assert step.swing.spec.tip_gap == MIN_TIP_GAP
     assert step.swing.spec.clearance == spec.clearance
@@ -413,28 +429,16 @@ def test_a_swing_beside_a_close_neighbour_keeps_half_its_gap() -> None:
     clearance nor MIN_TIP_GAP (1 mm) admits a swing; the last fallback keeps
     NARROW_SHARE of the ends' gaps, and the swing is certified, the bodies apart
     throughout."""
-    import json
-    from pathlib import Path
-
     from ocp.gait.checks import swing_checks
-    from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, SwingSpec, plan_swing
+    from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, plan_swing
 
-    d = json.loads((Path(__file__).parent / "data" / "gait_close_neighbour_swing.json")
-                   .read_text())
-    qs = tuple(np.array(q) for q in d["qs"])
-    k, centre, rho = d["finger"], np.array(d["centre"]), d["radius"]
-    normal, target = np.array(d["landing_normal"]), np.array(d["q_target"])
-    others = []
-    for i in (0, 2, 3):
-        R, p = FINGERS[i].fingertip_pose_pin(qs[i])
-        a, b = tip_body(FINGERS[i]).placed(R, p)
-        others.append((a, b, tip_body(FINGERS[i]).r))
-    spec = SwingSpec(FINGERS[k], qs[k], target, normal, centre, rho, tuple(others))
+    d, spec = stored_swing("gait_close_neighbour_swing.json")
     assert min(spec.required_gaps()) < 1.4e-3  # a neighbour within 1.5 mm (the premise)
     assert plan_swing(spec).status == "infeasible"
     assert plan_swing(dataclasses.replace(spec, tip_gap=MIN_TIP_GAP)).status == "infeasible"
-    step = replace_finger(FINGERS, qs, k, normal, target, centre, rho,
-                          np.array(d["rotation"]), LOAD)
+    step = replace_finger(FINGERS, spec_joints(d), d["finger"], spec.landing_normal,
+                          spec.q_target, spec.centre, spec.radius, np.array(d["rotation"]),
+                          LOAD)
     assert step.ok, step.message
     assert step.swing.spec.neighbour_share == NARROW_SHARE
     need = step.swing.spec.required_gaps()
