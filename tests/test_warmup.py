@@ -80,3 +80,25 @@ def test_bad_and_missing_warm_up_requests_are_skipped(tmp_path: Path) -> None:
     assert [name for name, _ in done] == ["triangle.json"]
     assert done[0][1] > 0.0
     assert warm_up([TRIANGLE], palm, FingerCache()) == [("triangle.json", 0.0)]  # cached
+
+
+def test_a_gait_request_warms_its_fingers_swing_nlps_too() -> None:
+    """A gait's swings use one NLP per finger (ocp.gait.swing: 0.75 s to build each on
+    the built-in hand); the warm-up of a gait request builds them with the rolls' NLP,
+    so that its first request pays neither. Warmed again: nothing left to build."""
+    from ocp.gait.swing import _SOLVERS, SwingSpec
+    from planner_service.planners import REQUEST, Planners
+    from planner_service.planners.manipulation import manipulation_problem
+
+    gait = ROOT / "tests" / "data" / "gait_small_request.json"
+    cache = FingerCache()
+    palm = BallOnPalmPlanner()
+    done = warm_up([gait], palm, cache)
+    assert [name for name, _ in done] == [gait.name] and done[0][1] > 0.0
+    problem = manipulation_problem(REQUEST.validate_python(json.loads(gait.read_text())),
+                                   Planners(palm, cache).fingers)
+    fingers = [tip.finger for tip in problem.fingers]
+    for f in fingers:
+        key = (id(f), SwingSpec.n_intervals, SwingSpec.lift_intervals, len(fingers) - 1)
+        assert key in _SOLVERS and _SOLVERS[key][3] is f
+    assert warm_up([gait], palm, cache) == [(gait.name, 0.0)]

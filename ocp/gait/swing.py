@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 from ocp.contacts.base import backed_off_joint_limits
 from ocp.geometry.bodies import TipBody, point_segment_distance, segment_distance, tip_body
 
-__all__ = ["SwingPlan", "SwingSpec", "plan_swing"]
+__all__ = ["SwingPlan", "SwingSpec", "plan_swing", "prepare_swings"]
 
 FloatArray = NDArray[np.float64]
 
@@ -324,6 +324,31 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
     warm = ca.nlpsol("swing_warm", "ipopt", nlp, {**_IPOPT, **_IPOPT_WARM})
     _SOLVERS[key] = (solver, lbg, ubg, f, warm)
     return _SOLVERS[key]
+
+
+def prepare_swings(fingers: tuple[Any, ...], n_intervals: int | None = None,
+                   lift_intervals: int | None = None) -> float:
+    """Build (and keep) the swing NLP of every round fingertip of a grasp of ``fingers``
+    (the others its neighbours), as a gait's swings use them (``n_intervals`` and
+    ``lift_intervals``: :class:`SwingSpec`'s defaults when None), without solving: a
+    service worker's warm-up. Returns the build time [s] (0 when built already)."""
+    import time
+
+    n = SwingSpec.n_intervals if n_intervals is None else int(n_intervals)
+    K = SwingSpec.lift_intervals if lift_intervals is None else int(lift_intervals)
+    t0 = time.perf_counter()
+    built = False
+    for f in fingers:
+        try:
+            body = tip_body(f)
+        except ValueError:  # a flat or spheroid tip: no gait
+            continue
+        key = (id(f), n, K, len(fingers) - 1)
+        if key in _SOLVERS and _SOLVERS[key][3] is f:
+            continue
+        _swing_nlp(f, body, n, K, len(fingers) - 1)
+        built = True
+    return time.perf_counter() - t0 if built else 0.0
 
 
 def _swing_params(spec: SwingSpec) -> FloatArray:

@@ -492,7 +492,12 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
         with fingers.lock:
             problem = manipulation_problem(request, fingers)
             general = fingers.manipulation
-        return general.prepare(problem)
+        built = general.prepare(problem)
+        if request.gait is not None:  # a gait's swings: one NLP per finger
+            from ocp.gait.swing import prepare_swings
+
+            built += prepare_swings(tuple(tip.finger for tip in problem.fingers))
+        return built
 
     def summary(self, result: ManipulationResult, solution: Any) -> str:
         return manipulation_summary(result)
