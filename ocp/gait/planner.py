@@ -194,6 +194,8 @@ REACH_MARGIN = math.radians(1.0)
 REACH_SHARE = 0.1
 #: The least roll worth planning [rad]: a gait whose fingers cannot roll farther stops.
 MIN_ROLL = math.radians(0.5)
+#: How many times a gait halves its rolls when a fingertip finds no swing back after one.
+MAX_ROLL_RETRIES = 2
 
 
 def _quaternion_product(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -373,6 +375,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     ``forces``: the holds need the object's weight) by ``angle`` [rad] about ``axis``
     (palm frame) from the joints ``qs`` (one array per finger), rolling by at most
     ``roll_step`` at a time and re-placing fingertips in between (the module's doc).
+    When a fingertip finds no swing back after a roll, the gait goes back to before that
+    roll and rolls half as far from then on, up to :data:`MAX_ROLL_RETRIES` times.
     ``swing``: fields of :class:`~ocp.gait.swing.SwingSpec` (duration, clearance);
     ``hold_time``: the unloading and loading around each swing [s]."""
     from ocp.solve.planner import ManipulationPlanner
@@ -400,8 +404,9 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     checks: list[Check] = []
     t, done = 0.0, 0.0
     R_then = R0
+    cap, retries = roll_step, 0  # the roll's length, halved where a re-placement failed
     while done < angle - 1e-12 and len(plan.rolls) < max_rolls:
-        step = min(roll_step, angle - done)
+        step = min(cap, angle - done)
         reach, who, why = _rolled_reach(template, q_now, np.asarray(pose.position, float),
                                         rho, ax, step)
         if why and reach < step - 1e-6:  # a finger stops short: roll to just before it
@@ -424,6 +429,9 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                                 "roll on")
                 break
             step = apart
+        # where the plan stands before this roll, to go back to if what follows fails
+        before = (len(plan.rolls), len(plan.phases), len(plan.steps), len(checks), t, done,
+                  pose, q_now, R_then, set(never_lifted))
         target = axis_angle_rotation(ax, done + step) @ R0
         dur = max(1.0, seconds_per_radian * step)
         prob = _roll_problem(template, q_now, pose, target, centre, dur)
@@ -467,6 +475,18 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         q_now, t = _replace_fingers(plan, checks, template, q_start, q_now, pose, t, load,
                                     swing, hold_time, never_lifted)
         if plan.status != "solved":
+            if retries < MAX_ROLL_RETRIES and step / 2 >= MIN_ROLL:
+                # a fingertip found no swing back after this roll: roll half as far (a
+                # shorter roll leaves the tips nearer where they land) from where it began,
+                # and keep the shorter rolls (the grasp recurs)
+                n_r, n_p, n_s, n_k, t, done, pose, q_now, R_then, lifted = before
+                del plan.rolls[n_r:], plan.clocks[n_r:], plan.phases[n_p:]
+                del plan.steps[n_s:], checks[n_k:]
+                never_lifted.clear()
+                never_lifted.update(lifted)
+                plan.status, plan.message = "solved", ""
+                cap, retries = step / 2, retries + 1
+                continue
             break
     plan.turned = done
     plan.never_lifted = tuple(nm for nm in names if nm in never_lifted)
