@@ -100,7 +100,7 @@ class SimOptions:
     timestep: float = 5e-4
     condim: int = 4
     impratio: float = 10.0
-    noslip_iterations: int = 10
+    noslip_iterations: int = 3
     torsional_friction: float | None = None
     rolling_friction: float = 0.0
     solref: tuple[float, float] = (0.004, 1.0)

@@ -241,7 +241,7 @@ def test_the_scene_is_the_plans(plans: dict[str, tuple[AnyPlanResult, PlanReques
     sim = Simulation(plan)
     m = sim.model
     assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
-    assert m.opt.impratio == 10 and m.opt.noslip_iterations == 10 and m.opt.timestep == 5e-4
+    assert m.opt.impratio == 10 and m.opt.noslip_iterations == 3 and m.opt.timestep == 5e-4
     obj = sim.object_geom
     assert m.geom_condim[obj] == 4 and m.geom_friction[obj][0] == pytest.approx(0.5)
     r = plan.object.dimensions[0]

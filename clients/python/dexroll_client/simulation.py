@@ -181,7 +181,7 @@ class SimulationOptions(_Request):
                                               "constraint impedance (default 10)")
     noslip_iterations: OptionalCount = Field(default=None, ge=0, le=100,
                                             description="MuJoCo's no-slip solver "
-                                                        "iterations (default 10)")
+                                                        "iterations (default 3)")
     use_plan_forces: bool | None = Field(default=None,
                                          description="a plan that states contact forces or "
                                                      "joint torques is executed with them "
