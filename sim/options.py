@@ -143,6 +143,11 @@ class SimOptions:
         own = getattr(plan, "force_control", None)
         return "off" if own is None else str(own)
 
+    @property
+    def feedback(self) -> bool:
+        """Whether contact-force feedback is asked ('pi' or 'admittance')."""
+        return self.force_control not in (None, "off")
+
     def resolved(self, plan: Any) -> SimOptions:
         """These options for ``plan``, its squeeze (:meth:`squeeze_for`) and force control
         (:meth:`force_control_for`) filled in."""

@@ -260,8 +260,7 @@ class Simulation:
         the planned one, at least ``force_min`` where the contact counts as touching
         (activity :data:`ACTIVE_SHARE` and up; from none at :data:`SQUEEZE_FROM`)."""
         plan, m = self.plan, self.model
-        if self.options.force_control not in ("pi", "admittance") or \
-                self.options.mode != "servo":
+        if not self.options.feedback or self.options.mode != "servo":
             return []
         d = mujoco.MjData(m)
         jacp = np.zeros((3, m.nv))
@@ -315,27 +314,20 @@ class Simulation:
         planned_force = self._planned_normal_forces(ts)
         loops = self._force_loops(ts, ramp, planned_force)
         shifting = o.force_control == "admittance"
-        if o.force_control == "admittance":
+        if o.feedback:
+            name = "admittance" if shifting else "PI"
+            names = ", ".join(plan.contacts[lp.j].name for lp in loops)
             notes.append(
-                f"force control: admittance (the servo's set point shifted along the "
-                f"planned normal by {o.force_shift_ki:g} m/(N s) times the integral of "
-                f"the normal force's error, at most {o.force_shift_limit * 1e3:g} mm; at "
-                f"least {o.force_min:g} N while touching) for "
-                f"{', '.join(plan.contacts[lp.j].name for lp in loops)}"
-                if loops else
-                f"force control: admittance asked, but off ({o.mode} mode)"
-                if o.mode != "servo"
-                else "force control: admittance asked, but no contact has a planned "
-                     "force: off")
-        elif o.force_control == "pi":
-            notes.append(
-                f"force control: PI contact-force feedback (gains {o.force_kp:g} N/N, "
-                f"{o.force_ki:g} 1/s, at most {o.force_limit:g} N; at least "
-                f"{o.force_min:g} N while touching) along the planned normals of "
-                f"{', '.join(plan.contacts[lp.j].name for lp in loops)}, on top of the "
-                "servo" if loops else
-                f"force control: PI asked, but off ({o.mode} mode)" if o.mode != "servo"
-                else "force control: PI asked, but no contact has a planned force: off")
+                (f"force control: admittance (the servo's set point shifted along the "
+                 f"planned normal by {o.force_shift_ki:g} m/(N s) times the integral of "
+                 f"the normal force's error, at most {o.force_shift_limit * 1e3:g} mm; "
+                 f"at least {o.force_min:g} N while touching) for {names}" if shifting
+                 else f"force control: PI contact-force feedback (gains {o.force_kp:g} "
+                      f"N/N, {o.force_ki:g} 1/s, at most {o.force_limit:g} N; at least "
+                      f"{o.force_min:g} N while touching) along the planned normals of "
+                      f"{names}, on top of the servo") if loops else
+                f"force control: {name} asked, but off ({o.mode} mode)" if o.mode != "servo"
+                else f"force control: {name} asked, but no contact has a planned force: off")
         else:
             notes.append("force control: off (the servo with the planned forces fed "
                          "forward)")

@@ -433,7 +433,7 @@ class UserModelSimulation:
                          f"{o.squeeze_for(plan) * 1e3:g} mm")
         notes.append("force control: off (the user's model is driven through its own "
                      "actuators; contact-force feedback runs on dexroll's scene only)"
-                     if o.force_control in ("pi", "admittance") else "force control: off")
+                     if o.feedback else "force control: off")
         return offsets, torques, notes
 
     # -- the run --------------------------------------------------------------------------

@@ -237,13 +237,19 @@ def _guess(spec: SwingSpec) -> FloatArray:
 _SOLVERS: dict[tuple[int, int, int, int], tuple[Any, FloatArray, FloatArray, Any, Any]] = {}
 
 
+def _built(f: Any, n: int, K: int, n_others: int) -> bool:
+    """Whether finger ``f``'s swing NLP of this shape is built (its key, the same finger)."""
+    key = (id(f), n, K, n_others)
+    return key in _SOLVERS and _SOLVERS[key][3] is f
+
+
 def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
                ) -> tuple[Any, FloatArray, FloatArray, Any, Any]:
     """(solver, lbg, ubg, the finger it is for, the warm-start solver) of the swing NLP of
     finger ``f`` (see the module's doc), built once; the parameters in
     :func:`_swing_params`' order."""
     key = (id(f), n, K, n_others)
-    if key in _SOLVERS and _SOLVERS[key][3] is f:
+    if _built(f, n, K, n_others):
         return _SOLVERS[key]
     nq = int(f.nq)
     P = ca.SX.sym("p", 2 * nq + 31 + 8 * n_others)
@@ -343,11 +349,9 @@ def prepare_swings(fingers: tuple[Any, ...], n_intervals: int | None = None,
             body = tip_body(f)
         except ValueError:  # a flat or spheroid tip: no gait
             continue
-        key = (id(f), n, K, len(fingers) - 1)
-        if key in _SOLVERS and _SOLVERS[key][3] is f:
-            continue
-        _swing_nlp(f, body, n, K, len(fingers) - 1)
-        built = True
+        if not _built(f, n, K, len(fingers) - 1):
+            _swing_nlp(f, body, n, K, len(fingers) - 1)
+            built = True
     return time.perf_counter() - t0 if built else 0.0
 
 
