@@ -326,6 +326,28 @@ def _stopped(who: str, why: str, at: float, angle: float, ax: FloatArray,
                    if held else " even from its re-placed contact")
 
 
+def _too_close(need: float, at: float, angle: float, ax: FloatArray) -> str:
+    """Why a gait stops short: two fingertips' bodies within ``need`` [m] after ``at``."""
+    return (f"two fingertips come within {need * 1e3:.2f} mm of each other after "
+            f"{math.degrees(at):.1f} deg of {math.degrees(angle):.1f} deg about "
+            f"({', '.join(f'{c:.3g}' for c in ax)}): the grasp cannot roll on")
+
+
+def _undo(plan: GaitPlan, checks: list[Check], never_lifted: set[str], before: tuple[Any, ...]
+          ) -> tuple[Any, ...]:
+    """Back to where the gait stood before a roll (``before``: the counts of its rolls,
+    phases, steps and checks, then the loop's time, turn, pose, joints, ball rotation and
+    the fingers never lifted): what came after dropped, the status solved again; (t,
+    done, pose, q_now, R_then) then."""
+    n_r, n_p, n_s, n_k, t, done, pose, q_now, R_then, lifted = before
+    del plan.rolls[n_r:], plan.clocks[n_r:], plan.phases[n_p:]
+    del plan.steps[n_s:], checks[n_k:]
+    never_lifted.clear()
+    never_lifted.update(lifted)
+    plan.status, plan.message = "solved", ""
+    return t, done, pose, q_now, R_then
+
+
 def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
                      q_start: tuple[FloatArray, ...], q_now: tuple[FloatArray, ...],
                      pose: ObjectPose, t: float, load: FloatArray,
@@ -419,16 +441,11 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         # the tips' gaps: a turn that would bring two together stops before
         apart, need = _gap_reach(template, q_now, np.asarray(pose.position, float), rho, ax,
                                  step)
-        if apart < step:
-            if apart < MIN_ROLL:
-                plan.status = "infeasible"
-                plan.message = (f"two fingertips come within {need * 1e3:.2f} mm of each "
-                                f"other after {math.degrees(done + max(apart, 0.0)):.1f} "
-                                f"deg of {math.degrees(angle):.1f} deg about "
-                                f"({', '.join(f'{c:.3g}' for c in ax)}): the grasp cannot "
-                                "roll on")
-                break
-            step = apart
+        if apart < step and apart < MIN_ROLL:  # (a last roll may be shorter than that)
+            plan.status, plan.message = "infeasible", _too_close(need, done + max(apart, 0.0),
+                                                                 angle, ax)
+            break
+        step = min(step, apart)
         # where the plan stands before this roll, to go back to if what follows fails
         before = (len(plan.rolls), len(plan.phases), len(plan.steps), len(checks), t, done,
                   pose, q_now, R_then, set(never_lifted))
@@ -479,12 +496,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 # a fingertip found no swing back after this roll: roll half as far (a
                 # shorter roll leaves the tips nearer where they land) from where it began,
                 # and keep the shorter rolls (the grasp recurs)
-                n_r, n_p, n_s, n_k, t, done, pose, q_now, R_then, lifted = before
-                del plan.rolls[n_r:], plan.clocks[n_r:], plan.phases[n_p:]
-                del plan.steps[n_s:], checks[n_k:]
-                never_lifted.clear()
-                never_lifted.update(lifted)
-                plan.status, plan.message = "solved", ""
+                t, done, pose, q_now, R_then = _undo(plan, checks, never_lifted, before)
                 cap, retries = step / 2, retries + 1
                 continue
             break
