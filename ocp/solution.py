@@ -283,22 +283,29 @@ class Collocation:
 def joint_torques(finger: Any, q: FloatArray, tip_point: FloatArray, normal: FloatArray,
                   force: FloatArray, torsion: FloatArray,
                   gravity: Any = (0.0, 0.0, 0.0)) -> FloatArray:
-    """tau = J^T (f; tau_n n) + g(q) for rows of joint angles ``q``: J the finger's
-    geometric Jacobian (:attr:`~ocp.robots.finger.FingerModel.jacobian`) moved to the
-    contact point ``tip_point`` (palm frame), f the force the fingertip exerts on the
-    object, tau_n n the torsion about the object's outward normal ``normal``; g(q) the
-    torques that hold the finger's own links against ``gravity`` (palm frame;
-    :meth:`~ocp.robots.finger.FingerModel.gravity_torques`: zero when its model has no
-    inertias, as the built-in fingers)."""
+    """tau = J^T (f; r x f + tau_n n) + g(q) for rows of joint angles ``q``, every row at
+    once: J the finger's geometric Jacobian of its tip frame
+    (:meth:`~ocp.robots.finger.FingerModel.tip_jacobians`; v of the frame's origin), r from
+    that origin to the contact point ``tip_point`` (palm frame), f the force the fingertip
+    exerts on the object, tau_n n the torsion about the object's outward normal
+    ``normal``; g(q) the torques that hold the finger's own links against ``gravity``
+    (palm frame; :meth:`~ocp.robots.finger.FingerModel.gravity_torques`: zero when its
+    model has no inertias, as the built-in fingers)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
     k = len(q)
     out = finger.gravity_torques(q, gravity) if finger.mass > 0 else np.zeros((k, finger.nq))
-    for j in range(k):
-        J = np.asarray(finger.jacobian(q[j]))
-        _, p_tip = finger.fk(q[j])
-        r = tip_point[j] - np.asarray(p_tip).ravel()
-        moment = np.cross(r, force[j]) + torsion[j] * normal[j]
-        out[j] += J[:3].T @ force[j] + J[3:].T @ moment
-    return out
+    if not k:
+        return out
+    _, p_tip = finger.tip_poses(q)
+    J = finger.tip_jacobians(q)
+    f = np.asarray(force, dtype=float).reshape(k, 3)
+    moment = np.cross(np.asarray(tip_point, dtype=float).reshape(k, 3) - p_tip, f) \
+        + np.asarray(torsion, dtype=float).reshape(k, 1) * \
+        np.asarray(normal, dtype=float).reshape(k, 3)
+    return out + np.einsum("kij,ki->kj", J[:, :3], f) + np.einsum("kij,ki->kj", J[:, 3:],
+                                                                   moment)
+
+
 def fixed_rate_times(duration: float, rate: float) -> FloatArray:
     """Times [s] at a controller's rate [Hz] from 0 to ``duration``: k / rate for every k
     with k / rate < duration, then ``duration`` itself (the plan's end, where it stops)."""

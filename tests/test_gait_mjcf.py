@@ -12,18 +12,31 @@ import copy
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
 
 from dexroll_client import ManipulationResult, PlanStatus
 from ocp.robots.mjcf_frames import mujoco_text
-from ocp.solution import joint_torques
 from planner_service.cli import plan_request
 
 ROOT = Path(__file__).resolve().parents[1]
 TIPS = ("ff_tip", "mf_tip", "rf_tip", "th_tip")
 
+
+
+def _pinocchio_torques(f: Any, q: Any, point: Any, normal: Any, force: Any, torsion: Any,
+                       gravity: Any) -> Any:
+    """tau = J^T (f; r x f + tau_n n) + g(q) row by row, J Pinocchio's frame Jacobian of the
+    tip frame (its origin's velocity), r from that origin to the contact point."""
+    out = f.gravity_torques(q, gravity)
+    for j in range(len(q)):
+        J = f.frame_jacobian_pin(q[j])
+        _, p = f.fingertip_pose_pin(q[j])
+        moment = np.cross(point[j] - p, force[j]) + torsion[j] * normal[j]
+        out[j] += J[:3].T @ force[j] + J[3:].T @ moment
+    return out
 
 def _fingers(body: dict) -> list:
     """The request's finger models, as the planner loads them."""
@@ -78,8 +91,8 @@ def test_a_gait_on_a_users_mjcf_hand() -> None:
         assert np.abs(np.array(jt.points[k].velocities)).max() < 1e-6
     # the ball turned as asked, its centre held within the tracking tolerance
     # the joint torques (the wire's efforts): J^T of each fingertip's planned force at its
-    # contact point, and the links' own weight (this file's links have masses), by
-    # ocp.solution.joint_torques (the fingers' CasADi Jacobians, not the samples' Pinocchio)
+    # contact point, and the links' own weight (this file's links have masses), row by row
+    # with Pinocchio's frame Jacobian (the samples use the fingers' CasADi kinematics)
     effort = np.array([p.effort for p in jt.points])
     assert effort.shape == q.shape and np.all(np.isfinite(effort))
     fingers = _fingers(body)
@@ -88,9 +101,9 @@ def test_a_gait_on_a_users_mjcf_hand() -> None:
     at = 0
     for k, (c, f) in enumerate(zip(gait.samples.contacts, fingers, strict=True)):
         force = np.array(c.force)[rows]
-        want = joint_torques(f, q[rows, at:at + f.nq], np.array(c.point)[rows],
-                             np.array(c.normal)[rows], force, _torsion(result, k, rows),
-                             gravity)
+        want = _pinocchio_torques(f, q[rows, at:at + f.nq], np.array(c.point)[rows],
+                                  np.array(c.normal)[rows], force,
+                                  _torsion(result, k, rows), gravity)
         assert np.abs(effort[rows, at:at + f.nq] - want).max() < 1e-9, c.name
         at += f.nq
     assert np.abs(effort).max() > 0.05  # the holds ask torques

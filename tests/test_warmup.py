@@ -86,7 +86,7 @@ def test_a_gait_request_warms_its_fingers_swing_nlps_too() -> None:
     """A gait's swings use one NLP per finger (ocp.gait.swing: 0.75 s to build each on
     the built-in hand); the warm-up of a gait request builds them with the rolls' NLP,
     so that its first request pays neither. Warmed again: nothing left to build."""
-    from ocp.gait.swing import _SOLVERS, SwingSpec
+    from ocp.gait.swing import _SOLVERS, SwingSpec, swing_key
     from planner_service.planners import REQUEST, Planners
     from planner_service.planners.manipulation import manipulation_problem
 
@@ -99,6 +99,31 @@ def test_a_gait_request_warms_its_fingers_swing_nlps_too() -> None:
                                    Planners(palm, cache).fingers)
     fingers = [tip.finger for tip in problem.fingers]
     for f in fingers:
-        key = (id(f), SwingSpec.n_intervals, SwingSpec.lift_intervals, len(fingers) - 1)
-        assert key in _SOLVERS and _SOLVERS[key][3] is f
+        key = swing_key(f, SwingSpec.n_intervals, SwingSpec.lift_intervals,
+                        len(fingers) - 1)
+        assert key in _SOLVERS
     assert warm_up([gait], palm, cache) == [(gait.name, 0.0)]
+
+
+def test_swing_nlps_are_shared_by_equal_fingers_and_not_by_different_ones() -> None:
+    """A searched grasp's hand is a new model of the same fingers (only its tips' chart
+    sides differ): its swings take the NLPs built for the first (keyed by what they are
+    built from, not by the model object). A finger whose joint limits differ gets its own."""
+    from dataclasses import replace
+
+    from ocp.gait.swing import SwingSpec, prepare_swings, swing_key
+    from ocp.robots.allegro import load_allegro
+
+    a = tuple(load_allegro().fingers)
+    b = tuple(load_allegro("urdf", ((0.6481, 0.5744, 0.0), None, None, None)).fingers)
+    assert all(x is not y for x, y in zip(a, b, strict=True))
+    assert a[0].tip_surface != b[0].tip_surface  # the chart side differs
+    n, K = SwingSpec.n_intervals, SwingSpec.lift_intervals
+    keys = [swing_key(f, n, K, 3) for f in a]
+    assert keys == [swing_key(f, n, K, 3) for f in b]
+    assert len(set(keys)) == 4  # four fingers, four NLPs
+    prepare_swings(a)
+    assert prepare_swings(b) == 0.0
+    tighter = replace(a[1], upper=a[1].upper - 0.1)
+    assert swing_key(tighter, n, K, 3) != keys[1]
+    assert swing_key(a[1], n, K, 2) != keys[1]

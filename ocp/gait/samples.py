@@ -13,8 +13,9 @@ from numpy.typing import NDArray
 from ocp.gait.planner import GaitPlan
 from ocp.geometry.bodies import tip_body
 from ocp.geometry.rotations import quaternion_wxyz
+from ocp.solution import joint_torques
 
-__all__ = ["TRANSITION", "GaitSamples", "gait_samples", "gait_times", "joint_efforts"]
+__all__ = ["TRANSITION", "GaitSamples", "gait_samples", "gait_times"]
 
 FloatArray = NDArray[np.float64]
 
@@ -48,7 +49,8 @@ class GaitSamples:
     #: per fingertip the torsion it applies about the object's outward normal [N m]
     #: (a roll's planned one; none in a hold or a swing)
     torsion: FloatArray | None = None
-    #: every finger's joint torques [N m] (columns as ``q``): :func:`joint_efforts`
+    #: every finger's joint torques [N m] (columns as ``q``):
+    #: :func:`~ocp.solution.joint_torques`
     effort: FloatArray | None = None
 
 
@@ -111,32 +113,14 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
     points, normals = np.zeros((n, nf, 3)), np.zeros((n, nf, 3))
     tip_p, tip_q = np.zeros((n, nf, 3)), np.zeros((n, nf, 4))
     for c, f in enumerate(fingers):  # contact_of's line of centres, every sample at once
-        Rs = np.empty((n, 3, 3))
-        for i in range(n):
-            Rs[i], tip_p[i, c] = f.fingertip_pose_pin(Q[i, cut[c]:cut[c + 1]])
+        Rs, tip_p[:, c] = f.tip_poses(Q[:, cut[c]:cut[c + 1]])
         d = tip_p[:, c] + Rs @ tip_body(f).a - pos
         normals[:, c] = d / np.linalg.norm(d, axis=1)[:, None]
         points[:, c] = pos + rho * normals[:, c]
         tip_q[:, c] = quaternion_wxyz(Rs)
     gravity = problem.forces.gravity if problem.forces is not None else (0.0, 0.0, 0.0)
-    effort = np.hstack([joint_efforts(f, Q[:, cut[c]:cut[c + 1]], points[:, c],
+    effort = np.hstack([joint_torques(f, Q[:, cut[c]:cut[c + 1]], points[:, c],
                                       normals[:, c], force[:, c], torsion[:, c], gravity)
                         for c, f in enumerate(fingers)])
     return GaitSamples(ts, Q, QD, QDD, pos, wxyz, points, normals, force, active, tip_p,
                        tip_q, torsion, effort)
-
-
-def joint_efforts(finger: Any, q: FloatArray, point: FloatArray, normal: FloatArray,
-                  force: FloatArray, torsion: FloatArray, gravity: Any) -> FloatArray:
-    """A finger's joint torques at the joint rows ``q`` that make its fingertip apply
-    ``force`` (palm frame) at ``point`` and ``torsion`` about the object's outward
-    ``normal``, and hold its links against ``gravity``: :func:`ocp.solution.joint_torques`'
-    tau = J^T (f; r x f + tau_n n) + g(q), with Pinocchio's frame Jacobian (J_v of the tip
-    frame's origin, r from it to the point)."""
-    out = finger.gravity_torques(q, gravity) if finger.mass > 0 else np.zeros(q.shape)
-    for i in range(len(q)):
-        J = finger.frame_jacobian_pin(q[i])
-        _, p = finger.fingertip_pose_pin(q[i])
-        moment = np.cross(point[i] - p, force[i]) + torsion[i] * normal[i]
-        out[i] += J[:3].T @ force[i] + J[3:].T @ moment
-    return out

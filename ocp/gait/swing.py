@@ -37,7 +37,9 @@ freedom there).
 
 from __future__ import annotations
 
+import hashlib
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -48,7 +50,7 @@ from numpy.typing import NDArray
 from ocp.contacts.base import backed_off_joint_limits
 from ocp.geometry.bodies import TipBody, point_segment_distance, segment_distance, tip_body
 
-__all__ = ["SwingPlan", "SwingSpec", "plan_swing", "prepare_swings"]
+__all__ = ["SwingPlan", "SwingSpec", "plan_swing", "prepare_swings", "swing_key"]
 
 FloatArray = NDArray[np.float64]
 
@@ -232,24 +234,45 @@ def _guess(spec: SwingSpec) -> FloatArray:
     return Q
 
 
-#: The swing NLPs built, by (finger, intervals, lift intervals, other tips): the
-#: geometry, the times and the margins are parameters.
-_SOLVERS: dict[tuple[int, int, int, int], tuple[Any, FloatArray, FloatArray, Any, Any]] = {}
+#: The swing NLPs built, by (the finger's kinematics and tip body, intervals, lift
+#: intervals, other tips): the geometry, the times and the margins are parameters. Keyed by
+#: content, not identity: a searched grasp's hand is a new model of the same fingers (its
+#: tips' chart sides differ), and a swing NLP takes seconds to build. The least recently
+#: used beyond :data:`MAX_SWING_NLPS` are dropped.
+_SOLVERS: OrderedDict[tuple[str, int, int, int],
+                      tuple[Any, FloatArray, FloatArray, Any]] = OrderedDict()
+MAX_SWING_NLPS = 32
+
+
+def swing_key(f: Any, n: int, K: int, n_others: int) -> tuple[str, int, int, int]:
+    """The key of finger ``f``'s swing NLP on this grid: a hash of everything the NLP is
+    built from (the chain's placements, axes and kinds, the base and tip placements, the
+    joint and rate limits, the tip's body), so that equal fingers share it."""
+    body = tip_body(f)
+    arrays = [f.base_rotation, f.base_position, f.tip_rotation, f.tip_translation, f.lower,
+              f.upper, f.velocity_limit, body.a, body.b, [body.r]]
+    kinds = []
+    for j in f.chain:
+        arrays += [j.axis, j.placement_rotation, j.placement_translation, [j.index_q]]
+        kinds.append(j.kind)
+    digest = hashlib.sha256("/".join(kinds).encode())
+    for a in arrays:
+        digest.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    return digest.hexdigest(), n, K, n_others
 
 
 def _built(f: Any, n: int, K: int, n_others: int) -> bool:
-    """Whether finger ``f``'s swing NLP of this shape is built (its key, the same finger)."""
-    key = (id(f), n, K, n_others)
-    return key in _SOLVERS and _SOLVERS[key][3] is f
+    """Whether finger ``f``'s swing NLP of this shape is built."""
+    return swing_key(f, n, K, n_others) in _SOLVERS
 
 
 def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
-               ) -> tuple[Any, FloatArray, FloatArray, Any, Any]:
-    """(solver, lbg, ubg, the finger it is for, the warm-start solver) of the swing NLP of
-    finger ``f`` (see the module's doc), built once; the parameters in
-    :func:`_swing_params`' order."""
-    key = (id(f), n, K, n_others)
-    if _built(f, n, K, n_others):
+               ) -> tuple[Any, FloatArray, FloatArray, Any]:
+    """(solver, lbg, ubg, the warm-start solver) of the swing NLP of finger ``f`` (see the
+    module's doc), built once; the parameters in :func:`_swing_params`' order."""
+    key = swing_key(f, n, K, n_others)
+    if key in _SOLVERS:
+        _SOLVERS.move_to_end(key)
         return _SOLVERS[key]
     nq = int(f.nq)
     P = ca.SX.sym("p", 2 * nq + 31 + 8 * n_others)
@@ -328,7 +351,9 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
     nlp = {"x": w, "p": P, "f": cost, "g": g}
     solver = ca.nlpsol("swing", "ipopt", nlp, _IPOPT)
     warm = ca.nlpsol("swing_warm", "ipopt", nlp, {**_IPOPT, **_IPOPT_WARM})
-    _SOLVERS[key] = (solver, lbg, ubg, f, warm)
+    _SOLVERS[key] = (solver, lbg, ubg, warm)
+    while len(_SOLVERS) > MAX_SWING_NLPS:
+        _SOLVERS.popitem(last=False)
     return _SOLVERS[key]
 
 
@@ -395,7 +420,7 @@ def _solve_swing(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArra
     nq, n, K = int(f.nq), spec.n_intervals, spec.lift_intervals
     T = float(spec.duration)
     h = T / n
-    solver, lbg, ubg, _, warm_solver = _swing_nlp(f, body, n, K, len(spec.others))
+    solver, lbg, ubg, warm_solver = _swing_nlp(f, body, n, K, len(spec.others))
     vs, as_, js = 1.0 / T, 1.0 / T**2, 1.0 / T**3
     lo_q, hi_q = backed_off_joint_limits(f)
     vmax = np.asarray(f.velocity_limit, dtype=float)

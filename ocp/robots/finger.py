@@ -260,6 +260,21 @@ class FingerModel:
         J_w = ca.horzcat(*cols)
         return ca.Function("fingertip_jacobian", [q], [ca.vertcat(J_v, J_w)], ["q"], ["J"])
 
+    def tip_poses(self, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """(R: n x 3 x 3, p: n x 3): :attr:`fk` at every joint row of ``q`` (n x nq) in one
+        call."""
+        qa = np.asarray(q, dtype=float).reshape(-1, self.nq)
+        n = len(qa)
+        R, p = self.fk.map(n)(qa.T)
+        return np.asarray(R).reshape(3, n, 3).transpose(1, 0, 2), np.asarray(p).T.copy()
+
+    def tip_jacobians(self, q: ArrayLike) -> FloatArray:
+        """n x 6 x nq: :attr:`jacobian` at every joint row of ``q`` (n x nq) in one call."""
+        qa = np.asarray(q, dtype=float).reshape(-1, self.nq)
+        n = len(qa)
+        J = self.jacobian.map(n)(qa.T)
+        return np.asarray(J).reshape(6, n, self.nq).transpose(1, 0, 2)
+
     def joint_frames(self, q: Any) -> tuple[list[tuple[ChainJoint, Any, Any]], Any, Any]:
         """The chain's product (CasADi): each joint with its frame's orientation and origin
         in the palm frame before its own motion, and the last joint's frame after it."""
