@@ -15,7 +15,7 @@ from ocp.gait.checks import swing_checks
 from ocp.gait.step import contact_of, replace_finger
 from ocp.gait.swing import SwingPlan, SwingSpec
 from ocp.geometry.bodies import tip_body
-from ocp.geometry.rotations import axis_angle_rotation, quaternion_matrix, quaternion_wxyz
+from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
 from ocp.robots.allegro import NOMINAL_Q, load_allegro
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
 from ocp.spec.motion import ObjectPose, Tracking
@@ -210,42 +210,46 @@ def test_a_swing_warm_started_from_the_last_is_the_same_swing(step: object) -> N
     assert all(c.passed for c in cert), [c.failure for c in cert if not c.passed]
 
 
-def test_a_roll_carried_to_a_turned_ball_keeps_its_motion_relative_to_the_palm() -> None:
-    """The warm start of a gait's next roll (ocp.gait.planner.carried): the previous
-    roll's joints and contacts unchanged, the ball's frame turned by C = R_then^T R_now:
-    its rotation R(t) C (quaternion product), its angular velocity the same in the palm
-    frame, its first state the new roll's."""
-    from ocp.gait.planner import _roll_problem, carried
+def test_a_roll_planned_in_the_balls_start_frame_is_the_same_motion_in_the_palm() -> None:
+    """A gait plans each roll in the ball's frame at its start (ocp.gait.planner.
+    _roll_problem: a uniform ball's motion does not depend on the frame fixed in it). From
+    a ball turned by R_now, the same roll planned in the palm frame's ball orientation
+    (its charts, start and goal there) gives the same joints, the same contact forces and
+    the rotations R(t) R_now; and the roll asked again (a recurring grasp) starts from the
+    last one's primal-dual point and takes fewer iterations than it did cold."""
+    from ocp.gait.planner import _roll_problem
     from ocp.solve.planner import ManipulationPlanner
 
     planner = ManipulationPlanner()
     ax = np.array([0.0, 0.0, 1.0])
-    prob = _roll_problem(TEMPLATE, QS, POSE, axis_angle_rotation(ax, math.radians(3.0)),
-                         CENTRE, 1.0)
-    sol = planner.solve(prob)
-    assert sol.ok
     R_now = axis_angle_rotation((1.0, 2.0, 0.5), 0.7)
     turned = ObjectPose(tuple(float(c) for c in quaternion_wxyz(R_now).ravel()),
                         tuple(CENTRE))
-    prob2 = _roll_problem(TEMPLATE, QS, turned, axis_angle_rotation(ax, math.radians(3.0))
-                          @ R_now, CENTRE, 1.0)
-    m = planner.model(prob2)
-    x0 = planner.initial_state(prob2)
-    ws = carried(sol, m, np.eye(3), R_now, x0)
-    obj = m.object
-    for k in range(len(ws.t)):
-        R_new = quaternion_matrix(ws.x[k, obj.xs][3:7])
-        R_old = quaternion_matrix(sol.X[k, obj.xs][3:7])
-        assert np.abs(R_new - R_old @ R_now).max() < 1e-12
-        w_new = R_new @ ws.u[k, obj.us][3:6]
-        w_old = R_old @ sol.U[k, obj.us][3:6]
-        assert np.abs(w_new - w_old).max() < 1e-12  # the same spin, palm frame
-    others = [c for c in range(ws.x.shape[1]) if c not in range(obj.xs.start, obj.xs.stop)]
-    assert np.array_equal(ws.x[:, others], sol.X[:, others])
-    assert np.abs(ws.x[0] - x0).max() < 1e-9  # it starts where the new roll does
-    sol2 = planner.solve(prob2, ws)
-    assert sol2.ok and sol2.certificate.passed
-
+    target = axis_angle_rotation(ax, math.radians(3.0)) @ R_now
+    rel = _roll_problem(TEMPLATE, QS, turned, target, CENTRE, 1.0)
+    assert rel.initial_pose is not None and rel.initial_pose.orientation == (1.0, 0.0, 0.0,
+                                                                             0.0)
+    names = tuple(f.name for f in TEMPLATE.fingers)
+    q1 = np.ravel(quaternion_wxyz(target))
+    absolute = dataclasses.replace(
+        rel, initial_pose=turned,
+        fingers=fingertips_from_joints(FINGERS, QS, OBJ, turned, names,
+                                       tuple(f"q{i}" for i in range(4))),
+        motion=dataclasses.replace(rel.motion, orientations=(
+            turned.orientation, tuple(float(c) for c in q1))))
+    a, b = planner.solve(rel), planner.solve(absolute)
+    assert a.ok and a.certificate.passed and b.ok and b.certificate.passed
+    t = np.linspace(0.0, 1.0, 41)
+    ja, jb = a.joint_trajectory(t, efforts=False), b.joint_trajectory(t, efforts=False)
+    assert np.abs(ja.positions - jb.positions).max() < 1e-5
+    assert np.abs(a.sample(t).object_rotation @ R_now - b.sample(t).object_rotation
+                  ).max() < 1e-6
+    assert np.abs(a.forces(t)[0] - b.forces(t)[0]).max() < 1e-3  # [N], palm frame
+    again = planner.solve(rel, a)
+    assert again.ok and again.certificate.passed
+    assert again.iterations < a.iterations
+    assert np.abs(again.joint_trajectory(t, efforts=False).positions - ja.positions
+                  ).max() < 1e-5
 
 
 def test_a_swing_between_close_neighbours_keeps_the_least_tip_gap() -> None:
@@ -389,12 +393,12 @@ NEG_Z_GRASP = (np.array([-0.155391, 0.855795, 0.016562, 1.606769]),
 
 
 def test_a_roll_is_cut_before_two_fingertips_come_closer_than_the_kept_gap() -> None:
-    """ocp.gait.planner._gap_reach: the fingers' rolled motion (every 4-joint finger's
+    """ocp.gait.planner._roll_ahead: the fingers' rolled motion (every 4-joint finger's
     fixed by the ball's, grasp_reach.roll) from the -z grasp brings the index's and the
     middle's bodies into each other within 10 deg; the reach stops the roll where they
     are ROLL_TIP_GAP apart: at it the gap is that (within the linear interpolation's
     error), a degree on it is less."""
-    from ocp.gait.planner import ROLL_TIP_GAP, _gap_reach, tips_gaps
+    from ocp.gait.planner import ROLL_TIP_GAP, _roll_ahead, tips_gaps
     from ocp.robots.grasp_reach import roll
 
     nq = tuple(int(f.nq) for f in FINGERS)
@@ -411,14 +415,40 @@ def test_a_roll_is_cut_before_two_fingertips_come_closer_than_the_kept_gap() -> 
 
     assert tips_gaps(FINGERS, np.concatenate(NEG_Z_GRASP)[None], nq)[0] > 2e-3
     assert gap_after(math.radians(10.0)) < 0.0  # the whole roll: an overlap (the premise)
-    apart, need = _gap_reach(template, NEG_Z_GRASP, CENTRE, RHO, ax, math.radians(10.0))
+    ahead = _roll_ahead(template, NEG_Z_GRASP, CENTRE, RHO, ax, math.radians(10.0))
+    apart, need = ahead.apart, ahead.need
     assert need == ROLL_TIP_GAP
+    assert not ahead.why and ahead.reach == math.radians(10.0)  # no finger stops
     assert math.radians(1.0) < apart < math.radians(10.0)
     assert gap_after(apart) == pytest.approx(need, abs=2e-5)
     assert gap_after(apart + math.radians(1.0)) < need - 1e-4
     # a turn the gap does not cut is returned whole
-    short, _ = _gap_reach(template, NEG_Z_GRASP, CENTRE, RHO, ax, apart * 0.9)
+    short = _roll_ahead(template, NEG_Z_GRASP, CENTRE, RHO, ax, apart * 0.9).apart
     assert short == pytest.approx(apart * 0.9, abs=1e-15)
+
+
+@pytest.mark.parametrize("axis", [(-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)])
+def test_the_one_pass_ahead_finds_the_stop_each_fingers_whole_roll_finds(
+        axis: tuple[float, float, float]) -> None:
+    """ocp.gait.planner._roll_ahead rolls the fingers in ten parts of the turn, all
+    together, for the tips' gaps; the first stop it finds (finger, why, where) is the
+    first of each finger's own rolled motion over the whole turn (grasp_reach.roll with
+    the planner's seam margin), to within one integration step."""
+    from ocp.gait.planner import _roll_ahead
+    from ocp.robots.grasp_reach import STEP, roll
+
+    template = dataclasses.replace(TEMPLATE, fingers=fingertips_from_joints(
+        FINGERS, NEG_Z_GRASP, OBJ, POSE, ("index", "middle", "ring", "thumb"),
+        ("q0", "q1", "q2", "q3")))
+    ax, upto = np.array(axis), math.radians(60.0)
+    whole = [roll(f, q, CENTRE, RHO, ax, upto, template.pad_margin)
+             for f, q in zip(FINGERS, NEG_Z_GRASP, strict=True)]
+    first = min(range(4), key=lambda i: whole[i].reach)
+    assert whole[first].why and whole[first].reach < upto  # a finger stops (the premise)
+    ahead = _roll_ahead(template, NEG_Z_GRASP, CENTRE, RHO, ax, upto)
+    assert ahead.who == ("index", "middle", "ring", "thumb")[first]
+    assert ahead.why == whole[first].why
+    assert ahead.reach == pytest.approx(whole[first].reach, abs=STEP)
 
 
 def test_a_swing_beside_a_close_neighbour_keeps_half_its_gap() -> None:

@@ -114,8 +114,28 @@ HOLD_MARGINS = (0.3, 0.2, 0.15, 0.1, 0.05, 0.0)
 HOLD_FORCE_FACTOR = 10.0
 
 
+#: The last holds' deep forces, by their geometry and load (:func:`deep_hold_forces`): a
+#: gait step's hold after its fingertip lands is the next step's before it lifts.
+_DEEP: dict[bytes, tuple[FloatArray | None, float]] = {}
+_DEEP_KEPT = 16
+
+
 def deep_hold_forces(hold: Hold, load: FloatArray, L: float
                      ) -> tuple[FloatArray | None, float]:
+    """:func:`_deep_hold_forces` of the hold, remembered for the last :data:`_DEEP_KEPT`
+    holds (keyed by the exact bytes of the geometry, the load and ``L``)."""
+    key = b"".join(np.ascontiguousarray(a, dtype=float).tobytes() for a in (
+        hold.points, hold.normals, hold.centre, hold.rotation, load, [L]))
+    if key not in _DEEP:
+        if len(_DEEP) >= _DEEP_KEPT:
+            _DEEP.pop(next(iter(_DEEP)))
+        _DEEP[key] = _deep_hold_forces(hold, load, L)
+    F, extra = _DEEP[key]
+    return (None if F is None else F.copy()), extra
+
+
+def _deep_hold_forces(hold: Hold, load: FloatArray, L: float
+                      ) -> tuple[FloatArray | None, float]:
     """(forces, the extra margin [rad] they keep inside the cones): :func:`hold_forces`
     with each cone narrowed by the largest of :data:`HOLD_MARGINS` that still holds the
     object with no normal force over :data:`HOLD_FORCE_FACTOR` times its weight

@@ -33,10 +33,9 @@ from ocp.solution import ManipulationSolution
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
 from ocp.spec.motion import DesiredMotion, ObjectPose
 from ocp.spec.problem import ProblemError
-from ocp.transcription.collocation import WarmStart
 from ocp.transcription.values import load_parameters
 
-__all__ = ["GaitPhase", "GaitPlan", "carried", "plan_gait"]
+__all__ = ["GaitPhase", "GaitPlan", "plan_gait"]
 
 FloatArray = NDArray[np.float64]
 
@@ -74,6 +73,9 @@ class GaitPlan:
     #: each roll's clock (:mod:`ocp.gait.warp`): its plan run so that it starts and ends
     #: still (the joints' accelerations continuous with the holds')
     clocks: list[RollClock] = field(default_factory=list)
+    #: each roll's ball orientation at its start (palm frame): a roll is planned in the
+    #: ball's frame there (:func:`_roll_problem`), its rotations R(t) are relative to it
+    frames: list[FloatArray] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -105,6 +107,11 @@ class GaitPlan:
             q = np.concatenate(step.q_after)
         return q, zero, zero
 
+    def rotation(self, r: int, R: FloatArray) -> FloatArray:
+        """Roll ``r``'s ball rotations ``R`` (its plan's: from its start) in the palm
+        frame."""
+        return np.asarray(R, dtype=float) @ self.frames[r]
+
     def clock(self, r: int) -> RollClock:
         """Roll ``r``'s clock (its own, unwarped, for a plan made without)."""
         if r < len(self.clocks):
@@ -132,59 +139,89 @@ class GaitPlan:
 def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
                   pose: ObjectPose, target: FloatArray, centre: FloatArray,
                   duration: float) -> ManipulationProblem:
+    """A roll of the ball from ``pose`` to the orientation ``target`` (palm frame) and the
+    centre ``centre``, the fingers starting at the joints ``qs``, planned in the ball's
+    frame at the roll's start (its rotation the identity there, the goal ``target
+    pose.rotation^T``): a uniform ball's motion does not depend on the frame fixed in it,
+    and so a gait whose grasp recurs asks the same roll again, which the last roll's
+    primal-dual point starts (:func:`plan_gait`). The plan's rotations R(t) are the
+    ball's from the start: R(t) ``pose.rotation`` in the palm frame."""
     fingers = tuple(f.finger for f in template.fingers)
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
-    tips = fingertips_from_joints(fingers, qs, template.object, pose, names,
+    start = ObjectPose((1.0, 0.0, 0.0, 0.0), pose.position)
+    tips = fingertips_from_joints(fingers, qs, template.object, start, names,
                                   tuple(f"fingers[{i}].initial_q" for i in range(len(qs))))
-    q0, q1 = pose.orientation, quaternion_wxyz(target)
+    q1 = np.ravel(quaternion_wxyz(np.asarray(target, dtype=float) @ pose.rotation.T))
     motion = DesiredMotion((0.0, duration),
-                           ((q0[0], q0[1], q0[2], q0[3]),
+                           ((1.0, 0.0, 0.0, 0.0),
                             (float(q1[0]), float(q1[1]), float(q1[2]), float(q1[3]))),
                            (pose.position, (float(centre[0]), float(centre[1]),
                                             float(centre[2]))))
-    return replace(template, fingers=tips, initial_pose=pose, motion=motion,
+    return replace(template, fingers=tips, initial_pose=start, motion=motion,
                    duration=duration)
 
 
 #: The least distance [m] a roll is planned to keep between two fingertips' bodies: the
 #: turn is cut where the fingers' rolled motion would bring two closer
-#: (:func:`_gap_reach`); a grasp that starts closer keeps 90 % of its gap.
+#: (:func:`_roll_ahead`); a grasp that starts closer keeps 90 % of its gap.
 ROLL_TIP_GAP = 5e-4
 #: Points of a roll's predicted motion at which the tips' gaps are measured.
 GAP_REACH_SAMPLES = 10
 
 
-def _gap_reach(template: ManipulationProblem, qs: tuple[FloatArray, ...],
-               centre: FloatArray, rho: float, axis: FloatArray, upto: float
-               ) -> tuple[float, float]:
-    """(the turn [rad] about ``axis``, at most ``upto``, before the fingers' rolled motion
-    (:func:`~ocp.robots.grasp_reach.roll`, every finger's motion fixed by the ball's)
-    brings two fingertips' bodies closer than ``need``, the gap kept: ROLL_TIP_GAP or 90 %
-    of the grasp's own). Sampled at :data:`GAP_REACH_SAMPLES` points of the turn, the
-    crossing interpolated linearly; ``upto`` when some finger's motion is not fixed by the
-    ball's (the rolls' certificate measures their gaps still)."""
+@dataclass(frozen=True)
+class RollAhead:
+    """What the fingers' rolled motion (:func:`~ocp.robots.grasp_reach.roll`: every 4-joint
+    round fingertip's motion fixed by the ball's) says of a turn about an axis, up to
+    ``upto`` [rad]: how far before its first finger stops (``reach``; ``upto`` when none
+    does), which finger and why; how far before two fingertips' bodies come closer than
+    ``need`` [m] (``apart``; ``upto`` when they do not, or when some finger's motion is
+    not fixed by the ball's: the rolls' certificate measures their gaps still)."""
+
+    reach: float
+    who: str
+    why: str
+    apart: float
+    need: float
+
+
+def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
+                centre: FloatArray, rho: float, axis: FloatArray, upto: float) -> RollAhead:
+    """:class:`RollAhead` of the grasp at joints ``qs`` turned about ``axis``: one pass of
+    the fingers' rolled motion in :data:`GAP_REACH_SAMPLES` equal parts of ``upto`` (the
+    seams kept ``pad_margin`` away), the tips' gaps measured at the end of each part and
+    the crossing of ``need`` (ROLL_TIP_GAP, or 90 % of the grasp's own gap) interpolated
+    linearly; the pass ends at the first finger's stop."""
     from ocp.robots.grasp_reach import roll
     from ocp.robots.turn_reach import rolls
 
     fingers = tuple(f.finger for f in template.fingers)
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
     nq = tuple(len(q) for q in qs)
     g0, _ = tips_gaps(fingers, np.concatenate(qs)[None], nq)
     need = min(ROLL_TIP_GAP, 0.9 * g0)
-    if not all(rolls(f) for f in fingers) or not math.isfinite(g0):
-        return upto, need
+    gaps = all(rolls(f) for f in fingers) and math.isfinite(g0)
     h = upto / GAP_REACH_SAMPLES
     q = [np.asarray(v, dtype=float) for v in qs]
+    reach, who, why, apart = upto, "", "", upto
     g_prev, th = g0, 0.0
     for _ in range(GAP_REACH_SAMPLES):
-        moved = [roll(f, qi, centre, rho, axis, h) for f, qi in zip(fingers, q, strict=True)]
-        if any(m.why for m in moved):  # a stop: the rolled reach cuts the turn there
-            return upto, need
-        q = [m.q for m in moved]
-        g, _ = tips_gaps(fingers, np.concatenate(q)[None], nq)
-        if g < need:
-            return th + h * (g_prev - need) / max(g_prev - g, 1e-12), need
-        g_prev, th = g, th + h
-    return upto, need
+        for i, f in enumerate(fingers):
+            if not rolls(f):
+                continue
+            m = roll(f, q[i], centre, rho, axis, h, template.pad_margin)
+            if m.why and th + m.reach < reach:  # a stop (a joint limit, the seam, a fold)
+                reach, who, why = th + m.reach, names[i], m.why
+            q[i] = m.q
+        if why:
+            break
+        if gaps and apart >= upto:
+            g, _ = tips_gaps(fingers, np.concatenate(q)[None], nq)
+            if g < need:
+                apart = th + h * (g_prev - need) / max(g_prev - g, 1e-12)
+            g_prev = g
+        th += h
+    return RollAhead(reach, who, why, apart, need)
 
 
 #: A roll the fingers' rolled reach shortens stops this far before the reach: the larger
@@ -196,40 +233,6 @@ REACH_SHARE = 0.1
 MIN_ROLL = math.radians(0.5)
 #: How many times a gait halves its rolls when a fingertip finds no swing back after one.
 MAX_ROLL_RETRIES = 2
-
-
-def _quaternion_product(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Rows of quaternions (w, x, y, z) ``a`` times the quaternion ``b``."""
-    w1, x1, y1, z1 = a.T
-    w2, x2, y2, z2 = b
-    return np.column_stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-                            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
-
-
-def carried(sol: ManipulationSolution, model: Any, R_then: FloatArray, R_now: FloatArray,
-            x0: FloatArray) -> WarmStart:
-    """The roll ``sol``, which began with the ball at the rotation ``R_then``, as the warm
-    start of a roll from ``R_now`` (the initial state ``x0``): the same motion of the
-    joints, the tips and the ball relative to the palm. Every roll's contacts start at
-    (0, 0) of charts put there (:func:`~ocp.spec.grasp.contact_from_joints`), so only the
-    ball's own frame differs, by C = R_then^T R_now: its quaternion times C's, its angular
-    velocity (object frame) by C^T. The primal point only: it spares the roll's own guess
-    (the inverse kinematics along the motion, half a second on the built-in hand) and
-    takes as many iterations; IPOPT's multipliers of the previous roll took 3-4 times as
-    many (docs/gait.md, "Speed")."""
-    obj = model.object
-    cols, ucols = obj.xs, obj.us
-    X, U = np.array(sol.X, dtype=float), np.array(sol.U, dtype=float)
-    C = R_then.T @ R_now
-    qc = np.reshape(quaternion_wxyz(C), 4)
-    Q = _quaternion_product(X[:, cols][:, 3:7], qc)
-    if float(Q[0] @ x0[cols][3:7]) < 0.0:
-        Q = -Q
-    X[:, cols.start + 3:cols.start + 7] = Q
-    U[:, ucols.start + 3:ucols.start + 6] = U[:, ucols.start + 3:ucols.start + 6] @ C
-    return WarmStart(np.asarray(sol.t, dtype=float), X, U)
 
 
 #: Samples per second of a roll's clock at which its joints' rates and accelerations are
@@ -297,26 +300,6 @@ def tips_gaps(fingers: tuple[Any, ...], q: FloatArray, nq: tuple[int, ...]
     return float(gaps[k]), k
 
 
-def _rolled_reach(template: ManipulationProblem, qs: tuple[FloatArray, ...],
-                  centre: FloatArray, rho: float, axis: FloatArray, upto: float
-                  ) -> tuple[float, str, str]:
-    """(the turn [rad] the grasp at joints ``qs`` rolls about ``axis`` before its first
-    finger stops, at most ``upto``; that finger's name, why it stops): each 4-joint round
-    fingertip's motion rolled (:func:`~ocp.robots.grasp_reach.roll`, the seam kept
-    ``pad_margin`` away)."""
-    from ocp.robots.grasp_reach import roll
-    from ocp.robots.turn_reach import rolls
-
-    best = (upto, "", "")
-    for i, (tip, q) in enumerate(zip(template.fingers, qs, strict=True)):
-        if not rolls(tip.finger):
-            continue
-        r = roll(tip.finger, q, centre, rho, axis, upto, template.pad_margin)
-        if r.why and r.reach < best[0]:  # a stop (a joint limit, the seam, a fold)
-            best = (r.reach, tip.name or f"finger{i}", r.why)
-    return best
-
-
 def _stopped(who: str, why: str, at: float, angle: float, ax: FloatArray,
              held: bool) -> str:
     """Why a gait stops short: which finger, what stops it, after how much of the turn."""
@@ -338,14 +321,14 @@ def _undo(plan: GaitPlan, checks: list[Check], never_lifted: set[str], before: t
     """Back to where the gait stood before a roll (``before``: the counts of its rolls,
     phases, steps and checks, then the loop's time, turn, pose, joints, ball rotation and
     the fingers never lifted): what came after dropped, the status solved again; (t,
-    done, pose, q_now, R_then) then."""
-    n_r, n_p, n_s, n_k, t, done, pose, q_now, R_then, lifted = before
-    del plan.rolls[n_r:], plan.clocks[n_r:], plan.phases[n_p:]
+    done, pose, q_now) then."""
+    n_r, n_p, n_s, n_k, t, done, pose, q_now, lifted = before
+    del plan.rolls[n_r:], plan.clocks[n_r:], plan.frames[n_r:], plan.phases[n_p:]
     del plan.steps[n_s:], checks[n_k:]
     never_lifted.clear()
     never_lifted.update(lifted)
     plan.status, plan.message = "solved", ""
-    return t, done, pose, q_now, R_then
+    return t, done, pose, q_now
 
 
 def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
@@ -425,40 +408,34 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                                                              load)) if not ok}
     checks: list[Check] = []
     t, done = 0.0, 0.0
-    R_then = R0
     cap, retries = roll_step, 0  # the roll's length, halved where a re-placement failed
     while done < angle - 1e-12 and len(plan.rolls) < max_rolls:
         step = min(cap, angle - done)
-        reach, who, why = _rolled_reach(template, q_now, np.asarray(pose.position, float),
-                                        rho, ax, step)
-        if why and reach < step - 1e-6:  # a finger stops short: roll to just before it
-            step = reach - max(REACH_MARGIN, REACH_SHARE * reach)
+        ahead = _roll_ahead(template, q_now, np.asarray(pose.position, float), rho, ax, step)
+        if ahead.why and ahead.reach < step - 1e-6:  # a finger stops short: roll to just
+            step = ahead.reach - max(REACH_MARGIN, REACH_SHARE * ahead.reach)  # before it
             if step < MIN_ROLL:
                 plan.status = "infeasible"
-                plan.message = _stopped(who, why, done + max(reach, 0.0), angle, ax,
-                                        who in never_lifted)
+                plan.message = _stopped(ahead.who, ahead.why, done + max(ahead.reach, 0.0),
+                                        angle, ax, ahead.who in never_lifted)
                 break
         # the tips' gaps: a turn that would bring two together stops before
-        apart, need = _gap_reach(template, q_now, np.asarray(pose.position, float), rho, ax,
-                                 step)
-        if apart < step and apart < MIN_ROLL:  # (a last roll may be shorter than that)
-            plan.status, plan.message = "infeasible", _too_close(need, done + max(apart, 0.0),
-                                                                 angle, ax)
+        if ahead.apart < step and ahead.apart < MIN_ROLL:  # (a last roll may be shorter)
+            plan.status, plan.message = "infeasible", _too_close(
+                ahead.need, done + max(ahead.apart, 0.0), angle, ax)
             break
-        step = min(step, apart)
+        step = min(step, ahead.apart)
         # where the plan stands before this roll, to go back to if what follows fails
         before = (len(plan.rolls), len(plan.phases), len(plan.steps), len(checks), t, done,
-                  pose, q_now, R_then, set(never_lifted))
+                  pose, q_now, set(never_lifted))
         target = axis_angle_rotation(ax, done + step) @ R0
         dur = max(1.0, seconds_per_radian * step)
         prob = _roll_problem(template, q_now, pose, target, centre, dur)
-        warm = None
-        if plan.rolls and plan.rolls[-1].ok:
-            warm = carried(plan.rolls[-1], planner.model(prob), R_then, pose.rotation,
-                           planner.initial_state(prob))
-        R_then = pose.rotation
+        # the last roll, in its own start frame, is this one's warm start, primal-dual
+        # point included: the grasp recurs, so it is (nearly) this very problem's optimum
+        warm = plan.rolls[-1] if plan.rolls and plan.rolls[-1].ok else None
         try:
-            sol = planner.solve(prob, warm)
+            sol = planner.solve(prob, warm, reach_checked=True)  # (_roll_ahead)
         except ProblemError as exc:  # the roll's own start (the gait's, not the request's)
             plan.status = "failed"
             plan.message = (f"roll {len(plan.rolls)} ({math.degrees(done):.1f} deg on) could "
@@ -466,6 +443,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             break
         r = len(plan.rolls)
         plan.rolls.append(sol)
+        plan.frames.append(pose.rotation)
         clock = RollClock.of(dur)
         plan.clocks.append(clock)
         plan.phases.append(GaitPhase("roll", t, t + clock.length, (True,) * nf, None, r))
@@ -483,7 +461,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                          np.cumsum(plan.nq)[:-1])
         t += clock.length
         done += step
-        pose = ObjectPose(tuple(quaternion_wxyz(sol.object_rotation[-1])),
+        pose = ObjectPose(tuple(quaternion_wxyz(plan.rotation(r, sol.object_rotation[-1]))),
                           tuple(sol.object_position[-1]))
         q_start = q_now
         q_now = tuple(q_end)
@@ -496,7 +474,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 # a fingertip found no swing back after this roll: roll half as far (a
                 # shorter roll leaves the tips nearer where they land) from where it began,
                 # and keep the shorter rolls (the grasp recurs)
-                t, done, pose, q_now, R_then = _undo(plan, checks, never_lifted, before)
+                t, done, pose, q_now = _undo(plan, checks, never_lifted, before)
                 cap, retries = step / 2, retries + 1
                 continue
             break

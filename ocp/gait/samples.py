@@ -81,7 +81,7 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
     for j, ph in enumerate(gait.phases):
         if ph.kind == "roll":
             sol = gait.rolls[ph.index]
-            end = (sol.object_position[-1], sol.object_rotation[-1])
+            end = (sol.object_position[-1], gait.rotation(ph.index, sol.object_rotation[-1]))
         rows = np.flatnonzero(phase_of == j)
         if not rows.size:
             if ph.kind == "roll":
@@ -92,7 +92,8 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
             Q[rows], QD[rows], QDD[rows] = gait.roll_joints(ph.index, tl)
             s = gait.clock(ph.index)(tl)[0]
             smp = sol.sample(s)
-            pos[rows], wxyz[rows] = smp.object_position, quaternion_wxyz(smp.object_rotation)
+            pos[rows] = smp.object_position
+            wxyz[rows] = quaternion_wxyz(gait.rotation(ph.index, smp.object_rotation))
             force[rows], torsion[rows] = sol.forces(s)
             last = end
             continue

@@ -299,7 +299,7 @@ class ManipulationPlanner:
 
     def solve(self, problem: ManipulationProblem,
               warm_start: WarmStart | ManipulationSolution | None = None, *,
-              certify: bool = True) -> ManipulationSolution:
+              certify: bool = True, reach_checked: bool = False) -> ManipulationSolution:
         """Plan; ProblemError (before any NLP is built) on bad input or an impossible
         initial grasp. When IPOPT converges but the certificate finds the grid too coarse
         (only discretisation checks fail: slip between collocation points, closure,
@@ -313,7 +313,9 @@ class ManipulationPlanner:
         A warm start that is a plan of this problem on a refined grid
         (:func:`warm_grid_factor`) starts on that grid, counted as one refinement.
         ``certify=False`` (a plan that only seeds another's initial guess): no certificate
-        and so no refinement; the plan is at best ``inaccurate``.
+        and so no refinement; the plan is at best ``inaccurate``. ``reach_checked``: the
+        caller has cut the turn at the grasp's rolled reach itself (a gait's rolls), so
+        :meth:`beyond_reach` is not asked again.
 
         A problem with ``forces`` is planned in two stages (``two_stage_forces``): its
         kinematics as without them, then the forces at the plan's collocation points
@@ -322,7 +324,7 @@ class ManipulationPlanner:
         plan, within what is left of the time limit.
         """
         problem.validate()
-        if certify:
+        if certify and not reach_checked:
             refused = self.beyond_reach(problem)
             if refused is not None:
                 return refused
@@ -343,8 +345,11 @@ class ManipulationPlanner:
     def beyond_reach(self, problem: ManipulationProblem) -> ManipulationSolution | None:
         """A turn the grasp cannot roll through, answered without an NLP
         (:func:`unplanned_turn`); None for any other problem."""
-        return unplanned_turn(problem, lambda: [
-            self.initial_state(problem)[tip.q_cols] for tip in self.model(problem).fingertips])
+        def joints() -> list[FloatArray]:
+            x0 = self.initial_state(problem)
+            return [x0[tip.q_cols] for tip in self.model(problem).fingertips]
+
+        return unplanned_turn(problem, joints)
 
     def _plan(self, problem: ManipulationProblem,
               warm_start: WarmStart | ManipulationSolution | None, certify: bool
