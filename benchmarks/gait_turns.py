@@ -1,0 +1,169 @@
+"""The issue's target turns of finger gaiting, timed (docs/gait.md, docs/performance.md).
+
+The turns: ``examples/allegro_turn_90.json`` (the built-in hand, the 60 mm, 50 g ball,
+mu = 1.0, a searched grasp, rolls of at most 10 deg) with its axis set to each of +-x, +-y
+and +-z; ``examples/allegro_turn_180_z.json``; 90 deg about +x on
+``examples/own_hand.xml`` given as MJCF text.
+
+Each run is one fresh process that plans every turn in turn, as a service worker does (the
+first request pays the swing NLPs' construction; each searched grasp is a new hand model,
+so each request builds its roll NLP). Per turn it reports the plan (status, certificate,
+rolls, re-placements) and, as medians over ``--repeats`` runs:
+
+- ``wall``: the whole request (validation, grasp search, builds, the gait, the result's
+  samples), what a client waits for;
+- ``build``: constructing NLPs, apart: the swing NLPs (``prepare_swings``) and the rolls'
+  (``stats.build_time``);
+- ``solve``: the solver calls (``stats.solve_time``: the rolls' IPOPT, force stages
+  included, and the swings');
+- ``other``: the rest of the gait (reach predictions, holds, certificates, samples).
+
+With ``--ref REV`` the same runs are made at git commit REV (a worktree under the system's
+temporary directory), interleaved with this tree's (old, new, old, new, ...), and both are
+printed side by side.
+
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --repeats 3
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --ref 1d51bdd --repeats 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+AXES = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0),
+        "+z": (0, 0, 1), "-z": (0, 0, -1)}
+
+
+def targets(root: Path = ROOT) -> dict[str, dict[str, Any]]:
+    """The requests of the target turns, by name, from the examples under ``root``."""
+    base = json.loads((root / "examples" / "allegro_turn_90.json").read_text())
+    out: dict[str, dict[str, Any]] = {}
+    for name, axis in AXES.items():
+        req = json.loads(json.dumps(base))
+        req["motion"]["steps"][0]["axis"] = list(axis)
+        out[f"90 {name}"] = req
+    out["180 +z"] = json.loads((root / "examples" / "allegro_turn_180_z.json").read_text())
+    own = json.loads(json.dumps(base))
+    own["hand"] = {"mjcf": (root / "examples" / "own_hand.xml").read_text(),
+                   "tips": [{"name": n} for n in ("ff_tip", "mf_tip", "rf_tip", "th_tip")]}
+    out["90 +x MJCF"] = own
+    return out
+
+
+def _worker(names: list[str]) -> None:
+    """One run: every named turn planned in this process, one JSON line each."""
+    from dexroll_client import ManipulationRequest
+    from ocp.gait.swing import prepare_swings
+    from planner_service.planners import REQUEST
+    from planner_service.planners.cache import FINGERS
+    from planner_service.planners.gait import solve_gait
+    from planner_service.planners.manipulation import problem_and_grasp
+
+    reqs = targets(Path.cwd())
+    for name in names:
+        t0 = time.perf_counter()
+        req = REQUEST.validate_python(reqs[name])
+        assert isinstance(req, ManipulationRequest)
+        problem, _ = problem_and_grasp(req, FINGERS)
+        t1 = time.perf_counter()
+        swings = prepare_swings(tuple(tip.finger for tip in problem.fingers))
+        t2 = time.perf_counter()
+        res, gait = solve_gait(req, problem, FINGERS.manipulation)
+        t3 = time.perf_counter()
+        assert res.stats is not None
+        print(json.dumps({
+            "name": name, "status": res.status.value,
+            "certified": bool(res.certificate is not None and res.certificate.passed),
+            "rolls": len(gait.rolls), "replacements": len(gait.steps),
+            "wall": t3 - t0, "grasp": t1 - t0, "swing_build": swings,
+            "roll_build": res.stats.build_time, "solve": res.stats.solve_time,
+            "gait": t3 - t2}), flush=True)
+
+
+def _run(tree: Path, names: list[str]) -> list[dict[str, Any]]:
+    """One run in a fresh process whose ``ocp`` and ``planner_service`` are ``tree``'s."""
+    env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
+                          *names], cwd=tree, env=env, capture_output=True, text=True,
+                         check=True)
+    return [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
+
+
+def _worktree(rev: str) -> Path:
+    path = Path(tempfile.gettempdir()) / f"dexroll-gait-turns-{rev}"
+    if not path.exists():
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(path),
+                        rev], check=True, capture_output=True)
+    return path
+
+
+def _median(rows: list[dict[str, Any]], key: str) -> float:
+    return statistics.median(float(r[key]) for r in rows)
+
+
+def _table(sides: dict[str, list[list[dict[str, Any]]]]) -> str:
+    lines = ["| turn | side | status, certified | rolls, re-placements | wall [s] | "
+             "grasp [s] | swing build [s] | roll build [s] | solve [s] | other [s] |",
+             "|---|---|---|---|---:|---:|---:|---:|---:|---:|"]
+    names = [r["name"] for r in next(iter(sides.values()))[0]]
+    for name in names:
+        for side, runs in sides.items():
+            rows = [r for run in runs for r in run if r["name"] == name]
+            other = [r["gait"] - r["solve"] - r["roll_build"] for r in rows]
+            lines.append(
+                f"| {name} | {side} | {rows[0]['status']}, {rows[0]['certified']} | "
+                f"{rows[0]['rolls']}, {rows[0]['replacements']} | "
+                f"{_median(rows, 'wall'):.1f} | {_median(rows, 'grasp'):.1f} | "
+                f"{_median(rows, 'swing_build'):.1f} | {_median(rows, 'roll_build'):.1f} | "
+                f"{_median(rows, 'solve'):.1f} | {statistics.median(other):.1f} |")
+    for side, runs in sides.items():
+        walls = [statistics.median(r["wall"] for run in runs for r in run
+                                   if r["name"] == n) for n in names if n.startswith("90 ")
+                 and "MJCF" not in n]
+        solves = [statistics.median(r["solve"] for run in runs for r in run
+                                    if r["name"] == n) for n in names if n.startswith("90 ")
+                  and "MJCF" not in n]
+        lines.append(f"\n{side}: the six 90 deg turns' median wall "
+                     f"{statistics.median(walls):.1f} s, median solve "
+                     f"{statistics.median(solves):.1f} s")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeats", type=int, default=3, help="runs per side (median)")
+    ap.add_argument("--ref", default=None, help="a git commit to time side by side")
+    ap.add_argument("--turns", default=None,
+                    help="comma-separated subset of the turns (default: all)")
+    ap.add_argument("--out", default=None, help="write every run's rows as JSON here")
+    ap.add_argument("--worker", nargs="*", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.worker is not None:
+        _worker(args.worker)
+        return
+    names = list(targets())
+    if args.turns:
+        names = [n for n in names if n in args.turns.split(",")]
+    trees = {"new": ROOT} if args.ref is None else {"old": _worktree(args.ref), "new": ROOT}
+    sides: dict[str, list[list[dict[str, Any]]]] = {side: [] for side in trees}
+    for k in range(args.repeats):
+        for side, tree in trees.items():
+            print(f"run {k + 1}/{args.repeats}, {side}", file=sys.stderr, flush=True)
+            sides[side].append(_run(tree, names))
+    if args.out:
+        Path(args.out).write_text(json.dumps(sides, indent=1))
+    print(_table(sides))
+
+
+if __name__ == "__main__":
+    main()
