@@ -434,6 +434,11 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         # the last roll, in its own start frame, is this one's warm start, primal-dual
         # point included: the grasp recurs, so it is (nearly) this very problem's optimum
         warm = plan.rolls[-1] if plan.rolls and plan.rolls[-1].ok else None
+        if warm is not None and warm.stats is not None \
+                and warm.stats.n_intervals > prob.n_intervals:
+            # the last roll's certificate refined its grid: this one starts there, where
+            # the last one's primal-dual point is (its coarse grid would be refined again)
+            prob = prob.with_intervals(warm.stats.n_intervals)
         try:
             sol = planner.solve(prob, warm, reach_checked=True)  # (_roll_ahead)
         except ProblemError as exc:  # the roll's own start (the gait's, not the request's)
