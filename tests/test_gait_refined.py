@@ -12,6 +12,9 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 from planner_service.planners import REQUEST
 from planner_service.planners.cache import FingerCache
 from planner_service.planners.gait import solve_gait
@@ -44,3 +47,15 @@ def test_a_roll_after_a_refined_one_starts_on_its_grid_from_its_point() -> None:
     assert second.n_intervals == first.n_intervals and second.refinements == 0
     assert second.iterations < first.iterations
     assert result.certificate is not None and result.certificate.passed
+    # each roll is planned in the ball's frame at its start (GaitPlan.frames): turned back
+    # into the palm frame the ball's orientation is continuous over the whole gait, still
+    # between the rolls, and ends 12 deg about -z from where it began
+    assert result.gait is not None and result.gait.samples is not None
+    wxyz = np.array(result.gait.samples.object_orientation_wxyz)
+    dots = np.abs(np.einsum("ij,ij->i", wxyz[1:], wxyz[:-1]))
+    assert np.degrees(2.0 * np.arccos(np.minimum(dots, 1.0))).max() < 0.2  # per sample
+    assert len(gait.frames) == 2 and np.allclose(gait.frames[0], np.eye(3))
+    w, x, y, z = wxyz[-1]
+    assert np.degrees(2.0 * math.atan2(math.hypot(x, y, z), abs(w))) == \
+        pytest.approx(12.0, abs=1.0)
+    assert z * w < 0.0 and abs(z) > 10.0 * max(abs(x), abs(y))  # about -z
