@@ -126,16 +126,15 @@ def _table(sides: dict[str, list[list[dict[str, Any]]]]) -> str:
                 f"{_median(rows, 'wall'):.1f} | {_median(rows, 'grasp'):.1f} | "
                 f"{_median(rows, 'swing_build'):.1f} | {_median(rows, 'roll_build'):.1f} | "
                 f"{_median(rows, 'solve'):.1f} | {statistics.median(other):.1f} |")
+    axes = [n for n in names if n.startswith("90 ") and "MJCF" not in n]
     for side, runs in sides.items():
-        walls = [statistics.median(r["wall"] for run in runs for r in run
-                                   if r["name"] == n) for n in names if n.startswith("90 ")
-                 and "MJCF" not in n]
-        solves = [statistics.median(r["solve"] for run in runs for r in run
-                                    if r["name"] == n) for n in names if n.startswith("90 ")
-                  and "MJCF" not in n]
+        def over_axes(key: str, runs: list[list[dict[str, Any]]] = runs) -> float:
+            """The median over the 90 deg axis turns of each turn's median ``key``."""
+            return statistics.median(_median([r for run in runs for r in run
+                                              if r["name"] == n], key) for n in axes)
+
         lines.append(f"\n{side}: the six 90 deg turns' median wall "
-                     f"{statistics.median(walls):.1f} s, median solve "
-                     f"{statistics.median(solves):.1f} s")
+                     f"{over_axes('wall'):.1f} s, median solve {over_axes('solve'):.1f} s")
     return "\n".join(lines)
 
 

@@ -319,9 +319,9 @@ def _too_close(need: float, at: float, angle: float, ax: FloatArray) -> str:
 def _undo(plan: GaitPlan, checks: list[Check], never_lifted: set[str], before: tuple[Any, ...]
           ) -> tuple[Any, ...]:
     """Back to where the gait stood before a roll (``before``: the counts of its rolls,
-    phases, steps and checks, then the loop's time, turn, pose, joints, ball rotation and
-    the fingers never lifted): what came after dropped, the status solved again; (t,
-    done, pose, q_now) then."""
+    phases, steps and checks, then the loop's time, turn, pose, joints and the fingers
+    never lifted): what came after dropped, the status solved again; (t, done, pose,
+    q_now) then."""
     n_r, n_p, n_s, n_k, t, done, pose, q_now, lifted = before
     del plan.rolls[n_r:], plan.clocks[n_r:], plan.frames[n_r:], plan.phases[n_p:]
     del plan.steps[n_s:], checks[n_k:]

@@ -363,8 +363,6 @@ def prepare_swings(fingers: tuple[Any, ...], n_intervals: int | None = None,
     (the others its neighbours), as a gait's swings use them (``n_intervals`` and
     ``lift_intervals``: :class:`SwingSpec`'s defaults when None), without solving: a
     service worker's warm-up. Returns the build time [s] (0 when built already)."""
-    import time
-
     n = SwingSpec.n_intervals if n_intervals is None else int(n_intervals)
     K = SwingSpec.lift_intervals if lift_intervals is None else int(lift_intervals)
     t0 = time.perf_counter()
