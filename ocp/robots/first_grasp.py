@@ -63,6 +63,12 @@ MAX_CANDIDATES = 16
 #: The search's roll step [rad] (the planner's check rolls at 0.25 deg: a candidate's
 #: reach is a search's estimate; the chosen grasp's is rolled again at that step).
 COARSE_STEP = math.radians(1.0)
+#: A searched grasp keeps the hand's links (all but the touching fingertips) this far [m]
+#: from the ball and from each other, as MuJoCo collides them: twice the certificate's
+#: ``LINK_CLEARANCE``, so that a roll's motion keeps that.
+GRASP_LINK_CLEARANCE = 1e-3
+#: At most this many grasps (in order of preference) are checked for their links.
+LINK_TRIES = 400
 #: At most this many combinations are weighed (each finger's least preferred candidates
 #: dropped first): 4 fingers keep 16 each, 5 fingers 9.
 MAX_COMBINATIONS = 66_000
@@ -292,7 +298,8 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
                 seeds: Sequence[Sequence[ArrayLike]] | None = None, samples: int = 1500,
                 keep: int = 8, min_gap: float = 1e-3, margin: float = 0.002,
                 seed: int = 0, names: Sequence[str] | None = None,
-                prefer: Callable[[tuple[FingerContact, ...]], bool] | None = None
+                prefer: Callable[[tuple[FingerContact, ...]], bool] | None = None,
+                clear: Callable[[FloatArray], Any] | None = None
                 ) -> FirstGrasp:
     """A first grasp of the ball of ``radius`` at ``centre`` by the round tips of
     ``fingers`` (module docstring): per finger its joints ``fixed[i]`` when given, else
@@ -301,8 +308,11 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
     grasp), tips ``min_gap`` [m] apart, contacts ``margin`` [m] from the caps' seams.
     ``prefer``: of the grasps passing the planner's grasp-angle test, in that order, the
     first it accepts (a gait's: every fingertip liftable); the first of all when it
-    accepts none. :class:`GraspNotFoundError` naming ``fingers[i]`` or ``grasp`` when
-    there is none."""
+    accepts none. ``clear``: the least clearance of the hand's other links (an
+    :class:`ocp.robots.collision.Clearance`) over rows of all fingers' joints (the grasp,
+    and each finger's rolled motion halfway through each of ``turns`` and at its end); a
+    grasp below :data:`GRASP_LINK_CLEARANCE` is never taken. :class:`GraspNotFoundError`
+    naming ``fingers[i]`` or ``grasp`` when there is none."""
     from ocp.geometry.grasp import force_angles
 
     c = np.asarray(centre, dtype=float)
@@ -371,18 +381,48 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
     order = np.lexsort((-clo, -least))  # by reach, then closure (last key first)
     chosen = [k for k in order if pool[k]]
     first: tuple[int, tuple[FingerContact, ...], float] | None = None
-    for k in chosen[:20 if prefer is None else 60]:  # the planner's own test: the grasp
-        contacts = tuple(per[i][combos[k, i]] for i in range(n))  # angle below atan(mu)
+    worst: Any = None  # the nearest links of the grasps refused for them
+    tried, budget = 0, 20 if prefer is None else 60
+    paths: dict[tuple[int, int], list[FloatArray]] = {}
+
+    def rolled(i: int, k: int) -> list[FloatArray]:
+        """Finger i's candidate k: its joints at the grasp and along the turns."""
+        got = paths.get((i, k))
+        if got is None:
+            q = np.asarray(per[i][k].q, dtype=float)
+            got = [q]
+            for t in turns:
+                for _ in range(2):
+                    r = roll(fingers[i], got[-1], c, radius, t.axis, t.angle / 2, margin,
+                             COARSE_STEP)
+                    got.append(np.asarray(r.q, dtype=float))
+            paths[(i, k)] = got
+        return got
+
+    for k in chosen[:budget if clear is None else LINK_TRIES]:
+        contacts = tuple(per[i][combos[k, i]] for i in range(n))
         pts = np.array([c + radius * ct.normal for ct in contacts])[None]
         nrm = np.array([ct.normal for ct in contacts])[None]
         phi, _, onto = force_angles(pts, nrm) if n >= 2 else (np.zeros(1), None,
                                                                np.ones(1, dtype=bool))
+        # the planner's own test: the grasp angle below atan(mu)
         if n < 2 or (bool(onto[0]) and float(phi[0]) < math.atan(mu)):
             angle = float(phi[0]) if n >= 2 else 0.0
+            if clear is not None:
+                tried += 1
+                got = clear(np.array([np.concatenate(row) for row in zip(*(
+                    rolled(i, int(combos[k, i])) for i in range(n)), strict=True)]))
+                if got.value < GRASP_LINK_CLEARANCE:
+                    if worst is None or got.value > worst.value:
+                        worst = got
+                    continue
+                budget -= 1  # of the clear grasps, as many weighed as without the links
             if first is None:
                 first = (k, contacts, angle)
             if prefer is None or prefer(contacts):
                 first = (k, contacts, angle)
+                break
+            if clear is not None and budget <= 0:
                 break
     if first is not None:
         k, contacts, angle = first
@@ -391,6 +431,12 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
                              for f, ct in zip(fingers, contacts, strict=True))
         return FirstGrasp(contacts, float(clo[k]), float(gap[k]), angle, requested,
                           tuple(len(p) for p in per), len(combos))
+    if worst is not None:
+        raise GraspNotFoundError([("grasp", (
+            f"of the {tried} grasps that hold the ball, none keeps the hand's other links "
+            f"{GRASP_LINK_CLEARANCE * 1e3:g} mm clear of the ball and of each other: at "
+            f"best {worst.describe()}; move the ball (initial_pose) or give "
+            "fewer fingers"))])
     raise GraspNotFoundError([("grasp", f"no combination's grasp angle is below atan(mu) = "
                                    f"{math.degrees(math.atan(mu)):.3g} deg (mu {mu}) with a "
                                    "grasp map onto; raise mu or give more fingers")])

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -292,6 +292,27 @@ class WholeHand:
     tips: tuple[TipSpec, ...]
     fingers: tuple[Any, ...]  # FingerModel
     mount: tuple[FloatArray, FloatArray]
+    _collisions: dict[tuple[int, ...], Any] = field(default_factory=dict, repr=False)
+
+    def collision(self, fingers: Sequence[int]) -> Any:
+        """The hand's collision geoms as MuJoCo collides them, with the tips of
+        ``fingers`` (indices into :attr:`fingers`, a plan's order) as the fingertips a
+        plan touches with (:class:`ocp.robots.collision.HandCollision`); None for a URDF
+        (its links' collisions are not checked) or without MuJoCo."""
+        if self.format != "mjcf":
+            return None
+        try:
+            import mujoco  # noqa: F401
+        except ImportError:
+            return None
+        from ocp.robots.collision import HandCollision
+
+        key = tuple(int(i) for i in fingers)
+        got = self._collisions.get(key)
+        if got is None:
+            got = self._collisions[key] = HandCollision(
+                self.text, tuple(self.tips[i].name for i in key), self.mount)
+        return got
 
     @property
     def n_fingers(self) -> int:

@@ -203,6 +203,36 @@ def with_force_checks(cert: Certificate, problem: ManipulationProblem, m: GraspM
                           n_samples=cert.n_samples)
 
 
+def touching_at(problem: ManipulationProblem, ts: FloatArray) -> NDArray[np.bool_]:
+    """(n, fingertips): whether each fingertip's contact is active at ``ts`` (its phases;
+    every one without)."""
+    n, k = len(ts), len(problem.fingers)
+    if problem.phases is None:
+        return np.ones((n, k), dtype=bool)
+    ends = np.cumsum([ph.duration for ph in problem.phases])
+    j = np.minimum(np.searchsorted(ends, ts - ts[0], side="right"), len(ends) - 1)
+    return np.array([problem.phases[i].touching for i in j], dtype=bool).reshape(n, k)
+
+
+def link_clearance_check(problem: ManipulationProblem, ts: FloatArray, q: FloatArray,
+                         R_po: FloatArray, p_po: FloatArray) -> Check:
+    """``min_link_clearance``: every pair of the hand's collision geoms MuJoCo would
+    collide (and each with the object) at least ``LINK_CLEARANCE`` apart at the samples
+    ``ts`` (joints ``q`` in the fingers' order, the object at ``R_po``, ``p_po``), but
+    for a touching fingertip and the object (:mod:`ocp.robots.collision`)."""
+    from ocp.robots.collision import LINK_CLEARANCE
+
+    names = [n for f in problem.fingers for n in f.finger.joint_names]
+    c = problem.collision.least(problem.object.shape, problem.object.dimensions, names, q,
+                                R_po, p_po, touching_at(problem, ts))
+    at = float(ts[c.sample]) if c.sample >= 0 else None
+    return Check("min_link_clearance", c.value, LINK_CLEARANCE, CheckKind.PHYSICS,
+                 lower_bound=True, time=at,
+                 reason="" if c.passed else
+                 f"min_link_clearance: {c.describe()} at t = {at:.6g} s (at least "
+                 f"{LINK_CLEARANCE * 1e3:g} mm kept between links not in a planned contact)")
+
+
 def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInterpolant,
                   prm: FloatArray, policy: TolerancePolicy,
                   forces: PlannedForces | None = None) -> Certificate:
@@ -305,6 +335,9 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
                                   pts, nrm)
         checks += more
         reported.update(rep_)
+    if problem.collision is not None:
+        checks.append(link_clearance_check(problem, ts, sx[:, m.joint_columns()], R_po,
+                                           p_po))
     if problem.smooth:
         checks += timing_checks(problem, m, traj)
     return Certificate.of(checks, reported, n_samples=n)

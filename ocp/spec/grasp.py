@@ -179,6 +179,11 @@ class ManipulationProblem:
     #: re-plan's :meth:`remaining` (so that the shrinking horizon keeps its NLP's
     #: structure); None: in proportion to the segments' durations.
     segment_counts: tuple[int, ...] | None = None
+    #: The hand's collision geoms as MuJoCo collides them, the fingertips in
+    #: :attr:`fingers`' order (:class:`ocp.robots.collision.HandCollision`): the
+    #: certificate keeps every other pair :data:`~ocp.robots.collision.LINK_CLEARANCE`
+    #: apart. None: only the fingertips' own checks (a URDF hand, fingers of their own).
+    collision: Any = field(default=None, compare=False, repr=False)
 
     @property
     def ramp_time_fraction(self) -> float:

@@ -189,6 +189,17 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
             return all(liftable(models, [ct.q for ct in contacts], centre, radius, rotation,
                                 load))
 
+    collision = _hand_collision(request, hand)
+    clear = None
+    if collision is not None:
+        joints = [n for m in models for n in m.joint_names]
+        R0 = np.asarray(start.rotation, dtype=float)[None]
+
+        def clear(q: np.ndarray) -> Any:
+            return collision.least(obj.shape, obj.dimensions, joints, q,
+                                   np.repeat(R0, len(q), axis=0),
+                                   np.repeat(centre[None], len(q), axis=0))
+
     def run() -> Any:
         t0 = time.perf_counter()
         got = first_grasp(models, centre, radius, turns, request.mu,
@@ -196,7 +207,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                           seeds=[s for _, s in info], samples=search.samples,
                           keep=search.candidates, min_gap=search.min_gap,
                           margin=request.pad_margin, seed=search.seed, names=names,
-                          prefer=prefer)
+                          prefer=prefer, clear=clear)
         return got, time.perf_counter() - t0
 
     try:
@@ -250,6 +261,38 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
         closure=found.closure, grasp_angle=found.grasp_angle, tip_gap=found.gap,
         candidates=list(found.candidates), combinations=found.combinations,
         search_time=took)
+
+
+def _hand_collision(request: ManipulationRequest, hand: Any) -> Any:
+    """The request's hand's collision geoms with its fingers' tips
+    (:meth:`ocp.robots.whole_hand.WholeHand.collision`): None unless every finger is one
+    of a whole hand's (a URDF's links are not checked)."""
+    if request.hand is None or not hasattr(hand, "collision") or any(
+            f.finger is not None or f.hand_finger is None for f in request.fingers):
+        return None
+    return hand.collision([int(f.hand_finger) for f in request.fingers
+                           if f.hand_finger is not None])
+
+
+def _initial_clearance(collision: Any, obj: ObjectSpec, start: ObjectPose,
+                       from_joints: list[tuple[int, FingerModel, tuple[float, ...] | None,
+                                               str, str]]) -> list[tuple[str, str]]:
+    """Why the initial grasp's links are not clear of the object and of each other (the
+    fields of the fingers' joints), [] when they are."""
+    from ocp.robots.collision import LINK_CLEARANCE
+
+    got = collision.least(obj.shape, obj.dimensions,
+                          [n for _, m, _, _, _ in from_joints for n in m.joint_names],
+                          np.concatenate([q for _, _, q, _, _ in from_joints])[None],
+                          np.asarray(start.rotation, dtype=float)[None],
+                          np.asarray(start.position, dtype=float)[None])
+    if got.passed:
+        return []
+    where = from_joints[got.fingers[0] if got.fingers else 0][4]
+    return [(where, f"at the initial grasp {got.describe()}: the hand's links "
+                                f"(but the touching fingertips with the object) must keep "
+                                f"{LINK_CLEARANCE * 1e3:g} mm from the object and from "
+                                "each other, as MuJoCo collides them")]
 
 
 def manipulation_problem(request: ManipulationRequest, cache: FingerCache
@@ -387,16 +430,22 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
             else:
                 for (k, _, _, _, _), tip in zip(from_joints, found, strict=True):
                     tips[k] = tip
+    collision = None if errors else _hand_collision(request, hand)
+    if collision is not None and motion_start is not None and from_joints and \
+            len(from_joints) == len(request.fingers) and \
+            all(q is not None for _, _, q, _, _ in from_joints):
+        errors += _initial_clearance(collision, obj, motion_start, from_joints)
     if errors:
         raise ProblemError(errors)
     tr = request.tracking
     forces = force_spec(request.forces)
-    return _problem(request, obj, tips, palm, start, motion, tr, forces), grasp_used
+    return _problem(request, obj, tips, palm, start, motion, tr, forces,
+                    collision), grasp_used
 
 
 def _problem(request: ManipulationRequest, obj: ObjectSpec, tips: list[Fingertip | None],
              palm: Palm | None, start: ObjectPose | None, motion: DesiredMotion | None,
-             tr: Any, forces: Any) -> ManipulationProblem:
+             tr: Any, forces: Any, collision: Any = None) -> ManipulationProblem:
     return ManipulationProblem(
         object=obj, fingers=tuple(t for t in tips if t is not None), duration=request.duration,
         palm=palm,
@@ -412,7 +461,7 @@ def _problem(request: ManipulationRequest, obj: ObjectSpec, tips: list[Fingertip
         max_object_rate=request.max_object_rate, max_refinements=request.max_refinements,
         options=solver_options(request.solver), forces=forces, timing=request.timing,
         ramp_time=request.ramp_time,
-        max_joint_acceleration=request.max_joint_acceleration)
+        max_joint_acceleration=request.max_joint_acceleration, collision=collision)
 
 
 class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProblem,

@@ -1,0 +1,178 @@
+"""The whole hand's links against the object and each other (issue 37, item 4:
+``ocp/robots/collision.py``), on ``examples/own_hand.xml`` (ours, in the Menagerie's
+style: box palm, capsule links, capsule tips, visual meshes whose files are absent,
+``<exclude>`` of the palm and the finger bases).
+
+Laws: every distance reported is MuJoCo's own (``mj_geomDistance``) for that pair; no
+pair MuJoCo would not collide (a body and its parent, an ``<exclude>``, a visual mesh) is
+ever reported; a fingertip touching the object is left out only while its contact is
+active; a grasp whose links enter each other or the ball is refused naming the bodies;
+the grasp search and the certificate keep the links clear."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco")
+
+from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_Q, NOMINAL_RADIUS  # noqa: E402
+from ocp.robots.collision import LINK_CLEARANCE, WINDOW, collision_text  # noqa: E402
+from ocp.robots.first_grasp import GRASP_LINK_CLEARANCE  # noqa: E402
+from ocp.robots.whole_hand import TipSpec, load_whole_hand  # noqa: E402
+
+OWN = (Path(__file__).resolve().parents[1] / "examples" / "own_hand.xml").read_text()
+TIPS = ("ff_tip", "mf_tip", "rf_tip", "th_tip")
+BODY = re.compile(r"body '([^']+)' \(geom (\d+)\)")
+
+
+@pytest.fixture(scope="module")
+def hand():
+    return load_whole_hand(OWN, "mjcf", [TipSpec(t) for t in TIPS])
+
+
+def _names(hand):
+    return [n for f in hand.fingers for n in f.joint_names]
+
+
+def _at(hand, q, touching=None, centre=NOMINAL_OBJECT_POSITION):
+    q = np.atleast_2d(q)
+    n = len(q)
+    return hand.collision([0, 1, 2, 3]).least(
+        "sphere", (NOMINAL_RADIUS,), _names(hand), q, np.tile(np.eye(3), (n, 1, 1)),
+        np.tile(np.asarray(centre, dtype=float), (n, 1)), touching)
+
+
+def _random_q(hand, n, seed=0):
+    rng = np.random.default_rng(seed)
+    lo = np.concatenate([f.lower for f in hand.fingers])
+    hi = np.concatenate([f.upper for f in hand.fingers])
+    return lo + rng.random((n, lo.size)) * (hi - lo)
+
+
+def test_distances_are_mujocos_own_for_each_pair(hand):
+    """Over random joint vectors (the ball far away), every pair nearer than the clearance
+    is at MuJoCo's ``mj_geomDistance`` for those two geoms."""
+    hc = hand.collision([0, 1, 2, 3])
+    mj, d = hc._model("sphere", (NOMINAL_RADIUS,))[:2]
+    addr = hc.joint_address("sphere", (NOMINAL_RADIUS,), _names(hand))
+    seen = 0
+    for q in _random_q(hand, 40):
+        got = _at(hand, q, centre=(1.0, 1.0, 1.0))
+        d.qpos[:] = mj.qpos0
+        d.qpos[addr] = q
+        d.qpos[-7:-4] = hc.mount[0].T @ (np.array([1.0, 1.0, 1.0]) - hc.mount[1])
+        mujoco.mj_kinematics(mj, d)
+        for (a, b), dist in got.near:
+            g1, g2 = int(BODY.search(a).group(2)), int(BODY.search(b).group(2))
+            exact = mujoco.mj_geomDistance(mj, d, g1, g2, WINDOW, None)
+            assert dist == pytest.approx(exact, abs=1e-6)
+            seen += 1
+    assert seen > 0  # random hands do put links into each other
+
+
+def test_pairs_mujoco_would_not_collide_are_never_reported(hand):
+    """A body and its parent, the file's ``<exclude>`` pairs and visual mesh geoms never
+    appear, however the joints are set."""
+    hc = hand.collision([0, 1, 2, 3])
+    mj = hc._model("sphere", (NOMINAL_RADIUS,))[0]
+    excluded = {frozenset(p) for p in re.findall(r'<exclude body1="([^"]+)" body2="([^"]+)"',
+                                                 OWN)}
+    assert excluded
+    for q in _random_q(hand, 60, seed=1):
+        for (a, b), _ in _at(hand, q, centre=(1.0, 1.0, 1.0)).near:
+            ga, gb = int(BODY.search(a).group(2)), int(BODY.search(b).group(2))
+            ba, bb = int(mj.geom_bodyid[ga]), int(mj.geom_bodyid[gb])
+            assert int(mj.body_parentid[ba]) != bb and int(mj.body_parentid[bb]) != ba
+            assert frozenset((BODY.search(a).group(1), BODY.search(b).group(1))) not in excluded
+            for g in (ga, gb):
+                assert mj.geom_contype[g] or mj.geom_conaffinity[g]
+    # the visual meshes are there, inert
+    assert "mesh" in OWN and 'contype="0"' in collision_text(OWN)
+
+
+def test_a_touching_fingertip_is_left_out_only_while_it_touches(hand):
+    q = np.concatenate(NOMINAL_Q)
+    held = _at(hand, q)
+    assert held.passed, held.describe()
+    lifted = _at(hand, q, touching=np.array([[False, True, True, True]]))
+    assert lifted.value < LINK_CLEARANCE
+    assert any("the object" in pair and "ff_tip" in " ".join(pair) for pair, _ in lifted.near)
+    assert lifted.fingers == (0,)
+
+
+def test_a_link_in_the_ball_is_refused_naming_the_bodies():
+    """A file whose index medial link carries a fat collision sphere reaching into the ball
+    at the nominal grasp: the request is a 422 naming the index finger's joints, the
+    bodies and the depth."""
+    from planner_service.planners import REQUEST, ProblemError
+    from planner_service.planners.cache import FingerCache
+    from planner_service.planners.manipulation import manipulation_problem
+
+    fat = OWN
+    i = fat.index('<body name="ff_medial"')
+    j = fat.index(">", i) + 1
+    fat = fat[:j] + '<geom name="fat" type="sphere" size="0.03" pos="0.02 0 0.02"/>' + fat[j:]
+    req = REQUEST.validate_python({
+        "planner": "manipulation", "object": {"shape": "sphere",
+                                              "dimensions": [NOMINAL_RADIUS]},
+        "hand": {"mjcf": fat, "tips": [{"name": t} for t in TIPS]},
+        "fingers": [{"hand_finger": k, "initial_q": list(q)}
+                    for k, q in enumerate(NOMINAL_Q)],
+        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
+                         "orientation_wxyz": [1, 0, 0, 0]},
+        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
+                                               "angle": 0.1}]},
+        "duration": 1.0})
+    with pytest.raises(ProblemError) as exc:
+        manipulation_problem(req, FingerCache())
+    fields = dict(exc.value.errors)
+    assert "fingers[0].initial_q" in fields, exc.value.errors
+    reason = fields["fingers[0].initial_q"]
+    assert "'ff_medial' (geom 'fat')" in reason and "mm into" in reason
+
+
+def test_the_search_keeps_links_clear_along_the_rolled_turn(hand):
+    """first_grasp with the hand's links: the grasp it takes keeps them the search's
+    clearance from the ball and each other, at the grasp and along the rolled turn."""
+    from ocp.robots.first_grasp import _Turn, first_grasp
+
+    seen: list[float] = []
+
+    def clear(q):
+        got = _at(hand, q)
+        seen.append(got.value)
+        return got
+
+    found = first_grasp(hand.fingers, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS,
+                        [_Turn(np.array([0.0, 0.0, 1.0]), 0.2)], mu=1.0, samples=300,
+                        clear=clear)
+    assert seen
+    q = np.concatenate([np.asarray(ct.q) for ct in found.contacts])
+    assert _at(hand, q).value >= GRASP_LINK_CLEARANCE
+
+
+def test_a_certified_plan_states_its_links_clearance():
+    """A roll on the file's own hand: its certificate has ``min_link_clearance`` (physics,
+    at least 0.5 mm), MuJoCo's least distance over the plan's samples."""
+    from planner_service.planners import REQUEST, solve
+
+    req = REQUEST.validate_python({
+        "planner": "manipulation", "object": {"shape": "sphere",
+                                              "dimensions": [NOMINAL_RADIUS]},
+        "hand": {"mjcf": OWN, "tips": [{"name": t} for t in TIPS]},
+        "fingers": [{"hand_finger": k, "initial_q": list(q)}
+                    for k, q in enumerate(NOMINAL_Q)],
+        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
+                         "orientation_wxyz": [1, 0, 0, 0]},
+        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
+                                               "angle": 0.1}]},
+        "duration": 1.0, "n_intervals": 10})
+    result = solve(req)[0]
+    assert result.status.value == "solved", result.message
+    values = result.certificate.values
+    assert values["min_link_clearance"] >= LINK_CLEARANCE
+    assert result.certificate.tolerances["min_link_clearance"] == LINK_CLEARANCE
