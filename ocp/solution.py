@@ -11,6 +11,7 @@ planner's terms (its contact coordinates' :class:`Trajectory`, sampled on any gr
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any
@@ -28,9 +29,17 @@ if TYPE_CHECKING:
 __all__ = ["Collocation", "ContactTrajectory", "FingerTrajectory", "GraspSample",
            "JointTrajectory", "ManipulationSolution", "PalmSolution", "PlannedForces", "RateBreak",
            "Solution", "SolverStats", "Status", "Trajectory", "fixed_rate_times",
-           "joint_torques", "status_from_ipopt"]
+           "joint_torques", "status_from_ipopt", "trajectory_joint_names"]
 
 FloatArray = NDArray[np.float64]
+
+
+def trajectory_joint_names(fingers: Sequence[tuple[str, Sequence[str]]]) -> tuple[str, ...]:
+    """A joint trajectory's names for fingers (name, their joints' names): the model's,
+    prefixed with the finger's (``<finger>/<joint>``) only where two fingers share one."""
+    names = [(f, j) for f, joints in fingers for j in joints]
+    seen = [j for _, j in names]
+    return tuple(j if seen.count(j) == 1 else f"{f}/{j}" for f, j in names)
 
 
 class Status(StrEnum):
@@ -558,9 +567,7 @@ class ManipulationSolution:
         assert self._interpolant is not None
         m = self._interpolant.m
         cols = [c for tip in m.fingertips for c in range(tip.q_cols.start, tip.q_cols.stop)]
-        names = [(f.name, j) for f in self.fingers for j in f.joint_names]
-        seen = [j for _, j in names]
-        joint_names = tuple(j if seen.count(j) == 1 else f"{f}/{j}" for f, j in names)
+        joint_names = trajectory_joint_names([(f.name, f.joint_names) for f in self.fingers])
         breaks = []
         traj = self.trajectory
         for k in self.break_nodes():

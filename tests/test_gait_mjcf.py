@@ -73,8 +73,13 @@ def test_a_gait_on_a_users_mjcf_hand() -> None:
     q = np.array([p.positions for p in jt.points])
     # the joints within the file's own limits (MuJoCo's reading: degrees, classes)
     model = mujoco.MjModel.from_xml_string(mujoco_text(xml))  # its meshes stripped
+    # the file's own joint names, and times a JointTrajectoryController takes: strictly
+    # increasing in its nanoseconds
+    ns = np.array([p.time_from_start.sec * 10**9 + p.time_from_start.nanosec
+                   for p in jt.points])
+    assert np.all(np.diff(ns) > 0)
     for j, name in enumerate(jt.joint_names):
-        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name.split("/")[-1])
+        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
         assert jid >= 0, name
         lo, hi = model.jnt_range[jid]
         assert lo - 1e-9 <= q[:, j].min() and q[:, j].max() <= hi + 1e-9, name

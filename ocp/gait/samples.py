@@ -54,11 +54,18 @@ class GaitSamples:
     effort: FloatArray | None = None
 
 
+#: The least time [s] between two samples of a gait's trajectories.
+MIN_SAMPLE_GAP = 1e-6
+
+
 def gait_times(gait: GaitPlan, rate: float) -> FloatArray:
-    """Times at ``rate`` [Hz] over the gait, and every switch."""
+    """Times at ``rate`` [Hz] over the gait, and every switch: strictly increasing, at
+    least :data:`MIN_SAMPLE_GAP` apart (a time of the grid that near a switch is left
+    out), so that no two points share a ``time_from_start`` in nanoseconds."""
     t = np.linspace(0.0, gait.duration, max(2, int(np.ceil(gait.duration * rate)) + 1))
-    edges = [p.start for p in gait.phases] + [gait.duration]
-    return np.unique(np.concatenate([t, edges]))
+    edges = np.unique([p.start for p in gait.phases] + [gait.duration])
+    near = np.min(np.abs(t[:, None] - edges[None, :]), axis=1) < MIN_SAMPLE_GAP
+    return np.unique(np.concatenate([t[~near], edges]))
 
 
 def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:

@@ -26,7 +26,7 @@ from dexroll_client.models import (
 from ocp.gait.feasibility import MAX_ROLLS, gait_outlook
 from ocp.gait.planner import GaitPlan, plan_gait
 from ocp.gait.samples import gait_samples, gait_times
-from ocp.solution import JointTrajectory
+from ocp.solution import JointTrajectory, trajectory_joint_names
 from ocp.spec.grasp import ManipulationProblem
 
 from .common import finger_certificate, rows
@@ -123,8 +123,9 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float
     """The wire result of a gait: its phases, the joints at ``rate`` [Hz] over the whole
     plan (ROS 2's JointTrajectory), the certificate."""
     names = [tip.name or f"finger{i}" for i, tip in enumerate(problem.fingers)]
-    joint_names = [f"{nm}/{j}" for nm, tip in zip(names, problem.fingers, strict=True)
-                   for j in tip.finger.joint_names]
+    joint_names = trajectory_joint_names(
+        [(nm, tip.finger.joint_names) for nm, tip in zip(names, problem.fingers, strict=True)])
+    cut = np.cumsum([0, *(len(tip.finger.joint_names) for tip in problem.fingers)])
     jt, samples = None, None
     if gait.phases:
         smp = gait_samples(gait, problem, gait_times(gait, rate))
@@ -140,7 +141,8 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float
                                        force=rows(smp.force[:, k]))
                       for k, nm in enumerate(names)],
             fingers=[GaitFingerModel(name=nm, tip_position=rows(smp.tip_position[:, k]),
-                                     tip_orientation_wxyz=rows(smp.tip_wxyz[:, k]))
+                                     tip_orientation_wxyz=rows(smp.tip_wxyz[:, k]),
+                                     joint_names=list(joint_names[cut[k]:cut[k + 1]]))
                      for k, nm in enumerate(names)])
     block = GaitResultModel(
         phases=[GaitPhaseModel(kind=p.kind, start=p.start, end=p.end,

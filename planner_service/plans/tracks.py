@@ -151,14 +151,18 @@ def tracks_of(result: AnyPlanResult) -> PlanTracks:
 def _gait_tracks(result: ManipulationResult, gs: Any, status: str, message: str
                  ) -> PlanTracks:
     """A gait's plan (docs/gait.md): its samples, the joints from its joint trajectory
-    (named ``<finger>/<joint>``)."""
+    (each finger's columns by its ``joint_names``; a result from before they were given:
+    the columns named ``<finger>/<joint>``)."""
     jt = result.joint_trajectory
     assert jt is not None
     q_all = _a([p.positions for p in jt.points])
     fingers = []
     for f in gs.fingers:
-        cols = [i for i, nm in enumerate(jt.joint_names) if nm.startswith(f"{f.name}/")]
-        fingers.append(FingerTrack(f.name, tuple(jt.joint_names[i].split("/", 1)[1]
+        if f.joint_names:
+            cols = [jt.joint_names.index(nm) for nm in f.joint_names]
+        else:
+            cols = [i for i, nm in enumerate(jt.joint_names) if nm.startswith(f"{f.name}/")]
+        fingers.append(FingerTrack(f.name, tuple(jt.joint_names[i].split("/")[-1]
                                                  for i in cols), q_all[:, cols],
                                    _a(f.tip_position), _a(f.tip_orientation_wxyz)))
     return PlanTracks(

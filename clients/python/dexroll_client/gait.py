@@ -73,6 +73,11 @@ class GaitFingerModel(_Response):
     name: str
     tip_position: Rows
     tip_orientation_wxyz: Rows
+    joint_names: list[str] = Field(
+        default_factory=list,
+        description="this finger's columns of the result's joint_trajectory, by name (the "
+                    "model's joint names; '<finger>/<joint>' only where two fingers share "
+                    "one)")
 
 
 class GaitSamplesModel(_Response):
