@@ -119,6 +119,11 @@ class SimOptions:
     grip_force: float = 1.0
     use_plan_forces: bool = True
     object_mass: float | None = None
+    #: On the user's model (``sim.user_model``): the mass [kg] given to each moving body of
+    #: the file left without one once its mesh geoms are removed (the mass came from the
+    #: meshes' volume, files the scene never reads). None: such a file is refused, naming
+    #: the bodies.
+    model_link_mass: float | None = None
     settle: float = 0.2
     record_every: int = 10
     tolerances: Tolerances = Tolerances()
@@ -181,6 +186,9 @@ class SimOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be finite and >= 0")
+        if self.model_link_mass is not None and not (math.isfinite(self.model_link_mass)
+                                                     and self.model_link_mass > 0):
+            raise ValueError("model_link_mass must be finite and > 0 kg")
         if self.noslip_iterations < 0 or self.record_every < 1:
             raise ValueError("noslip_iterations >= 0 and record_every >= 1")
         if self.solref[0] < 2 * self.timestep:

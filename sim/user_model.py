@@ -175,11 +175,16 @@ def _strip_files(root: ET.Element) -> None:
                 parent.remove(el)
     for mat in root.iter("material"):
         mat.attrib.pop("texture", None)
-    for geom in root.iter("geom"):  # default classes' mesh geoms
+    for geom in root.iter("geom"):  # default classes' mesh geoms: a geom of such a
+        # class with no mesh of its own is a small sphere without mass or contacts
+        meshy = "mesh" in geom.attrib or geom.get("type") in ("mesh", "hfield")
         geom.attrib.pop("mesh", None)
-        if geom.get("type") in ("mesh", "hfield"):
+        if meshy:
             geom.set("type", "sphere")
             geom.set("size", "0.005")
+            geom.set("mass", "0")
+            geom.set("contype", "0")
+            geom.set("conaffinity", "0")
     compiler = root.find("compiler")
     if compiler is None:
         compiler = ET.Element("compiler")
@@ -188,6 +193,44 @@ def _strip_files(root: ET.Element) -> None:
     compiler.set("boundinertia", "1e-12")
     for k in ("meshdir", "texturedir", "assetdir"):
         compiler.attrib.pop(k, None)
+
+
+#: A moving body lighter than this [kg] has no mass of its own (MuJoCo's ``boundmass``
+#: the scene sets is 1e-6 kg).
+MASSLESS = 1e-5
+
+
+def _compiled(xml: str) -> Any:
+    try:
+        return mujoco.MjModel.from_xml_string(xml)
+    except ValueError as exc:
+        raise ValueError(f"MuJoCo cannot compile the model: {exc}") from exc
+
+
+def massless_links(m: Any) -> list[str]:
+    """The names of the model's bodies that move (a joint of their own, the object's
+    aside) and weigh less than :data:`MASSLESS`."""
+    out = []
+    for b in range(1, m.nbody):
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or f"body {b}"
+        if name != OBJECT and int(m.body_jntnum[b]) > 0 and float(m.body_mass[b]) < MASSLESS:
+            out.append(name)
+    return out
+
+
+def _with_inertials(xml: str, bodies: list[str], mass: float) -> str:
+    """``xml`` with each of ``bodies`` given ``mass`` [kg] at its origin (the inertia of a
+    solid ball 10 mm in radius of that mass)."""
+    root = ET.fromstring(xml)
+    wanted = set(bodies)
+    inertia = 0.4 * mass * 0.01 ** 2
+    for body in root.iter("body"):
+        if body.get("name") in wanted:
+            for old in body.findall("inertial"):
+                body.remove(old)
+            body.insert(0, ET.Element("inertial", pos="0 0 0", mass=f"{mass:.17g}",
+                                      diaginertia=_v([inertia] * 3)))
+    return ET.tostring(root, encoding="unicode")
 
 
 @dataclass
@@ -285,10 +328,19 @@ class UserModelSimulation:
         if len(model.tips) != len(plan.fingers):
             raise ValueError(f"{len(model.tips)} tips named for {len(plan.fingers)} fingers")
         self.xml, changes = user_scene(plan, model, self.options)
-        try:
-            self.model = mujoco.MjModel.from_xml_string(self.xml)
-        except ValueError as exc:
-            raise ValueError(f"MuJoCo cannot compile the model: {exc}") from exc
+        self.model = _compiled(self.xml)
+        light = massless_links(self.model)
+        if light:
+            mass = self.options.model_link_mass
+            if mass is None:
+                raise ValueError(
+                    f"the model's moving bodies {', '.join(light)} have no mass once their "
+                    "mesh geoms are removed (their mass came from the meshes' volume: the "
+                    "scene never reads mesh files); give each an <inertial> in the file, or "
+                    "a mass with the simulation option model_link_mass [kg]")
+            self.xml = _with_inertials(self.xml, light, mass)
+            self.model = _compiled(self.xml)
+            changes["links_given_mass"] = {"bodies": light, "mass": mass}
         self.data = mujoco.MjData(self.model)
         m = self.model
         ident = mujoco.mjtObj

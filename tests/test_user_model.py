@@ -172,3 +172,28 @@ def test_the_requests_hand_names_each_fingers_tip_and_mount() -> None:
                                                     [np.sin(0.1), np.cos(0.1)]])
     with pytest.raises(NotExecutableError):
         user_model(request, plan)  # 2 fingers asked, 4 planned
+
+
+def test_links_whose_mass_came_from_their_meshes_are_refused_naming_them() -> None:
+    """The Menagerie's style of mass: no ``<inertial>``, the links' mass from their visual
+    meshes' volume (here: a density on the meshes' class, collision geoms of mass 0). The
+    scene never reads mesh files, so those links would weigh nothing: refused, naming each
+    body and the option; with ``model_link_mass`` each is given that mass (reported)."""
+    import re
+
+    text = re.sub(r"\s*<inertial [^>]*/>", "", OWN)
+    text = text.replace('<default class="visual"><geom type="mesh"',
+                        '<default class="visual"><geom type="mesh" density="800"')
+    text = text.replace('<geom group="3" type="box"', '<geom group="3" type="box" mass="0"')
+    with pytest.raises(ValueError) as exc:
+        UserModelSimulation(held_plan(), UserModel(text, TIPS))
+    reason = str(exc.value)
+    for body in ("ff_proximal", "mf_medial", "rf_distal", "th_base"):
+        assert body in reason
+    assert "model_link_mass" in reason and "mesh" in reason
+    sim = UserModelSimulation(held_plan(), UserModel(text, TIPS),
+                              SimOptions(model_link_mass=0.02))
+    m = sim.model
+    b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "ff_proximal")
+    assert m.body_mass[b] == pytest.approx(0.02)
+    assert "th_base" in sim.settings["links_given_mass"]["bodies"]
