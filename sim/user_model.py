@@ -26,12 +26,15 @@ The controller drives the model's own actuators (joint transmissions), per joint
   (q_dot_ref - q_dot)) / (gear gain)``, ``kp``, ``kv`` the simulator's options;
 * no actuator (or another kind): the joint is left passive (reported).
 
-``tau_ff`` = the plan's joint torques (its contact forces through ``J^T``; a plan
-without forces: the simulator's grip force pushing each fingertip into the object along
-the planned normal), plus what the model itself needs to follow the reference: gravity
-and Coriolis less its passive forces (joint damping, springs, gravity compensation) at
-``(q_ref, q_dot_ref)``, by MuJoCo (``qfrc_bias - qfrc_passive``; the links' inertia
-``M q_ddot`` is left out). Control ranges and force ranges are the file's: the report
+``tau_ff`` = the plan's joint torques (its contact forces through ``J^T`` and its links'
+weight; a plan without forces: the simulator's grip force pushing each fingertip into the
+object along the planned normal), plus what the model itself needs to follow the
+reference: Coriolis (and gravity, where the plan's torques do not hold the links' weight)
+less its passive forces (joint damping, springs, gravity compensation) at ``(q_ref,
+q_dot_ref)``, by MuJoCo (``qfrc_bias - qfrc_passive``; the links' inertia ``M q_ddot`` is
+left out). A plan that states its forces is driven by them alone: no squeeze unless
+asked (a plan without forces: the simulator's default squeeze). Control ranges and force
+ranges are the file's: the report
 gives each joint's largest feed-forward torque against its actuator's force range, the
 steps at the range's end, and the control clipped (a position servo whose reference
 offset would leave its control range). The grip ramps up while the object is held at its
@@ -42,7 +45,7 @@ from __future__ import annotations
 
 import time
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import mujoco
@@ -320,7 +323,12 @@ class UserModelSimulation:
     def __init__(self, plan: ExecutionPlan, model: UserModel,
                  options: SimOptions | None = None) -> None:
         plan.check()
-        self.plan, self.user, self.options = plan, model, (options or SimOptions()).resolved(plan)
+        options = options or SimOptions()
+        if options.squeeze is None and all(
+                r.joint_torques is not None or r.contact_force is not None
+                for r in plan.references):
+            options = replace(options, squeeze=0.0)  # the plan's forces, nothing of ours
+        self.plan, self.user, self.options = plan, model, options.resolved(plan)
         self.options.check()
         if self.options.mode != "servo":
             raise ValueError("on the user's model the joints are driven by its actuators: "
@@ -450,6 +458,9 @@ class UserModelSimulation:
             d.qpos[oq:oq + 3] = centre[i] + 10.0  # away: no contact in this evaluation
             mujoco.mj_forward(m, d)
             model_needs = d.qfrc_bias - d.qfrc_passive
+            d.qvel[:] = 0.0
+            mujoco.mj_forward(m, d)
+            weight = d.qfrc_bias.copy()  # the links' weight: in a plan's joint torques
             for f_i, (f, joints, ref, body) in enumerate(zip(
                     plan.fingers, self.joints, plan.references, self.tip_bodies,
                     strict=True)):
@@ -465,7 +476,7 @@ class UserModelSimulation:
                 J = jacp[:, dofs]
                 offsets[f_i][i] = _damped_pinv(J) @ (-o.squeeze_for(plan) * n_out)
                 if o.use_plan_forces and ref.joint_torques is not None:
-                    contact = ref.joint_torques[i]
+                    contact = ref.joint_torques[i] - weight[dofs]
                 elif o.use_plan_forces and ref.contact_force is not None:
                     contact = J.T @ ref.contact_force[i]
                 else:

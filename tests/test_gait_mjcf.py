@@ -3,8 +3,9 @@ degrees, default classes, the Menagerie's style; docs/hands.md), its grasp searc
 phases re-place every fingertip, each swing's fingertip lands on the ball where the plan
 says, at rest, the joints within the file's own limits, the ball turned as asked with its
 centre held; and the certificate passed (its swing and hold checks are the library's,
-tests/test_gait.py). Not executed here: on the file's own actuators (0.7 N m) the holds ask
-more torque than they give, which the planner does not bound (docs/gait.md)."""
+tests/test_gait.py). On the file's own actuators (0.7 N m) the holds ask more torque than
+they give: that gait is refused naming the joint, the torque and the limit; the geometry is
+tested on the same file with actuators of 2 N m, whose commands the result states."""
 
 from __future__ import annotations
 
@@ -56,9 +57,19 @@ def _torsion(result: ManipulationResult, k: int, rows: np.ndarray) -> np.ndarray
 def test_a_gait_on_a_users_mjcf_hand() -> None:
     body = copy.deepcopy(json.loads((ROOT / "tests" / "data" / "gait_small_request.json")
                                     .read_text()))
-    xml = (ROOT / "examples" / "own_hand.xml").read_text()
-    body["hand"] = {"mjcf": xml, "tips": [{"name": n} for n in TIPS]}
+    own = (ROOT / "examples" / "own_hand.xml").read_text()
+    body["hand"] = {"mjcf": own, "tips": [{"name": n} for n in TIPS]}
     body["grasp"] = "auto"
+    refused, summary = plan_request(body)
+    assert isinstance(refused, ManipulationResult)
+    assert refused.status is PlanStatus.INFEASIBLE, summary
+    assert refused.certificate is not None and not refused.certificate.passed
+    assert "its actuator" in refused.message and "gives -0.7..0.7 N m" in refused.message
+    assert refused.actuator_trajectory is not None
+    assert refused.actuator_trajectory.max_load > 1.0
+    xml = own.replace('forcerange="-0.7 0.7"', 'forcerange="-2 2"')
+    assert xml != own
+    body["hand"]["mjcf"] = xml
     result, summary = plan_request(body)
     assert isinstance(result, ManipulationResult)
     assert result.status is PlanStatus.SOLVED, summary

@@ -282,6 +282,17 @@ def frame_problems(text: str, fmt: str, model: Any) -> list[tuple[str, str]]:
             for r in found or []]
 
 
+def effort_limits(finger: Any) -> FloatArray:
+    """A finger's joints' effort limits [N m] as its model gives them (Pinocchio's
+    ``effortLimit``: a URDF's ``effort``), in its joint order."""
+    m = finger.model
+    out = []
+    for n in finger.joint_names:
+        j = m.getJointId(n)
+        out.append(float(m.effortLimit[m.joints[j].idx_v]) if j < m.njoints else np.inf)
+    return np.asarray(out, dtype=float)
+
+
 @dataclass(frozen=True, eq=False)
 class WholeHand:
     """A hand from one model text: one finger per fingertip (in the order of ``tips``)."""
@@ -292,7 +303,28 @@ class WholeHand:
     tips: tuple[TipSpec, ...]
     fingers: tuple[Any, ...]  # FingerModel
     mount: tuple[FloatArray, FloatArray]
-    _collisions: dict[tuple[int, ...], Any] = field(default_factory=dict, repr=False)
+    #: What :meth:`collision` and :meth:`actuation` built, by their arguments.
+    _collisions: dict[tuple[Any, ...], Any] = field(default_factory=dict, repr=False)
+
+    def actuation(self) -> Any:
+        """The hand's actuators as its file says (:mod:`ocp.robots.actuation`): an MJCF's
+        as MuJoCo reads them (None without MuJoCo), a URDF's joints as motors limited by
+        their ``effort``."""
+        from ocp.robots.actuation import HandActuation, UrdfActuation
+
+        got = self._collisions.get(("actuation",))
+        if got is None:
+            if self.format == "mjcf":
+                try:
+                    import mujoco  # noqa: F401
+                except ImportError:
+                    return None
+                got = HandActuation(self.text, self.mount)
+            else:
+                got = UrdfActuation({n: float(e) for f in self.fingers for n, e in zip(
+                    f.joint_names, effort_limits(f), strict=True)})
+            self._collisions[("actuation",)] = got
+        return got
 
     def collision(self, fingers: Sequence[int]) -> Any:
         """The hand's collision geoms as MuJoCo collides them, with the tips of

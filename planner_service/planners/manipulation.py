@@ -40,6 +40,7 @@ from ocp.solve.planner import (
 from ocp.spec.grasp import fingertips_from_joints
 from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
 
+from .actuation import hand_actuation, with_actuation
 from .base import SOLVER_FIELDS, PlannerAdapter
 from .cache import FingerCache, Planners, hand_finger_name
 from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
@@ -514,6 +515,8 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
         with fingers.lock:  # the hand and fingers, by the cache's rules
             problem, grasp = problem_and_grasp(request, fingers)
             planner = fingers.manipulation
+            actuation = None if request.hand is None else \
+                hand_actuation(request, fingers.hand(request.hand))
         errors = fields.errors(problem.errors())
         if errors:
             raise ProblemError(errors)
@@ -522,12 +525,13 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
             if errors:
                 raise ProblemError(errors)
             gait_res, gait = solve_gait(request, problem, planner)
-            return gait_res.model_copy(update={"grasp": grasp}), gait
+            return with_actuation(gait_res, actuation).model_copy(update={"grasp": grasp}), \
+                gait
         try:
             sol = planner.solve(problem, warm)
         except ProblemError as exc:
             raise ProblemError(fields.errors(exc.errors)) from exc
-        result = self.to_result(request, problem, sol)
+        result = with_actuation(self.to_result(request, problem, sol), actuation)
         if grasp is not None:
             result = result.model_copy(update={"grasp": grasp})
         return result, sol

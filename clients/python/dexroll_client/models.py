@@ -94,6 +94,8 @@ from dexroll_client.results import (
     COLLOCATION_DESCRIPTION as COLLOCATION_DESCRIPTION,
 )
 from dexroll_client.results import (
+    ActuatorModel,
+    ActuatorTrajectoryModel,
     AnyPlanResult,
     CertificateBase,
     CertificateModel,
@@ -143,6 +145,8 @@ __all__ = [
     "MAX_VIA_POINTS",
     "MAX_WARM_START_COLUMNS",
     "PLANNERS",
+    "ActuatorModel",
+    "ActuatorTrajectoryModel",
     "AnyPlanResult",
     "BallOnPalmRequest",
     "CertificateBase",

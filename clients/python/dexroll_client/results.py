@@ -459,6 +459,40 @@ class RateBreakModel(_Response):
                                                       "point at this time has these)")
 
 
+class ActuatorModel(_Response):
+    """One planned joint's actuator, as the hand file says."""
+
+    joint: str = Field(description="the joint (the file's name)")
+    actuator: str | None = Field(description="the actuator driving it (the file's name); "
+                                             "null: none")
+    kind: str = Field(description="'servo' (an affine bias: a position or velocity servo), "
+                                  "'motor' (torque), or 'none' (not commanded)")
+    gear: float = 1.0
+    gain: float = 1.0
+    bias: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0],
+                              description="b0, b1, b2 of MuJoCo's affine bias")
+    torque_range: list[float] | None = Field(
+        default=None, description="the joint torque it can give [N m] (gear x forcerange)")
+    ctrl_range: list[float] | None = None
+
+
+class ActuatorTrajectoryModel(_Response):
+    """What the hand file's own actuators must be commanded, at the joint trajectory's
+    times, to make the plan's motion and its planned contact forces (docs/actuation.md):
+    per joint, the torque it must get (the plan's joint torques plus the file's damping,
+    Coriolis and inertia terms) and its actuator's control (a position servo: its set
+    point, q + torque / kp; a motor: its torque over gear and gain)."""
+
+    actuators: list[ActuatorModel]
+    t: list[float] = Field(description="times [s] (the joint trajectory's)")
+    torques: Rows = Field(description="per sample, each joint's needed torque [N m]")
+    controls: list[list[float | None]] = Field(
+        description="per sample, each actuator's control (null: the joint has none)")
+    max_load: float = Field(description="the largest share of a torque limit needed (1: at "
+                                        "the limit; 0 without limits)")
+    notes: list[str] = Field(default_factory=list)
+
+
 class JointTrajectoryModel(_Response):
     """Every finger's joints shaped like ROS 2's ``trajectory_msgs/JointTrajectory``: hand
     ``joint_names`` and ``points`` to a joint trajectory controller as they are. From the
@@ -603,6 +637,10 @@ class ManipulationResult(PlanResultBase):
         default=None, description=JOINT_TRAJECTORY_DESCRIPTION)
     collocation: CollocationModel | None = Field(default=None,
                                                  description=COLLOCATION_DESCRIPTION)
+    actuator_trajectory: ActuatorTrajectoryModel | None = Field(
+        default=None, description="the hand file's actuators' commands for this plan, at "
+                                  "the joint trajectory's times (a hand of one file; null: "
+                                  "fingers of their own)")
     grasp: GraspUsedModel | None = Field(
         default=None, description="the initial grasp the request's `grasp` search found "
                                   "(null: none was searched)")
