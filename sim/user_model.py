@@ -221,18 +221,38 @@ def massless_links(m: Any) -> list[str]:
     return out
 
 
-def _with_inertials(xml: str, bodies: list[str], mass: float) -> str:
-    """``xml`` with each of ``bodies`` given ``mass`` [kg] at its origin (the inertia of a
-    solid ball 10 mm in radius of that mass)."""
+def _with_inertials(xml: str, m: Any, bodies: list[str], mass: float) -> str:
+    """``xml`` with each of ``bodies`` given ``mass`` [kg] spread evenly over the box that
+    bounds its collision geoms (all its geoms when none collides) in the compiled ``m``:
+    its centre the centre of mass, the box's inertia."""
     root = ET.fromstring(xml)
-    wanted = set(bodies)
-    inertia = 0.4 * mass * 0.01 ** 2
+    boxes: dict[str, tuple[FloatArray, FloatArray]] = {}
+    for name in bodies:
+        b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+        geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == b]
+        touching = [g for g in geoms if m.geom_contype[g] or m.geom_conaffinity[g]]
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        R = np.zeros(9)
+        for g in touching or geoms:
+            mujoco.mju_quat2Mat(R, m.geom_quat[g])
+            Rg = R.reshape(3, 3)
+            centre = m.geom_pos[g] + Rg @ m.geom_aabb[g, :3]
+            half = np.abs(Rg) @ m.geom_aabb[g, 3:]
+            lo, hi = np.minimum(lo, centre - half), np.maximum(hi, centre + half)
+        if not geoms:
+            lo, hi = np.full(3, -0.005), np.full(3, 0.005)
+        boxes[name] = ((lo + hi) / 2, np.maximum(hi - lo, 1e-3))
     for body in root.iter("body"):
-        if body.get("name") in wanted:
-            for old in body.findall("inertial"):
-                body.remove(old)
-            body.insert(0, ET.Element("inertial", pos="0 0 0", mass=f"{mass:.17g}",
-                                      diaginertia=_v([inertia] * 3)))
+        got = boxes.get(body.get("name", ""))
+        if got is None:
+            continue
+        centre, (a, b_, c) = got
+        for old in body.findall("inertial"):
+            body.remove(old)
+        inertia = [mass / 12.0 * (b_ * b_ + c * c), mass / 12.0 * (a * a + c * c),
+                   mass / 12.0 * (a * a + b_ * b_)]
+        body.insert(0, ET.Element("inertial", pos=_v(centre), mass=f"{mass:.17g}",
+                                  diaginertia=_v(inertia)))
     return ET.tostring(root, encoding="unicode")
 
 
@@ -283,6 +303,44 @@ def _joint_drive(m: Any, jid: int, name: str) -> _Joint:
                        "torque at its gain" + more)
 
 
+def _impedance(solimp: Any, r: float) -> float:
+    """MuJoCo's impedance d(r) of ``solimp`` (d0, dmax, width, mid, power) at depth r."""
+    d0, dmax, width, mid, power = (float(x) for x in solimp)
+    x = min(abs(r) / width, 1.0) if width > 0 else 1.0
+    if x >= 1.0 or power == 1.0:
+        y = x
+    elif x <= mid:
+        y = x ** power / mid ** (power - 1.0)
+    else:
+        y = 1.0 - (1.0 - x) ** power / (1.0 - mid) ** (power - 1.0)
+    return d0 + y * (dmax - d0)
+
+
+def contact_depth(m: Any, tip_body: int, object_body: int, force: float, solref: Any,
+                  solimp: Any) -> float:
+    """How deep [m] a fingertip sinks into the object in MuJoCo's soft contact to carry
+    the normal ``force`` [N] at rest. MuJoCo's constraint force is ``f = (A + R)^-1 (aref
+    - a0)`` with ``aref = -K d r`` at rest and ``a1 = a0 + A f = 0``, so ``R f = -K d r``:
+    ``r = (1 - d) A~ f / (d^2 K)``, ``R = (1 - d) / d A~``, ``A~`` MuJoCo's approximate
+    inverse inertia of the contact (the two bodies' ``body_invweight0``), ``K = 1 / (dmax^2
+    timeconst^2 dampratio^2)`` of ``solref``, ``d`` the impedance of ``solimp`` at that
+    depth. 0 for a direct-stiffness ``solref`` (negative), which this does not model."""
+    tau, zeta = (float(x) for x in solref)
+    if force <= 0.0 or tau <= 0.0 or zeta <= 0.0:
+        return 0.0
+    A = float(m.body_invweight0[tip_body, 0] + m.body_invweight0[object_body, 0])
+    dmax = float(solimp[1])
+    K = 1.0 / (dmax * dmax * tau * tau * zeta * zeta)
+    r = 0.0
+    for _ in range(50):  # the impedance depends on the depth: a fixed point
+        imp = _impedance(solimp, r)
+        r_new = (1.0 - imp) * A * force / (imp * imp * K)
+        if abs(r_new - r) < 1e-10:
+            return r_new
+        r = r_new
+    return r
+
+
 def _geom_settings(m: Any, g: int) -> dict[str, Any]:
     return {"condim": int(m.geom_condim[g]),
             "friction": [float(x) for x in m.geom_friction[g]],
@@ -324,10 +382,12 @@ class UserModelSimulation:
                  options: SimOptions | None = None) -> None:
         plan.check()
         options = options or SimOptions()
-        if options.squeeze is None and all(
-                r.joint_torques is not None or r.contact_force is not None
-                for r in plan.references):
-            options = replace(options, squeeze=0.0)  # the plan's forces, nothing of ours
+        #: the fingertips pressed in by the depth the file's own contacts need to carry
+        #: the planned forces (:func:`contact_depth`), instead of a squeeze of ours
+        self.compliance = options.squeeze is None and all(
+            r.contact_force is not None for r in plan.references)
+        if self.compliance:
+            options = replace(options, squeeze=0.0)
         self.plan, self.user, self.options = plan, model, options.resolved(plan)
         self.options.check()
         if self.options.mode != "servo":
@@ -346,7 +406,7 @@ class UserModelSimulation:
                     "mesh geoms are removed (their mass came from the meshes' volume: the "
                     "scene never reads mesh files); give each an <inertial> in the file, or "
                     "a mass with the simulation option model_link_mass [kg]")
-            self.xml = _with_inertials(self.xml, light, mass)
+            self.xml = _with_inertials(self.xml, self.model, light, mass)
             self.model = _compiled(self.xml)
             changes["links_given_mass"] = {"bodies": light, "mass": mass}
         self.data = mujoco.MjData(self.model)
@@ -455,6 +515,8 @@ class UserModelSimulation:
                     d.qpos[j.qpos] = ref.q[i, k]
                     d.qvel[j.dof] = ref.q_dot[i, k]
             oq = self.object_qpos
+            if self.compliance:
+                depths = self._depths(i, contact_of)
             d.qpos[oq:oq + 3] = centre[i] + 10.0  # away: no contact in this evaluation
             mujoco.mj_forward(m, d)
             model_needs = d.qfrc_bias - d.qfrc_passive
@@ -474,7 +536,10 @@ class UserModelSimulation:
                     n_out = n_out / max(float(np.linalg.norm(n_out)), 1e-12)
                 mujoco.mj_jac(m, d, jacp, None, point, body)
                 J = jacp[:, dofs]
-                offsets[f_i][i] = _damped_pinv(J) @ (-o.squeeze_for(plan) * n_out)
+                depth = o.squeeze_for(plan)
+                if self.compliance and c is not None and ref.contact_force is not None:
+                    depth = depths[f_i]
+                offsets[f_i][i] = _damped_pinv(J) @ (-depth * n_out)
                 if o.use_plan_forces and ref.joint_torques is not None:
                     contact = ref.joint_torques[i] - weight[dofs]
                 elif o.use_plan_forces and ref.contact_force is not None:
@@ -498,6 +563,25 @@ class UserModelSimulation:
                      "actuators; contact-force feedback runs on dexroll's scene only)"
                      if o.feedback else "force control: off")
         return offsets, torques, notes
+
+    def _depths(self, i: int, contact_of: dict[str, Any]) -> list[float]:
+        """Per finger, the depth [m] its contact sinks in the file's soft contact under the
+        planned normal force at sample ``i`` (:func:`contact_depth`)."""
+        plan, m = self.plan, self.model
+        out = []
+        for f, ref, body in zip(plan.fingers, plan.references, self.tip_bodies, strict=True):
+            c = contact_of.get(f.name)
+            geom = next((g for g, k in self.contact_of_geom.items()
+                         if int(m.geom_bodyid[g]) == body), None)
+            if c is None or ref.contact_force is None or geom is None or c.normal is None:
+                out.append(0.0)
+                continue
+            n_out = np.asarray(c.normal[i], dtype=float)
+            f_n = max(float(-np.asarray(ref.contact_force[i]) @ n_out), 0.0)
+            pair = _pair_settings(m, geom, self.object_geom)
+            out.append(contact_depth(m, body, self.object_body, f_n, pair["solref"],
+                                     pair["solimp"]))
+        return out
 
     # -- the run --------------------------------------------------------------------------
     def run(self) -> SimReport:

@@ -197,3 +197,32 @@ def test_links_whose_mass_came_from_their_meshes_are_refused_naming_them() -> No
     b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "ff_proximal")
     assert m.body_mass[b] == pytest.approx(0.02)
     assert "th_base" in sim.settings["links_given_mass"]["bodies"]
+
+
+@pytest.mark.parametrize("solimp", ["0.9 0.95 0.001 0.5 2", "0.95 0.99 0.002 0.5 2"])
+def test_the_contact_depth_is_mujocos_own_at_rest(solimp: str) -> None:
+    """A 50 g ball resting on a fixed round tip under gravity: MuJoCo's settled depth is
+    :func:`sim.user_model.contact_depth` of its weight, the file's solref and solimp (what
+    the fingertips' set points are pressed in by for a plan's forces)."""
+    from sim.user_model import contact_depth
+
+    xml = f"""<mujoco><option timestep="0.0005" cone="elliptic"/>
+      <worldbody>
+        <body name="tip"><geom type="sphere" size="0.012" solref="0.02 1"
+                               solimp="{solimp}"/></body>
+        <body name="ball" pos="0 0 0.042"><freejoint/>
+          <geom type="sphere" size="0.03" mass="0.05" solref="0.02 1" solimp="{solimp}"/>
+        </body>
+      </worldbody></mujoco>"""
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    for _ in range(6000):
+        mujoco.mj_step(m, d)
+    assert d.ncon == 1
+    depth = -float(d.contact[0].dist)
+    ball = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "ball")
+    tip = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "tip")
+    want = contact_depth(m, tip, ball, 0.05 * 9.81, (0.02, 1.0),
+                         [float(x) for x in solimp.split()])
+    assert depth > 1e-5
+    assert want == pytest.approx(depth, rel=0.02)
