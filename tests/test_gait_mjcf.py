@@ -74,6 +74,12 @@ def test_a_gait_on_a_users_mjcf_hand() -> None:
     assert isinstance(result, ManipulationResult)
     assert result.status is PlanStatus.SOLVED, summary
     assert result.certificate is not None and result.certificate.passed
+    # the file's links, as MuJoCo collides them, clear over the whole gait and every roll
+    values = result.certificate.values
+    assert values["gait_link_clearance"] >= 5e-4
+    assert all(v >= 5e-4 for k, v in values.items() if k.endswith("min_link_clearance"))
+    assert result.actuator_trajectory is not None
+    assert 0.0 < result.actuator_trajectory.max_load <= 1.0
     gait = result.gait
     assert gait is not None and gait.samples is not None and gait.never_lifted == []
     swings = [p.lifted_finger for p in gait.phases if p.kind == "swing"]

@@ -15,7 +15,8 @@ from ocp.geometry.bodies import tip_body
 from ocp.geometry.rotations import quaternion_wxyz
 from ocp.solution import joint_torques
 
-__all__ = ["TRANSITION", "GaitSamples", "gait_samples", "gait_times"]
+__all__ = ["LINK_CHECK_RATE", "TRANSITION", "GaitSamples", "gait_samples", "gait_times",
+           "with_link_clearance"]
 
 FloatArray = NDArray[np.float64]
 
@@ -132,3 +133,30 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
                         for c, f in enumerate(fingers)])
     return GaitSamples(ts, Q, QD, QDD, pos, wxyz, points, normals, force, active, tip_p,
                        tip_q, torsion, effort)
+
+
+#: Samples a second at which a gait's links are checked (its rolls' own certificates check
+#: them at their dense samples too).
+LINK_CHECK_RATE = 100.0
+
+
+def with_link_clearance(gait: GaitPlan, problem: Any) -> GaitPlan:
+    """``gait`` with its certificate's ``gait_link_clearance``: the hand's links (MuJoCo's
+    pairs, ``problem.collision``) at least ``LINK_CLEARANCE`` apart over the whole gait at
+    :data:`LINK_CHECK_RATE` and every switch, a fingertip's own contact with the object
+    left out while it is active at all (its swing checks hold it clear of the ball when
+    lifted). Unchanged without a collision model or phases; call it on what
+    :func:`~ocp.gait.planner.plan_gait` returns."""
+    from ocp.certify.certificate import Certificate
+    from ocp.geometry.rotations import quaternion_matrix
+    from ocp.solve.certify import link_clearance_check
+
+    if getattr(problem, "collision", None) is None or not gait.phases:
+        return gait
+    ts = gait_times(gait, LINK_CHECK_RATE)
+    smp = gait_samples(gait, problem, ts)
+    R = np.array([quaternion_matrix(w) for w in smp.object_wxyz])
+    check = link_clearance_check(problem, ts, smp.q, R, smp.object_position,
+                                 smp.active > 0.0, name="gait_link_clearance")
+    gait.certificate = Certificate.of([*gait.certificate.checks, check])
+    return gait

@@ -215,21 +215,25 @@ def touching_at(problem: ManipulationProblem, ts: FloatArray) -> NDArray[np.bool
 
 
 def link_clearance_check(problem: ManipulationProblem, ts: FloatArray, q: FloatArray,
-                         R_po: FloatArray, p_po: FloatArray) -> Check:
+                         R_po: FloatArray, p_po: FloatArray,
+                         touching: NDArray[np.bool_] | None = None,
+                         name: str = "min_link_clearance") -> Check:
     """``min_link_clearance``: every pair of the hand's collision geoms MuJoCo would
     collide (and each with the object) at least ``LINK_CLEARANCE`` apart at the samples
     ``ts`` (joints ``q`` in the fingers' order, the object at ``R_po``, ``p_po``), but
-    for a touching fingertip and the object (:mod:`ocp.robots.collision`)."""
+    for a touching fingertip and the object (``touching`` (n, fingertips); default: by
+    the problem's phases) (:mod:`ocp.robots.collision`)."""
     from ocp.robots.collision import LINK_CLEARANCE
 
     names = [n for f in problem.fingers for n in f.finger.joint_names]
     c = problem.collision.least(problem.object.shape, problem.object.dimensions, names, q,
-                                R_po, p_po, touching_at(problem, ts))
+                                R_po, p_po,
+                                touching_at(problem, ts) if touching is None else touching)
     at = float(ts[c.sample]) if c.sample >= 0 else None
-    return Check("min_link_clearance", c.value, LINK_CLEARANCE, CheckKind.PHYSICS,
+    return Check(name, c.value, LINK_CLEARANCE, CheckKind.PHYSICS,
                  lower_bound=True, time=at,
                  reason="" if c.passed else
-                 f"min_link_clearance: {c.describe()} at t = {at:.6g} s (at least "
+                 f"{name}: {c.describe()} at t = {at:.6g} s (at least "
                  f"{LINK_CLEARANCE * 1e3:g} mm kept between links not in a planned contact)")
 
 

@@ -25,7 +25,7 @@ from dexroll_client.models import (
 )
 from ocp.gait.feasibility import MAX_ROLLS, gait_outlook
 from ocp.gait.planner import GaitPlan, plan_gait
-from ocp.gait.samples import gait_samples, gait_times
+from ocp.gait.samples import gait_samples, gait_times, with_link_clearance
 from ocp.solution import JointTrajectory, trajectory_joint_names
 from ocp.spec.grasp import ManipulationProblem
 
@@ -102,6 +102,7 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
                      swing={"duration": float(g.swing_duration),
                             "clearance": float(g.clearance)},
                      hold_time=float(g.hold_time))
+    gait = with_link_clearance(gait, problem)
     rate = float(getattr(request, "sample_rate", None) or DEFAULT_GAIT_RATE)
     return gait_result(gait, problem, rate), gait
 
