@@ -260,7 +260,13 @@ def test_a_swing_between_close_neighbours_keeps_the_least_tip_gap() -> None:
     from ocp.gait.swing import MIN_TIP_GAP, plan_swing
 
     d, spec = stored_swing("gait_narrow_swing.json")
-    assert plan_swing(spec).status == "infeasible"
+    failed = plan_swing(dataclasses.replace(spec, name="middle",
+                                            other_names=("index", "ring", "thumb")))
+    assert failed.status == "infeasible"
+    # the message names the finger and the physical cause: the neighbour it cannot clear
+    assert failed.message.startswith("the swing of finger 'middle' was not found (IPOPT "), \
+        failed.message
+    assert "it cannot keep the gap to fingertip 'index'" in failed.message, failed.message
     step = replace_finger(FINGERS, spec_joints(d), d["finger"], spec.landing_normal,
                           spec.q_target, spec.centre, spec.radius, np.eye(3), LOAD)
     assert step.ok, step.message

@@ -129,7 +129,9 @@ def test_a_tip_without_sphere_or_capsule_geometry_and_no_surface() -> None:
 @pytest.mark.parametrize(("patch", "words"), [
     ("<worldbody>", "<equality><joint joint1=\"index_j2\" joint2=\"index_j3\"/></equality>"
                     "<worldbody>"),
-    ("<worldbody>", "<tendon><fixed name=\"couple\"/></tendon><worldbody>"),
+    ("<worldbody>", "<tendon><fixed name=\"couple\" limited=\"true\" range=\"-0.001 0.001\">"
+                    "<joint joint=\"index_j2\" coef=\"1\"/><joint joint=\"index_j3\" "
+                    "coef=\"-1\"/></fixed></tendon><worldbody>"),
     ("<worldbody>", "<include file=\"other.xml\"/><worldbody>"),
     ('type="hinge" axis="0 0 1"', 'type="ball" axis="0 0 1"'),
 ])

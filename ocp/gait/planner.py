@@ -349,7 +349,9 @@ def _replace_fingers(plan: GaitPlan, checks: list[Check], template: Manipulation
         _, n_back = contact_of(fingers[k], q_start[k], centre, rho)
         last = next((st.swing for st in reversed(plan.steps) if st.finger == k), None)
         gs = replace_finger(fingers, q_now, k, n_back, q_start[k], centre, rho,
-                            pose.rotation, load, swing, hold_time, last)
+                            pose.rotation, load, swing, hold_time, last,
+                            tuple(f.name or f"finger{i}"
+                                  for i, f in enumerate(template.fingers)))
         if gs.status == "infeasible" and gs.swing is None:
             never_lifted.add(template.fingers[k].name or f"finger{k}")
             continue  # it keeps rolling

@@ -134,21 +134,26 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                    landing_normal: FloatArray, q_target: FloatArray, centre: FloatArray,
                    radius: float, rotation: FloatArray, load: FloatArray,
                    swing: dict[str, Any] | None = None, hold_time: float = 0.2,
-                   warm: SwingPlan | None = None) -> GaitStep:
+                   warm: SwingPlan | None = None,
+                   names: tuple[str, ...] | None = None) -> GaitStep:
     """Re-place fingertip ``k`` of a grasp of a still ball (``fingers`` at the joints
     ``qs``, every tip touching) at the contact whose outward normal is ``landing_normal``
     (palm frame), its joints seeded by ``q_target``. ``load``: the load parameters
     (:func:`~ocp.transcription.values.load_parameters`); ``swing``: fields of the
     :class:`~ocp.gait.swing.SwingSpec` (duration, clearance, ...); ``hold_time``: the
     unloading's and the loading's duration [s]; ``warm``: this finger's previous swing
-    (:func:`~ocp.gait.swing.plan_swing`'s warm start). A grasp whose other
-    fingertips cannot hold the object is ``infeasible`` at once, naming the finger."""
+    (:func:`~ocp.gait.swing.plan_swing`'s warm start); ``names``: the fingers' names (for
+    messages; default from their joints). A grasp whose other fingertips cannot hold the
+    object is ``infeasible`` at once, naming the finger."""
     L = radius
     allf = list(range(len(fingers)))
     rest = [i for i in allf if i != k]
     before = grasp_hold(fingers, qs, allf, centre, radius, rotation)
     during = grasp_hold(fingers, qs, rest, centre, radius, rotation)
-    name = fingers[k].joint_names[0].rsplit("_", 1)[0] if fingers[k].joint_names else str(k)
+    if names is None:
+        names = tuple(f.joint_names[0].rsplit("_", 1)[0] if f.joint_names else str(i)
+                      for i, f in enumerate(fingers))
+    name = names[k]
     F_before, _ = deep_hold_forces(before, load, L)
     F_during, _ = deep_hold_forces(during, load, L)
     if F_before is None or F_during is None:
@@ -164,7 +169,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     spec = SwingSpec(fingers[k], np.asarray(qs[k], dtype=float),
                      np.asarray(q_target, dtype=float), np.asarray(landing_normal, float),
                      np.asarray(centre, dtype=float), float(radius), tuple(others),
-                     **(swing or {}))
+                     name=name, other_names=tuple(names[i] for i in rest), **(swing or {}))
     if warm is not None and warm.spec.tip_gap is not None:
         # its last swing needed it
         spec = replace(spec, tip_gap=warm.spec.tip_gap,

@@ -105,6 +105,9 @@ class SwingSpec:
     #: ``neighbour_share`` of the gap at the start or at the landing if smaller
     tip_gap: float | None = None
     neighbour_share: float = 0.9
+    #: the finger's name and the other fingertips' (``others``' order), for messages
+    name: str = ""
+    other_names: tuple[str, ...] = ()
 
     @property
     def body(self) -> TipBody:
@@ -240,7 +243,8 @@ def _guess(spec: SwingSpec) -> FloatArray:
 #: tips' chart sides differ), and a swing NLP takes seconds to build. The least recently
 #: used beyond :data:`MAX_SWING_NLPS` are dropped.
 _SOLVERS: OrderedDict[tuple[str, int, int, int],
-                      tuple[Any, FloatArray, FloatArray, Any]] = OrderedDict()
+                      tuple[Any, FloatArray, FloatArray, Any, Any, tuple[str, ...]]
+                      ] = OrderedDict()
 MAX_SWING_NLPS = 32
 
 
@@ -267,9 +271,10 @@ def _built(f: Any, n: int, K: int, n_others: int) -> bool:
 
 
 def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
-               ) -> tuple[Any, FloatArray, FloatArray, Any]:
-    """(solver, lbg, ubg, the warm-start solver) of the swing NLP of finger ``f`` (see the
-    module's doc), built once; the parameters in :func:`_swing_params`' order."""
+               ) -> tuple[Any, FloatArray, FloatArray, Any, Any, tuple[str, ...]]:
+    """(solver, lbg, ubg, the warm-start solver, the rows' function ``g(x, p)``, each
+    row's kind in words) of the swing NLP of finger ``f`` (see the module's doc), built
+    once; the parameters in :func:`_swing_params`' order."""
     key = swing_key(f, n, K, n_others)
     if key in _SOLVERS:
         _SOLVERS.move_to_end(key)
@@ -290,12 +295,14 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
     capsule = bool(np.linalg.norm(body.b - body.a) > 0)
     r = body.r
     L = rho + r
-    rows: list[tuple[Any, float, float]] = []
+    rows: list[tuple[Any, float, float, str]] = []
+    kind = "the start at the finger's joints"
 
     def add(e: Any, lo: float, hi: float) -> None:
-        rows.append((e, lo, hi))
+        rows.append((e, lo, hi, kind))
 
     add(Q[:, 0] - q_start, 0.0, 0.0)
+    kind = "the joints' motion"
     for k in range(n):  # exact integration of the jerk
         qk, vk, ak, jk = Q[:, k], Vp[:, k], Ap[:, k], Jp[:, k]
         add((Q[:, k + 1] - (qk + h * vk + h * h / 2 * ak + h**3 / 6 * jk)), 0.0, 0.0)
@@ -308,50 +315,61 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
         qk, vk, ak = Q[:, k], Vp[:, k], Ap[:, k]
         for ctrl in (qk + h / 3 * vk, qk + 2 * h / 3 * vk + h * h / 6 * ak):
             for i in range(nq):
+                kind = f"joint {f.joint_names[i]}'s limits"
                 add(ctrl[i], lo_q[i], hi_q[i])
         mid_v = vk + h / 2 * ak  # the rate's middle control point
         for i in range(nq):
+            kind = f"joint {f.joint_names[i]}'s velocity limit"
             add(mid_v[i] / vmax[i], -1.0, 1.0)
     for k in range(1, n + 1):
         R, p = f.fk(Q[:, k])
         a, b = p + R @ a_loc, p + R @ b_loc
         dist = point_segment_distance(centre, a, b) - L
         if k == n:  # touch-down: the cap's centre over the landing point, on the cap
+            kind = "the landing point (the tip's reach)"
             add((a - a_land) / L, 0.0, 0.0)
             if capsule:
+                kind = "the landing on the cap"
                 u = (b - a) / float(np.linalg.norm(body.b - body.a))
                 add(ca.dot(centre - a, u) / L + cap_sin, -np.inf, 0.0)
             continue
+        kind = "the clearance from the ball"
         if k in (K, n - K):  # the clear part's ends
             add((dist - clearance) / L, 0.0, np.inf)
         if k <= K:  # lift-off along the normal
             d = a - a_start
+            kind = "the lift-off along the normal"
             add(ca.vertcat(ca.dot(d, t0a), ca.dot(d, t0b)) / L, 0.0, 0.0)
             add(ca.dot(d, n0) / L, 0.0, np.inf)
+            kind = "the clearance from the ball"
             add(dist / L, 0.0, np.inf)
         elif k >= n - K:  # approach along the landing normal
             d = a - a_land
+            kind = "the approach along the landing normal"
             add(ca.vertcat(ca.dot(d, t1a), ca.dot(d, t1b)) / L, 0.0, 0.0)
             add(ca.dot(d, n1) / L, 0.0, np.inf)
+            kind = "the clearance from the ball"
             add(dist / L, 0.0, np.inf)
         else:
             add((dist - clearance) / L, 0.0, np.inf)
         for j in range(n_others):
             assert oth is not None
             a1, b1, r1, need = oth[0:3, j], oth[3:6, j], oth[6, j], oth[7, j]
+            kind = f"the gap to the other fingertip {j + 1}"
             for s in np.linspace(0.0, 1.0, SEGMENT_SAMPLES if capsule else 1):
                 x = a + float(s) * (b - a)
                 add((point_segment_distance(x, a1, b1) - r - r1 - need) / L, 0.0, np.inf)
     jref = 20.0 * n  # the jerk's scale in the effort
     cost = h / T * ca.sumsqr(Jp / jref) + 10.0 * ca.sumsqr(Q[:, n] - q_target)
     w = ca.vertcat(ca.vec(Q), ca.vec(V), ca.vec(A), ca.vec(Jn))
-    g = ca.vertcat(*[e for e, _, _ in rows])
-    lbg = np.concatenate([np.full(int(e.numel()), lo) for e, lo, _ in rows])
-    ubg = np.concatenate([np.full(int(e.numel()), hi) for e, _, hi in rows])
+    g = ca.vertcat(*[e for e, _, _, _ in rows])
+    lbg = np.concatenate([np.full(int(e.numel()), lo) for e, lo, _, _ in rows])
+    ubg = np.concatenate([np.full(int(e.numel()), hi) for e, _, hi, _ in rows])
+    kinds = tuple(k for e, _, _, k in rows for _ in range(int(e.numel())))
     nlp = {"x": w, "p": P, "f": cost, "g": g}
     solver = ca.nlpsol("swing", "ipopt", nlp, _IPOPT)
     warm = ca.nlpsol("swing_warm", "ipopt", nlp, {**_IPOPT, **_IPOPT_WARM})
-    _SOLVERS[key] = (solver, lbg, ubg, warm)
+    _SOLVERS[key] = (solver, lbg, ubg, warm, ca.Function("swing_rows", [w, P], [g]), kinds)
     while len(_SOLVERS) > MAX_SWING_NLPS:
         _SOLVERS.popitem(last=False)
     return _SOLVERS[key]
@@ -418,7 +436,8 @@ def _solve_swing(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArra
     nq, n, K = int(f.nq), spec.n_intervals, spec.lift_intervals
     T = float(spec.duration)
     h = T / n
-    solver, lbg, ubg, warm_solver = _swing_nlp(f, body, n, K, len(spec.others))
+    solver, lbg, ubg, warm_solver, rows_of, kinds = _swing_nlp(f, body, n, K,
+                                                                len(spec.others))
     vs, as_, js = 1.0 / T, 1.0 / T**2, 1.0 / T**3
     lo_q, hi_q = backed_off_joint_limits(f)
     vmax = np.asarray(f.velocity_limit, dtype=float)
@@ -462,13 +481,45 @@ def _solve_swing(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArra
     ok = bool(st["success"])
     status = "solved" if ok else "infeasible" if "Infeasible" in st["return_status"] \
         else "failed"
-    message = "" if ok else (f"the swing of {_name(spec)} was not found: IPOPT "
-                             f"{st['return_status']}")
+    message = "" if ok else (f"the swing of {_name(spec)} was not found (IPOPT "
+                             f"{st['return_status']}): " + _cause(
+                                 np.asarray(rows_of(x, _swing_params(spec))).ravel(), lbg,
+                                 ubg, kinds, spec))
     return SwingPlan(spec, status, message, np.linspace(0.0, T, n + 1), Qs, Vs, As, Js,
                      int(st["iter_count"]), elapsed,
                      (x, np.asarray(res["lam_x"]).ravel(), np.asarray(res["lam_g"]).ravel()))
 
 
 def _name(spec: SwingSpec) -> str:
+    if spec.name:
+        return f"finger {spec.name!r}"
     names = getattr(spec.finger, "joint_names", ())
-    return f"the finger of {names[0]}" if names else "the finger"
+    return f"the finger of joints {', '.join(names)}" if names else "the finger"
+
+
+def _cause(g: FloatArray, lbg: FloatArray, ubg: FloatArray, kinds: tuple[str, ...],
+           spec: SwingSpec) -> str:
+    """The physical cause of a failed swing, in words: the kind of row the last iterate
+    breaks most (scaled as the NLP's rows are), and the others it breaks."""
+    over = np.maximum(lbg - g, g - ubg)
+    over = np.where(np.isfinite(over), over, 0.0)
+    worst: dict[str, float] = {}
+    for k, v in zip(kinds, over, strict=True):
+        if v > 1e-6:
+            worst[k] = max(worst.get(k, 0.0), float(v))
+    if not worst:
+        return "every row is met at the last iterate; IPOPT stopped without converging"
+    names = list(spec.other_names)
+    ranked = sorted(worst.items(), key=lambda kv: -kv[1])
+
+    def words(k: str) -> str:
+        if k.startswith("the gap to the other fingertip ") and names:
+            j = int(k.rsplit(" ", 1)[1]) - 1
+            if 0 <= j < len(names) and names[j]:
+                return f"the gap to fingertip {names[j]!r}"
+        return k
+
+    first = words(ranked[0][0])
+    rest = ", ".join(words(k) for k, _ in ranked[1:4])
+    return (f"it cannot keep {first}" + (f" (nor {rest})" if rest else "") +
+            " with this finger's joints")

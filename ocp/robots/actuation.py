@@ -170,6 +170,8 @@ class HandActuation:
     text: str
     mount: tuple[FloatArray, FloatArray] = field(
         default_factory=lambda: (np.eye(3), np.zeros(3)))
+    #: Joints not planned, held at these values (a shared wrist); the rest at ``qpos0``.
+    held: dict[str, float] = field(default_factory=dict)
     _mj: Any = field(default=None, repr=False)
 
     def model(self) -> Any:
@@ -242,6 +244,8 @@ class HandActuation:
             raise ValueError(f"the hand has no joint {missing[0]!r}")
         qa = [int(m.jnt_qposadr[i]) for i in ids]
         va = [int(m.jnt_dofadr[i]) for i in ids]
+        held = [(int(m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)]), v)
+                for n, v in self.held.items()]
         Q = np.atleast_2d(np.asarray(q, dtype=float))
         QD = np.atleast_2d(np.asarray(q_dot, dtype=float))
         QDD = None if q_ddot is None else np.atleast_2d(np.asarray(q_ddot, dtype=float))
@@ -249,6 +253,8 @@ class HandActuation:
         acc, mq = np.zeros(m.nv), np.zeros(m.nv)
         for i in range(len(Q)):
             d.qpos[:] = m.qpos0
+            for a, v in held:
+                d.qpos[a] = v
             d.qpos[qa] = Q[i]
             d.qvel[:] = 0.0
             mujoco.mj_forward(m, d)
@@ -269,6 +275,10 @@ class HandActuation:
                  plan_torques: ArrayLike | None) -> Actuation:
         """The plan's actuator commands (module docstring) at the samples ``t``."""
         acts, notes = self.actuators(joint_names)
+        if self.held:
+            notes = (*notes, "joints shared by several fingers, held (not planned): " +
+                     ", ".join(f"{n} at {v:.4g}" for n, v in self.held.items()) +
+                     "; their actuators hold them there")
         Q = np.atleast_2d(np.asarray(q, dtype=float))
         QD = np.atleast_2d(np.asarray(q_dot, dtype=float))
         tau = self.model_torques(joint_names, Q, QD, q_ddot)

@@ -110,6 +110,8 @@ class HandCollision:
     tips: tuple[str, ...]
     mount: tuple[FloatArray, FloatArray] = field(
         default_factory=lambda: (np.eye(3), np.zeros(3)))
+    #: Joints not planned, held at these values (a shared wrist); the rest at ``qpos0``.
+    held: dict[str, float] = field(default_factory=dict)
     _models: dict[tuple[str, tuple[float, ...]], Any] = field(default_factory=dict,
                                                               repr=False)
 
@@ -186,6 +188,8 @@ class HandCollision:
 
         mj, d, o_geom, o_q, tip_geoms, names, finger_of = self._model(shape, dims)
         addr = self.joint_address(shape, dims, joint_names)
+        held_at = self.joint_address(shape, dims, list(self.held))
+        held_q = np.array(list(self.held.values()), dtype=float)
         Q = np.atleast_2d(np.asarray(q, dtype=float))
         Ro = np.asarray(object_R, dtype=float).reshape(-1, 3, 3)
         po = np.asarray(object_p, dtype=float).reshape(-1, 3)
@@ -198,6 +202,7 @@ class HandCollision:
         near: dict[tuple[str, str], float] = {}
         for i in range(n):
             d.qpos[:] = mj.qpos0
+            d.qpos[held_at] = held_q
             d.qpos[addr] = Q[i]
             # the object's pose in the hand's world frame: x_palm = Rm x_world + pm
             d.qpos[o_q:o_q + 3] = Rm.T @ (po[i] - pm)

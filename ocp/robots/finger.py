@@ -392,29 +392,50 @@ def _chain(model: Any, tip_frame_id: int, tip_frame: str) -> tuple[ChainJoint, .
     return tuple(chain)
 
 
-def _reduce_to_tip_chain(model: Any, tip_frame_id: int) -> Any:
+def tip_path(model: Any, tip_frame: str) -> list[str]:
+    """The names of the joints from the model's root to the tip frame, root first."""
+    joint = int(model.frames[int(model.getFrameId(tip_frame))].parentJoint)
+    path = []
+    while joint != 0:
+        path.append(str(model.names[joint]))
+        joint = int(model.parents[joint])
+    return path[::-1]
+
+
+def _reduce_to_tip_chain(model: Any, tip_frame_id: int,
+                         held: dict[str, float] | None = None) -> Any:
     """The model restricted to the branch of the kinematic tree that carries the tip frame.
 
     A hand's URDF is a tree: several fingers hang from its root (the palm). The branch of
-    the tip frame is the subtree of the root-level joint on the tip's path; every joint
-    outside it is locked at its neutral position with Pinocchio's ``buildReducedModel``
-    (the joints of the other fingers, which do not move this tip). A model with a single
-    root-level branch (a serial chain, or a chain that branches further out, which
-    :func:`_chain` rejects) is returned unchanged.
+    the tip frame is the subtree of the first joint on the tip's path (from the root) that
+    is not ``held``; every joint outside it is locked with Pinocchio's
+    ``buildReducedModel``: the ``held`` joints (a wrist that carries every finger) at
+    their given values, the others (the other fingers' joints, which do not move this tip)
+    at their neutral positions. A model with a single branch and nothing held (a serial
+    chain, or a chain that branches further out, which :func:`_chain` rejects) is returned
+    unchanged.
     """
+    held = held or {}
+    held_ids = {int(model.getJointId(n)) for n in held}
     joint = int(model.frames[tip_frame_id].parentJoint)
-    if joint == 0:
-        return model  # the tip hangs from the root: no branch to keep
-    while model.parents[joint] != 0:
+    path = []
+    while joint != 0:
+        path.append(joint)
         joint = int(model.parents[joint])
-    keep = {joint}
+    free = [j for j in reversed(path) if j not in held_ids]
+    if not free and not held_ids:
+        return model  # the tip hangs from the root: no branch to keep
+    keep = {free[0]} if free else set()
     for i in range(1, model.njoints):
         if model.parents[i] in keep:  # parents precede their children in Pinocchio
             keep.add(i)
     locked = [i for i in range(1, model.njoints) if i not in keep]
     if not locked:
         return model
-    return pin.buildReducedModel(model, locked, pin.neutral(model))
+    q_ref = pin.neutral(model)
+    for name, value in held.items():
+        q_ref[model.joints[int(model.getJointId(name))].idx_q] = value
+    return pin.buildReducedModel(model, locked, q_ref)
 
 
 def load_finger(
@@ -471,16 +492,19 @@ def finger_from_model(
     pad_half_size: float | None = None,
     tip: Any = None,
     default_velocity: float | None = None,
+    held: dict[str, float] | None = None,
 ) -> FingerModel:
     """The finger of a Pinocchio model (built from ``text``, a URDF or an MJCF) whose tip
     is the frame ``tip_frame``: the branch of the model's tree carrying it (the other
     branches' joints locked at their neutral positions), mounted by ``base_rotation``
     and ``base_position`` in the palm frame; see :func:`load_finger`. Non-finite velocity
-    limits (an MJCF has none) become ``default_velocity`` when it is given."""
+    limits (an MJCF has none) become ``default_velocity`` when it is given. ``held``:
+    joints on the tip's path locked at the given values, not the finger's (a wrist shared
+    by every finger: :func:`ocp.robots.whole_hand.load_whole_hand`)."""
     if not model.existFrame(tip_frame):
         names = sorted({str(f.name) for f in model.frames})
         raise ValueError(f"the URDF has no frame {tip_frame!r}; its frames are {names}")
-    model = _reduce_to_tip_chain(model, int(model.getFrameId(tip_frame)))
+    model = _reduce_to_tip_chain(model, int(model.getFrameId(tip_frame)), held)
     tip_id = int(model.getFrameId(tip_frame))
     chain = _chain(model, tip_id, tip_frame)
     half = PAD_HALF_SIZE if pad_half_size is None else float(pad_half_size)

@@ -224,22 +224,16 @@ def model_problems(text: str, fmt: str) -> list[tuple[str, str]]:
         for inc in root.iter("include"):
             errs.append(("model", f"<include file={inc.get('file')!r}>: included files are "
                                   "not read; send the whole model as one text"))
-        for tag in ("equality", "tendon"):
-            for el in root.iter(tag):
-                for child in el:
-                    what = ", ".join(f"{k}={v!r}" for k, v in child.attrib.items()
-                                     if k in ("name", "joint1", "joint2", "joint", "body1"))
-                    errs.append(("model", f"<{tag}><{child.tag} {what}>: a joint coupling; "
-                                          "coupled joints are not modelled, so this hand "
-                                          "is refused"))
+        errs += _coupling_problems(root)
         for j in root.iter("freejoint"):
             errs.append(("model", f"<freejoint name={j.get('name')!r}>: a free joint; only "
                                   "hinge and slide joints are supported"))
-        for j in root.iter("joint"):
-            kind = j.get("type", "hinge")
-            if kind not in ("hinge", "slide"):
-                errs.append(("model", f"joint {j.get('name')!r} is a {kind!r} joint; only "
-                                      "hinge and slide joints are supported"))
+        for world in root.iter("worldbody"):  # the bodies' joints, not default classes'
+            for j in world.iter("joint"):
+                kind = j.get("type", "hinge")
+                if kind not in ("hinge", "slide"):
+                    errs.append(("model", f"joint {j.get('name')!r} is a {kind!r} joint; "
+                                          "only hinge and slide joints are supported"))
     else:
         if root.tag != "robot":
             return [("model", f"a URDF's root element is <robot>, got <{root.tag}>")]
@@ -254,6 +248,92 @@ def model_problems(text: str, fmt: str) -> list[tuple[str, str]]:
                 errs.append(("model", f"joint {j.get('name')!r} is a {kind_u!r} joint; only "
                                       "revolute, prismatic and fixed joints are supported"))
     return errs
+
+
+def _coupling_problems(root: ET.Element) -> list[tuple[str, str]]:
+    """An MJCF's couplings of joints, as ("model", reason) naming each: an ``<equality>``
+    (``joint``: two joints coupled; ``weld``, ``connect``: a closed chain; ``tendon``: its
+    tendon's joints) and a ``<fixed>`` tendon over two or more joints that is limited,
+    held by an equality or driven by an actuator; a ``<spatial>`` tendon so used. A fixed
+    tendon over one joint is a limit of that joint (:func:`tendon_limits`), and a tendon
+    nothing constrains is no coupling: neither is refused."""
+    errs: list[tuple[str, str]] = []
+    in_equality = {el.get("tendon1") for eq in root.iter("equality") for el in eq
+                   if el.tag == "tendon"} | {el.get("tendon2") for eq in root.iter("equality")
+                                             for el in eq if el.tag == "tendon"}
+    driven = {el.get("tendon") for act in root.iter("actuator") for el in act}
+    why = "coupled joints are not planned yet, so this hand is refused"
+    for eq in root.iter("equality"):
+        for el in eq:
+            name = f" {el.get('name')!r}" if el.get("name") else ""
+            if el.tag == "joint":
+                other = el.get("joint2")
+                errs.append(("model", f"<equality><joint{name}>: a coupling of joint "
+                                      f"{el.get('joint1')!r}" + (f" to {other!r}" if other
+                                                                 else " to a constant")
+                             + f"; {why}"))
+            elif el.tag in ("weld", "connect"):
+                errs.append(("model", f"<equality><{el.tag}{name}> closes a kinematic chain "
+                                      f"({el.get('body1') or el.get('site1')!r}): {why}"))
+    couplings, limits = [], 0
+    for tendons in root.iter("tendon"):
+        for t in tendons:
+            tname = t.get("name")
+            joints = [(j.get("joint"), j.get("coef", "1")) for j in t if j.tag == "joint"]
+            limited = t.get("limited") == "true" or (t.get("limited") != "false"
+                                                      and t.get("range") is not None)
+            used = limited or tname in in_equality or tname in driven
+            if t.tag == "fixed" and len(joints) == 1:
+                limits += int(limited)
+                continue
+            if not used:
+                continue
+            how = ("limited to " + (t.get("range") or "?")) if limited else \
+                "held by an <equality>" if tname in in_equality else "driven by an actuator"
+            if t.tag == "fixed":
+                terms = " + ".join(f"{c} {j}" for j, c in joints)
+                couplings.append(f"tendon {tname!r} couples joints "
+                                 f"{', '.join(repr(j) for j, _ in joints)} ({terms}, {how})")
+            else:
+                couplings.append(f"spatial tendon {tname!r} ({how}) routes over sites and "
+                                 "couples the joints it crosses")
+    if couplings:
+        shown = "; ".join(couplings[:6]) + (f"; and {len(couplings) - 6} more"
+                                            if len(couplings) > 6 else "")
+        errs.append(("model", f"{len(couplings)} tendon coupling(s): {shown}: {why}"
+                     + (f" (the {limits} tendons that limit one joint each are read as "
+                        "that joint's limits)" if limits else "")))
+    return errs
+
+
+def tendon_limits(text: str) -> dict[str, tuple[float, float]]:
+    """The limits [rad or m] that limited fixed tendons over one joint put on that joint,
+    as MuJoCo reads them (``range / coef``); {} without MuJoCo or when it cannot compile
+    the text."""
+    try:
+        import mujoco
+    except ImportError:
+        return {}
+    from ocp.robots.mjcf_frames import mujoco_text
+
+    try:
+        m = mujoco.MjModel.from_xml_string(mujoco_text(text))
+    except Exception:  # MuJoCo's reason is the frame check's to report
+        return {}
+    out: dict[str, tuple[float, float]] = {}
+    for t in range(m.ntendon):
+        adr, num = int(m.tendon_adr[t]), int(m.tendon_num[t])
+        if num != 1 or not m.tendon_limited[t] or \
+                int(m.wrap_type[adr]) != int(mujoco.mjtWrap.mjWRAP_JOINT):
+            continue
+        coef = float(m.wrap_prm[adr])
+        if coef == 0.0:
+            continue
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.wrap_objid[adr]))
+        a, b = sorted(float(x) / coef for x in m.tendon_range[t])
+        lo, hi = out.get(name, (-np.inf, np.inf))
+        out[name] = (max(lo, a), min(hi, b))
+    return out
 
 
 def _build(text: str, fmt: str) -> tuple[Any, str]:
@@ -303,6 +383,9 @@ class WholeHand:
     tips: tuple[TipSpec, ...]
     fingers: tuple[Any, ...]  # FingerModel
     mount: tuple[FloatArray, FloatArray]
+    #: Joints shared by several fingers (a wrist), held at these values [rad or m]: not
+    #: planned (:func:`shared_joints`).
+    held: dict[str, float] = field(default_factory=dict)
     #: What :meth:`collision` and :meth:`actuation` built, by their arguments.
     _collisions: dict[tuple[Any, ...], Any] = field(default_factory=dict, repr=False)
 
@@ -319,7 +402,7 @@ class WholeHand:
                     import mujoco  # noqa: F401
                 except ImportError:
                     return None
-                got = HandActuation(self.text, self.mount)
+                got = HandActuation(self.text, self.mount, dict(self.held))
             else:
                 got = UrdfActuation({n: float(e) for f in self.fingers for n, e in zip(
                     f.joint_names, effort_limits(f), strict=True)})
@@ -343,7 +426,8 @@ class WholeHand:
         got = self._collisions.get(key)
         if got is None:
             got = self._collisions[key] = HandCollision(
-                self.text, tuple(self.tips[i].name for i in key), self.mount)
+                self.text, tuple(self.tips[i].name for i in key), self.mount,
+                dict(self.held))
         return got
 
     @property
@@ -384,9 +468,16 @@ def load_whole_hand(text: str, fmt: str, tips: Sequence[TipSpec],
         raise HandModelError([("model", f"Pinocchio cannot build the {fmt.upper()}: "
                                         f"{str(exc)[:300]}")]) from exc
     errs = frame_problems(text, fmt, model)  # reported with the tips' own
+    if fmt == "mjcf":  # tendons over one joint: that joint's limits
+        for joint, (lo, hi) in tendon_limits(text).items():
+            if model.existJointName(joint):
+                i = model.joints[int(model.getJointId(joint))].idx_q
+                model.lowerPositionLimit[i] = max(float(model.lowerPositionLimit[i]), lo)
+                model.upperPositionLimit[i] = min(float(model.upperPositionLimit[i]), hi)
     frames = sorted({str(f.name) for f in model.frames} - {"universe"})
     R = np.eye(3) if mount_rotation is None else np.asarray(mount_rotation, dtype=float)
     p = np.zeros(3) if mount_position is None else np.asarray(mount_position, dtype=float)
+    held = shared_joints(model, [t.name for t in tips if model.existFrame(t.name)])
     fingers: list[Any] = []
     seen: dict[str, int] = {}
     for i, tip in enumerate(tips):
@@ -413,9 +504,32 @@ def load_whole_hand(text: str, fmt: str, tips: Sequence[TipSpec],
             continue
         try:
             fingers.append(finger_from_model(model, text, tip.name, R, p, tip=surface,
-                                             default_velocity=DEFAULT_VELOCITY))
+                                             default_velocity=DEFAULT_VELOCITY,
+                                             held=held))
         except ValueError as exc:
             errs.append((f"{where}.name", str(exc)))
     if errs:
         raise HandModelError(errs)
-    return WholeHand(name, fmt, text, tuple(tips), tuple(fingers), (R, p))
+    return WholeHand(name, fmt, text, tuple(tips), tuple(fingers), (R, p), held)
+
+
+def shared_joints(model: Any, tips: Sequence[str]) -> dict[str, float]:
+    """The joints on the paths of two or more of ``tips`` whose paths differ (a wrist, an
+    arm: they would move several fingers at once), each with the value it is held at: 0
+    (the joint's reference in the file), or the nearer end of its range when 0 is outside
+    it."""
+    from ocp.robots.finger import tip_path
+
+    paths = {tuple(tip_path(model, t)) for t in tips}  # two tips on one chain: one path
+    count: dict[str, int] = {}
+    for path in paths:
+        for n in path:
+            count[n] = count.get(n, 0) + 1
+    out = {}
+    for n, k in count.items():
+        if k > 1:
+            j = model.joints[int(model.getJointId(n))]
+            lo = float(model.lowerPositionLimit[j.idx_q])
+            hi = float(model.upperPositionLimit[j.idx_q])
+            out[n] = min(max(0.0, lo), hi)
+    return out
