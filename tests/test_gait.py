@@ -483,3 +483,55 @@ def test_a_swing_beside_a_close_neighbour_keeps_half_its_gap() -> None:
     assert all(c.passed for c in cert), [c.failure for c in cert if not c.passed]
     gaps = [c for c in swing_checks(step.swing, "s", 0.0) if "tip_gap" in c.name]
     assert gaps and all(c.value >= 0.7e-3 for c in gaps)
+
+
+def test_a_holds_forces_keep_the_joints_torques_within_the_actuators() -> None:
+    """The nominal grasp held still: with the actuators' torques capped below what the
+    deepest hold asks, the hold takes a shallower narrowing whose forces keep every
+    joint's torque (J^T f and the links' weight) within the cap, and still hold the
+    ball (ocp.gait.step.hold_fits, TorqueLimits)."""
+    from ocp.gait.hold import hold_residuals
+    from ocp.gait.step import TorqueLimits, _deep, grasp_hold, hold_fits
+    from ocp.solution import joint_torques
+
+    qs = tuple(np.asarray(q, dtype=float) for q in NOMINAL_Q)
+    which = [0, 1, 2, 3]
+    hold = grasp_hold(FINGERS, qs, which, CENTRE, RHO, np.eye(3))
+    g = np.array([0.0, 0.0, -9.81])
+
+    def peak(F: np.ndarray) -> float:
+        return max(float(np.abs(joint_torques(
+            FINGERS[i], qs[i][None], hold.points[r][None], hold.normals[r][None],
+            F[r][None], np.zeros(1), g)).max()) for r, i in enumerate(which))
+
+    free = _deep(FINGERS, qs, which, hold, LOAD, RHO, None)
+    assert free is not None
+    cap = 0.8 * peak(free)
+    limits = TorqueLimits(tuple(np.full(4, -cap) for _ in which),
+                          tuple(np.full(4, cap) for _ in which), g)
+    F = _deep(FINGERS, qs, which, hold, LOAD, RHO, limits)
+    assert F is not None and peak(F) <= cap + 1e-12
+    assert hold_fits(FINGERS, qs, which, hold, limits)(F)
+    res = hold_residuals(hold, F, LOAD, np.full(len(F), float(LOAD[3])))
+    assert res.equilibrium < 1e-6 and res.normal_margin > -1e-6 and res.cone_margin > -1e-6
+
+
+def test_a_swing_is_slowed_to_what_the_joints_damping_lets_the_actuators_drive() -> None:
+    """A swing whose joint rates, against the file's joint damping, would ask more torque
+    than the actuators give is planned again, longer, within those rates."""
+    from ocp.gait.step import TorqueLimits
+
+    d, spec = stored_swing("gait_narrow_swing.json")
+    k = d["finger"]
+    args = (FINGERS, spec_joints(d), k, spec.landing_normal, spec.q_target, spec.centre,
+            spec.radius, np.eye(3), LOAD)
+    free = replace_finger(*args)
+    assert free.ok, free.message
+    fast = float(np.abs(free.swing.V).max())
+    inf = tuple(np.full(4, np.inf) for _ in FINGERS)
+    rate = tuple(np.full(4, 0.5 * fast if i == k else np.inf) for i in range(len(FINGERS)))
+    slowed = replace_finger(*args, limits=TorqueLimits(tuple(-x for x in inf), inf,
+                                                       np.array([0.0, 0.0, -9.81]), rate))
+    assert slowed.ok, slowed.message
+    assert float(np.abs(slowed.swing.V).max()) <= 0.5 * fast
+    assert slowed.swing.spec.duration > 1.9 * free.swing.spec.duration

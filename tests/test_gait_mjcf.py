@@ -74,6 +74,7 @@ def test_a_gait_on_a_users_mjcf_hand() -> None:
     assert isinstance(result, ManipulationResult)
     assert result.status is PlanStatus.SOLVED, summary
     assert result.certificate is not None and result.certificate.passed
+    assert result.message == "planned; certificate passed"
     # the file's links, as MuJoCo collides them, clear over the whole gait and every roll
     values = result.certificate.values
     assert values["gait_link_clearance"] >= 5e-4

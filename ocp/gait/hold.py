@@ -16,6 +16,7 @@ after it lands, the reverse).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -120,31 +121,36 @@ _DEEP: dict[bytes, tuple[FloatArray | None, float]] = {}
 _DEEP_KEPT = 16
 
 
-def deep_hold_forces(hold: Hold, load: FloatArray, L: float
+def deep_hold_forces(hold: Hold, load: FloatArray, L: float,
+                     fits: Callable[[FloatArray], bool] | None = None, fits_key: bytes = b""
                      ) -> tuple[FloatArray | None, float]:
     """:func:`_deep_hold_forces` of the hold, remembered for the last :data:`_DEEP_KEPT`
-    holds (keyed by the exact bytes of the geometry, the load and ``L``)."""
+    holds (keyed by the exact bytes of the geometry, the load, ``L`` and ``fits_key``,
+    which names what ``fits`` checks)."""
     key = b"".join(np.ascontiguousarray(a, dtype=float).tobytes() for a in (
-        hold.points, hold.normals, hold.centre, hold.rotation, load, [L]))
+        hold.points, hold.normals, hold.centre, hold.rotation, load, [L])) + fits_key
     if key not in _DEEP:
         if len(_DEEP) >= _DEEP_KEPT:
             _DEEP.pop(next(iter(_DEEP)))
-        _DEEP[key] = _deep_hold_forces(hold, load, L)
+        _DEEP[key] = _deep_hold_forces(hold, load, L, fits)
     F, extra = _DEEP[key]
     return (None if F is None else F.copy()), extra
 
 
-def _deep_hold_forces(hold: Hold, load: FloatArray, L: float
+def _deep_hold_forces(hold: Hold, load: FloatArray, L: float,
+                      fits: Callable[[FloatArray], bool] | None = None
                       ) -> tuple[FloatArray | None, float]:
     """(forces, the extra margin [rad] they keep inside the cones): :func:`hold_forces`
     with each cone narrowed by the largest of :data:`HOLD_MARGINS` that still holds the
-    object with no normal force over :data:`HOLD_FORCE_FACTOR` times its weight
-    (least-effort forces ride the cones' edges, which a servo-driven hand does not
-    deliver exactly; the deepest forces can be large: docs/gait.md); when every
-    narrowing asks more, the least normal force's; (None, 0) when none holds it."""
+    object with no normal force over :data:`HOLD_FORCE_FACTOR` times its weight and whose
+    forces ``fits`` accepts (the joints' torques within the actuators'; least-effort
+    forces ride the cones' edges, which a servo-driven hand does not deliver exactly; the
+    deepest forces can be large: docs/gait.md); when every narrowing asks more, the least
+    normal force's of those ``fits`` accepts, else of all; (None, 0) when none holds it."""
     mu_m = float(load[6])
     cap = HOLD_FORCE_FACTOR * float(np.linalg.norm(load[0:3]))
     best: tuple[FloatArray | None, float, float] = (None, 0.0, math.inf)
+    best_fit: tuple[FloatArray | None, float, float] = (None, 0.0, math.inf)
     for extra in HOLD_MARGINS:
         narrowed = np.array(load, dtype=float)
         narrowed[6] = np.tan(max(np.arctan(mu_m) - extra, 1e-3))
@@ -153,10 +159,15 @@ def _deep_hold_forces(hold: Hold, load: FloatArray, L: float
         if F is None:
             continue
         top = float((-np.einsum("ij,ij->i", F, hold.normals)).max())
-        if top <= cap:
+        fit = fits is None or fits(F)
+        if top <= cap and fit:
             return F, extra
         if top < best[2]:
             best = (F, extra, top)
+        if fit and top < best_fit[2]:
+            best_fit = (F, extra, top)
+    if best_fit[0] is not None:
+        return best_fit[0], best_fit[1]
     return best[0], best[1]
 
 

@@ -25,7 +25,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate, Check, CheckKind
-from ocp.gait.step import GaitStep, contact_of, liftable, replace_finger
+from ocp.gait.step import (
+    HOLD_TORQUE_SHARE,
+    GaitStep,
+    TorqueLimits,
+    contact_of,
+    liftable,
+    replace_finger,
+)
 from ocp.gait.warp import RollClock
 from ocp.geometry.bodies import segments_distance, tip_body
 from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
@@ -331,6 +338,27 @@ def _undo(plan: GaitPlan, checks: list[Check], never_lifted: set[str], before: t
     return t, done, pose, q_now
 
 
+def torque_limits(template: ManipulationProblem) -> TorqueLimits | None:
+    """The fingers' actuator torques a gait's holds keep to (``template.actuation``, times
+    :data:`~ocp.gait.step.HOLD_TORQUE_SHARE`); None without actuators, limits or forces."""
+    from ocp.robots.actuation import torque_bounds
+
+    act = template.actuation
+    if act is None or template.forces is None:
+        return None
+    bounds = [torque_bounds(act, f.finger.joint_names, HOLD_TORQUE_SHARE)
+              for f in template.fingers]
+    if all(np.all(np.isinf(lo)) and np.all(np.isinf(hi)) for lo, hi in bounds):
+        return None
+    rates = []
+    for f, (lo, hi) in zip(template.fingers, bounds, strict=True):
+        c = act.damping(f.finger.joint_names)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rates.append(np.where(c > 0, np.minimum(-lo, hi) / c, np.inf))
+    return TorqueLimits(tuple(lo for lo, _ in bounds), tuple(hi for _, hi in bounds),
+                        np.asarray(template.forces.gravity, dtype=float), tuple(rates))
+
+
 def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
                      q_start: tuple[FloatArray, ...], q_now: tuple[FloatArray, ...],
                      pose: ObjectPose, t: float, load: FloatArray,
@@ -345,13 +373,14 @@ def _replace_fingers(plan: GaitPlan, checks: list[Check], template: Manipulation
     rho = float(template.object.dimensions[0])
     centre = np.asarray(pose.position, dtype=float)
     assert template.forces is not None
+    limits = torque_limits(template)
     for k in range(nf):
         _, n_back = contact_of(fingers[k], q_start[k], centre, rho)
         last = next((st.swing for st in reversed(plan.steps) if st.finger == k), None)
         gs = replace_finger(fingers, q_now, k, n_back, q_start[k], centre, rho,
                             pose.rotation, load, swing, hold_time, last,
                             tuple(f.name or f"finger{i}"
-                                  for i, f in enumerate(template.fingers)))
+                                  for i, f in enumerate(template.fingers)), limits)
         if gs.status == "infeasible" and gs.swing is None:
             never_lifted.add(template.fingers[k].name or f"finger{k}")
             continue  # it keeps rolling

@@ -130,12 +130,68 @@ class GaitStep:
         return out
 
 
+#: The share of an actuator's torque limit a hold's forces may ask of its joint (the rest
+#: for the motion's own terms: damping, inertia, the set points' errors).
+HOLD_TORQUE_SHARE = 0.9
+
+
+@dataclass(frozen=True)
+class TorqueLimits:
+    """Per finger, the joint torques [N m] its actuators give (lower, upper arrays, already
+    times :data:`HOLD_TORQUE_SHARE`), and gravity [m/s^2] (palm frame) for its links'
+    weight."""
+
+    lower: tuple[FloatArray, ...]
+    upper: tuple[FloatArray, ...]
+    gravity: FloatArray
+    #: per finger, the joint rates [rad/s] whose damping alone its actuators can overcome
+    #: within their share (infinite without damping or limits)
+    rate: tuple[FloatArray, ...] = ()
+
+    def key(self) -> bytes:
+        return b"".join(np.ascontiguousarray(a, dtype=float).tobytes()
+                        for a in (*self.lower, *self.upper, self.gravity))
+
+
+def hold_fits(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
+              hold: Hold, limits: TorqueLimits | None) -> Any:
+    """Whether forces of the hold (rows: its contacts, the fingertips ``which``) keep every
+    finger's joint torques (``J^T f`` and its links' weight) within ``limits``; None
+    without limits."""
+    if limits is None:
+        return None
+    from ocp.solution import joint_torques
+
+    def fits(F: FloatArray) -> bool:
+        for row, i in enumerate(which):
+            tau = joint_torques(fingers[i], np.asarray(qs[i], dtype=float)[None],
+                                hold.points[row][None], hold.normals[row][None],
+                                F[row][None], np.zeros(1), limits.gravity)[0]
+            if np.any(tau > limits.upper[i]) or np.any(tau < limits.lower[i]):
+                return False
+        return True
+
+    return fits
+
+
+def _deep(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
+          hold: Hold, load: FloatArray, L: float, limits: TorqueLimits | None
+          ) -> FloatArray | None:
+    """The hold's deep forces (:func:`~ocp.gait.hold.deep_hold_forces`) within the
+    actuators' torques where the cones allow."""
+    key = b"" if limits is None else limits.key() + b"".join(
+        np.ascontiguousarray(qs[i], dtype=float).tobytes() for i in which)
+    F, _ = deep_hold_forces(hold, load, L, hold_fits(fingers, qs, which, hold, limits), key)
+    return F
+
+
 def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                    landing_normal: FloatArray, q_target: FloatArray, centre: FloatArray,
                    radius: float, rotation: FloatArray, load: FloatArray,
                    swing: dict[str, Any] | None = None, hold_time: float = 0.2,
                    warm: SwingPlan | None = None,
-                   names: tuple[str, ...] | None = None) -> GaitStep:
+                   names: tuple[str, ...] | None = None,
+                   limits: TorqueLimits | None = None) -> GaitStep:
     """Re-place fingertip ``k`` of a grasp of a still ball (``fingers`` at the joints
     ``qs``, every tip touching) at the contact whose outward normal is ``landing_normal``
     (palm frame), its joints seeded by ``q_target``. ``load``: the load parameters
@@ -143,8 +199,9 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     :class:`~ocp.gait.swing.SwingSpec` (duration, clearance, ...); ``hold_time``: the
     unloading's and the loading's duration [s]; ``warm``: this finger's previous swing
     (:func:`~ocp.gait.swing.plan_swing`'s warm start); ``names``: the fingers' names (for
-    messages; default from their joints). A grasp whose other fingertips cannot hold the
-    object is ``infeasible`` at once, naming the finger."""
+    messages; default from their joints); ``limits``: the actuators' torques, which the
+    holds' forces keep to where the cones allow. A grasp whose other fingertips cannot
+    hold the object is ``infeasible`` at once, naming the finger."""
     L = radius
     allf = list(range(len(fingers)))
     rest = [i for i in allf if i != k]
@@ -154,8 +211,8 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         names = tuple(f.joint_names[0].rsplit("_", 1)[0] if f.joint_names else str(i)
                       for i, f in enumerate(fingers))
     name = names[k]
-    F_before, _ = deep_hold_forces(before, load, L)
-    F_during, _ = deep_hold_forces(during, load, L)
+    F_before = _deep(fingers, qs, allf, before, load, L, limits)
+    F_during = _deep(fingers, qs, rest, during, load, L, limits)
     if F_before is None or F_during is None:
         why = ("the grasp cannot hold the object" if F_before is None else
                f"the other fingertips cannot hold the object with {name} lifted (no forces "
@@ -186,11 +243,18 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         closer = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP, neighbour_share=NARROW_SHARE))
         if closer.ok:
             plan = closer
+    if plan.ok and limits is not None and limits.rate:
+        # a swing faster than the joints' damping lets the actuators drive: slower
+        over = float(np.max(np.abs(plan.V) / limits.rate[k]))
+        if over > 1.0:
+            slower = plan_swing(replace(plan.spec, duration=plan.spec.duration * over * 1.05))
+            if slower.ok:
+                plan = slower
     if not plan.ok:
         return GaitStep(k, plan.status, plan.message, plan)
     q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)
     after = grasp_hold(fingers, q_after, allf, centre, radius, rotation)
-    F_after, _ = deep_hold_forces(after, load, L)
+    F_after = _deep(fingers, q_after, allf, after, load, L, limits)
     if F_after is None:
         return GaitStep(k, "infeasible", f"the grasp with {name} landed cannot hold the "
                                          "object", plan)

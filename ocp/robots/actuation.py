@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["Actuation", "Actuator", "HandActuation", "UrdfActuation", "actuation_of",
-           "urdf_actuators"]
+           "torque_bounds", "urdf_actuators"]
 
 FloatArray = NDArray[np.float64]
 
@@ -146,10 +146,20 @@ class UrdfActuation:
 
     effort: dict[str, float]
 
+    def actuators(self, joint_names: Sequence[str]) -> tuple[tuple[Actuator, ...],
+                                                             tuple[str, ...]]:
+        """Each joint's motor (:func:`urdf_actuators`), and no notes."""
+        return urdf_actuators(joint_names, [self.effort.get(n, np.inf)
+                                            for n in joint_names]), ()
+
+    def damping(self, joint_names: Sequence[str]) -> FloatArray:
+        """No damping is read from a URDF's joints."""
+        return np.zeros(len(joint_names))
+
     def commands(self, joint_names: Sequence[str], t: ArrayLike, q: ArrayLike,
                  q_dot: ArrayLike, q_ddot: ArrayLike | None,
                  plan_torques: ArrayLike | None) -> Actuation:
-        acts = urdf_actuators(joint_names, [self.effort.get(n, np.inf) for n in joint_names])
+        acts, _ = self.actuators(joint_names)
         Q = np.atleast_2d(np.asarray(q, dtype=float))
         tau = np.zeros_like(Q) if plan_torques is None else \
             np.atleast_2d(np.asarray(plan_torques, dtype=float))
@@ -230,6 +240,14 @@ class HandActuation:
                 notes.append(f"joint {n}: its frictionloss is not compensated")
         return tuple(out), tuple(notes)
 
+    def damping(self, joint_names: Sequence[str]) -> FloatArray:
+        """The joints' viscous damping [N m s/rad] in the file (``damping``)."""
+        import mujoco
+
+        m = self.model()
+        return np.array([float(m.dof_damping[int(m.jnt_dofadr[
+            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])]) for n in joint_names])
+
     def model_torques(self, joint_names: Sequence[str], q: ArrayLike, q_dot: ArrayLike,
                       q_ddot: ArrayLike | None = None) -> FloatArray:
         """(n, joints): what MuJoCo's model of the hand needs on top of the plan's torques
@@ -288,6 +306,16 @@ class HandActuation:
             notes = (*notes, "the plan states no forces: the commands make its motion "
                              "alone, not a grip")
         return actuation_of(np.asarray(t, dtype=float), acts, tau, Q, QD, notes)
+
+
+def torque_bounds(actuation: Any, joint_names: Sequence[str], share: float = 1.0
+                  ) -> tuple[FloatArray, FloatArray]:
+    """(lower, upper) joint torques [N m] the actuators give ``joint_names`` (infinite
+    where a joint has no limit), times ``share``."""
+    acts, _ = actuation.actuators(joint_names)
+    lo = np.array([a.torque_range[0] if a.torque_range else -np.inf for a in acts])
+    hi = np.array([a.torque_range[1] if a.torque_range else np.inf for a in acts])
+    return share * lo, share * hi
 
 
 def actuation_of(t: FloatArray, acts: tuple[Actuator, ...], tau: FloatArray, q: FloatArray,

@@ -184,6 +184,10 @@ class ManipulationProblem:
     #: certificate keeps every other pair :data:`~ocp.robots.collision.LINK_CLEARANCE`
     #: apart. None: only the fingertips' own checks (a URDF hand, fingers of their own).
     collision: Any = field(default=None, compare=False, repr=False)
+    #: The hand's actuators (:mod:`ocp.robots.actuation`: an object with ``actuators(joint
+    #: names)``): a gait's holds keep their joints' torques within them where the cones
+    #: allow. None: no limits known.
+    actuation: Any = field(default=None, compare=False, repr=False)
 
     @property
     def ramp_time_fraction(self) -> float:

@@ -107,6 +107,18 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
     return gait_result(gait, problem, rate), gait
 
 
+def _message(gait: GaitPlan) -> str:
+    """The gait's own message, or what its status and certificate say: never empty."""
+    if gait.message:
+        return gait.message
+    if gait.status == "solved":
+        failures = gait.certificate.failures
+        return ("planned; certificate passed" if not failures else
+                "planned, but the certificate failed: " + "; ".join(failures[:5]) +
+                (f" (and {len(failures) - 5} more)" if len(failures) > 5 else ""))
+    return f"the gait ended {gait.status} after {len(gait.rolls)} roll(s)"
+
+
 def _status(gait: GaitPlan) -> PlanStatus:
     if gait.status == "solved":
         return PlanStatus.SOLVED if gait.certificate.passed else PlanStatus.INACCURATE
@@ -160,7 +172,7 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float
     cert = finger_certificate(ManipulationCertificateModel, gait.certificate) \
         if gait.certificate.checks else None
     return ManipulationResult(
-        status=_status(gait), message=gait.message,
+        status=_status(gait), message=_message(gait),
         stats=ManipulationStatsModel(raw_status=gait.rolls[-1].raw_status if gait.rolls
                                      else "", iterations=iterations,
                                      build_time=build, solve_time=solve, refinements=0,

@@ -432,6 +432,7 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
                 for (k, _, _, _, _), tip in zip(from_joints, found, strict=True):
                     tips[k] = tip
     collision = None if errors else _hand_collision(request, hand)
+    actuation = None if errors else hand_actuation(request, hand)
     if collision is not None and motion_start is not None and from_joints and \
             len(from_joints) == len(request.fingers) and \
             all(q is not None for _, _, q, _, _ in from_joints):
@@ -441,12 +442,13 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
     tr = request.tracking
     forces = force_spec(request.forces)
     return _problem(request, obj, tips, palm, start, motion, tr, forces,
-                    collision), grasp_used
+                    collision, actuation), grasp_used
 
 
 def _problem(request: ManipulationRequest, obj: ObjectSpec, tips: list[Fingertip | None],
              palm: Palm | None, start: ObjectPose | None, motion: DesiredMotion | None,
-             tr: Any, forces: Any, collision: Any = None) -> ManipulationProblem:
+             tr: Any, forces: Any, collision: Any = None, actuation: Any = None
+             ) -> ManipulationProblem:
     return ManipulationProblem(
         object=obj, fingers=tuple(t for t in tips if t is not None), duration=request.duration,
         palm=palm,
@@ -462,7 +464,8 @@ def _problem(request: ManipulationRequest, obj: ObjectSpec, tips: list[Fingertip
         max_object_rate=request.max_object_rate, max_refinements=request.max_refinements,
         options=solver_options(request.solver), forces=forces, timing=request.timing,
         ramp_time=request.ramp_time,
-        max_joint_acceleration=request.max_joint_acceleration, collision=collision)
+        max_joint_acceleration=request.max_joint_acceleration, collision=collision,
+        actuation=actuation)
 
 
 class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProblem,
@@ -515,8 +518,7 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
         with fingers.lock:  # the hand and fingers, by the cache's rules
             problem, grasp = problem_and_grasp(request, fingers)
             planner = fingers.manipulation
-            actuation = None if request.hand is None else \
-                hand_actuation(request, fingers.hand(request.hand))
+        actuation = problem.actuation
         errors = fields.errors(problem.errors())
         if errors:
             raise ProblemError(errors)
