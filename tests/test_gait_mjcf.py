@@ -96,6 +96,12 @@ def test_a_gait_on_a_users_mjcf_hand() -> None:
     ns = np.array([p.time_from_start.sec * 10**9 + p.time_from_start.nanosec
                    for p in jt.points])
     assert np.all(np.diff(ns) > 0)
+    # which fingertips touch: all but the one a swing has lifted, inside the swing
+    names = [c.name for c in gait.samples.contacts]
+    for p in gait.phases:
+        inside = [pt for pt in jt.points if p.start < pt.t < p.end]
+        want = [n for n in names if n != p.lifted_finger] if p.kind == "swing" else names
+        assert inside and all(pt.touching == want for pt in inside), p
     for j, name in enumerate(jt.joint_names):
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
         assert jid >= 0, name

@@ -173,6 +173,7 @@ def test_a_certified_plan_states_its_links_clearance():
         "duration": 1.0, "n_intervals": 10})
     result = solve(req)[0]
     assert result.status.value == "solved", result.message
+    assert all(p.touching == ["ff", "mf", "rf", "th"] for p in result.joint_trajectory.points)
     values = result.certificate.values
     assert values["min_link_clearance"] >= LINK_CLEARANCE
     assert result.certificate.tolerances["min_link_clearance"] == LINK_CLEARANCE

@@ -107,6 +107,18 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
     return gait_result(gait, problem, rate), gait
 
 
+def _touching(gait: GaitPlan, names: list[str], t: np.ndarray) -> list[list[str]]:
+    """At each time, the fingertips touching the ball: all but the one a swing phase has
+    lifted (its unloading and loading touch; a switch's time belongs to the phase it
+    starts, the last time to the last phase)."""
+    out = []
+    for tt in t:
+        ph = next((p for p in gait.phases if p.start <= tt < p.end), gait.phases[-1])
+        lifted = names[ph.lifted] if ph.kind == "swing" and ph.lifted is not None else None
+        out.append([n for n in names if n != lifted])
+    return out
+
+
 def _message(gait: GaitPlan) -> str:
     """The gait's own message, or what its status and certificate say: never empty."""
     if gait.message:
@@ -144,7 +156,8 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float
         smp = gait_samples(gait, problem, gait_times(gait, rate))
         jt = joint_trajectory_model(JointTrajectory(tuple(joint_names), smp.t, smp.q,
                                                     smp.q_dot, smp.q_ddot, (),
-                                                    smp.effort))
+                                                    smp.effort),
+                                    _touching(gait, names, smp.t))
         samples = GaitSamplesModel(
             t=smp.t.tolist(), object_position=rows(smp.object_position),
             object_orientation_wxyz=rows(smp.object_wxyz),

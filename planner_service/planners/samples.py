@@ -87,12 +87,14 @@ def joint_trajectory_block(plan: ManipulationSolution | None,
     jt = plan.joint_trajectory(plan.t if times is None else times)
     if not _finite(jt.positions, jt.velocities, jt.accelerations):
         return None
-    return joint_trajectory_model(jt)
+    tips = [c.name for c in plan.contacts if c.body != "palm"]  # one phase: all touch
+    return joint_trajectory_model(jt, [tips] * len(jt.t))
 
 
-def joint_trajectory_model(jt: Any) -> JointTrajectoryModel:
+def joint_trajectory_model(jt: Any, touching: list[list[str]] | None = None
+                           ) -> JointTrajectoryModel:
     """The wire form of the core's :class:`~ocp.solution.JointTrajectory` (its
-    ``to_dict``: ROS 2's fields)."""
+    ``to_dict``: ROS 2's fields), with the fingertips ``touching`` at each point."""
     d = jt.to_dict()
     return JointTrajectoryModel(
         joint_names=d["joint_names"],
@@ -100,6 +102,6 @@ def joint_trajectory_model(jt: Any) -> JointTrajectoryModel:
             positions=p["positions"], velocities=p["velocities"],
             accelerations=p["accelerations"],
             time_from_start=DurationModel(**p["time_from_start"]), t=p["t"],
-            effort=p.get("effort"))
-            for p in d["points"]],
+            effort=p.get("effort"), touching=None if touching is None else touching[k])
+            for k, p in enumerate(d["points"])],
         rate_breaks=[RateBreakModel(**b) for b in d["rate_breaks"]])

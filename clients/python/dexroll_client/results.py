@@ -446,6 +446,9 @@ class JointTrajectoryPointModel(_Response):
     effort: list[float] | None = Field(
         default=None, description="joint torques [N m; N] that exert the planned contact "
                                   "forces (a plan with `forces`; else null)")
+    touching: list[str] | None = Field(
+        default=None, description="the fingertips touching the object at this time, by "
+                                  "name (a gait's swinging fingertip is not)")
 
 
 class RateBreakModel(_Response):
