@@ -493,7 +493,34 @@ class UserModelSimulation:
             "object": {"mass": float(m.body_mass[self.object_body]),
                        **_geom_settings(m, self.object_geom),
                        "solmix": float(m.geom_solmix[self.object_geom])},
-            "fingertip_contacts": tips, "drive": drive}
+            "fingertip_contacts": tips, "drive": drive,
+            "couplings": self._couplings()}
+
+    def _couplings(self) -> list[str]:
+        """The file's constraints between the joints the plan moves (limited tendons over
+        two or more of them, joint equalities), in words: the plan does not model them,
+        the execution has them."""
+        m = self.model
+        planned = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j.name)
+                   for joints in self.joints for j in joints}
+        out = []
+        for t in range(m.ntendon):
+            adr, num = int(m.tendon_adr[t]), int(m.tendon_num[t])
+            joints = [int(m.wrap_objid[adr + i]) for i in range(num)
+                      if int(m.wrap_type[adr + i]) == int(mujoco.mjtWrap.mjWRAP_JOINT)]
+            if num > 1 and m.tendon_limited[t] and planned & set(joints):
+                names = ", ".join(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
+                                  for j in joints)
+                lo, hi = (float(x) for x in m.tendon_range[t])
+                out.append(f"tendon {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_TENDON, t)!r}"
+                           f" ({names}) limited to {lo:g}..{hi:g}")
+        for e in range(m.neq):
+            if int(m.eq_type[e]) == int(mujoco.mjtEq.mjEQ_JOINT) and \
+                    planned & {int(m.eq_obj1id[e]), int(m.eq_obj2id[e])}:
+                a = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.eq_obj1id[e]))
+                b = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.eq_obj2id[e]))
+                out.append(f"joint equality {a} = f({b})")
+        return out
 
     # -- the reference --------------------------------------------------------------------
     def _feedforward(self) -> tuple[list[FloatArray], list[FloatArray], list[str]]:
@@ -722,6 +749,10 @@ class UserModelSimulation:
         if changed:
             extra.append("fingertip contact settings that differ from the file's (with the "
                          f"object): {', '.join(changed)}")
+        if settings["couplings"]:
+            extra.append("the file couples joints the plan moves independently (the plan "
+                         "does not model them; the execution has them): "
+                         + "; ".join(settings["couplings"]))
         report = SimReport.assess(
             mode="servo (the model's actuators)", options=o, contacts=contacts,
             position=ErrorSummary.of(pos_err[during], t_end[during]),

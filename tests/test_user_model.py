@@ -226,3 +226,24 @@ def test_the_contact_depth_is_mujocos_own_at_rest(solimp: str) -> None:
                          [float(x) for x in solimp.split()])
     assert depth > 1e-5
     assert want == pytest.approx(depth, rel=0.02)
+
+
+def test_the_files_couplings_of_planned_joints_are_said() -> None:
+    """A plan made without the file's couplings (a coupled hand is refused for planning;
+    a plan made on a copy without them) executed on the file: the report says which
+    tendons and equalities constrain the joints the plan moves independently."""
+    text = OWN.replace("<actuator>", """<tendon>
+      <fixed name="ff_couple" limited="true" range="-0.001 0.001">
+        <joint joint="ffj2" coef="0.01"/><joint joint="ffj3" coef="-0.01"/>
+      </fixed>
+      <fixed name="ff_limit" limited="true" range="-0.01 0.01">
+        <joint joint="ffj0" coef="0.02"/>
+      </fixed>
+    </tendon>
+    <actuator>""", 1)
+    sim = UserModelSimulation(held_plan(), UserModel(text, TIPS))
+    assert sim.settings["couplings"] == ["tendon 'ff_couple' (ffj2, ffj3) limited to "
+                                         "-0.001..0.001"]
+    report = sim.run()
+    assert any("couples joints the plan moves independently" in n and "ff_couple" in n
+               for n in report.notes)
