@@ -11,6 +11,7 @@ the grasp search and the certificate keep the links clear."""
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -177,3 +178,43 @@ def test_a_certified_plan_states_its_links_clearance():
     values = result.certificate.values
     assert values["min_link_clearance"] >= LINK_CLEARANCE
     assert result.certificate.tolerances["min_link_clearance"] == LINK_CLEARANCE
+
+
+def test_a_gait_does_not_roll_a_grasp_whose_links_are_too_close() -> None:
+    """ocp.gait.planner's look ahead (the fingers' rolled motion, as for the tips' gaps):
+    with a link already within MIN_ROLL_LINK_CLEARANCE of the ball the roll is cut at
+    once, and the gait's reason names the link."""
+    import dataclasses
+
+    from ocp.gait.planner import MIN_ROLL_LINK_CLEARANCE, _roll_ahead, _too_close
+    from planner_service.planners import REQUEST
+    from planner_service.planners.cache import FingerCache
+    from planner_service.planners.manipulation import manipulation_problem
+
+    req = REQUEST.validate_python({
+        "planner": "manipulation", "object": {"shape": "sphere",
+                                              "dimensions": [NOMINAL_RADIUS]},
+        "hand": {"mjcf": OWN, "tips": [{"name": t} for t in TIPS]},
+        "fingers": [{"hand_finger": k, "initial_q": list(q)}
+                    for k, q in enumerate(NOMINAL_Q)],
+        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
+                         "orientation_wxyz": [1, 0, 0, 0]},
+        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
+                                               "angle": 0.1}]},
+        "forces": {"mass": 0.05}, "duration": 1.0})
+    problem = manipulation_problem(req, FingerCache())
+    qs = tuple(np.asarray(q, dtype=float) for q in NOMINAL_Q)
+    centre = np.asarray(NOMINAL_OBJECT_POSITION, dtype=float)
+    axis = np.array([0.0, 0.0, 1.0])
+    clear = _roll_ahead(problem, qs, centre, NOMINAL_RADIUS, axis, 0.1)
+    assert clear.close == "" and clear.apart == pytest.approx(0.1)
+    i = OWN.index('<body name="ff_medial"')
+    j = OWN.index(">", i) + 1
+    fat = OWN[:j] + '<geom name="fat" type="sphere" size="0.03" pos="0.02 0 0.02"/>' + OWN[j:]
+    near = load_whole_hand(fat, "mjcf", [TipSpec(t) for t in TIPS]).collision([0, 1, 2, 3])
+    ahead = _roll_ahead(dataclasses.replace(problem, collision=near), qs, centre,
+                        NOMINAL_RADIUS, axis, 0.1)
+    assert ahead.apart == 0.0 and ahead.need >= MIN_ROLL_LINK_CLEARANCE
+    assert "'ff_medial' (geom 'fat')" in ahead.close
+    why = _too_close(ahead.need, 0.0, math.pi / 2, axis, ahead.close)
+    assert why.startswith("the hand's links come within") and "'fat'" in why

@@ -190,6 +190,9 @@ class RollAhead:
     why: str
     apart: float
     need: float
+    #: what comes within ``need`` at ``apart`` ("" two fingertips' bodies; else the hand's
+    #: links, in words: ``problem.collision``)
+    close: str = ""
 
 
 def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
@@ -212,6 +215,12 @@ def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
     q = [np.asarray(v, dtype=float) for v in qs]
     reach, who, why, apart = upto, "", "", upto
     g_prev, th = g0, 0.0
+    links = _link_gap(template, fingers, centre) if gaps else None
+    l_prev = links(q).value if links is not None else math.inf
+    l_need = max(min(ROLL_LINK_CLEARANCE, 0.9 * l_prev), MIN_ROLL_LINK_CLEARANCE)
+    close = ""
+    if l_prev < l_need:  # the grasp's links are too close already
+        apart, need, close = 0.0, l_need, links(q).describe() if links else ""
     for _ in range(GAP_REACH_SAMPLES):
         for i, f in enumerate(fingers):
             if not rolls(f):
@@ -227,8 +236,39 @@ def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
             if g < need:
                 apart = th + h * (g_prev - need) / max(g_prev - g, 1e-12)
             g_prev = g
+        if links is not None and apart >= upto:
+            c = links(q)
+            if c.value < l_need:
+                apart = th + h * (l_prev - l_need) / max(l_prev - c.value, 1e-12)
+                need, close = l_need, c.describe()
+            l_prev = c.value
         th += h
-    return RollAhead(reach, who, why, apart, need)
+    return RollAhead(reach, who, why, apart, need, close)
+
+
+#: A roll is cut where the fingers' rolled motion brings two of the hand's links (MuJoCo's
+#: pairs, not the touching tips and the ball) this close [m], or 90 % of the grasp's own
+#: least gap if smaller, but never below :data:`MIN_ROLL_LINK_CLEARANCE`: the
+#: certificate's 0.5 mm with room for the plan's tracking slack.
+ROLL_LINK_CLEARANCE = 1e-3
+MIN_ROLL_LINK_CLEARANCE = 6e-4
+
+
+def _link_gap(template: ManipulationProblem, fingers: tuple[Any, ...],
+              centre: FloatArray) -> Any:
+    """The least clearance of the hand's links at joints (per finger) with the ball at
+    ``centre`` (``template.collision``), as a function; None without a collision model."""
+    coll = template.collision
+    if coll is None:
+        return None
+    names = [n for f in fingers for n in f.joint_names]
+    shape, dims = template.object.shape, template.object.dimensions
+
+    def gap(q: list[FloatArray]) -> Any:
+        return coll.least(shape, dims, names, np.concatenate(q)[None], np.eye(3)[None],
+                          np.asarray(centre, dtype=float)[None])
+
+    return gap
 
 
 #: A roll the fingers' rolled reach shortens stops this far before the reach: the larger
@@ -316,11 +356,14 @@ def _stopped(who: str, why: str, at: float, angle: float, ax: FloatArray,
                    if held else " even from its re-placed contact")
 
 
-def _too_close(need: float, at: float, angle: float, ax: FloatArray) -> str:
-    """Why a gait stops short: two fingertips' bodies within ``need`` [m] after ``at``."""
-    return (f"two fingertips come within {need * 1e3:.2f} mm of each other after "
-            f"{math.degrees(at):.1f} deg of {math.degrees(angle):.1f} deg about "
-            f"({', '.join(f'{c:.3g}' for c in ax)}): the grasp cannot roll on")
+def _too_close(need: float, at: float, angle: float, ax: FloatArray, close: str = ""
+               ) -> str:
+    """Why a gait stops short: two fingertips' bodies (or the hand's links: ``close``)
+    within ``need`` [m] after ``at``."""
+    what = (f"the hand's links come within {need * 1e3:.2f} mm ({close})" if close else
+            f"two fingertips come within {need * 1e3:.2f} mm of each other")
+    return (f"{what} after {math.degrees(at):.1f} deg of {math.degrees(angle):.1f} deg "
+            f"about ({', '.join(f'{c:.3g}' for c in ax)}): the grasp cannot roll on")
 
 
 def _undo(plan: GaitPlan, checks: list[Check], never_lifted: set[str], before: tuple[Any, ...]
@@ -453,7 +496,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         # the tips' gaps: a turn that would bring two together stops before
         if ahead.apart < step and ahead.apart < MIN_ROLL:  # (a last roll may be shorter)
             plan.status, plan.message = "infeasible", _too_close(
-                ahead.need, done + max(ahead.apart, 0.0), angle, ax)
+                ahead.need, done + max(ahead.apart, 0.0), angle, ax, ahead.close)
             break
         step = min(step, ahead.apart)
         # where the plan stands before this roll, to go back to if what follows fails
