@@ -218,3 +218,39 @@ def test_a_gait_does_not_roll_a_grasp_whose_links_are_too_close() -> None:
     assert "'ff_medial' (geom 'fat')" in ahead.close
     why = _too_close(ahead.need, 0.0, math.pi / 2, axis, ahead.close)
     assert why.startswith("the hand's links come within") and "'fat'" in why
+
+
+def test_a_swings_obstacles_are_the_geoms_mujoco_collides_with_its_tip(hand) -> None:
+    """HandCollision.obstacles: for the middle fingertip, the geoms of the other fingers'
+    links and the palm that MuJoCo would collide with it (never its own chain's, the
+    other tips' or the excluded), a box as the capsule along its longest axis that bounds
+    it: every corner of the box is inside that capsule."""
+    hc = hand.collision([0, 1, 2, 3])
+    q = np.concatenate(NOMINAL_Q)
+    got = hc.obstacles("sphere", (NOMINAL_RADIUS,), _names(hand), q, 1)
+    bodies = {BODY.search(n).group(1) for n, _ in got}
+    assert bodies and not any(b.startswith("mf_") for b in bodies)
+    assert not bodies & {"ff_tip", "rf_tip", "th_tip"}
+    assert "ff_medial" in bodies and "palm" in bodies
+    mj, d = hc._model("sphere", (NOMINAL_RADIUS,))[:2]
+    from itertools import product
+
+    from ocp.geometry.bodies import point_segment_distance
+
+    d.qpos[:] = mj.qpos0
+    d.qpos[hc.joint_address("sphere", (NOMINAL_RADIUS,), _names(hand))] = q
+    mujoco.mj_kinematics(mj, d)
+    boxes = 0
+    for name, (a, b, r) in got:
+        g = int(BODY.search(name).group(2))
+        if int(mj.geom_type[g]) != int(mujoco.mjtGeom.mjGEOM_BOX):
+            continue
+        boxes += 1
+        R, c = d.geom_xmat[g].reshape(3, 3), d.geom_xpos[g]
+        for signs in product((-1.0, 1.0), repeat=3):
+            corner = c + R @ (np.array(signs) * mj.geom_size[g])
+            assert float(point_segment_distance(corner, a, b)) <= r + 1e-12
+    assert boxes  # the palm's
+    near = hc.obstacles("sphere", (NOMINAL_RADIUS,), _names(hand), q, 1,
+                        near=(np.asarray(NOMINAL_OBJECT_POSITION), NOMINAL_RADIUS + 0.005))
+    assert len(near) < len(got)

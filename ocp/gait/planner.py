@@ -381,6 +381,29 @@ def _undo(plan: GaitPlan, checks: list[Check], never_lifted: set[str], before: t
     return t, done, pose, q_now
 
 
+#: A swing keeps clear of the hand's links within this distance [m] of the ball's surface
+#: (its tip goes no farther from the ball than the clearance and its own length).
+OBSTACLE_RANGE = 0.04
+
+
+def swing_obstacles(template: ManipulationProblem) -> Any:
+    """The hand's links a swing keeps clear of (``template.collision``'s
+    :meth:`~ocp.robots.collision.HandCollision.obstacles` near the ball), as
+    ``obstacles(qs, k, centre)``; None without a collision model."""
+    coll = template.collision
+    if coll is None:
+        return None
+    names = [n for f in template.fingers for n in f.finger.joint_names]
+    shape, dims = template.object.shape, template.object.dimensions
+    rho = float(max(dims))
+
+    def obstacles(qs: tuple[FloatArray, ...], k: int, centre: FloatArray) -> list[Any]:
+        return coll.obstacles(shape, dims, names, np.concatenate(qs), k,
+                              near=(centre, rho + OBSTACLE_RANGE))
+
+    return obstacles
+
+
 def torque_limits(template: ManipulationProblem) -> TorqueLimits | None:
     """The fingers' actuator torques a gait's holds keep to (``template.actuation``, times
     :data:`~ocp.gait.step.HOLD_TORQUE_SHARE`); None without actuators, limits or forces."""
@@ -417,13 +440,15 @@ def _replace_fingers(plan: GaitPlan, checks: list[Check], template: Manipulation
     centre = np.asarray(pose.position, dtype=float)
     assert template.forces is not None
     limits = torque_limits(template)
+    obstacles = swing_obstacles(template)
     for k in range(nf):
         _, n_back = contact_of(fingers[k], q_start[k], centre, rho)
         last = next((st.swing for st in reversed(plan.steps) if st.finger == k), None)
         gs = replace_finger(fingers, q_now, k, n_back, q_start[k], centre, rho,
                             pose.rotation, load, swing, hold_time, last,
                             tuple(f.name or f"finger{i}"
-                                  for i, f in enumerate(template.fingers)), limits)
+                                  for i, f in enumerate(template.fingers)), limits,
+                            obstacles)
         if gs.status == "infeasible" and gs.swing is None:
             never_lifted.add(template.fingers[k].name or f"finger{k}")
             continue  # it keeps rolling

@@ -130,6 +130,9 @@ class GaitStep:
         return out
 
 
+#: A swing's link obstacles are padded to a multiple of this many (each count its NLP).
+OBSTACLE_BLOCK = 4
+
 #: The share of an actuator's torque limit a hold's forces may ask of its joint (the rest
 #: for the motion's own terms: damping, inertia, the set points' errors).
 HOLD_TORQUE_SHARE = 0.9
@@ -191,7 +194,8 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                    swing: dict[str, Any] | None = None, hold_time: float = 0.2,
                    warm: SwingPlan | None = None,
                    names: tuple[str, ...] | None = None,
-                   limits: TorqueLimits | None = None) -> GaitStep:
+                   limits: TorqueLimits | None = None,
+                   obstacles: Any = None) -> GaitStep:
     """Re-place fingertip ``k`` of a grasp of a still ball (``fingers`` at the joints
     ``qs``, every tip touching) at the contact whose outward normal is ``landing_normal``
     (palm frame), its joints seeded by ``q_target``. ``load``: the load parameters
@@ -200,8 +204,11 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     unloading's and the loading's duration [s]; ``warm``: this finger's previous swing
     (:func:`~ocp.gait.swing.plan_swing`'s warm start); ``names``: the fingers' names (for
     messages; default from their joints); ``limits``: the actuators' torques, which the
-    holds' forces keep to where the cones allow. A grasp whose other fingertips cannot
-    hold the object is ``infeasible`` at once, naming the finger."""
+    holds' forces keep to where the cones allow; ``obstacles(qs, k, centre)``: the hand's
+    links the swing keeps clear of as it does of the other tips (name, (a, b, r)),
+    padded with far-away ones to a multiple of :data:`OBSTACLE_BLOCK` (fewer swing NLPs).
+    A grasp whose other fingertips cannot hold the object is ``infeasible`` at once,
+    naming the finger."""
     L = radius
     allf = list(range(len(fingers)))
     rest = [i for i in allf if i != k]
@@ -223,10 +230,17 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         R, p = fingers[i].fingertip_pose_pin(qs[i])
         a, b = tip_body(fingers[i]).placed(R, p)
         others.append((a, b, tip_body(fingers[i]).r))
+    other_names = [names[i] for i in rest]
+    if obstacles is not None:
+        links = obstacles(qs, k, np.asarray(centre, dtype=float))
+        far = np.asarray(centre, dtype=float) + 1.0
+        links += [("(none)", (far, far, 0.0))] * (-len(links) % OBSTACLE_BLOCK)
+        others += [seg for _, seg in links]
+        other_names += [n for n, _ in links]
     spec = SwingSpec(fingers[k], np.asarray(qs[k], dtype=float),
                      np.asarray(q_target, dtype=float), np.asarray(landing_normal, float),
                      np.asarray(centre, dtype=float), float(radius), tuple(others),
-                     name=name, other_names=tuple(names[i] for i in rest), **(swing or {}))
+                     name=name, other_names=tuple(other_names), **(swing or {}))
     if warm is not None and warm.spec.tip_gap is not None:
         # its last swing needed it
         spec = replace(spec, tip_gap=warm.spec.tip_gap,

@@ -515,8 +515,9 @@ def _cause(g: FloatArray, lbg: FloatArray, ubg: FloatArray, kinds: tuple[str, ..
     def words(k: str) -> str:
         if k.startswith("the gap to the other fingertip ") and names:
             j = int(k.rsplit(" ", 1)[1]) - 1
-            if 0 <= j < len(names) and names[j]:
-                return f"the gap to fingertip {names[j]!r}"
+            if 0 <= j < len(names) and names[j]:  # a fingertip's name, or a link's words
+                return f"the gap to {names[j]}" if names[j].startswith("body ") else \
+                    f"the gap to fingertip {names[j]!r}"
         return k
 
     first = words(ranked[0][0])

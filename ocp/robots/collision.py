@@ -84,6 +84,26 @@ def collision_text(text: str) -> str:
     return mujoco_text(ET.tostring(root, encoding="unicode"))
 
 
+def _collides(mj: Any, g1: int, g2: int) -> bool:
+    """Whether MuJoCo would collide geoms ``g1`` and ``g2``: their contype/conaffinity
+    bits, not one body, neither body the other's parent (unless it is the world), no
+    ``<exclude>`` of their bodies."""
+    if not ((mj.geom_contype[g1] & mj.geom_conaffinity[g2]) or
+            (mj.geom_contype[g2] & mj.geom_conaffinity[g1])):
+        return False
+    b1, b2 = int(mj.geom_bodyid[g1]), int(mj.geom_bodyid[g2])
+    if b1 == b2:
+        return False
+    w1, w2 = int(mj.body_weldid[b1]), int(mj.body_weldid[b2])
+    if w1 == w2:
+        return False
+    p1, p2 = int(mj.body_weldid[mj.body_parentid[w1]]), int(mj.body_weldid[mj.body_parentid[w2]])
+    if (p1 == w2 and w2 != 0) or (p2 == w1 and w1 != 0):
+        return False
+    signature = min(b1, b2) << 16 | max(b1, b2)
+    return int(signature) not in {int(x) for x in mj.exclude_signature}
+
+
 def _on_chain(mj: Any, body: int, tip: int) -> bool:
     """Whether ``body`` is ``tip`` or one of its ancestors below the root body."""
     b = tip
@@ -175,6 +195,63 @@ class HandCollision:
             if j < 0:
                 raise ValueError(f"the hand has no joint {n!r}")
             out.append(int(mj.jnt_qposadr[j]))
+        return out
+
+    def obstacles(self, shape: str, dims: Sequence[float], joint_names: Sequence[str],
+                  q: ArrayLike, finger: int, near: tuple[FloatArray, float] | None = None
+                  ) -> list[tuple[str, tuple[FloatArray, FloatArray, float]]]:
+        """The hand's collision geoms a swing of fingertip ``finger`` must keep clear of,
+        at joints ``q`` (the values of ``joint_names``), as capsules in the palm frame
+        (name, (a, b, r)): every geom MuJoCo would collide with that tip's, but its own
+        finger's (they move with it), the other tips' (a swing keeps clear of them by
+        their own bodies) and the object. A sphere
+        is itself, a capsule or cylinder its axis and radius, a box the capsule along its
+        longest axis that bounds it (its whole length, the half-diagonal of its section),
+        an ellipsoid its longest axis with the larger of its other two half-sizes. ``near``: (a point [m],
+        a distance [m]); only geoms within that distance of it."""
+        import mujoco
+
+        mj, d, o_geom, _, tip_geoms, names, _ = self._model(shape, dims)
+        addr = self.joint_address(shape, dims, joint_names)
+        held_at = self.joint_address(shape, dims, list(self.held))
+        d.qpos[:] = mj.qpos0
+        d.qpos[held_at] = np.array(list(self.held.values()), dtype=float)
+        d.qpos[addr] = np.asarray(q, dtype=float)
+        mujoco.mj_kinematics(mj, d)
+        mine = tip_geoms[finger]
+        tips = {g for gs in tip_geoms for g in gs}
+        own = int(mj.geom_bodyid[next(iter(mine))]) if mine else -1  # its chain moves
+        Rm, pm = (np.asarray(x, dtype=float) for x in self.mount)
+        out = []
+        for g in range(mj.ngeom):
+            if g in tips or g == o_geom or _on_chain(mj, int(mj.geom_bodyid[g]), own) or \
+                    not any(_collides(mj, g, t) for t in mine):
+                continue
+            kind, size = int(mj.geom_type[g]), np.asarray(mj.geom_size[g], dtype=float)
+            R = d.geom_xmat[g].reshape(3, 3)
+            c = d.geom_xpos[g]
+            T = mujoco.mjtGeom
+            if kind == int(T.mjGEOM_SPHERE):
+                half, r, axis = 0.0, float(size[0]), R[:, 2]
+            elif kind in (int(T.mjGEOM_CAPSULE), int(T.mjGEOM_CYLINDER)):
+                half, r, axis = float(size[1]), float(size[0]), R[:, 2]
+            elif kind == int(T.mjGEOM_BOX):  # the capsule that bounds it
+                i = int(np.argmax(size))
+                r = float(np.linalg.norm(np.delete(size, i)))
+                half, axis = float(size[i]), R[:, i]
+            elif kind == int(T.mjGEOM_ELLIPSOID):
+                i = int(np.argmax(size))
+                r = float(np.delete(size, i).max())
+                half, axis = max(float(size[i]) - r, 0.0), R[:, i]
+            else:
+                continue
+            a, b = Rm @ (c - half * axis) + pm, Rm @ (c + half * axis) + pm
+            if near is not None:
+                from ocp.geometry.bodies import point_segment_distance
+
+                if float(point_segment_distance(near[0], a, b)) - r > near[1]:
+                    continue
+            out.append((names[g], (a, b, r)))
         return out
 
     def least(self, shape: str, dims: Sequence[float], joint_names: Sequence[str],
