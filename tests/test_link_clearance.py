@@ -47,6 +47,23 @@ def _at(hand, q, touching=None, centre=NOMINAL_OBJECT_POSITION):
         np.tile(np.asarray(centre, dtype=float), (n, 1)), touching)
 
 
+def _turn(text, **extra):
+    """A 0.1 rad turn about the palm's z of the nominal grasp on the hand ``text``."""
+    from planner_service.planners import REQUEST
+
+    return REQUEST.validate_python({
+        "planner": "manipulation", "object": {"shape": "sphere",
+                                              "dimensions": [NOMINAL_RADIUS]},
+        "hand": {"mjcf": text, "tips": [{"name": t} for t in TIPS]},
+        "fingers": [{"hand_finger": k, "initial_q": list(q)}
+                    for k, q in enumerate(NOMINAL_Q)],
+        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
+                         "orientation_wxyz": [1, 0, 0, 0]},
+        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
+                                               "angle": 0.1}]},
+        "duration": 1.0, **extra})
+
+
 def _random_q(hand, n, seed=0):
     rng = np.random.default_rng(seed)
     lo = np.concatenate([f.lower for f in hand.fingers])
@@ -109,7 +126,7 @@ def test_a_link_in_the_ball_is_refused_naming_the_bodies():
     """A file whose index medial link carries a fat collision sphere reaching into the ball
     at the nominal grasp: the request is a 422 naming the index finger's joints, the
     bodies and the depth."""
-    from planner_service.planners import REQUEST, ProblemError
+    from planner_service.planners import ProblemError
     from planner_service.planners.cache import FingerCache
     from planner_service.planners.manipulation import manipulation_problem
 
@@ -117,17 +134,7 @@ def test_a_link_in_the_ball_is_refused_naming_the_bodies():
     i = fat.index('<body name="ff_medial"')
     j = fat.index(">", i) + 1
     fat = fat[:j] + '<geom name="fat" type="sphere" size="0.03" pos="0.02 0 0.02"/>' + fat[j:]
-    req = REQUEST.validate_python({
-        "planner": "manipulation", "object": {"shape": "sphere",
-                                              "dimensions": [NOMINAL_RADIUS]},
-        "hand": {"mjcf": fat, "tips": [{"name": t} for t in TIPS]},
-        "fingers": [{"hand_finger": k, "initial_q": list(q)}
-                    for k, q in enumerate(NOMINAL_Q)],
-        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
-                         "orientation_wxyz": [1, 0, 0, 0]},
-        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
-                                               "angle": 0.1}]},
-        "duration": 1.0})
+    req = _turn(fat)
     with pytest.raises(ProblemError) as exc:
         manipulation_problem(req, FingerCache())
     fields = dict(exc.value.errors)
@@ -159,19 +166,9 @@ def test_the_search_keeps_links_clear_along_the_rolled_turn(hand):
 def test_a_certified_plan_states_its_links_clearance():
     """A roll on the file's own hand: its certificate has ``min_link_clearance`` (physics,
     at least 0.5 mm), MuJoCo's least distance over the plan's samples."""
-    from planner_service.planners import REQUEST, solve
+    from planner_service.planners import solve
 
-    req = REQUEST.validate_python({
-        "planner": "manipulation", "object": {"shape": "sphere",
-                                              "dimensions": [NOMINAL_RADIUS]},
-        "hand": {"mjcf": OWN, "tips": [{"name": t} for t in TIPS]},
-        "fingers": [{"hand_finger": k, "initial_q": list(q)}
-                    for k, q in enumerate(NOMINAL_Q)],
-        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
-                         "orientation_wxyz": [1, 0, 0, 0]},
-        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
-                                               "angle": 0.1}]},
-        "duration": 1.0, "n_intervals": 10})
+    req = _turn(OWN, n_intervals=10)
     result = solve(req)[0]
     assert result.status.value == "solved", result.message
     assert all(p.touching == ["ff", "mf", "rf", "th"] for p in result.joint_trajectory.points)
@@ -187,21 +184,10 @@ def test_a_gait_does_not_roll_a_grasp_whose_links_are_too_close() -> None:
     import dataclasses
 
     from ocp.gait.planner import MIN_ROLL_LINK_CLEARANCE, _roll_ahead, _too_close
-    from planner_service.planners import REQUEST
     from planner_service.planners.cache import FingerCache
     from planner_service.planners.manipulation import manipulation_problem
 
-    req = REQUEST.validate_python({
-        "planner": "manipulation", "object": {"shape": "sphere",
-                                              "dimensions": [NOMINAL_RADIUS]},
-        "hand": {"mjcf": OWN, "tips": [{"name": t} for t in TIPS]},
-        "fingers": [{"hand_finger": k, "initial_q": list(q)}
-                    for k, q in enumerate(NOMINAL_Q)],
-        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
-                         "orientation_wxyz": [1, 0, 0, 0]},
-        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
-                                               "angle": 0.1}]},
-        "forces": {"mass": 0.05}, "duration": 1.0})
+    req = _turn(OWN, forces={"mass": 0.05})
     problem = manipulation_problem(req, FingerCache())
     qs = tuple(np.asarray(q, dtype=float) for q in NOMINAL_Q)
     centre = np.asarray(NOMINAL_OBJECT_POSITION, dtype=float)
