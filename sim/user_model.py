@@ -2,18 +2,10 @@
 damping, armature), actuators and contact settings, as MuJoCo reads the file
 (docs/simulation.md, "On your own model").
 
-The scene is the user's MJCF with three changes, each reported: every mesh geom removed
-(meshes are files the service never reads: their collisions and, on a body without an
-``<inertial>``, their mass go with them; named in the report) and the mesh assets with
-them, keyframes dropped (the object adds a free joint); the physics step and gravity the
-simulator's and the plan's (the file's are reported); the object added as a free body at
-the plan's initial pose (the plan's shape and mass; its friction the plan's ``mu`` and
-the simulator's torsional and rolling friction, its ``condim`` the simulator's; its
-``solmix`` tiny, so that each contact takes the hand geom's ``solref`` and ``solimp``).
+The scene is the user's MJCF with three changes, each reported (:mod:`sim.user_scene`).
 MuJoCo mixes a contact pair's settings (the larger ``condim`` and friction, ``solref``
-and ``solimp`` weighted by ``solmix``; a higher ``priority`` wins): the report lists, per
-fingertip geom, the file's settings, the pair's, and which differ. A ``mount`` places the
-model's world frame in the palm frame (a body wrapping the world's bodies).
+and ``solimp`` weighted by ``solmix``; a higher ``priority`` wins: :mod:`sim.soft_contact`):
+the report lists, per fingertip geom, the file's settings, the pair's, and which differ.
 
 The controller drives the model's own actuators (joint transmissions), per joint:
 
@@ -44,8 +36,7 @@ initial pose (the first half of ``settle``), then it is let go.
 from __future__ import annotations
 
 import time
-import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import mujoco
@@ -65,196 +56,12 @@ from .run import (
     slerp,
     step_grid,
 )
-from .scene import quat_of_matrix
+from .soft_contact import contact_depth, geom_settings, pair_settings
 from .spec import ExecutionPlan, FloatArray
+from .user_scene import OBJECT, UserModel, compiled, massless_links, user_scene, with_inertials
 
-__all__ = ["OBJECT", "UserModel", "UserModelSimulation", "simulate_on_model", "user_scene"]
-
-#: The object's body, joint and geom in the scene (not a name a hand file uses).
-OBJECT = "dexroll_object"
-#: The object's ``solmix``: each contact takes the hand geom's solref and solimp.
-OBJECT_SOLMIX = 1e-6
-#: MuJoCo's defaults of what a file may leave out.
-_MJ_TIMESTEP, _MJ_GRAVITY = 0.002, (0.0, 0.0, -9.81)
-
-
-@dataclass(frozen=True)
-class UserModel:
-    """The user's hand: its MJCF ``text``, per finger of the plan the body or site its
-    tip is (``tips``, in the plan's finger order), and the pose of the model's world frame
-    in the palm frame (``mount``: rotation, position)."""
-
-    text: str
-    tips: tuple[str, ...]
-    mount_rotation: FloatArray = field(default_factory=lambda: np.eye(3))
-    mount_position: FloatArray = field(default_factory=lambda: np.zeros(3))
-
-
-def _v(x: Any) -> str:
-    return " ".join(f"{float(v):.17g}" for v in np.asarray(x, dtype=float).ravel())
-
-
-def _floats(text: str | None, default: tuple[float, ...]) -> tuple[float, ...]:
-    return default if text is None else tuple(float(v) for v in text.split())
-
-
-def user_scene(plan: ExecutionPlan, model: UserModel, options: SimOptions
-               ) -> tuple[str, dict[str, Any]]:
-    """The scene's MJCF (module docstring) and what was changed in the file: meshes
-    removed (the geoms, where), keyframes dropped, the file's step and gravity."""
-    root = ET.fromstring(model.text)
-    parents = {c: p for p in root.iter() for c in p}
-    removed: list[str] = []
-    massless: set[str] = set()
-    for geom in list(root.iter("geom")):
-        parent = parents[geom]
-        if parent.tag == "default":
-            continue
-        if "mesh" in geom.attrib or geom.get("type") in ("mesh", "hfield") \
-                or "hfield" in geom.attrib:
-            body = parent.get("name", "(unnamed body)")
-            removed.append(f"{body}/{geom.get('name') or geom.get('mesh') or 'geom'}")
-            if parent.find("inertial") is None:
-                massless.add(body)
-            parent.remove(geom)
-    keyframes = [k for k in root.iter("keyframe")]
-    for k in keyframes:
-        root.remove(k)
-    opt = root.find("option")
-    if opt is None:
-        opt = ET.Element("option")
-        root.insert(1 if root.find("compiler") is not None else 0, opt)
-    file_step = float(opt.get("timestep", _MJ_TIMESTEP))
-    file_gravity = _floats(opt.get("gravity"), _MJ_GRAVITY)
-    opt.set("timestep", f"{options.timestep:.17g}")
-    opt.set("gravity", _v(plan.gravity))
-    world = root.find("worldbody")
-    if world is None:
-        raise ValueError("the model has no <worldbody>")
-    if not (np.allclose(model.mount_rotation, np.eye(3)) and
-            np.allclose(model.mount_position, 0.0)):
-        mount = ET.Element("body", name="dexroll_mount", pos=_v(model.mount_position),
-                           quat=_v(quat_of_matrix(model.mount_rotation)))
-        for child in list(world):
-            if child.tag in ("body", "geom", "site", "camera", "light", "frame"):
-                world.remove(child)
-                mount.append(child)
-        world.append(mount)
-    torsion = options.torsional_friction if options.torsional_friction is not None else \
-        plan.torsional_friction if plan.torsional_friction is not None else \
-        options.DEFAULT_TORSIONAL
-    obj = ET.SubElement(world, "body", name=OBJECT, pos=_v(plan.object_position[0]),
-                        quat=_v(plan.object_wxyz[0] / np.linalg.norm(plan.object_wxyz[0])))
-    ET.SubElement(obj, "freejoint", name=OBJECT)
-    mass = options.object_mass if options.object_mass is not None else plan.object.mass
-    a, b, c = plan.object.semi_axes
-    shape = "sphere" if plan.object.shape == "sphere" else "ellipsoid"
-    ET.SubElement(obj, "geom", name=OBJECT, type=shape,
-                  size=_v([a] if shape == "sphere" else [a, b, c]), mass=f"{mass:.17g}",
-                  contype="1", conaffinity="1", condim=str(options.condim),
-                  friction=_v([plan.mu, torsion, options.rolling_friction]),
-                  solmix=f"{OBJECT_SOLMIX:.17g}", priority="0", margin="0", gap="0",
-                  rgba="0.9 0.5 0.1 1")
-    changes = {"meshes_removed": removed,
-               "bodies_without_inertial_that_lost_mesh_geoms": sorted(massless),
-               "keyframes_dropped": len(keyframes),
-               "file_timestep": file_step, "file_gravity": list(file_gravity)}
-    _strip_files(root)
-    return ET.tostring(root, encoding="unicode"), changes
-
-
-def _strip_files(root: ET.Element) -> None:
-    """What names files the scene does not have: mesh, height-field and skin assets, file
-    textures (and materials' references to them), the compiler's directories; a body left
-    without mass gets MuJoCo's least (``boundmass``, ``boundinertia``)."""
-    for asset in root.iter("asset"):
-        for el in list(asset):
-            if el.tag in ("mesh", "hfield", "skin") or (el.tag == "texture" and
-                                                        "file" in el.attrib):
-                asset.remove(el)
-    for parent in list(root.iter()):
-        for el in list(parent):
-            if el.tag == "skin":
-                parent.remove(el)
-    for mat in root.iter("material"):
-        mat.attrib.pop("texture", None)
-    for geom in root.iter("geom"):  # default classes' mesh geoms: a geom of such a
-        # class with no mesh of its own is a small sphere without mass or contacts
-        meshy = "mesh" in geom.attrib or geom.get("type") in ("mesh", "hfield")
-        geom.attrib.pop("mesh", None)
-        if meshy:
-            geom.set("type", "sphere")
-            geom.set("size", "0.005")
-            geom.set("mass", "0")
-            geom.set("contype", "0")
-            geom.set("conaffinity", "0")
-    compiler = root.find("compiler")
-    if compiler is None:
-        compiler = ET.Element("compiler")
-        root.insert(0, compiler)
-    compiler.set("boundmass", "1e-6")
-    compiler.set("boundinertia", "1e-12")
-    for k in ("meshdir", "texturedir", "assetdir"):
-        compiler.attrib.pop(k, None)
-
-
-#: A moving body lighter than this [kg] has no mass of its own (MuJoCo's ``boundmass``
-#: the scene sets is 1e-6 kg).
-MASSLESS = 1e-5
-
-
-def _compiled(xml: str) -> Any:
-    try:
-        return mujoco.MjModel.from_xml_string(xml)
-    except ValueError as exc:
-        raise ValueError(f"MuJoCo cannot compile the model: {exc}") from exc
-
-
-def massless_links(m: Any) -> list[str]:
-    """The names of the model's bodies that move (a joint of their own, the object's
-    aside) and weigh less than :data:`MASSLESS`."""
-    out = []
-    for b in range(1, m.nbody):
-        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or f"body {b}"
-        if name != OBJECT and int(m.body_jntnum[b]) > 0 and float(m.body_mass[b]) < MASSLESS:
-            out.append(name)
-    return out
-
-
-def _with_inertials(xml: str, m: Any, bodies: list[str], mass: float) -> str:
-    """``xml`` with each of ``bodies`` given ``mass`` [kg] spread evenly over the box that
-    bounds its collision geoms (all its geoms when none collides) in the compiled ``m``:
-    its centre the centre of mass, the box's inertia."""
-    root = ET.fromstring(xml)
-    boxes: dict[str, tuple[FloatArray, FloatArray]] = {}
-    for name in bodies:
-        b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
-        geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == b]
-        touching = [g for g in geoms if m.geom_contype[g] or m.geom_conaffinity[g]]
-        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        R = np.zeros(9)
-        for g in touching or geoms:
-            mujoco.mju_quat2Mat(R, m.geom_quat[g])
-            Rg = R.reshape(3, 3)
-            centre = m.geom_pos[g] + Rg @ m.geom_aabb[g, :3]
-            half = np.abs(Rg) @ m.geom_aabb[g, 3:]
-            lo, hi = np.minimum(lo, centre - half), np.maximum(hi, centre + half)
-        if not geoms:
-            lo, hi = np.full(3, -0.005), np.full(3, 0.005)
-        boxes[name] = ((lo + hi) / 2, np.maximum(hi - lo, 1e-3))
-    for body in root.iter("body"):
-        got = boxes.get(body.get("name", ""))
-        if got is None:
-            continue
-        centre, (a, b_, c) = got
-        for old in body.findall("inertial"):
-            body.remove(old)
-        inertia = [mass / 12.0 * (b_ * b_ + c * c), mass / 12.0 * (a * a + c * c),
-                   mass / 12.0 * (a * a + b_ * b_)]
-        body.insert(0, ET.Element("inertial", pos=_v(centre), mass=f"{mass:.17g}",
-                                  diaginertia=_v(inertia)))
-    return ET.tostring(root, encoding="unicode")
-
+__all__ = ["OBJECT", "UserModel", "UserModelSimulation", "contact_depth", "simulate_on_model",
+           "user_scene"]
 
 @dataclass
 class _Joint:
@@ -303,71 +110,6 @@ def _joint_drive(m: Any, jid: int, name: str) -> _Joint:
                        "torque at its gain" + more)
 
 
-def _impedance(solimp: Any, r: float) -> float:
-    """MuJoCo's impedance d(r) of ``solimp`` (d0, dmax, width, mid, power) at depth r."""
-    d0, dmax, width, mid, power = (float(x) for x in solimp)
-    x = min(abs(r) / width, 1.0) if width > 0 else 1.0
-    if x >= 1.0 or power == 1.0:
-        y = x
-    elif x <= mid:
-        y = x ** power / mid ** (power - 1.0)
-    else:
-        y = 1.0 - (1.0 - x) ** power / (1.0 - mid) ** (power - 1.0)
-    return d0 + y * (dmax - d0)
-
-
-def contact_depth(m: Any, tip_body: int, object_body: int, force: float, solref: Any,
-                  solimp: Any) -> float:
-    """How deep [m] a fingertip sinks into the object in MuJoCo's soft contact to carry
-    the normal ``force`` [N] at rest. MuJoCo's constraint force is ``f = (A + R)^-1 (aref
-    - a0)`` with ``aref = -K d r`` at rest and ``a1 = a0 + A f = 0``, so ``R f = -K d r``:
-    ``r = (1 - d) A~ f / (d^2 K)``, ``R = (1 - d) / d A~``, ``A~`` MuJoCo's approximate
-    inverse inertia of the contact (the two bodies' ``body_invweight0``), ``K = 1 / (dmax^2
-    timeconst^2 dampratio^2)`` of ``solref``, ``d`` the impedance of ``solimp`` at that
-    depth. 0 for a direct-stiffness ``solref`` (negative), which this does not model."""
-    tau, zeta = (float(x) for x in solref)
-    if force <= 0.0 or tau <= 0.0 or zeta <= 0.0:
-        return 0.0
-    A = float(m.body_invweight0[tip_body, 0] + m.body_invweight0[object_body, 0])
-    dmax = float(solimp[1])
-    K = 1.0 / (dmax * dmax * tau * tau * zeta * zeta)
-    r = 0.0
-    for _ in range(50):  # the impedance depends on the depth: a fixed point
-        imp = _impedance(solimp, r)
-        r_new = (1.0 - imp) * A * force / (imp * imp * K)
-        if abs(r_new - r) < 1e-10:
-            return r_new
-        r = r_new
-    return r
-
-
-def _geom_settings(m: Any, g: int) -> dict[str, Any]:
-    return {"condim": int(m.geom_condim[g]),
-            "friction": [float(x) for x in m.geom_friction[g]],
-            "solref": [float(x) for x in m.geom_solref[g]],
-            "solimp": [float(x) for x in m.geom_solimp[g]],
-            "margin": float(m.geom_margin[g]), "priority": int(m.geom_priority[g])}
-
-
-def _pair_settings(m: Any, g: int, o: int) -> dict[str, Any]:
-    """MuJoCo's mix of the settings of the contact of geoms ``g`` (the hand's) and ``o``
-    (the object's)."""
-    pg, po = int(m.geom_priority[g]), int(m.geom_priority[o])
-    if pg != po:
-        win = g if pg > po else o
-        s = _geom_settings(m, win)
-        s["margin"] = float(max(m.geom_margin[g], m.geom_margin[o]))
-        return s
-    w = float(m.geom_solmix[g]) / max(float(m.geom_solmix[g] + m.geom_solmix[o]), 1e-15)
-    return {"condim": int(max(m.geom_condim[g], m.geom_condim[o])),
-            "friction": [float(x) for x in np.maximum(m.geom_friction[g],
-                                                      m.geom_friction[o])],
-            "solref": [float(x) for x in w * m.geom_solref[g] + (1 - w) * m.geom_solref[o]],
-            "solimp": [float(x) for x in w * m.geom_solimp[g] + (1 - w) * m.geom_solimp[o]],
-            "margin": float(max(m.geom_margin[g], m.geom_margin[o])),
-            "priority": pg}
-
-
 def _differs(a: Any, b: Any) -> bool:
     return not np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float),
                            rtol=1e-6, atol=1e-9)
@@ -396,7 +138,7 @@ class UserModelSimulation:
         if len(model.tips) != len(plan.fingers):
             raise ValueError(f"{len(model.tips)} tips named for {len(plan.fingers)} fingers")
         self.xml, changes = user_scene(plan, model, self.options)
-        self.model = _compiled(self.xml)
+        self.model = compiled(self.xml)
         light = massless_links(self.model)
         if light:
             mass = self.options.model_link_mass
@@ -406,8 +148,8 @@ class UserModelSimulation:
                     "mesh geoms are removed (their mass came from the meshes' volume: the "
                     "scene never reads mesh files); give each an <inertial> in the file, or "
                     "a mass with the simulation option model_link_mass [kg]")
-            self.xml = _with_inertials(self.xml, self.model, light, mass)
-            self.model = _compiled(self.xml)
+            self.xml = with_inertials(self.xml, self.model, light, mass)
+            self.model = compiled(self.xml)
             changes["links_given_mass"] = {"bodies": light, "mass": mass}
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -448,8 +190,8 @@ class UserModelSimulation:
         m, o = self.model, self.options
         tips = []
         for g, k in sorted(self.contact_of_geom.items()):
-            file_s = _geom_settings(m, g)
-            pair = _pair_settings(m, g, self.object_geom)
+            file_s = geom_settings(m, g)
+            pair = pair_settings(m, g, self.object_geom)
             body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g]))
             tips.append({"geom": mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g)
                          or f"{body}'s geom {g}", "geom_id": g,
@@ -491,7 +233,7 @@ class UserModelSimulation:
             "solver_iterations": int(m.opt.iterations),
             "hand_mass": hand_mass,
             "object": {"mass": float(m.body_mass[self.object_body]),
-                       **_geom_settings(m, self.object_geom),
+                       **geom_settings(m, self.object_geom),
                        "solmix": float(m.geom_solmix[self.object_geom])},
             "fingertip_contacts": tips, "drive": drive,
             "couplings": self._couplings()}
@@ -605,7 +347,7 @@ class UserModelSimulation:
                 continue
             n_out = np.asarray(c.normal[i], dtype=float)
             f_n = max(float(-np.asarray(ref.contact_force[i]) @ n_out), 0.0)
-            pair = _pair_settings(m, geom, self.object_geom)
+            pair = pair_settings(m, geom, self.object_geom)
             out.append(contact_depth(m, body, self.object_body, f_n, pair["solref"],
                                      pair["solimp"]))
         return out

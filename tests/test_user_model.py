@@ -62,7 +62,7 @@ def held_plan(duration: float = 0.1) -> ExecutionPlan:
 def _file_model() -> Any:
     import xml.etree.ElementTree as ET
 
-    from sim.user_model import _strip_files
+    from sim.user_scene import _strip_files
 
     root = ET.fromstring(OWN)
     for parent in list(root.iter()):
@@ -202,9 +202,9 @@ def test_links_whose_mass_came_from_their_meshes_are_refused_naming_them() -> No
 @pytest.mark.parametrize("solimp", ["0.9 0.95 0.001 0.5 2", "0.95 0.99 0.002 0.5 2"])
 def test_the_contact_depth_is_mujocos_own_at_rest(solimp: str) -> None:
     """A 50 g ball resting on a fixed round tip under gravity: MuJoCo's settled depth is
-    :func:`sim.user_model.contact_depth` of its weight, the file's solref and solimp (what
+    :func:`sim.soft_contact.contact_depth` of its weight, the file's solref and solimp (what
     the fingertips' set points are pressed in by for a plan's forces)."""
-    from sim.user_model import contact_depth
+    from sim.soft_contact import contact_depth
 
     xml = f"""<mujoco><option timestep="0.0005" cone="elliptic"/>
       <worldbody>

@@ -207,8 +207,8 @@ class HandCollision:
         their own bodies) and the object. A sphere
         is itself, a capsule or cylinder its axis and radius, a box the capsule along its
         longest axis that bounds it (its whole length, the half-diagonal of its section),
-        an ellipsoid its longest axis with the larger of its other two half-sizes. ``near``: (a point [m],
-        a distance [m]); only geoms within that distance of it."""
+        an ellipsoid its longest axis with the larger of its other two half-sizes.
+        ``near``: (a point [m], a distance [m]); only geoms within that distance of it."""
         import mujoco
 
         mj, d, o_geom, _, tip_geoms, names, _ = self._model(shape, dims)
