@@ -209,8 +209,8 @@ def test_a_gait_does_not_roll_a_grasp_whose_links_are_too_close() -> None:
 def test_a_swings_obstacles_are_the_geoms_mujoco_collides_with_its_tip(hand) -> None:
     """HandCollision.obstacles: for the middle fingertip, the geoms of the other fingers'
     links and the palm that MuJoCo would collide with it (never its own chain's, the
-    other tips' or the excluded), a box as the capsule along its longest axis that bounds
-    it: every corner of the box is inside that capsule."""
+    other tips' or the excluded), a box as capsules along its longest axis that together
+    bound it: its corners and random points of it are each inside one of them."""
     hc = hand.collision([0, 1, 2, 3])
     q = np.concatenate(NOMINAL_Q)
     got = hc.obstacles("sphere", (NOMINAL_RADIUS,), _names(hand), q, 1)
@@ -226,17 +226,21 @@ def test_a_swings_obstacles_are_the_geoms_mujoco_collides_with_its_tip(hand) -> 
     d.qpos[:] = mj.qpos0
     d.qpos[hc.joint_address("sphere", (NOMINAL_RADIUS,), _names(hand))] = q
     mujoco.mj_kinematics(mj, d)
-    boxes = 0
-    for name, (a, b, r) in got:
+    capsules: dict[int, list] = {}
+    for name, seg in got:
         g = int(BODY.search(name).group(2))
-        if int(mj.geom_type[g]) != int(mujoco.mjtGeom.mjGEOM_BOX):
-            continue
-        boxes += 1
+        if int(mj.geom_type[g]) == int(mujoco.mjtGeom.mjGEOM_BOX):
+            capsules.setdefault(g, []).append(seg)
+    assert capsules  # the palm's
+    rng = np.random.default_rng(4)
+    for g, segs in capsules.items():  # the box's corners and points of it: in a capsule
         R, c = d.geom_xmat[g].reshape(3, 3), d.geom_xpos[g]
-        for signs in product((-1.0, 1.0), repeat=3):
-            corner = c + R @ (np.array(signs) * mj.geom_size[g])
-            assert float(point_segment_distance(corner, a, b)) <= r + 1e-12
-    assert boxes  # the palm's
+        points = [np.array(signs) for signs in product((-1.0, 1.0), repeat=3)]
+        points += list(rng.uniform(-1.0, 1.0, (50, 3)))
+        for u in points:
+            x = c + R @ (u * mj.geom_size[g])
+            assert min(float(point_segment_distance(x, a, b)) - r for a, b, r in segs) \
+                <= 1e-12
     near = hc.obstacles("sphere", (NOMINAL_RADIUS,), _names(hand), q, 1,
                         near=(np.asarray(NOMINAL_OBJECT_POSITION), NOMINAL_RADIUS + 0.005))
     assert len(near) < len(got)

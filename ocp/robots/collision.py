@@ -21,6 +21,7 @@ Frames: the hand's world frame sits at ``mount`` (R, p) in the palm frame, as fo
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -82,6 +83,33 @@ def collision_text(text: str) -> str:
             geom.set("contype", "0")
             geom.set("conaffinity", "0")
     return mujoco_text(ET.tostring(root, encoding="unicode"))
+
+
+#: At most this many capsules cover one box (along its longest axis, side by side across
+#: the longer side of its section).
+BOX_CAPSULES = 3
+
+
+def _box_capsules(c: FloatArray, R: FloatArray, size: FloatArray
+                  ) -> list[tuple[FloatArray, float, float, FloatArray]]:
+    """Capsules (centre, half-length, radius, axis) whose union bounds a box of half-sizes
+    ``size`` at ``c`` with axes ``R``'s columns: along its longest axis, ``n`` of them side
+    by side across the longer side of its section (each bounding its share of the
+    section), ``n`` as few as keep each radius within 1.25 times the shorter side's half."""
+    i = int(np.argmax(size))
+    j, k = (x for x in range(3) if x != i)
+    if size[j] > size[k]:
+        j, k = k, j  # j the shorter side of the section, k the longer
+    hj, hk = float(size[j]), float(size[k])
+    n = 1
+    while n < BOX_CAPSULES and math.hypot(hj, hk / n) > 1.25 * hj:
+        n += 1
+    r = math.hypot(hj, hk / n)
+    out = []
+    for m in range(n):
+        offset = (-hk + hk / n * (2 * m + 1)) * R[:, k]
+        out.append((c + offset, float(size[i]), r, R[:, i]))
+    return out
 
 
 def _collides(mj: Any, g1: int, g2: int) -> bool:
@@ -205,9 +233,10 @@ class HandCollision:
         (name, (a, b, r)): every geom MuJoCo would collide with that tip's, but its own
         finger's (they move with it), the other tips' (a swing keeps clear of them by
         their own bodies) and the object. A sphere
-        is itself, a capsule or cylinder its axis and radius, a box the capsule along its
-        longest axis that bounds it (its whole length, the half-diagonal of its section),
-        an ellipsoid its longest axis with the larger of its other two half-sizes.
+        is itself, a capsule or cylinder its axis and radius, a box up to
+        :data:`BOX_CAPSULES` capsules along its longest axis that together bound it
+        (:func:`_box_capsules`), an ellipsoid its longest axis with the larger of its
+        other two half-sizes.
         ``near``: (a point [m], a distance [m]); only geoms within that distance of it."""
         import mujoco
 
@@ -231,27 +260,25 @@ class HandCollision:
             R = d.geom_xmat[g].reshape(3, 3)
             c = d.geom_xpos[g]
             T = mujoco.mjtGeom
+            parts: list[tuple[FloatArray, float, float, FloatArray]] = []  # centre, half, r, axis
             if kind == int(T.mjGEOM_SPHERE):
-                half, r, axis = 0.0, float(size[0]), R[:, 2]
+                parts.append((c, 0.0, float(size[0]), R[:, 2]))
             elif kind in (int(T.mjGEOM_CAPSULE), int(T.mjGEOM_CYLINDER)):
-                half, r, axis = float(size[1]), float(size[0]), R[:, 2]
-            elif kind == int(T.mjGEOM_BOX):  # the capsule that bounds it
-                i = int(np.argmax(size))
-                r = float(np.linalg.norm(np.delete(size, i)))
-                half, axis = float(size[i]), R[:, i]
+                parts.append((c, float(size[1]), float(size[0]), R[:, 2]))
+            elif kind == int(T.mjGEOM_BOX):
+                parts += _box_capsules(c, R, size)
             elif kind == int(T.mjGEOM_ELLIPSOID):
                 i = int(np.argmax(size))
                 r = float(np.delete(size, i).max())
-                half, axis = max(float(size[i]) - r, 0.0), R[:, i]
-            else:
-                continue
-            a, b = Rm @ (c - half * axis) + pm, Rm @ (c + half * axis) + pm
-            if near is not None:
-                from ocp.geometry.bodies import point_segment_distance
+                parts.append((c, max(float(size[i]) - r, 0.0), r, R[:, i]))
+            for centre, half, r, axis in parts:
+                a, b = Rm @ (centre - half * axis) + pm, Rm @ (centre + half * axis) + pm
+                if near is not None:
+                    from ocp.geometry.bodies import point_segment_distance
 
-                if float(point_segment_distance(near[0], a, b)) - r > near[1]:
-                    continue
-            out.append((names[g], (a, b, r)))
+                    if float(point_segment_distance(near[0], a, b)) - r > near[1]:
+                        continue
+                out.append((names[g], (a, b, r)))
         return out
 
     def least(self, shape: str, dims: Sequence[float], joint_names: Sequence[str],
