@@ -244,3 +244,21 @@ def test_a_swings_obstacles_are_the_geoms_mujoco_collides_with_its_tip(hand) -> 
     near = hc.obstacles("sphere", (NOMINAL_RADIUS,), _names(hand), q, 1,
                         near=(np.asarray(NOMINAL_OBJECT_POSITION), NOMINAL_RADIUS + 0.005))
     assert len(near) < len(got)
+
+
+def test_a_gait_whose_rolls_are_cut_too_short_is_refused_at_once_saying_why() -> None:
+    """A gait's fingertips return to its grasp after each roll, so a roll cut to 1.9 deg
+    by the hand's links stays so: 40 rolls cannot make 90 deg, said before any NLP."""
+    from ocp.gait.planner import RollAhead, _too_few
+
+    ahead = RollAhead(math.radians(10.0), "", "", math.radians(1.9), 1e-3,
+                      "body 'mf_distal' (geom 19) 0.912 mm from body 'rf_distal' (geom 29)")
+    why = _too_few(math.radians(1.9), 40, math.pi / 2, ahead)
+    assert why == ("each roll from this grasp is cut to 1.9 deg (the hand's links come "
+                   "within 1.00 mm (body 'mf_distal' (geom 19) 0.912 mm from body "
+                   "'rf_distal' (geom 29))): 40 more rolls (max_rolls) cannot turn the "
+                   "remaining 90.0 deg")
+    stopped = RollAhead(math.radians(2.0), "th", "joint limit (thj0)", math.radians(10.0),
+                        5e-4)
+    assert "finger 'th' stops (joint limit (thj0))" in _too_few(math.radians(1.8), 40,
+                                                                math.pi / 2, stopped)

@@ -356,6 +356,21 @@ def _stopped(who: str, why: str, at: float, angle: float, ax: FloatArray,
                    if held else " even from its re-placed contact")
 
 
+def _too_few(step: float, left: int, rest: float, ahead: RollAhead) -> str:
+    """Why a gait stops at once: its rolls, cut to ``step`` [rad] (a gait's fingertips
+    return to the grasp after each), would need more than the ``left`` rolls allowed for
+    the ``rest`` [rad] of the turn."""
+    if ahead.apart <= step + 1e-12 and ahead.apart < ahead.reach:
+        why = (f"the hand's links come within {ahead.need * 1e3:.2f} mm ({ahead.close})"
+               if ahead.close else
+               f"two fingertips come within {ahead.need * 1e3:.2f} mm of each other")
+    else:
+        why = f"finger {ahead.who!r} stops ({ahead.why})" if ahead.why else "max_rolls"
+    return (f"each roll from this grasp is cut to {math.degrees(step):.2g} deg ({why}): "
+            f"{left} more rolls (max_rolls) cannot turn the remaining "
+            f"{math.degrees(rest):.1f} deg")
+
+
 def _too_close(need: float, at: float, angle: float, ax: FloatArray, close: str = ""
                ) -> str:
     """Why a gait stops short: two fingertips' bodies (or the hand's links: ``close``)
@@ -524,6 +539,11 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 ahead.need, done + max(ahead.apart, 0.0), angle, ax, ahead.close)
             break
         step = min(step, ahead.apart)
+        left = max_rolls - len(plan.rolls)
+        if step * left < angle - done - 1e-9:  # each roll returns to this grasp: too short
+            plan.status, plan.message = "infeasible", _too_few(step, left, angle - done,
+                                                               ahead)
+            break
         # where the plan stands before this roll, to go back to if what follows fails
         before = (len(plan.rolls), len(plan.phases), len(plan.steps), len(checks), t, done,
                   pose, q_now, set(never_lifted))
