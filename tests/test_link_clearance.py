@@ -262,3 +262,8 @@ def test_a_gait_whose_rolls_are_cut_too_short_is_refused_at_once_saying_why() ->
                         5e-4)
     assert "finger 'th' stops (joint limit (thj0))" in _too_few(math.radians(1.8), 40,
                                                                 math.pi / 2, stopped)
+    halved = _too_few(math.radians(1.8), 40, math.pi / 2, stopped,
+                      "halved 2 time(s) after gait step 1: the swing of finger 'mf' was not "
+                      "found")
+    assert "cut to 1.8 deg (halved 2 time(s) after gait step 1: the swing of finger 'mf'" \
+        in halved

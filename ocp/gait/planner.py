@@ -356,16 +356,20 @@ def _stopped(who: str, why: str, at: float, angle: float, ax: FloatArray,
                    if held else " even from its re-placed contact")
 
 
-def _too_few(step: float, left: int, rest: float, ahead: RollAhead) -> str:
+def _too_few(step: float, left: int, rest: float, ahead: RollAhead, halved: str = ""
+             ) -> str:
     """Why a gait stops at once: its rolls, cut to ``step`` [rad] (a gait's fingertips
     return to the grasp after each), would need more than the ``left`` rolls allowed for
-    the ``rest`` [rad] of the turn."""
-    if ahead.apart <= step + 1e-12 and ahead.apart < ahead.reach:
+    the ``rest`` [rad] of the turn; ``halved``: why the rolls were halved, when that is
+    what cut them."""
+    if halved:
+        why = halved
+    elif ahead.apart <= step + 1e-12 and ahead.apart < ahead.reach:
         why = (f"the hand's links come within {ahead.need * 1e3:.2f} mm ({ahead.close})"
                if ahead.close else
                f"two fingertips come within {ahead.need * 1e3:.2f} mm of each other")
     else:
-        why = f"finger {ahead.who!r} stops ({ahead.why})" if ahead.why else "max_rolls"
+        why = f"finger {ahead.who!r} stops ({ahead.why})" if ahead.why else "roll_step"
     return (f"each roll from this grasp is cut to {math.degrees(step):.2g} deg ({why}): "
             f"{left} more rolls (max_rolls) cannot turn the remaining "
             f"{math.degrees(rest):.1f} deg")
@@ -523,6 +527,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     checks: list[Check] = []
     t, done = 0.0, 0.0
     cap, retries = roll_step, 0  # the roll's length, halved where a re-placement failed
+    halved = ""  # why it was last halved
     while done < angle - 1e-12 and len(plan.rolls) < max_rolls:
         step = min(cap, angle - done)
         ahead = _roll_ahead(template, q_now, np.asarray(pose.position, float), rho, ax, step)
@@ -541,8 +546,10 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         step = min(step, ahead.apart)
         left = max_rolls - len(plan.rolls)
         if step * left < angle - done - 1e-9:  # each roll returns to this grasp: too short
-            plan.status, plan.message = "infeasible", _too_few(step, left, angle - done,
-                                                               ahead)
+            plan.status, plan.message = "infeasible", _too_few(
+                step, left, angle - done, ahead,
+                f"halved {retries} time(s) after {halved}" if step >= cap - 1e-12 and retries
+                else "")
             break
         # where the plan stands before this roll, to go back to if what follows fails
         before = (len(plan.rolls), len(plan.phases), len(plan.steps), len(checks), t, done,
@@ -598,6 +605,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 # a fingertip found no swing back after this roll: roll half as far (a
                 # shorter roll leaves the tips nearer where they land) from where it began,
                 # and keep the shorter rolls (the grasp recurs)
+                halved = plan.message  # why: the swing that was not found
                 t, done, pose, q_now = _undo(plan, checks, never_lifted, before)
                 cap, retries = step / 2, retries + 1
                 continue
