@@ -22,6 +22,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from ocp.robots.mjcf_frames import strip_files
+
 from .options import SimOptions
 from .scene import quat_of_matrix
 from .spec import ExecutionPlan, FloatArray
@@ -118,43 +120,8 @@ def user_scene(plan: ExecutionPlan, model: UserModel, options: SimOptions
                "bodies_without_inertial_that_lost_mesh_geoms": sorted(massless),
                "keyframes_dropped": len(keyframes),
                "file_timestep": file_step, "file_gravity": list(file_gravity)}
-    _strip_files(root)
+    strip_files(root, inert=True)  # the default classes' mesh geoms: no mass, no contacts
     return ET.tostring(root, encoding="unicode"), changes
-
-
-def _strip_files(root: ET.Element) -> None:
-    """What names files the scene does not have: mesh, height-field and skin assets, file
-    textures (and materials' references to them), the compiler's directories; a body left
-    without mass gets MuJoCo's least (``boundmass``, ``boundinertia``)."""
-    for asset in root.iter("asset"):
-        for el in list(asset):
-            if el.tag in ("mesh", "hfield", "skin") or (el.tag == "texture" and
-                                                        "file" in el.attrib):
-                asset.remove(el)
-    for parent in list(root.iter()):
-        for el in list(parent):
-            if el.tag == "skin":
-                parent.remove(el)
-    for mat in root.iter("material"):
-        mat.attrib.pop("texture", None)
-    for geom in root.iter("geom"):  # default classes' mesh geoms: a geom of such a
-        # class with no mesh of its own is a small sphere without mass or contacts
-        meshy = "mesh" in geom.attrib or geom.get("type") in ("mesh", "hfield")
-        geom.attrib.pop("mesh", None)
-        if meshy:
-            geom.set("type", "sphere")
-            geom.set("size", "0.005")
-            geom.set("mass", "0")
-            geom.set("contype", "0")
-            geom.set("conaffinity", "0")
-    compiler = root.find("compiler")
-    if compiler is None:
-        compiler = ET.Element("compiler")
-        root.insert(0, compiler)
-    compiler.set("boundmass", "1e-6")
-    compiler.set("boundinertia", "1e-12")
-    for k in ("meshdir", "texturedir", "assetdir"):
-        compiler.attrib.pop(k, None)
 
 
 #: A moving body lighter than this [kg] has no mass of its own (MuJoCo's ``boundmass``

@@ -62,14 +62,14 @@ def held_plan(duration: float = 0.1) -> ExecutionPlan:
 def _file_model() -> Any:
     import xml.etree.ElementTree as ET
 
-    from sim.user_scene import _strip_files
+    from ocp.robots.mjcf_frames import strip_files
 
     root = ET.fromstring(OWN)
     for parent in list(root.iter()):
         for el in list(parent):
             if el.tag == "geom" and "mesh" in el.attrib:
                 parent.remove(el)
-    _strip_files(root)
+    strip_files(root, inert=True)
     return mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
 
 

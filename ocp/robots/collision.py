@@ -41,7 +41,6 @@ LINK_CLEARANCE = 5e-4
 WINDOW = 5e-3
 #: The object's body and geom in the collision model.
 OBJECT = "dexroll_object"
-_MESHY = ("mesh", "hfield", "sdf")
 
 
 @dataclass(frozen=True)
@@ -72,17 +71,11 @@ class Clearance:
 
 def collision_text(text: str) -> str:
     """The MJCF ``text`` MuJoCo compiles without the files it names, for collision: mesh
-    and height-field geoms (bodies' and default classes') made inert (``contype`` and
-    ``conaffinity`` 0: their files are never read), then
-    :func:`ocp.robots.mjcf_frames.mujoco_text`."""
+    and height-field geoms (bodies' and default classes') made inert (no contacts: their
+    files are never read): :func:`ocp.robots.mjcf_frames.mujoco_text`."""
     from ocp.robots.mjcf_frames import mujoco_text
 
-    root = ET.fromstring(text)
-    for geom in root.iter("geom"):
-        if geom.get("type") in _MESHY or "mesh" in geom.attrib or "hfield" in geom.attrib:
-            geom.set("contype", "0")
-            geom.set("conaffinity", "0")
-    return mujoco_text(ET.tostring(root, encoding="unicode"))
+    return mujoco_text(text, inert=True)
 
 
 #: At most this many capsules cover one box (along its longest axis, side by side across

@@ -305,13 +305,21 @@ def build_mjcf(text: str) -> tuple[Any, str]:
 
 # -- MuJoCo's reading ----------------------------------------------------------------------
 
-def mujoco_text(text: str) -> str:
-    """The MJCF ``text`` MuJoCo can compile without the files it names: ``<mesh>``,
-    ``<hfield>``, ``<skin>`` and file textures removed (and every material's texture),
-    every mesh or height-field geom (in the bodies and the default classes) a small
-    sphere, every body given a least mass and inertia (``boundmass``, ``boundinertia``:
-    a body with a joint and no geom compiles). Frames, joints and limits unchanged."""
+def mujoco_text(text: str, inert: bool = False) -> str:
+    """The MJCF ``text`` MuJoCo can compile without the files it names
+    (:func:`strip_files`; ``inert``: its mesh geoms without mass or contacts)."""
     root = ET.fromstring(text)
+    strip_files(root, inert)
+    return ET.tostring(root, encoding="unicode")
+
+
+def strip_files(root: ET.Element, inert: bool = False) -> None:
+    """What names files an MJCF tree (``root``, changed in place) cannot have here:
+    ``<mesh>``, ``<hfield>``, ``<skin>`` and file textures removed (and every material's
+    texture), every mesh or height-field geom (in the bodies and the default classes) a
+    small sphere (``inert``: also without mass or contacts), every body given a least mass
+    and inertia (``boundmass``, ``boundinertia``: a body with a joint and no geom
+    compiles), the compiler's directories dropped. Frames, joints and limits unchanged."""
     for asset in root.iter("asset"):
         for el in list(asset):
             if el.tag in ("mesh", "hfield", "skin") or (el.tag == "texture" and
@@ -333,6 +341,10 @@ def mujoco_text(text: str) -> str:
             geom.set("type", "sphere")
             geom.set("size", "0.005")
             geom.attrib.pop("fromto", None)
+            if inert:
+                geom.set("mass", "0")
+                geom.set("contype", "0")
+                geom.set("conaffinity", "0")
     compiler = root.find("compiler")
     if compiler is None:
         compiler = ET.Element("compiler")
@@ -341,7 +353,6 @@ def mujoco_text(text: str) -> str:
     compiler.set("boundinertia", "1e-12")
     for k in ("meshdir", "texturedir", "assetdir"):
         compiler.attrib.pop(k, None)
-    return ET.tostring(root, encoding="unicode")
 
 
 def _angle(Ra: FloatArray, Rb: FloatArray) -> float:
