@@ -102,6 +102,15 @@ def test_the_client_plans_the_builtin_hand_over_http(live_server: Server) -> Non
     assert result.certificate is not None and result.certificate.passed
     assert result.joint_trajectory is not None
     assert len(result.joint_trajectory.joint_names) == 16
+    # the built-in hand's joints are motors limited by its URDF's effort (1 N m): the
+    # commands over the wire, within it
+    act = result.actuator_trajectory
+    assert act is not None and [a.joint for a in act.actuators] == \
+        result.joint_trajectory.joint_names
+    assert {a.kind for a in act.actuators} == {"motor"}
+    assert all(a.torque_range == [-1.0, 1.0] for a in act.actuators)
+    assert 0.0 <= act.max_load <= 1.0 and len(act.t) == len(result.joint_trajectory.points)
+    assert result.certificate.values["max_actuator_load"] == act.max_load
 
 
 def test_the_examples_are_valid_requests() -> None:

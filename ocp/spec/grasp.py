@@ -278,7 +278,7 @@ class ManipulationProblem:
         (from rest: a moving start's input is the grasp's, its phases the fingertips')."""
         return replace(self, fingers=(), motion=None, forces=None, tracking=Tracking(),
                        object_effort_weight=1.0, tolerances=PALM_TOLERANCES,
-                       initial_input=None, phases=None)
+                       initial_input=None, phases=None, collision=None, actuation=None)
 
     def errors(self) -> list[tuple[str, str]]:
         """Every reason the problem is invalid, as (field, reason)."""
