@@ -535,3 +535,26 @@ def test_a_swing_is_slowed_to_what_the_joints_damping_lets_the_actuators_drive()
     assert slowed.ok, slowed.message
     assert float(np.abs(slowed.swing.V).max()) <= 0.5 * fast
     assert slowed.swing.spec.duration > 1.9 * free.swing.spec.duration
+
+
+def test_a_hold_no_forces_of_which_fit_the_actuators_is_named() -> None:
+    """hold_torque_refusal: with the actuators capped below what any narrowing of the
+    cones asks, the reason names the fingers, the joint, the torque and the range; with
+    room, there is none."""
+    from ocp.gait.step import TorqueLimits, grasp_hold, hold_torque_refusal
+
+    qs = tuple(np.asarray(q, dtype=float) for q in NOMINAL_Q)
+    which = [0, 1, 2, 3]
+    hold = grasp_hold(FINGERS, qs, which, CENTRE, RHO, np.eye(3))
+    g = np.array([0.0, 0.0, -9.81])
+    names = ("index", "middle", "ring", "thumb")
+
+    def limits(cap: float) -> TorqueLimits:
+        return TorqueLimits(tuple(np.full(4, -cap) for _ in which),
+                            tuple(np.full(4, cap) for _ in which), g)
+
+    assert hold_torque_refusal(FINGERS, qs, which, hold, LOAD, RHO, limits(10.0), names) == ""
+    why = hold_torque_refusal(FINGERS, qs, which, hold, LOAD, RHO, limits(1e-3), names)
+    assert why.startswith("no forces that hold the ball keep index, middle, ring, thumb "
+                          "within their actuators: joint "), why
+    assert "its actuator gives -0.001..0.001 N m" in why

@@ -30,6 +30,8 @@ from ocp.gait.step import (
     GaitStep,
     TorqueLimits,
     contact_of,
+    grasp_hold,
+    hold_torque_refusal,
     liftable,
     replace_finger,
 )
@@ -423,16 +425,34 @@ def swing_obstacles(template: ManipulationProblem) -> Any:
     return obstacles
 
 
-def torque_limits(template: ManipulationProblem) -> TorqueLimits | None:
+def _holds_beyond_actuators(template: ManipulationProblem, fingers: tuple[Any, ...],
+                            qs: tuple[FloatArray, ...], centre: FloatArray, rho: float,
+                            R0: FloatArray, load: FloatArray, names: tuple[str, ...]) -> str:
+    """Why the grasp held by every fingertip needs more torque than the actuators give at
+    their full range, naming the joint, the torque and the limit; "" when it fits. (Each
+    re-placement starts and ends with that hold; a hold with one fingertip lifted that
+    does not fit leaves that fingertip rolling instead: :func:`~ocp.gait.step.
+    replace_finger`.)"""
+    limits = torque_limits(template, share=1.0)
+    if limits is None:
+        return ""
+    allf = list(range(len(fingers)))
+    hold = grasp_hold(fingers, qs, allf, centre, rho, R0)
+    why = hold_torque_refusal(fingers, qs, allf, hold, load, rho, limits, names)
+    return f"the grasp's hold: {why}" if why else ""
+
+
+def torque_limits(template: ManipulationProblem, share: float = HOLD_TORQUE_SHARE
+                  ) -> TorqueLimits | None:
     """The fingers' actuator torques a gait's holds keep to (``template.actuation``, times
-    :data:`~ocp.gait.step.HOLD_TORQUE_SHARE`); None without actuators, limits or forces."""
+    ``share``: :data:`~ocp.gait.step.HOLD_TORQUE_SHARE`); None without actuators, limits
+    or forces."""
     from ocp.robots.actuation import torque_bounds
 
     act = template.actuation
     if act is None or template.forces is None:
         return None
-    bounds = [torque_bounds(act, f.finger.joint_names, HOLD_TORQUE_SHARE)
-              for f in template.fingers]
+    bounds = [torque_bounds(act, f.finger.joint_names, share) for f in template.fingers]
     if all(np.all(np.isinf(lo)) and np.all(np.isinf(hi)) for lo, hi in bounds):
         return None
     rates = []
@@ -441,7 +461,7 @@ def torque_limits(template: ManipulationProblem) -> TorqueLimits | None:
         with np.errstate(divide="ignore", invalid="ignore"):
             rates.append(np.where(c > 0, np.minimum(-lo, hi) / c, np.inf))
     return TorqueLimits(tuple(lo for lo, _ in bounds), tuple(hi for _, hi in bounds),
-                        np.asarray(template.forces.gravity, dtype=float), tuple(rates))
+                        np.asarray(template.forces.gravity, dtype=float), tuple(rates), share)
 
 
 def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
@@ -524,6 +544,10 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     # the fingers the others cannot hold the ball without (they roll throughout)
     never_lifted = {names[k] for k, ok in enumerate(liftable(fingers, q_now, centre, rho, R0,
                                                              load)) if not ok}
+    refusal = _holds_beyond_actuators(template, fingers, q_now, centre, rho, R0, load, names)
+    if refusal:
+        return GaitPlan("infeasible", refusal, never_lifted=tuple(sorted(never_lifted)),
+                        nq=plan.nq, wall_time=time.perf_counter() - t_wall)
     checks: list[Check] = []
     t, done = 0.0, 0.0
     cap, retries = roll_step, 0  # the roll's length, halved where a re-placement failed

@@ -150,10 +150,17 @@ class TorqueLimits:
     #: per finger, the joint rates [rad/s] whose damping alone its actuators can overcome
     #: within their share (infinite without damping or limits)
     rate: tuple[FloatArray, ...] = ()
+    #: the share of the actuators' range ``lower`` and ``upper`` are
+    share: float = 1.0
 
     def key(self) -> bytes:
         return b"".join(np.ascontiguousarray(a, dtype=float).tobytes()
-                        for a in (*self.lower, *self.upper, self.gravity))
+                        for a in (*self.lower, *self.upper, self.gravity, [self.share]))
+
+    def full(self) -> TorqueLimits:
+        """The same limits at the actuators' whole range."""
+        return replace(self, lower=tuple(a / self.share for a in self.lower),
+                       upper=tuple(a / self.share for a in self.upper), share=1.0)
 
 
 def hold_fits(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
@@ -177,6 +184,50 @@ def hold_fits(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[
     return fits
 
 
+def hold_torque_refusal(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...],
+                        which: list[int], hold: Hold, load: FloatArray, L: float,
+                        limits: TorqueLimits, names: tuple[str, ...]) -> str:
+    """Why no forces of the hold keep the fingers ``which`` within their actuators'
+    torques ``limits`` (at their full range): the joint, the torque its least-force hold
+    asks and the limit; "" when some narrowing of the cones (:data:`~ocp.gait.hold.
+    HOLD_MARGINS`) fits."""
+    from ocp.gait.hold import HOLD_MARGINS
+    from ocp.solution import joint_torques
+
+    fits = hold_fits(fingers, qs, which, hold, limits)
+    least: tuple[float, FloatArray | None] = (np.inf, None)
+    mu_m = float(load[6])
+    for extra in HOLD_MARGINS:
+        narrowed = np.array(load, dtype=float)
+        narrowed[6] = np.tan(max(np.arctan(mu_m) - extra, 1e-3))
+        narrowed[7] = load[7] * narrowed[6] / mu_m
+        F = hold_forces(hold, narrowed, L)
+        if F is None:
+            continue
+        if fits(F):
+            return ""
+        top = float((-np.einsum("ij,ij->i", F, hold.normals)).max())
+        if top < least[0]:
+            least = (top, F)
+    F = least[1]
+    if F is None:
+        return ""  # the hold itself fails: its own reason is given elsewhere
+    worst = (0.0, "", 0.0, 0.0, 0.0)
+    for row, i in enumerate(which):
+        tau = joint_torques(fingers[i], np.asarray(qs[i], dtype=float)[None],
+                            hold.points[row][None], hold.normals[row][None], F[row][None],
+                            np.zeros(1), limits.gravity)[0]
+        for j, v in enumerate(tau):
+            lo, hi = float(limits.lower[i][j]), float(limits.upper[i][j])
+            over = v / hi if v > 0 and hi > 0 else v / lo if v < 0 and lo < 0 else 0.0
+            if over > worst[0]:
+                worst = (over, fingers[i].joint_names[j], float(v), lo, hi)
+    _, joint, v, lo, hi = worst
+    return (f"no forces that hold the ball keep {', '.join(names[i] for i in which)} within "
+            f"their actuators: joint {joint} needs {v:.3g} N m, its actuator gives "
+            f"{lo:.3g}..{hi:.3g} N m")
+
+
 def _deep(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
           hold: Hold, load: FloatArray, L: float, limits: TorqueLimits | None
           ) -> FloatArray | None:
@@ -185,6 +236,12 @@ def _deep(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int]
     key = b"" if limits is None else limits.key() + b"".join(
         np.ascontiguousarray(qs[i], dtype=float).tobytes() for i in which)
     F, _ = deep_hold_forces(hold, load, L, hold_fits(fingers, qs, which, hold, limits), key)
+    if F is not None and limits is not None and limits.share < 1.0:
+        full = limits.full()  # none fits the share: the whole range, if any does
+        if not hold_fits(fingers, qs, which, hold, full)(F):
+            G = _deep(fingers, qs, which, hold, load, L, full)
+            if G is not None and hold_fits(fingers, qs, which, hold, full)(G):
+                F = G
     return F
 
 
@@ -225,6 +282,11 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                f"the other fingertips cannot hold the object with {name} lifted (no forces "
                "inside their friction cones balance its weight)")
         return GaitStep(k, "infeasible", why, None)
+    if limits is not None:  # the holds within the actuators' whole range, or no step
+        for which, hold, lifted in ((allf, before, ""), (rest, during, f" with {name} lifted")):
+            why = hold_torque_refusal(fingers, qs, which, hold, load, L, limits.full(), names)
+            if why:
+                return GaitStep(k, "infeasible", f"the hold{lifted}: {why}", None)
     others = []
     for i in rest:
         R, p = fingers[i].fingertip_pose_pin(qs[i])
