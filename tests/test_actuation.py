@@ -152,3 +152,58 @@ def test_the_file_is_compiled_as_mujoco_reads_it() -> None:
     j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "ffj1")
     assert acts[0].ctrl_range == pytest.approx(tuple(m.jnt_range[j]))
     assert acts[0].name == "ffa1" and acts[0].gain == 10.0 and notes == ()
+
+
+def test_the_force_stages_torque_rows_are_the_plans_joint_torques_and_bound_them(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The force stage's torque rows (ocp.transcription.force_stage): at a planned roll's
+    collocation points they are its fingers' joint torques (J^T of the planned forces and
+    torsions, exactly); bounded at those torques the stage finds forces within them; bounded
+    below what any forces holding the ball ask, it finds none (and the planner falls back
+    to the coupled NLP, whose plan the actuator check then refuses)."""
+    import dataclasses
+    import json
+    from pathlib import Path
+
+    import ocp.transcription.force_stage as fs
+    from ocp.solve.planner import ManipulationPlanner
+    from planner_service.planners import REQUEST
+    from planner_service.planners.cache import FingerCache
+    from planner_service.planners.manipulation import manipulation_problem
+
+    seen: dict = {}
+    solve = fs.ForceStage.solve
+
+    def watched(self, Xall, prm, load, L, guess, torques=None):  # type: ignore[no-untyped-def]
+        seen.update(stage=self, args=(Xall, prm, load, L, guess))
+        return solve(self, Xall, prm, load, L, guess, torques)
+
+    monkeypatch.setattr(fs.ForceStage, "solve", watched)
+    body = json.loads((Path(__file__).resolve().parents[1] / "examples" /
+                       "allegro_turn.json").read_text())
+    body["forces"] = {"mass": 0.05, "min_normal_force": 2.0}
+    problem = dataclasses.replace(manipulation_problem(REQUEST.validate_python(body),
+                                                       FingerCache()), actuation=None)
+    free = ManipulationPlanner().solve(problem)
+    assert free.status.value == "solved", free.message
+    stage, (Xall, prm, load, L, guess) = seen["stage"], seen["args"]
+    F, _ = solve(stage, Xall, prm, load, L, guess)
+    assert F is not None
+    tq = stage.torque_params(Xall, prm, problem.forces.gravity)
+    k, nc = len(Xall), stage.m.n_contacts
+    _, P, N, R, _ = stage.m.mapped("path", k)(Xall.T, prm)
+    n_tau = sum(int(t.finger.nq) for _, t in stage.tips)
+    rows = np.array([np.asarray(stage._point(
+        F[:, i], np.asarray(P).reshape(3 * nc, k, order="F")[:, i],
+        np.asarray(N).reshape(3 * nc, k, order="F")[:, i],
+        np.asarray(R).reshape(9, k, order="F")[:, i], load, L, tq[:, i])[0]).ravel()[-n_tau:]
+        for i in range(k)])
+    plan = np.hstack([f.joint_torques for f in free.fingers])  # nodes and midpoints in turn
+    n = (k + 1) // 2
+    assert np.abs(rows[:n] - plan[0::2]).max() < 1e-12
+    assert np.abs(rows[n:] - plan[1::2]).max() < 1e-12
+    top = np.abs(rows).max(axis=0) + 1e-9
+    G, _ = solve(stage, Xall, prm, load, L, guess, (tq, -top, top))
+    assert G is not None
+    G, _ = solve(stage, Xall, prm, load, L, guess, (tq, -0.1 * top, 0.1 * top))
+    assert G is None

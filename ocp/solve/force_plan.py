@@ -52,8 +52,14 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
     prm = m.params(np.asarray(pf.object.dimensions, dtype=float), contact_charts(pf))
     Xall = np.vstack([col.X, col.Xm])
     load = load_parameters(pf)
-    F, iterations = stage.solve(Xall, prm, load, pf.object.length_scale,
-                                planned_force_guess(m, Xall, prm, load))
+    guess = planned_force_guess(m, Xall, prm, load)
+    torques = _torque_rows(stage, pf, Xall, prm)
+    F, iterations = stage.solve(Xall, prm, load, pf.object.length_scale, guess, torques)
+    if F is None and torques is not None:
+        # no forces within the actuators: the plan's forces without them (the actuator
+        # check then refuses the plan, naming the joint), not the coupled NLP's
+        F, more = stage.solve(Xall, prm, load, pf.object.length_scale, guess)
+        iterations += more
     t_stage = time.perf_counter() - t0
     if F is None:
         return None
@@ -73,6 +79,29 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
                     certificate_time=kin.stats.certificate_time + t_cert)
     return replace(sol, stats=stats, nlp_point=kin.nlp_point,
                    object_chart_rotation=kin.object_chart_rotation)
+
+
+#: The share of each actuator's torque range a roll's forces may ask of its joint (the rest
+#: for the motion's own terms: damping, inertia).
+ROLL_TORQUE_SHARE = 0.9
+
+
+def _torque_rows(stage: ForceStage, problem: ManipulationProblem, Xall: np.ndarray,
+                 prm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The force stage's torque rows for the problem's actuators (``problem.actuation``,
+    :data:`ROLL_TORQUE_SHARE` of their ranges): their parameters at ``Xall`` and bounds;
+    None without actuators or limits."""
+    if problem.actuation is None or problem.forces is None or not stage.tips:
+        return None
+    from ocp.robots.actuation import torque_bounds
+
+    bounds = [torque_bounds(problem.actuation, t.finger.joint_names, ROLL_TORQUE_SHARE)
+              for _, t in stage.tips]
+    lo = np.concatenate([b[0] for b in bounds])
+    hi = np.concatenate([b[1] for b in bounds])
+    if not (np.isfinite(lo).any() or np.isfinite(hi).any()):
+        return None
+    return stage.torque_params(Xall, prm, problem.forces.gravity), lo, hi
 
 
 def with_earlier(sol: ManipulationSolution, earlier: ManipulationSolution

@@ -57,8 +57,26 @@ class ForceStage:
         R = ca.SX.sym("R", 3, 3)
         load, L = ca.SX.sym("load", LOAD_PARAMS), ca.SX.sym("L")
         rows, fn = load_rows(P, N, R, fl, load, L)
-        self._point = ca.Function("force_point", [fl, ca.vec(P), ca.vec(N), ca.vec(R), load, L],
-                                  [ca.vertcat(*[e for e, _, _ in rows]), load_cost(fl, fn)])
+        # each fingertip's joint torques, affine in its force and torsion at a given state:
+        # tau = g + A f + b tau_n (parameters per point: A (nq x 3, the object frame's
+        # force), b, g), bounded by the actuators (none: infinite bounds)
+        #: (the contact's index among the point contacts, the fingertip) of every fingertip
+        self.tips = [(m.point_contacts.index(t), t) for t in m.fingertips]
+        self.n_torque = sum(5 * int(t.finger.nq) for _, t in self.tips)
+        tq = ca.SX.sym("tq", self.n_torque)
+        Fl = ca.reshape(fl, LOAD_VARS, nc)
+        F0, mu_t = load[5], load[4]
+        taus, o = [], 0
+        for j, t in self.tips:
+            nq = int(t.finger.nq)
+            A = ca.reshape(tq[o:o + 3 * nq], nq, 3)
+            b, g = tq[o + 3 * nq:o + 4 * nq], tq[o + 4 * nq:o + 5 * nq]
+            o += 5 * nq
+            taus.append(g + F0 * (A @ Fl[0:3, j]) + b * (mu_t * F0 * fn[j] * Fl[3, j]))
+        self._point = ca.Function("force_point", [fl, ca.vec(P), ca.vec(N), ca.vec(R), load, L,
+                                                  tq],
+                                  [ca.vertcat(*[e for e, _, _ in rows], *taus),
+                                   load_cost(fl, fn)])
         self._lo = np.concatenate([np.full(int(e.numel()), a) for e, a, _ in rows])
         self._hi = np.concatenate([np.full(int(e.numel()), b) for e, _, b in rows])
         self._solvers: dict[int, ca.Function] = {}
@@ -72,22 +90,58 @@ class ForceStage:
             nfl = self._point.size1_in(0)
             z = ca.MX.sym("z", nfl * k)
             geo = ca.MX.sym("geo", 3 * self.m.n_contacts * 2 + 9, k)
+            tq = ca.MX.sym("tq", self.n_torque, k)
             q = ca.MX.sym("q", LOAD_PARAMS + 1)
             nc3 = 3 * self.m.n_contacts
             g, c = self._point.map(k)(ca.reshape(z, nfl, k), geo[0:nc3, :],
                                       geo[nc3:2 * nc3, :], geo[2 * nc3:, :],
-                                      q[0:LOAD_PARAMS], q[LOAD_PARAMS])
+                                      q[0:LOAD_PARAMS], q[LOAD_PARAMS], tq)
             self._solvers[k] = ca.nlpsol("forces", "ipopt",
-                                         {"x": z, "p": ca.vertcat(ca.vec(geo), q),
+                                         {"x": z, "p": ca.vertcat(ca.vec(geo), ca.vec(tq), q),
                                           "f": ca.sum2(c), "g": ca.vec(g)},
                                          FORCE_STAGE_OPTIONS)
         return self._solvers[k]
 
+    def torque_params(self, Xall: FloatArray, prm: FloatArray, gravity: Any) -> FloatArray:
+        """The torque rows' parameters at the states ``Xall`` (n_torque x points): per
+        fingertip its ``A`` (``J_v^T + J_w^T [p - p_tip]x`` times the object's rotation:
+        the torques of a force given in the object frame), ``b = J_w^T n`` (the torsion's)
+        and ``g`` (its links' weight; ``gravity`` [m/s^2], palm frame)."""
+        k = len(Xall)
+        _, P, N, R, p_po = self.m.mapped("path", k)(Xall.T, prm)
+        nc = self.m.n_contacts
+        Pp = np.asarray(P).reshape(3, nc, k, order="F")
+        Np = np.asarray(N).reshape(3, nc, k, order="F")
+        Rp = np.asarray(R).reshape(3, 3, k, order="F")
+        pp = np.asarray(p_po).reshape(3, k, order="F")
+        out = np.zeros((self.n_torque, k))
+        o = 0
+        for j, t in self.tips:
+            f, nq = t.finger, int(t.finger.nq)
+            q = Xall[:, t.q_cols]
+            J = f.tip_jacobians(q)  # (k, 6, nq)
+            _, p_tip = f.tip_poses(q)
+            g = f.gravity_torques(q, gravity) if f.mass > 0 else np.zeros((k, nq))
+            for i in range(k):
+                Ri = Rp[:, :, i]
+                r = pp[:, i] + Ri @ Pp[:, j, i] - p_tip[i]
+                skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+                A = (J[i, :3].T + J[i, 3:].T @ skew) @ Ri
+                out[o:o + 3 * nq, i] = A.ravel(order="F")
+                out[o + 3 * nq:o + 4 * nq, i] = J[i, 3:].T @ (Ri @ Np[:, j, i])
+                out[o + 4 * nq:o + 5 * nq, i] = g[i]
+            o += 5 * nq
+        return out
+
     def solve(self, Xall: FloatArray, prm: FloatArray, load: FloatArray, L: float,
-              guess: FloatArray) -> tuple[FloatArray | None, int]:
+              guess: FloatArray,
+              torques: tuple[FloatArray, FloatArray, FloatArray] | None = None
+              ) -> tuple[FloatArray | None, int]:
         """(the load variables, :data:`LOAD_VARS` per contact x point, or None when some
         point admits no forces; IPOPT's iterations) at the physical states ``Xall``
-        (points x nx), from ``guess`` (same shape as the result)."""
+        (points x nx), from ``guess`` (same shape as the result). ``torques``: the torque
+        rows' parameters (:meth:`torque_params`) and their lower and upper bounds (every
+        fingertip's joints in turn) [N m]; None: no bounds."""
         k = len(Xall)
         nc = self.m.n_contacts
         _, P, N, R, _ = self.m.mapped("path", k)(Xall.T, prm)
@@ -96,14 +150,23 @@ class ForceStage:
                          np.asarray(R).reshape(9, k, order="F")])
         bound = load_bounds(nc, k)
         solver = self._solver(k)
+        n_tau = sum(int(t.finger.nq) for _, t in self.tips)
+        if torques is None:
+            tq, lo_t, hi_t = (np.zeros((self.n_torque, k)), np.full(n_tau, -np.inf),
+                              np.full(n_tau, np.inf))
+        else:
+            tq, lo_t, hi_t = torques
+        lo = np.tile(np.concatenate([self._lo, lo_t]), k)
+        hi = np.tile(np.concatenate([self._hi, hi_t]), k)
         res = solver(x0=np.clip(guess, -bound, bound).ravel(order="F"),
-                     p=np.concatenate([geo.ravel(order="F"), load, [L]]),
+                     p=np.concatenate([geo.ravel(order="F"), tq.ravel(order="F"), load, [L]]),
                      lbx=-bound.ravel(order="F"), ubx=bound.ravel(order="F"),
-                     lbg=np.tile(self._lo, k), ubg=np.tile(self._hi, k))
+                     lbg=lo, ubg=hi)
         st = solver.stats()
         g = np.asarray(res["g"]).ravel()
-        viol = float(np.max(np.maximum(np.tile(self._lo, k) - g, g - np.tile(self._hi, k)),
-                            initial=0.0))
+        with np.errstate(invalid="ignore"):
+            viol = float(np.max(np.nan_to_num(np.maximum(lo - g, g - hi), nan=0.0),
+                                initial=0.0))
         iterations = int(st["iter_count"])
         if not st["success"] or not np.isfinite(viol) or viol > MAX_VIOLATION:
             return None, iterations
