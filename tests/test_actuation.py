@@ -13,6 +13,7 @@ their effort."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -207,3 +208,40 @@ def test_the_force_stages_torque_rows_are_the_plans_joint_torques_and_bound_them
     assert G is not None
     G, _ = solve(stage, Xall, prm, load, L, guess, (tq, -0.1 * top, 0.1 * top))
     assert G is None
+
+
+def _roll_request(**hand: Any) -> Any:
+    from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS
+    from planner_service.planners import REQUEST
+
+    return REQUEST.validate_python({
+        "planner": "manipulation", "object": {"shape": "sphere",
+                                              "dimensions": [NOMINAL_RADIUS]},
+        "hand": {"mjcf": OWN, "tips": [{"name": t} for t in ("ff_tip", "mf_tip", "rf_tip",
+                                                             "th_tip")], **hand},
+        "fingers": [{"hand_finger": k, "initial_q": list(q)}
+                    for k, q in enumerate(NOMINAL_Q)],
+        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
+                         "orientation_wxyz": [1, 0, 0, 0]},
+        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
+                                               "angle": 0.1}]},
+        "forces": {"mass": 0.05}, "duration": 1.0, "n_intervals": 10})
+
+
+def test_the_requests_torque_limits_are_the_actuators() -> None:
+    """``hand.torque_limits``: a joint's actuator given 0.01 N m (the file says 0.7) makes
+    the roll infeasible naming it; a name that is no joint of the fingers is a 422 naming
+    it under the field."""
+    from planner_service.planners import ProblemError, solve
+
+    result, _ = solve(_roll_request(torque_limits={"ffj2": 0.01}))
+    assert result.status.value == "infeasible", result.message
+    assert "joint ffj2 needs" in result.message
+    assert "its actuator ffa2 gives -0.01..0.01 N m" in result.message
+    acts = {a.joint: a for a in result.actuator_trajectory.actuators}
+    assert acts["ffj2"].torque_range == [-0.01, 0.01]
+    assert acts["ffj1"].torque_range == [-0.7, 0.7]  # the file's
+    with pytest.raises(ProblemError) as exc:
+        solve(_roll_request(torque_limits={"wrist": 1.0}))
+    fields = dict(exc.value.errors)
+    assert "'wrist' is not a joint of the hand's fingers" in fields["hand.torque_limits.wrist"]

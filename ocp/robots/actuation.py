@@ -27,7 +27,7 @@ joints are motors limited by their ``effort``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -152,6 +152,10 @@ class UrdfActuation:
         return urdf_actuators(joint_names, [self.effort.get(n, np.inf)
                                             for n in joint_names]), ()
 
+    def with_limits(self, limits: dict[str, float]) -> UrdfActuation:
+        """The same joints with ``limits`` [N m] as their efforts where given."""
+        return UrdfActuation({**self.effort, **limits})
+
     def damping(self, joint_names: Sequence[str]) -> FloatArray:
         """No damping is read from a URDF's joints."""
         return np.zeros(len(joint_names))
@@ -182,7 +186,14 @@ class HandActuation:
         default_factory=lambda: (np.eye(3), np.zeros(3)))
     #: Joints not planned, held at these values (a shared wrist); the rest at ``qpos0``.
     held: dict[str, float] = field(default_factory=dict)
+    #: Torque limits [N m] given for joints' actuators, over the file's ``forcerange``.
+    limits: dict[str, float] = field(default_factory=dict)
     _mj: Any = field(default=None, repr=False)
+
+    def with_limits(self, limits: dict[str, float]) -> HandActuation:
+        """The same hand with ``limits`` [N m] as its joints' actuators' torque ranges
+        (either way) where given."""
+        return replace(self, limits={**self.limits, **limits})
 
     def model(self) -> Any:
         import mujoco
@@ -195,50 +206,60 @@ class HandActuation:
 
     def actuators(self, joint_names: Sequence[str]) -> tuple[tuple[Actuator, ...],
                                                              tuple[str, ...]]:
-        """Each joint's actuator (the first with a joint transmission on it), and notes."""
+        """Each joint's actuator (the first with a joint transmission on it; ``limits``
+        over its torque range), and notes."""
+        m = self.model()
+        out: list[Actuator] = []
+        notes: list[str] = []
+        for n in joint_names:
+            given = self.limits.get(n)
+            got = self._actuator(m, n, notes)
+            if given is not None:
+                got = replace(got, torque_range=(-float(given), float(given)))
+                notes.append(f"joint {n}: its actuator gives {given:g} N m, as asked")
+            out.append(got)
+        return tuple(out), tuple(notes)
+
+    def _actuator(self, m: Any, n: str, notes: list[str]) -> Actuator:
+        """Joint ``n``'s actuator as the file says (the first with a joint transmission on
+        it), notes added on what it is not."""
         import mujoco
 
-        m = self.model()
         obj = mujoco.mjtObj
-        out, notes = [], []
-        for n in joint_names:
-            jid = mujoco.mj_name2id(m, obj.mjOBJ_JOINT, n)
-            ids = [a for a in range(m.nu)
-                   if int(m.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
-                   and int(m.actuator_trnid[a, 0]) == jid] if jid >= 0 else []
-            if not ids:
-                out.append(Actuator(n))
-                notes.append(f"joint {n}: no actuator drives it")
-                continue
-            a = ids[0]
-            name = mujoco.mj_id2name(m, obj.mjOBJ_ACTUATOR, a) or f"actuator {a}"
-            gear = float(m.actuator_gear[a, 0])
-            gain = float(m.actuator_gainprm[a, 0])
-            fixed = int(m.actuator_gaintype[a]) == int(mujoco.mjtGain.mjGAIN_FIXED)
-            plain = int(m.actuator_dyntype[a]) == int(mujoco.mjtDyn.mjDYN_NONE)
-            biastype = int(m.actuator_biastype[a])
-            if not (fixed and plain and gain != 0.0 and gear != 0.0) or biastype not in (
-                    int(mujoco.mjtBias.mjBIAS_NONE), int(mujoco.mjtBias.mjBIAS_AFFINE)):
-                out.append(Actuator(n, name))
-                notes.append(f"joint {n}: actuator {name} has activation dynamics, a "
-                             "non-fixed gain or a non-affine bias: not commanded")
-                continue
-            b = (0.0, 0.0, 0.0) if biastype == int(mujoco.mjtBias.mjBIAS_NONE) else \
-                (float(m.actuator_biasprm[a, 0]), float(m.actuator_biasprm[a, 1]),
-                 float(m.actuator_biasprm[a, 2]))
-            force = None
-            if m.actuator_forcelimited[a]:
-                lo, hi = sorted(gear * float(x) for x in m.actuator_forcerange[a])
-                force = (lo, hi)
-            ctrl = (float(m.actuator_ctrlrange[a, 0]), float(m.actuator_ctrlrange[a, 1])) \
-                if m.actuator_ctrllimited[a] else None
-            kind = "servo" if b[1] != 0.0 or b[2] != 0.0 else "motor"
-            out.append(Actuator(n, name, kind, gear, gain, b, force, ctrl))
-            if len(ids) > 1:
-                notes.append(f"joint {n}: {len(ids) - 1} more actuators on it, not commanded")
-            if float(m.dof_frictionloss[int(m.jnt_dofadr[jid])]) > 0:
-                notes.append(f"joint {n}: its frictionloss is not compensated")
-        return tuple(out), tuple(notes)
+        jid = mujoco.mj_name2id(m, obj.mjOBJ_JOINT, n)
+        ids = [a for a in range(m.nu)
+               if int(m.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+               and int(m.actuator_trnid[a, 0]) == jid] if jid >= 0 else []
+        if not ids:
+            notes.append(f"joint {n}: no actuator drives it")
+            return Actuator(n)
+        a = ids[0]
+        name = mujoco.mj_id2name(m, obj.mjOBJ_ACTUATOR, a) or f"actuator {a}"
+        gear = float(m.actuator_gear[a, 0])
+        gain = float(m.actuator_gainprm[a, 0])
+        fixed = int(m.actuator_gaintype[a]) == int(mujoco.mjtGain.mjGAIN_FIXED)
+        plain = int(m.actuator_dyntype[a]) == int(mujoco.mjtDyn.mjDYN_NONE)
+        biastype = int(m.actuator_biastype[a])
+        if not (fixed and plain and gain != 0.0 and gear != 0.0) or biastype not in (
+                int(mujoco.mjtBias.mjBIAS_NONE), int(mujoco.mjtBias.mjBIAS_AFFINE)):
+            notes.append(f"joint {n}: actuator {name} has activation dynamics, a non-fixed "
+                         "gain or a non-affine bias: not commanded")
+            return Actuator(n, name)
+        b = (0.0, 0.0, 0.0) if biastype == int(mujoco.mjtBias.mjBIAS_NONE) else \
+            (float(m.actuator_biasprm[a, 0]), float(m.actuator_biasprm[a, 1]),
+             float(m.actuator_biasprm[a, 2]))
+        force = None
+        if m.actuator_forcelimited[a]:
+            lo, hi = sorted(gear * float(x) for x in m.actuator_forcerange[a])
+            force = (lo, hi)
+        ctrl = (float(m.actuator_ctrlrange[a, 0]), float(m.actuator_ctrlrange[a, 1])) \
+            if m.actuator_ctrllimited[a] else None
+        kind = "servo" if b[1] != 0.0 or b[2] != 0.0 else "motor"
+        if len(ids) > 1:
+            notes.append(f"joint {n}: {len(ids) - 1} more actuators on it, not commanded")
+        if float(m.dof_frictionloss[int(m.jnt_dofadr[jid])]) > 0:
+            notes.append(f"joint {n}: its frictionloss is not compensated")
+        return Actuator(n, name, kind, gear, gain, b, force, ctrl)
 
     def damping(self, joint_names: Sequence[str]) -> FloatArray:
         """The joints' viscous damping [N m s/rad] in the file (``damping``)."""

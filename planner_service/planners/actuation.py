@@ -19,7 +19,7 @@ from dexroll_client.models import (
     PlanStatus,
 )
 
-__all__ = ["hand_actuation", "with_actuation"]
+__all__ = ["hand_actuation", "torque_limit_errors", "with_actuation"]
 
 #: The certificate's entry: the largest share of a torque limit the plan needs.
 LOAD = "max_actuator_load"
@@ -27,11 +27,31 @@ LOAD = "max_actuator_load"
 
 def hand_actuation(request: Any, hand: Any) -> Any:
     """The actuators of the request's hand (:meth:`ocp.robots.whole_hand.WholeHand.
-    actuation`) when every finger is one of that hand's; None otherwise."""
+    actuation`, with the request's ``hand.torque_limits``) when every finger is one of
+    that hand's; None otherwise."""
     if request.hand is None or not hasattr(hand, "actuation") or any(
             f.finger is not None or f.hand_finger is None for f in request.fingers):
         return None
-    return hand.actuation()
+    got = hand.actuation()
+    limits = request.hand.torque_limits
+    return got.with_limits(dict(limits)) if limits and got is not None else got
+
+
+def torque_limit_errors(request: Any, hand: Any) -> list[tuple[str, str]]:
+    """Why the request's ``hand.torque_limits`` cannot be applied, as (field, reason):
+    a name that is not a joint of the hand's fingers, or a hand without actuators."""
+    limits = request.hand.torque_limits if request.hand is not None else None
+    if not limits:
+        return []
+    if not hasattr(hand, "actuation"):
+        return [("hand.torque_limits", "for a hand of one model (`urdf`, `mjcf` or the "
+                                       "built-in allegro); this hand's fingers have flat "
+                                       "pads and no actuators")]
+    joints = [n for f in hand.fingers for n in f.joint_names]
+    bad = sorted(set(limits) - set(joints))
+    shown = ", ".join(joints[:24]) + (" ..." if len(joints) > 24 else "")
+    return [(f"hand.torque_limits.{n}", f"{n!r} is not a joint of the hand's fingers; "
+                                        f"they are: {shown}") for n in bad]
 
 
 def _rows(a: np.ndarray) -> list[list[float | None]]:

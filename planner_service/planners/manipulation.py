@@ -40,7 +40,7 @@ from ocp.solve.planner import (
 from ocp.spec.grasp import fingertips_from_joints
 from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
 
-from .actuation import hand_actuation, with_actuation
+from .actuation import hand_actuation, torque_limit_errors, with_actuation
 from .base import SOLVER_FIELDS, PlannerAdapter
 from .cache import FingerCache, Planners, hand_finger_name
 from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
@@ -431,6 +431,8 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
             else:
                 for (k, _, _, _, _), tip in zip(from_joints, found, strict=True):
                     tips[k] = tip
+    if not errors:
+        errors += torque_limit_errors(request, hand)
     collision = None if errors else _hand_collision(request, hand)
     actuation = None if errors else hand_actuation(request, hand)
     if collision is not None and motion_start is not None and from_joints and \

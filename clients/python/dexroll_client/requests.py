@@ -654,6 +654,13 @@ class HandModel(_Request):
         description="two_finger, three_finger: the fingers' mounts on the palm, one per "
                     "finger of the hand in its order; default: the hand's own "
                     "(GET /v1/models)")
+    torque_limits: dict[str, Annotated[Real, Field(gt=0.0, le=1e4)]] | None = Field(
+        default=None, max_length=MAX_FINGERS * MAX_FINGER_JOINTS,
+        description="with `urdf` or `mjcf`, or the built-in allegro: the torque [N m] each "
+                    "named joint's actuator gives, either way (over the file's forcerange "
+                    "or effort; a joint the file leaves unlimited gets one); the plan's "
+                    "holds, rolls and swings keep within them and a plan that cannot is "
+                    "refused (docs/actuation.md)")
 
     @model_validator(mode="after")
     def _one_source(self) -> HandModel:
