@@ -130,3 +130,68 @@ def test_shared_wrist_joints_are_held_and_single_joint_tendons_are_limits() -> N
     notes = hand.actuation().commands(list(hand.fingers[0].joint_names), [0.0],
                                       np.zeros((1, 4)), np.zeros((1, 4)), None, None).notes
     assert any("held (not planned): WRJ1 at 0, WRJ0 at 0" in n for n in notes), notes
+
+
+def _wrist_wrapped_own_hand() -> str:
+    """examples/own_hand.xml carried by a forearm's two wrist joints (their axes through
+    the world origin, position servos of their own), as a Shadow-style arm carries its
+    hand; the index's spread joint limited by a fixed tendon over it alone."""
+    from pathlib import Path
+
+    own = (Path(__file__).resolve().parents[1] / "examples" / "own_hand.xml").read_text()
+    start, end = own.index("<worldbody>") + len("<worldbody>"), own.index("</worldbody>")
+    wrapped = (own[:start] + """
+    <body name="wrist_a">
+      <joint name="WRJ1" axis="0 1 0" range="-28 8" damping="1"/>
+      <inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>
+      <body name="wrist_b">
+        <joint name="WRJ0" axis="1 0 0" range="-40 28" damping="1"/>
+        <inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>""" +
+               own[start:end] + """
+      </body>
+    </body>
+  """ + own[end:])
+    return wrapped.replace("<actuator>", """<tendon>
+    <fixed name="T_ffj0" limited="true" range="-0.004 0.004">
+      <joint joint="ffj0" coef="0.01"/>
+    </fixed>
+  </tendon>
+  <actuator>
+    <position name="A_WRJ1" joint="WRJ1" kp="10" ctrlrange="-28 8"/>
+    <position name="A_WRJ0" joint="WRJ0" kp="10" ctrlrange="-40 28"/>""", 1)
+
+
+def test_a_wrist_mounted_hand_is_planned_with_its_wrist_held_and_executed() -> None:
+    """The wrist-wrapped own_hand.xml: loads without edits, the wrist held at 0 (said in
+    the actuator notes), the spread joint limited by its tendon as MuJoCo reads it
+    (0.4 rad), and a turn of the nominal grasp planned, certified and executed on the
+    file's own actuators (the wrist's servos holding it) within 1 mm and 2 deg."""
+    from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_Q, NOMINAL_RADIUS
+    from planner_service.execution import simulate_result
+    from planner_service.planners import REQUEST, solve
+
+    text = _wrist_wrapped_own_hand()
+    tips = [TipSpec(t) for t in ("ff_tip", "mf_tip", "rf_tip", "th_tip")]
+    hand = load_whole_hand(text, "mjcf", tips)
+    assert hand.held == {"WRJ1": 0.0, "WRJ0": 0.0}
+    assert hand.fingers[0].joint_names == ("ffj0", "ffj1", "ffj2", "ffj3")
+    assert hand.fingers[0].upper[0] == pytest.approx(0.4)
+    req = REQUEST.validate_python({
+        "planner": "manipulation", "object": {"shape": "sphere",
+                                              "dimensions": [NOMINAL_RADIUS]},
+        "hand": {"mjcf": text, "tips": [{"name": t.name} for t in tips]},
+        "fingers": [{"hand_finger": k, "initial_q": list(q)}
+                    for k, q in enumerate(NOMINAL_Q)],
+        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
+                         "orientation_wxyz": [1, 0, 0, 0]},
+        "motion": {"kind": "steps", "steps": [{"duration": 2.0, "axis": [0, 0, 1],
+                                               "angle": 0.2}]},
+        "forces": {"mass": 0.05, "min_normal_force": 1.0}, "duration": 2.0,
+        "n_intervals": 16})
+    result, _ = solve(req)
+    assert result.status.value == "solved", result.message
+    assert "WRJ1" not in result.joint_trajectory.joint_names
+    assert any("held (not planned): WRJ1 at 0, WRJ0 at 0" in n
+               for n in result.actuator_trajectory.notes)
+    report = simulate_result(result, req, model="request")
+    assert report.passed, report.failures
