@@ -28,7 +28,7 @@ from ocp.transcription.loads import LOAD_VARS, load_cost, load_rows
 from ocp.transcription.values import load_bounds
 
 __all__ = ["HOLD_FORCE_FACTOR", "HOLD_MARGINS", "Hold", "HoldResiduals", "deep_hold_forces",
-           "hold_forces", "hold_residuals"]
+           "hold_forces", "hold_residuals", "narrowed_load"]
 
 FloatArray = NDArray[np.float64]
 
@@ -147,15 +147,11 @@ def _deep_hold_forces(hold: Hold, load: FloatArray, L: float,
     forces ride the cones' edges, which a servo-driven hand does not deliver exactly; the
     deepest forces can be large: docs/gait.md); when every narrowing asks more, the least
     normal force's of those ``fits`` accepts, else of all; (None, 0) when none holds it."""
-    mu_m = float(load[6])
     cap = HOLD_FORCE_FACTOR * float(np.linalg.norm(load[0:3]))
     best: tuple[FloatArray | None, float, float] = (None, 0.0, math.inf)
     best_fit: tuple[FloatArray | None, float, float] = (None, 0.0, math.inf)
     for extra in HOLD_MARGINS:
-        narrowed = np.array(load, dtype=float)
-        narrowed[6] = np.tan(max(np.arctan(mu_m) - extra, 1e-3))
-        narrowed[7] = load[7] * narrowed[6] / mu_m
-        F = hold_forces(hold, narrowed, L)
+        F = hold_forces(hold, narrowed_load(load, extra), L)
         if F is None:
             continue
         top = float((-np.einsum("ij,ij->i", F, hold.normals)).max())
@@ -169,6 +165,16 @@ def _deep_hold_forces(hold: Hold, load: FloatArray, L: float,
     if best_fit[0] is not None:
         return best_fit[0], best_fit[1]
     return best[0], best[1]
+
+
+def narrowed_load(load: FloatArray, extra: float) -> FloatArray:
+    """The load parameters with the friction cones narrowed by ``extra`` [rad] more (their
+    smoothing with them)."""
+    mu_m = float(load[6])
+    out = np.array(load, dtype=float)
+    out[6] = np.tan(max(np.arctan(mu_m) - extra, 1e-3))
+    out[7] = load[7] * out[6] / mu_m
+    return out
 
 
 def hold_residuals(hold: Hold, forces: FloatArray, load: FloatArray, min_normal: FloatArray

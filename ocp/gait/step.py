@@ -191,17 +191,13 @@ def hold_torque_refusal(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...],
     torques ``limits`` (at their full range): the joint, the torque its least-force hold
     asks and the limit; "" when some narrowing of the cones (:data:`~ocp.gait.hold.
     HOLD_MARGINS`) fits."""
-    from ocp.gait.hold import HOLD_MARGINS
+    from ocp.gait.hold import HOLD_MARGINS, narrowed_load
     from ocp.solution import joint_torques
 
     fits = hold_fits(fingers, qs, which, hold, limits)
     least: tuple[float, FloatArray | None] = (np.inf, None)
-    mu_m = float(load[6])
     for extra in HOLD_MARGINS:
-        narrowed = np.array(load, dtype=float)
-        narrowed[6] = np.tan(max(np.arctan(mu_m) - extra, 1e-3))
-        narrowed[7] = load[7] * narrowed[6] / mu_m
-        F = hold_forces(hold, narrowed, L)
+        F = hold_forces(hold, narrowed_load(load, extra), L)
         if F is None:
             continue
         if fits(F):
@@ -283,8 +279,12 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                "inside their friction cones balance its weight)")
         return GaitStep(k, "infeasible", why, None)
     if limits is not None:  # the holds within the actuators' whole range, or no step
-        for which, hold, lifted in ((allf, before, ""), (rest, during, f" with {name} lifted")):
-            why = hold_torque_refusal(fingers, qs, which, hold, load, L, limits.full(), names)
+        full = limits.full()
+        for which, hold, F, lifted in ((allf, before, F_before, ""),
+                                       (rest, during, F_during, f" with {name} lifted")):
+            if hold_fits(fingers, qs, which, hold, full)(F):
+                continue
+            why = hold_torque_refusal(fingers, qs, which, hold, load, L, full, names)
             if why:
                 return GaitStep(k, "infeasible", f"the hold{lifted}: {why}", None)
     others = []
