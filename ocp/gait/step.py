@@ -307,6 +307,8 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         # its last swing needed it
         spec = replace(spec, tip_gap=warm.spec.tip_gap,
                        neighbour_share=warm.spec.neighbour_share)
+    if warm is not None and limits is not None and warm.spec.duration > spec.duration:
+        spec = replace(spec, duration=warm.spec.duration)  # its last swing was slowed
     plan = plan_swing(spec, warm)
     if plan.status == "infeasible" and spec.tip_gap is None \
             and max(spec.required_gaps(), default=0.0) > MIN_TIP_GAP:
