@@ -16,7 +16,7 @@ from ocp.certify.certificate import Check, CheckKind
 from ocp.gait.checks import hold_checks, swing_checks
 from ocp.gait.hold import Hold, deep_hold_forces, hold_forces
 from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, SwingPlan, SwingSpec, plan_swing
-from ocp.geometry.bodies import tip_body
+from ocp.geometry.bodies import point_segment_distance, tip_body
 
 __all__ = ["GaitStep", "contact_of", "grasp_hold", "liftable", "replace_finger"]
 
@@ -130,8 +130,9 @@ class GaitStep:
         return out
 
 
-#: A swing's link obstacles are padded to a multiple of this many (each count its NLP).
-OBSTACLE_BLOCK = 4
+#: A swing keeps clear of this many of the hand's links (the nearest to the ball, padded
+#: with far-away ones): one swing NLP per finger, whatever the hand's pose.
+SWING_OBSTACLES = 8
 
 #: The share of an actuator's torque limit a hold's forces may ask of its joint (the rest
 #: for the motion's own terms: damping, inertia, the set points' errors).
@@ -259,7 +260,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     messages; default from their joints); ``limits``: the actuators' torques, which the
     holds' forces keep to where the cones allow; ``obstacles(qs, k, centre)``: the hand's
     links the swing keeps clear of as it does of the other tips (name, (a, b, r)),
-    padded with far-away ones to a multiple of :data:`OBSTACLE_BLOCK` (fewer swing NLPs).
+    the nearest :data:`SWING_OBSTACLES` to the ball kept, padded with far-away ones.
     A grasp whose other fingertips cannot hold the object is ``infeasible`` at once,
     naming the finger."""
     L = radius
@@ -294,9 +295,11 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         others.append((a, b, tip_body(fingers[i]).r))
     other_names = [names[i] for i in rest]
     if obstacles is not None:
-        links = obstacles(qs, k, np.asarray(centre, dtype=float))
-        far = np.asarray(centre, dtype=float) + 1.0
-        links += [("(none)", (far, far, 0.0))] * (-len(links) % OBSTACLE_BLOCK)
+        c = np.asarray(centre, dtype=float)
+        links = sorted(obstacles(qs, k, c), key=lambda o: float(
+            point_segment_distance(c, o[1][0], o[1][1])) - o[1][2])[:SWING_OBSTACLES]
+        far = c + 1.0
+        links += [("(none)", (far, far, 0.0))] * (SWING_OBSTACLES - len(links))
         others += [seg for _, seg in links]
         other_names += [n for n, _ in links]
     spec = SwingSpec(fingers[k], np.asarray(qs[k], dtype=float),
