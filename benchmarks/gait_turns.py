@@ -127,7 +127,7 @@ def _table(sides: dict[str, list[list[dict[str, Any]]]]) -> str:
                 f"{_median(rows, 'swing_build'):.1f} | {_median(rows, 'roll_build'):.1f} | "
                 f"{_median(rows, 'solve'):.1f} | {statistics.median(other):.1f} |")
     axes = [n for n in names if n.startswith("90 ") and "MJCF" not in n]
-    for side, runs in sides.items():
+    for side, runs in sides.items() if axes else ():  # (--turns may leave none)
         def over_axes(key: str, runs: list[list[dict[str, Any]]] = runs) -> float:
             """The median over the 90 deg axis turns of each turn's median ``key``."""
             return statistics.median(_median([r for run in runs for r in run
