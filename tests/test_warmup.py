@@ -127,3 +127,27 @@ def test_swing_nlps_are_shared_by_equal_fingers_and_not_by_different_ones() -> N
     tighter = replace(a[1], upper=a[1].upper - 0.1)
     assert swing_key(tighter, n, K, 3) != keys[1]
     assert swing_key(a[1], n, K, 2) != keys[1]
+
+
+def test_a_gait_on_a_hand_with_links_warms_its_swings_with_their_obstacles() -> None:
+    """On an MJCF hand whose links are checked, a gait's swings keep clear of
+    SWING_OBSTACLES of them (one NLP per finger, with them among its 'others'): the
+    warm-up builds that NLP, not the one without."""
+    from ocp.gait.step import SWING_OBSTACLES
+    from ocp.gait.swing import _SOLVERS, SwingSpec, swing_key
+    from planner_service.planners import REQUEST, ManipulationAdapter, Planners
+    from planner_service.planners.manipulation import manipulation_problem
+
+    body = json.loads((ROOT / "tests" / "data" / "gait_small_request.json").read_text())
+    body["hand"] = {"mjcf": (ROOT / "examples" / "own_hand.xml").read_text(),
+                    "tips": [{"name": n} for n in ("ff_tip", "mf_tip", "rf_tip", "th_tip")]}
+    body["grasp"] = "auto"
+    request = REQUEST.validate_python(body)
+    planners = Planners(BallOnPalmPlanner(), FingerCache())
+    ManipulationAdapter().prepare(request, planners)
+    problem = manipulation_problem(request, planners.fingers)
+    assert problem.collision is not None
+    fingers = [tip.finger for tip in problem.fingers]
+    for f in fingers:
+        assert swing_key(f, SwingSpec.n_intervals, SwingSpec.lift_intervals,
+                         len(fingers) - 1 + SWING_OBSTACLES) in _SOLVERS

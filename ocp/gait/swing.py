@@ -376,11 +376,13 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
 
 
 def prepare_swings(fingers: tuple[Any, ...], n_intervals: int | None = None,
-                   lift_intervals: int | None = None) -> float:
+                   lift_intervals: int | None = None, obstacles: int = 0) -> float:
     """Build (and keep) the swing NLP of every round fingertip of a grasp of ``fingers``
-    (the others its neighbours), as a gait's swings use them (``n_intervals`` and
-    ``lift_intervals``: :class:`SwingSpec`'s defaults when None), without solving: a
-    service worker's warm-up. Returns the build time [s] (0 when built already)."""
+    (the others its neighbours, and ``obstacles`` of the hand's links:
+    :data:`ocp.gait.step.SWING_OBSTACLES` for a hand whose links are checked), as a
+    gait's swings use them (``n_intervals`` and ``lift_intervals``: :class:`SwingSpec`'s
+    defaults when None), without solving: a service worker's warm-up. Returns the build
+    time [s] (0 when built already)."""
     n = SwingSpec.n_intervals if n_intervals is None else int(n_intervals)
     K = SwingSpec.lift_intervals if lift_intervals is None else int(lift_intervals)
     t0 = time.perf_counter()
@@ -390,8 +392,9 @@ def prepare_swings(fingers: tuple[Any, ...], n_intervals: int | None = None,
             body = tip_body(f)
         except ValueError:  # a flat or spheroid tip: no gait
             continue
-        if not _built(f, n, K, len(fingers) - 1):
-            _swing_nlp(f, body, n, K, len(fingers) - 1)
+        others = len(fingers) - 1 + int(obstacles)
+        if not _built(f, n, K, others):
+            _swing_nlp(f, body, n, K, others)
             built = True
     return time.perf_counter() - t0 if built else 0.0
 

@@ -551,9 +551,12 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
             general = fingers.manipulation
         built = general.prepare(problem)
         if request.gait is not None:  # a gait's swings: one NLP per finger
+            from ocp.gait.step import SWING_OBSTACLES
             from ocp.gait.swing import prepare_swings
 
-            built += prepare_swings(tuple(tip.finger for tip in problem.fingers))
+            built += prepare_swings(tuple(tip.finger for tip in problem.fingers),
+                                    obstacles=SWING_OBSTACLES if problem.collision is not None
+                                    else 0)
         return built
 
     def summary(self, result: ManipulationResult, solution: Any) -> str:
