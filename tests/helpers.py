@@ -71,3 +71,24 @@ def experiment1(goal: dict[str, float], duration: float = 2.0, n_intervals: int 
                             chart_rotation=(0.0, 0.0, math.pi),
                             q_seed=tuple(math.radians(a) for a in (0, 30, 0, 30, 0, 30)))
     return presets.one_finger(base, contact, mu=0.5)
+
+
+def nominal_turn(mjcf: str, tips: list[str], angle: float = 0.1, duration: float = 1.0,
+                 hand: dict[str, Any] | None = None, **extra: Any) -> dict[str, Any]:
+    """A manipulation request body: the built-in hand's nominal grasp (its joints, the
+    60 mm ball where they touch it) on the MJCF hand ``mjcf`` with fingertips ``tips``,
+    turned by ``angle`` [rad] about the palm's z in ``duration`` [s]; ``hand``: more of the
+    hand's fields, ``extra``: more of the request's."""
+    from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_Q, NOMINAL_RADIUS
+
+    return {
+        "planner": "manipulation", "object": {"shape": "sphere",
+                                              "dimensions": [NOMINAL_RADIUS]},
+        "hand": {"mjcf": mjcf, "tips": [{"name": t} for t in tips], **(hand or {})},
+        "fingers": [{"hand_finger": k, "initial_q": list(q)}
+                    for k, q in enumerate(NOMINAL_Q)],
+        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
+                         "orientation_wxyz": [1, 0, 0, 0]},
+        "motion": {"kind": "steps", "steps": [{"duration": duration, "axis": [0, 0, 1],
+                                               "angle": angle}]},
+        "duration": duration, **extra}

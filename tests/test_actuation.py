@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from helpers import nominal_turn
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -211,21 +212,11 @@ def test_the_force_stages_torque_rows_are_the_plans_joint_torques_and_bound_them
 
 
 def _roll_request(**hand: Any) -> Any:
-    from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS
     from planner_service.planners import REQUEST
 
-    return REQUEST.validate_python({
-        "planner": "manipulation", "object": {"shape": "sphere",
-                                              "dimensions": [NOMINAL_RADIUS]},
-        "hand": {"mjcf": OWN, "tips": [{"name": t} for t in ("ff_tip", "mf_tip", "rf_tip",
-                                                             "th_tip")], **hand},
-        "fingers": [{"hand_finger": k, "initial_q": list(q)}
-                    for k, q in enumerate(NOMINAL_Q)],
-        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
-                         "orientation_wxyz": [1, 0, 0, 0]},
-        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
-                                               "angle": 0.1}]},
-        "forces": {"mass": 0.05}, "duration": 1.0, "n_intervals": 10})
+    return REQUEST.validate_python(nominal_turn(
+        OWN, ["ff_tip", "mf_tip", "rf_tip", "th_tip"], hand=hand, forces={"mass": 0.05},
+        n_intervals=10))
 
 
 def test_the_requests_torque_limits_are_the_actuators() -> None:

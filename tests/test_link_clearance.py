@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import nominal_turn
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -51,17 +52,7 @@ def _turn(text, **extra):
     """A 0.1 rad turn about the palm's z of the nominal grasp on the hand ``text``."""
     from planner_service.planners import REQUEST
 
-    return REQUEST.validate_python({
-        "planner": "manipulation", "object": {"shape": "sphere",
-                                              "dimensions": [NOMINAL_RADIUS]},
-        "hand": {"mjcf": text, "tips": [{"name": t} for t in TIPS]},
-        "fingers": [{"hand_finger": k, "initial_q": list(q)}
-                    for k, q in enumerate(NOMINAL_Q)],
-        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
-                         "orientation_wxyz": [1, 0, 0, 0]},
-        "motion": {"kind": "steps", "steps": [{"duration": 1.0, "axis": [0, 0, 1],
-                                               "angle": 0.1}]},
-        "duration": 1.0, **extra})
+    return REQUEST.validate_python(nominal_turn(text, list(TIPS), **extra))
 
 
 def _random_q(hand, n, seed=0):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import nominal_turn
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -166,7 +167,6 @@ def test_a_wrist_mounted_hand_is_planned_with_its_wrist_held_and_executed() -> N
     the actuator notes), the spread joint limited by its tendon as MuJoCo reads it
     (0.4 rad), and a turn of the nominal grasp planned, certified and executed on the
     file's own actuators (the wrist's servos holding it) within 1 mm and 2 deg."""
-    from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_Q, NOMINAL_RADIUS
     from planner_service.execution import simulate_result
     from planner_service.planners import REQUEST, solve
 
@@ -176,18 +176,9 @@ def test_a_wrist_mounted_hand_is_planned_with_its_wrist_held_and_executed() -> N
     assert hand.held == {"WRJ1": 0.0, "WRJ0": 0.0}
     assert hand.fingers[0].joint_names == ("ffj0", "ffj1", "ffj2", "ffj3")
     assert hand.fingers[0].upper[0] == pytest.approx(0.4)
-    req = REQUEST.validate_python({
-        "planner": "manipulation", "object": {"shape": "sphere",
-                                              "dimensions": [NOMINAL_RADIUS]},
-        "hand": {"mjcf": text, "tips": [{"name": t.name} for t in tips]},
-        "fingers": [{"hand_finger": k, "initial_q": list(q)}
-                    for k, q in enumerate(NOMINAL_Q)],
-        "initial_pose": {"position": list(NOMINAL_OBJECT_POSITION),
-                         "orientation_wxyz": [1, 0, 0, 0]},
-        "motion": {"kind": "steps", "steps": [{"duration": 2.0, "axis": [0, 0, 1],
-                                               "angle": 0.2}]},
-        "forces": {"mass": 0.05, "min_normal_force": 1.0}, "duration": 2.0,
-        "n_intervals": 16})
+    req = REQUEST.validate_python(nominal_turn(
+        text, [t.name for t in tips], angle=0.2, duration=2.0,
+        forces={"mass": 0.05, "min_normal_force": 1.0}, n_intervals=16))
     result, _ = solve(req)
     assert result.status.value == "solved", result.message
     assert "WRJ1" not in result.joint_trajectory.joint_names
