@@ -140,23 +140,25 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
 LINK_CHECK_RATE = 100.0
 
 
-def with_link_clearance(gait: GaitPlan, problem: Any) -> GaitPlan:
+def with_link_clearance(gait: GaitPlan, problem: Any, samples: GaitSamples | None = None
+                        ) -> GaitPlan:
     """``gait`` with its certificate's ``gait_link_clearance``: the hand's links (MuJoCo's
     pairs, ``problem.collision``) at least ``LINK_CLEARANCE`` apart over the whole gait at
     :data:`LINK_CHECK_RATE` and every switch, a fingertip's own contact with the object
     left out while it is active at all (its swing checks hold it clear of the ball when
     lifted). Unchanged without a collision model or phases; call it on what
-    :func:`~ocp.gait.planner.plan_gait` returns."""
+    :func:`~ocp.gait.planner.plan_gait` returns. ``samples``: the gait's samples already
+    made at :func:`gait_times` of at least that rate (else made here)."""
     from ocp.certify.certificate import Certificate
     from ocp.geometry.rotations import quaternion_matrix
     from ocp.solve.certify import link_clearance_check
 
     if getattr(problem, "collision", None) is None or not gait.phases:
         return gait
-    ts = gait_times(gait, LINK_CHECK_RATE)
-    smp = gait_samples(gait, problem, ts)
+    smp = samples if samples is not None else \
+        gait_samples(gait, problem, gait_times(gait, LINK_CHECK_RATE))
     R = np.array([quaternion_matrix(w) for w in smp.object_wxyz])
-    check = link_clearance_check(problem, ts, smp.q, R, smp.object_position,
+    check = link_clearance_check(problem, smp.t, smp.q, R, smp.object_position,
                                  smp.active > 0.0, name="gait_link_clearance")
     gait.certificate = Certificate.of([*gait.certificate.checks, check])
     return gait

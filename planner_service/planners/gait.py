@@ -25,7 +25,13 @@ from dexroll_client.models import (
 )
 from ocp.gait.feasibility import MAX_ROLLS, gait_outlook
 from ocp.gait.planner import GaitPlan, plan_gait
-from ocp.gait.samples import gait_samples, gait_times, with_link_clearance
+from ocp.gait.samples import (
+    LINK_CHECK_RATE,
+    GaitSamples,
+    gait_samples,
+    gait_times,
+    with_link_clearance,
+)
 from ocp.solution import JointTrajectory, trajectory_joint_names
 from ocp.spec.grasp import ManipulationProblem
 
@@ -102,9 +108,11 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
                      swing={"duration": float(g.swing_duration),
                             "clearance": float(g.clearance)},
                      hold_time=float(g.hold_time))
-    gait = with_link_clearance(gait, problem)
     rate = float(getattr(request, "sample_rate", None) or DEFAULT_GAIT_RATE)
-    return gait_result(gait, problem, rate), gait
+    # the result's samples serve the links' check when they are at least as dense
+    smp = gait_samples(gait, problem, gait_times(gait, rate)) if gait.phases else None
+    gait = with_link_clearance(gait, problem, smp if rate >= LINK_CHECK_RATE else None)
+    return gait_result(gait, problem, rate, smp), gait
 
 
 def _touching(gait: GaitPlan, names: list[str], t: np.ndarray) -> list[list[str]]:
@@ -143,17 +151,19 @@ def _status(gait: GaitPlan) -> PlanStatus:
     return PlanStatus.INFEASIBLE
 
 
-def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float
-                ) -> ManipulationResult:
+def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float,
+                made: GaitSamples | None = None) -> ManipulationResult:
     """The wire result of a gait: its phases, the joints at ``rate`` [Hz] over the whole
-    plan (ROS 2's JointTrajectory), the certificate."""
+    plan (ROS 2's JointTrajectory; ``made``: those samples, made already), the
+    certificate."""
     names = [tip.name or f"finger{i}" for i, tip in enumerate(problem.fingers)]
     joint_names = trajectory_joint_names(
         [(nm, tip.finger.joint_names) for nm, tip in zip(names, problem.fingers, strict=True)])
     cut = np.cumsum([0, *(len(tip.finger.joint_names) for tip in problem.fingers)])
     jt, samples = None, None
     if gait.phases:
-        smp = gait_samples(gait, problem, gait_times(gait, rate))
+        smp = made if made is not None else gait_samples(gait, problem,
+                                                        gait_times(gait, rate))
         jt = joint_trajectory_model(JointTrajectory(tuple(joint_names), smp.t, smp.q,
                                                     smp.q_dot, smp.q_ddot, (),
                                                     smp.effort),
