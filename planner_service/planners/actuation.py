@@ -19,6 +19,8 @@ from dexroll_client.models import (
     PlanStatus,
 )
 
+from .common import hand_fingers
+
 __all__ = ["hand_actuation", "torque_limit_errors", "with_actuation"]
 
 #: The certificate's entry: the largest share of a torque limit the plan needs.
@@ -29,8 +31,7 @@ def hand_actuation(request: Any, hand: Any) -> Any:
     """The actuators of the request's hand (:meth:`ocp.robots.whole_hand.WholeHand.
     actuation`, with the request's ``hand.torque_limits``) when every finger is one of
     that hand's; None otherwise."""
-    if request.hand is None or not hasattr(hand, "actuation") or any(
-            f.finger is not None or f.hand_finger is None for f in request.fingers):
+    if hand_fingers(request, hand) is None:
         return None
     got = hand.actuation()
     limits = request.hand.torque_limits

@@ -14,9 +14,21 @@ from ocp.certify.certificate import Certificate, CheckKind
 from ocp.spec.problem import ForceSpec, ObjectSpec, SolverOptions
 
 __all__ = ["all_finite", "check_tolerances", "check_values", "finger_certificate",
-           "finite_or_none", "force_spec", "object_spec", "rows", "solver_options"]
+           "finite_or_none", "force_spec", "hand_fingers", "object_spec", "rows",
+           "solver_options"]
 
 CertificateT = TypeVar("CertificateT", bound=FingerCertificateModel)
+
+
+def hand_fingers(request: Any, hand: Any) -> list[int] | None:
+    """The request's fingers' indices into its whole hand's (``hand``: a
+    :class:`~ocp.robots.whole_hand.WholeHand`), when every finger is one of them; None
+    otherwise (no hand, fingers of their own, a hand of flat pads): the condition for
+    checking the hand's own links and actuators."""
+    if request.hand is None or not hasattr(hand, "collision") or any(
+            f.finger is not None or f.hand_finger is None for f in request.fingers):
+        return None
+    return [int(f.hand_finger) for f in request.fingers]
 
 
 def force_spec(f: ForcesModel | None) -> ForceSpec | None:

@@ -48,6 +48,7 @@ from .common import (
     all_finite,
     finger_certificate,
     force_spec,
+    hand_fingers,
     object_spec,
     rows,
     solver_options,
@@ -268,11 +269,8 @@ def _hand_collision(request: ManipulationRequest, hand: Any) -> Any:
     """The request's hand's collision geoms with its fingers' tips
     (:meth:`ocp.robots.whole_hand.WholeHand.collision`): None unless every finger is one
     of a whole hand's (a URDF's links are not checked)."""
-    if request.hand is None or not hasattr(hand, "collision") or any(
-            f.finger is not None or f.hand_finger is None for f in request.fingers):
-        return None
-    return hand.collision([int(f.hand_finger) for f in request.fingers
-                           if f.hand_finger is not None])
+    which = hand_fingers(request, hand)
+    return None if which is None else hand.collision(which)
 
 
 def _initial_clearance(collision: Any, obj: ObjectSpec, start: ObjectPose,
