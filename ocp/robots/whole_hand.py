@@ -387,7 +387,7 @@ class WholeHand:
     #: planned (:func:`shared_joints`).
     held: dict[str, float] = field(default_factory=dict)
     #: What :meth:`collision` and :meth:`actuation` built, by their arguments.
-    _collisions: dict[tuple[Any, ...], Any] = field(default_factory=dict, repr=False)
+    _made: dict[tuple[Any, ...], Any] = field(default_factory=dict, repr=False)
 
     def actuation(self) -> Any:
         """The hand's actuators as its file says (:mod:`ocp.robots.actuation`): an MJCF's
@@ -395,7 +395,7 @@ class WholeHand:
         their ``effort``."""
         from ocp.robots.actuation import HandActuation, UrdfActuation
 
-        got = self._collisions.get(("actuation",))
+        got = self._made.get(("actuation",))
         if got is None:
             if self.format == "mjcf":
                 try:
@@ -406,7 +406,7 @@ class WholeHand:
             else:
                 got = UrdfActuation({n: float(e) for f in self.fingers for n, e in zip(
                     f.joint_names, effort_limits(f), strict=True)})
-            self._collisions[("actuation",)] = got
+            self._made[("actuation",)] = got
         return got
 
     def collision(self, fingers: Sequence[int]) -> Any:
@@ -423,9 +423,9 @@ class WholeHand:
         from ocp.robots.collision import HandCollision
 
         key = tuple(int(i) for i in fingers)
-        got = self._collisions.get(key)
+        got = self._made.get(key)
         if got is None:
-            got = self._collisions[key] = HandCollision(
+            got = self._made[key] = HandCollision(
                 self.text, tuple(self.tips[i].name for i in key), self.mount,
                 dict(self.held))
         return got
