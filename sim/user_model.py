@@ -240,28 +240,55 @@ class UserModelSimulation:
 
     def _couplings(self) -> list[str]:
         """The file's constraints between the joints the plan moves (limited tendons over
-        two or more of them, joint equalities), in words: the plan does not model them,
-        the execution has them."""
+        two or more of them, joint equalities), in words, each with how far the plan's
+        joints leave it at worst (the plan keeps those of the hand it was planned on; a
+        different file's may be broken, and the execution has them)."""
         m = self.model
-        planned = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j.name)
-                   for joints in self.joints for j in joints}
+        d = mujoco.MjData(m)
+        plan = self.plan
+        joint = {j.name: j for joints in self.joints for j in joints}
+        planned = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in joint}
+        lengths, values = [], []
+        for i in range(plan.t.size):  # the tendons and joints along the plan
+            d.qpos[:] = m.qpos0
+            for joints, ref in zip(self.joints, plan.references, strict=True):
+                for k, j in enumerate(joints):
+                    d.qpos[j.qpos] = ref.q[i, k]
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_tendon(m, d)
+            lengths.append(d.ten_length.copy())
+            values.append(d.qpos.copy())
+        L, Q = np.array(lengths), np.array(values)
         out = []
         for t in range(m.ntendon):
             adr, num = int(m.tendon_adr[t]), int(m.tendon_num[t])
-            joints = [int(m.wrap_objid[adr + i]) for i in range(num)
-                      if int(m.wrap_type[adr + i]) == int(mujoco.mjtWrap.mjWRAP_JOINT)]
-            if num > 1 and m.tendon_limited[t] and planned & set(joints):
+            wrapped = [int(m.wrap_objid[adr + i]) for i in range(num)
+                       if int(m.wrap_type[adr + i]) == int(mujoco.mjtWrap.mjWRAP_JOINT)]
+            if num > 1 and m.tendon_limited[t] and planned & set(wrapped):
                 names = ", ".join(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
-                                  for j in joints)
+                                  for j in wrapped)
                 lo, hi = (float(x) for x in m.tendon_range[t])
+                over = float(np.max(np.maximum(L[:, t] - hi, lo - L[:, t]), initial=0.0))
                 out.append(f"tendon {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_TENDON, t)!r}"
-                           f" ({names}) limited to {lo:g}..{hi:g}")
+                           f" ({names}) limited to {lo:g}..{hi:g}: "
+                           + ("the plan keeps it" if over <= 1e-6 else
+                              f"the plan leaves it by {over:.3g} at worst"))
         for e in range(m.neq):
             if int(m.eq_type[e]) == int(mujoco.mjtEq.mjEQ_JOINT) and \
                     planned & {int(m.eq_obj1id[e]), int(m.eq_obj2id[e])}:
-                a = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.eq_obj1id[e]))
-                b = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.eq_obj2id[e]))
-                out.append(f"joint equality {a} = f({b})")
+                i1, i2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
+                a = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, i1)
+                q1 = Q[:, int(m.jnt_qposadr[i1])] - m.qpos0[int(m.jnt_qposadr[i1])]
+                poly = np.asarray(m.eq_data[e, :5], dtype=float)
+                if i2 >= 0:
+                    b = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, i2)
+                    q2 = Q[:, int(m.jnt_qposadr[i2])] - m.qpos0[int(m.jnt_qposadr[i2])]
+                else:
+                    b, q2 = "a constant", np.zeros_like(q1)
+                err = float(np.max(np.abs(q1 - sum(c * q2 ** k for k, c in enumerate(poly)))))
+                out.append(f"joint equality {a} = f({b}): " +
+                           ("the plan keeps it" if err <= 1e-6 else
+                            f"the plan leaves it by {err:.3g} at worst"))
         return out
 
     # -- the reference --------------------------------------------------------------------
@@ -492,9 +519,8 @@ class UserModelSimulation:
             extra.append("fingertip contact settings that differ from the file's (with the "
                          f"object): {', '.join(changed)}")
         if settings["couplings"]:
-            extra.append("the file couples joints the plan moves independently (the plan "
-                         "does not model them; the execution has them): "
-                         + "; ".join(settings["couplings"]))
+            extra.append("the file couples joints the plan moves (the execution has the "
+                         "couplings): " + "; ".join(settings["couplings"]))
         report = SimReport.assess(
             mode="servo (the model's actuators)", options=o, contacts=contacts,
             position=ErrorSummary.of(pos_err[during], t_end[during]),

@@ -126,23 +126,60 @@ def test_a_tip_without_sphere_or_capsule_geometry_and_no_surface() -> None:
     assert "give the fingertip's surface" in errs[0][1]
 
 
-@pytest.mark.parametrize(("patch", "words"), [
-    ("<worldbody>", "<equality><joint joint1=\"index_j2\" joint2=\"index_j3\"/></equality>"
-                    "<worldbody>"),
-    ("<worldbody>", "<tendon><fixed name=\"couple\" limited=\"true\" range=\"-0.001 0.001\">"
-                    "<joint joint=\"index_j2\" coef=\"1\"/><joint joint=\"index_j3\" "
-                    "coef=\"-1\"/></fixed></tendon><worldbody>"),
-    ("<worldbody>", "<include file=\"other.xml\"/><worldbody>"),
-    ('type="hinge" axis="0 0 1"', 'type="ball" axis="0 0 1"'),
+@pytest.mark.parametrize(("patch", "words", "why"), [
+    ("<worldbody>", "<equality><joint joint1=\"index_j2\" joint2=\"index_j3\" "
+                    "polycoef=\"0 1 0.5 0 0\"/></equality><worldbody>",
+     "a polynomial of degree above 1"),
+    ("<worldbody>", "<equality><weld body1=\"index_tip\"/></equality><worldbody>",
+     "closes a kinematic chain"),
+    ("<worldbody>", "<tendon><fixed name=\"drive\"><joint joint=\"index_j2\" coef=\"1\"/>"
+                    "<joint joint=\"index_j3\" coef=\"1\"/></fixed></tendon><actuator>"
+                    "<motor tendon=\"drive\"/></actuator><worldbody>",
+     "a transmission to several joints is not commanded"),
+    ("<worldbody>", "<tendon><fixed name=\"across\" limited=\"true\" range=\"-0.01 0.01\">"
+                    "<joint joint=\"index_j2\" coef=\"1\"/><joint joint=\"middle_j2\" "
+                    "coef=\"-1\"/></fixed></tendon><worldbody>",
+     "couplings across fingers are not planned"),
+    ("<worldbody>", "<include file=\"other.xml\"/><worldbody>", "included files"),
+    ('type="hinge" axis="0 0 1"', 'type="ball" axis="0 0 1"', "'ball' joint"),
 ])
-def test_mjcf_couplings_includes_and_unsupported_joints_are_refused(patch: str, words: str
-                                                                     ) -> None:
+def test_mjcf_couplings_it_cannot_plan_includes_and_unsupported_joints_are_refused(
+        patch: str, words: str, why: str) -> None:
     text = MJCF.text.replace(patch, words, 1)
-    errs = _errors(lambda: load_whole_hand(text, "mjcf", [TipSpec("index_tip")]))
+    errs = _errors(lambda: load_whole_hand(text, "mjcf", [TipSpec("index_tip"),
+                                                         TipSpec("middle_tip")]))
     assert errs[0][0] == "model"
-    what = {"equality": "coupling", "tendon": "coupling", "include": "included files",
-            "ball": "'ball' joint"}
-    assert any(w in errs[0][1] for k, w in what.items() if k in words), errs
+    assert any(why in e for _, e in errs), errs
+
+
+def test_mjcf_linear_couplings_are_read_as_mujoco_states_them() -> None:
+    """A limited fixed tendon over two joints, a linear joint equality (relative to the
+    joints' qpos0, as MuJoCo states it) and a tendon equality with a constant: each a
+    coupling of its finger, lower <= coefs . q <= upper, in the file's names; a coupling
+    of the middle finger's joints is not the index's."""
+    pytest.importorskip("mujoco")
+    words = ("<tendon><fixed name=\"c\" limited=\"true\" range=\"-0.001 0.002\">"
+             "<joint joint=\"index_j2\" coef=\"0.007\"/><joint joint=\"index_j3\" "
+             "coef=\"-0.008\"/></fixed><fixed name=\"m\"><joint joint=\"middle_j1\" "
+             "coef=\"1\"/><joint joint=\"middle_j2\" coef=\"1\"/></fixed></tendon>"
+             "<equality><joint name=\"e\" joint1=\"index_j1\" joint2=\"index_j0\" "
+             "polycoef=\"0.1 0.5 0 0 0\"/><tendon tendon1=\"m\" polycoef=\"0.2 0 0 0 0\"/>"
+             "</equality><worldbody>")
+    hand = load_whole_hand(MJCF.text.replace("<worldbody>", words, 1), "mjcf",
+                           [TipSpec("index_tip"), TipSpec("middle_tip")])
+    index, middle = hand.fingers
+    got = {c.name: c for c in index.couplings}
+    assert set(got) == {"tendon 'c'", "<equality><joint> 'e'"}
+    c = got["tendon 'c'"]
+    assert c.joints == ("index_j2", "index_j3") and c.coefs == (0.007, -0.008)
+    assert (c.lower, c.upper) == (-0.001, 0.002)
+    assert np.allclose(c.row(index.joint_names), [0, 0, 0.007, -0.008])
+    e = got["<equality><joint> 'e'"]  # q1 - 0.5 q0 = 0.1 (qpos0 = 0)
+    assert e.lower == e.upper == pytest.approx(0.1)
+    assert np.allclose(e.row(index.joint_names), [-0.5, 1, 0, 0])
+    (m,) = middle.couplings  # L - L0 = 0.2, L0 = 0 at qpos0
+    assert m.name == "<equality><tendon> 1" and m.lower == m.upper == pytest.approx(0.2)
+    assert np.allclose(m.row(middle.joint_names), [0, 1, 1, 0])
 
 
 def test_urdf_mimic_and_continuous_joints_are_refused() -> None:

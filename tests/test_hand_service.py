@@ -142,14 +142,14 @@ def test_a_tip_without_round_geometry_and_no_surface_is_422(live_server: Server)
     assert "no sphere or capsule geom" in fields["hand.tips[0].surface"]
 
 
-def test_a_coupled_joint_is_422_naming_what_and_where(live_server: Server) -> None:
+def test_a_coupling_it_cannot_plan_is_422_naming_what_and_why(live_server: Server) -> None:
     body = turn(own("mjcf"))
     body["hand"]["mjcf"] = body["hand"]["mjcf"].replace(
-        "<worldbody>", '<equality><joint joint1="index_j2" joint2="index_j3"/></equality>'
-                       "<worldbody>")
+        "<worldbody>", '<equality><joint joint1="index_j2" joint2="index_j3" '
+                       'polycoef="0 1 0.3 0 0"/></equality><worldbody>')
     fields = _post(live_server, body)
-    assert "'index_j2' to 'index_j3'" in fields["hand.mjcf"]
-    assert "coupling" in fields["hand.mjcf"]
+    assert "<equality><joint> couples 'index_j2'" in fields["hand.mjcf"]
+    assert "polynomial of degree above 1" in fields["hand.mjcf"]
 
 
 def test_an_unsupported_joint_is_422(live_server: Server) -> None:

@@ -5,9 +5,9 @@ tendons over one joint that limit it, a default class with a joint type no body 
 position servos of kp 1.
 
 Laws: the wrist joints, shared by all fingers, are held (not planned) and said so; a
-tendon over one joint is that joint's limit, as MuJoCo reads it; the couplings are refused
-naming each tendon, its joints and its range, and how many single-joint tendons were read
-as limits; an unused default class's joint type refuses nothing."""
+tendon over one joint is that joint's limit, as MuJoCo reads it; a coupling tendon is a
+coupling of its finger's joints (tests/test_couplings.py plans with them); an unused
+default class's joint type refuses nothing."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from helpers import nominal_turn
 
 mujoco = pytest.importorskip("mujoco")
 
-from ocp.robots.whole_hand import HandModelError, TipSpec, load_whole_hand  # noqa: E402
+from ocp.robots.whole_hand import TipSpec, load_whole_hand  # noqa: E402
 
 FINGERS = (("ff", 0.033), ("mf", 0.011), ("rf", -0.011))
 
@@ -92,18 +92,18 @@ def hand_text(couplings: bool = True) -> str:
 TIPS = [TipSpec(f"{n}_tip") for n, _ in FINGERS]
 
 
-def test_couplings_are_refused_naming_each_tendon_and_its_joints() -> None:
-    with pytest.raises(HandModelError) as exc:
-        load_whole_hand(hand_text(), "mjcf", TIPS)
-    (field, reason), = exc.value.errors
-    assert field == "model"
-    assert "3 tendon coupling(s)" in reason
-    for n, _ in FINGERS:
+def test_coupling_tendons_are_read_as_couplings_of_their_fingers() -> None:
+    """Each finger's T_J1c (its J0 and J1 within 1 mm of tendon of each other) is a
+    coupling of that finger's joints, in the file's names and MuJoCo's numbers; the
+    unused default class's joint type refuses nothing."""
+    hand = load_whole_hand(hand_text(), "mjcf", TIPS)
+    for (n, _), f in zip(FINGERS, hand.fingers, strict=True):
         p = n.upper()
-        assert f"tendon 'T_{p}J1c' couples joints '{p}J0', '{p}J1'" in reason
-    assert "0.00705 FFJ0 + -0.00805 FFJ1, limited to -0.001 0.001" in reason
-    assert "the 3 tendons that limit one joint each are read as that joint's limits" in reason
-    assert "ball" not in reason and "free" not in reason  # the unused class's joint type
+        (c,) = f.couplings
+        assert c.name == f"tendon 'T_{p}J1c'"
+        assert c.joints == (f"{p}J0", f"{p}J1") and c.coefs == (0.00705, -0.00805)
+        assert (c.lower, c.upper) == (-0.001, 0.001)
+        assert "0.00705 " + p + "J0 + -0.00805 " + p + "J1 in -0.001..0.001" in c.describe()
 
 
 def test_shared_wrist_joints_are_held_and_single_joint_tendons_are_limits() -> None:

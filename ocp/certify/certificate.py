@@ -237,6 +237,8 @@ class TolerancePolicy:
     #: a fingertip's gap to the object [m], a joint's excursion past its limit [rad or m]
     gap: float = 1e-5
     joint_limit: float = 1e-6
+    #: a joint coupling's excursion past its bounds [m of tendon] (ocp.robots.couplings)
+    coupling: float = 1e-6
     #: each fingertip where its joints put it (Pinocchio) [m], [rad]
     closure_position: float = 1e-5
     closure_orientation: float = 1e-4

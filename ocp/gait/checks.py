@@ -17,6 +17,7 @@ from ocp.certify.certificate import Check, CheckKind
 from ocp.gait.hold import Hold, hold_residuals
 from ocp.gait.swing import SwingPlan
 from ocp.geometry.bodies import point_segment_distance, segments_distance
+from ocp.robots.couplings import coupling_violation
 
 __all__ = ["DENSE_SAMPLES", "hold_checks", "swing_checks"]
 
@@ -96,6 +97,11 @@ def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
     k = int(np.argmax(over))
     out.append(_check(f"swing_joint_limits_{label}", over[k], 0.0, CheckKind.LIMITS, ts[k],
                       t0))
+    if getattr(f, "couplings", ()):  # the finger's joint couplings [m of tendon]
+        over_c = coupling_violation(f, q)
+        k = int(np.argmax(over_c))
+        out.append(_check(f"swing_coupling_{label}", over_c[k], 1e-6, CheckKind.LIMITS,
+                          ts[k], t0))
     vmax = np.asarray(f.velocity_limit, dtype=float)
     over_v = (np.abs(v) / vmax).max(axis=1)
     k = int(np.argmax(over_v))

@@ -259,6 +259,8 @@ def swing_key(f: Any, n: int, K: int, n_others: int) -> tuple[str, int, int, int
     for j in f.chain:
         arrays += [j.axis, j.placement_rotation, j.placement_translation, [j.index_q]]
         kinds.append(j.kind)
+    for c in getattr(f, "couplings", ()):
+        arrays += [c.row(f.joint_names), [c.lower, c.upper]]
     digest = hashlib.sha256("/".join(kinds).encode())
     for a in arrays:
         digest.update(np.ascontiguousarray(a, dtype=float).tobytes())
@@ -317,6 +319,15 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
             for i in range(nq):
                 kind = f"joint {f.joint_names[i]}'s limits"
                 add(ctrl[i], lo_q[i], hi_q[i])
+        # the finger's joint couplings (ocp.robots.couplings), linear: kept by the
+        # segment's control points and its end
+        for cp in getattr(f, "couplings", ()):
+            a = cp.row(f.joint_names)
+            scale = float(np.linalg.norm(a))
+            kind = f"the coupling {cp.name}"
+            for ctrl in (qk + h / 3 * vk, qk + 2 * h / 3 * vk + h * h / 6 * ak,
+                         Q[:, k + 1]):
+                add(ca.dot(ca.DM(a / scale), ctrl), cp.lower / scale, cp.upper / scale)
         mid_v = vk + h / 2 * ak  # the rate's middle control point
         for i in range(nq):
             kind = f"joint {f.joint_names[i]}'s velocity limit"

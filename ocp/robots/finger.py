@@ -192,6 +192,9 @@ class FingerModel:
     #: The fingertip surface in the tip frame (:class:`~ocp.geometry.tips.TipSurface`);
     #: None: the flat square pad of :attr:`pad_half_size` (the tip frame the pad's).
     tip: Any = None
+    #: Linear couplings of its joints the plan keeps (:class:`~ocp.robots.couplings.Coupling`:
+    #: an MJCF's coupling tendons and joint equalities).
+    couplings: tuple[Any, ...] = ()
 
     @property
     def tip_surface(self) -> Any:

@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import segments_distance, tip_body
+from ocp.robots.couplings import project_couplings
 from ocp.robots.grasp_reach import _tip, grasp_on_ball, roll, tip_state
 
 __all__ = [
@@ -234,6 +235,8 @@ def finger_contacts(f: Any, centre: ArrayLike, radius: float, seeds: Sequence[Ar
     lo, hi = _limits(f)
     Q = [np.clip(np.asarray(s, dtype=float), lo, hi) for s in seeds]
     Q += [(lo + hi) / 2, *(lo + (hi - lo) * rng.random((samples, f.nq)))]
+    if getattr(f, "couplings", ()):  # drawn within the couplings too
+        Q = [project_couplings(f, q) for q in Q]
     near: list[tuple[float, FloatArray, FloatArray]] = []
     closest = math.inf
     for q in Q:

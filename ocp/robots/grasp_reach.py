@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import segment_distance, tip_body
+from ocp.robots.couplings import coupled_step, coupling_violation, project_couplings
 
 __all__ = ["GraspSearch", "Rolled", "TipState", "cap_bound", "contact_sides", "grasp_on_ball",
            "roll", "search_grasp", "tip_state", "tips_gap"]
@@ -171,6 +172,10 @@ def roll(f: Any, q0: ArrayLike, centre: ArrayLike, radius: float, axis: ArrayLik
         out = np.flatnonzero((q_new < f.lower) | (q_new > f.upper))
         if out.size:
             return stop(f"joint limit ({f.joint_names[int(out[0])]})")
+        held = [c for c in getattr(f, "couplings", ()) if not
+                c.backed_off()[0] <= float(c.row(f.joint_names) @ q_new) <= c.backed_off()[1]]
+        if held:
+            return stop(f"coupling limit ({held[0].name})")
         if s.polar > seam:
             return stop("cap's seam")
         theta += h
@@ -216,7 +221,7 @@ def grasp_on_ball(f: Any, q_start: ArrayLike, centre: ArrayLike, radius: float,
     pc, _, r = _tip(f)
     target = c + (radius + r) * nrm / np.linalg.norm(nrm)
     q_ref = np.asarray(q_start, dtype=float)
-    q = np.clip(q_ref, f.lower, f.upper)
+    q = project_couplings(f, q_ref)
     for _ in range(40):  # damped Gauss-Newton on the tip's centre, a pull towards q_start
         s = tip_state(f, q, c, radius)
         e = target - s.centre
@@ -226,7 +231,7 @@ def grasp_on_ball(f: Any, q_start: ArrayLike, centre: ArrayLike, radius: float,
         Jc = J[:3] - _skew(s.R_l @ pc) @ J[3:]
         A = np.vstack([Jc, 1e-3 * np.eye(f.nq)])
         dq = np.linalg.lstsq(A, np.concatenate([e, 1e-3 * (q_ref - q)]), rcond=None)[0]
-        q = np.clip(q + dq / max(1.0, float(np.abs(dq).max()) / 0.3), f.lower, f.upper)
+        q = coupled_step(f, q, dq / max(1.0, float(np.abs(dq).max()) / 0.3))
     for _ in range(10):  # then onto the target exactly (least-norm steps)
         s = tip_state(f, q, c, radius)
         e = target - s.centre
@@ -234,9 +239,10 @@ def grasp_on_ball(f: Any, q_start: ArrayLike, centre: ArrayLike, radius: float,
             break
         J = f.frame_jacobian_pin(q)
         dq = np.linalg.lstsq(J[:3] - _skew(s.R_l @ pc) @ J[3:], e, rcond=None)[0]
-        q = np.clip(q + dq, f.lower, f.upper)
+        q = coupled_step(f, q, dq)
     s = tip_state(f, q, c, radius)
-    if np.linalg.norm(s.centre - target) > tol or s.polar > math.pi / 2 - margin / r:
+    if np.linalg.norm(s.centre - target) > tol or s.polar > math.pi / 2 - margin / r \
+            or coupling_violation(f, q)[0] > 0.0:
         return None
     return np.asarray(q, dtype=float)
 

@@ -15,9 +15,10 @@ a model read in another frame is refused (:func:`frame_problems`).
 
 What Pinocchio would not model is refused before it builds anything, naming what and
 where (:class:`HandModelError`, (field, reason) pairs): an MJCF ``<include>`` (a file the
-service would read), joint couplings (MJCF ``<equality>`` and ``<tendon>``, URDF
-``<mimic>``), joint types other than revolute/hinge and prismatic/slide (ball, free,
-planar, floating, continuous without limits).
+service would read), joint couplings it does not plan (URDF ``<mimic>``; MJCF couplings
+that are not linear or span two fingers: the linear ones are read as MuJoCo compiles
+them, :mod:`ocp.robots.couplings`), joint types other than revolute/hinge and
+prismatic/slide (ball, free, planar, floating, continuous without limits).
 """
 
 from __future__ import annotations
@@ -212,7 +213,7 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
 
 def model_problems(text: str, fmt: str) -> list[tuple[str, str]]:
     """What Pinocchio would not model faithfully in the model text, as ("model", reason):
-    includes, couplings, unsupported joint types; [] when none."""
+    includes, couplings not planned, unsupported joint types; [] when none."""
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
@@ -251,58 +252,45 @@ def model_problems(text: str, fmt: str) -> list[tuple[str, str]]:
 
 
 def _coupling_problems(root: ET.Element) -> list[tuple[str, str]]:
-    """An MJCF's couplings of joints, as ("model", reason) naming each: an ``<equality>``
-    (``joint``: two joints coupled; ``weld``, ``connect``: a closed chain; ``tendon``: its
-    tendon's joints) and a ``<fixed>`` tendon over two or more joints that is limited,
-    held by an equality or driven by an actuator; a ``<spatial>`` tendon so used. A fixed
-    tendon over one joint is a limit of that joint (:func:`tendon_limits`), and a tendon
-    nothing constrains is no coupling: neither is refused."""
+    """An MJCF's couplings of joints that are not planned, as ("model", reason) naming
+    each (:mod:`ocp.robots.couplings` plans the linear ones): a ``weld`` or ``connect``
+    equality (a closed chain), a joint or tendon equality whose polynomial is not linear,
+    a ``<spatial>`` tendon that is limited, held by an equality or driven, a fixed tendon
+    over several joints driven by an actuator (a transmission, not a coupling)."""
     errs: list[tuple[str, str]] = []
-    in_equality = {el.get("tendon1") for eq in root.iter("equality") for el in eq
-                   if el.tag == "tendon"} | {el.get("tendon2") for eq in root.iter("equality")
-                                             for el in eq if el.tag == "tendon"}
+    equalities = [el for eq in root.iter("equality") for el in eq]
+    in_equality = {el.get(k) for el in equalities if el.tag == "tendon"
+                   for k in ("tendon1", "tendon2")}
     driven = {el.get("tendon") for act in root.iter("actuator") for el in act}
-    why = "coupled joints are not planned yet, so this hand is refused"
-    for eq in root.iter("equality"):
-        for el in eq:
-            name = f" {el.get('name')!r}" if el.get("name") else ""
-            if el.tag == "joint":
-                other = el.get("joint2")
-                errs.append(("model", f"<equality><joint{name}>: a coupling of joint "
-                                      f"{el.get('joint1')!r}" + (f" to {other!r}" if other
-                                                                 else " to a constant")
-                             + f"; {why}"))
-            elif el.tag in ("weld", "connect"):
-                errs.append(("model", f"<equality><{el.tag}{name}> closes a kinematic chain "
-                                      f"({el.get('body1') or el.get('site1')!r}): {why}"))
-    couplings, limits = [], 0
+    why = "it is not planned, so this hand is refused"
+    for el in equalities:
+        name = f" {el.get('name')!r}" if el.get("name") else ""
+        if el.tag in ("weld", "connect"):
+            errs.append(("model", f"<equality><{el.tag}{name}> closes a kinematic chain "
+                                  f"({el.get('body1') or el.get('site1')!r}): {why}"))
+        elif el.tag in ("joint", "tendon") and el.get("active", "true") != "false":
+            poly = [float(v) for v in (el.get("polycoef") or "0 1 0 0 0").split()]
+            if any(abs(v) > 0.0 for v in poly[2:]):
+                errs.append(("model", f"<equality><{el.tag}{name}> couples "
+                                      f"{el.get(el.tag + '1')!r} by a polynomial of degree "
+                                      f"above 1 (polycoef {el.get('polycoef')}): only linear "
+                                      f"couplings are planned, so this hand is refused"))
     for tendons in root.iter("tendon"):
         for t in tendons:
             tname = t.get("name")
-            joints = [(j.get("joint"), j.get("coef", "1")) for j in t if j.tag == "joint"]
+            joints = [j.get("joint") for j in t if j.tag == "joint"]
             limited = t.get("limited") == "true" or (t.get("limited") != "false"
                                                       and t.get("range") is not None)
-            used = limited or tname in in_equality or tname in driven
-            if t.tag == "fixed" and len(joints) == 1:
-                limits += int(limited)
-                continue
-            if not used:
-                continue
-            how = ("limited to " + (t.get("range") or "?")) if limited else \
-                "held by an <equality>" if tname in in_equality else "driven by an actuator"
-            if t.tag == "fixed":
-                terms = " + ".join(f"{c} {j}" for j, c in joints)
-                couplings.append(f"tendon {tname!r} couples joints "
-                                 f"{', '.join(repr(j) for j, _ in joints)} ({terms}, {how})")
-            else:
-                couplings.append(f"spatial tendon {tname!r} ({how}) routes over sites and "
-                                 "couples the joints it crosses")
-    if couplings:
-        shown = "; ".join(couplings[:6]) + (f"; and {len(couplings) - 6} more"
-                                            if len(couplings) > 6 else "")
-        errs.append(("model", f"{len(couplings)} tendon coupling(s): {shown}: {why}"
-                     + (f" (the {limits} tendons that limit one joint each are read as "
-                        "that joint's limits)" if limits else "")))
+            if t.tag == "spatial" and (limited or tname in in_equality or tname in driven):
+                how = "limited" if limited else "held by an <equality>" \
+                    if tname in in_equality else "driven by an actuator"
+                errs.append(("model", f"spatial tendon {tname!r} ({how}) routes over sites "
+                                      f"and couples the joints it crosses: {why}"))
+            elif t.tag == "fixed" and len(joints) > 1 and tname in driven:
+                errs.append(("model", f"tendon {tname!r} over joints "
+                                      f"{', '.join(repr(j) for j in joints)} is driven by an "
+                                      "actuator: a transmission to several joints is not "
+                                      "commanded, so this hand is refused"))
     return errs
 
 
@@ -508,9 +496,43 @@ def load_whole_hand(text: str, fmt: str, tips: Sequence[TipSpec],
                                              held=held))
         except ValueError as exc:
             errs.append((f"{where}.name", str(exc)))
+    if not errs and fmt == "mjcf":
+        fingers, errs = _coupled(text, fingers, held)
     if errs:
         raise HandModelError(errs)
     return WholeHand(name, fmt, text, tuple(tips), tuple(fingers), (R, p), held)
+
+
+def _coupled(text: str, fingers: list[Any], held: dict[str, float]
+             ) -> tuple[list[Any], list[tuple[str, str]]]:
+    """The fingers with the MJCF's couplings of their joints
+    (:func:`~ocp.robots.couplings.hand_couplings`), and the couplings refused."""
+    from dataclasses import replace
+
+    from ocp.robots.couplings import hand_couplings
+
+    try:
+        per, errs = hand_couplings(text, [f.joint_names for f in fingers], held)
+    except ImportError:  # without MuJoCo its couplings cannot be read: refused if any
+        return fingers, [("model", r) for r in _unread_couplings(text)]
+    except Exception:  # MuJoCo's reason is the frame check's to report
+        return fingers, []
+    return ([replace(f, couplings=c) if c else f for f, c in zip(fingers, per, strict=True)],
+            [("model", r) for r in errs])
+
+
+def _unread_couplings(text: str) -> list[str]:
+    """Without MuJoCo: the limited fixed tendons over several joints and the joint and
+    tendon equalities of the text, each a coupling that cannot be read."""
+    root = ET.fromstring(text)
+    out = [f"tendon {t.get('name')!r} couples joints: reading couplings needs MuJoCo "
+           "(pip install mujoco)" for tendons in root.iter("tendon") for t in tendons
+           if t.tag == "fixed" and len([j for j in t if j.tag == "joint"]) > 1
+           and (t.get("limited") == "true" or t.get("range") is not None)]
+    out += [f"<equality><{el.tag}> {el.get('name') or ''} couples joints: reading "
+            "couplings needs MuJoCo (pip install mujoco)" for eq in root.iter("equality")
+            for el in eq if el.tag in ("joint", "tendon")]
+    return out
 
 
 def shared_joints(model: Any, tips: Sequence[str]) -> dict[str, float]:

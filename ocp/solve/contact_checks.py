@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from ocp.certify.certificate import Check, CheckKind, TolerancePolicy
 from ocp.contacts import Contact, FingertipContact, FreeFingertip, FreeObject, SupportContact
+from ocp.robots.couplings import coupling_violation
 
 if TYPE_CHECKING:
     from ocp.spec.grasp import ManipulationProblem
@@ -157,6 +158,7 @@ def fingertip_checks(contact: FingertipContact, problem: ManipulationProblem,
         c.check(excursion_name, excursion, limit, CheckKind.LIMITS),
         c.check(f"max_joint_limit_violation_{name}", joint_limit_violation(f, q_i),
                 pol.joint_limit, D),
+        *coupling_checks(f, name, q_i, c),
         c.check("max_closure_position_error", np.linalg.norm(p_pin - c.p_pf[:, i],
                                                               axis=1),
                 pol.closure_position, D),
@@ -168,6 +170,18 @@ def free_fingertip_checks(contact: FreeFingertip, problem: ManipulationProblem,
                           c: CertificateContext) -> list[Check]:
     """A free fingertip's joints inside their limits along the returned trajectory."""
     q = c.states[:, contact.q_cols]
-    return [c.check(f"max_joint_limit_violation_{contact.label(problem)}",
+    name = contact.label(problem)
+    return [c.check(f"max_joint_limit_violation_{name}",
                     joint_limit_violation(contact.finger, q), c.policy.joint_limit,
-                    CheckKind.DISCRETISATION)]
+                    CheckKind.DISCRETISATION),
+            *coupling_checks(contact.finger, name, q, c)]
+
+
+def coupling_checks(finger: Any, name: str, q: FloatArray, c: CertificateContext
+                    ) -> list[Check]:
+    """The finger's joint couplings kept (:mod:`ocp.robots.couplings`: metres of
+    tendon) along the returned trajectory; none for a finger without couplings."""
+    if not getattr(finger, "couplings", ()):
+        return []
+    return [c.check(f"max_coupling_violation_{name}", coupling_violation(finger, q),
+                    c.policy.coupling, CheckKind.DISCRETISATION)]

@@ -155,7 +155,8 @@ class GraspStructure:
             parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
                       repr(np.asarray(f.base_rotation).round(12).tolist()),
                       repr(np.asarray(f.base_position).round(12).tolist()),
-                      repr(f.tip_surface)]  # the fingertip surface (issue 14)
+                      repr(f.tip_surface),  # the fingertip surface (issue 14)
+                      repr(getattr(f, "couplings", ()))]  # its joints' couplings' rows
         return hashlib.sha256("|".join(parts).encode()).hexdigest()[:32]
 
 

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from ocp.certify.certificate import GRASP_TOLERANCES, PALM_TOLERANCES, TolerancePolicy
 from ocp.geometry.rotations import log_rotation
 from ocp.geometry.surfaces import SURFACES, rotation_from_vector
+from ocp.robots.couplings import coupled_step
 from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
 from ocp.spec.phases import ContactPhase, phase_errors, phase_intervals
 from ocp.spec.problem import (
@@ -454,8 +455,7 @@ def contact_from_joints(finger: Any, q: ArrayLike, obj: Any, pose: Any
             J = finger.frame_jacobian_pin(qa)
             Jc = J[:3] - np.cross(R_l @ tip.p, J[3:].T).T  # the centre's velocity
             g = -(d / np.linalg.norm(d)) @ Jc  # d gap / dq
-            qa = np.clip(qa - gap * g / max(float(g @ g), 1e-18), finger.lower,
-                         finger.upper)
+            qa = coupled_step(finger, qa, -gap * g / max(float(g @ g), 1e-18))
             R_l, _, centre = centre_of(qa)
     R_t = R_l @ tip.R
     d = c_obj - centre
@@ -491,6 +491,10 @@ def fingertips_from_joints(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: O
                f"{lo if v < lo else hi:.4g} by {max(lo - v, v - hi):.3g}"
                for j, v, lo, hi in zip(f.joint_names, q, f.lower, f.upper, strict=True)
                if not lo <= v <= hi]
+        bad += [f"{c.describe()} is {v:.4g}, outside by {max(c.lower - v, v - c.upper):.3g}"
+                for c in getattr(f, "couplings", ())
+                for v in [float(c.row(f.joint_names) @ q)]
+                if not c.lower - 1e-9 <= v <= c.upper + 1e-9]
         if bad:
             errs.append((where[i], f"finger {name!r}: " + "; ".join(bad)))
             continue

@@ -182,6 +182,13 @@ def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
     clear = pm.clearance(x_scale * xs, prm)  # the lifted fingertips kept off the object
     if clear.numel():
         add(clear, 0.0, math.inf)
+    for c in m.fingertips:  # each finger's joint couplings (ocp.robots.couplings), in rad
+        q_c = (x_scale * xs)[c.q_cols]
+        for cp in getattr(c.finger, "couplings", ()):
+            a = cp.row(c.finger.joint_names)
+            scale = float(np.linalg.norm(a))
+            lo_c, hi_c = cp.backed_off()
+            add(ca.dot(ca.DM(a / scale), q_c), lo_c / scale, hi_c / scale, at_node0=False)
     if n_load:
         load_rows_, fn = load_rows(P, N, R_po, fl, load_q, L)
         for expr, a, b in load_rows_:
