@@ -63,6 +63,31 @@ from .user_scene import OBJECT, UserModel, compiled, massless_links, user_scene,
 __all__ = ["OBJECT", "UserModel", "UserModelSimulation", "contact_depth", "simulate_on_model",
            "user_scene"]
 
+def _through_tendons(m: Any, joints: list[Any], tau: FloatArray) -> FloatArray:
+    """A finger's feed-forward torques with each joint no actuator drives given its torque
+    through a limited fixed tendon over it and the finger's other joints (the Shadow
+    hand's J0): the tendon's limit force ``lam = tau_p / c_p`` comes off every joint of
+    the tendon (``tau -= c lam``), as ``ocp.robots.actuation`` plans it."""
+    out = np.array(tau, dtype=float)
+    index = {j.qpos: k for k, j in enumerate(joints)}
+    for t in range(m.ntendon):
+        adr, num = int(m.tendon_adr[t]), int(m.tendon_num[t])
+        if num < 2 or not m.tendon_limited[t]:
+            continue
+        terms = [(int(m.jnt_qposadr[int(m.wrap_objid[w])]), float(m.wrap_prm[w]))
+                 for w in range(adr, adr + num)
+                 if int(m.wrap_type[w]) == int(mujoco.mjtWrap.mjWRAP_JOINT)]
+        if len(terms) < num or any(a not in index for a, _ in terms):
+            continue
+        passive = [(index[a], c) for a, c in terms if joints[index[a]].kind == "passive"]
+        if len(passive) != 1:
+            continue
+        lam = out[passive[0][0]] / passive[0][1]
+        for a, c in terms:
+            out[index[a]] -= c * lam
+    return out
+
+
 @dataclass
 class _Joint:
     name: str
@@ -342,7 +367,8 @@ class UserModelSimulation:
                     contact = J.T @ ref.contact_force[i]
                 else:
                     contact = J.T @ (-o.grip_force * n_out)
-                torques[f_i][i] = contact + model_needs[dofs]
+                torques[f_i][i] = _through_tendons(
+                    m, joints, contact + model_needs[dofs])
         notes = []
         for f, ref in zip(plan.fingers, plan.references, strict=True):
             if o.use_plan_forces and ref.joint_torques is not None:

@@ -141,3 +141,81 @@ def test_joint_angles_that_break_a_coupling_are_refused_naming_the_tendon() -> N
     (field, reason), = [e for e in exc.value.errors if e[0].startswith("fingers[0]")]
     assert field == "fingers[0].initial_q"
     assert "tendon 'T_ffc'" in reason and "outside by 0.0044" in reason
+
+
+def test_a_passive_joint_is_planned_at_its_tendons_bound_and_executed() -> None:
+    """The Shadow hand's J0: the coupled distal joints without actuators. The grasp puts
+    each tendon at the bound the fingertip's load pulls it to, the plan keeps it there
+    (an equality), the forces keep each passive torque of the sign that bound gives, the
+    actuator trajectory takes the tendon's force off the medial joint's actuator, and the
+    file's own actuators execute it, the distal joints driven by the tendons alone, within
+    2 mm and 3 deg."""
+    from planner_service.execution import simulate_result
+
+    text = coupled_hand(passive=True)
+    hand = load_whole_hand(text, "mjcf", [TipSpec(t) for t in TIPS])
+    for p, f in zip(COUPLED, hand.fingers[:3], strict=True):
+        assert f.couplings[0].passive == (f"{p}j3",)
+    req, result = _plan(text)
+    assert result.status.value == "solved", result.message
+    m = mujoco.MjModel.from_xml_string(mujoco_text(text))
+    d = mujoco.MjData(m)
+    jt = result.joint_trajectory
+    adr = [int(m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
+           for n in jt.joint_names]
+    lengths = []
+    for point in jt.points:
+        d.qpos[:] = m.qpos0
+        d.qpos[adr] = point.positions
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_tendon(m, d)
+        lengths.append(d.ten_length.copy())
+    L = np.array(lengths)
+    at = np.minimum(np.abs(L - m.tendon_range[:, 0]), np.abs(L - m.tendon_range[:, 1]))
+    assert float(at.max()) <= 1e-6  # each tendon at one of its bounds throughout
+    assert np.all(np.ptp(L, axis=0) <= 1e-6)
+    act = result.actuator_trajectory
+    names = act.actuators
+    for p in COUPLED:
+        (said,) = [n for n in act.notes if n.startswith(f"joint {p}j3 has no actuator: its "
+                                                        "torque comes from")]
+        assert f"tendon 'T_{p}c'" in said
+        assert p + "j3" not in [a.joint for a in names if a.actuator]
+    report = simulate_result(result, req, model="request")
+    assert report.passed, report.failures
+    assert report.position_error.max <= 2e-3
+    assert report.angle_error.max <= math.radians(3.0)
+
+
+def test_a_passive_joint_off_its_tendons_bound_or_without_one_is_refused() -> None:
+    """The actuators' check: a passive joint whose torque its tendon could give only at a
+    bound the plan does not hold it at, and a passive joint without a tendon, are each
+    refused naming the joint, the torque, the time and the tendon."""
+    hand = load_whole_hand(coupled_hand(passive=True), "mjcf", [TipSpec(t) for t in TIPS])
+    act = hand.actuation()
+    ff = hand.fingers[0]
+    q = np.array([[0.0, 0.5, 0.6, 0.68]])  # tendon 0.00705*0.68 - 0.00805*0.6 = -0.04 mm
+    tau = np.array([[0.0, 0.0, 0.0, 0.02]])  # ffj3 flexing: the tendon at its lower bound
+    got = act.commands(list(ff.joint_names), [0.5], q, np.zeros((1, 4)), None, tau)
+    (why,) = got.refusals()
+    assert why.startswith("joint ffj3 has no actuator: its 0.02 N m at t = 0.5 s can come "
+                          "only from tendon 'T_ffc' pulling at its lower bound, but the plan "
+                          "holds the tendon 0.96")
+    # at the bound: carried, the tendon's force taken off ffj2's actuator
+    q[0, 3] = (-0.001 + 0.00805 * 0.6) / 0.00705
+    got = act.commands(list(ff.joint_names), [0.5], q, np.zeros((1, 4)), None, tau)
+    assert got.refusals() == []
+    base = act.commands(list(ff.joint_names), [0.5], q, np.zeros((1, 4)), None,
+                        np.zeros((1, 4)))
+    lam = (got.needed[0, 3] + 0.02 - base.needed[0, 3]) / 0.00705  # the joint's own terms
+    assert got.needed[0, 3] == 0.0
+    assert got.needed[0, 2] - base.needed[0, 2] == pytest.approx(0.00805 * 0.02 / 0.00705,
+                                                                 rel=1e-9)
+    assert lam > 0
+    # a joint without an actuator and no tendon: its torque has nowhere to come from
+    text = re.sub(r'\s*<position name="ffa1" joint="ffj1"[^>]*/>', "", coupled_hand())
+    bare = load_whole_hand(text, "mjcf", [TipSpec(t) for t in TIPS])
+    got = bare.actuation().commands(list(ff.joint_names), [0.5], q, np.zeros((1, 4)), None,
+                                    np.array([[0.0, 0.03, 0.0, 0.0]]))
+    assert any(r.startswith("joint ffj1 has no actuator and no coupling to carry its "
+                            "torque, but needs") for r in got.refusals())

@@ -38,6 +38,10 @@ __all__ = ["Actuation", "Actuator", "HandActuation", "UrdfActuation", "actuation
 
 FloatArray = NDArray[np.float64]
 
+#: A joint no actuator drives may need at most this torque [N m] (its damping, inertia
+#: and weight over a plan's motion) without a tendon to carry it.
+PASSIVE_TOL = 1e-5
+
 
 @dataclass(frozen=True)
 class Actuator:
@@ -77,6 +81,9 @@ class Actuation:
     needed: FloatArray
     controls: FloatArray
     notes: tuple[str, ...] = ()
+    #: why the file cannot make this plan other than by a limit: a joint no actuator
+    #: drives that needs a torque (:meth:`HandActuation.through_tendons`)
+    problems: tuple[str, ...] = ()
 
     def load(self) -> tuple[float, int, int]:
         """The largest share of a torque limit needed (1 at the limit), the joint and the
@@ -111,7 +118,7 @@ class Actuation:
     def refusals(self, tol: float = 1e-6) -> list[str]:
         """Why the file's actuators cannot make this plan: a torque beyond a joint's limit,
         a control beyond its range (each the worst; [] when within)."""
-        out = []
+        out = list(self.problems)
         share, j, k = self.load()
         if share > 1.0 + tol:
             a = self.actuators[j]
@@ -188,6 +195,9 @@ class HandActuation:
     held: dict[str, float] = field(default_factory=dict)
     #: Torque limits [N m] given for joints' actuators, over the file's ``forcerange``.
     limits: dict[str, float] = field(default_factory=dict)
+    #: The fingers' joint couplings (:class:`~ocp.robots.couplings.Coupling`): a joint no
+    #: actuator drives gets its torque through one (:meth:`through_tendons`).
+    couplings: tuple[Any, ...] = ()
     _mj: Any = field(default=None, repr=False)
 
     def with_limits(self, limits: dict[str, float]) -> HandActuation:
@@ -326,7 +336,66 @@ class HandActuation:
         else:
             notes = (*notes, "the plan states no forces: the commands make its motion "
                              "alone, not a grip")
-        return actuation_of(np.asarray(t, dtype=float), acts, tau, Q, QD, notes)
+        T = np.asarray(t, dtype=float)
+        tau, more, problems = self.through_tendons(joint_names, acts, T, Q, tau)
+        return replace(actuation_of(T, acts, tau, Q, QD, (*notes, *more)),
+                       problems=tuple(problems))
+
+    def through_tendons(self, joint_names: Sequence[str], acts: tuple[Actuator, ...],
+                        t: FloatArray, q: FloatArray, tau: FloatArray
+                        ) -> tuple[FloatArray, list[str], list[str]]:
+        """The torques the actuators must give when a joint no actuator drives (the
+        Shadow hand's J0) gets its torque through a coupling tendon: the tendon's force
+        ``lam = tau_p / c_p`` (a limit's force: it pulls only at the tendon's bound, at
+        the lower one for ``lam > 0``, MuJoCo's sign), taken off every joint of the
+        tendon (``tau -= c lam``; the passive joint's then 0). Returns (the torques, notes
+        on each tendon's force, problems: a passive joint that needs a torque its tendon
+        cannot give there, or that no coupling carries)."""
+        names = list(joint_names)
+        out = np.array(tau, dtype=float)
+        notes: list[str] = []
+        problems: list[str] = []
+        carried: set[str] = set()
+        for c in self.couplings:
+            if not set(c.joints) <= set(names):
+                continue
+            passive = [j for j in c.joints if not _driven(acts[names.index(j)])]
+            if len(passive) != 1:
+                continue
+            p = passive[0]
+            a = c.row(names)
+            lam = out[:, names.index(p)] / a[names.index(p)]
+            out = out - np.outer(lam, a)
+            carried.add(p)
+            length = q @ a
+            need = np.abs(lam * a[names.index(p)]) > PASSIVE_TOL
+            off = np.where(need & (lam > 0), length - c.lower,
+                           np.where(need & (lam < 0), c.upper - length, 0.0))
+            k = int(np.argmax(off))
+            if off[k] > 1e-6:
+                side = "lower" if lam[k] > 0 else "upper"
+                problems.append(
+                    f"joint {p} has no actuator: its {tau[k, names.index(p)]:.3g} N m at "
+                    f"t = {t[k]:.4g} s can come only from {c.name} pulling at its {side} "
+                    f"bound, but the plan holds the tendon {off[k] * 1e3:.3g} mm from it")
+            notes.append(f"joint {p} has no actuator: its torque comes from {c.name} "
+                         f"({float(lam.min()):.3g}..{float(lam.max()):.3g} N at its bound), "
+                         "taken off the other joints' actuators")
+        if not self.model().nu:  # a file without actuators does not say how it is driven
+            return out, notes, problems
+        for j, (n, act) in enumerate(zip(names, acts, strict=True)):
+            if _driven(act) or n in carried:
+                continue
+            k = int(np.argmax(np.abs(out[:, j])))
+            if out.size and abs(out[k, j]) > PASSIVE_TOL:
+                problems.append(f"joint {n} has no actuator and no coupling to carry its "
+                                f"torque, but needs {out[k, j]:.3g} N m at t = {t[k]:.4g} s")
+        return out, notes, problems
+
+
+def _driven(a: Actuator) -> bool:
+    """Whether an actuator drives the joint (the file's, or a limit the request gave)."""
+    return bool(a.name) or a.torque_range is not None
 
 
 def torque_bounds(actuation: Any, joint_names: Sequence[str], share: float = 1.0

@@ -30,14 +30,15 @@ unit: metres of tendon).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["COUPLING_MARGIN", "Coupling", "coupled_step", "coupling_violation",
-           "hand_couplings", "project_couplings"]
+__all__ = ["COUPLING_MARGIN", "Coupling", "at_tendon_bounds", "coupled_step",
+           "coupling_violation", "hand_couplings", "project_couplings",
+           "tendon_torque_bounds"]
 
 FloatArray = NDArray[np.float64]
 
@@ -46,6 +47,9 @@ FloatArray = NDArray[np.float64]
 COUPLING_MARGIN = 0.01
 #: ... in the coupling's own unit [m of tendon, rad].
 COUPLING_MARGIN_ABS = 1e-6
+#: The least torque [N m] a roll's forces ask of a passive joint held by its tendon's
+#: bound, of the sign that bound gives (:func:`tendon_torque_bounds`).
+PASSIVE_MARGIN = 5e-3
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,16 @@ class Coupling:
     coefs: tuple[float, ...]
     lower: float
     upper: float
+    #: its joints no actuator drives (the Shadow hand's J0): their torque comes from the
+    #: tendon's limit, which pulls only at a bound (:func:`at_tendon_bounds`)
+    passive: tuple[str, ...] = ()
+    #: the band's bound a passive joint's load holds it at ("lower", "upper"; "": none)
+    held_at: str = ""
+
+    def at(self, bound: str) -> Coupling:
+        """The coupling held at its ``bound`` ("lower" or "upper"): an equality."""
+        value = self.lower if bound == "lower" else self.upper
+        return replace(self, lower=value, upper=value, held_at=bound)
 
     def row(self, joint_names: Sequence[str]) -> FloatArray:
         """Its coefficients over ``joint_names`` (zero for the joints it does not have)."""
@@ -190,6 +204,8 @@ def hand_couplings(text: str, fingers: Sequence[Sequence[str]], held: dict[str, 
                 value -= a1 * float(m.tendon_length0[i2])
             found.append(Coupling(f"<equality><tendon>{label}", tuple(joints),
                                   tuple(coefs), value, value))
+    driven = {joint_name(int(m.actuator_trnid[a, 0])) for a in range(m.nu)
+              if int(m.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)}
     per: list[list[Coupling]] = [[] for _ in fingers]
     errs: list[str] = []
     for c in found:
@@ -210,8 +226,9 @@ def hand_couplings(text: str, fingers: Sequence[Sequence[str]], held: dict[str, 
         merged: dict[str, float] = {}
         for j, k in own:
             merged[j] = merged.get(j, 0.0) + k
+        passive = tuple(j for j in merged if j not in driven) if m.nu else ()
         per[owners.pop()].append(Coupling(c.name, tuple(merged), tuple(merged.values()),
-                                          c.lower - shift, c.upper - shift))
+                                          c.lower - shift, c.upper - shift, passive))
     return [tuple(p) for p in per], errs
 
 
@@ -235,3 +252,70 @@ def coupled_step(finger: Any, q: ArrayLike, dq: ArrayLike) -> FloatArray:
         A = np.array(active)
         d = d - A.T @ np.linalg.lstsq(A @ A.T, A @ d, rcond=None)[0]
     return project_couplings(finger, x + d, margin=False)
+
+
+def at_tendon_bounds(finger: Any, q: ArrayLike, centre: ArrayLike, radius: float
+                     ) -> tuple[Any, FloatArray] | str:
+    """A round-tipped finger touching a ball at joints ``q``, with each coupling that
+    carries a passive joint's torque held at the bound its load needs (an equality the
+    plan keeps), and the joints moved there with the contact kept: ``(finger, q)``, or why
+    not (the contact cannot be kept with the tendon at that bound).
+
+    The fingertip pushes the ball along the inward normal, so the passive joint ``p``
+    needs ``tau_p = -fn (J_p . n)`` (``J_p`` its column of the contact point's Jacobian,
+    ``n`` the ball's outward normal there); the tendon gives ``c_p lam``, and a limit's
+    ``lam`` is positive at the tendon's lower bound (MuJoCo's sign): the lower bound when
+    ``-(J_p . n) / c_p > 0``, else the upper. The finger returned is
+    :meth:`~ocp.robots.finger.FingerModel.with_couplings` of the bounds (the same object
+    for the same bounds: its NLPs are cached)."""
+    from ocp.robots.grasp_reach import grasp_on_ball, tip_state
+
+    cs = getattr(finger, "couplings", ())
+    x = np.asarray(q, dtype=float)
+    if not any(c.passive and c.lower < c.upper for c in cs):
+        return finger, x
+    c0 = np.asarray(centre, dtype=float)
+    s = tip_state(finger, x, c0, radius)
+    J = finger.frame_jacobian_pin(x)
+    Jc = J[:3] - np.cross(s.contact - s.p_l, J[3:].T).T  # the contact point's velocity
+    names = list(finger.joint_names)
+    held = []
+    for c in cs:
+        if not c.passive or c.lower == c.upper:
+            held.append(c)
+            continue
+        p = names.index(c.passive[0])
+        cp = c.coefs[c.joints.index(c.passive[0])]
+        push = -float(Jc[:, p] @ s.n) / cp
+        if abs(push) < 1e-9:  # the contact does not load the joint: the nearer bound
+            v = float(c.row(names) @ x)
+            push = 1.0 if v - c.lower < c.upper - v else -1.0
+        held.append(c.at("lower" if push > 0 else "upper"))
+    bounded = finger.with_couplings(tuple(held))
+    got = grasp_on_ball(bounded, x, c0, radius, s.n, tol=1e-9, margin=0.0)
+    if got is None:
+        named = "; ".join(f"{c.name} at its {c.held_at} bound" for c in held if c.held_at)
+        return (f"the contact cannot be kept with {named} (the load on its passive joint "
+                "holds the tendon there)")
+    return bounded, got
+
+
+def tendon_torque_bounds(finger: Any, lower: ArrayLike, upper: ArrayLike
+                         ) -> tuple[FloatArray, FloatArray]:
+    """Joint torque bounds (``lower``, ``upper`` in the finger's joint order) with each
+    passive joint whose tendon is held at a bound (:func:`at_tendon_bounds`) given the
+    sign that bound's force can give: ``c_p tau_p >= 0`` at the lower bound (the
+    limit's force ``lam = tau_p / c_p >= 0``), ``<= 0`` at the upper, with
+    :data:`PASSIVE_MARGIN` to spare for what the forces' stage does not see (the joints'
+    damping and inertia over the motion)."""
+    lo, hi = np.array(lower, dtype=float), np.array(upper, dtype=float)
+    names = list(finger.joint_names)
+    for c in getattr(finger, "couplings", ()):
+        for p in c.passive if c.held_at else ():
+            k = names.index(p)
+            sign = np.sign(c.coefs[c.joints.index(p)]) * (1 if c.held_at == "lower" else -1)
+            if sign > 0:
+                lo[k] = max(lo[k], PASSIVE_MARGIN)
+            else:
+                hi[k] = min(hi[k], -PASSIVE_MARGIN)
+    return lo, hi

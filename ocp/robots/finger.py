@@ -30,7 +30,7 @@ finger dimensions are not given).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
@@ -195,6 +195,20 @@ class FingerModel:
     #: Linear couplings of its joints the plan keeps (:class:`~ocp.robots.couplings.Coupling`:
     #: an MJCF's coupling tendons and joint equalities).
     couplings: tuple[Any, ...] = ()
+    #: :meth:`with_couplings`' fingers, by their couplings
+    _variants: dict[tuple[Any, ...], Any] = field(default_factory=dict, repr=False)
+
+    def with_couplings(self, couplings: tuple[Any, ...]) -> FingerModel:
+        """This finger with other couplings (a passive joint's tendon held at a bound:
+        :func:`~ocp.robots.couplings.at_tendon_bounds`); the same object for the same
+        couplings, so that the NLPs built for it are found again."""
+        if couplings == self.couplings:
+            return self
+        got = self._variants.get(couplings)
+        if got is None:
+            got = self._variants[couplings] = replace(self, couplings=couplings,
+                                                      _variants={})
+        return got
 
     @property
     def tip_surface(self) -> Any:

@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import segments_distance, tip_body
-from ocp.robots.couplings import project_couplings
+from ocp.robots.couplings import at_tendon_bounds, project_couplings
 from ocp.robots.grasp_reach import _tip, grasp_on_ball, roll, tip_state
 
 __all__ = [
@@ -261,6 +261,9 @@ def finger_contacts(f: Any, centre: ArrayLike, radius: float, seeds: Sequence[Ar
             continue
         tried.append(n)
         got = grasp_on_ball(f, q, c, radius, n, margin=margin)
+        if got is not None:  # a passive joint's tendon at the bound its load needs
+            held = at_tendon_bounds(f, got, c, radius)
+            got = None if isinstance(held, str) else held[1]
         if got is None or not _outside(f, got, c, radius):
             continue
         s = tip_state(f, got, c, radius)

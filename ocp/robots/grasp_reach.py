@@ -229,8 +229,9 @@ def grasp_on_ball(f: Any, q_start: ArrayLike, centre: ArrayLike, radius: float,
             break
         J = f.frame_jacobian_pin(q)
         Jc = J[:3] - _skew(s.R_l @ pc) @ J[3:]
-        A = np.vstack([Jc, 1e-3 * np.eye(f.nq)])
-        dq = np.linalg.lstsq(A, np.concatenate([e, 1e-3 * (q_ref - q)]), rcond=None)[0]
+        Ae, be = _equalities(f, q)
+        A = np.vstack([Jc, Ae, 1e-3 * np.eye(f.nq)])
+        dq = np.linalg.lstsq(A, np.concatenate([e, be, 1e-3 * (q_ref - q)]), rcond=None)[0]
         q = coupled_step(f, q, dq / max(1.0, float(np.abs(dq).max()) / 0.3))
     for _ in range(10):  # then onto the target exactly (least-norm steps)
         s = tip_state(f, q, c, radius)
@@ -238,13 +239,28 @@ def grasp_on_ball(f: Any, q_start: ArrayLike, centre: ArrayLike, radius: float,
         if np.linalg.norm(e) < tol / 10:
             break
         J = f.frame_jacobian_pin(q)
-        dq = np.linalg.lstsq(J[:3] - _skew(s.R_l @ pc) @ J[3:], e, rcond=None)[0]
+        Ae, be = _equalities(f, q)
+        dq = np.linalg.lstsq(np.vstack([J[:3] - _skew(s.R_l @ pc) @ J[3:], Ae]),
+                             np.concatenate([e, be]), rcond=None)[0]
         q = coupled_step(f, q, dq)
     s = tip_state(f, q, c, radius)
     if np.linalg.norm(s.centre - target) > tol or s.polar > math.pi / 2 - margin / r \
             or coupling_violation(f, q)[0] > 0.0:
         return None
     return np.asarray(q, dtype=float)
+
+
+def _equalities(f: Any, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The finger's equality couplings as rows of a joint step (``A dq = b`` puts each on
+    its value), scaled to radians; (0, nq) without any."""
+    rows, rhs = [], []
+    for c in getattr(f, "couplings", ()):
+        if c.lower == c.upper:
+            a = c.row(f.joint_names)
+            k = float(np.linalg.norm(a))
+            rows.append(a / k)
+            rhs.append((c.lower - float(a @ q)) / k)
+    return np.array(rows).reshape(len(rows), f.nq), np.array(rhs)
 
 
 def tips_gap(fingers: Sequence[Any], qs: Sequence[ArrayLike]) -> float:

@@ -390,7 +390,9 @@ class WholeHand:
                     import mujoco  # noqa: F401
                 except ImportError:
                     return None
-                got = HandActuation(self.text, self.mount, dict(self.held))
+                got = HandActuation(self.text, self.mount, dict(self.held),
+                                    couplings=tuple(c for f in self.fingers
+                                                    for c in f.couplings))
             else:
                 got = UrdfActuation({n: float(e) for f in self.fingers for n, e in zip(
                     f.joint_names, effort_limits(f), strict=True)})

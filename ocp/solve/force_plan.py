@@ -94,9 +94,10 @@ def _torque_rows(stage: ForceStage, problem: ManipulationProblem, Xall: np.ndarr
     if problem.actuation is None or problem.forces is None or not stage.tips:
         return None
     from ocp.robots.actuation import torque_bounds
+    from ocp.robots.couplings import tendon_torque_bounds
 
-    bounds = [torque_bounds(problem.actuation, t.finger.joint_names, ROLL_TORQUE_SHARE)
-              for _, t in stage.tips]
+    bounds = [tendon_torque_bounds(t.finger, *torque_bounds(
+        problem.actuation, t.finger.joint_names, ROLL_TORQUE_SHARE)) for _, t in stage.tips]
     lo = np.concatenate([b[0] for b in bounds])
     hi = np.concatenate([b[1] for b in bounds])
     if not (np.isfinite(lo).any() or np.isfinite(hi).any()):

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from ocp.certify.certificate import GRASP_TOLERANCES, PALM_TOLERANCES, TolerancePolicy
 from ocp.geometry.rotations import log_rotation
 from ocp.geometry.surfaces import SURFACES, rotation_from_vector
-from ocp.robots.couplings import coupled_step
+from ocp.robots.couplings import at_tendon_bounds, coupled_step
 from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
 from ocp.spec.phases import ContactPhase, phase_errors, phase_intervals
 from ocp.spec.problem import (
@@ -498,6 +498,12 @@ def fingertips_from_joints(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: O
         if bad:
             errs.append((where[i], f"finger {name!r}: " + "; ".join(bad)))
             continue
+        if obj.shape == "sphere" and f.tip_surface.round:  # passive joints' tendons
+            held = at_tendon_bounds(f, q, pose.position, float(obj.dimensions[0]))
+            if isinstance(held, str):
+                errs.append((where[i], f"finger {name!r}: {held}"))
+                continue
+            f, q = held
         try:
             init, chart, gap = contact_from_joints(f, q, obj, pose)
         except ValueError as exc:
