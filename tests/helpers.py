@@ -92,3 +92,34 @@ def nominal_turn(mjcf: str, tips: list[str], angle: float = 0.1, duration: float
         "motion": {"kind": "steps", "steps": [{"duration": duration, "axis": [0, 0, 1],
                                                "angle": angle}]},
         "duration": duration, **extra}
+
+
+def wrist_wrapped(own: str) -> str:
+    """A hand in examples/own_hand.xml's layout (``own``) carried by a forearm's two wrist
+    joints (their axes through the world origin, position servos of their own), as a
+    Shadow-style arm carries its hand; the index's spread joint limited by a fixed tendon
+    over it alone."""
+    start, end = own.index("<worldbody>") + len("<worldbody>"), own.index("</worldbody>")
+    wrapped = (own[:start] + """
+    <body name="wrist_a">
+      <joint name="WRJ1" axis="0 1 0" range="-28 8" damping="1"/>
+      <inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>
+      <body name="wrist_b">
+        <joint name="WRJ0" axis="1 0 0" range="-40 28" damping="1"/>
+        <inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>""" +
+               own[start:end] + """
+      </body>
+    </body>
+  """ + own[end:])
+    limit = """
+    <fixed name="T_ffj0" limited="true" range="-0.004 0.004">
+      <joint joint="ffj0" coef="0.01"/>
+    </fixed>"""
+    if "<tendon>" in wrapped:
+        wrapped = wrapped.replace("<tendon>", "<tendon>" + limit, 1)
+    else:
+        wrapped = wrapped.replace("<actuator>", f"<tendon>{limit}\n  </tendon>\n  <actuator>",
+                                  1)
+    return wrapped.replace("<actuator>", """<actuator>
+    <position name="A_WRJ1" joint="WRJ1" kp="10" ctrlrange="-28 8"/>
+    <position name="A_WRJ0" joint="WRJ0" kp="10" ctrlrange="-40 28"/>""", 1)

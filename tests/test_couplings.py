@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import nominal_turn
+from helpers import nominal_turn, wrist_wrapped
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -143,8 +143,10 @@ def test_joint_angles_that_break_a_coupling_are_refused_naming_the_tendon() -> N
     assert "tendon 'T_ffc'" in reason and "outside by 0.0044" in reason
 
 
-def test_a_passive_joint_is_planned_at_its_tendons_bound_and_executed() -> None:
-    """The Shadow hand's J0: the coupled distal joints without actuators. The grasp puts
+@pytest.mark.parametrize("wrist", [False, True])
+def test_a_passive_joint_is_planned_at_its_tendons_bound_and_executed(wrist: bool) -> None:
+    """The Shadow hand's J0: the coupled distal joints without actuators (and, the
+    Shadow hand's whole structure, the hand carried by two wrist joints). The grasp puts
     each tendon at the bound the fingertip's load pulls it to, the plan keeps it there
     (an equality), the forces keep each passive torque of the sign that bound gives, the
     actuator trajectory takes the tendon's force off the medial joint's actuator, and the
@@ -153,7 +155,10 @@ def test_a_passive_joint_is_planned_at_its_tendons_bound_and_executed() -> None:
     from planner_service.execution import simulate_result
 
     text = coupled_hand(passive=True)
+    if wrist:
+        text = wrist_wrapped(text)
     hand = load_whole_hand(text, "mjcf", [TipSpec(t) for t in TIPS])
+    assert hand.held == ({"WRJ1": 0.0, "WRJ0": 0.0} if wrist else {})
     for p, f in zip(COUPLED, hand.fingers[:3], strict=True):
         assert f.couplings[0].passive == (f"{p}j3",)
     req, result = _plan(text)
@@ -170,9 +175,11 @@ def test_a_passive_joint_is_planned_at_its_tendons_bound_and_executed() -> None:
         mujoco.mj_kinematics(m, d)
         mujoco.mj_tendon(m, d)
         lengths.append(d.ten_length.copy())
-    L = np.array(lengths)
-    at = np.minimum(np.abs(L - m.tendon_range[:, 0]), np.abs(L - m.tendon_range[:, 1]))
-    assert float(at.max()) <= 1e-6  # each tendon at one of its bounds throughout
+    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, f"T_{p}c") for p in COUPLED]
+    L = np.array(lengths)[:, ids]
+    r = m.tendon_range[ids]
+    at = np.minimum(np.abs(L - r[:, 0]), np.abs(L - r[:, 1]))
+    assert float(at.max()) <= 1e-6  # each coupling tendon at one of its bounds throughout
     assert np.all(np.ptp(L, axis=0) <= 1e-6)
     act = result.actuator_trajectory
     names = act.actuators

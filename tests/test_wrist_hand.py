@@ -11,9 +11,11 @@ default class's joint type refuses nothing."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
-from helpers import nominal_turn
+from helpers import nominal_turn, wrist_wrapped
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -133,35 +135,6 @@ def test_shared_wrist_joints_are_held_and_single_joint_tendons_are_limits() -> N
     assert any("held (not planned): WRJ1 at 0, WRJ0 at 0" in n for n in notes), notes
 
 
-def _wrist_wrapped_own_hand() -> str:
-    """examples/own_hand.xml carried by a forearm's two wrist joints (their axes through
-    the world origin, position servos of their own), as a Shadow-style arm carries its
-    hand; the index's spread joint limited by a fixed tendon over it alone."""
-    from pathlib import Path
-
-    own = (Path(__file__).resolve().parents[1] / "examples" / "own_hand.xml").read_text()
-    start, end = own.index("<worldbody>") + len("<worldbody>"), own.index("</worldbody>")
-    wrapped = (own[:start] + """
-    <body name="wrist_a">
-      <joint name="WRJ1" axis="0 1 0" range="-28 8" damping="1"/>
-      <inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>
-      <body name="wrist_b">
-        <joint name="WRJ0" axis="1 0 0" range="-40 28" damping="1"/>
-        <inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>""" +
-               own[start:end] + """
-      </body>
-    </body>
-  """ + own[end:])
-    return wrapped.replace("<actuator>", """<tendon>
-    <fixed name="T_ffj0" limited="true" range="-0.004 0.004">
-      <joint joint="ffj0" coef="0.01"/>
-    </fixed>
-  </tendon>
-  <actuator>
-    <position name="A_WRJ1" joint="WRJ1" kp="10" ctrlrange="-28 8"/>
-    <position name="A_WRJ0" joint="WRJ0" kp="10" ctrlrange="-40 28"/>""", 1)
-
-
 def test_a_wrist_mounted_hand_is_planned_with_its_wrist_held_and_executed() -> None:
     """The wrist-wrapped own_hand.xml: loads without edits, the wrist held at 0 (said in
     the actuator notes), the spread joint limited by its tendon as MuJoCo reads it
@@ -170,7 +143,8 @@ def test_a_wrist_mounted_hand_is_planned_with_its_wrist_held_and_executed() -> N
     from planner_service.execution import simulate_result
     from planner_service.planners import REQUEST, solve
 
-    text = _wrist_wrapped_own_hand()
+    text = wrist_wrapped((Path(__file__).resolve().parents[1] / "examples" /
+                          "own_hand.xml").read_text())
     tips = [TipSpec(t) for t in ("ff_tip", "mf_tip", "rf_tip", "th_tip")]
     hand = load_whole_hand(text, "mjcf", tips)
     assert hand.held == {"WRJ1": 0.0, "WRJ0": 0.0}
