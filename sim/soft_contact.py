@@ -1,7 +1,8 @@
 """MuJoCo's soft contacts, as the execution on a user's file meets them: how a contact
 pair's settings mix (``condim``, friction, ``solref``, ``solimp``, ``priority``,
-``solmix``) and how deep a fingertip sinks to carry a normal force at rest
-(:func:`contact_depth`).
+``solmix``), how deep a fingertip sinks to carry a normal force at rest
+(:func:`contact_depth`) and how fast it creeps while it carries a tangential one
+(:func:`creep_speed`).
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["contact_depth", "geom_settings", "pair_settings"]
+__all__ = ["contact_depth", "creep_speed", "geom_settings", "pair_settings"]
 
 
 def _impedance(solimp: Any, r: float) -> float:
@@ -76,3 +77,32 @@ def pair_settings(m: Any, g: int, o: int) -> dict[str, Any]:
             "solimp": [float(x) for x in w * m.geom_solimp[g] + (1 - w) * m.geom_solimp[o]],
             "margin": float(max(m.geom_margin[g], m.geom_margin[o])),
             "priority": pg}
+
+
+def creep_speed(m: Any, d: Any, con: Any) -> float:
+    """How fast [m/s] MuJoCo's contact ``con`` (of ``d.contact``) slides while it carries
+    its present friction force, however far inside the cone: MuJoCo's friction is soft.
+    A friction row's reference acceleration is ``-B v`` (``B`` of ``efc_KBIP``), its
+    force ``f = (A + R)^-1 (aref - a0)``; carried steadily (``a1 = a0 + A f = 0``) that
+    is ``R f = -B v``, ``v = R f / B`` along the row. An elliptic cone's friction rows
+    are the tangent directions; a pyramid's edges ``J_n +- mu J_t`` come in pairs, the
+    tangent speed ``(R+ f+ - R- f-) / (2 mu B)``. 0 with the noslip solver on
+    (``noslip_iterations``: it removes that slip) or a frictionless contact."""
+    import mujoco
+
+    dim, adr = int(con.dim), int(con.efc_address)
+    if dim < 3 or adr < 0 or m.opt.noslip_iterations > 0:
+        return 0.0
+    R, F, B = d.efc_R, d.efc_force, d.efc_KBIP[:, 1]
+    v2 = 0.0
+    if int(m.opt.cone) == int(mujoco.mjtCone.mjCONE_ELLIPTIC):
+        for k in (1, 2):  # the two sliding directions (torsion, rolling: not a slide)
+            r = adr + k
+            v2 += (R[r] * F[r] / B[r]) ** 2 if B[r] > 0 else 0.0
+    else:
+        for k in range(2):  # the pyramid's edges of the two sliding directions
+            a, b = adr + 2 * k, adr + 2 * k + 1
+            mu = float(con.friction[k])
+            if mu > 0 and B[a] > 0:
+                v2 += ((R[a] * F[a] - R[b] * F[b]) / (2 * mu * B[a])) ** 2
+    return float(np.sqrt(v2))

@@ -56,7 +56,7 @@ from .run import (
     slerp,
     step_grid,
 )
-from .soft_contact import contact_depth, geom_settings, pair_settings
+from .soft_contact import contact_depth, creep_speed, geom_settings, pair_settings
 from .spec import ExecutionPlan, FloatArray
 from .user_scene import OBJECT, UserModel, compiled, massless_links, user_scene, with_inertials
 
@@ -473,6 +473,8 @@ class UserModelSimulation:
         limited = [(j, float(m.actuator_forcerange[j.actuator, 1]),
                     float(m.actuator_forcerange[j.actuator, 0])) for j, _, _, _ in flat
                    if j.actuator >= 0 and m.actuator_forcelimited[j.actuator]]
+        creep: list[list[float]] = [[] for _ in range(nc)]
+        creep_every = max(1, round(0.01 / dt))  # the friction's creep, sampled at 100 Hz
         for k in range(n_steps):
             for dof, u in ctrl_pre.items():
                 d.ctrl[act_of[dof]] = u[k]
@@ -491,6 +493,7 @@ class UserModelSimulation:
                     if force >= hi - 1e-9 or force <= lo + 1e-9:
                         saturated[jl.name] += 1
             obj_pose[k] = d.qpos[oq:oq + 7]
+            sample_creep = plan_time[k + 1] >= 0 and k % creep_every == 0
             for con, other, fn in object_contacts(m, d, self.object_geom, f6):
                 j_c = self.contact_of_geom.get(other)
                 if j_c is None:
@@ -500,6 +503,8 @@ class UserModelSimulation:
                         other_force[body] = max(other_force.get(body, 0.0), fn)
                     continue
                 normal_force[k, j_c] += fn
+                if sample_creep:
+                    creep[j_c].append(creep_speed(m, d, con))
                 slip_speed[k, j_c] = max(slip_speed[k, j_c],
                                          contact_slip(m, d, con, self.object_body, other,
                                                       jac_a, jac_b))
@@ -547,6 +552,7 @@ class UserModelSimulation:
         if settings["couplings"]:
             extra.append("the file couples joints the plan moves (the execution has the "
                          "couplings): " + "; ".join(settings["couplings"]))
+        extra += _creep_notes(plan, creep, m, T)
         report = SimReport.assess(
             mode="servo (the model's actuators)", options=o, contacts=contacts,
             position=ErrorSummary.of(pos_err[during], t_end[during]),
@@ -562,6 +568,30 @@ class UserModelSimulation:
     def _actuator_of(self) -> dict[int, int]:
         return {j.dof: j.actuator for joints in self.joints for j in joints
                 if j.actuator >= 0}
+
+
+#: A fingertip whose creep over the plan's duration would exceed this [m] is reported.
+CREEP_NOTE = 1e-3
+
+
+def _creep_notes(plan: ExecutionPlan, creep: list[list[float]], m: Any, T: float
+                 ) -> list[str]:
+    """What the file's soft friction does to the plan (:func:`creep_speed`, sampled while
+    it ran): each fingertip whose median creep over the plan's duration exceeds
+    :data:`CREEP_NOTE`, and what would hold it."""
+    out = []
+    for spec, speeds in zip(plan.contacts, creep, strict=True):
+        if not speeds:
+            continue
+        med, top = float(np.median(speeds)), float(np.max(speeds))
+        if med * T > CREEP_NOTE:
+            out.append(f"fingertip {spec.name}: the file's soft friction lets it creep "
+                       f"{med * 1e3:.3g} mm/s (up to {top * 1e3:.3g}) under its friction "
+                       f"force, about {med * T * 1e3:.3g} mm over this {T:.3g} s plan "
+                       f"(MuJoCo's v = R f / B; impratio {float(m.opt.impratio):g}, "
+                       "noslip_iterations 0): the noslip solver (<option "
+                       "noslip_iterations=\"5\">) removes that creep")
+    return out
 
 
 def simulate_on_model(plan: ExecutionPlan, model: UserModel,

@@ -254,3 +254,19 @@ def test_the_files_couplings_of_planned_joints_are_said() -> None:
     report = sim.run()
     assert any("the file couples joints the plan moves" in n and "ff_couple" in n
                for n in report.notes)
+
+
+def test_a_files_soft_friction_creep_is_said_with_what_would_hold_it() -> None:
+    """The held grasp executed for 2 s on the file without the noslip solver and with
+    impratio 1: the report says how far each fingertip that carries a friction force
+    creeps (MuJoCo's R f / B, tests/test_soft_friction.py) and names the noslip solver;
+    on the file as shipped (noslip_iterations 5) nothing is said."""
+    plan = held_plan(2.0)
+    soft = OWN.replace('<option cone="elliptic" impratio="10" noslip_iterations="5"/>',
+                       '<option cone="elliptic"/>')
+    assert soft != OWN
+    report = UserModelSimulation(plan, UserModel(soft, TIPS)).run()
+    said = [n for n in report.notes if "the file's soft friction lets it creep" in n]
+    assert said and all("noslip_iterations=\"5\"" in n and "impratio 1," in n for n in said)
+    report = UserModelSimulation(plan, UserModel(OWN, TIPS)).run()
+    assert not [n for n in report.notes if "creep" in n]

@@ -94,9 +94,12 @@ def own_hand_mjcf() -> str:
   <!-- A hand of our own in the style of MuJoCo Menagerie's hands (tools/own_hand_mjcf.py
        writes it): the Allegro-class kinematics of ocp/robots/allegro.py, angles in
        degrees, the root posed, default classes, visual meshes whose files are absent,
-       collision capsules, inertials and position actuators of our choosing. -->
+       collision capsules, inertials and position actuators of our choosing. MuJoCo's
+       friction is soft: a fingertip holding a tangential force creeps (about 2 mm/s
+       under 0.3 N at impratio 10); the noslip solver removes that creep, without which
+       a gait of a minute drifts off (docs/simulation.md). -->
   <compiler angle="degree" meshdir="assets" autolimits="true"/>
-  <option cone="elliptic" impratio="10"/>
+  <option cone="elliptic" impratio="10" noslip_iterations="5"/>
   <default>
     <default class="hand">
       <joint axis="0 1 0" damping="1" armature="0.001"/>

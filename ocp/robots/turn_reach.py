@@ -123,6 +123,8 @@ def _stop(f: Any, why: str, q: FloatArray, seam_margin: float) -> str | None:
         j = list(f.joint_names).index(name)
         side = "upper" if abs(q[j] - f.upper[j]) < abs(q[j] - f.lower[j]) else "lower"
         return f"its joint {name!r} {side} limit"
+    if why.startswith("coupling limit ("):  # a band's bound: as definite as a limit
+        return f"its {why[len('coupling limit ('):-1]}'s bound"
     if why == "cap's seam":
         return f"its cap's seam (within {seam_margin * 1e3:.3g} mm, the pad_margin)" \
             if seam_margin > 0 else "its cap's seam"
@@ -130,8 +132,11 @@ def _stop(f: Any, why: str, q: FloatArray, seam_margin: float) -> str | None:
 
 
 def rolls(f: Any) -> bool:
-    """Whether a finger's motion is fixed by the ball's: 4 joints, a sphere or capsule tip."""
-    return bool(f.nq == 4 and f.tip_surface.kind in ("sphere", "capsule"))
+    """Whether a finger's motion is fixed by the ball's: 4 joints, none tied to another
+    by an equality (a passive joint's tendon held at its bound leaves 3: the finger then
+    constrains the ball's motion instead), a sphere or capsule tip."""
+    tied = any(c.lower == c.upper for c in getattr(f, "couplings", ()))
+    return bool(f.nq == 4 and not tied and f.tip_surface.kind in ("sphere", "capsule"))
 
 
 def turn_shortfall(fingers: Sequence[Any], names: Sequence[str], qs: Sequence[ArrayLike],
