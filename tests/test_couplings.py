@@ -226,3 +226,30 @@ def test_a_passive_joint_off_its_tendons_bound_or_without_one_is_refused() -> No
                                     np.array([[0.0, 0.03, 0.0, 0.0]]))
     assert any(r.startswith("joint ffj1 has no actuator and no coupling to carry its "
                             "torque, but needs") for r in got.refusals())
+
+
+def test_a_rolled_reach_stops_at_a_couplings_bound_and_the_quick_check_names_it() -> None:
+    """A 4-joint finger's rolled motion is fixed by the ball's: where it takes a coupling
+    out of its band the roll stops, and the quick reach check refuses a turn beyond it
+    naming the tendon (a finger whose coupling is an equality, a passive joint's tendon
+    at its bound, is not rolled: it constrains the ball's motion instead)."""
+    from dataclasses import replace
+
+    from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS
+    from ocp.robots.first_grasp import first_grasp
+    from ocp.robots.grasp_reach import roll
+    from ocp.robots.turn_reach import Turn, rolls, turn_shortfall
+
+    hand = load_whole_hand(coupled_hand(), "mjcf", [TipSpec(t) for t in TIPS])
+    grasp = first_grasp(hand.fingers, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS)
+    f, q = hand.fingers[0], np.asarray(grasp.q[0])
+    (c,) = f.couplings
+    v = float(c.row(f.joint_names) @ q)
+    narrow = f.with_couplings((replace(c, lower=v - 2e-5, upper=v + 2e-5),))
+    axis = np.array([0.0, 0.0, 1.0])
+    got = roll(narrow, q, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, axis, math.radians(30))
+    assert got.why == "coupling limit (tendon 'T_ffc')" and got.reach < math.radians(30)
+    short = turn_shortfall([narrow], ["ff"], [q], NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS,
+                           [Turn(axis, math.radians(60))], 0.0)
+    assert short is not None and "its tendon 'T_ffc''s bound" in short.message
+    assert rolls(f) and not rolls(f.with_couplings((c.at("lower"),)))
