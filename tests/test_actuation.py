@@ -236,3 +236,44 @@ def test_the_requests_torque_limits_are_the_actuators() -> None:
         solve(_roll_request(torque_limits={"wrist": 1.0}))
     fields = dict(exc.value.errors)
     assert "'wrist' is not a joint of the hand's fingers" in fields["hand.torque_limits.wrist"]
+
+
+def test_a_servos_torque_range_at_a_joint_position_is_what_its_ctrlrange_reaches() -> None:
+    """A position servo whose set point must stay in its ctrlrange gives, at joint
+    position q, kp (c_lo - q) .. kp (c_hi - q) (within its forcerange): MuJoCo's own
+    actuator force at the two ends of the control range. Near the range's end a gait's
+    holds and swings keep to it (the swing slowed while its joints' damping asks more)."""
+    import mujoco
+
+    from ocp.gait.step import TorqueLimits
+    from ocp.robots.actuation import HandActuation, torque_bounds_at
+
+    act = HandActuation(OWN)
+    names = ["ffj1", "ffj2"]
+    m = act.model()
+    d = mujoco.MjData(m)
+    (a1, a2), _ = act.actuators(names)
+    for q in (-0.19, 0.0, 0.9, 1.6):
+        lo, hi = a1.range_at(q)
+        jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "ffj1")
+        aid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a1.name)
+        ends = []
+        for c in m.actuator_ctrlrange[aid]:
+            d.qpos[:] = 0.0
+            d.qpos[m.jnt_qposadr[jid]] = q
+            d.qvel[:] = 0.0
+            d.ctrl[:] = 0.0
+            d.ctrl[aid] = c
+            mujoco.mj_forward(m, d)
+            ends.append(float(d.actuator_force[aid]))
+        assert lo == pytest.approx(min(ends), abs=1e-12)
+        assert hi == pytest.approx(max(ends), abs=1e-12)
+    q_lo = float(m.actuator_ctrlrange[aid, 0])
+    lo, hi = torque_bounds_at(act, names, [[q_lo, 0.5]], 0.9)
+    assert lo[0, 0] == 0.0 and hi[0, 0] > 0  # at the range's end: nothing further down
+    assert (lo[0, 1], hi[0, 1]) == pytest.approx((-0.63, 0.63))  # its forcerange, x 0.9
+    limits = TorqueLimits((np.full(2, -0.63),), (np.full(2, 0.63),), np.zeros(3), (),
+                          0.9, ((a1, a2),), (np.ones(2),))
+    q = np.array([[q_lo + 0.02, 0.5]])
+    v = np.array([[-0.1, 0.0]])  # toward the end at 0.1 rad/s against damping 1
+    assert limits.damping_overrun(0, q, v) == pytest.approx(0.1 / (0.9 * 10 * 0.02))

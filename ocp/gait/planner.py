@@ -453,7 +453,11 @@ def torque_limits(template: ManipulationProblem, share: float = HOLD_TORQUE_SHAR
     if act is None or template.forces is None:
         return None
     bounds = [torque_bounds(act, f.finger.joint_names, share) for f in template.fingers]
-    if all(np.all(np.isinf(lo)) and np.all(np.isinf(hi)) for lo, hi in bounds):
+    actuators = tuple(act.actuators(f.finger.joint_names)[0] for f in template.fingers)
+    ctrl_limited = any(a.ctrl_range is not None and a.kind != "none"
+                       for acts in actuators for a in acts)
+    if not ctrl_limited and all(np.all(np.isinf(lo)) and np.all(np.isinf(hi))
+                                for lo, hi in bounds):
         return None
     rates = []
     for f, (lo, hi) in zip(template.fingers, bounds, strict=True):
@@ -461,7 +465,10 @@ def torque_limits(template: ManipulationProblem, share: float = HOLD_TORQUE_SHAR
         with np.errstate(divide="ignore", invalid="ignore"):
             rates.append(np.where(c > 0, np.minimum(-lo, hi) / c, np.inf))
     return TorqueLimits(tuple(lo for lo, _ in bounds), tuple(hi for _, hi in bounds),
-                        np.asarray(template.forces.gravity, dtype=float), tuple(rates), share)
+                        np.asarray(template.forces.gravity, dtype=float), tuple(rates), share,
+                        actuators,
+                        tuple(np.asarray(act.damping(f.finger.joint_names), dtype=float)
+                              for f in template.fingers))
 
 
 def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,

@@ -153,15 +153,55 @@ class TorqueLimits:
     rate: tuple[FloatArray, ...] = ()
     #: the share of the actuators' range ``lower`` and ``upper`` are
     share: float = 1.0
+    #: per finger, its joints' actuators (:class:`~ocp.robots.actuation.Actuator`): where
+    #: a control is limited, the torque it gives depends on the joint's position
+    actuators: tuple[tuple[Any, ...], ...] = ()
+    #: per finger, its joints' viscous damping [N m s/rad]
+    damping: tuple[FloatArray, ...] = ()
 
     def key(self) -> bytes:
         return b"".join(np.ascontiguousarray(a, dtype=float).tobytes()
-                        for a in (*self.lower, *self.upper, self.gravity, [self.share]))
+                        for a in (*self.lower, *self.upper, self.gravity, [self.share])) \
+            + repr(self.actuators).encode()
+
+    def damping_overrun(self, i: int, Q: FloatArray, V: FloatArray) -> float:
+        """How many times more torque than finger ``i``'s actuators give (at each sample's
+        joints ``Q``, :meth:`at`) its joints' damping asks at the rates ``V``, at worst
+        (1: just enough; inf: a joint moving against an actuator that gives nothing that
+        way there); 0 without damping."""
+        if not self.damping:
+            return 0.0
+        c = np.asarray(self.damping[i], dtype=float)
+        worst = 0.0
+        for q, v in zip(Q, V, strict=True):
+            lo, hi = self.at(i, q)
+            need = c * np.asarray(v, dtype=float)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = np.where(need > 0, need / hi, np.where(need < 0, need / lo, 0.0))
+            r = np.where(np.isnan(r), 0.0, np.where(r < 0, np.inf, r))
+            worst = max(worst, float(r.max(initial=0.0)))
+        return worst
+
+    def at(self, i: int, q: Any) -> tuple[FloatArray, FloatArray]:
+        """Finger ``i``'s joint torque bounds at its joints ``q``: ``lower`` and ``upper``,
+        narrowed where an actuator's control range reaches less there (a position servo
+        near the end of its range: :meth:`~ocp.robots.actuation.Actuator.range_at`)."""
+        lo, hi = np.array(self.lower[i], dtype=float), np.array(self.upper[i], dtype=float)
+        if self.actuators:
+            for j, a in enumerate(self.actuators[i]):
+                a_lo, a_hi = a.range_at(float(np.asarray(q, dtype=float)[j]))
+                lo[j], hi[j] = max(lo[j], self.share * a_lo), min(hi[j], self.share * a_hi)
+        return lo, hi
 
     def full(self) -> TorqueLimits:
         """The same limits at the actuators' whole range."""
         return replace(self, lower=tuple(a / self.share for a in self.lower),
                        upper=tuple(a / self.share for a in self.upper), share=1.0)
+
+
+#: A swing is slowed for its joints' damping at most this many times (a joint driven
+#: against an actuator that gives nothing that way is left to the actuators' check).
+MAX_SLOWDOWN = 10.0
 
 
 def hold_fits(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
@@ -173,12 +213,15 @@ def hold_fits(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[
         return None
     from ocp.solution import joint_torques
 
+    bounds = {i: limits.at(i, qs[i]) for i in which}
+
     def fits(F: FloatArray) -> bool:
         for row, i in enumerate(which):
             tau = joint_torques(fingers[i], np.asarray(qs[i], dtype=float)[None],
                                 hold.points[row][None], hold.normals[row][None],
                                 F[row][None], np.zeros(1), limits.gravity)[0]
-            if np.any(tau > limits.upper[i]) or np.any(tau < limits.lower[i]):
+            lo, hi = bounds[i]
+            if np.any(tau > hi) or np.any(tau < lo):
                 return False
         return True
 
@@ -214,8 +257,9 @@ def hold_torque_refusal(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...],
         tau = joint_torques(fingers[i], np.asarray(qs[i], dtype=float)[None],
                             hold.points[row][None], hold.normals[row][None], F[row][None],
                             np.zeros(1), limits.gravity)[0]
+        lo_i, hi_i = limits.at(i, qs[i])
         for j, v in enumerate(tau):
-            lo, hi = float(limits.lower[i][j]), float(limits.upper[i][j])
+            lo, hi = float(lo_i[j]), float(hi_i[j])
             over = v / hi if v > 0 and hi > 0 else v / lo if v < 0 and lo < 0 else 0.0
             if over > worst[0]:
                 worst = (over, fingers[i].joint_names[j], float(v), lo, hi)
@@ -325,9 +369,11 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         if closer.ok:
             plan = closer
     if plan.ok and limits is not None and limits.rate:
-        # a swing faster than the joints' damping lets the actuators drive: slower
-        over = float(np.max(np.abs(plan.V) / limits.rate[k]))
-        if over > 1.0:
+        # a swing faster than the joints' damping lets the actuators drive (at each
+        # sample's joints: a servo near the end of its control range gives less): slower
+        over = max(float(np.max(np.abs(plan.V) / limits.rate[k])),
+                   limits.damping_overrun(k, plan.Q, plan.V))
+        if 1.0 < over < MAX_SLOWDOWN:
             slower = plan_swing(replace(plan.spec, duration=plan.spec.duration * over * 1.05))
             if slower.ok:
                 plan = slower

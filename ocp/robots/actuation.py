@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["Actuation", "Actuator", "HandActuation", "UrdfActuation", "actuation_of",
-           "torque_bounds", "urdf_actuators"]
+           "torque_bounds", "torque_bounds_at", "urdf_actuators"]
 
 FloatArray = NDArray[np.float64]
 
@@ -62,6 +62,22 @@ class Actuator:
         b0, b1, b2 = self.bias
         g = self.gear
         return (tau / g - b0 - b1 * g * q - b2 * g * q_dot) / self.gain
+
+    def range_at(self, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """The joint torques [N m] it can give at joint positions ``q`` (at rest): its
+        ``torque_range``, and where its control is limited the torques its ``ctrlrange``
+        reaches there (a position servo of stiffness kp whose set point must stay in
+        ``[c_lo, c_hi]`` gives ``kp (c_lo - q) .. kp (c_hi - q)``: nothing below 0 at
+        ``q = c_lo``); infinite where it has no limit."""
+        Q = np.asarray(q, dtype=float)
+        lo, hi = np.full(Q.shape, -np.inf), np.full(Q.shape, np.inf)
+        if self.torque_range is not None:
+            lo, hi = np.maximum(lo, self.torque_range[0]), np.minimum(hi, self.torque_range[1])
+        if self.ctrl_range is not None and self.kind != "none":
+            g, (b0, b1, _) = self.gear, self.bias
+            ends = [g * (self.gain * c + b0 + b1 * g * Q) for c in self.ctrl_range]
+            lo, hi = np.maximum(lo, np.minimum(*ends)), np.minimum(hi, np.maximum(*ends))
+        return lo, hi
 
     def describe_range(self) -> str:
         if self.torque_range is None:
@@ -405,6 +421,19 @@ def torque_bounds(actuation: Any, joint_names: Sequence[str], share: float = 1.0
     acts, _ = actuation.actuators(joint_names)
     lo = np.array([a.torque_range[0] if a.torque_range else -np.inf for a in acts])
     hi = np.array([a.torque_range[1] if a.torque_range else np.inf for a in acts])
+    return share * lo, share * hi
+
+
+def torque_bounds_at(actuation: Any, joint_names: Sequence[str], q: ArrayLike,
+                     share: float = 1.0) -> tuple[FloatArray, FloatArray]:
+    """(lower, upper) joint torques [N m] the actuators give ``joint_names`` at the joint
+    positions ``q`` (rows: samples): :meth:`Actuator.range_at`, times ``share`` (each
+    range is narrowed toward 0 torque)."""
+    acts, _ = actuation.actuators(joint_names)
+    Q = np.atleast_2d(np.asarray(q, dtype=float))
+    lo, hi = np.empty_like(Q), np.empty_like(Q)
+    for j, a in enumerate(acts):
+        lo[:, j], hi[:, j] = a.range_at(Q[:, j])
     return share * lo, share * hi
 
 

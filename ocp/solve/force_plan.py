@@ -89,17 +89,23 @@ ROLL_TORQUE_SHARE = 0.9
 def _torque_rows(stage: ForceStage, problem: ManipulationProblem, Xall: np.ndarray,
                  prm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The force stage's torque rows for the problem's actuators (``problem.actuation``,
-    :data:`ROLL_TORQUE_SHARE` of their ranges): their parameters at ``Xall`` and bounds;
-    None without actuators or limits."""
+    :data:`ROLL_TORQUE_SHARE` of their ranges at each point's joints: a position servo's
+    control range bounds its torque near the range's ends): their parameters at ``Xall``
+    and bounds (joints x points); None without actuators or limits."""
     if problem.actuation is None or problem.forces is None or not stage.tips:
         return None
-    from ocp.robots.actuation import torque_bounds
+    from ocp.robots.actuation import torque_bounds_at
     from ocp.robots.couplings import tendon_torque_bounds
 
-    bounds = [tendon_torque_bounds(t.finger, *torque_bounds(
-        problem.actuation, t.finger.joint_names, ROLL_TORQUE_SHARE)) for _, t in stage.tips]
-    lo = np.concatenate([b[0] for b in bounds])
-    hi = np.concatenate([b[1] for b in bounds])
+    los, his = [], []
+    for _, t in stage.tips:
+        lo, hi = torque_bounds_at(problem.actuation, t.finger.joint_names,
+                                  Xall[:, t.q_cols], ROLL_TORQUE_SHARE)
+        for k in range(len(Xall)):
+            lo[k], hi[k] = tendon_torque_bounds(t.finger, lo[k], hi[k])
+        los.append(lo.T)
+        his.append(hi.T)
+    lo, hi = np.vstack(los), np.vstack(his)
     if not (np.isfinite(lo).any() or np.isfinite(hi).any()):
         return None
     return stage.torque_params(Xall, prm, problem.forces.gravity), lo, hi

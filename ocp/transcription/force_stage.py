@@ -141,7 +141,8 @@ class ForceStage:
         point admits no forces; IPOPT's iterations) at the physical states ``Xall``
         (points x nx), from ``guess`` (same shape as the result). ``torques``: the torque
         rows' parameters (:meth:`torque_params`) and their lower and upper bounds (every
-        fingertip's joints in turn) [N m]; None: no bounds."""
+        fingertip's joints in turn; one column per point, or one for all) [N m]; None: no
+        bounds."""
         k = len(Xall)
         nc = self.m.n_contacts
         _, P, N, R, _ = self.m.mapped("path", k)(Xall.T, prm)
@@ -156,8 +157,11 @@ class ForceStage:
                               np.full(n_tau, np.inf))
         else:
             tq, lo_t, hi_t = torques
-        lo = np.tile(np.concatenate([self._lo, lo_t]), k)
-        hi = np.tile(np.concatenate([self._hi, hi_t]), k)
+        if np.ndim(lo_t) == 1:  # the same bounds at every point
+            lo_t, hi_t = np.tile(np.reshape(lo_t, (-1, 1)), k), np.tile(
+                np.reshape(hi_t, (-1, 1)), k)
+        lo = np.vstack([np.tile(np.reshape(self._lo, (-1, 1)), k), lo_t]).ravel(order="F")
+        hi = np.vstack([np.tile(np.reshape(self._hi, (-1, 1)), k), hi_t]).ravel(order="F")
         res = solver(x0=np.clip(guess, -bound, bound).ravel(order="F"),
                      p=np.concatenate([geo.ravel(order="F"), tq.ravel(order="F"), load, [L]]),
                      lbx=-bound.ravel(order="F"), ubx=bound.ravel(order="F"),
