@@ -24,6 +24,10 @@ printed side by side.
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --repeats 3
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --ref 1d51bdd --repeats 2
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --replace --repeats 1
+
+``--replace`` plans every turn with the request's ``gait.replace`` "all" and "spent" side
+by side instead (robot time and re-placements are the plans', the same every run).
 """
 
 from __future__ import annotations
@@ -60,8 +64,9 @@ def targets(root: Path = ROOT) -> dict[str, dict[str, Any]]:
     return out
 
 
-def _worker(names: list[str]) -> None:
-    """One run: every named turn planned in this process, one JSON line each."""
+def _worker(names: list[str], replace: str | None = None) -> None:
+    """One run: every named turn planned in this process, one JSON line each
+    (``replace``: the requests' ``gait.replace``, default theirs)."""
     from dexroll_client import ManipulationRequest
     from ocp.gait.swing import prepare_swings
     from planner_service.planners import REQUEST
@@ -71,6 +76,8 @@ def _worker(names: list[str]) -> None:
 
     reqs = targets(Path.cwd())
     for name in names:
+        if replace is not None:
+            reqs[name]["gait"]["replace"] = replace
         t0 = time.perf_counter()
         req = REQUEST.validate_python(reqs[name])
         assert isinstance(req, ManipulationRequest)
@@ -85,17 +92,20 @@ def _worker(names: list[str]) -> None:
             "name": name, "status": res.status.value,
             "certified": bool(res.certificate is not None and res.certificate.passed),
             "rolls": len(gait.rolls), "replacements": len(gait.steps),
+            "robot": gait.duration if gait.phases else None,
             "wall": t3 - t0, "grasp": t1 - t0, "swing_build": swings,
             "roll_build": res.stats.build_time, "solve": res.stats.solve_time,
             "gait": t3 - t2}), flush=True)
 
 
-def _run(tree: Path, names: list[str]) -> list[dict[str, Any]]:
-    """One run in a fresh process whose ``ocp`` and ``planner_service`` are ``tree``'s."""
+def _run(tree: Path, names: list[str], replace: str | None = None) -> list[dict[str, Any]]:
+    """One run in a fresh process whose ``ocp`` and ``planner_service`` are ``tree``'s
+    (``replace``: the requests' ``gait.replace``)."""
     env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1"}
-    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
-                          *names], cwd=tree, env=env, capture_output=True, text=True,
-                         check=True)
+    extra = [] if replace is None else ["--worker-replace", replace]
+    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), *extra,
+                          "--worker", *names], cwd=tree, env=env, capture_output=True,
+                         text=True, check=True)
     return [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
 
 
@@ -112,9 +122,10 @@ def _median(rows: list[dict[str, Any]], key: str) -> float:
 
 
 def _table(sides: dict[str, list[list[dict[str, Any]]]]) -> str:
-    lines = ["| turn | side | status, certified | rolls, re-placements | wall [s] | "
-             "grasp [s] | swing build [s] | roll build [s] | solve [s] | other [s] |",
-             "|---|---|---|---|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| turn | side | status, certified | rolls, re-placements | robot time [s] | "
+             "wall [s] | grasp [s] | swing build [s] | roll build [s] | solve [s] | "
+             "other [s] |",
+             "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     names = [r["name"] for r in next(iter(sides.values()))[0]]
     for name in names:
         for side, runs in sides.items():
@@ -123,6 +134,7 @@ def _table(sides: dict[str, list[list[dict[str, Any]]]]) -> str:
             lines.append(
                 f"| {name} | {side} | {rows[0]['status']}, {rows[0]['certified']} | "
                 f"{rows[0]['rolls']}, {rows[0]['replacements']} | "
+                f"{rows[0].get('robot') or float('nan'):.1f} | "
                 f"{_median(rows, 'wall'):.1f} | {_median(rows, 'grasp'):.1f} | "
                 f"{_median(rows, 'swing_build'):.1f} | {_median(rows, 'roll_build'):.1f} | "
                 f"{_median(rows, 'solve'):.1f} | {statistics.median(other):.1f} |")
@@ -145,20 +157,26 @@ def main() -> None:
     ap.add_argument("--turns", default=None,
                     help="comma-separated subset of the turns (default: all)")
     ap.add_argument("--out", default=None, help="write every run's rows as JSON here")
+    ap.add_argument("--replace", action="store_true",
+                    help="time gait.replace 'all' and 'spent' side by side (this tree)")
     ap.add_argument("--worker", nargs="*", help=argparse.SUPPRESS)
+    ap.add_argument("--worker-replace", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker is not None:
-        _worker(args.worker)
+        _worker(args.worker, args.worker_replace)
         return
     names = list(targets())
     if args.turns:
         names = [n for n in names if n in args.turns.split(",")]
-    trees = {"new": ROOT} if args.ref is None else {"old": _worktree(args.ref), "new": ROOT}
-    sides: dict[str, list[list[dict[str, Any]]]] = {side: [] for side in trees}
+    runs: dict[str, tuple[Path, str | None]] = \
+        {"all": (ROOT, "all"), "spent": (ROOT, "spent")} if args.replace else \
+        {"new": (ROOT, None)} if args.ref is None else \
+        {"old": (_worktree(args.ref), None), "new": (ROOT, None)}
+    sides: dict[str, list[list[dict[str, Any]]]] = {side: [] for side in runs}
     for k in range(args.repeats):
-        for side, tree in trees.items():
+        for side, (tree, replace) in runs.items():
             print(f"run {k + 1}/{args.repeats}, {side}", file=sys.stderr, flush=True)
-            sides[side].append(_run(tree, names))
+            sides[side].append(_run(tree, names, replace))
     if args.out:
         Path(args.out).write_text(json.dumps(sides, indent=1))
     print(_table(sides))

@@ -471,15 +471,80 @@ def torque_limits(template: ManipulationProblem, share: float = HOLD_TORQUE_SHAR
                               for f in template.fingers))
 
 
+def spent_fingers(template: ManipulationProblem, q_now: tuple[FloatArray, ...],
+                  centre: FloatArray, rho: float, axis: FloatArray, upto: float,
+                  never_lifted: set[str]) -> list[int]:
+    """The fingertips to re-place before the next roll of ``upto`` [rad] about ``axis``:
+    those whose rolled reach from the joints ``q_now`` (:func:`~ocp.robots.grasp_reach.
+    roll`, the seams kept ``pad_margin`` away) falls short of ``(1 + SPENT_MARGIN) upto``,
+    those whose motion the ball's does not fix (their reach is not known), and of two
+    fingertips the roll brings within the tips' gap, the one that reaches less. A
+    fingertip the others cannot hold the ball without is none of them (it rolls
+    throughout)."""
+    from ocp.robots.grasp_reach import roll
+    from ocp.robots.turn_reach import rolls
+
+    out = []
+    reach: dict[int, float] = {}
+    rolled: list[FloatArray] = []
+    for k, f in enumerate(template.fingers):
+        r = roll(f.finger, q_now[k], centre, rho, axis, upto * (1.0 + SPENT_MARGIN),
+                 template.pad_margin) if rolls(f.finger) else None
+        rolled.append(np.asarray(q_now[k] if r is None else r.q, dtype=float))
+        if (f.name or f"finger{k}") in never_lifted:
+            continue
+        reach[k] = math.inf if r is None else r.reach
+        if r is None or r.why:
+            out.append(k)
+    # two fingertips the roll brings together: the one of the pair that reaches less
+    ahead = _roll_ahead(template, q_now, centre, rho, axis, upto)
+    if ahead.apart < upto and not ahead.close:
+        fingers = tuple(f.finger for f in template.fingers)
+        pair = _closest_pair(fingers, [q if k in out else rolled[k]
+                                       for k, q in enumerate(q_now)])
+        liftable_ = [k for k in pair if k in reach]
+        if liftable_ and not set(pair) & set(out):
+            out.append(min(liftable_, key=lambda k: reach[k]))
+    return sorted(out)
+
+
+def _closest_pair(fingers: tuple[Any, ...], qs: list[FloatArray]) -> tuple[int, int]:
+    """The two fingertips whose bodies are nearest at the joints ``qs``."""
+    best, pair = math.inf, (0, 0)
+    bodies = []
+    for f, q in zip(fingers, qs, strict=True):
+        body = tip_body(f)
+        a, b = body.placed(*f.fingertip_pose_pin(q))
+        bodies.append((a[None], b[None], body.r))
+    for i, (a0, b0, r0) in enumerate(bodies):
+        for j in range(i + 1, len(bodies)):
+            a1, b1, r1 = bodies[j]
+            d = float(segments_distance(a0, b0, a1, b1)[0]) - r0 - r1
+            if d < best:
+                best, pair = d, (i, j)
+    return pair
+
+
+#: A fingertip is re-placed when its rolled reach is below the next roll's length and
+#: this share of it more (its reach is spent, or will be after the next roll: a fingertip
+#: rolled farther from where it began finds no swing back as often).
+SPENT_MARGIN = 1.0
+#: A roll is warm-started from the last one when every joint starts within this [rad]
+#: of where the last one started (the grasp recurs).
+RECUR_TOL = 0.05
 def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
                      q_start: tuple[FloatArray, ...], q_now: tuple[FloatArray, ...],
                      pose: ObjectPose, t: float, load: FloatArray,
-                     swing: dict[str, Any] | None, hold_time: float, never_lifted: set[str]
+                     swing: dict[str, Any] | None, hold_time: float, never_lifted: set[str],
+                     which: list[int] | None = None,
+                     nearer: tuple[FloatArray, ...] | None = None
                      ) -> tuple[tuple[FloatArray, ...], float]:
-    """After a roll that began at the joints ``q_start``: every fingertip the others can
-    hold the ball without re-placed, in turn, at the contact it had then (relative to the
-    palm), its phases, step and checks added to ``plan`` and ``checks``; (the joints
-    after, the time). A step that fails sets the plan's status and ends the loop."""
+    """After a roll: the fingertips ``which`` (default: every one) that the others can
+    hold the ball without re-placed, in turn, at the contact they had at the joints
+    ``q_start`` (relative to the palm), its phases, step and checks added to ``plan`` and
+    ``checks``; (the joints after, the time); where no swing there is found, at the
+    contact it had at the joints ``nearer`` when given (where this roll began). A step
+    that fails sets the plan's status and ends the loop."""
     fingers = tuple(f.finger for f in template.fingers)
     nf = len(fingers)
     rho = float(template.object.dimensions[0])
@@ -487,14 +552,17 @@ def _replace_fingers(plan: GaitPlan, checks: list[Check], template: Manipulation
     assert template.forces is not None
     limits = torque_limits(template)
     obstacles = swing_obstacles(template)
-    for k in range(nf):
-        _, n_back = contact_of(fingers[k], q_start[k], centre, rho)
+    for k in (range(nf) if which is None else which):
         last = next((st.swing for st in reversed(plan.steps) if st.finger == k), None)
-        gs = replace_finger(fingers, q_now, k, n_back, q_start[k], centre, rho,
-                            pose.rotation, load, swing, hold_time, last,
-                            tuple(f.name or f"finger{i}"
-                                  for i, f in enumerate(template.fingers)), limits,
-                            obstacles)
+        for q_land in (q_start[k], *(() if nearer is None else (nearer[k],))):
+            _, n_back = contact_of(fingers[k], q_land, centre, rho)
+            gs = replace_finger(fingers, q_now, k, n_back, q_land, centre, rho,
+                                pose.rotation, load, swing, hold_time, last,
+                                tuple(f.name or f"finger{i}"
+                                      for i, f in enumerate(template.fingers)), limits,
+                                obstacles)
+            if gs.ok or gs.swing is None:  # found, or the others cannot hold the ball
+                break
         if gs.status == "infeasible" and gs.swing is None:
             never_lifted.add(template.fingers[k].name or f"finger{k}")
             continue  # it keeps rolling
@@ -520,7 +588,8 @@ def _replace_fingers(plan: GaitPlan, checks: list[Check], template: Manipulation
 def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, angle: float,
               roll_step: float = math.radians(10.0), seconds_per_radian: float = 8.0,
               planner: Any = None, swing: dict[str, Any] | None = None,
-              hold_time: float = 0.2, max_rolls: int = 40) -> GaitPlan:
+              hold_time: float = 0.2, max_rolls: int = 40, replace_all: bool = True
+              ) -> GaitPlan:
     """Turn the ball of ``template`` (a grasp of round fingertips on a ball, with
     ``forces``: the holds need the object's weight) by ``angle`` [rad] about ``axis``
     (palm frame) from the joints ``qs`` (one array per finger), rolling by at most
@@ -528,7 +597,13 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     When a fingertip finds no swing back after a roll, the gait goes back to before that
     roll and rolls half as far from then on, up to :data:`MAX_ROLL_RETRIES` times.
     ``swing``: fields of :class:`~ocp.gait.swing.SwingSpec` (duration, clearance);
-    ``hold_time``: the unloading and loading around each swing [s]."""
+    ``hold_time``: the unloading and loading around each swing [s]. ``replace_all``
+    (default): after each roll every liftable fingertip is re-placed where it touched
+    when that roll began ("roll and reset"); else only those whose reach is spent
+    (:func:`spent_fingers`), each where it touched when the gait began (the ball turned
+    about its centre fills the same space: that contact gives the grasp's searched
+    reach again), or every one there when one of them cannot be lifted or finds no
+    swing, and where it touched when the roll began when it finds no swing home."""
     from ocp.solve.planner import ManipulationPlanner
 
     t_wall = time.perf_counter()
@@ -545,6 +620,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     load = load_parameters(template)
     rho = float(template.object.dimensions[0])
     q_now = tuple(np.asarray(q, dtype=float) for q in qs)
+    q_home = q_now  # where each fingertip touched when the gait began
+    roll_starts: list[tuple[FloatArray, ...]] = []  # each roll's joints at its start
     pose = pose0
     plan = GaitPlan("solved", "", nq=tuple(int(f.nq) for f in fingers))
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
@@ -591,6 +668,10 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         # the last roll, in its own start frame, is this one's warm start, primal-dual
         # point included: the grasp recurs, so it is (nearly) this very problem's optimum
         warm = plan.rolls[-1] if plan.rolls and plan.rolls[-1].ok else None
+        if warm is not None and roll_starts and max(
+                float(np.abs(a - b).max()) for a, b in zip(roll_starts[-1], q_now,
+                                                           strict=True)) > RECUR_TOL:
+            warm = None  # a grasp of other contacts: the last roll's point is no start
         if warm is not None and warm.stats is not None \
                 and warm.stats.n_intervals > prob.n_intervals:
             # the last roll's certificate refined its grid: this one starts there, where
@@ -605,6 +686,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             break
         r = len(plan.rolls)
         plan.rolls.append(sol)
+        roll_starts.append(q_now)
         plan.frames.append(pose.rotation)
         clock = RollClock.of(dur)
         plan.clocks.append(clock)
@@ -629,8 +711,28 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         q_now = tuple(q_end)
         if done >= angle - 1e-12:
             break
-        q_now, t = _replace_fingers(plan, checks, template, q_start, q_now, pose, t, load,
-                                    swing, hold_time, never_lifted)
+        if not replace_all:
+            # only the fingertips whose reach is spent, each back where the gait began;
+            # when one of them cannot be lifted or finds no swing there, every one is
+            # (the grasp the gait began with, whose fingertips could all be lifted)
+            after = (len(plan.phases), len(plan.steps), len(checks), t, q_now,
+                     set(never_lifted))
+            which = spent_fingers(template, q_now, np.asarray(pose.position, float), rho,
+                                  ax, min(cap, angle - done), never_lifted)
+            q_part, t_part = _replace_fingers(plan, checks, template, q_home, q_now, pose,
+                                              t, load, swing, hold_time, never_lifted, which,
+                                              q_start)
+            if plan.status == "solved" and never_lifted == after[5]:
+                q_now, t = q_part, t_part
+                continue
+            del plan.phases[after[0]:], plan.steps[after[1]:], checks[after[2]:]
+            plan.status, plan.message = "solved", ""
+            never_lifted.clear()
+            never_lifted.update(after[5])
+        q_now, t = _replace_fingers(plan, checks, template,
+                                    q_start if replace_all else q_home, q_now, pose, t,
+                                    load, swing, hold_time, never_lifted,
+                                    nearer=None if replace_all else q_start)
         if plan.status != "solved":
             if retries < MAX_ROLL_RETRIES and step / 2 >= MIN_ROLL:
                 # a fingertip found no swing back after this roll: roll half as far (a

@@ -107,7 +107,7 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
                      planner=planner,
                      swing={"duration": float(g.swing_duration),
                             "clearance": float(g.clearance)},
-                     hold_time=float(g.hold_time))
+                     hold_time=float(g.hold_time), replace_all=g.replace == "all")
     rate = float(getattr(request, "sample_rate", None) or DEFAULT_GAIT_RATE)
     # the result's samples serve the links' check when they are at least as dense
     smp = gait_samples(gait, problem, gait_times(gait, rate)) if gait.phases else None

@@ -29,6 +29,15 @@ class GaitModel(_Request):
     hold_time: Real = Field(default=0.2, ge=0.01, le=5.0,
                             description="the unloading before a lift-off and the loading "
                                         "after a touch-down, each [s]")
+    replace: Literal["all", "spent"] = Field(
+        default="all",
+        description="which fingertips are re-placed after a roll: 'all': every one the "
+                    "others can hold the ball without, where it touched when that roll "
+                    "began; 'spent': only those whose rolled reach is spent for the next "
+                    "two rolls' worth (or that the next roll brings within 0.5 mm of "
+                    "another), each where it touched when the gait began (all of them "
+                    "there when one cannot be lifted or finds no swing): fewer "
+                    "re-placements, a shorter motion (docs/gait.md)")
     clearance: Real = Field(default=0.003, ge=0.0, le=0.05,
                             description="the least distance [m] between a swinging "
                                         "fingertip's surface and the ball's, and (or the "
