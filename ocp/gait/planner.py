@@ -529,8 +529,9 @@ def _closest_pair(fingers: tuple[Any, ...], qs: list[FloatArray]) -> tuple[int, 
 #: this share of it more (its reach is spent, or will be after the next roll: a fingertip
 #: rolled farther from where it began finds no swing back as often).
 SPENT_MARGIN = 1.0
-#: A roll is warm-started from the last one when every joint starts within this [rad]
-#: of where the last one started (the grasp recurs).
+#: Re-placing only the spent fingertips, a roll is warm-started from the last one when
+#: every joint starts within this [rad] of where the last one started (the grasp recurs;
+#: re-placing every one, it recurs but for the never-lifted fingertips, and always is).
 RECUR_TOL = 0.05
 def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
                      q_start: tuple[FloatArray, ...], q_now: tuple[FloatArray, ...],
@@ -668,7 +669,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         # the last roll, in its own start frame, is this one's warm start, primal-dual
         # point included: the grasp recurs, so it is (nearly) this very problem's optimum
         warm = plan.rolls[-1] if plan.rolls and plan.rolls[-1].ok else None
-        if warm is not None and roll_starts and max(
+        if warm is not None and not replace_all and roll_starts and max(
                 float(np.abs(a - b).max()) for a, b in zip(roll_starts[-1], q_now,
                                                            strict=True)) > RECUR_TOL:
             warm = None  # a grasp of other contacts: the last roll's point is no start
