@@ -44,6 +44,8 @@ class Visit:
     failure: str | None = None
     #: the directive that refused a script added to the page afterwards (None: it ran)
     refused_by: str | None = None
+    #: the window's and the 3D view's heights [px], whether the schedule is shown
+    layout: dict[str, Any] = field(default_factory=dict)
 
 
 #: Adds an inline script the page's policy does not name; what refused it (or null).
@@ -57,6 +59,14 @@ INJECT = """() => new Promise(done => {
 })"""
 
 
+#: The window's height, the 3D view's and the timeline bar's, and the schedule's display.
+LAYOUT = """() => ({window: innerHeight,
+  view: document.querySelector("#view canvas").getBoundingClientRect().height,
+  bar: document.getElementById("bar").getBoundingClientRect().height,
+  schedule: getComputedStyle(document.getElementById("schedule")).display,
+  scheduleHeight: document.getElementById("schedule").getBoundingClientRect().height})"""
+
+
 def visit(context: Any, url: str, times: dict[str, float]) -> Visit:
     v = Visit()
     page = context.new_page()
@@ -66,6 +76,7 @@ def visit(context: Any, url: str, times: dict[str, float]) -> Visit:
     open_view(page, url)
     v.failure = page.evaluate("window.dexroll.error")
     v.duration = float(page.evaluate("window.dexroll.duration"))
+    v.layout = page.evaluate(LAYOUT)
     canvas = page.locator("#view canvas")
     for name, frac in times.items():
         page.evaluate("t => window.dexroll.setTime(t)", frac * v.duration)
@@ -140,6 +151,15 @@ def test_the_canvas_is_not_blank(served: tuple[Visit, Path, str]) -> None:
     assert len(np.unique(shot.reshape(-1, 3), axis=0)) > 200  # shading, not a flat fill
 
 
+def test_a_rolling_plans_view_fills_the_window(served: tuple[Visit, Path, str]) -> None:
+    """A plan without contact phases shows no schedule, and its 3D view takes the whole
+    window but the timeline bar (the hidden schedule's canvas was shown at its default
+    size: the view was 225 px tall in a 900 px window)."""
+    layout = served[0].layout
+    assert layout["schedule"] == "none"
+    assert layout["view"] >= layout["window"] - layout["bar"] - 2, layout
+
+
 def test_the_object_moves_along_the_timeline(served: tuple[Visit, Path, str]) -> None:
     shots = served[0].shots
     assert differs(shots["start"], shots["middle"]) > 0.002
@@ -212,6 +232,9 @@ def test_a_gaits_contact_schedule_is_on_the_timeline(browser: Any, tmp_path: Pat
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(f"uncaught: {e}"))
     open_view(page, file.as_uri())
+    layout = page.evaluate(LAYOUT)  # the view, the bar and the schedule fill the window
+    assert layout["schedule"] == "block" and layout["scheduleHeight"] > 50
+    assert layout["view"] >= layout["window"] - layout["bar"] - layout["scheduleHeight"] - 2
     scene = json.loads(page.locator("#dexroll-scene").text_content())
     colors = {c["name"]: np.array([int(c["color"][i:i + 2], 16) for i in (1, 3, 5)],
                                   dtype=float) for c in scene["contacts"]}

@@ -62,6 +62,7 @@ body { display: flex; flex-direction: column; }
 #clock { font-variant-numeric: tabular-nums; min-width: 13em; }
 #grasp { font-variant-numeric: tabular-nums; }
 #schedule { display: block; width: 100%; cursor: pointer; background: #fff; }
+#schedule[hidden] { display: none; }
 """
 
 
