@@ -558,3 +558,24 @@ def test_a_hold_no_forces_of_which_fit_the_actuators_is_named() -> None:
     assert why.startswith("no forces that hold the ball keep index, middle, ring, thumb "
                           "within their actuators: joint "), why
     assert "its actuator gives -0.001..0.001 N m" in why
+
+
+def test_a_swing_timed_faster_keeps_its_path_within_the_joints_limits(step: object) -> None:
+    """SwingPlan.scaled: the same path in another time (positions at s f equal the
+    original's at s; rates over f, accelerations over f^2); fastest_factor times it to
+    the joints' velocity or acceleration limit exactly, and its checks still pass."""
+    sw = step.swing
+    f = sw.fastest_factor()
+    assert 0.0 < f < 1.0  # the default 0.8 s swing is slower than its limits
+    fast = sw.scaled(f)
+    assert fast.duration == pytest.approx(f * sw.duration)
+    s = np.linspace(0.0, sw.duration, 97)
+    q0, v0, a0 = sw.sample(s)
+    q1, v1, a1 = fast.sample(s * f)
+    assert np.abs(q1 - q0).max() < 1e-12
+    assert np.abs(v1 - v0 / f).max() < 1e-9 and np.abs(a1 - a0 / f**2).max() < 1e-6
+    vmax = np.asarray(sw.spec.finger.velocity_limit)
+    v_use = float(np.max(np.abs(fast.V) / vmax))
+    a_use = float(np.max(np.abs(fast.A))) / sw.spec.max_joint_acceleration
+    assert max(v_use, a_use) == pytest.approx(1.0, rel=1e-9)  # at a limit, within both
+    assert fast.fastest_factor() == pytest.approx(1.0, rel=1e-9)

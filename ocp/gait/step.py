@@ -15,7 +15,14 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Check, CheckKind
 from ocp.gait.checks import hold_checks, swing_checks
 from ocp.gait.hold import Hold, deep_hold_forces, hold_forces
-from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, SwingPlan, SwingSpec, plan_swing
+from ocp.gait.swing import (
+    MIN_SWING,
+    MIN_TIP_GAP,
+    NARROW_SHARE,
+    SwingPlan,
+    SwingSpec,
+    plan_swing,
+)
 from ocp.geometry.bodies import point_segment_distance, tip_body
 
 __all__ = ["GaitStep", "contact_of", "grasp_hold", "liftable", "replace_finger"]
@@ -377,6 +384,13 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
             slower = plan_swing(replace(plan.spec, duration=plan.spec.duration * over * 1.05))
             if slower.ok:
                 plan = slower
+    if plan.ok and plan.spec.fastest:  # the same path as fast as the limits allow
+        factor = max(plan.fastest_factor(), MIN_SWING / plan.duration)
+        if limits is not None and limits.rate:
+            factor = max(factor, float(np.max(np.abs(plan.V) / limits.rate[k])),
+                         limits.damping_overrun(k, plan.Q, plan.V))
+        if factor < 1.0:
+            plan = plan.scaled(factor)
     if not plan.ok:
         return GaitStep(k, plan.status, plan.message, plan)
     q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)

@@ -38,6 +38,7 @@ freedom there).
 from __future__ import annotations
 
 import hashlib
+import math
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
@@ -108,6 +109,10 @@ class SwingSpec:
     #: the finger's name and the other fingertips' (``others``' order), for messages
     name: str = ""
     other_names: tuple[str, ...] = ()
+    #: ``duration`` is an upper bound: the swing found is timed as fast as the joints'
+    #: velocity and acceleration limits (and the actuators' damping) allow, not below
+    #: :data:`MIN_SWING` (:meth:`SwingPlan.scaled`)
+    fastest: bool = False
 
     @property
     def body(self) -> TipBody:
@@ -141,6 +146,10 @@ def _body_gap(finger: Any, body: TipBody, q: FloatArray, a1: FloatArray, b1: Flo
     R, p = finger.fingertip_pose_pin(q)
     a0, b0 = body.placed(R, p)
     return segment_distance(a0, b0, a1, b1) - body.r - r1
+
+
+#: The shortest swing [s] a ``fastest`` swing is timed to.
+MIN_SWING = 0.15
 
 
 @dataclass(frozen=True)
@@ -181,6 +190,23 @@ class SwingPlan:
         s = (tt - self.t[k])[:, None]
         q, v, a, j = self.Q[k], self.V[k], self.A[k], self.J[k]
         return (q + v * s + a * s**2 / 2 + j * s**3 / 6, v + a * s + j * s**2 / 2, a + j * s)
+
+    def scaled(self, factor: float) -> SwingPlan:
+        """The same path in ``factor`` times the time: rates divided by ``factor``,
+        accelerations by its square, the jerk by its cube (every check of the path --
+        clearance, gaps, limits, landing -- holds as it did; its IPOPT point, in the
+        NLP's duration-scaled variables, is the same)."""
+        f = float(factor)
+        return replace(self, spec=replace(self.spec, duration=self.spec.duration * f),
+                       t=self.t * f, V=self.V / f, A=self.A / f**2, J=self.J / f**3)
+
+    def fastest_factor(self) -> float:
+        """The least time factor within the finger's joint velocity limits and the
+        spec's ``max_joint_acceleration`` (below 1: the swing can be made faster)."""
+        vmax = np.asarray(self.spec.finger.velocity_limit, dtype=float)
+        v = float(np.max(np.abs(self.V) / vmax, initial=0.0))
+        a = float(np.max(np.abs(self.A), initial=0.0)) / self.spec.max_joint_acceleration
+        return max(v, math.sqrt(a))
 
     def segment(self, t: float) -> str:
         """Which part of the swing ``t`` is in: ``lift``, ``clear`` or ``approach``."""

@@ -106,7 +106,8 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
                      seconds_per_radian=float(step.duration) / float(step.angle),
                      planner=planner,
                      swing={"duration": float(g.swing_duration),
-                            "clearance": float(g.clearance)},
+                            "clearance": float(g.clearance),
+                            "fastest": bool(g.fastest_swings)},
                      hold_time=float(g.hold_time), replace_all=g.replace == "all")
     rate = float(getattr(request, "sample_rate", None) or DEFAULT_GAIT_RATE)
     # the result's samples serve the links' check when they are at least as dense

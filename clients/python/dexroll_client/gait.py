@@ -26,6 +26,11 @@ class GaitModel(_Request):
     swing_duration: Real = Field(default=0.8, ge=0.1, le=10.0,
                                  description="a fingertip's swing from lift-off to "
                                              "touch-down [s]")
+    fastest_swings: bool = Field(
+        default=False,
+        description="swing_duration an upper bound: each swing found is timed as fast as "
+                    "the joints' velocity limits, an acceleration of 20 rad/s^2 and the "
+                    "actuators' damping allow (its path unchanged), at least 0.15 s")
     hold_time: Real = Field(default=0.2, ge=0.01, le=5.0,
                             description="the unloading before a lift-off and the loading "
                                         "after a touch-down, each [s]")
