@@ -47,6 +47,9 @@ def test_a_roll_after_a_refined_one_starts_on_its_grid_from_its_point() -> None:
     assert second.n_intervals == first.n_intervals and second.refinements == 0
     assert second.iterations < first.iterations
     assert result.certificate is not None and result.certificate.passed
+    # the second roll starts where the swings before it left the joints
+    assert result.certificate.values["switch_position_roll1_start"] <= 1e-7
+    assert "switch_position_roll0_start" not in result.certificate.values
     # each roll is planned in the ball's frame at its start (GaitPlan.frames): turned back
     # into the palm frame the ball's orientation is continuous over the whole gait, still
     # between the rolls, and ends 12 deg about -z from where it began

@@ -289,16 +289,22 @@ MAX_ROLL_RETRIES = 2
 CLOCK_SAMPLES = 200
 
 
-def _clock_checks(plan: GaitPlan, r: int, template: ManipulationProblem, t0: float
-                  ) -> list[Check]:
-    """Roll ``r`` on its clock (starting at ``t0``): still at both ends (rates and
-    accelerations zero: continuous with the holds'), its rates and accelerations within
-    the joints' limits, sampled densely."""
+def _clock_checks(plan: GaitPlan, r: int, template: ManipulationProblem, t0: float,
+                  q_before: tuple[FloatArray, ...] | None = None) -> list[Check]:
+    """Roll ``r`` on its clock (starting at ``t0``): starting where the joints were
+    (``q_before``: the positions continuous across the switch, to
+    :data:`SWITCH_POSITION_TOL`), still at both ends (rates and accelerations zero:
+    continuous with the holds'), its rates and accelerations within the joints' limits,
+    sampled densely."""
     clock = plan.clock(r)
     n = max(int(clock.length * CLOCK_SAMPLES), 2)
     tau = np.linspace(0.0, clock.length, n + 1)
-    _, v, a = plan.roll_joints(r, tau)
+    q, v, a = plan.roll_joints(r, tau)
     out = []
+    if q_before is not None:
+        jump = float(np.abs(q[0] - np.concatenate(q_before)).max())
+        out.append(Check(f"switch_position_roll{r}_start", jump, SWITCH_POSITION_TOL,
+                         CheckKind.PHYSICS, time=t0))
     for end, k in (("start", 0), ("end", -1)):
         out.append(Check(f"switch_rate_roll{r}_{end}", float(np.abs(v[k]).max()), 1e-9,
                          CheckKind.PHYSICS, time=t0 + float(tau[k])))
@@ -324,6 +330,12 @@ def _clock_checks(plan: GaitPlan, r: int, template: ManipulationProblem, t0: flo
     return out
 
 
+#: How far [rad or m] a roll's first joints may be from the joints the phase before it
+#: ended at: the contact coordinates a roll starts from close the tips' nanometre gaps
+#: first (``ocp.spec.grasp.contact_from_joints``), moving the joints by nanoradians
+#: (4e-9 measured). The first roll has no phase before it: it starts where the
+#: request's grasp is once its gaps (up to 2 mm) are closed.
+SWITCH_POSITION_TOL = 1e-7
 #: Every how many of a roll's clock samples its fingertips' gaps are measured (40 a
 #: second), and how far two tips' bodies may overlap [m] before the check fails.
 TIP_GAP_STRIDE = 5
@@ -701,7 +713,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                             f"{math.degrees(done + step):.1f} deg) was not certified: "
                             f"{sol.status}; " + "; ".join(sol.certificate.failures[:3]))
             break
-        checks += _clock_checks(plan, r, template, t)
+        checks += _clock_checks(plan, r, template, t, q_now if r else None)
         q_end = np.split(plan.roll_joints(r, np.array([clock.length]))[0][0],
                          np.cumsum(plan.nq)[:-1])
         t += clock.length
