@@ -598,6 +598,31 @@ def _replace_fingers(plan: GaitPlan, checks: list[Check], template: Manipulation
     return q_now, t
 
 
+def _replace_spent(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
+                   q_home: tuple[FloatArray, ...], q_start: tuple[FloatArray, ...],
+                   q_now: tuple[FloatArray, ...], pose: ObjectPose, t: float,
+                   load: FloatArray, swing: dict[str, Any] | None, hold_time: float,
+                   never_lifted: set[str], axis: FloatArray, upto: float
+                   ) -> tuple[tuple[FloatArray, ...], float] | None:
+    """After a roll: only the fingertips whose reach is spent for the next one of
+    ``upto`` (:func:`spent_fingers`) re-placed, each where it touched when the gait began
+    (``q_home``; where it touched when the roll began, ``q_start``, when no swing home is
+    found): (the joints after, the time). None, with ``plan``, ``checks`` and
+    ``never_lifted`` as they were, when one of them cannot be lifted or a step fails."""
+    marks = (len(plan.phases), len(plan.steps), len(checks), set(never_lifted))
+    which = spent_fingers(template, q_now, np.asarray(pose.position, float),
+                          float(template.object.dimensions[0]), axis, upto, never_lifted)
+    q_after, t_after = _replace_fingers(plan, checks, template, q_home, q_now, pose, t,
+                                        load, swing, hold_time, never_lifted, which, q_start)
+    if plan.status == "solved" and never_lifted == marks[3]:
+        return q_after, t_after
+    del plan.phases[marks[0]:], plan.steps[marks[1]:], checks[marks[2]:]
+    plan.status, plan.message = "solved", ""
+    never_lifted.clear()
+    never_lifted.update(marks[3])
+    return None
+
+
 def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, angle: float,
               roll_step: float = math.radians(10.0), seconds_per_radian: float = 8.0,
               planner: Any = None, swing: dict[str, Any] | None = None,
@@ -725,23 +750,15 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         if done >= angle - 1e-12:
             break
         if not replace_all:
-            # only the fingertips whose reach is spent, each back where the gait began;
-            # when one of them cannot be lifted or finds no swing there, every one is
-            # (the grasp the gait began with, whose fingertips could all be lifted)
-            after = (len(plan.phases), len(plan.steps), len(checks), t, q_now,
-                     set(never_lifted))
-            which = spent_fingers(template, q_now, np.asarray(pose.position, float), rho,
-                                  ax, min(cap, angle - done), never_lifted)
-            q_part, t_part = _replace_fingers(plan, checks, template, q_home, q_now, pose,
-                                              t, load, swing, hold_time, never_lifted, which,
-                                              q_start)
-            if plan.status == "solved" and never_lifted == after[5]:
-                q_now, t = q_part, t_part
+            got = _replace_spent(plan, checks, template, q_home, q_start, q_now, pose, t,
+                                 load, swing, hold_time, never_lifted, ax,
+                                 min(cap, angle - done))
+            if got is not None:
+                q_now, t = got
                 continue
-            del plan.phases[after[0]:], plan.steps[after[1]:], checks[after[2]:]
-            plan.status, plan.message = "solved", ""
-            never_lifted.clear()
-            never_lifted.update(after[5])
+        # every liftable fingertip: where it touched when this roll began (roll and
+        # reset), or, when re-placing the spent ones failed, where the gait began (its
+        # grasp, whose fingertips could all be lifted)
         q_now, t = _replace_fingers(plan, checks, template,
                                     q_start if replace_all else q_home, q_now, pose, t,
                                     load, swing, hold_time, never_lifted,
