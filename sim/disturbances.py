@@ -120,8 +120,9 @@ class Disturbances:
         """ValueError naming the first disturbance out of range."""
         if not (math.isfinite(self.friction_scale) and self.friction_scale > 0):
             raise ValueError("friction_scale must be positive")
-        if not (math.isfinite(self.mass_scale) and self.mass_scale > 0):
-            raise ValueError("mass_scale must be positive")
+        if not (math.isfinite(self.mass_scale) and 0.01 <= self.mass_scale <= 100.0):
+            raise ValueError("mass_scale must be within 0.01..100 (the object's mass times "
+                             "this)")
         if not (math.isfinite(self.size_change) and abs(self.size_change) < 0.05):
             raise ValueError("size_change must be within (-0.05, 0.05) m")
         if not all(math.isfinite(s) and s >= 0 for s in self.pose_noise):

@@ -124,6 +124,8 @@ def test_disturbances_parse_and_refuse() -> None:
             parse_kick(bad)
     with pytest.raises(ValueError, match="friction_scale"):
         Disturbances.from_dict({"friction_scale": 0})
+    with pytest.raises(ValueError, match=r"mass_scale must be within 0\.01\.\.100"):
+        Disturbances.from_dict({"mass_scale": 1e-300})
     with pytest.raises(ValueError, match="unknown"):
         Disturbances.from_dict({"pushs": []})
     d = Disturbances.from_dict({"pushes": [[1.0, 0.0, 0.003, 0.0]], "size_change": 5e-4})

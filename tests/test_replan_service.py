@@ -199,6 +199,8 @@ def test_a_pushed_closed_loop_through_the_service_ends_nearer_the_goal(
                         ({"closed_loop": {"rate": 0}}, "closed_loop.rate"),
                         ({"disturbances": {"friction_scale": -1}},
                          "disturbances.friction_scale"),
+                        ({"disturbances": {"mass_scale": 1e-300}},
+                         "disturbances.mass_scale"),
                         ({"closed_loop": {}, "mode": "kinematic"}, "mode")):
         r = httpx.post(url, json=body, timeout=120)
         assert r.status_code == 422, (body, r.text)

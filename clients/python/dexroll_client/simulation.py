@@ -89,8 +89,8 @@ class DisturbanceOptions(_Request):
     size_change: Real = Field(default=0.0, gt=-0.05, lt=0.05,
                               description="added to each of the object's semi-axes [m] (a "
                                           "ball 1 mm larger in diameter: 0.0005)")
-    mass_scale: Real = Field(default=1.0, gt=0.0, le=100.0,
-                             description="the object's mass times this")
+    mass_scale: Real = Field(default=1.0, ge=0.01, le=100.0,
+                             description="the object's mass times this (0.01 to 100)")
     pose_noise: PoseNoiseModel = Field(default_factory=PoseNoiseModel,
                                        description="noise on the measured pose (closed loop)")
     seed: Count = Field(default=0, ge=0, le=2**31 - 1, description="the noise's seed")
