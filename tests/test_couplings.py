@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -92,6 +93,22 @@ def _plan(text: str, angle_deg: float = 10.0, **extra: object):
     return req, result
 
 
+def _tendon_lengths(m: Any, jt: Any) -> np.ndarray:
+    """MuJoCo's own tendon lengths (rows: the joint trajectory's points) at the plan's
+    joints, the others at qpos0."""
+    d = mujoco.MjData(m)
+    adr = [int(m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
+           for n in jt.joint_names]
+    lengths = []
+    for point in jt.points:
+        d.qpos[:] = m.qpos0
+        d.qpos[adr] = point.positions
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_tendon(m, d)
+        lengths.append(d.ten_length.copy())
+    return np.array(lengths)
+
+
 def test_a_roll_keeps_the_couplings_and_executes_on_the_files_actuators() -> None:
     from planner_service.execution import simulate_result
 
@@ -103,18 +120,7 @@ def test_a_roll_keeps_the_couplings_and_executes_on_the_files_actuators() -> Non
         assert 0.0 <= values[f"max_coupling_violation_{p}"] <= 1e-6
     # MuJoCo's own tendon lengths at the plan's joints: inside their ranges
     m = mujoco.MjModel.from_xml_string(mujoco_text(text))
-    d = mujoco.MjData(m)
-    jt = result.joint_trajectory
-    adr = [int(m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
-           for n in jt.joint_names]
-    lengths = []
-    for point in jt.points:
-        d.qpos[:] = m.qpos0
-        d.qpos[adr] = point.positions
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_tendon(m, d)
-        lengths.append(d.ten_length.copy())
-    L = np.array(lengths)
+    L = _tendon_lengths(m, result.joint_trajectory)
     over = np.maximum(m.tendon_range[:, 0] - L, L - m.tendon_range[:, 1])
     assert float(over.max()) <= 1e-6
     assert float(np.ptp(L, axis=0).max()) > 1e-4  # the plan moves within the bands
@@ -164,19 +170,8 @@ def test_a_passive_joint_is_planned_at_its_tendons_bound_and_executed(wrist: boo
     req, result = _plan(text)
     assert result.status.value == "solved", result.message
     m = mujoco.MjModel.from_xml_string(mujoco_text(text))
-    d = mujoco.MjData(m)
-    jt = result.joint_trajectory
-    adr = [int(m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
-           for n in jt.joint_names]
-    lengths = []
-    for point in jt.points:
-        d.qpos[:] = m.qpos0
-        d.qpos[adr] = point.positions
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_tendon(m, d)
-        lengths.append(d.ten_length.copy())
     ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, f"T_{p}c") for p in COUPLED]
-    L = np.array(lengths)[:, ids]
+    L = _tendon_lengths(m, result.joint_trajectory)[:, ids]
     r = m.tendon_range[ids]
     at = np.minimum(np.abs(L - r[:, 0]), np.abs(L - r[:, 1]))
     assert float(at.max()) <= 1e-6  # each coupling tendon at one of its bounds throughout
