@@ -36,9 +36,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["COUPLING_MARGIN", "Coupling", "at_tendon_bounds", "coupled_step",
-           "coupling_violation", "hand_couplings", "project_couplings",
-           "tendon_torque_bounds"]
+__all__ = ["COUPLING_MARGIN", "Coupling", "coupled_step", "coupling_violation",
+           "hand_couplings", "project_couplings", "tendon_torque_bounds"]
 
 FloatArray = NDArray[np.float64]
 
@@ -64,7 +63,7 @@ class Coupling:
     lower: float
     upper: float
     #: its joints no actuator drives (the Shadow hand's J0): their torque comes from the
-    #: tendon's limit, which pulls only at a bound (:func:`at_tendon_bounds`)
+    #: tendon's limit, which pulls only at a bound (:func:`ocp.robots.grasp_reach.at_tendon_bounds`)
     passive: tuple[str, ...] = ()
     #: the band's bound a passive joint's load holds it at ("lower", "upper"; "": none)
     held_at: str = ""
@@ -254,60 +253,14 @@ def coupled_step(finger: Any, q: ArrayLike, dq: ArrayLike) -> FloatArray:
     return project_couplings(finger, x + d, margin=False)
 
 
-def at_tendon_bounds(finger: Any, q: ArrayLike, centre: ArrayLike, radius: float
-                     ) -> tuple[Any, FloatArray] | str:
-    """A round-tipped finger touching a ball at joints ``q``, with each coupling that
-    carries a passive joint's torque held at the bound its load needs (an equality the
-    plan keeps), and the joints moved there with the contact kept: ``(finger, q)``, or why
-    not (the contact cannot be kept with the tendon at that bound).
-
-    The fingertip pushes the ball along the inward normal, so the passive joint ``p``
-    needs ``tau_p = -fn (J_p . n)`` (``J_p`` its column of the contact point's Jacobian,
-    ``n`` the ball's outward normal there); the tendon gives ``c_p lam``, and a limit's
-    ``lam`` is positive at the tendon's lower bound (MuJoCo's sign): the lower bound when
-    ``-(J_p . n) / c_p > 0``, else the upper. The finger returned is
-    :meth:`~ocp.robots.finger.FingerModel.with_couplings` of the bounds (the same object
-    for the same bounds: its NLPs are cached)."""
-    from ocp.robots.grasp_reach import grasp_on_ball, tip_state
-
-    cs = getattr(finger, "couplings", ())
-    x = np.asarray(q, dtype=float)
-    if not any(c.passive and c.lower < c.upper for c in cs):
-        return finger, x
-    c0 = np.asarray(centre, dtype=float)
-    s = tip_state(finger, x, c0, radius)
-    J = finger.frame_jacobian_pin(x)
-    Jc = J[:3] - np.cross(s.contact - s.p_l, J[3:].T).T  # the contact point's velocity
-    names = list(finger.joint_names)
-    held = []
-    for c in cs:
-        if not c.passive or c.lower == c.upper:
-            held.append(c)
-            continue
-        p = names.index(c.passive[0])
-        cp = c.coefs[c.joints.index(c.passive[0])]
-        push = -float(Jc[:, p] @ s.n) / cp
-        if abs(push) < 1e-9:  # the contact does not load the joint: the nearer bound
-            v = float(c.row(names) @ x)
-            push = 1.0 if v - c.lower < c.upper - v else -1.0
-        held.append(c.at("lower" if push > 0 else "upper"))
-    bounded = finger.with_couplings(tuple(held))
-    got = grasp_on_ball(bounded, x, c0, radius, s.n, tol=1e-9, margin=0.0)
-    if got is None:
-        named = "; ".join(f"{c.name} at its {c.held_at} bound" for c in held if c.held_at)
-        return (f"the contact cannot be kept with {named} (the load on its passive joint "
-                "holds the tendon there)")
-    return bounded, got
-
-
 def tendon_torque_bounds(finger: Any, lower: ArrayLike, upper: ArrayLike
                          ) -> tuple[FloatArray, FloatArray]:
-    """Joint torque bounds (``lower``, ``upper`` in the finger's joint order) with each
-    passive joint whose tendon is held at a bound (:func:`at_tendon_bounds`) given the
-    sign that bound's force can give: ``c_p tau_p >= 0`` at the lower bound (the
-    limit's force ``lam = tau_p / c_p >= 0``), ``<= 0`` at the upper, with
-    :data:`PASSIVE_MARGIN` to spare for what the forces' stage does not see (the joints'
-    damping and inertia over the motion)."""
+    """Joint torque bounds (``lower``, ``upper``: the finger's joints on the last axis,
+    samples on any before it) with each passive joint whose tendon is held at a bound
+    (:func:`ocp.robots.grasp_reach.at_tendon_bounds`) given the sign that bound's force
+    can give: ``c_p tau_p >= 0`` at the lower bound (the limit's force ``lam = tau_p /
+    c_p >= 0``), ``<= 0`` at the upper, with :data:`PASSIVE_MARGIN` to spare for what the
+    forces' stage does not see (the joints' damping and inertia over the motion)."""
     lo, hi = np.array(lower, dtype=float), np.array(upper, dtype=float)
     names = list(finger.joint_names)
     for c in getattr(finger, "couplings", ()):
@@ -315,7 +268,7 @@ def tendon_torque_bounds(finger: Any, lower: ArrayLike, upper: ArrayLike
             k = names.index(p)
             sign = np.sign(c.coefs[c.joints.index(p)]) * (1 if c.held_at == "lower" else -1)
             if sign > 0:
-                lo[k] = max(lo[k], PASSIVE_MARGIN)
+                lo[..., k] = np.maximum(lo[..., k], PASSIVE_MARGIN)
             else:
-                hi[k] = min(hi[k], -PASSIVE_MARGIN)
+                hi[..., k] = np.minimum(hi[..., k], -PASSIVE_MARGIN)
     return lo, hi

@@ -200,7 +200,7 @@ class FingerModel:
 
     def with_couplings(self, couplings: tuple[Any, ...]) -> FingerModel:
         """This finger with other couplings (a passive joint's tendon held at a bound:
-        :func:`~ocp.robots.couplings.at_tendon_bounds`); the same object for the same
+        :func:`~ocp.robots.grasp_reach.at_tendon_bounds`); the same object for the same
         couplings, so that the NLPs built for it are found again."""
         if couplings == self.couplings:
             return self

@@ -37,8 +37,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import segments_distance, tip_body
-from ocp.robots.couplings import at_tendon_bounds, project_couplings
-from ocp.robots.grasp_reach import _tip, grasp_on_ball, roll, tip_state
+from ocp.robots.couplings import project_couplings
+from ocp.robots.grasp_reach import _tip, at_tendon_bounds, grasp_on_ball, roll, tip_state
 
 __all__ = [
     "GOOD_CLOSURE",

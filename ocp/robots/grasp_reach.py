@@ -35,8 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 from ocp.geometry.bodies import segment_distance, tip_body
 from ocp.robots.couplings import coupled_step, coupling_violation, project_couplings
 
-__all__ = ["GraspSearch", "Rolled", "TipState", "cap_bound", "contact_sides", "grasp_on_ball",
-           "roll", "search_grasp", "tip_state", "tips_gap"]
+__all__ = ["GraspSearch", "Rolled", "TipState", "at_tendon_bounds", "cap_bound",
+           "contact_sides", "grasp_on_ball", "roll", "search_grasp", "tip_state", "tips_gap"]
 
 FloatArray = NDArray[np.float64]
 
@@ -261,6 +261,50 @@ def _equalities(f: Any, q: FloatArray) -> tuple[FloatArray, FloatArray]:
             rows.append(a / k)
             rhs.append((c.lower - float(a @ q)) / k)
     return np.array(rows).reshape(len(rows), f.nq), np.array(rhs)
+
+
+def at_tendon_bounds(finger: Any, q: ArrayLike, centre: ArrayLike, radius: float
+                     ) -> tuple[Any, FloatArray] | str:
+    """A round-tipped finger touching a ball at joints ``q``, with each coupling that
+    carries a passive joint's torque held at the bound its load needs (an equality the
+    plan keeps), and the joints moved there with the contact kept: ``(finger, q)``, or why
+    not (the contact cannot be kept with the tendon at that bound).
+
+    The fingertip pushes the ball along the inward normal, so the passive joint ``p``
+    needs ``tau_p = -fn (J_p . n)`` (``J_p`` its column of the contact point's Jacobian,
+    ``n`` the ball's outward normal there); the tendon gives ``c_p lam``, and a limit's
+    ``lam`` is positive at the tendon's lower bound (MuJoCo's sign): the lower bound when
+    ``-(J_p . n) / c_p > 0``, else the upper. The finger returned is
+    :meth:`~ocp.robots.finger.FingerModel.with_couplings` of the bounds (the same object
+    for the same bounds: its NLPs are cached)."""
+    cs = getattr(finger, "couplings", ())
+    x = np.asarray(q, dtype=float)
+    if not any(c.passive and c.lower < c.upper for c in cs):
+        return finger, x
+    c0 = np.asarray(centre, dtype=float)
+    s = tip_state(finger, x, c0, radius)
+    J = finger.frame_jacobian_pin(x)
+    Jc = J[:3] - np.cross(s.contact - s.p_l, J[3:].T).T  # the contact point's velocity
+    names = list(finger.joint_names)
+    held = []
+    for c in cs:
+        if not c.passive or c.lower == c.upper:
+            held.append(c)
+            continue
+        p = names.index(c.passive[0])
+        cp = c.coefs[c.joints.index(c.passive[0])]
+        push = -float(Jc[:, p] @ s.n) / cp
+        if abs(push) < 1e-9:  # the contact does not load the joint: the nearer bound
+            v = float(c.row(names) @ x)
+            push = 1.0 if v - c.lower < c.upper - v else -1.0
+        held.append(c.at("lower" if push > 0 else "upper"))
+    bounded = finger.with_couplings(tuple(held))
+    got = grasp_on_ball(bounded, x, c0, radius, s.n, tol=1e-9, margin=0.0)
+    if got is None:
+        named = "; ".join(f"{c.name} at its {c.held_at} bound" for c in held if c.held_at)
+        return (f"the contact cannot be kept with {named} (the load on its passive joint "
+                "holds the tendon there)")
+    return bounded, got
 
 
 def tips_gap(fingers: Sequence[Any], qs: Sequence[ArrayLike]) -> float:

@@ -99,10 +99,8 @@ def _torque_rows(stage: ForceStage, problem: ManipulationProblem, Xall: np.ndarr
 
     los, his = [], []
     for _, t in stage.tips:
-        lo, hi = torque_bounds_at(problem.actuation, t.finger.joint_names,
-                                  Xall[:, t.q_cols], ROLL_TORQUE_SHARE)
-        for k in range(len(Xall)):
-            lo[k], hi[k] = tendon_torque_bounds(t.finger, lo[k], hi[k])
+        lo, hi = tendon_torque_bounds(t.finger, *torque_bounds_at(
+            problem.actuation, t.finger.joint_names, Xall[:, t.q_cols], ROLL_TORQUE_SHARE))
         los.append(lo.T)
         his.append(hi.T)
     lo, hi = np.vstack(los), np.vstack(his)

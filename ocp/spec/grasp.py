@@ -18,7 +18,8 @@ from numpy.typing import ArrayLike, NDArray
 from ocp.certify.certificate import GRASP_TOLERANCES, PALM_TOLERANCES, TolerancePolicy
 from ocp.geometry.rotations import log_rotation
 from ocp.geometry.surfaces import SURFACES, rotation_from_vector
-from ocp.robots.couplings import at_tendon_bounds, coupled_step
+from ocp.robots.couplings import coupled_step
+from ocp.robots.grasp_reach import at_tendon_bounds
 from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
 from ocp.spec.phases import ContactPhase, phase_errors, phase_intervals
 from ocp.spec.problem import (
