@@ -342,10 +342,10 @@ TIP_GAP_STRIDE = 5
 TIP_GAP_TOL = 1e-5
 
 
-def tips_gaps(fingers: tuple[Any, ...], q: FloatArray, nq: tuple[int, ...]
-              ) -> tuple[float, int]:
-    """(the least distance [m] between two fingertips' bodies over the joint rows ``q``
-    (every finger's, concatenated; < 0: overlap), the row where it is)."""
+def pair_gaps(fingers: tuple[Any, ...], q: FloatArray, nq: tuple[int, ...]
+              ) -> dict[tuple[int, int], FloatArray]:
+    """Per pair of fingertips (i < j), the distance [m] between their bodies over the
+    joint rows ``q`` (every finger's, concatenated; < 0: overlap)."""
     cut = np.cumsum((0, *nq))
     segs = []
     for c, f in enumerate(fingers):
@@ -353,10 +353,18 @@ def tips_gaps(fingers: tuple[Any, ...], q: FloatArray, nq: tuple[int, ...]
         ends = [body.placed(*f.fingertip_pose_pin(row[cut[c]:cut[c + 1]])) for row in q]
         segs.append((np.array([e[0] for e in ends]), np.array([e[1] for e in ends]),
                      body.r))
+    return {(i, j): segments_distance(a0, b0, a1, b1) - r0 - r1
+            for i, (a0, b0, r0) in enumerate(segs)
+            for j, (a1, b1, r1) in enumerate(segs) if j > i}
+
+
+def tips_gaps(fingers: tuple[Any, ...], q: FloatArray, nq: tuple[int, ...]
+              ) -> tuple[float, int]:
+    """(the least distance [m] between two fingertips' bodies over the joint rows ``q``
+    (every finger's, concatenated; < 0: overlap), the row where it is)."""
     gaps = np.full(len(q), np.inf)
-    for i, (a0, b0, r0) in enumerate(segs):
-        for a1, b1, r1 in segs[i + 1:]:
-            gaps = np.minimum(gaps, segments_distance(a0, b0, a1, b1) - r0 - r1)
+    for g in pair_gaps(fingers, q, nq).values():
+        gaps = np.minimum(gaps, g)
     k = int(np.argmin(gaps))
     return float(gaps[k]), k
 
@@ -512,29 +520,13 @@ def spent_fingers(template: ManipulationProblem, q_now: tuple[FloatArray, ...],
     ahead = _roll_ahead(template, q_now, centre, rho, axis, upto)
     if ahead.apart < upto and not ahead.close:
         fingers = tuple(f.finger for f in template.fingers)
-        pair = _closest_pair(fingers, [q if k in out else rolled[k]
-                                       for k, q in enumerate(q_now)])
+        at = [q if k in out else rolled[k] for k, q in enumerate(q_now)]
+        gaps = pair_gaps(fingers, np.concatenate(at)[None], tuple(len(q) for q in at))
+        pair = min(gaps, key=lambda ij: float(gaps[ij][0]))
         liftable_ = [k for k in pair if k in reach]
         if liftable_ and not set(pair) & set(out):
             out.append(min(liftable_, key=lambda k: reach[k]))
     return sorted(out)
-
-
-def _closest_pair(fingers: tuple[Any, ...], qs: list[FloatArray]) -> tuple[int, int]:
-    """The two fingertips whose bodies are nearest at the joints ``qs``."""
-    best, pair = math.inf, (0, 0)
-    bodies = []
-    for f, q in zip(fingers, qs, strict=True):
-        body = tip_body(f)
-        a, b = body.placed(*f.fingertip_pose_pin(q))
-        bodies.append((a[None], b[None], body.r))
-    for i, (a0, b0, r0) in enumerate(bodies):
-        for j in range(i + 1, len(bodies)):
-            a1, b1, r1 = bodies[j]
-            d = float(segments_distance(a0, b0, a1, b1)[0]) - r0 - r1
-            if d < best:
-                best, pair = d, (i, j)
-    return pair
 
 
 #: A fingertip is re-placed when its rolled reach is below the next roll's length and
