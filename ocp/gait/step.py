@@ -175,11 +175,12 @@ class TorqueLimits:
         """How many times more torque than finger ``i``'s actuators give (at each sample's
         joints ``Q``, :meth:`at`) its joints' damping asks at the rates ``V``, at worst
         (1: just enough; inf: a joint moving against an actuator that gives nothing that
-        way there); 0 without damping."""
+        way there), and the rates over :attr:`rate` (the least of either side's range);
+        0 without damping."""
+        worst = float(np.max(np.abs(V) / self.rate[i])) if self.rate else 0.0
         if not self.damping:
-            return 0.0
+            return worst
         c = np.asarray(self.damping[i], dtype=float)
-        worst = 0.0
         for q, v in zip(Q, V, strict=True):
             lo, hi = self.at(i, q)
             need = c * np.asarray(v, dtype=float)
@@ -378,8 +379,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     if plan.ok and limits is not None and limits.rate:
         # a swing faster than the joints' damping lets the actuators drive (at each
         # sample's joints: a servo near the end of its control range gives less): slower
-        over = max(float(np.max(np.abs(plan.V) / limits.rate[k])),
-                   limits.damping_overrun(k, plan.Q, plan.V))
+        over = limits.damping_overrun(k, plan.Q, plan.V)
         if 1.0 < over < MAX_SLOWDOWN:
             slower = plan_swing(replace(plan.spec, duration=plan.spec.duration * over * 1.05))
             if slower.ok:
@@ -387,8 +387,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     if plan.ok and plan.spec.fastest:  # the same path as fast as the limits allow
         factor = max(plan.fastest_factor(), MIN_SWING / plan.duration)
         if limits is not None and limits.rate:
-            factor = max(factor, float(np.max(np.abs(plan.V) / limits.rate[k])),
-                         limits.damping_overrun(k, plan.Q, plan.V))
+            factor = max(factor, limits.damping_overrun(k, plan.Q, plan.V))
         if factor < 1.0:
             plan = plan.scaled(factor)
     if not plan.ok:
