@@ -467,28 +467,27 @@ def torque_limits(template: ManipulationProblem, share: float = HOLD_TORQUE_SHAR
     """The fingers' actuator torques a gait's holds keep to (``template.actuation``, times
     ``share``: :data:`~ocp.gait.step.HOLD_TORQUE_SHARE`); None without actuators, limits
     or forces."""
-    from ocp.robots.actuation import torque_bounds
+    from ocp.robots.actuation import ranges_of
 
     act = template.actuation
     if act is None or template.forces is None:
         return None
-    bounds = [torque_bounds(act, f.finger.joint_names, share) for f in template.fingers]
     actuators = tuple(act.actuators(f.finger.joint_names)[0] for f in template.fingers)
+    bounds = [ranges_of(acts, share) for acts in actuators]
     ctrl_limited = any(a.ctrl_range is not None and a.kind != "none"
                        for acts in actuators for a in acts)
     if not ctrl_limited and all(np.all(np.isinf(lo)) and np.all(np.isinf(hi))
                                 for lo, hi in bounds):
         return None
+    damping = tuple(np.asarray(act.damping(f.finger.joint_names), dtype=float)
+                    for f in template.fingers)
     rates = []
-    for f, (lo, hi) in zip(template.fingers, bounds, strict=True):
-        c = act.damping(f.finger.joint_names)
+    for c, (lo, hi) in zip(damping, bounds, strict=True):
         with np.errstate(divide="ignore", invalid="ignore"):
             rates.append(np.where(c > 0, np.minimum(-lo, hi) / c, np.inf))
     return TorqueLimits(tuple(lo for lo, _ in bounds), tuple(hi for _, hi in bounds),
                         np.asarray(template.forces.gravity, dtype=float), tuple(rates), share,
-                        actuators,
-                        tuple(np.asarray(act.damping(f.finger.joint_names), dtype=float)
-                              for f in template.fingers))
+                        actuators, damping)
 
 
 def spent_fingers(template: ManipulationProblem, q_now: tuple[FloatArray, ...],

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["Actuation", "Actuator", "HandActuation", "UrdfActuation", "actuation_of",
-           "torque_bounds", "torque_bounds_at", "urdf_actuators"]
+           "ranges_of", "torque_bounds", "torque_bounds_at", "urdf_actuators"]
 
 FloatArray = NDArray[np.float64]
 
@@ -418,7 +418,12 @@ def torque_bounds(actuation: Any, joint_names: Sequence[str], share: float = 1.0
                   ) -> tuple[FloatArray, FloatArray]:
     """(lower, upper) joint torques [N m] the actuators give ``joint_names`` (infinite
     where a joint has no limit), times ``share``."""
-    acts, _ = actuation.actuators(joint_names)
+    return ranges_of(actuation.actuators(joint_names)[0], share)
+
+
+def ranges_of(acts: Sequence[Actuator], share: float = 1.0) -> tuple[FloatArray, FloatArray]:
+    """(lower, upper) joint torques [N m] the actuators ``acts`` give (infinite where one
+    has no limit), times ``share``."""
     lo = np.array([a.torque_range[0] if a.torque_range else -np.inf for a in acts])
     hi = np.array([a.torque_range[1] if a.torque_range else np.inf for a in acts])
     return share * lo, share * hi
