@@ -7,10 +7,18 @@ simulated time: at each control instant the simulation is paused, the controller
 measurement (:class:`SimMeasurement`: the joints' angles and rates, the object's pose with
 the disturbances' noise, its twist) and answers with the rest of the motion (an
 :class:`~.spec.ExecutionPlan` whose times are on the first plan's clock) or None (the
-current reference goes on). The new reference replaces the servos' set points from that
-step on: zero latency in simulated time; the controller's own wall time is measured and
-reported beside (how far from real time it is on this machine). Errors are measured
-against the first plan, as in an open-loop run: the goal does not move.
+current reference goes on). By default the new reference replaces the servos' set points
+from that step on: zero latency in simulated time; the controller's own wall time is
+measured and reported beside (how far from real time it is on this machine). Errors are
+measured against the first plan, as in an open-loop run: the goal does not move.
+
+With ``latency=True`` the controller runs in real time: its wall time (at least
+``min_latency``) is charged in simulated time, the servos keep the old set points
+meanwhile and its answer takes over at the first step at or after the measurement's time
+plus that latency. Control instants that fall while a call is still in flight are skipped
+(each one an *overrun*; the last answer stays in force), and an answer still pending at
+the plan's end is dropped. The report then gives each call's charged latency and where its
+answer was applied, the overruns and the wall times' 99th percentile.
 
 Like the rest of ``sim``, nothing here knows the planner: the service's adapter
 (``planner_service.execution.closed_loop``) makes the controller from ``ocp``'s
@@ -58,7 +66,9 @@ class SimMeasurement:
 class ControlEvent:
     """One call of the controller: its time, what it answered (``status``, the
     controller's word: "replanned", "unexplained", ...), its wall time [s] and a
-    ``message``; ``details``: the controller's own numbers."""
+    ``message``; ``details``: the controller's own numbers (with latency charged,
+    :func:`simulate_closed_loop` adds "latency_charged" [s] and "applied_at": the time
+    of the step its answer took over from, None when nothing was applied)."""
 
     t: float
     status: str
@@ -79,12 +89,17 @@ Controller = Callable[[SimMeasurement], tuple[ExecutionPlan | None, ControlEvent
 class ClosedLoopReport:
     """A closed-loop run: the simulation's ``report`` (errors against the first plan),
     the control ``rate`` [Hz], every controller call (``events``), the object's final
-    pose (position, wxyz)."""
+    pose (position, wxyz); whether the controller's ``latency`` was charged in simulated
+    time (its floor ``min_latency`` [s]) and how many control instants were skipped
+    while a call was in flight (``overruns``)."""
 
     report: SimReport
     rate: float
     events: tuple[ControlEvent, ...]
     final_pose: FloatArray
+    latency: bool = False
+    min_latency: float = 0.0
+    overruns: int = 0
 
     @property
     def wall_times(self) -> FloatArray:
@@ -101,7 +116,10 @@ class ClosedLoopReport:
                 "statuses": counts,
                 "wall_time_median": med,
                 "wall_time_max": float(np.max(w)) if w.size else None,
-                "real_time_factor": None if med is None else med / period}
+                "wall_time_p99": float(np.percentile(w, 99)) if w.size else None,
+                "real_time_factor": None if med is None else med / period,
+                "latency_charged": self.latency, "min_latency": self.min_latency,
+                "ticks": len(self.events), "overruns": self.overruns}
 
     def to_dict(self) -> dict[str, Any]:
         return {"report": self.report.to_dict(), "control": self.timing(),
@@ -151,12 +169,25 @@ def _set_reference(sim: Simulation, rows: StepRows, k: int, frag: ExecutionPlan)
 
 def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: float,
                          options: SimOptions | None = None,
-                         disturbances: Disturbances | None = None) -> ClosedLoopReport:
+                         disturbances: Disturbances | None = None, *,
+                         latency: bool = False,
+                         min_latency: float = 0.0) -> ClosedLoopReport:
     """``plan`` executed with ``controller`` called every 1 / ``rate`` s of simulated time
     (from one period after t = 0 to the end) in the disturbed world; errors against
-    ``plan``."""
+    ``plan``.
+
+    ``latency``: charge the controller's wall time, at least ``min_latency`` [s], in
+    simulated time (see the module): a call measured at t answers from the first step
+    starting at or after t + max(wall, ``min_latency``) (to within 1e-9 of a step), the
+    control instants before that step are skipped (overruns) and an answer due after the
+    last step is dropped. Without it (the default) an answer takes over at once and
+    ``min_latency`` must be 0."""
     if not (math.isfinite(rate) and rate > 0):
         raise ValueError("rate must be positive")
+    if not (math.isfinite(min_latency) and min_latency >= 0):
+        raise ValueError("min_latency must be finite and >= 0")
+    if min_latency and not latency:
+        raise ValueError("min_latency needs latency=True (without it nothing is charged)")
     dist = disturbances or Disturbances()
     world, o = _world(plan, options, dist)
     sim = Simulation(world, o)
@@ -168,12 +199,31 @@ def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: floa
     every = max(1, round(period / o.timestep))
     events: list[ControlEvent] = []
     T = plan.duration
+    # the call in flight (latency charged): its answer's first step, its event's index
+    # and the answer
+    pending: list[tuple[int, int, ExecutionPlan | None]] = []
+    overruns = 0
+
+    def land(k: int, t: float, rows: StepRows) -> None:
+        """The answer in flight, applied from step ``k`` when it is due by then."""
+        if not pending or k < pending[0][0]:
+            return
+        _, i, frag = pending.pop(0)
+        if frag is not None:
+            _set_reference(sim, rows, k, frag)
+            e = events[i]
+            events[i] = replace(e, details={**e.details, "applied_at": t})
 
     def hook(k: int, t: float, rows: StepRows) -> None:
+        nonlocal overruns
         kick(k, t, rows)
+        land(k, t, rows)
         if t <= 0.5 * o.timestep or t >= T - 0.5 * o.timestep:
             return
         if round(t / o.timestep) % every:
+            return
+        if pending:  # the last call is still in flight: this instant is skipped
+            overruns += 1
             return
         quat = d.qpos[oq + 3:oq + 7].copy()
         R = np.zeros(9)
@@ -186,9 +236,19 @@ def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: floa
         start = time.perf_counter()
         frag, event = controller(meas)
         wall = time.perf_counter() - start
-        events.append(replace(event, wall_time=wall))
-        if frag is not None:
-            _set_reference(sim, rows, k, frag)
+        if not latency:
+            events.append(replace(event, wall_time=wall))
+            if frag is not None:
+                _set_reference(sim, rows, k, frag)
+            return
+        charged = max(wall, min_latency)
+        events.append(replace(event, wall_time=wall, details={
+            **event.details, "latency_charged": charged, "applied_at": None}))
+        # the first step starting at or after t + charged (steps are timestep apart)
+        ahead = max(0, math.ceil(charged / o.timestep - 1e-9))
+        pending.append((k + ahead, len(events) - 1, frag))
+        land(k, t, rows)  # no time charged at all (a clock too coarse to see the call)
 
     report = sim.run(hook)
-    return ClosedLoopReport(report, rate, tuple(events), d.qpos[oq:oq + 7].copy())
+    return ClosedLoopReport(report, rate, tuple(events), d.qpos[oq:oq + 7].copy(),
+                            latency, min_latency, overruns)
