@@ -130,7 +130,7 @@ def setup(planner: ManipulationPlanner, problem: ManipulationProblem,
     segments, tb = problem.segments()
     t_nodes = node_times(segments, tb)
     prm = m.params(np.asarray(problem.object.dimensions, dtype=float), contact_charts(problem))
-    p = nlp_parameters(problem, nlp)
+    p = nlp_parameters(problem, nlp, (x_scale, u_scale))
     lbx, ubx = bounds(problem, nlp, m, x0, x_scale, u_scale)
     strategy = strategy_for(problem)
     strategy.adjust_bounds(problem, nlp, lbx, ubx)
@@ -305,6 +305,10 @@ def attempt(problem: ManipulationProblem, *, x0: Any = None, u0: Any = None,
     if u0 is not None:
         u0 = _checked_state(problem, m, "u0", u0, m.nu)
         problem = replace(problem, initial_input=tuple(float(v) for v in u0))
+    if problem.reference is not None:
+        errs = problem.reference.errors(m.nx, m.nu, problem.duration)
+        if errs:
+            raise ProblemError(errs)
     if warm is not None:
         ws = warm.warm_start if isinstance(warm, ManipulationSolution) else warm
         errs = ws.errors("warm", m.nx, m.nu)

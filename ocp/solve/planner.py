@@ -128,6 +128,8 @@ class GraspStructure:
     #: the contact phases on the grid (``problem.schedule()``): None, one phase with every
     #: fingertip touching
     schedule: tuple[tuple[int, tuple[bool, ...]], ...] | None = None
+    #: a reference trajectory tracked (``problem.reference``): its objective terms
+    reference: bool = False
 
     @staticmethod
     def of(problem: ManipulationProblem) -> GraspStructure:
@@ -140,7 +142,8 @@ class GraspStructure:
         return GraspStructure(problem.object.shape, problem.palm is not None, segments,
                               goal_mask, via_masks, tuple(c.finger for c in problem.fingers),
                               problem.motion is not None, problem.forces is not None,
-                              problem.smooth, problem.schedule())
+                              problem.smooth, problem.schedule(),
+                              problem.reference is not None)
 
     def fingerprint(self, m: GraspModel) -> str:
         """The structure as a string that another process computes alike: the fingers by
@@ -150,7 +153,8 @@ class GraspStructure:
         parts = [repr((self.shape, self.palm, self.segments, self.goal_mask, self.via_masks,
                        self.tracking, m.nx, m.nu)) + (":forces" if self.forces else "")
                  + (":smooth" if self.smooth else "")
-                 + (f":phases={self.schedule!r}" if self.schedule is not None else "")]
+                 + (f":phases={self.schedule!r}" if self.schedule is not None else "")
+                 + (":reference" if self.reference else "")]
         for f in self.fingers:
             parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
                       repr(np.asarray(f.base_rotation).round(12).tolist()),
@@ -257,7 +261,8 @@ class ManipulationPlanner:
         block = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
                                        key.tracking, FORCE_REGULARISATION,
                                        forces=key.forces, smooth=key.smooth,
-                                       schedule=key.schedule, stage_order=self.stage_order)
+                                       schedule=key.schedule, stage_order=self.stage_order,
+                                       reference=key.reference)
         fingerprint = key.fingerprint(m) + (":stages" if self.stage_order else "")
         nlp = ipopt_solver(block, fingerprint, None if self.compiler else self.compile_dir,
                            self.solver)

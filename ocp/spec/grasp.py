@@ -36,6 +36,7 @@ from ocp.spec.problem import (
     goal_errors,
     joint_acceleration_errors,
 )
+from ocp.spec.reference import Reference
 
 __all__ = ["Fingertip", "ManipulationProblem", "Palm", "contact_chart_for_pad",
            "contact_charts", "contact_from_joints", "fingertip_errors", "fingertips_from_joints",
@@ -174,6 +175,14 @@ class ManipulationProblem:
     #: moving, re-planned from a measured state (:func:`ocp.solve.attempt.attempt`'s
     #: ``u0``). None: at rest with the smooth timing, free with the paper's.
     initial_input: tuple[float, ...] | None = None
+    #: The input at t = duration (same layout): a plan that ends moving, a window of a
+    #: longer motion (:mod:`ocp.control`) handing over to the rest of its reference. None:
+    #: at rest with the smooth timing, free with the paper's.
+    final_input: tuple[float, ...] | None = None
+    #: A trajectory to track (:class:`~ocp.spec.reference.Reference`: states and inputs
+    #: over the horizon, weighted terms of the objective): the window of a longer plan
+    #: that a controller re-solves (:mod:`ocp.control`). None: no such terms.
+    reference: Reference | None = field(default=None, compare=False, repr=False)
     #: The motion's contact phases (:mod:`ocp.spec.phases`): which fingertips touch the
     #: object when. None: one phase, every fingertip touching throughout.
     phases: tuple[ContactPhase, ...] | None = None
@@ -280,7 +289,8 @@ class ManipulationProblem:
         (from rest: a moving start's input is the grasp's, its phases the fingertips')."""
         return replace(self, fingers=(), motion=None, forces=None, tracking=Tracking(),
                        object_effort_weight=1.0, tolerances=PALM_TOLERANCES,
-                       initial_input=None, phases=None, collision=None, actuation=None)
+                       initial_input=None, final_input=None, reference=None, phases=None,
+                       collision=None, actuation=None)
 
     def errors(self) -> list[tuple[str, str]]:
         """Every reason the problem is invalid, as (field, reason)."""
@@ -289,8 +299,9 @@ class ManipulationProblem:
                        "max_contact_speed")
         if self.palm is not None:
             for name, why in self.palm_problem().errors():
-                if name == "goal" and self.motion is not None and "nothing to plan" in why:
-                    continue  # the motion says what to do
+                if name == "goal" and (self.motion is not None or self.reference is not None) \
+                        and "nothing to plan" in why:
+                    continue  # the motion (the reference) says what to do
                 head = name.split(".")[0].split("[")[0]
                 errs.append((f"palm.{name}" if head in palm_fields else name, why))
         else:
@@ -305,7 +316,7 @@ class ManipulationProblem:
                 errs.append(("initial_pose", "required when no palm carries the object"))
             else:
                 errs += self.initial_pose.errors("initial_pose")
-            if self.motion is None:
+            if self.motion is None and self.reference is None:
                 errs.append(("motion", "required when no palm carries the object: what "
                                        "should the object do?"))
         if self.motion is not None:

@@ -140,12 +140,14 @@ def point_params(m: Any) -> tuple[Any, Any, Any, Any, Any, Any]:
 
 
 def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
-                force_regularisation: float, npts: int) -> Block:
+                force_regularisation: float, npts: int, reference: bool = False) -> Block:
     """The rows at one point of phase ``pm``
     (:class:`~ocp.transcription.grasp_model.PhaseModel`): z = (x~, s, f, fl) of its active
     contacts (``z_map``). Force closure by the phase's condition, the loads of the active
     contacts, the tracking bounds (not at the grid's first node); the objective's tracking
-    error, the internal forces' and the loads' size."""
+    error, the internal forces' and the loads' size; with a ``reference``
+    (:class:`~ocp.spec.reference.Reference`) the scaled states' squared distance from the
+    point's reference state ``xr`` times the point's weight ``wr``."""
     m = pm.grasp
     q, shape_q, charts_q, ccone_q, tol_q, (wtr_q, load_q) = point_params(m)
     L = ca.mmax(shape_q)
@@ -163,6 +165,8 @@ def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
     pd = ca.SX.sym("pd", 3 if tracking else 0)
     rd = ca.SX.sym("rd", 9 if tracking else 0)
     swp = ca.SX.sym("sw")  # the point's Simpson weight (normalised time)
+    xr = ca.SX.sym("xr", m.nx if reference else 0)  # the reference state (scaled)
+    wr = ca.SX.sym("wr", 1 if reference else 0)  # its weight at this point
     rows: list[Any] = []
     lo: list[float] = []
     hi: list[float] = []
@@ -207,21 +211,25 @@ def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
         cost_p = cost_p + force_regularisation * ca.sumsqr(fcol) / (npts * n_force)
     if n_load:
         cost_p = cost_p + load_cost(fl, fn) / (npts * n_load)
+    if reference:
+        cost_p = cost_p + wr * ca.sumsqr(xs - xr) / m.nx
     Gp = ca.vertcat(*rows)
     dropped = set(not_at_node0)
-    block = _block("point", zp, [pd, rd, swp, q], Gp, cost_p,
+    block = _block("point", zp, [pd, rd, swp, xr, wr, q], Gp, cost_p,
                    ca.SX.sym("lam", len(lo)), ca.SX.sym("sigma"), lo, hi)
     block.z_map = layout.positions(cond.n_epigraph, pm.slots, bool(n_force), bool(n_load))
     block.keep0 = [r for r in range(len(lo)) if r not in dropped]
     return block
 
 
-def interval_block(pm: Any, n_s: int, smooth: bool) -> Block:
+def interval_block(pm: Any, n_s: int, smooth: bool, reference: bool = False) -> Block:
     """One interval of phase ``pm``: z = (x_k, x_m, x_k+1, u_0, u_m, u_1, s_k, s_m,
     s_k+1); rows: the Hermite-Simpson defects of the states with dynamics in the phase
     (its ``dyn_cols``: a lifted fingertip's contact coordinates have none); cost: the
     grasp-angle epigraph and each effort group's inputs (Simpson's rule), with the smooth
-    timing their ramps (:func:`ramp_penalty`)."""
+    timing their ramps (:func:`ramp_penalty`); with a ``reference`` the scaled inputs'
+    squared distance from the reference's ``ur`` (u_0, u_m, u_1) by Simpson's rule, times
+    the weight ``wu``."""
     m = pm.grasp
     nx, nu = m.nx, m.nu
     shape_q = ca.SX.sym("shape", m.surface.n_params)
@@ -254,8 +262,13 @@ def interval_block(pm: Any, n_s: int, smooth: bool) -> Block:
                                         + ca.sumsqr(u1[idx]))
             if smooth:
                 cost_i += wq[i] * ramp_q ** 2 * ramp_penalty(u0[idx], um[idx], u1[idx], hn)
+    ur = ca.SX.sym("ur", 3 * nu if reference else 0)  # the reference inputs (scaled)
+    wu = ca.SX.sym("wu", 1 if reference else 0)
+    if reference:
+        cost_i += wu * hn / 6 * (ca.sumsqr(u0 - ur[:nu]) + 4 * ca.sumsqr(um - ur[nu:2 * nu])
+                                 + ca.sumsqr(u1 - ur[2 * nu:])) / nu
     n_d = int(D.numel())
-    return _block("interval", zi, [hq, Tq, wq, shape_q, charts_q, ramp_q], D, cost_i,
+    return _block("interval", zi, [hq, Tq, wq, shape_q, charts_q, ramp_q, ur, wu], D, cost_i,
                   ca.SX.sym("lam", n_d), ca.SX.sym("sigma"), [0.0] * n_d, [0.0] * n_d)
 
 

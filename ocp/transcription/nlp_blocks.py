@@ -143,13 +143,17 @@ class BlockAssembler:
         return ca.MX(self.sparsity, ca.mtimes(self.matrix, nz))
 
 
-def _declaration(m: Any, nseg: int, nv: int, npts: int, tracking: bool) -> Parameters:
+def _declaration(m: Any, nseg: int, nv: int, npts: int, tracking: bool,
+                 reference: bool = False) -> Parameters:
     """The NLP's parameters, by name (every structure's, whatever it uses)."""
     n_track = npts if tracking else 0
+    n_ref = npts if reference else 0
     return Parameters.of(shape=(m.surface.n_params, 1), seg_T=(nseg, 1), goal=(5, 1),
                          vias=(5, nv), charts=(9 * m.n_contacts, 1), weights=(6, 1),
                          ccone=(1, 1), tol=(2, 1), Pd=(3, n_track), Rd=(9, n_track),
-                         load=(LOAD_PARAMS, 1), accel=(2, 1))
+                         load=(LOAD_PARAMS, 1), accel=(2, 1), Xr=(m.nx, n_ref),
+                         Wr=(1, n_ref), Ur=(3 * m.nu, (npts - 1) // 2 if reference else 0),
+                         wu=(1 if reference else 0, 1))
 
 
 def _triplets(sp: ca.Sparsity) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -180,7 +184,7 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
                            force_regularisation: float, small: bool | None = None,
                            forces: bool = False, smooth: bool = False,
                            schedule: Schedule | None = None,
-                           stage_order: bool = False) -> BlockNLP:
+                           stage_order: bool = False, reference: bool = False) -> BlockNLP:
     """The NLP of one grasp structure (``m``: its
     :class:`~ocp.transcription.grasp_model.GraspModel`) with its contact phases
     (``schedule``: :data:`Schedule`; None, one phase with every fingertip touching):
@@ -218,6 +222,11 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     one interval: a velocity jump again as h -> 0 (slip converged like h on the triangle
     example).
 
+    ``reference`` (:class:`~ocp.spec.reference.Reference`): the tracking terms of a
+    reference trajectory (parameters ``Xr``, ``Wr``: the scaled reference state and its
+    weight at every point; ``Ur``: the scaled reference inputs of every interval, ``wu``
+    their weight); never the small SX form.
+
     ``stage_order`` (issue 27): the same NLP laid out stage by stage for a
     structure-exploiting solver (:mod:`~ocp.transcription.stage_order`: each interval's
     end copied into its stage, the gap-closing rows first in each stage; ``copies`` and
@@ -229,9 +238,9 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     touching = interval_touching(len(m.fingertips), n, schedule)
     one_phase = len(set(touching)) == 1 and all(touching[0])
     if small is None:
-        small = nc < 2 and not tracking and one_phase and not stage_order
+        small = nc < 2 and not tracking and one_phase and not stage_order and not reference
     if small:
-        if nc >= 2 or tracking or forces or not one_phase or stage_order:
+        if nc >= 2 or tracking or forces or not one_phase or stage_order or reference:
             raise ValueError("only a grasp without path rows (one contact, no tracking, "
                              "one phase, kind order) has the small SX form")
         from ocp.transcription.small_nlp import small_grasp_nlp
@@ -240,4 +249,4 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     from ocp.transcription.phased_nlp import PhasedNLP
 
     return PhasedNLP(m, hs, touching, goal_mask, via_masks, tracking, force_regularisation,
-                      forces, smooth, stage_order).build(t0)
+                      forces, smooth, stage_order, reference).build(t0)

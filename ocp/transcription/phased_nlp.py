@@ -61,11 +61,11 @@ class PhasedNLP:
     def __init__(self, m: Any, hs: HermiteSimpson, touching: list[tuple[bool, ...]],
                  goal_mask: tuple[bool, ...], via_masks: tuple[tuple[bool, ...], ...],
                  tracking: bool, force_regularisation: float, forces: bool,
-                 smooth: bool, stage_order: bool = False) -> None:
+                 smooth: bool, stage_order: bool = False, reference: bool = False) -> None:
         self.m, self.hs, self.touching = m, hs, touching
         self.goal_mask, self.via_masks = goal_mask, via_masks
         self.tracking, self.forces, self.smooth = tracking, forces, smooth
-        self.stage_order = stage_order
+        self.stage_order, self.reference = stage_order, reference
         n = hs.n_intervals
         self.n, self.npts = n, 2 * n + 1
         # every point's contacts: a node has those of the intervals it joins
@@ -81,7 +81,8 @@ class PhasedNLP:
             m.n_contacts if forces else 0)
         for pm in conditions:
             self._points[pm.touching] = point_block(pm, self.layout, tracking, forces,
-                                                    force_regularisation, self.npts)
+                                                    force_regularisation, self.npts,
+                                                    reference)
 
     def build(self, t0: float) -> BlockNLP:
         m, hs, n, npts, layout = self.m, self.hs, self.n, self.npts, self.layout
@@ -145,7 +146,8 @@ class PhasedNLP:
         # defects of every interval (in the stage order: with its end's copy)
         ex, eu, es = (stages.cx, stages.cu, stages.cs) if stages is not None else (
             Xi[:, 1:], Ui[:, rc], Si[:, 1:])
-        group(self.touching, lambda k: interval_block(m.phase(k), n_s, self.smooth),
+        group(self.touching, lambda k: interval_block(m.phase(k), n_s, self.smooth,
+                                                         self.reference),
               lambda k, _: np.concatenate([Xi[:, k], Xmi[:, k], ex[:, k], Ui[:, lc[k]],
                                            Umi[:, k], eu[:, k], Si[:, k], Smi[:, k],
                                            es[:, k]]), all_rows)
@@ -320,7 +322,7 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
     tg_fn, tg_jac, tg_hess, Jt, Ht, ze_idx = targets
     segments = hs.segments
     w = ca.MX.sym("w", nw)
-    decl = _declaration(m, nseg, nv, npts, nlp.tracking)
+    decl = _declaration(m, nseg, nv, npts, nlp.tracking, nlp.reference)
     p = ca.MX.sym("p", decl.size)
     prm_ = decl.unpack(p)
     shape_p, seg_T, goal, charts, weights, ccone, tol, Pd, Rd = (
@@ -336,9 +338,10 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
     qv = ca.vertcat(shape_p, charts, ccone, tol, weights[4], weights[5], prm_["load"])
     wts = weights[0:4]
     accel = prm_["accel"]
+    Xr, Wr, Ur, wu = (prm_[k] for k in ("Xr", "Wr", "Ur", "wu"))
 
     def cols(M: Any, c: list[int], total: int) -> Any:
-        return M if len(c) == total else M[:, c]
+        return M if len(c) == total or M.size2() == 0 else M[:, c]
 
     def args(pl: _Placed) -> list[Any]:
         """The mapped arguments of a kind's instances (its variables first)."""
@@ -346,9 +349,11 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
         name = pl.block.fn.name()
         if name == "point":
             return [Z, cols(Pd, pl.cols, npts), cols(Rd, pl.cols, npts),
-                    cols(sw, pl.cols, npts), qv]
+                    cols(sw, pl.cols, npts), cols(Xr, pl.cols, npts),
+                    cols(Wr, pl.cols, npts), qv]
         if name == "interval":
-            return [Z, cols(h, pl.cols, n), T, wts, shape_p, charts, accel[1]]
+            return [Z, cols(h, pl.cols, n), T, wts, shape_p, charts, accel[1],
+                    cols(Ur, pl.cols, n), wu]
         if name == "rates":
             return [Z, T, shape_p, charts]
         if name == "accel":

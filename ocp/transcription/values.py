@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -74,10 +75,12 @@ def load_vector(fs: ForceSpec | None, mu: float, n_contacts: int) -> FloatArray:
     return out
 
 
-def parameters(problem: ManipulationProblem, nlp: BlockNLP) -> FloatArray:
+def parameters(problem: ManipulationProblem, nlp: BlockNLP,
+               scales_: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
     """The NLP parameter vector of a problem (its structure's NLP ``nlp``): object,
     segment durations, palm goal and via-points, charts, weights, cone, tracking
-    tolerances and the desired poses at every collocation point."""
+    tolerances and the desired poses at every collocation point; with a reference, its
+    states and inputs scaled by ``scales_`` (:func:`scales`: the grasp's states', inputs')."""
     segments, tb = problem.segments()
     t_nodes = node_times(segments, tb)
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
@@ -108,7 +111,34 @@ def parameters(problem: ManipulationProblem, nlp: BlockNLP) -> FloatArray:
         charts=np.concatenate([R.ravel(order="F") for R in charts]), weights=weights,
         ccone=[cone_cosine(problem.mu)], tol=tol, Pd=Pd_, Rd=Rd_,
         load=load_parameters(problem),
-        accel=[problem.max_joint_acceleration, problem.ramp_time_fraction])
+        accel=[problem.max_joint_acceleration, problem.ramp_time_fraction],
+        **reference_parameters(problem, t_nodes, scales_))
+
+
+def reference_parameters(problem: ManipulationProblem, t_nodes: FloatArray,
+                         scales_: tuple[FloatArray, FloatArray] | None
+                         ) -> dict[str, Any]:
+    """The reference's parameters (:class:`~ocp.spec.reference.Reference`; empty without
+    one): the scaled states at every point (nodes, then midpoints) with each point's
+    weight (Simpson's rule in normalised time, the last node's ``terminal_weight`` more),
+    the scaled inputs of every interval (start, midpoint, end) and their weight."""
+    ref = problem.reference
+    if ref is None or scales_ is None:
+        return {k: np.zeros(0) for k in ("Xr", "Wr", "Ur", "wu")}
+    x_scale, u_scale = scales_
+    n = len(t_nodes) - 1
+    tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+    xs, _ = ref.at(np.concatenate([t_nodes, tm]))
+    hn = np.diff(t_nodes) / float(t_nodes[-1] - t_nodes[0])
+    sw = np.concatenate([(np.r_[0.0, hn] + np.r_[hn, 0.0]) / 6, 4 * hn / 6])
+    wr = ref.state_weight * sw
+    wr[n] += ref.terminal_weight * ref.state_weight / n
+    _, u0 = ref.at(t_nodes[:-1])
+    _, um = ref.at(tm)
+    _, u1 = ref.at(t_nodes[1:])
+    Ur = np.vstack([(u0 / u_scale).T, (um / u_scale).T, (u1 / u_scale).T])
+    return {"Xr": (xs / x_scale).T, "Wr": wr[None, :], "Ur": Ur, "wu": [ref.input_weight]}
+
 
 
 def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: FloatArray,
@@ -136,6 +166,9 @@ def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: Float
     if problem.initial_input is not None:  # a moving start: the given input, either timing
         col = nlp.hs.left_cols[0]
         lo_u[col] = hi_u[col] = np.asarray(problem.initial_input, dtype=float) / u_scale
+    if problem.final_input is not None:  # a moving end (a window of a longer motion)
+        col = nlp.hs.right_cols[-1]
+        lo_u[col] = hi_u[col] = np.asarray(problem.final_input, dtype=float) / u_scale
     lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
     ns = nlp.n_epigraph
     zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))
