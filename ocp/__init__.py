@@ -35,6 +35,7 @@ if TYPE_CHECKING:
     from ocp.ball_on_palm import PALM_NX, BallOnPalmPlanner, certify_palm_plan, palm_model
     from ocp.certify.certificate import Certificate, Check, CheckKind, TolerancePolicy
     from ocp.contacts import FingertipContact, FreeFingertip, FreeObject, SupportContact
+    from ocp.control import ControllerOptions, Tick, WindowController
     from ocp.gait.planner import GaitPhase, GaitPlan, plan_gait
     from ocp.gait.samples import GaitSamples, gait_samples, gait_times
     from ocp.gait.step import GaitStep, contact_of, replace_finger
@@ -77,6 +78,7 @@ if TYPE_CHECKING:
         ViaPoint,
         goal_errors,
     )
+    from ocp.spec.reference import Reference
     from ocp.transcription.collocation import left_input_columns, node_times
 
 #: public name -> the module that defines it
@@ -106,6 +108,9 @@ _EXPORTS = {
     "StateEstimate": "ocp.solve.estimate", "estimate_state": "ocp.solve.estimate",
     "Replan": "ocp.solve.replan", "Replanner": "ocp.solve.replan",
     "ReplanOptions": "ocp.solve.replan",
+    # tracking a plan at a controller's rate (docs/control.md)
+    "ControllerOptions": "ocp.control", "Tick": "ocp.control",
+    "WindowController": "ocp.control", "Reference": "ocp.spec.reference",
     "FingertipContact": "ocp.contacts", "FreeFingertip": "ocp.contacts",
     "FreeObject": "ocp.contacts", "SupportContact": "ocp.contacts",
     "Fingertip": "ocp.spec.grasp", "ManipulationProblem": "ocp.spec.grasp",
@@ -144,6 +149,7 @@ __all__ = [
     "Certificate",
     "Check",
     "CheckKind",
+    "ControllerOptions",
     "DesiredMotion",
     "EstimateOptions",
     "FingerContact",
@@ -171,6 +177,7 @@ __all__ = [
     "Palm",
     "PalmSolution",
     "ProblemError",
+    "Reference",
     "Replan",
     "ReplanOptions",
     "Replanner",
@@ -181,10 +188,12 @@ __all__ = [
     "Structure",
     "SupportContact",
     "Surface",
+    "Tick",
     "TolerancePolicy",
     "Tracking",
     "Trajectory",
     "ViaPoint",
+    "WindowController",
     "attempt",
     "certify_palm_plan",
     "contact_of",

@@ -157,7 +157,8 @@ def test_the_service_folders_keep_their_places() -> None:
 # transcription (collocation, parameters, the grasp model, the NLP from blocks); the
 # solution; solve (IPOPT, guesses and strategies, the pipeline, the certification of a
 # plan); the front ends (ball_on_palm, one_finger) on the pipeline; methods (greedy) on
-# everything; gait (finger gaiting) on the pipeline. Each layer imports only the layers
+# everything; gait (finger gaiting) on the pipeline; control (tracking a plan at a
+# controller's rate) on the pipeline. Each layer imports only the layers
 # listed for it (and itself, and certify).
 
 CORE_LAYERS: dict[str, set[str]] = {
@@ -175,6 +176,7 @@ CORE_LAYERS: dict[str, set[str]] = {
     "methods": {"geometry", "robots", "spec", "contacts", "transcription", "solution", "solve",
                 "ball_on_palm", "one_finger"},
     "gait": {"geometry", "robots", "spec", "contacts", "transcription", "solution", "solve"},
+    "control": {"spec", "transcription", "solution", "solve"},
 }
 
 

@@ -175,13 +175,10 @@ class ManipulationProblem:
     #: moving, re-planned from a measured state (:func:`ocp.solve.attempt.attempt`'s
     #: ``u0``). None: at rest with the smooth timing, free with the paper's.
     initial_input: tuple[float, ...] | None = None
-    #: The input at t = duration (same layout): a plan that ends moving, a window of a
-    #: longer motion (:mod:`ocp.control`) handing over to the rest of its reference. None:
-    #: at rest with the smooth timing, free with the paper's.
-    final_input: tuple[float, ...] | None = None
     #: A trajectory to track (:class:`~ocp.spec.reference.Reference`: states and inputs
     #: over the horizon, weighted terms of the objective): the window of a longer plan
-    #: that a controller re-solves (:mod:`ocp.control`). None: no such terms.
+    #: that a controller re-solves (:mod:`ocp.control`); such a plan ends moving (its last
+    #: input free, tracked). None: no such terms.
     reference: Reference | None = field(default=None, compare=False, repr=False)
     #: The motion's contact phases (:mod:`ocp.spec.phases`): which fingertips touch the
     #: object when. None: one phase, every fingertip touching throughout.
@@ -289,7 +286,7 @@ class ManipulationProblem:
         (from rest: a moving start's input is the grasp's, its phases the fingertips')."""
         return replace(self, fingers=(), motion=None, forces=None, tracking=Tracking(),
                        object_effort_weight=1.0, tolerances=PALM_TOLERANCES,
-                       initial_input=None, final_input=None, reference=None, phases=None,
+                       initial_input=None, reference=None, phases=None,
                        collision=None, actuation=None)
 
     def errors(self) -> list[tuple[str, str]]:

@@ -37,6 +37,9 @@ class Reference:
     state_weight: float = 1e4
     input_weight: float = 1.0
     terminal_weight: float = 10.0
+    #: each state's weight (nx, relative; None: all 1): a controller weighs the object's
+    #: pose, which the task is about, above the joints and contact coordinates
+    state_weights: tuple[float, ...] | None = None
 
     def errors(self, nx: int, nu: int, duration: float) -> list[tuple[str, str]]:
         """(field, reason) pairs; empty when it fits a grasp of ``nx`` states and ``nu``
@@ -52,6 +55,10 @@ class Reference:
             errs.append(("reference.x", f"must be {t.size} x {nx} finite states"))
         if u.shape != (t.size, nu) or not np.all(np.isfinite(u)):
             errs.append(("reference.u", f"must be {t.size} x {nu} finite inputs"))
+        qx = self.state_weights
+        if qx is not None and not (len(qx) == nx and all(math.isfinite(v) and 0.0 <= v <= 1e8
+                                                         for v in qx)):
+            errs.append(("reference.state_weights", f"must be {nx} weights in [0, 1e8]"))
         for name in ("state_weight", "input_weight", "terminal_weight"):
             w = getattr(self, name)
             if not (math.isfinite(w) and 0.0 <= w <= 1e8):

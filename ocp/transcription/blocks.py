@@ -147,7 +147,8 @@ def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
     contacts, the tracking bounds (not at the grid's first node); the objective's tracking
     error, the internal forces' and the loads' size; with a ``reference``
     (:class:`~ocp.spec.reference.Reference`) the scaled states' squared distance from the
-    point's reference state ``xr`` times the point's weight ``wr``."""
+    point's reference state ``xr``, each state weighted by ``qx``, times the point's weight
+    ``wr``."""
     m = pm.grasp
     q, shape_q, charts_q, ccone_q, tol_q, (wtr_q, load_q) = point_params(m)
     L = ca.mmax(shape_q)
@@ -167,6 +168,7 @@ def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
     swp = ca.SX.sym("sw")  # the point's Simpson weight (normalised time)
     xr = ca.SX.sym("xr", m.nx if reference else 0)  # the reference state (scaled)
     wr = ca.SX.sym("wr", 1 if reference else 0)  # its weight at this point
+    qx = ca.SX.sym("qx", m.nx if reference else 0)  # each state's own weight
     rows: list[Any] = []
     lo: list[float] = []
     hi: list[float] = []
@@ -212,10 +214,10 @@ def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
     if n_load:
         cost_p = cost_p + load_cost(fl, fn) / (npts * n_load)
     if reference:
-        cost_p = cost_p + wr * ca.sumsqr(xs - xr) / m.nx
+        cost_p = cost_p + wr * ca.dot(qx, (xs - xr) ** 2) / m.nx
     Gp = ca.vertcat(*rows)
     dropped = set(not_at_node0)
-    block = _block("point", zp, [pd, rd, swp, xr, wr, q], Gp, cost_p,
+    block = _block("point", zp, [pd, rd, swp, xr, wr, qx, q], Gp, cost_p,
                    ca.SX.sym("lam", len(lo)), ca.SX.sym("sigma"), lo, hi)
     block.z_map = layout.positions(cond.n_epigraph, pm.slots, bool(n_force), bool(n_load))
     block.keep0 = [r for r in range(len(lo)) if r not in dropped]

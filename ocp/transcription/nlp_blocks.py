@@ -52,7 +52,7 @@ __all__ = ["LOAD_PARAMS", "LOAD_PUSH_WEIGHT", "LOAD_REGULARISATION", "LOAD_VARS"
 Schedule = tuple[tuple[int, tuple[bool, ...]], ...]
 
 
-def _node_input_pairs(hs: HermiteSimpson) -> list[tuple[int, int]]:
+def _node_input_pairs(hs: HermiteSimpson, free_ends: bool = False) -> list[tuple[int, int]]:
     """(node, input column) of every input at a node that is not fixed: each interval's
     start, and each segment's end (with the paper's timing a via-point node has the input
     arriving and the one leaving). With the smooth timing (continuous inputs) each node
@@ -61,7 +61,7 @@ def _node_input_pairs(hs: HermiteSimpson) -> list[tuple[int, int]]:
     lc, rc = hs.left_cols, hs.right_cols
     ends = [int(k) for k in np.cumsum(hs.segments)]
     pairs = [(k, lc[k]) for k in range(hs.n_intervals)] + [(k, rc[k - 1]) for k in ends]
-    if hs.continuous:
+    if hs.continuous and not free_ends:  # (``free_ends``: a window's, moving)
         pairs = [pc for pc in dict.fromkeys(pairs)
                  if pc not in ((0, lc[0]), (hs.n_intervals, rc[-1]))]
     return pairs
@@ -152,7 +152,8 @@ def _declaration(m: Any, nseg: int, nv: int, npts: int, tracking: bool,
                          vias=(5, nv), charts=(9 * m.n_contacts, 1), weights=(6, 1),
                          ccone=(1, 1), tol=(2, 1), Pd=(3, n_track), Rd=(9, n_track),
                          load=(LOAD_PARAMS, 1), accel=(2, 1), Xr=(m.nx, n_ref),
-                         Wr=(1, n_ref), Ur=(3 * m.nu, (npts - 1) // 2 if reference else 0),
+                         Wr=(1, n_ref), Qx=(m.nx if reference else 0, 1),
+                         Ur=(3 * m.nu, (npts - 1) // 2 if reference else 0),
                          wu=(1 if reference else 0, 1))
 
 
@@ -224,8 +225,10 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
 
     ``reference`` (:class:`~ocp.spec.reference.Reference`): the tracking terms of a
     reference trajectory (parameters ``Xr``, ``Wr``: the scaled reference state and its
-    weight at every point; ``Ur``: the scaled reference inputs of every interval, ``wu``
-    their weight); never the small SX form.
+    weight at every point, ``Qx`` each state's weight; ``Ur``: the scaled reference inputs
+    of every interval, ``wu`` their weight), and the first and last inputs free (a
+    window of a longer motion starts and ends moving: the closure at the velocity level
+    at the first and last nodes with them); never the small SX form.
 
     ``stage_order`` (issue 27): the same NLP laid out stage by stage for a
     structure-exploiting solver (:mod:`~ocp.transcription.stage_order`: each interval's

@@ -169,7 +169,7 @@ class PhasedNLP:
         ubg += [0.0] * n_t
         # the closure at the velocity level: every node with each of its inputs (those of
         # the intervals using that input touch), then the midpoints
-        pairs = _node_input_pairs(hs)
+        pairs = _node_input_pairs(hs, self.reference)
         users = {c: [k for k in range(n) if c in (lc[k], rc[k])] for _, c in pairs}
         rate_kinds = [self._touching_of(users[c]) for _, c in pairs] + list(self.touching)
         rate_z = [np.concatenate([Xi[:, k], Ui[:, c]]) for k, c in pairs] + \
@@ -338,7 +338,7 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
     qv = ca.vertcat(shape_p, charts, ccone, tol, weights[4], weights[5], prm_["load"])
     wts = weights[0:4]
     accel = prm_["accel"]
-    Xr, Wr, Ur, wu = (prm_[k] for k in ("Xr", "Wr", "Ur", "wu"))
+    Xr, Wr, Qx, Ur, wu = (prm_[k] for k in ("Xr", "Wr", "Qx", "Ur", "wu"))
 
     def cols(M: Any, c: list[int], total: int) -> Any:
         return M if len(c) == total or M.size2() == 0 else M[:, c]
@@ -350,7 +350,7 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
         if name == "point":
             return [Z, cols(Pd, pl.cols, npts), cols(Rd, pl.cols, npts),
                     cols(sw, pl.cols, npts), cols(Xr, pl.cols, npts),
-                    cols(Wr, pl.cols, npts), qv]
+                    cols(Wr, pl.cols, npts), Qx, qv]
         if name == "interval":
             return [Z, cols(h, pl.cols, n), T, wts, shape_p, charts, accel[1],
                     cols(Ur, pl.cols, n), wu]

@@ -124,7 +124,7 @@ def reference_parameters(problem: ManipulationProblem, t_nodes: FloatArray,
     the scaled inputs of every interval (start, midpoint, end) and their weight."""
     ref = problem.reference
     if ref is None or scales_ is None:
-        return {k: np.zeros(0) for k in ("Xr", "Wr", "Ur", "wu")}
+        return {k: np.zeros(0) for k in ("Xr", "Wr", "Qx", "Ur", "wu")}
     x_scale, u_scale = scales_
     n = len(t_nodes) - 1
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
@@ -137,7 +137,10 @@ def reference_parameters(problem: ManipulationProblem, t_nodes: FloatArray,
     _, um = ref.at(tm)
     _, u1 = ref.at(t_nodes[1:])
     Ur = np.vstack([(u0 / u_scale).T, (um / u_scale).T, (u1 / u_scale).T])
-    return {"Xr": (xs / x_scale).T, "Wr": wr[None, :], "Ur": Ur, "wu": [ref.input_weight]}
+    qx = np.ones(len(x_scale)) if ref.state_weights is None else \
+        np.asarray(ref.state_weights, dtype=float)
+    return {"Xr": (xs / x_scale).T, "Wr": wr[None, :], "Qx": qx, "Ur": Ur,
+            "wu": [ref.input_weight]}
 
 
 
@@ -160,15 +163,14 @@ def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: Float
     ub_in = np.array(uhi) / u_scale
     n_cols = nlp.hs.n_input_cols
     lo_u, hi_u = np.tile(-ub_in, (n_cols, 1)), np.tile(ub_in, (n_cols, 1))
-    if nlp.hs.continuous:  # the smooth timing: at rest at the start and at the end
+    if nlp.hs.continuous and problem.reference is None:  # the smooth timing: at rest at
+        # the start and at the end (a window of a longer motion, tracking its reference,
+        # starts and ends moving)
         for col in (nlp.hs.left_cols[0], nlp.hs.right_cols[-1]):
             lo_u[col] = hi_u[col] = 0.0
     if problem.initial_input is not None:  # a moving start: the given input, either timing
         col = nlp.hs.left_cols[0]
         lo_u[col] = hi_u[col] = np.asarray(problem.initial_input, dtype=float) / u_scale
-    if problem.final_input is not None:  # a moving end (a window of a longer motion)
-        col = nlp.hs.right_cols[-1]
-        lo_u[col] = hi_u[col] = np.asarray(problem.final_input, dtype=float) / u_scale
     lo_um, hi_um = np.tile(-ub_in, (n, 1)), np.tile(ub_in, (n, 1))
     ns = nlp.n_epigraph
     zeros_s, twos_s = np.zeros((ns, n + 1)), 2 * np.ones((ns, n + 1))

@@ -29,8 +29,9 @@ from ocp import (
     quaternion_wxyz,
 )
 
-__all__ = ["FirstPlan", "ReplanController", "ReplanSession", "closed_loop_report", "compare",
-           "first_plan", "goal_of", "replannable", "stored_first_plan", "summary"]
+__all__ = ["FirstPlan", "ReplanController", "ReplanSession", "TrackingController",
+           "closed_loop_report", "compare", "first_plan", "goal_of", "replannable",
+           "stored_first_plan", "summary"]
 
 
 @dataclass(frozen=True)
@@ -153,6 +154,101 @@ class ReplanController:
         return frag, ControlEvent(r.t, r.status, r.wall_time, r.message, details)
 
 
+class TrackingController:
+    """The controller of sim's real-time closed loop: each measurement estimated into the
+    grasp's state (from the reference's state at that time) and a window of the plan
+    re-solved from it (:class:`ocp.control.WindowController`, its real-time iteration
+    budget); the window's collocation points as the simulator's reference from the tick
+    on. Every window is kept (``ticks``) and certified after the run
+    (:meth:`certify_all`: outside the ticks' budget)."""
+
+    def __init__(self, first: FirstPlan, base: Any, options: Any = None) -> None:
+        from ocp import WindowController
+
+        self.control = WindowController(first.problem, first.plan, options)
+        self.base = base
+        m = self.control.model
+        self.prm = self.control.params
+        self.columns = [j for tip in m.fingertips for j, c in enumerate(m.point_contacts)
+                        if c is tip]
+        #: (tick time, certificate failures) of the windows certified
+        self.failures: list[tuple[float, list[str]]] = []
+
+    def prepare(self) -> float:
+        return self.control.prepare()
+
+    def fragment(self, tick: Any) -> Any:
+        """The simulator's plan of a tick's window (its collocation points, on the first
+        plan's clock)."""
+        from dataclasses import replace
+
+        from sim import ContactSpec, FingerReference
+
+        m, col = self.control.model, tick.collocation
+        traj = m.interpolant(col.t_nodes, col.X, col.U0, col.Um, col.U1, self.prm)
+        ts = np.linspace(0.0, float(col.t_nodes[-1]), 2 * (len(col.t_nodes) - 1) + 1)
+        x, xd = traj(ts), traj(ts, order=1)
+        cart = m.mapped("cartesian", ts.size)(x.T, self.prm)
+        R = np.asarray(cart[0]).T.reshape(ts.size, 3, 3).transpose(0, 2, 1)
+        p = np.asarray(cart[1]).T
+        pts = np.asarray(cart[4]).T.reshape(ts.size, -1, 3)
+        refs, points = [], {}
+        for spec, tip, j in zip(self.base.fingers, m.fingertips, self.columns, strict=True):
+            refs.append(FingerReference(x[:, tip.q_cols], xd[:, tip.q_cols]))
+            points[spec.name] = pts[:, j]
+        contacts = tuple(
+            ContactSpec(c.name, c.body, c.finger, points[c.finger], None)
+            if c.finger in points else
+            ContactSpec(c.name, c.body, c.finger, np.repeat(c.point[:1], ts.size, axis=0))
+            for c in self.base.contacts)
+        return replace(self.base, t=ts + tick.t, object_position=p,
+                       object_wxyz=quaternion_wxyz(R), references=tuple(refs),
+                       contacts=contacts)
+
+    def __call__(self, meas: Any) -> tuple[Any, Any]:
+        import time
+
+        from ocp import estimate_state
+        from sim.closed_loop import ControlEvent
+
+        t0 = time.perf_counter()
+        c = self.control
+        est = estimate_state(c.problem, c.model, Measurement(
+            meas.q, meas.object_position, meas.object_wxyz, meas.q_dot,
+            meas.object_velocity, meas.object_omega), *c.state_at(meas.t))
+        t_est = time.perf_counter() - t0
+        if not est.explained:
+            return None, ControlEvent(meas.t, "unexplained", 0.0, "; ".join(est.problems),
+                                      {"estimate_time": t_est})
+        # the measured rates (MuJoCo's servos make them ring) enter only a window whose
+        # first input is fixed to them (``fix_start``); else it starts at the reference's
+        u = est.u if c.options.fix_start and est.u is not None else None
+        tick = c.tick(meas.t, est.x, u)
+        details: dict[str, Any] = {
+            "iterations": tick.iterations, "solve_time": tick.solve_time,
+            "estimate_time": t_est, "primal_infeasibility": tick.primal_infeasibility,
+            "dual_infeasibility": tick.dual_infeasibility}
+        frag = self.fragment(tick) if tick.collocation is not None else None
+        return frag, ControlEvent(meas.t, tick.status, 0.0, tick.raw_status, details)
+
+    def certify_all(self, every: int = 1) -> dict[str, Any]:
+        """Every ``every``-th window certified: how many, how many passed, and the ticks
+        that failed with their failed checks."""
+        checked = passed = 0
+        for k, tick in enumerate(self.control.ticks):
+            if k % every:
+                continue
+            cert = self.control.certify(tick)
+            checked += 1
+            if cert.passed:
+                passed += 1
+            else:
+                self.failures.append((tick.t, [ch.name for ch in cert.checks
+                                               if not ch.passed]))
+        return {"windows": len(self.control.ticks), "checked": checked, "certified": passed,
+                "failed": [{"t": t, "checks": names} for t, names in self.failures]}
+
+
 #: After a push or impulse, contact losses within this time [s] are the push's own
 #: transient (the object jumps; a fingertip re-touches within a few steps): a run that
 #: loses no contact after it "recovers".
@@ -221,27 +317,38 @@ def summary(report: Any, disturbances: Any = None, final_pose: Any = None,
 
 
 def compare(first: FirstPlan, base: Any, rate: float, options: Any = None,
-            disturbances: Any = None, replan: ReplanOptions | None = None
-            ) -> dict[str, Any]:
+            disturbances: Any = None, replan: ReplanOptions | None = None,
+            control: Any = None) -> dict[str, Any]:
     """``base`` (the simulator's plan of ``first``) executed open loop and closed loop
-    (re-planning at ``rate`` [Hz]) in the same disturbed world: both reports, each one's
-    summary (``recovered``: final error within 1 mm and 2 deg, no contact lost) and the
-    controller's timing."""
+    in the same disturbed world: both reports, each one's summary (``recovered``: final
+    error within 1 mm and 2 deg, no contact lost) and the controller's timing. The closed
+    loop: with ``control`` (:class:`ocp.ControllerOptions`) the window controller at
+    ``rate`` [Hz] in real time (its latency charged in simulated time, every window
+    certified after the run: ``certificates``); else the whole-remainder re-planner with
+    MuJoCo paused at each call (``replan``)."""
     from sim.closed_loop import run_disturbed, simulate_closed_loop
 
     open_report, open_final = run_disturbed(base, options, disturbances)
     goal = goal_of(first)
-    controller = ReplanController(first, base, replan)
-    period = 1.0 / rate
-    setup = controller.replanner.prepare(
-        [k * period for k in range(1, int(first.plan.duration / period) + 1)])
-    closed = simulate_closed_loop(base, controller, rate, options, disturbances)
+    extra: dict[str, Any] = {}
+    if control is not None:
+        tracker = TrackingController(first, base, control)
+        setup = tracker.prepare()
+        closed = simulate_closed_loop(base, tracker, rate, options, disturbances,
+                                      latency=True)
+        extra["certificates"] = tracker.certify_all()
+    else:
+        controller = ReplanController(first, base, replan)
+        period = 1.0 / rate
+        setup = controller.replanner.prepare(
+            [k * period for k in range(1, int(first.plan.duration / period) + 1)])
+        closed = simulate_closed_loop(base, controller, rate, options, disturbances)
     return {"disturbances": None if disturbances is None else disturbances.to_dict(),
             "open_loop": {"summary": summary(open_report, disturbances, open_final, goal),
                           "report": open_report.to_dict()},
             "closed_loop": {"summary": summary(closed.report, disturbances,
                                                closed.final_pose, goal),
-                            "setup_time": setup, **closed.to_dict()}}
+                            "setup_time": setup, **closed.to_dict(), **extra}}
 
 
 def closed_loop_report(request: Any, result: Any, plan: Any, options: dict[str, Any],

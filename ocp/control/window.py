@@ -1,0 +1,311 @@
+"""A controller that tracks a certified plan over a short window at a fixed rate
+(docs/control.md).
+
+The whole-remainder re-plan (:class:`~ocp.solve.replan.Replanner`) solves the rest of the
+motion; at a controller's rate it cannot. :class:`WindowController` solves, at every tick,
+the grasp's NLP over the next ``horizon`` seconds only (``intervals`` collocation
+intervals), from the measured state and rates (a moving start), to the reference plan's
+input at the window's end (a moving end), tracking the reference's states and inputs (a
+:class:`~ocp.spec.reference.Reference`: weighted terms, the last node weighted more: the
+terminal condition, soft so that a pushed grasp still has a window), under the plan's own
+constraints (rolling, closure at the position and velocity levels, the friction cones of
+the grasp, joint limits and accelerations). Each tick warm-starts IPOPT from the previous
+window shifted by the time between them (its primal-dual point; the reference past its
+end) and stops after ``max_iter`` iterations (a real-time iteration budget); the tick
+reports the KKT residuals the budget left.
+
+Why tracking and not the plan's own objective: a window that minimises the plan's effort
+and grasp angle over 0.5 s (the reference's terms) finds, on a grid of 10 intervals, a
+motion other than the reference that the dense certificate catches slipping (experiment 1:
+the fingertip's spin rate 1.1-2x its tolerance after 2 iterations, slip 2.3x after 10);
+the reference was certified on its own grid, and a window that stays near it (the state
+weight 1e4) is certified too (docs/control.md, "Why windows slipped").
+
+Every window can be certified (:meth:`WindowController.certify`: the same dense checks as
+a plan's), outside the tick's budget.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ocp.certify.certificate import Certificate
+from ocp.solution import Collocation, ManipulationSolution, Status
+from ocp.solve.attempt import Setup, finish, initial_point, run, setup
+from ocp.solve.ipopt import kkt_residuals
+from ocp.spec.grasp import ManipulationProblem, contact_charts
+from ocp.spec.motion import Tracking
+from ocp.spec.problem import ProblemError
+from ocp.spec.reference import Reference
+from ocp.transcription.collocation import NlpPoint
+
+if TYPE_CHECKING:
+    from ocp.solve.planner import ManipulationPlanner
+
+__all__ = ["ControllerOptions", "Tick", "WindowController"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ControllerOptions:
+    """The window: ``horizon`` [s] and its collocation ``intervals``; the real-time budget:
+    IPOPT iterations per tick (``max_iter``) and a wall-clock safety (``time_limit`` [s]);
+    the tracking weights (:class:`~ocp.spec.reference.Reference`). Near the reference's
+    end the window keeps its horizon and tracks the reference's final state at rest past
+    it: the same NLP, its scaling and its multipliers from tick to tick (a window that
+    shrank to what was left lost IPOPT's multipliers at every tick, and one iteration from
+    the primal point alone left experiment 1's last 0.35 s slipping 1.05-1.84x its
+    tolerance)."""
+
+    horizon: float = 0.5
+    intervals: int = 10
+    max_iter: int = 1
+    time_limit: float = 1.0
+    state_weight: float = 1e5
+    input_weight: float = 1e4
+    terminal_weight: float = 10.0
+    #: the weight of the states other than the object's pose (the joints, the
+    #: fingertips' contact coordinates) relative to the object's (1): a pushed grasp
+    #: cannot roll back every contact coordinate within a window, the object's pose it can
+    grasp_state_weight: float = 0.01
+    #: the window's first input fixed to the measured one (a measurement of the rates
+    #: consistent with the grasp: the estimate's); else free, tracked toward it and
+    #: consistent with the measured state: a measured rate that MuJoCo's servos make noisy
+    #: does not force a jerk into the window
+    fix_start: bool = False
+    #: the initial guess of a tick's window: the previous window shifted (True) or the
+    #: reference (False); IPOPT's multipliers are the previous window's either way
+    shift_warm: bool = False
+
+    def errors(self) -> list[tuple[str, str]]:
+        errs: list[tuple[str, str]] = []
+        if not (math.isfinite(self.horizon) and 0.0 < self.horizon <= 10.0):
+            errs.append(("horizon", f"must be in (0, 10] s, got {self.horizon}"))
+        if not 2 <= self.intervals <= 200:
+            errs.append(("intervals", f"must be in [2, 200], got {self.intervals}"))
+        if not 1 <= self.max_iter <= 1000:
+            errs.append(("max_iter", f"must be in [1, 1000], got {self.max_iter}"))
+        return errs
+
+
+@dataclass
+class Tick:
+    """One tick of the controller at time ``t`` (the reference's clock): ``status``
+    ("tracked": a window solved within the budget; "converged": and IPOPT converged;
+    "failed": IPOPT's point unusable),
+    the window's values (``collocation``: its node times from 0 = ``t``, states and
+    inputs), IPOPT's ``iterations`` and time (``solve_time`` [s]), the whole tick's
+    ``wall_time`` [s], and the KKT residuals the budget left (``primal_infeasibility``,
+    ``dual_infeasibility``: the NLP's scaled units). ``certificate`` is filled by
+    :meth:`WindowController.certify`."""
+
+    t: float
+    status: str
+    horizon: float
+    collocation: Collocation | None
+    iterations: int = 0
+    solve_time: float = 0.0
+    wall_time: float = 0.0
+    primal_infeasibility: float | None = None
+    dual_infeasibility: float | None = None
+    raw_status: str = ""
+    certificate: Certificate | None = None
+    #: the window's problem and NLP values (to assemble its plan on demand)
+    _setup: Setup | None = field(default=None, repr=False)
+    _point: NlpPoint | None = field(default=None, repr=False)
+    _w: FloatArray | None = field(default=None, repr=False)
+    _raw: tuple[Status, str, float] | None = field(default=None, repr=False)
+
+    @property
+    def certified(self) -> bool | None:
+        return None if self.certificate is None else self.certificate.passed
+
+
+class WindowController:
+    """Tracks ``reference`` (a certified plan of ``problem``) over a short window at each
+    :meth:`tick` (see the module). ``planner``: whose NLP cache (default the process-wide
+    planner's)."""
+
+    def __init__(self, problem: ManipulationProblem, reference: ManipulationSolution,
+                 options: ControllerOptions | None = None,
+                 planner: ManipulationPlanner | None = None) -> None:
+        if planner is None:
+            from ocp.solve.planner import default_planner
+
+            planner = default_planner()
+        self.options = o = options or ControllerOptions()
+        errs = [(f"options.{k}", v) for k, v in o.errors()]
+        if problem.phases is not None and len(problem.phases) > 1:
+            errs.append(("problem.phases", "the window controller tracks plans of one "
+                                           "contact phase (a rolling plan), not a gait's"))
+        if not problem.fingers:
+            errs.append(("problem.fingers", "the window controller tracks grasps with "
+                                            "fingers"))
+        if errs:
+            raise ProblemError(errs)
+        self.planner, self.reference = planner, reference
+        self.problem = problem
+        self.duration = float(reference.duration)
+        palm = problem.palm
+        if palm is not None:
+            palm = replace(palm, goal={}, via_points=())
+        #: the window's problem, but for its horizon, ends and reference
+        self.template = replace(problem, palm=palm, motion=None, tracking=Tracking(),
+                                forces=None, n_intervals=o.intervals, segment_counts=None,
+                                phases=None)
+        self.model = m = planner.model(self.template)
+        #: the grasp model's parameters (the object's shape, the contacts' charts)
+        self.params = m.params(np.asarray(problem.object.dimensions, dtype=float),
+                               contact_charts(problem))
+        #: each state's tracking weight: the object's pose (a free object's block, or the
+        #: palm contact's coordinates, which place the object) 1, the others less
+        weights = np.full(m.nx, o.grasp_state_weight)
+        weights[m.contacts[0].xs] = 1.0
+        self.state_weights = tuple(float(v) for v in weights)
+        self._last: Tick | None = None
+        self.ticks: list[Tick] = []
+
+    # -- the reference --------------------------------------------------------------------
+    def state_at(self, t: float) -> tuple[FloatArray, FloatArray]:
+        """The reference's state and input at ``t`` (clamped into its duration)."""
+        x, u = self.reference.interpolate([min(max(t, 0.0), self.duration)])
+        return x[0], u[0]
+
+    def window(self, t: float, u0: FloatArray | None = None) -> ManipulationProblem:
+        """The window's problem at ``t``: its horizon, the reference's states and inputs at
+        its collocation points (past the reference's end its final state, at rest), the
+        input at its start ``u0`` (None: the reference's): fixed with ``fix_start``,
+        else tracked there like the reference's inputs, the window's own first input
+        free but consistent with the measured state (the closure at the velocity level);
+        its end moving, tracked."""
+        o = self.options
+        T = o.horizon
+        n = o.intervals
+        ts = np.linspace(0.0, T, 2 * n + 1)
+        x, u = self.reference.interpolate(np.minimum(t + ts, self.duration))
+        u[t + ts > self.duration] = 0.0
+        if u0 is not None:
+            u[0] = u0
+        ref = Reference(ts, x, u, state_weight=o.state_weight, input_weight=o.input_weight,
+                        terminal_weight=o.terminal_weight, state_weights=self.state_weights)
+        return replace(self.template, duration=T, reference=ref,
+                       initial_input=tuple(float(v) for v in u[0]) if o.fix_start else None)
+
+    # -- a tick ---------------------------------------------------------------------------
+    def prepare(self) -> float:
+        """Build the window's NLP and its warm-start solver before the loop (one tick at
+        t = 0 from the reference, forgotten); the wall time [s] it took."""
+        t0 = time.perf_counter()
+        x, u = self.state_at(0.0)
+        self.tick(0.0, x, u)
+        self.tick(min(0.01, self.duration / 2), *self.state_at(min(0.01, self.duration / 2)))
+        self._last, self.ticks = None, []
+        return time.perf_counter() - t0
+
+    def tick(self, t: float, x: FloatArray, u: FloatArray | None = None) -> Tick:
+        """One tick at time ``t`` from the measured state ``x`` and input ``u`` (the
+        grasp's layouts, physical units: :func:`~ocp.solve.estimate.estimate_state` makes
+        them from joints and the object's pose; ``u`` None: the reference's, a window
+        whose first input is free)."""
+        o = self.options
+        t_start = time.perf_counter()
+        problem = self.window(t, u)
+        s = setup(self.planner, problem, np.asarray(x, dtype=float))
+        guess = self._guess(t, s)
+        prev = self._last
+        point = prev._point if prev is not None and prev._point is not None \
+            and prev._point.nlp == s.nlp.fingerprint \
+            and abs(prev.horizon - problem.duration) < 1e-12 else None
+        r = run(s, initial_point(s, guess), point, time.perf_counter() + o.time_limit,
+                o.max_iter)
+        parts = s.nlp.unpack(r.w)
+        Xs, Xms, Us, Ums = (np.asarray(a) for a in parts[:4])
+        Ucols = Us.T * s.u_scale
+        col = Collocation(s.t_nodes, Xs.T * s.x_scale, Xms.T * s.x_scale,
+                          Ucols[s.nlp.hs.left_cols], Ums.T * s.u_scale,
+                          Ucols[s.nlp.hs.right_cols])
+        primal = dual = None
+        if r.point is not None:
+            primal, dual = kkt_residuals(s.nlp, r.point.w, s.p, r.point.lam_g,
+                                         r.point.lam_x, s.lbx, s.ubx)
+        ok = r.point is not None and np.all(np.isfinite(r.w))
+        status = "failed" if not ok else \
+            "converged" if r.status is Status.SOLVED else "tracked"
+        out = Tick(t, status, problem.duration, col if ok else None, r.iterations, r.time,
+                   0.0, primal, dual, r.raw, _setup=s, _point=r.point, _w=r.w,
+                   _raw=(r.status, r.raw, r.objective))
+        out.wall_time = time.perf_counter() - t_start
+        if ok:
+            self._last = out
+        self.ticks.append(out)
+        return out
+
+    def _guess(self, t: float, s: Setup) -> tuple[FloatArray, FloatArray, FloatArray,
+                                                   FloatArray]:
+        """The window's initial guess (X, Xm, U at the input columns, Um): the previous
+        window at the same times, shifted by the time since it (linear between its
+        collocation points), the reference past its end; the first state the measured one."""
+        t_nodes = s.t_nodes
+        tm = (t_nodes[:-1] + t_nodes[1:]) / 2
+        hs = s.nlp.hs
+        ref = s.problem.reference
+        assert ref is not None
+        X, U = ref.at(t_nodes)
+        Xm, Um = ref.at(tm)
+        prev = self._last
+        if self.options.shift_warm and prev is not None and prev.collocation is not None:
+            c, dt = prev.collocation, t - prev.t
+            tp = np.concatenate([c.t_nodes, (c.t_nodes[:-1] + c.t_nodes[1:]) / 2])
+            order = np.argsort(tp)
+            tp = tp[order]
+            xp = np.vstack([c.X, c.Xm])[order]
+            up = np.vstack([np.vstack([c.U0, c.U1[-1:]]), c.Um])[order]
+
+            def shift(values: FloatArray, base: FloatArray, ts: FloatArray) -> FloatArray:
+                inside = ts + dt <= tp[-1]
+                out = base.copy()
+                for j in range(values.shape[1]):
+                    out[inside, j] = np.interp(ts[inside] + dt, tp, values[:, j])
+                return out
+
+            X, Xm = shift(xp, X, t_nodes), shift(xp, Xm, tm)
+            U, Um = shift(up, U, t_nodes), shift(up, Um, tm)
+        X = X.copy()
+        X[0] = s.x0
+        Ucols = np.zeros((hs.n_input_cols, U.shape[1]))
+        Ucols[hs.left_cols] = U[:-1]
+        Ucols[hs.right_cols] = U[1:]
+        return X, Xm, Ucols, Um
+
+    # -- what a tick made -----------------------------------------------------------------
+    def plan(self, tick: Tick, certify: bool = False) -> ManipulationSolution:
+        """The tick's window as a plan (its trajectory, contacts, fingers: on the window's
+        clock, 0 at the tick), certified when asked (seconds for a hand: outside the
+        tick's budget)."""
+        if tick._setup is None or tick._raw is None or tick._w is None:
+            raise ValueError(f"the tick at t = {tick.t:g} s solved no window ({tick.status})")
+        from ocp.solve.attempt import IpoptRun
+
+        status, raw, objective = tick._raw
+        r = IpoptRun(status, raw, tick.iterations, objective, 0.0, tick._w, tick.solve_time,
+                     tick._point)
+        sol = finish(tick._setup, [r], tick.solve_time, math.inf, certify)
+        if certify:
+            tick.certificate = sol.certificate
+        return sol
+
+    def certify(self, tick: Tick) -> Certificate:
+        """The tick's window checked by the plan's certificate (every dense check of
+        :func:`~ocp.solve.certify.certify_grasp`); also stored in ``tick.certificate``."""
+        if tick.collocation is None:
+            tick.certificate = Certificate.failed(f"no window at t = {tick.t:g} s "
+                                                  f"({tick.status})")
+            return tick.certificate
+        return self.plan(tick, certify=True).certificate
