@@ -51,7 +51,11 @@ class SimMeasurement:
     """What the controller measures at time ``t`` (the plan's clock): per finger the
     joint angles ``q`` and rates ``q_dot``; the object's position [m] and orientation
     (w, x, y, z) with the disturbances' noise, its linear and angular velocity (palm
-    frame; not noisy)."""
+    frame; not noisy); per finger the grip's joint offset ``q_offset`` the executor
+    commands on top of the plan's angles at that time (the squeeze into the object: a
+    controller takes it off the measured joints before it estimates the grasp, else
+    every call presses the fingertips in once more: experiment 2 at 20 Hz drifted
+    1.4 mm before any disturbance)."""
 
     t: float
     q: list[FloatArray]
@@ -60,6 +64,7 @@ class SimMeasurement:
     object_wxyz: FloatArray
     object_velocity: FloatArray
     object_omega: FloatArray
+    q_offset: list[FloatArray] | None = None
 
 
 @dataclass(frozen=True)
@@ -160,7 +165,10 @@ def _set_reference(sim: Simulation, rows: StepRows, k: int, frag: ExecutionPlan)
     t = frag.t + float(sim.plan.t[0])
     for i, ref in enumerate(frag.references):
         q, qd = hermite(t, ref.q, ref.q_dot, ts)
-        target = q + _linear(t, offsets[i], ts)
+        grip = _linear(t, offsets[i], ts)
+        target = q + grip
+        if rows.offset:
+            rows.offset[i][k:] = grip
         rows.q_ref[i][k:] = target
         rows.qd_ref[i][k:] = qd
         rows.ctrl[i][k:] = target + (o.kv / o.kp) * qd
@@ -232,7 +240,8 @@ def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: floa
         meas = SimMeasurement(
             t, [d.qpos[f.qpos].copy() for f in sim.fingers],
             [d.qvel[f.dofs].copy() for f in sim.fingers], p, q,
-            d.qvel[od:od + 3].copy(), R.reshape(3, 3) @ d.qvel[od + 3:od + 6])
+            d.qvel[od:od + 3].copy(), R.reshape(3, 3) @ d.qvel[od + 3:od + 6],
+            [g[k].copy() for g in rows.offset] if rows.offset else None)
         start = time.perf_counter()
         frag, event = controller(meas)
         wall = time.perf_counter() - start

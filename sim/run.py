@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import mujoco
@@ -138,13 +138,16 @@ class _ForceLoop:
 class StepRows:
     """The controller's rows at every step (times ``ts`` on the plan's clock plus its
     t0): per finger the servo's set point ``ctrl``, the torque feed-forward ``tau``, the
-    reference angles ``q_ref`` and rates ``qd_ref`` (steps x joints)."""
+    reference angles ``q_ref`` and rates ``qd_ref`` (steps x joints), and the grip's
+    joint offset ``offset`` that ``q_ref`` has on top of the plan's angles (the squeeze:
+    what a controller measuring the joints takes off before it estimates the grasp)."""
 
     ts: FloatArray
     ctrl: list[FloatArray]
     tau: list[FloatArray]
     q_ref: list[FloatArray]
     qd_ref: list[FloatArray]
+    offset: list[FloatArray] = field(default_factory=list)
 
 
 class Simulation:
@@ -302,11 +305,12 @@ class Simulation:
         dt, T = o.timestep, plan.duration
         ts, plan_time, ramp, pin_object = step_grid(plan, o)
         offsets, torques, notes = self._feedforward()
-        q_ref, qd_ref, ctrl, tau = [], [], [], []
+        q_ref, qd_ref, ctrl, tau, grip = [], [], [], [], []
         for ref, off, trq in zip(plan.references, offsets, torques, strict=True):
             q, qd = hermite(plan.t, ref.q, ref.q_dot, ts)
             qd[plan_time < 0] = 0.0
-            target = q + ramp[:, None] * _linear(plan.t, off, ts)
+            grip.append(ramp[:, None] * _linear(plan.t, off, ts))
+            target = q + grip[-1]
             q_ref.append(target)
             qd_ref.append(qd)
             ctrl.append(target + (o.kv / o.kp) * qd)
@@ -359,7 +363,7 @@ class Simulation:
         ctrl_rows = [np.ascontiguousarray(c) for c in ctrl]
         replay = o.mode == "replay"
         kinematic = o.mode in ("kinematic", "replay")
-        rows = StepRows(ts, ctrl_rows, tau, q_ref, qd_ref)
+        rows = StepRows(ts, ctrl_rows, tau, q_ref, qd_ref, grip)
         for k in range(n_steps):
             if hook is not None:
                 hook(k, float(plan_time[k]), rows)

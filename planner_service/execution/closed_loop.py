@@ -99,6 +99,14 @@ def stored_first_plan(request: Any, result: Any) -> FirstPlan:
     return FirstPlan(result, again.problem, again.plan)
 
 
+def measured_joints(meas: Any) -> list[Any]:
+    """The measured joint angles less the grip's offset the executor commands on top of the
+    plan (``SimMeasurement.q_offset``): the grasp the plan knows, without the squeeze."""
+    if getattr(meas, "q_offset", None) is None:
+        return list(meas.q)
+    return [q - off for q, off in zip(meas.q, meas.q_offset, strict=True)]
+
+
 class ReplanController:
     """The controller of sim's closed loop: each measurement estimated into the grasp's
     state and the rest of the motion re-planned (:class:`Replanner`); the new plan as the
@@ -141,7 +149,7 @@ class ReplanController:
         from sim.closed_loop import ControlEvent
 
         r = self.replanner.replan(meas.t, Measurement(
-            meas.q, meas.object_position, meas.object_wxyz, meas.q_dot,
+            measured_joints(meas), meas.object_position, meas.object_wxyz, meas.q_dot,
             meas.object_velocity, meas.object_omega))
         est = r.estimate
         details: dict[str, Any] = {
@@ -214,7 +222,7 @@ class TrackingController:
         t0 = time.perf_counter()
         c = self.control
         est = estimate_state(c.problem, c.model, Measurement(
-            meas.q, meas.object_position, meas.object_wxyz, meas.q_dot,
+            measured_joints(meas), meas.object_position, meas.object_wxyz, meas.q_dot,
             meas.object_velocity, meas.object_omega), *c.state_at(meas.t))
         t_est = time.perf_counter() - t0
         if not est.explained:
