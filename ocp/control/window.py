@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Certificate
 from ocp.solution import Collocation, ManipulationSolution, Status
 from ocp.solve.attempt import Setup, finish, initial_point, run, setup
-from ocp.solve.ipopt import kkt_residuals
+from ocp.solve.ipopt import kkt_residuals, realtime_solver
 from ocp.spec.grasp import ManipulationProblem, contact_charts
 from ocp.spec.motion import Tracking
 from ocp.spec.problem import ProblemError
@@ -80,6 +80,9 @@ class ControllerOptions:
     #: consistent with the measured state: a measured rate that MuJoCo's servos make noisy
     #: does not force a jerk into the window
     fix_start: bool = False
+    #: the Hessian of the objective alone (Gauss-Newton: positive semidefinite, one
+    #: factorisation per iteration) instead of the Lagrangian's exact one
+    gauss_newton: bool = False
     #: the initial guess of a tick's window: the previous window shifted (True) or the
     #: reference (False); IPOPT's multipliers are the previous window's either way
     shift_warm: bool = False
@@ -224,7 +227,7 @@ class WindowController:
             and prev._point.nlp == s.nlp.fingerprint \
             and abs(prev.horizon - problem.duration) < 1e-12 else None
         r = run(s, initial_point(s, guess), point, time.perf_counter() + o.time_limit,
-                o.max_iter)
+                o.max_iter, solver=realtime_solver(s.nlp, o.gauss_newton))
         parts = s.nlp.unpack(r.w)
         Xs, Xms, Us, Ums = (np.asarray(a) for a in parts[:4])
         Ucols = Us.T * s.u_scale

@@ -152,13 +152,14 @@ def initial_point(s: Setup, guess: Guess) -> FloatArray:
 
 
 def run(s: Setup, w0: FloatArray, point: NlpPoint | None, deadline: float,
-        max_iter: int, warm_push: float | None = None) -> IpoptRun:
+        max_iter: int, warm_push: float | None = None, solver: Any = None) -> IpoptRun:
     """One IPOPT call from ``w0`` within ``max_iter`` iterations and the ``deadline``
     (``time.perf_counter()``). ``point``: a previous primal-dual point of this very NLP
     (its multipliers start IPOPT's, with a warm-start barrier; its epigraph and force
-    variables replace ``w0``'s; ``warm_push``: :class:`AttemptOptions`')."""
+    variables replace ``w0``'s; ``warm_push``: :class:`AttemptOptions`'; ``solver``: the
+    warm solver to use instead, e.g. :func:`~ocp.solve.ipopt.realtime_solver`)."""
     nlp = s.nlp
-    solver, duals = nlp.solver, {}
+    chosen, solver, duals = solver, nlp.solver, {}
     if point is not None:
         aux = nlp.aux_indices()
         w0 = w0.copy()
@@ -177,6 +178,8 @@ def run(s: Setup, w0: FloatArray, point: NlpPoint | None, deadline: float,
                 s.build_time += time.perf_counter() - t_build
             solver = nlp.warm_solvers[key]
         duals = {"lam_x0": point.lam_x, "lam_g0": point.lam_g}
+        if chosen is not None:
+            solver = chosen
     nlp.stop.arm(deadline, max_iter)
     t0 = time.perf_counter()
     res = solver(x0=w0, p=s.p, lbx=s.lbx, ubx=s.ubx, lbg=nlp.lbg, ubg=nlp.ubg, **duals)

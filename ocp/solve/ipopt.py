@@ -19,9 +19,20 @@ import numpy as np
 from ocp.solution import Status
 from ocp.transcription.nlp_blocks import BlockNLP
 
-__all__ = ["FATROP_OPTIONS", "IPOPT_OPTIONS", "IPOPT_WARM_OPTIONS", "NLP", "SOLVERS",
-           "StopCallback", "StructuredSolver", "ipopt_solver", "kkt_residuals",
-           "warm_solver"]
+__all__ = [
+    "FATROP_OPTIONS",
+    "IPOPT_OPTIONS",
+    "IPOPT_REALTIME_OPTIONS",
+    "IPOPT_WARM_OPTIONS",
+    "NLP",
+    "SOLVERS",
+    "StopCallback",
+    "StructuredSolver",
+    "ipopt_solver",
+    "kkt_residuals",
+    "realtime_solver",
+    "warm_solver",
+]
 
 #: The NLP solvers a planner may choose (``ManipulationPlanner(solver=...)``).
 SOLVERS = ("ipopt", "fatrop")
@@ -145,6 +156,8 @@ class NLP(BlockNLP):
     #: ``compiled``) (:func:`warm_solver`), made on first use (again once compiled)
     warm_solvers: dict[tuple[float, bool], ca.Function | StructuredSolver] = \
         field(default_factory=dict)
+    #: the real-time solvers (:func:`realtime_solver`), by (Gauss-Newton, ``compiled``)
+    realtime_solvers: dict[tuple[bool, bool], ca.Function] = field(default_factory=dict)
     #: whether ``solver`` runs compiled code (``compile_dir``)
     compiled: bool = False
     #: the solver chosen (:data:`SOLVERS`): "fatrop" runs IPOPT as its fallback
@@ -253,6 +266,39 @@ def warm_solver(nlp: NLP, push: float | None = None) -> ca.Function | Structured
     fatrop = _fatrop(nlp, "manipulation_warm_fatrop", True) \
         if nlp.solver_name == "fatrop" else None
     return StructuredSolver(fatrop, ipopt, nlp.copies)
+
+
+#: Added to :data:`IPOPT_WARM_OPTIONS` for a controller's window solved within an iteration
+#: or two from the previous window's point (:func:`realtime_solver`): MUMPS with AMD
+#: ordering. METIS (:data:`IPOPT_OPTIONS`' choice for whole plans, whose KKT systems it
+#: orders far better) cost 8 of experiment 2's 16 ms per call on a 1 100-variable window,
+#: every call (the ordering is redone each time): 16.0 -> 7.6 ms, experiment 1 7.7 -> 3.9,
+#: the Allegro turn 30 -> 17 (docs/control.md).
+IPOPT_REALTIME_OPTIONS: dict[str, Any] = {"ipopt.mumps_pivot_order": 0}
+
+
+def realtime_solver(nlp: NLP, gauss_newton: bool = False) -> ca.Function:
+    """IPOPT for a warm window of ``nlp`` at a controller's rate (made on first use,
+    cached on ``nlp``): :data:`IPOPT_WARM_OPTIONS` and :data:`IPOPT_REALTIME_OPTIONS`;
+    ``gauss_newton``: the Hessian of the objective alone (the constraints' curvature
+    dropped: positive semidefinite for a tracking objective, so IPOPT needs no inertia
+    correction, one factorisation per iteration; the steps converge linearly, not
+    quadratically)."""
+    key = (gauss_newton, nlp.compiled)
+    if key not in nlp.realtime_solvers:
+        opts = {**nlp.options, **IPOPT_WARM_OPTIONS, **IPOPT_REALTIME_OPTIONS}
+        if gauss_newton:
+            H = opts["hess_lag"]
+            x, p = ca.MX.sym("x", H.size1_in(0)), ca.MX.sym("p", H.size1_in(1))
+            lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", H.size1_in(3))
+            opts["hess_lag"] = ca.Function(
+                "nlp_hess_l", [x, p, lam_f, lam_g],
+                [H(x, p, lam_f, ca.DM.zeros(H.size1_in(3)))],
+                ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+        nlp.realtime_solvers[key] = ca.nlpsol(
+            "manipulation_realtime" + ("_gn" if gauss_newton else ""), "ipopt", nlp.oracle,
+            opts)
+    return nlp.realtime_solvers[key]
 
 
 def ipopt_solver(block: BlockNLP, fingerprint: str, compile_dir: Path | None = None,
