@@ -48,9 +48,12 @@ from ocp.transcription.collocation import NlpPoint
 if TYPE_CHECKING:
     from ocp.solve.planner import ManipulationPlanner
 
-__all__ = ["ControllerOptions", "Tick", "WindowController"]
+__all__ = ["PREPARE_ITERATIONS", "ControllerOptions", "Tick", "WindowController"]
 
 FloatArray = NDArray[np.float64]
+
+#: IPOPT iterations of :meth:`WindowController.prepare`'s window at t = 0 (to convergence)
+PREPARE_ITERATIONS = 50
 
 
 @dataclass(frozen=True)
@@ -83,6 +86,13 @@ class ControllerOptions:
     #: the Hessian of the objective alone (Gauss-Newton: positive semidefinite, one
     #: factorisation per iteration) instead of the Lagrangian's exact one
     gauss_newton: bool = False
+    #: the warm start's push into the interior (:func:`~ocp.solve.ipopt.warm_solver`'s;
+    #: None: its 1e-9). A window's point is the previous window's, shifted: at 1e-9 the
+    #: internal forces of three or more contacts, tight on their cones, could not follow
+    #: (the three-finger turn's windows 0.09 infeasible after their iteration, and 53 ms
+    #: per tick in inertia corrections); at 1e-2 they converge within a few ticks (1e-5)
+    #: and a tick costs 17.5 ms
+    warm_push: float | None = 1e-2
     #: the initial guess of a tick's window: the previous window shifted (True) or the
     #: reference (False); IPOPT's multipliers are the previous window's either way
     shift_warm: bool = False
@@ -203,13 +213,19 @@ class WindowController:
 
     # -- a tick ---------------------------------------------------------------------------
     def prepare(self) -> float:
-        """Build the window's NLP and its warm-start solver before the loop (one tick at
-        t = 0 from the reference, forgotten); the wall time [s] it took."""
+        """Build the window's NLP and its solvers before the loop, and solve the window at
+        t = 0 from the reference to convergence: the first tick starts from its
+        primal-dual point (from a cold point one iteration left experiment 2's first
+        window uncertified in MuJoCo). The wall time [s] it took."""
         t0 = time.perf_counter()
-        x, u = self.state_at(0.0)
-        self.tick(0.0, x, u)
-        self.tick(min(0.01, self.duration / 2), *self.state_at(min(0.01, self.duration / 2)))
-        self._last, self.ticks = None, []
+        o = self.options
+        x, _ = self.state_at(0.0)
+        self.options = replace(o, max_iter=max(o.max_iter, PREPARE_ITERATIONS))
+        try:
+            self.tick(0.0, x)
+        finally:
+            self.options = o
+        self.ticks = []
         return time.perf_counter() - t0
 
     def tick(self, t: float, x: FloatArray, u: FloatArray | None = None) -> Tick:
@@ -227,7 +243,7 @@ class WindowController:
             and prev._point.nlp == s.nlp.fingerprint \
             and abs(prev.horizon - problem.duration) < 1e-12 else None
         r = run(s, initial_point(s, guess), point, time.perf_counter() + o.time_limit,
-                o.max_iter, solver=realtime_solver(s.nlp, o.gauss_newton))
+                o.max_iter, solver=realtime_solver(s.nlp, o.gauss_newton, o.warm_push))
         parts = s.nlp.unpack(r.w)
         Xs, Xms, Us, Ums = (np.asarray(a) for a in parts[:4])
         Ucols = Us.T * s.u_scale

@@ -156,8 +156,10 @@ class NLP(BlockNLP):
     #: ``compiled``) (:func:`warm_solver`), made on first use (again once compiled)
     warm_solvers: dict[tuple[float, bool], ca.Function | StructuredSolver] = \
         field(default_factory=dict)
-    #: the real-time solvers (:func:`realtime_solver`), by (Gauss-Newton, ``compiled``)
-    realtime_solvers: dict[tuple[bool, bool], ca.Function] = field(default_factory=dict)
+    #: the real-time solvers (:func:`realtime_solver`), by (Gauss-Newton, ``compiled``,
+    #: push)
+    realtime_solvers: dict[tuple[bool, bool, float | None], ca.Function] = \
+        field(default_factory=dict)
     #: whether ``solver`` runs compiled code (``compile_dir``)
     compiled: bool = False
     #: the solver chosen (:data:`SOLVERS`): "fatrop" runs IPOPT as its fallback
@@ -277,16 +279,20 @@ def warm_solver(nlp: NLP, push: float | None = None) -> ca.Function | Structured
 IPOPT_REALTIME_OPTIONS: dict[str, Any] = {"ipopt.mumps_pivot_order": 0}
 
 
-def realtime_solver(nlp: NLP, gauss_newton: bool = False) -> ca.Function:
+def realtime_solver(nlp: NLP, gauss_newton: bool = False, push: float | None = None
+                    ) -> ca.Function:
     """IPOPT for a warm window of ``nlp`` at a controller's rate (made on first use,
     cached on ``nlp``): :data:`IPOPT_WARM_OPTIONS` and :data:`IPOPT_REALTIME_OPTIONS`;
     ``gauss_newton``: the Hessian of the objective alone (the constraints' curvature
     dropped: positive semidefinite for a tracking objective, so IPOPT needs no inertia
     correction, one factorisation per iteration; the steps converge linearly, not
-    quadratically)."""
-    key = (gauss_newton, nlp.compiled)
+    quadratically); ``push``: as :func:`warm_solver`'s."""
+    key = (gauss_newton, nlp.compiled, push)
     if key not in nlp.realtime_solvers:
         opts = {**nlp.options, **IPOPT_WARM_OPTIONS, **IPOPT_REALTIME_OPTIONS}
+        if push is not None:
+            opts.update({k: float(push) for k in IPOPT_WARM_OPTIONS
+                         if k.endswith(("_push", "_frac"))})
         if gauss_newton:
             H = opts["hess_lag"]
             x, p = ca.MX.sym("x", H.size1_in(0)), ca.MX.sym("p", H.size1_in(1))

@@ -170,10 +170,11 @@ class TrackingController:
     on. Every window is kept (``ticks``) and certified after the run
     (:meth:`certify_all`: outside the ticks' budget)."""
 
-    def __init__(self, first: FirstPlan, base: Any, options: Any = None) -> None:
+    def __init__(self, first: FirstPlan, base: Any, options: Any = None,
+                 planner: Any = None) -> None:
         from ocp import WindowController
 
-        self.control = WindowController(first.problem, first.plan, options)
+        self.control = WindowController(first.problem, first.plan, options, planner)
         self.base = base
         m = self.control.model
         self.prm = self.control.params
@@ -326,21 +327,22 @@ def summary(report: Any, disturbances: Any = None, final_pose: Any = None,
 
 def compare(first: FirstPlan, base: Any, rate: float, options: Any = None,
             disturbances: Any = None, replan: ReplanOptions | None = None,
-            control: Any = None) -> dict[str, Any]:
+            control: Any = None, planner: Any = None) -> dict[str, Any]:
     """``base`` (the simulator's plan of ``first``) executed open loop and closed loop
     in the same disturbed world: both reports, each one's summary (``recovered``: final
     error within 1 mm and 2 deg, no contact lost) and the controller's timing. The closed
     loop: with ``control`` (:class:`ocp.ControllerOptions`) the window controller at
     ``rate`` [Hz] in real time (its latency charged in simulated time, every window
     certified after the run: ``certificates``); else the whole-remainder re-planner with
-    MuJoCo paused at each call (``replan``)."""
+    MuJoCo paused at each call (``replan``). ``planner``: the window's NLP cache (e.g.
+    compiled; default the process-wide planner's)."""
     from sim.closed_loop import run_disturbed, simulate_closed_loop
 
     open_report, open_final = run_disturbed(base, options, disturbances)
     goal = goal_of(first)
     extra: dict[str, Any] = {}
     if control is not None:
-        tracker = TrackingController(first, base, control)
+        tracker = TrackingController(first, base, control, planner)
         setup = tracker.prepare()
         closed = simulate_closed_loop(base, tracker, rate, options, disturbances,
                                       latency=True)
@@ -376,8 +378,14 @@ def closed_loop_report(request: Any, result: Any, plan: Any, options: dict[str, 
     options = {k: v for k, v in options.items() if k != "model"}
     dist = Disturbances.from_dict(disturbed)
     first = stored_first_plan(request, result)
-    data = compare(first, plan, float(loop["rate"]), SimOptions.from_dict(options), dist,
-                   ReplanOptions(max_iter=int(loop["max_iter"]), time_limit=60.0))
+    if loop.get("controller", "replan") == "window":
+        from ocp import ControllerOptions
+
+        data = compare(first, plan, float(loop["rate"]), SimOptions.from_dict(options), dist,
+                       control=ControllerOptions(max_iter=int(loop["max_iter"])))
+    else:
+        data = compare(first, plan, float(loop["rate"]), SimOptions.from_dict(options),
+                       dist, ReplanOptions(max_iter=int(loop["max_iter"]), time_limit=60.0))
     closed = dict(data["closed_loop"])
     report = closed.pop("report")
     return ("ok", {**report, "disturbances": data["disturbances"],

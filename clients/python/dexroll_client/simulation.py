@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from dexroll_client.common import (
     MAX_DURATION,
@@ -97,14 +97,29 @@ class DisturbanceOptions(_Request):
 
 
 class ClosedLoopOptions(_Request):
-    """Re-plan from the measured state while MuJoCo runs (docs/simulation.md, "Closed
-    loop"; the command line's ``--closed-loop``): the open-loop run in the same disturbed
-    world beside it."""
+    """Control from the measured state while MuJoCo runs (docs/simulation.md, "Closed
+    loop"; docs/control.md; the command line's ``--closed-loop``): the open-loop run in
+    the same disturbed world beside it."""
 
-    rate: Real = Field(default=4.0, gt=0.0, le=50.0,
-                       description="the controller's rate in simulated time [Hz]")
+    controller: Literal["replan", "window"] = Field(
+        default="replan",
+        description="replan: the rest of the motion re-planned at `rate`, MuJoCo paused at "
+                    "each call; window: a short window of the plan re-solved at every tick "
+                    "in real time (the simulation does not wait: each tick's latency is "
+                    "charged in simulated time), every window certified after the run")
+    rate: Real = Field(default=4.0, gt=0.0, le=200.0,
+                       description="the controller's rate in simulated time [Hz] (at most "
+                                   "50 for replan)")
     max_iter: Count = Field(default=30, ge=1, le=500,
-                            description="IPOPT iterations per re-plan")
+                            description="IPOPT iterations per re-plan, or per window tick "
+                                        "(the command line's window default: 1)")
+
+    @model_validator(mode="after")
+    def _replan_rate(self) -> ClosedLoopOptions:
+        if self.controller == "replan" and self.rate > 50.0:
+            raise ValueError("rate: at most 50 Hz for the re-planner (MuJoCo pauses for "
+                             "each re-plan); the window controller runs up to 200 Hz")
+        return self
 
 
 class SimulationOptions(_Request):
@@ -299,9 +314,17 @@ class ControlTimingModel(_Response):
                                                  "not_converged, unexplained, kept, refused)")
     wall_time_median: float | None = Field(default=None, description="[s]")
     wall_time_max: float | None = Field(default=None, description="[s]")
+    wall_time_p99: float | None = Field(default=None, description="[s]")
     real_time_factor: float | None = Field(default=None,
                                            description="median wall time over the period "
                                                        "(above 1: slower than real time)")
+    latency_charged: bool = Field(default=False,
+                                  description="each call's wall time passed in simulated "
+                                              "time before its answer took over (window)")
+    ticks: int | None = Field(default=None, description="calls made")
+    overruns: int | None = Field(default=None,
+                                 description="control instants skipped while a call was in "
+                                             "flight (the last answer kept)")
 
 
 class ControlEventModel(_Response):
@@ -317,6 +340,21 @@ class ControlEventModel(_Response):
     fingertip_shift: list[float] | None = None
     object_shift: float | None = None
     object_turn: float | None = None
+    primal_infeasibility: float | None = Field(
+        default=None, description="the window's KKT residuals after its iterations")
+    dual_infeasibility: float | None = None
+    latency_charged: float | None = Field(default=None, description="[s] (window)")
+
+
+class WindowCertificatesModel(_Response):
+    """Every window of the window controller checked by the plan's certificate after the
+    run."""
+
+    windows: int
+    checked: int
+    certified: int
+    failed: list[dict[str, Any]] = Field(description="each failed window: its tick time "
+                                                     "`t` and the `checks` that failed")
 
 
 class ClosedLoopBlock(_Response):
@@ -328,6 +366,8 @@ class ClosedLoopBlock(_Response):
     setup_time: float = Field(description="building the re-planner's NLPs before the run, "
                                           "and the first plan re-solved warm [s]")
     final_pose: list[float] = Field(description="the object's final position and wxyz")
+    certificates: WindowCertificatesModel | None = Field(
+        default=None, description="the window controller's windows, certified")
 
 
 class OpenLoopBlock(_Response):
