@@ -152,3 +152,24 @@ def test_in_mujoco_at_100_hz_with_its_latency_charged_a_push_is_recovered(
     early = [f for f in report["failed"] if f["t"] < 2.0]
     assert report["checked"] == report["windows"] == timing["ticks"]
     assert not early, early
+
+
+@pytest.mark.parametrize("fix_start", [False, True])
+def test_a_tick_writes_into_the_first_setup_what_a_new_setup_computes(
+        first: FirstPlan, fix_start: bool) -> None:
+    """The controller keeps its first tick's bounds and parameters and writes only the
+    measured state (and input) and the reference's values into them: the same vectors as
+    a new :func:`ocp.solve.attempt.setup` of the tick's window, to the last bit."""
+    from ocp.solve.attempt import setup
+
+    c = WindowController(first.problem, first.plan, ControllerOptions(fix_start=fix_start))
+    x0, u0 = c.state_at(0.5)
+    c.tick(0.5, x0, u0)
+    for t in (0.73, 2.61):
+        x, u = c.state_at(t)
+        x = x + 1e-4  # any measured state
+        problem = c.window(t, u)
+        kept, fresh = c._setup(problem, x), setup(c.planner, problem, x)
+        for name in ("lbx", "ubx", "p", "x0", "x_scale", "u_scale", "t_nodes", "prm"):
+            np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name),
+                                          err_msg=name)

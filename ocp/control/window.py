@@ -44,6 +44,7 @@ from ocp.spec.motion import Tracking
 from ocp.spec.problem import ProblemError
 from ocp.spec.reference import Reference
 from ocp.transcription.collocation import NlpPoint
+from ocp.transcription.values import reference_parameters
 
 if TYPE_CHECKING:
     from ocp.solve.planner import ManipulationPlanner
@@ -183,6 +184,8 @@ class WindowController:
         weights[m.contacts[0].xs] = 1.0
         self.state_weights = tuple(float(v) for v in weights)
         self._last: Tick | None = None
+        self._base: Setup | None = None
+        self._x0_index = self._u0_index = np.zeros(0, dtype=np.int64)
         self.ticks: list[Tick] = []
 
     # -- the reference --------------------------------------------------------------------
@@ -236,7 +239,7 @@ class WindowController:
         o = self.options
         t_start = time.perf_counter()
         problem = self.window(t, u)
-        s = setup(self.planner, problem, np.asarray(x, dtype=float))
+        s = self._setup(problem, np.asarray(x, dtype=float))
         guess = self._guess(t, s)
         prev = self._last
         point = prev._point if prev is not None and prev._point is not None \
@@ -265,6 +268,33 @@ class WindowController:
             self._last = out
         self.ticks.append(out)
         return out
+
+    def _setup(self, problem: ManipulationProblem, x: FloatArray) -> Setup:
+        """The window's values on its NLP: the first tick's :func:`~ocp.solve.attempt.setup`
+        kept, and at every later tick only what changes (the measured state's bounds,
+        the reference's parameters) written into copies of its vectors: the same values
+        as a new setup (tested), without recomputing the bounds and parameters that do
+        not change."""
+        base = self._base
+        if base is None or base.problem.duration != problem.duration:
+            base = self._base = setup(self.planner, problem, x)
+            parts = base.nlp.unpack(np.arange(len(base.lbx), dtype=float))
+            self._x0_index = np.asarray(parts[0])[:, 0].round().astype(np.int64)
+            self._u0_index = np.asarray(parts[2])[:, base.nlp.hs.left_cols[0]].round() \
+                .astype(np.int64)
+            return base
+        lbx, ubx = base.lbx.copy(), base.ubx.copy()
+        lbx[self._x0_index] = ubx[self._x0_index] = x / base.x_scale
+        if problem.initial_input is not None:  # ``fix_start``: the measured input
+            lbx[self._u0_index] = ubx[self._u0_index] = \
+                np.asarray(problem.initial_input, dtype=float) / base.u_scale
+        p = base.p.copy()
+        offsets = base.nlp.params.offsets()
+        values = reference_parameters(problem, base.t_nodes, (base.x_scale, base.u_scale))
+        for name, value in values.items():
+            p[offsets[name]] = np.asarray(value, dtype=float).ravel(order="F")
+        return replace(base, problem=problem, x0=x, p=p, lbx=lbx, ubx=ubx, build_time=0.0,
+                       cache_hit=True)
 
     def _guess(self, t: float, s: Setup) -> tuple[FloatArray, FloatArray, FloatArray,
                                                    FloatArray]:
