@@ -386,6 +386,14 @@ def test_with_api_keys_jobs_and_idempotency_keys_are_the_owners(server_factory: 
         == mine["id"]
     assert [j["id"] for j in httpx.get(f"{server.url}/v1/plans",
                                        headers=alice).json()["items"]] == [mine["id"]]
+    # a controller session (a WebSocket) needs a key too, refused before its handshake
+    from dexroll_client.control import ControlError, ControlSession
+
+    socket = "ws" + server.url[4:] + f"/v1/plans/{mine['id']}/control"
+    for headers in ({}, {"Authorization": "Bearer wrong-key-0123456789"}):
+        with pytest.raises(ControlError) as refused:
+            ControlSession(socket, headers)
+        assert refused.value.error == "rejected" and "403" in refused.value.message
 
 
 def test_a_host_not_allowed_is_refused(live_server: Server) -> None:

@@ -205,3 +205,48 @@ def test_a_pushed_closed_loop_through_the_service_ends_nearer_the_goal(
         r = httpx.post(url, json=body, timeout=120)
         assert r.status_code == 422, (body, r.text)
         assert r.json()["detail"][0]["field"] == field, r.text
+
+
+def test_a_controller_session_answers_each_tick_with_the_next_window(
+        live_server: Server, roll: tuple[str, dict[str, Any]]) -> None:
+    """``WebSocket /v1/plans/{id}/control`` on a real service: the client's controller
+    object sends the plan's own states every 10 ms of plan time for 0.3 s; each answer
+    is a window from the measured instant (its first joints the measured ones, within
+    the estimate's projection), tracked within the one-iteration budget, nearly
+    feasible; the service's own share of a tick (the round trip less the process's
+    wall time) is measured. A measurement with two fingers for the plan's one is
+    answered with an error naming ``q`` and the session goes on; an unknown job's
+    session is refused before the handshake."""
+    from dexroll_client.control import ControlError
+
+    job_id, result = roll
+    with DexrollClient.from_url(live_server.url) as client, \
+            client.controller(job_id) as ctl:
+        answers = []
+        tr = result["trajectory"]
+        for t in np.arange(0.5, 0.8, 0.01):
+            body = measured(result, float(t))
+            a = ctl.tick(body["t"], body["q"], body["object_position"], body["object_wxyz"])
+            answers.append((body, a))
+        with pytest.raises(ControlError) as err:
+            ctl.tick(0.9, [tr["q"][0], tr["q"][0]], [0.0, 0.0, 0.03], [1.0, 0.0, 0.0, 0.0])
+        assert err.value.error == "invalid_request"
+        assert [f for f, _ in err.value.detail] == ["q"]
+        body = measured(result, 1.0)
+        assert ctl.tick(body["t"], body["q"], body["object_position"],
+                        body["object_wxyz"]).status in ("tracked", "converged")
+        overhead = [rt - a.wall_time for rt, (_, a) in zip(ctl.round_trips, answers,
+                                                            strict=False)]
+    assert answers[0][1].setup_time > 0 and all(a.setup_time == 0 for _, a in answers[1:])
+    for body, a in answers:
+        assert a.status in ("tracked", "converged") and a.iterations == 1
+        assert a.t == body["t"] and a.window is not None
+        assert a.window.t[0] == 0.0 and a.window.t[-1] == pytest.approx(0.5)
+        np.testing.assert_allclose(a.window.q[0][0], body["q"][0], atol=1e-6)
+        assert a.primal_infeasibility is not None and a.primal_infeasibility < 1e-3
+        assert a.wall_time >= a.solve_time + a.estimate_time > 0
+    assert all(o > 0 for o in overhead[1:])
+    with DexrollClient.from_url(live_server.url) as client, \
+            pytest.raises(ControlError) as refused:
+        client.controller("no-such-job")
+    assert refused.value.error == "rejected"

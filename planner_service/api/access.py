@@ -65,12 +65,17 @@ class Access:
         return found
 
     async def __call__(self, scope: MutableMapping[str, Any], receive: Any, send: Any) -> None:
-        if scope["type"] != "http":
+        if scope["type"] not in ("http", "websocket"):
             await self.app(scope, receive, send)
             return
         headers = dict(scope.get("headers") or [])
         host = host_name(headers.get(b"host", b"").decode("latin-1"))
+        socket = scope["type"] == "websocket"  # refused before the handshake: a 403
         if not self.any_host and host not in self.hosts:
+            if socket:
+                await send({"type": "websocket.close", "code": 1008,
+                            "reason": "invalid_host"})
+                return
             await error_response(
                 400, "invalid_host", f"Host {host!r} is not served here (the service's "
                 "DEXROLL_ALLOWED_HOSTS)")(scope, receive, send)
@@ -78,6 +83,10 @@ class Access:
         owner: str | None = None
         if self.keys and scope.get("path") not in OPEN_PATHS:
             owner = self.owner(headers)
+            if owner is None and socket:
+                await send({"type": "websocket.close", "code": 1008,
+                            "reason": "unauthorized"})
+                return
             if owner is None:
                 await error_response(
                     401, "unauthorized", "an API key is required: `Authorization: Bearer "

@@ -8,6 +8,7 @@ DELETE /v1/plans/{id}    cancel a queued or running job
 GET  /v1/models          built-in objects, fingers (with URDFs), hands and planners
 POST /v1/plans/{id}/simulation  execute a finished plan in MuJoCo; GET: the stored report
 POST /v1/plans/{id}/replan      the rest of a finished plan re-planned from a measured state
+WS   /v1/plans/{id}/control     a controller session: each measurement, the next window
 GET  /healthz, /readyz   liveness; readiness (store writable, a worker ready)
 
 Every error is an ``ErrorBody`` (no traceback ever leaves the service); an invalid request
@@ -36,7 +37,7 @@ from ..models_check import ModelChecker
 from ..settings import Settings
 from .access import Access
 from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
-from .routes import health, models, plans, replan, simulation, view
+from .routes import control, health, models, plans, replan, simulation, view
 from .submission import ModelSubmissions
 
 __all__ = ["BodyLimit", "create_app"]
@@ -130,7 +131,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   description=__doc__, responses=ERROR_RESPONSES)
     app.state.settings, app.state.notifier = settings, Notifier()
     add_error_handlers(app)
-    for routes in (plans, models, health, view, simulation, replan):
+    for routes in (plans, models, health, view, simulation, replan, control):
         app.include_router(routes.router)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     # outermost: a request from a host not served, or without a key, goes no further

@@ -517,3 +517,74 @@ def _rate_times(duration: float, rate: float) -> np.ndarray:
     request's ``sample_rate`` samples a plan)."""
     t = np.arange(math.ceil(duration * rate) + 1) / rate
     return np.append(t[t < duration - 1e-12], duration)
+
+
+class TrackingSession:
+    """A stored plan's window controller in the service's re-plan process (``WebSocket
+    /v1/plans/{id}/control``; docs/control.md "Through the service"): the plan planned
+    again warm from its stored result and its :class:`ocp.WindowController`, prepared,
+    kept from tick to tick. ValueError when the request cannot be planned again here."""
+
+    def __init__(self, request: Any, result: Any) -> None:
+        from ocp import ProblemError, WindowController
+
+        try:
+            self.first = stored_first_plan(request, result)
+            self.control = WindowController(self.first.problem, self.first.plan)
+        except ProblemError as exc:
+            raise ValueError(str(exc.errors)) from exc
+        self.control.prepare()
+        self.control.ticks = []  # the session keeps no history: a robot ticks for hours
+
+    def tick(self, body: Any, setup: float) -> tuple[str, Any]:
+        """One tick from ``body`` (a ``ControlMeasurement``): ("ok", the answer as a
+        dict), ("invalid" | "unexplained", [(field, reason)])."""
+        import time
+
+        from ocp import estimate_state
+
+        t0 = time.perf_counter()
+        c = self.control
+        m = c.model
+        n = len(m.fingertips)
+        joints = [int(np.arange(m.nx)[tip.q_cols].size) for tip in m.fingertips]
+        errors: list[tuple[str, str]] = []
+        if len(body.q) != n:
+            errors.append(("q", f"{len(body.q)} fingers measured, the plan has {n}"))
+        else:
+            errors += [(f"q[{i}]", f"{len(row)} joints, finger {i} of the plan has {k}")
+                       for i, (row, k) in enumerate(zip(body.q, joints, strict=True))
+                       if len(row) != k]
+        if float(np.linalg.norm(body.object_wxyz)) < 1e-6:
+            errors.append(("object_wxyz", "not a rotation: a zero quaternion"))
+        if body.t > c.duration + 1e-9:
+            errors.append(("t", f"{body.t:g} s is after the plan's end ({c.duration:g} s)"))
+        if errors:
+            return "invalid", errors
+        est = estimate_state(c.problem, m, Measurement(
+            [np.asarray(q, dtype=float) for q in body.q],
+            np.asarray(body.object_position, dtype=float),
+            np.asarray(body.object_wxyz, dtype=float)), *c.state_at(body.t))
+        t_est = time.perf_counter() - t0
+        if not est.explained:
+            return "unexplained", [(f, r) for f, r in zip(est.fields, est.problems,
+                                                          strict=False)] or \
+                [("q", "; ".join(est.problems))]
+        tick = c.tick(float(body.t), est.x)
+        c.ticks.clear()
+        window = None
+        if tick.collocation is not None:
+            col = tick.collocation
+            traj = m.interpolant(col.t_nodes, col.X, col.U0, col.Um, col.U1, c.params)
+            x, xd = col.X, traj(col.t_nodes, order=1)
+            cart = m.mapped("cartesian", len(col.t_nodes))(x.T, c.params)
+            window = {"t": col.t_nodes.tolist(),
+                      "q": [x[:, tip.q_cols].tolist() for tip in m.fingertips],
+                      "q_dot": [xd[:, tip.q_cols].tolist() for tip in m.fingertips],
+                      "object_position": np.asarray(cart[1]).T.tolist()}
+        return "ok", {"t": tick.t, "status": tick.status, "iterations": tick.iterations,
+                      "primal_infeasibility": tick.primal_infeasibility,
+                      "dual_infeasibility": tick.dual_infeasibility,
+                      "solve_time": tick.solve_time, "estimate_time": t_est,
+                      "wall_time": time.perf_counter() - t0, "setup_time": setup,
+                      "window": window}

@@ -83,19 +83,26 @@ def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float
         logging.basicConfig(level=logging.INFO,
                             format="%(asctime)s %(levelname)s [replan %(process)d] %(name)s: "
                                    "%(message)s")
+    from dexroll_client.control import ControlAnswer, ControlMeasurement
     from dexroll_client.replan import ReplanRequest, ReplanResult
 
-    from ..execution.closed_loop import ReplanSession, replannable
+    from ..execution.closed_loop import ReplanSession, TrackingSession, replannable
     from ..planners import REQUEST, RESULT
 
-    sessions: OrderedDict[Key, ReplanSession] = OrderedDict()
+    #: per kind of call, its sessions: the re-planners, the window controllers
+    kinds: dict[str, tuple[Any, Any, Any]] = {
+        "replan": (ReplanRequest, ReplanResult, ReplanSession),
+        "control": (ControlMeasurement, ControlAnswer, TrackingSession)}
+    sessions: dict[str, OrderedDict[Key, Any]] = {k: OrderedDict() for k in kinds}
     conn.send(("ready", None))
     for msg in received(conn):
-        _, key, body_json, result_json, request_json = msg
+        kind, key, body_json, result_json, request_json = msg
+        body_type, answer_type, session_type = kinds[kind]
+        held = sessions[kind]
         try:
-            body = ReplanRequest.model_validate_json(body_json)
+            body = body_type.model_validate_json(body_json)
             setup = 0.0
-            session = sessions.get(key)
+            session = held.get(key)
             if session is None:
                 if result_json is None:
                     conn.send(("need", None))
@@ -108,26 +115,29 @@ def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float
                     conn.send(("not_replannable", why))
                     continue
                 try:
-                    session = ReplanSession(request, result)
+                    session = session_type(request, result)
                 except ValueError as exc:
                     conn.send(("not_replannable", f"its request cannot be planned again "
                                                   f"here: {exc}"))
                     continue
-                sessions[key] = session
-                while len(sessions) > cache_size:
-                    sessions.popitem(last=False)
+                held[key] = session
+                while len(held) > cache_size:
+                    held.popitem(last=False)
                 setup = time.perf_counter() - t0
-                log.info("re-planner of job %s built in %.2f s", key[0], setup)
-            sessions.move_to_end(key)
-            kind, payload = session.replan(key[0], body, setup, time_cap)
-            if kind == "ok":
-                payload = ReplanResult.model_validate(payload).model_dump_json()
-            conn.send((kind, payload))
+                log.info("%s session of job %s built in %.2f s", kind, key[0], setup)
+            held.move_to_end(key)
+            if kind == "control":
+                reply, payload = session.tick(body, setup)
+            else:
+                reply, payload = session.replan(key[0], body, setup, time_cap)
+            if reply == "ok":
+                payload = answer_type.model_validate(payload).model_dump_json()
+            conn.send((reply, payload))
         except ValueError as exc:  # a measurement the estimate refuses (shapes)
             conn.send(("invalid", [("q", str(exc))]))
         except Exception as exc:  # a typed answer, never a dead process
-            log.exception("re-plan failed")
-            conn.send(("replan_failed", f"the re-plan failed: {exc!r}"))
+            log.exception("%s failed", kind)
+            conn.send(("replan_failed", f"the {kind} call failed: {exc!r}"))
 
 
 class _Slot:
@@ -182,11 +192,12 @@ class ReplanPool:
         self.executor.shutdown(wait=False, cancel_futures=True)
 
     def call(self, key: Key, body_json: str, time_limit: float,
-             fetch: Callable[[], tuple[str, str]]) -> str:
+             fetch: Callable[[], tuple[str, str]], kind: str = "replan") -> str:
         """One re-plan of the plan ``key`` (blocking: run it in a thread): its answer (the
         ReplanResult's JSON, as the process wrote it), or
         ReplanRefusedError. ``fetch`` gives the stored (result, request) JSON when the
-        process does not hold the plan yet."""
+        process does not hold the plan yet. ``kind`` "control": one tick of the plan's
+        window controller (a ControlMeasurement's JSON; the ControlAnswer's)."""
         with self._lock:
             if self._closed:
                 raise ReplanRefusedError(503, "shutting_down", "the service is stopping",
@@ -204,19 +215,19 @@ class ReplanPool:
             if slot.proc is None or not slot.proc.process.is_alive():
                 slot.proc = self._start()
             budget = min(time_limit, self.time_cap) + CALL_MARGIN
-            kind, payload = self._exchange(slot, (key, body_json, None, None), budget)
-            if kind == "need":
+            reply, payload = self._exchange(slot, (kind, key, body_json, None, None), budget)
+            if reply == "need":
                 result_json, request_json = fetch()
-                kind, payload = self._exchange(
-                    slot, (key, body_json, result_json, request_json),
+                reply, payload = self._exchange(
+                    slot, (kind, key, body_json, result_json, request_json),
                     budget + self.setup_limit)
-        if kind == "ok":
+        if reply == "ok":
             return str(payload)
-        status, error = _REPLIES.get(kind, (503, "replan_failed"))
-        if kind in ("invalid", "unexplained"):
+        status, error = _REPLIES.get(reply, (503, "replan_failed"))
+        if reply in ("invalid", "unexplained"):
             detail = [(str(f), str(r)) for f, r in payload]
             message = "; ".join(f"{f}: {r}" for f, r in detail)
-            if kind == "unexplained":
+            if reply == "unexplained":
                 message = f"the grasp cannot explain the measured state: {message}"
             raise ReplanRefusedError(status, error, message, detail)
         raise ReplanRefusedError(status, error, str(payload))
@@ -242,7 +253,7 @@ class ReplanPool:
         proc = slot.proc
         assert proc is not None
         try:
-            proc.conn.send(("replan", *msg))
+            proc.conn.send(msg)
         except (OSError, BrokenPipeError) as exc:
             proc.kill()
             slot.proc = None

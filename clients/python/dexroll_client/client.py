@@ -68,6 +68,7 @@ from urllib.parse import quote
 import httpx
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
+from dexroll_client.control import ControlSession
 from dexroll_client.errors import (
     APIError,
     PlanTimeoutError,
@@ -534,6 +535,19 @@ class DexrollClient:
         field in ``detail``), ConflictError for a plan that cannot be re-planned,
         NotFoundError for an unknown id."""
         return self._run(_one(_replan_call(job_id, measured, fields), ReplanResult))
+
+    def controller(self, job_id: str, open_timeout: float = 30.0) -> ControlSession:
+        """A controller session on a finished job's rolling plan
+        (``WebSocket /v1/plans/{id}/control``, docs/control.md "Through the service"):
+        its ``tick(t, q, object_position, object_wxyz)`` answers each measurement with
+        the next window of the plan from it (:class:`~dexroll_client.control.ControlAnswer`);
+        close it (or use ``with``) when the motion ends. The session's first tick builds
+        the service's controller (seconds: ``setup_time``)."""
+        base = str(self._http.base_url).rstrip("/")
+        url = "ws" + base[4:] if base.startswith("http") else base
+        headers = {k: v for k, v in self._http.headers.items()
+                   if k.lower() in ("authorization", "x-api-key")}
+        return ControlSession(f"{url}{_job_path(job_id)}/control", headers, open_timeout)
 
     def simulation(self, job_id: str) -> SimulationReport:
         """A job's latest simulation report (NotFoundError: none yet)."""
