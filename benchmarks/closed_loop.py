@@ -21,6 +21,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ocp import ControllerOptions  # noqa: E402
 from ocp.solve.replan import ReplanOptions  # noqa: E402
 from planner_service.execution import execution_plan  # noqa: E402
 from planner_service.execution.closed_loop import compare, first_plan  # noqa: E402
@@ -59,7 +60,11 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default="closed_loop.json")
     ap.add_argument("--only", action="append", default=[])
-    ap.add_argument("--rate", type=float, default=4.0)
+    ap.add_argument("--rate", type=float, default=None,
+                    help="default 4 Hz (replan), 100 Hz (window)")
+    ap.add_argument("--controller", choices=("replan", "window"), default="replan",
+                    help="window: the window controller in real time, its latency "
+                         "charged in simulated time (docs/control.md)")
     ap.add_argument("--only-variant", action="append", default=[])
     args = ap.parse_args()
     rows: list[dict[str, Any]] = []
@@ -75,13 +80,17 @@ def main() -> int:
             if args.only_variant and label not in args.only_variant:
                 continue
             t1 = time.perf_counter()
-            out = compare(first, base, args.rate, disturbances=dist,
-                          replan=replan)
+            if args.controller == "window":
+                out = compare(first, base, args.rate or 100.0, disturbances=dist,
+                              control=ControllerOptions())
+            else:
+                out = compare(first, base, args.rate or 4.0, disturbances=dist,
+                              replan=replan)
             c = out["closed_loop"]["control"]
             walls = [e["wall_time"] for e in out["closed_loop"]["events"]
                      if e["status"] != "kept"]
             its = [e["iterations"] for e in out["closed_loop"]["events"]
-                   if e["status"] != "kept"]
+                   if e["status"] != "kept" and "iterations" in e]
             row = {"plan": name, "disturbance": label, "first_plan_s": plan_time,
                    "open": out["open_loop"]["summary"],
                    "closed": out["closed_loop"]["summary"], "control": c,
@@ -98,7 +107,11 @@ def main() -> int:
             print(f"| {name} | {label} | {goal(o)} | {'yes' if o['recovered'] else 'no'} | "
                   f"{goal(k)} | {'yes' if k['recovered'] else 'no'} | "
                   f"{k['position_worst_mm']:.2f} / {k['angle_worst_deg']:.2f} | "
-                  f"{c['statuses']} | "
+                  f"{c['statuses']}"
+                  + (f", {c['overruns']} overruns, windows certified "
+                     f"{out['closed_loop']['certificates']['certified']}/"
+                     f"{out['closed_loop']['certificates']['checked']}"
+                     if c.get("latency_charged") else "") + " | "
                   f"{1e3 * (c['wall_time_median'] or 0):.0f} | "
                   f"{row['iterations_median']} |", flush=True)
             Path(args.out).write_text(json.dumps(rows, indent=1) + "\n")

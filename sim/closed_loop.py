@@ -250,6 +250,10 @@ def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: floa
             if frag is not None:
                 _set_reference(sim, rows, k, frag)
             return
+        # work the controller reports as its background's (a reference re-planned in a
+        # process of its own, in parallel with the ticks) is not the tick's latency
+        background = float(event.details.get("background_time", 0.0))
+        wall -= min(background, wall)
         charged = max(wall, min_latency)
         events.append(replace(event, wall_time=wall, details={
             **event.details, "latency_charged": charged, "applied_at": None}))

@@ -184,6 +184,8 @@ class WindowController:
         self.planner, self.reference = planner, reference
         self.problem = problem
         self.duration = float(reference.duration)
+        #: when the reference starts on the controller's clock (:meth:`retarget`)
+        self.start = 0.0
         palm = problem.palm
         if palm is not None:
             palm = replace(palm, goal={}, via_points=())
@@ -195,10 +197,15 @@ class WindowController:
         #: the grasp model's parameters (the object's shape, the contacts' charts)
         self.params = m.params(np.asarray(problem.object.dimensions, dtype=float),
                                contact_charts(problem))
-        #: each state's tracking weight: the object's pose (a free object's block, or the
-        #: palm contact's coordinates, which place the object) 1, the others less
+        #: each state's tracking weight: the object's pose 1 (a free object's block; on a
+        #: palm the contact's point (x, y): the ball's chart coordinates and contact angle
+        #: turn with its rolling, and a pushed ball rolled back to the reference's
+        #: position in a window cannot also come back to its orientation), the others less
         weights = np.full(m.nx, o.grasp_state_weight)
-        weights[m.contacts[0].xs] = 1.0
+        obj = m.contacts[0].xs
+        weights[obj] = 1.0
+        if problem.palm is not None:
+            weights[obj.start + 2:obj.stop] = o.grasp_state_weight
         self.state_weights = tuple(float(v) for v in weights)
         self._last: Tick | None = None
         self._base: Setup | None = None
@@ -207,9 +214,18 @@ class WindowController:
         self.ticks: list[Tick] = []
 
     # -- the reference --------------------------------------------------------------------
+    def retarget(self, reference: ManipulationSolution, start: float) -> None:
+        """Track ``reference`` from now on, a plan of the same grasp that starts at
+        ``start`` on the controller's clock (the rest of the motion re-planned from a
+        measured state: :class:`~ocp.solve.replan.Replanner`) and ends at the same time.
+        The window's NLP is the same; the next window starts from the last one's point."""
+        self.reference, self.start = reference, float(start)
+
     def state_at(self, t: float) -> tuple[FloatArray, FloatArray]:
-        """The reference's state and input at ``t`` (clamped into its duration)."""
-        x, u = self.reference.interpolate([min(max(t, 0.0), self.duration)])
+        """The reference's state and input at ``t`` (the controller's clock; clamped into
+        the reference's duration)."""
+        s = t - self.start
+        x, u = self.reference.interpolate([min(max(s, 0.0), self.reference.duration)])
         return x[0], u[0]
 
     def window(self, t: float, u0: FloatArray | None = None) -> ManipulationProblem:
@@ -223,8 +239,9 @@ class WindowController:
         T = o.horizon
         n = o.intervals
         ts = np.linspace(0.0, T, 2 * n + 1)
-        x, u = self.reference.interpolate(np.minimum(t + ts, self.duration))
-        u[t + ts > self.duration] = 0.0
+        s = t - self.start + ts
+        x, u = self.reference.interpolate(np.clip(s, 0.0, self.reference.duration))
+        u[s > self.reference.duration] = 0.0
         if u0 is not None:
             u[0] = u0
         ref = Reference(ts, x, u, state_weight=o.state_weight, input_weight=o.input_weight,
