@@ -4,22 +4,24 @@
 The whole-remainder re-plan (:class:`~ocp.solve.replan.Replanner`) solves the rest of the
 motion; at a controller's rate it cannot. :class:`WindowController` solves, at every tick,
 the grasp's NLP over the next ``horizon`` seconds only (``intervals`` collocation
-intervals), from the measured state and rates (a moving start), to the reference plan's
-input at the window's end (a moving end), tracking the reference's states and inputs (a
-:class:`~ocp.spec.reference.Reference`: weighted terms, the last node weighted more: the
-terminal condition, soft so that a pushed grasp still has a window), under the plan's own
-constraints (rolling, closure at the position and velocity levels, the friction cones of
-the grasp, joint limits and accelerations). Each tick warm-starts IPOPT from the previous
-window shifted by the time between them (its primal-dual point; the reference past its
-end) and stops after ``max_iter`` iterations (a real-time iteration budget); the tick
-reports the KKT residuals the budget left.
+intervals) from the measured state, tracking the reference plan's states and inputs (a
+:class:`~ocp.spec.reference.Reference`: weighted terms, the object's pose above the
+joints and contact coordinates, the last node weighted more: the terminal condition,
+soft, so that a pushed grasp still has a window), its first and last inputs free and
+consistent with the states (a window starts and ends moving), under the plan's own
+constraints (rolling, closure at the position and velocity levels, force closure in the
+friction cones, joint limits and accelerations). Each tick warm-starts IPOPT
+(:func:`~ocp.solve.ipopt.realtime_solver`) from the previous window's primal-dual point
+and stops after ``max_iter`` iterations (a real-time budget; two for a few ticks after a
+window was left unsettled); the tick reports the KKT residuals the budget left. The
+reference can be replaced by a re-plan of the rest (:meth:`WindowController.retarget`).
 
 Why tracking and not the plan's own objective: a window that minimises the plan's effort
-and grasp angle over 0.5 s (the reference's terms) finds, on a grid of 10 intervals, a
-motion other than the reference that the dense certificate catches slipping (experiment 1:
-the fingertip's spin rate 1.1-2x its tolerance after 2 iterations, slip 2.3x after 10);
-the reference was certified on its own grid, and a window that stays near it (the state
-weight 1e4) is certified too (docs/control.md, "Why windows slipped").
+and grasp angle over 0.5 s finds, on a grid of 10 intervals, a motion other than the
+reference that the dense certificate catches slipping (experiment 1: the fingertip's spin
+rate 1.1-2x its tolerance after 2 iterations, slip 2.3x after 10); the reference was
+certified on its own grid, and a window that stays near it is certified too
+(docs/control.md, "Why windows slipped, and what fixed it").
 
 Every window can be certified (:meth:`WindowController.certify`: the same dense checks as
 a plan's), outside the tick's budget.
