@@ -222,6 +222,9 @@ class WindowController:
         measured state: :class:`~ocp.solve.replan.Replanner`) and ends at the same time.
         The window's NLP is the same; the next window starts from the last one's point."""
         self.reference, self.start = reference, float(start)
+        # the previous window's point was for the old reference: the next few ticks take
+        # the unsettled budget
+        self._unsettled = self.options.settle_ticks
 
     def state_at(self, t: float) -> tuple[FloatArray, FloatArray]:
         """The reference's state and input at ``t`` (the controller's clock; clamped into
