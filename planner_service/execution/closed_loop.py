@@ -234,7 +234,8 @@ class TrackingController:
         from ocp import estimate_state
         from sim.closed_loop import ControlEvent
 
-        background, details0 = 0.0, {}
+        background = 0.0
+        details0: dict[str, Any] = {}
         if self.replanner is not None and meas.t >= self._next_replan - 1e-9:
             self._next_replan = meas.t + self.reference_period
             t_bg = time.perf_counter()
