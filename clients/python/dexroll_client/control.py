@@ -102,8 +102,12 @@ class ControlSession:
 
     def __init__(self, url: str, headers: dict[str, str], open_timeout: float = 30.0
                  ) -> None:
-        from websockets.exceptions import InvalidHandshake
-        from websockets.sync.client import connect
+        try:
+            from websockets.exceptions import InvalidHandshake
+            from websockets.sync.client import connect
+        except ImportError as exc:
+            raise ImportError("the controller session needs the websockets package: "
+                              "pip install 'dexroll-client[control]'") from exc
 
         try:
             self._cm = connect(url, additional_headers=headers, open_timeout=open_timeout,
