@@ -289,7 +289,8 @@ class WindowController:
             self._unsettled = o.settle_ticks
         budget = max(o.max_iter, o.unsettled_max_iter) if self._unsettled > 0 else o.max_iter
         self._unsettled -= 1
-        r = run(s, initial_point(s, guess), point, time.perf_counter() + o.time_limit,
+        r = run(s, initial_point(s, guess, aux=point is None), point,
+                time.perf_counter() + o.time_limit,
                 budget, solver=realtime_solver(s.nlp, o.gauss_newton, o.warm_push))
         parts = s.nlp.unpack(r.w)
         Xs, Xms, Us, Ums = (np.asarray(a) for a in parts[:4])

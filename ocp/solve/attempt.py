@@ -49,6 +49,7 @@ from ocp.spec.grasp import ManipulationProblem, contact_charts, support_goal_err
 from ocp.spec.problem import ProblemError
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.grasp_model import GraspModel
+from ocp.transcription.nlp_blocks import LOAD_VARS
 from ocp.transcription.values import bounds, load_parameters, scales
 from ocp.transcription.values import parameters as nlp_parameters
 
@@ -138,14 +139,19 @@ def setup(planner: ManipulationPlanner, problem: ManipulationProblem,
                  t_nodes, prm, p, lbx, ubx, 0.0 if hit else nlp.build_time, hit)
 
 
-def initial_point(s: Setup, guess: Guess) -> FloatArray:
+def initial_point(s: Setup, guess: Guess, aux: bool = True) -> FloatArray:
     """The NLP's initial point from a guess of the states and inputs (X, Xm, U, Um; physical
-    units): the epigraph and force variables guessed from it, everything clipped into the
+    units): the epigraph and force variables guessed from it (``aux`` False: zeros, for a
+    warm start that takes them from a previous point), everything clipped into the
     bounds."""
     X, Xm, U, Um = guess
     nlp, n = s.nlp, len(s.t_nodes) - 1
-    Sg, Fg = epigraph_guess(s.model, np.vstack([X, Xm]), s.prm,
-                            load_parameters(s.problem) if nlp.n_load else None)
+    if aux:
+        Sg, Fg = epigraph_guess(s.model, np.vstack([X, Xm]), s.prm,
+                                load_parameters(s.problem) if nlp.n_load else None)
+    else:
+        n_f = 3 * nlp.n_force + LOAD_VARS * nlp.n_load
+        Sg, Fg = np.zeros((nlp.n_epigraph, 2 * n + 1)), np.zeros((n_f, 2 * n + 1))
     w0 = nlp.pack((X / s.x_scale).T, (Xm / s.x_scale).T, (U / s.u_scale).T,
                   (Um / s.u_scale).T, Sg[:, : n + 1], Sg[:, n + 1:], Fg)
     return np.clip(np.asarray(w0).ravel(), s.lbx, s.ubx)

@@ -66,8 +66,13 @@ class Reference:
         return errs
 
     def at(self, ts: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """(states, inputs) at times ``ts``, linearly interpolated."""
+        """(states, inputs) at times ``ts``, linearly interpolated (taken as they are at
+        the reference's own times)."""
         x, u = np.asarray(self.x, dtype=float), np.asarray(self.u, dtype=float)
+        ts = np.asarray(ts, dtype=float)
+        idx = np.clip(np.searchsorted(self.t, ts), 0, len(self.t) - 1)
+        if np.array_equal(np.asarray(self.t)[idx], ts):  # the grid's own points
+            return x[idx], u[idx]
 
         def lerp(v: FloatArray) -> FloatArray:
             return np.column_stack([np.interp(ts, self.t, v[:, j]) for j in range(v.shape[1])])

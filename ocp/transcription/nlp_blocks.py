@@ -110,7 +110,14 @@ class BlockNLP:
 
     def aux_indices(self) -> NDArray[np.int64]:
         """The variables other than the states and inputs (epigraph, forces, copies):
-        what a warm start takes from a previous NLP point."""
+        what a warm start takes from a previous NLP point (computed once)."""
+        cached = self.__dict__.get("_aux")
+        if cached is not None:
+            return cached
+        self.__dict__["_aux"] = self._aux_indices()
+        return self.__dict__["_aux"]
+
+    def _aux_indices(self) -> NDArray[np.int64]:
         Xi, Xmi, Ui, Umi = (np.asarray(a).ravel() for a in
                             self.unpack(np.arange(self.pack.nnz_out(0), dtype=float))[:4])
         xu = np.concatenate([Xi, Xmi, Ui, Umi]).round().astype(np.int64)
