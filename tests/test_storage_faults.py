@@ -127,6 +127,23 @@ def plan(url: str, wait: float = 60.0) -> httpx.Response:
     return httpx.post(f"{url}/v1/plans", params={"wait": wait}, json=TRIANGLE, timeout=120)
 
 
+def test_readiness_finds_a_store_that_cannot_be_written_before_any_job_writes(
+        service: str, full_disk: type[Disk]) -> None:
+    """A store that has become unwritable while nothing is submitted: /readyz probes it
+    (one small write at most once a second) and says not ready, naming why, without a
+    job's write failing first; it is ready again once the store can be written."""
+    url = service
+    full_disk.refuse = every_write
+
+    def not_ready() -> bool:
+        r = httpx.get(f"{url}/readyz", timeout=30)
+        return r.status_code == 503 and "disk is full" in r.json()["message"]
+
+    assert wait_for(not_ready, 30.0)
+    full_disk.refuse = None
+    assert wait_for(lambda: ready(url), 60.0)
+
+
 def test_a_full_disk_refuses_new_work_and_the_service_resumes_by_itself(
         service: str, full_disk: type[Disk]) -> None:
     url = service

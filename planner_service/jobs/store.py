@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import math
 import shutil
 import sqlite3
 import threading
@@ -160,6 +161,7 @@ class Store:
         self._local = threading.local()
         #: why the last write failed (SQLite's message; None: the last write succeeded)
         self.fault: str | None = None
+        self._probed_at = -math.inf  # time.monotonic() of the last probe_if_stale
         #: when the store became faulted (time.time(); None: it is not)
         self.fault_since: float | None = None
         db = self._conn()
@@ -246,6 +248,16 @@ class Store:
             return None
         return (f"the plan's JSON is {nbytes} bytes; storing it needs about {need} bytes "
                 f"and the job store's disk has {free} free")
+
+    def probe_if_stale(self, max_age: float) -> bool:
+        """:meth:`probe`, unless the last probe is less than ``max_age`` [s] old (then
+        whether the store is not faulted): readiness learns that the store cannot be
+        written without waiting for a job's write to fail."""
+        now = time.monotonic()
+        if now - self._probed_at < max_age:
+            return self.fault is None
+        self._probed_at = now
+        return self.probe()
 
     def probe(self) -> bool:
         """Whether the store can be written now: one small write (a row of its own table);

@@ -14,6 +14,10 @@ __all__ = ["router"]
 
 router = APIRouter()
 
+#: /readyz writes one row to the store at most this often [s] to see that it can be
+#: written (before, a read-only store was reported only after a job's write had failed)
+READY_PROBE_AGE = 1.0
+
 
 @router.get("/healthz")
 async def healthz() -> dict[str, str]:
@@ -29,6 +33,8 @@ def readyz(request: Request, store: StoreDep, dispatcher: DispatcherDep) -> Any:
     retry = {"Retry-After": str(STORE_RETRY_AFTER)}
     try:
         queued = store.count("queued")
+        if store.fault is None:  # a read-only or full store, found now (a faulted one is
+            store.probe_if_stale(READY_PROBE_AGE)  # the dispatcher's to probe and resume)
     except Exception as exc:  # the store is the service's memory: not ready without it
         return error_response(503, "not_ready", f"job store unavailable: {exc}",
                               headers=retry)
