@@ -13,7 +13,8 @@
 | DEXROLL_DEFAULT_WAIT | 1.0 | how long POST waits for a plan by default [s] |
 | DEXROLL_MAX_WAIT | 30 | cap on POST's ?wait= [s] |
 | DEXROLL_LOG_LEVEL | info | log level |
-| DEXROLL_WARMUP | examples | requests whose NLPs a worker builds before it is ready |
+| DEXROLL_WARMUP | examples | requests whose NLPs a worker builds between jobs |
+| DEXROLL_WARMUP_FIRST | false | build them before a worker reports ready (else: once imported) |
 | DEXROLL_COMPILE_DIR | (none) | compile NLPs to C libraries cached here |
 | DEXROLL_MODEL_MAX_BYTES | 500000 | characters of a model (URDF) text in a request |
 | DEXROLL_MODEL_MAX_JOINTS | 64 | joints of a model's XML tree (every kind) |
@@ -80,6 +81,10 @@ class Settings(BaseSettings):
     max_wait: float = Field(default=30.0, ge=0.0, le=600.0)
     log_level: str = "info"
     warmup: str = "examples"
+    #: build the warm-up NLPs before a worker reports ready; by default a worker is ready
+    #: once it has imported the planners (seconds) and builds them one at a time while no
+    #: job waits (measured 2026-12-05: a service under load waited over 60 s to be ready)
+    warmup_first: bool = False
     compile_dir: Path | None = None
     # model files from requests, checked in isolated processes (planner_service.models_check)
     model_max_bytes: int = Field(default=500_000, ge=1_000, le=50_000_000)

@@ -4,6 +4,7 @@ first request of those structures is served from the structure cache (real servi
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -42,9 +43,28 @@ def warmed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Server, P
     exp2.write_text(json.dumps({**json.loads(EXPERIMENT2.read_text()), "n_intervals": 160,
                                 "max_refinements": 0}))
     server = start_server(folder / "data", DEXROLL_WORKERS="1",
-                          DEXROLL_WARMUP=f"{TRIANGLE},{exp2}")
+                          DEXROLL_WARMUP=f"{TRIANGLE},{exp2}", DEXROLL_WARMUP_FIRST="true")
     yield server, exp2
     server.stop()
+
+
+def test_by_default_a_worker_is_ready_first_and_warms_up_between_jobs(
+        tmp_path: Path) -> None:
+    """Without DEXROLL_WARMUP_FIRST a worker reports ready once it has imported the
+    planners, builds the warm-up structures while no job waits, and serves them from its
+    cache once built (the log says when)."""
+    server = start_server(tmp_path / "data", DEXROLL_WORKERS="1",
+                          DEXROLL_WARMUP=str(TRIANGLE))
+    try:
+        deadline = time.monotonic() + 300.0
+        while "structures built between jobs" not in server.log_text():
+            assert time.monotonic() < deadline, server.log_text()
+            time.sleep(0.2)
+        assert "warm-up: 1 structures built between jobs" in server.log_text()
+        triangle = plan(server, TRIANGLE)
+        assert triangle["stats"]["cache_hit"] is True
+    finally:
+        server.stop()
 
 
 def test_warmed_structures_are_served_from_the_cache(warmed: tuple[Server, Path]) -> None:

@@ -100,7 +100,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         dispatcher = Dispatcher(
             store, settings.workers, settings.kill_grace, notifier.notify, settings.warmup,
             None if settings.compile_dir is None else str(settings.compile_dir.resolve()),
-            settings.max_result_bytes)
+            settings.max_result_bytes, warmup_first=settings.warmup_first)
         dispatcher.housekeeping = purge
         dispatcher.start()
         checker = ModelChecker(settings.model_limits(), settings.model_checkers)

@@ -125,11 +125,16 @@ def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = N
             log.info("warm-up: %d structures built in %.1f s (%s)", len(built),
                      time.perf_counter() - t0, ", ".join(f"{n} {t:.2f} s" for n, t in built))
     conn.send(("ready", None))
+    built_between: list[tuple[str, float]] = []
     while True:
         if pending and not conn.poll(0):  # no job waiting: build one warm-up structure
             conn.send(("warming", None))  # the dispatcher gives jobs to other workers
             if not conn.poll(0):
-                warm_up([pending.pop(0)], palm, fingers)
+                built_between += warm_up([pending.pop(0)], palm, fingers)
+                if not pending:
+                    log.info("warm-up: %d structures built between jobs (%s)",
+                             len(built_between),
+                             ", ".join(f"{n} {t:.2f} s" for n, t in built_between))
             conn.send(("ready", None))
             continue
         try:
@@ -189,7 +194,8 @@ class Dispatcher(threading.Thread):
 
     def __init__(self, store: Store, n_workers: int, kill_grace: float,
                  on_finish: Callable[[str], None], warmup: str = "",
-                 compile_dir: str | None = None, max_result_bytes: int = 1 << 62) -> None:
+                 compile_dir: str | None = None, max_result_bytes: int = 1 << 62,
+                 warmup_first: bool = False) -> None:
         super().__init__(name="dexroll-dispatcher", daemon=True)
         self.store = store
         self.n_workers = n_workers
@@ -198,6 +204,8 @@ class Dispatcher(threading.Thread):
         self.warmup = warmup
         self.compile_dir = compile_dir
         self.max_result_bytes = max_result_bytes
+        #: workers build their warm-up NLPs before they report ready (else between jobs)
+        self.warmup_first = warmup_first
         #: called every minute or so from the dispatcher thread (the store's retention)
         self.housekeeping: Callable[[], None] | None = None
         self._housekept = 0.0
@@ -312,7 +320,8 @@ class Dispatcher(threading.Thread):
         return self.store.fault is None and not self._unwritten
 
     def run(self) -> None:
-        self._slots = [self._spawn() for _ in range(self.n_workers)]
+        self._slots = [self._spawn(replacement=not self.warmup_first)
+                       for _ in range(self.n_workers)]
         try:
             while not self._stopping.is_set():
                 try:
