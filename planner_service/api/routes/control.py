@@ -25,8 +25,8 @@ from pydantic import ValidationError
 from dexroll_client.control import ControlMeasurement
 
 from ...jobs.replans import ReplanPool, ReplanRefusedError
-from ..deps import ServiceError, finished_job
-from .replan import _NOT_REPLANNABLE
+from ..deps import ServiceError
+from .replan import replannable_job
 
 __all__ = ["router"]
 
@@ -46,20 +46,10 @@ async def control_plan(websocket: WebSocket, job_id: str) -> None:
     store = websocket.app.state.store
     owner = getattr(websocket.state, "owner", None)
     try:
-        row = finished_job(await asyncio.to_thread(store.head, job_id, owner), job_id,
-                           "it can be controlled")
-        if row.planner in _NOT_REPLANNABLE:
-            raise ServiceError(409, "not_replannable",
-                               f"job {job_id}: {_NOT_REPLANNABLE[row.planner]}")
+        row, fetch = await replannable_job(store, job_id, owner, "it can be controlled")
     except ServiceError as exc:
         await websocket.close(code=1008, reason=f"{exc.error}: {exc.message}"[:120])
         return
-
-    def fetch() -> tuple[str, str]:
-        full = store.get(job_id, owner)
-        if full is None or full.result is None:
-            raise ReplanRefusedError(404, "not_found", f"job {job_id} is gone (purged)")
-        return full.result, full.request
 
     pool: ReplanPool = websocket.app.state.replans
     loop = asyncio.get_running_loop()

@@ -16,6 +16,7 @@ names ``q[i]``, the object dropped ``object_position``, a measured contact elsew
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 from typing import Any
 
 from fastapi import APIRouter, Request
@@ -59,6 +60,26 @@ def _refused(exc: ReplanRefusedError) -> ServiceError:
     return ServiceError(exc.status, exc.error, exc.message, detail, headers)
 
 
+async def replannable_job(store: Any, job_id: str, owner: str | None, action: str
+                          ) -> tuple[Any, Callable[[], tuple[str, str]]]:
+    """A finished job whose plan a re-plan process can take (``finished_job``'s 404 and
+    409s, and 409 ``not_replannable`` for a planner without one NLP to re-solve), and
+    the function that reads its stored (result, request) JSON for a process that does not
+    hold it yet (404 when it was purged since)."""
+    row = finished_job(await asyncio.to_thread(store.head, job_id, owner), job_id, action)
+    if row.planner in _NOT_REPLANNABLE:
+        raise ServiceError(409, "not_replannable",
+                           f"job {job_id}: {_NOT_REPLANNABLE[row.planner]}")
+
+    def fetch() -> tuple[str, str]:
+        full = store.get(job_id, owner)
+        if full is None or full.result is None:
+            raise ReplanRefusedError(404, "not_found", f"job {job_id} is gone (purged)")
+        return full.result, full.request
+
+    return row, fetch
+
+
 @router.post("/v1/plans/{job_id}/replan", response_model=ReplanResult,
              responses=_RESPONSES)
 async def replan_plan(job_id: str, body: ReplanRequest, request: Request, store: StoreDep,
@@ -72,18 +93,7 @@ async def replan_plan(job_id: str, body: ReplanRequest, request: Request, store:
     builds its re-planner (seconds: `stats.setup_time`); later ones are warm. A state the
     grasp cannot explain is a 422 (`unexplained_state`) naming the field, never planned
     through."""
-    row = finished_job(await asyncio.to_thread(store.head, job_id, owner), job_id,
-                       "it can be re-planned")
-    if row.planner in _NOT_REPLANNABLE:
-        raise ServiceError(409, "not_replannable",
-                           f"job {job_id}: {_NOT_REPLANNABLE[row.planner]}")
-
-    def fetch() -> tuple[str, str]:
-        full = store.get(job_id, owner)
-        if full is None or full.result is None:
-            raise ReplanRefusedError(404, "not_found", f"job {job_id} is gone (purged)")
-        return full.result, full.request
-
+    row, fetch = await replannable_job(store, job_id, owner, "it can be re-planned")
     pool: ReplanPool = request.app.state.replans
     try:
         answer = await asyncio.get_running_loop().run_in_executor(
