@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
@@ -106,6 +107,9 @@ class ControllerOptions:
     #: per tick in inertia corrections); at 1e-2 they converge within a few ticks (1e-5)
     #: and a tick costs 17.5 ms
     warm_push: float | None = 1e-2
+    #: how many ticks the controller keeps (``WindowController.ticks``; each holds its
+    #: window's NLP values, tens of kB): a robot ticks for hours
+    history: int = 10_000
     #: the initial guess of a tick's window: the previous window shifted (True) or the
     #: reference (False); IPOPT's multipliers are the previous window's either way
     shift_warm: bool = False
@@ -123,6 +127,8 @@ class ControllerOptions:
                          f"must be in [1, 1000], got {self.unsettled_max_iter}"))
         if not (math.isfinite(self.settled_tol) and self.settled_tol > 0):
             errs.append(("settled_tol", f"must be > 0, got {self.settled_tol}"))
+        if not 1 <= self.history <= 10_000_000:
+            errs.append(("history", f"must be in [1, 1e7], got {self.history}"))
         if not 0 <= self.settle_ticks <= 100_000:
             errs.append(("settle_ticks", f"must be in [0, 100000], got {self.settle_ticks}"))
         return errs
@@ -213,7 +219,8 @@ class WindowController:
         self._base: Setup | None = None
         self._unsettled = 0
         self._x0_index = self._u0_index = np.zeros(0, dtype=np.int64)
-        self.ticks: list[Tick] = []
+        #: the last ``options.history`` ticks (to certify them beside the loop)
+        self.ticks: deque[Tick] = deque(maxlen=o.history)
 
     # -- the reference --------------------------------------------------------------------
     def retarget(self, reference: ManipulationSolution, start: float) -> None:
@@ -268,7 +275,7 @@ class WindowController:
             self.tick(0.0, x)
         finally:
             self.options = o
-        self.ticks = []
+        self.ticks.clear()
         return time.perf_counter() - t0
 
     def tick(self, t: float, x: FloatArray, u: FloatArray | None = None) -> Tick:

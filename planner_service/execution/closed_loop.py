@@ -567,7 +567,7 @@ class TrackingSession:
         except ProblemError as exc:
             raise ValueError(str(exc.errors)) from exc
         self.control.prepare()
-        self.control.ticks = []  # the session keeps no history: a robot ticks for hours
+        self.control.ticks.clear()  # the session keeps no history: a robot ticks for hours
 
     def tick(self, body: Any, setup: float) -> tuple[str, Any]:
         """One tick from ``body`` (a ``ControlMeasurement``): ("ok", the answer as a
