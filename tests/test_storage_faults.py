@@ -189,9 +189,11 @@ def test_a_plan_that_cannot_be_stored_fails_its_job_and_the_next_one_runs(
 def test_an_end_the_store_cannot_write_is_kept_and_written_when_it_can(
         service: str, full_disk: type[Disk]) -> None:
     url = service
-    # the disk fills for every job end (and the dispatcher's probe): the job runs, its
-    # end cannot be written, the service says so, and the end is written once it can
-    full_disk.refuse = lambda sql, args: "finished_at = ?" in sql or "probe" in sql
+    # the disk fills for every job end (and the dispatcher's probe; readiness's own goes
+    # through, so that not ready comes from the job's end): the job runs, its end cannot
+    # be written, the service says so, and the end is written once it can
+    full_disk.refuse = lambda sql, args: "finished_at = ?" in sql or \
+        ("probe" in sql and "readiness" not in sql)
     r = plan(url, wait=0.0)
     assert r.status_code == 202
     job_id = r.json()["id"]
@@ -202,6 +204,12 @@ def test_an_end_the_store_cannot_write_is_kept_and_written_when_it_can(
     assert plan(url).status_code == 503
     full_disk.refuse = None
     assert wait_for(lambda: ready(url), 60.0)
-    job = httpx.get(f"{url}/v1/plans/{job_id}", timeout=30).json()
-    assert job["state"] == "failed" and job["code"] == "storage_error", job
-    assert "disk is full" in job["message"]
+
+    def job() -> dict[str, Any]:
+        return dict(httpx.get(f"{url}/v1/plans/{job_id}", timeout=30).json())
+
+    # the dispatcher's probe clears the fault, then writes the end it kept
+    assert wait_for(lambda: job()["state"] != "running", 60.0)
+    job_now = job()
+    assert job_now["state"] == "failed" and job_now["code"] == "storage_error", job_now
+    assert "disk is full" in job_now["message"]

@@ -257,14 +257,15 @@ class Store:
         if now - self._probed_at < max_age:
             return self.fault is None
         self._probed_at = now
-        return self.probe()
+        return self.probe(by="readiness")
 
-    def probe(self) -> bool:
-        """Whether the store can be written now: one small write (a row of its own table);
-        it clears the fault when it succeeds, and records it when it does not."""
+    def probe(self, by: str = "dispatcher") -> bool:
+        """Whether the store can be written now: one small write (the row of its own
+        table; the statement says ``by`` whom, in a comment); it clears the fault when it
+        succeeds, and records it when it does not."""
         try:
             with self._tx() as db:
-                db.execute("INSERT OR REPLACE INTO probe (id, at) VALUES (1, ?)",
+                db.execute(f"INSERT OR REPLACE INTO probe (id, at) VALUES (1, ?) -- {by}",
                            (time.time(),))
         except sqlite3.OperationalError:
             return False

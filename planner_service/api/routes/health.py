@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from typing import Any
 
 from fastapi import APIRouter, Request
@@ -34,7 +35,10 @@ def readyz(request: Request, store: StoreDep, dispatcher: DispatcherDep) -> Any:
     try:
         queued = store.count("queued")
         if store.fault is None:  # a read-only or full store, found now (a faulted one is
-            store.probe_if_stale(READY_PROBE_AGE)  # the dispatcher's to probe and resume)
+            # the dispatcher's to probe and resume); a probe that fails otherwise (a busy
+            # store) is no fault: readiness goes by the recorded fault alone
+            with contextlib.suppress(Exception):
+                store.probe_if_stale(READY_PROBE_AGE)
     except Exception as exc:  # the store is the service's memory: not ready without it
         return error_response(503, "not_ready", f"job store unavailable: {exc}",
                               headers=retry)
