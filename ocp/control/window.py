@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate
 from ocp.solution import Collocation, ManipulationSolution, Status
-from ocp.solve.attempt import Setup, finish, initial_point, run, setup
+from ocp.solve.attempt import Setup, collocation_of, finish, initial_point, run, setup
 from ocp.solve.ipopt import kkt_residuals, realtime_solver
 from ocp.spec.grasp import ManipulationProblem, contact_charts
 from ocp.spec.motion import Tracking
@@ -290,8 +290,7 @@ class WindowController:
         guess = self._guess(t, s)
         prev = self._last
         point = prev._point if prev is not None and prev._point is not None \
-            and prev._point.nlp == s.nlp.fingerprint \
-            and abs(prev.horizon - problem.duration) < 1e-12 else None
+            and prev._point.nlp == s.nlp.fingerprint else None
         if prev is not None and (prev.primal_infeasibility or 0.0) > o.settled_tol:
             self._unsettled = o.settle_ticks
         budget = max(o.max_iter, o.unsettled_max_iter) if self._unsettled > 0 else o.max_iter
@@ -299,12 +298,7 @@ class WindowController:
         r = run(s, initial_point(s, guess, aux=point is None), point,
                 time.perf_counter() + o.time_limit,
                 budget, solver=realtime_solver(s.nlp, o.gauss_newton, o.warm_push))
-        parts = s.nlp.unpack(r.w)
-        Xs, Xms, Us, Ums = (np.asarray(a) for a in parts[:4])
-        Ucols = Us.T * s.u_scale
-        col = Collocation(s.t_nodes, Xs.T * s.x_scale, Xms.T * s.x_scale,
-                          Ucols[s.nlp.hs.left_cols], Ums.T * s.u_scale,
-                          Ucols[s.nlp.hs.right_cols])
+        col = collocation_of(s, r.w)
         primal = dual = None
         if r.point is not None:
             primal, dual = kkt_residuals(s.nlp, r.point.w, s.p, r.point.lam_g,
@@ -328,7 +322,7 @@ class WindowController:
         as a new setup (tested), without recomputing the bounds and parameters that do
         not change."""
         base = self._base
-        if base is None or base.problem.duration != problem.duration:
+        if base is None:  # (every window has the same horizon and grid)
             base = self._base = setup(self.planner, problem, x)
             parts = base.nlp.unpack(np.arange(len(base.lbx), dtype=float))
             self._x0_index = np.asarray(parts[0])[:, 0].round().astype(np.int64)

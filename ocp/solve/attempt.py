@@ -56,8 +56,8 @@ from ocp.transcription.values import parameters as nlp_parameters
 if TYPE_CHECKING:
     from ocp.solve.planner import ManipulationPlanner
 
-__all__ = ["AttemptOptions", "IpoptRun", "Setup", "attempt", "finish", "run", "setup",
-           "shifted"]
+__all__ = ["AttemptOptions", "IpoptRun", "Setup", "attempt", "collocation_of", "finish",
+           "run", "setup", "shifted"]
 
 FloatArray = NDArray[np.float64]
 
@@ -204,6 +204,17 @@ def run(s: Setup, w0: FloatArray, point: NlpPoint | None, deadline: float,
                     str(st.get("solver", "ipopt")))
 
 
+def collocation_of(s: Setup, w: FloatArray) -> Collocation:
+    """The states and inputs of an NLP point ``w`` (scaled variables) on its grid, in
+    physical units: the nodes' and midpoints' states, each interval's inputs at its start,
+    midpoint and end."""
+    Xs, Xms, Us, Ums = (np.asarray(a) for a in s.nlp.unpack(w)[:4])
+    Ucols = Us.T * s.u_scale
+    return Collocation(s.t_nodes, Xs.T * s.x_scale, Xms.T * s.x_scale,
+                       Ucols[s.nlp.hs.left_cols], Ums.T * s.u_scale,
+                       Ucols[s.nlp.hs.right_cols])
+
+
 def finish(s: Setup, runs: list[IpoptRun], solve_time: float, deadline: float,
            certify: bool) -> ManipulationSolution:
     """The plan of the best run (the first solved one, else the least infeasible): its
@@ -213,14 +224,11 @@ def finish(s: Setup, runs: list[IpoptRun], solve_time: float, deadline: float,
     problem, nlp, m = s.problem, s.nlp, s.model
     best = next((r for r in runs if r.status is Status.SOLVED),
                 min(runs, key=lambda r: r.violation))
-    parts = nlp.unpack(best.w)
-    Xs, Xms, Us, Ums = (np.asarray(a) for a in parts[:4])
-    Ucols = Us.T * s.u_scale
-    col = Collocation(s.t_nodes, Xs.T * s.x_scale, Xms.T * s.x_scale,
-                      Ucols[nlp.hs.left_cols], Ums.T * s.u_scale, Ucols[nlp.hs.right_cols])
+    col = collocation_of(s, best.w)
     if nlp.n_load:  # the planned forces, after the internal forces' rows
         col = replace(col, forces=planned_forces(
-            problem, m, np.asarray(parts[6])[3 * nlp.n_force:], col.X, col.Xm, s.prm))
+            problem, m, np.asarray(nlp.unpack(best.w)[6])[3 * nlp.n_force:], col.X, col.Xm,
+            s.prm))
     # one deadline over the whole plan: past it, no certificate either (seconds for a
     # multi-finger grasp); the plan is the last iterate, stopped by the time limit
     late = certify and time.perf_counter() >= deadline

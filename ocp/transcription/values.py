@@ -123,8 +123,11 @@ def reference_parameters(problem: ManipulationProblem, t_nodes: FloatArray,
     weight (Simpson's rule in normalised time, the last node's ``terminal_weight`` more),
     the scaled inputs of every interval (start, midpoint, end) and their weight."""
     ref = problem.reference
-    if ref is None or scales_ is None:
+    if ref is None:
         return {k: np.zeros(0) for k in ("Xr", "Wr", "Qx", "Ur", "wu")}
+    if scales_ is None:
+        raise ValueError("a problem with a reference needs the grasp's scales "
+                         "(parameters(problem, nlp, scales(problem, model)))")
     x_scale, u_scale = scales_
     n = len(t_nodes) - 1
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
@@ -141,7 +144,6 @@ def reference_parameters(problem: ManipulationProblem, t_nodes: FloatArray,
         np.asarray(ref.state_weights, dtype=float)
     return {"Xr": (xs / x_scale).T, "Wr": wr[None, :], "Qx": qx, "Ur": Ur,
             "wu": [ref.input_weight]}
-
 
 
 def bounds(problem: ManipulationProblem, nlp: BlockNLP, m: GraspModel, x0: FloatArray,

@@ -191,7 +191,6 @@ class TrackingController:
         self.retarget_distance = retarget_distance
         self.base = base
         m = self.control.model
-        self.prm = self.control.params
         self.columns = [j for tip in m.fingertips for j, c in enumerate(m.point_contacts)
                         if c is tip]
         #: (tick time, certificate failures) of the windows certified
@@ -208,13 +207,8 @@ class TrackingController:
         from sim import ContactSpec, FingerReference
 
         m, col = self.control.model, tick.collocation
-        traj = m.interpolant(col.t_nodes, col.X, col.U0, col.Um, col.U1, self.prm)
         ts = np.linspace(0.0, float(col.t_nodes[-1]), 2 * (len(col.t_nodes) - 1) + 1)
-        x, xd = traj(ts), traj(ts, order=1)
-        cart = m.mapped("cartesian", ts.size)(x.T, self.prm)
-        R = np.asarray(cart[0]).T.reshape(ts.size, 3, 3).transpose(0, 2, 1)
-        p = np.asarray(cart[1]).T
-        pts = np.asarray(cart[4]).T.reshape(ts.size, -1, 3)
+        x, xd, R, p, pts = window_at(self.control, tick, ts)
         refs, points = [], {}
         for spec, tip, j in zip(self.base.fingers, m.fingertips, self.columns, strict=True):
             refs.append(FingerReference(x[:, tip.q_cols], xd[:, tip.q_cols]))
@@ -425,6 +419,44 @@ def closed_loop_report(request: Any, result: Any, plan: Any, options: dict[str, 
                    "open_loop": data["open_loop"], "closed_loop": closed})
 
 
+def measurement_errors(m: Any, duration: float, t: float, object_wxyz: Any,
+                       **joint_rows: Any) -> list[tuple[str, str]]:
+    """What does not fit the plan in a (schema-valid) measurement, fields named: each
+    given per-finger joint field (``q``, ``q_dot``; None: not measured) of the plan's
+    fingers and joints (``m``: its grasp model), a rotation for ``object_wxyz``, a time
+    ``t`` within the plan's ``duration``. The re-plan route's and the controller
+    session's checks."""
+    n = len(m.fingertips)
+    joints = [int(np.arange(m.nx)[tip.q_cols].size) for tip in m.fingertips]
+    errors: list[tuple[str, str]] = []
+    for name, value in joint_rows.items():
+        if value is None:
+            continue
+        if len(value) != n:
+            errors.append((name, f"{len(value)} fingers measured, the plan has {n}"))
+            continue
+        errors += [(f"{name}[{i}]", f"{len(row)} joints, finger {i} of the plan has {k}")
+                   for i, (row, k) in enumerate(zip(value, joints, strict=True))
+                   if len(row) != k]
+    if float(np.linalg.norm(object_wxyz)) < 1e-6:
+        errors.append(("object_wxyz", "not a rotation: a zero quaternion"))
+    if t > duration + 1e-9:
+        errors.append(("t", f"{t:g} s is after the plan's end ({duration:g} s)"))
+    return errors
+
+
+def window_at(control: Any, tick: Any, ts: Any) -> tuple[np.ndarray, ...]:
+    """A tick's window (``control``: its :class:`ocp.WindowController`) at times ``ts``
+    from the tick: the states and their rates (the collocation polynomials), the object's
+    rotation matrices and position, each point contact's point (palm frame)."""
+    m, col, prm = control.model, tick.collocation, control.params
+    traj = m.interpolant(col.t_nodes, col.X, col.U0, col.Um, col.U1, prm)
+    x, xd = traj(ts), traj(ts, order=1)
+    cart = m.mapped("cartesian", len(ts))(x.T, prm)
+    R = np.asarray(cart[0]).T.reshape(len(ts), 3, 3).transpose(0, 2, 1)
+    return x, xd, R, np.asarray(cart[1]).T, np.asarray(cart[4]).T.reshape(len(ts), -1, 3)
+
+
 class ReplanSession:
     """A stored plan's re-planner in the service's re-plan process
     (``planner_service.jobs.replans``; docs/replanning.md "Through the service"): the plan
@@ -448,31 +480,15 @@ class ReplanSession:
         rp = self.replanner
         m = rp.model
         n = len(m.fingertips)
-        errors: list[tuple[str, str]] = []
-        joints = [int(np.arange(m.nx)[tip.q_cols].size) for tip in m.fingertips]
-        for name in ("q", "q_dot"):
-            value = getattr(body, name)
-            if value is None:
-                continue
-            if len(value) != n:
-                errors.append((name, f"{len(value)} fingers measured, the plan has {n}"))
-                continue
-            for i, (row, k) in enumerate(zip(value, joints, strict=True)):
-                if len(row) != k:
-                    errors.append((f"{name}[{i}]", f"{len(row)} joints, finger {i} of the "
-                                                   f"plan has {k}"))
+        errors = measurement_errors(m, float(rp.problem.duration), body.t, body.object_wxyz,
+                                    q=body.q, q_dot=body.q_dot)
         if body.contact_points is not None and len(body.contact_points) != n:
             errors.append(("contact_points", f"{len(body.contact_points)} given, the plan "
                                              f"has {n} fingers"))
-        if float(np.linalg.norm(body.object_wxyz)) < 1e-6:
-            errors.append(("object_wxyz", "not a rotation: a zero quaternion"))
         if (body.object_velocity is None) != (body.object_omega is None):
             name = "object_omega" if body.object_omega is None else "object_velocity"
             errors.append((name, "give object_velocity and object_omega together (or "
                                  "neither)"))
-        duration = float(rp.problem.duration)
-        if body.t > duration + 1e-9:
-            errors.append(("t", f"{body.t:g} s is after the plan's end ({duration:g} s)"))
         return errors
 
     def replan(self, job_id: str, body: Any, setup: float, time_cap: float
@@ -579,19 +595,7 @@ class TrackingSession:
         t0 = time.perf_counter()
         c = self.control
         m = c.model
-        n = len(m.fingertips)
-        joints = [int(np.arange(m.nx)[tip.q_cols].size) for tip in m.fingertips]
-        errors: list[tuple[str, str]] = []
-        if len(body.q) != n:
-            errors.append(("q", f"{len(body.q)} fingers measured, the plan has {n}"))
-        else:
-            errors += [(f"q[{i}]", f"{len(row)} joints, finger {i} of the plan has {k}")
-                       for i, (row, k) in enumerate(zip(body.q, joints, strict=True))
-                       if len(row) != k]
-        if float(np.linalg.norm(body.object_wxyz)) < 1e-6:
-            errors.append(("object_wxyz", "not a rotation: a zero quaternion"))
-        if body.t > c.duration + 1e-9:
-            errors.append(("t", f"{body.t:g} s is after the plan's end ({c.duration:g} s)"))
+        errors = measurement_errors(m, c.duration, body.t, body.object_wxyz, q=body.q)
         if errors:
             return "invalid", errors
         est = estimate_state(c.problem, m, Measurement(
@@ -600,21 +604,17 @@ class TrackingSession:
             np.asarray(body.object_wxyz, dtype=float)), *c.state_at(body.t))
         t_est = time.perf_counter() - t0
         if not est.explained:
-            return "unexplained", [(f, r) for f, r in zip(est.fields, est.problems,
-                                                          strict=False)] or \
-                [("q", "; ".join(est.problems))]
+            return "unexplained", list(zip(est.fields, est.problems, strict=True))
         tick = c.tick(float(body.t), est.x)
         c.ticks.clear()
         window = None
         if tick.collocation is not None:
-            col = tick.collocation
-            traj = m.interpolant(col.t_nodes, col.X, col.U0, col.Um, col.U1, c.params)
-            x, xd = col.X, traj(col.t_nodes, order=1)
-            cart = m.mapped("cartesian", len(col.t_nodes))(x.T, c.params)
-            window = {"t": col.t_nodes.tolist(),
+            ts = tick.collocation.t_nodes
+            x, xd, _, p, _ = window_at(c, tick, ts)
+            window = {"t": ts.tolist(),
                       "q": [x[:, tip.q_cols].tolist() for tip in m.fingertips],
                       "q_dot": [xd[:, tip.q_cols].tolist() for tip in m.fingertips],
-                      "object_position": np.asarray(cart[1]).T.tolist()}
+                      "object_position": p.tolist()}
         return "ok", {"t": tick.t, "status": tick.status, "iterations": tick.iterations,
                       "primal_infeasibility": tick.primal_infeasibility,
                       "dual_infeasibility": tick.dual_infeasibility,
