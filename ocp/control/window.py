@@ -42,6 +42,7 @@ from ocp.certify.certificate import Certificate
 from ocp.solution import Collocation, ManipulationSolution, Status
 from ocp.solve.attempt import Setup, collocation_of, finish, initial_point, run, setup
 from ocp.solve.ipopt import kkt_residuals, realtime_solver
+from ocp.solve.rti import Linearisation, RtiBackend, rti_support
 from ocp.spec.grasp import ManipulationProblem, contact_charts
 from ocp.spec.motion import Tracking
 from ocp.spec.problem import ProblemError
@@ -52,12 +53,16 @@ from ocp.transcription.values import reference_parameters
 if TYPE_CHECKING:
     from ocp.solve.planner import ManipulationPlanner
 
-__all__ = ["PREPARE_ITERATIONS", "ControllerOptions", "Tick", "WindowController"]
+__all__ = ["PREPARE_ITERATIONS", "WINDOW_BACKENDS", "ControllerOptions", "Tick",
+           "WindowController"]
 
 FloatArray = NDArray[np.float64]
 
 #: IPOPT iterations of :meth:`WindowController.prepare`'s window at t = 0 (to convergence)
 PREPARE_ITERATIONS = 50
+
+#: the solvers a window may be solved by (:attr:`ControllerOptions.backend`)
+WINDOW_BACKENDS = ("ipopt", "rti")
 
 
 @dataclass(frozen=True)
@@ -113,6 +118,11 @@ class ControllerOptions:
     #: the initial guess of a tick's window: the previous window shifted (True) or the
     #: reference (False); IPOPT's multipliers are the previous window's either way
     shift_warm: bool = False
+    #: the solver of a tick (:data:`WINDOW_BACKENDS`): "ipopt" (IPOPT warm from the
+    #: previous window, :func:`~ocp.solve.ipopt.realtime_solver`) or "rti" (real-time
+    #: iterations, Gauss-Newton QPs solved by HPIPM, :mod:`~ocp.solve.rti`: the stage-ordered
+    #: NLP; one or two contacts)
+    backend: str = "ipopt"
 
     def errors(self) -> list[tuple[str, str]]:
         errs: list[tuple[str, str]] = []
@@ -129,6 +139,8 @@ class ControllerOptions:
             errs.append(("settled_tol", f"must be > 0, got {self.settled_tol}"))
         if not 1 <= self.history <= 10_000_000:
             errs.append(("history", f"must be in [1, 1e7], got {self.history}"))
+        if self.backend not in WINDOW_BACKENDS:
+            errs.append(("backend", f"must be one of {WINDOW_BACKENDS}, got {self.backend!r}"))
         if not 0 <= self.settle_ticks <= 100_000:
             errs.append(("settle_ticks", f"must be in [0, 100000], got {self.settle_ticks}"))
         return errs
@@ -156,6 +168,10 @@ class Tick:
     dual_infeasibility: float | None = None
     raw_status: str = ""
     certificate: Certificate | None = None
+    #: the preparation made for this tick before its measurement
+    #: (:meth:`WindowController.prepare_next`; the RTI backend's linearisation), not in
+    #: ``wall_time``; 0 when there was none (the tick linearised within its wall time)
+    prepare_time: float = 0.0
     #: the window's problem and NLP values (to assemble its plan on demand)
     _setup: Setup | None = field(default=None, repr=False)
     _point: NlpPoint | None = field(default=None, repr=False)
@@ -180,6 +196,9 @@ class WindowController:
 
             planner = default_planner()
         self.options = o = options or ControllerOptions()
+        self._rti = RtiBackend() if o.backend == "rti" else None
+        #: the RTI linearisation prepared for the next tick (its time, the QP)
+        self._prepared: tuple[float, Linearisation] | None = None
         errs = [(f"options.{k}", v) for k, v in o.errors()]
         if problem.phases is not None and len(problem.phases) > 1:
             errs.append(("problem.phases", "the window controller tracks plans of one "
@@ -295,25 +314,69 @@ class WindowController:
             self._unsettled = o.settle_ticks
         budget = max(o.max_iter, o.unsettled_max_iter) if self._unsettled > 0 else o.max_iter
         self._unsettled -= 1
-        r = run(s, initial_point(s, guess, aux=point is None), point,
-                time.perf_counter() + o.time_limit,
-                budget, solver=realtime_solver(s.nlp, o.gauss_newton, o.warm_push))
+        deadline = time.perf_counter() + o.time_limit
+        prepare_time = 0.0
+        if self._rti is not None:
+            prepared = self._prepared[1] if self._prepared is not None \
+                and self._prepared[0] == t else None
+            self._prepared = None
+            prepare_time = prepared.time if prepared is not None else 0.0
+            r = self._rti.run(s, self._warm_point(s, guess, point), deadline, budget,
+                              prepared)
+        else:
+            r = run(s, initial_point(s, guess, aux=point is None), point, deadline, budget,
+                    solver=realtime_solver(s.nlp, o.gauss_newton, o.warm_push))
         col = collocation_of(s, r.w)
         primal = dual = None
-        if r.point is not None:
+        if self._rti is not None:  # the shooting rows' violation (no dual residual)
+            primal = r.violation if math.isfinite(r.violation) else None
+        elif r.point is not None:
             primal, dual = kkt_residuals(s.nlp, r.point.w, s.p, r.point.lam_g,
                                          r.point.lam_x, s.lbx, s.ubx)
         ok = r.point is not None and np.all(np.isfinite(r.w))
         status = "failed" if not ok else \
             "converged" if r.status is Status.SOLVED else "tracked"
         out = Tick(t, status, problem.duration, col if ok else None, r.iterations, r.time,
-                   0.0, primal, dual, r.raw, _setup=s, _point=r.point, _w=r.w,
-                   _raw=(r.status, r.raw, r.objective))
+                   0.0, primal, dual, r.raw, prepare_time=prepare_time, _setup=s,
+                   _point=r.point, _w=r.w, _raw=(r.status, r.raw, r.objective))
         out.wall_time = time.perf_counter() - t_start
         if ok:
             self._last = out
         self.ticks.append(out)
         return out
+
+    def prepare_next(self, t: float) -> float:
+        """Prepare the tick at ``t`` before its state is measured (the RTI backend: the QP
+        linearised at the window's guess from the state the last window predicts at
+        ``t``; the measurement then enters only the QP's bounds); the wall time [s] it
+        took. A controller calls it right after sending a tick's input. Nothing to
+        prepare for IPOPT (0)."""
+        last = self._last
+        if self._rti is None or last is None or last.collocation is None:
+            return 0.0
+        t0 = time.perf_counter()
+        c = last.collocation
+        tp = np.concatenate([c.t_nodes, (c.t_nodes[:-1] + c.t_nodes[1:]) / 2])
+        xp = np.vstack([c.X, c.Xm])
+        order = np.argsort(tp)
+        dt = min(max(t - last.t, 0.0), float(tp[-1]))
+        x = np.array([np.interp(dt, tp[order], xp[order, j]) for j in range(xp.shape[1])])
+        s = self._setup(self.window(t), x)
+        w = self._warm_point(s, self._guess(t, s), last._point)
+        lin = self._rti.prepare(s, self._rti.initial(s, w))
+        self._prepared = (t, lin)
+        return time.perf_counter() - t0
+
+    @staticmethod
+    def _warm_point(s: Setup, guess: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+                    point: NlpPoint | None) -> FloatArray:
+        """The window's initial point: the guess's states and inputs, the other variables
+        (epigraph, forces, copies) the previous window's."""
+        w = initial_point(s, guess, aux=point is None)
+        if point is not None:
+            aux = s.nlp.aux_indices()
+            w[aux] = np.clip(point.w[aux], s.lbx[aux], s.ubx[aux])
+        return w
 
     def _setup(self, problem: ManipulationProblem, x: FloatArray) -> Setup:
         """The window's values on its NLP: the first tick's :func:`~ocp.solve.attempt.setup`
@@ -323,7 +386,11 @@ class WindowController:
         not change."""
         base = self._base
         if base is None:  # (every window has the same horizon and grid)
-            base = self._base = setup(self.planner, problem, x)
+            base = setup(self.planner, problem, x)
+            why = rti_support(base) if self._rti is not None else None
+            if why is not None:
+                raise ProblemError([("options.backend", why)])
+            self._base = base
             parts = base.nlp.unpack(np.arange(len(base.lbx), dtype=float))
             self._x0_index = np.asarray(parts[0])[:, 0].round().astype(np.int64)
             self._u0_index = np.asarray(parts[2])[:, base.nlp.hs.left_cols[0]].round() \
@@ -395,6 +462,8 @@ class WindowController:
         from ocp.solve.attempt import IpoptRun
 
         status, raw, objective = tick._raw
+        if not math.isfinite(objective):  # (the RTI backend does not evaluate it)
+            objective = float(tick._setup.nlp.oracle(tick._w, tick._setup.p)[0])
         r = IpoptRun(status, raw, tick.iterations, objective, 0.0, tick._w, tick.solve_time,
                      tick._point)
         sol = finish(tick._setup, [r], tick.solve_time, math.inf, certify)
