@@ -86,6 +86,14 @@ HPIPM_STATUS: dict[int, Status] = {0: Status.SOLVED, 1: Status.ITERATION_LIMIT,
 #: Runge-Kutta 4 steps per interval of the window
 SUBSTEPS = 1
 
+#: The Levenberg-Marquardt term added to the QP's Hessian on the epigraph and the internal
+#: forces (scaled units): the objective curves them hardly at all (the epigraph is linear
+#: in it, the forces' size weighed 1e-3), and without the constraints' curvature the QPs of
+#: three fingers took steps of 1 in the forces from the third iteration on, 0.4 infeasible
+#: in their cones' rows, HPIPM stopping on its minimal step; with 1e-2 the same from the
+#: sixth; with 1 every iteration converged (3 QP iterations, steps 1e-12)
+AUX_REGULARISATION = 1.0
+
 
 def rti_support(s: Any) -> str | None:
     """Why the RTI backend cannot solve the window ``s`` (a
@@ -230,6 +238,7 @@ class ShootingWindow:
         H = ca.hessian(cost, zv)[0]
         stage_k = ca.Function("stage", [z, v, pk, p],
                               [G, ca.jacobian(G, zv), ca.gradient(cost, zv), H, cost])
+        values_k = ca.Function("stage_values", [z, v, pk, p], [G, cost])
         self.mid = ca.Function("midpoint", [z, v, p], [xm, um]).map(n)
         # -- the last node's stage -----------------------------------------------------
         zN, vN = ca.SX.sym("zN", nz), ca.SX.sym("vN", nvN)
@@ -242,6 +251,7 @@ class ShootingWindow:
         stage_N = ca.Function("stage_last", [zN, vN, pN, p],
                               [GN_all, ca.jacobian(GN_all, zvN), ca.gradient(costN, zvN),
                                ca.hessian(costN, zvN)[0], costN])
+        values_N = ca.Function("stage_last_values", [zN, vN, pN, p], [GN_all, costN])
         self.lo_N = np.concatenate([point.lo, [0.0] * n_rate])
         self.hi_N = np.concatenate([point.hi, [0.0] * n_rate])
 
@@ -267,8 +277,10 @@ class ShootingWindow:
         Vm = ca.reshape(Wm[self.v_at.T.ravel().tolist()], nvk, n)
         Gs, Js, gs, Hs, cs = stage_k.map(n)(Zm, Vm, PK, P)
         zN_, vN_ = Wm[self.zN_at.tolist()], Wm[self.vN_at.tolist()]
-        GN_, JN_, gN_, HN_, cN_ = stage_N(zN_, vN_, ca.vertcat(Xr[:, n], Wr[:, n],
-                                                             sw_nodes[:, n]), P)
+        PN = ca.vertcat(Xr[:, n], Wr[:, n], sw_nodes[:, n])
+        GN_, JN_, gN_, HN_, cN_ = stage_N(zN_, vN_, PN, P)
+        Gv, cv = values_k.map(n)(Zm, Vm, PK, P)
+        GNv, cNv = values_N(zN_, vN_, PN, P)
         nck = int(G.numel()) - nz
         ncN = int(GN_all.numel()) - nz
         self.nck, self.ncN = nck, ncN
@@ -277,7 +289,13 @@ class ShootingWindow:
         H_blocks = [Hs[:, k * cols_k:(k + 1) * cols_k] for k in range(n)]
         J = ca.diagcat(*J_blocks, JN_, ca.MX(0, nz))
         H = ca.diagcat(*H_blocks, HN_, ca.MX(nz, nz))
-        H = H + ca.MX(ca.Sparsity.diag(nW), 0.0)  # the whole diagonal in the pattern
+        # the whole diagonal in the pattern, and a Levenberg-Marquardt term on the
+        # epigraph and internal forces (:data:`AUX_REGULARISATION`)
+        aux = np.zeros(nW)
+        for k in range(n):
+            aux[self.z_at[:, k][-1] + 1 + na + np.arange(2 * (n_s + n_f))] = 1.0
+        aux[self.vN_at] = 1.0
+        H = H + ca.MX(ca.DM(ca.Sparsity.diag(nW), AUX_REGULARISATION * aux))
         # the gap rows' -I on the next stage's state
         rows_gap: list[int] = []
         cols_gap: list[int] = []
@@ -294,7 +312,9 @@ class ShootingWindow:
         grad = ca.vertcat(ca.vec(gs), gN_, ca.MX.zeros(nz))
         obj = ca.sum2(cs) + cN_
         self.lin = ca.Function("rti_linearisation", [Wm, P], [g, J, grad, H, obj])
-        self.rows = ca.Function("rti_rows", [Wm, P], [g, obj])
+        self.rows = ca.Function("rti_rows", [Wm, P],
+                                [ca.vertcat(ca.vec(Gv), GNv) + ca.mtimes(E, Wm),
+                                 ca.sum2(cv) + cNv])
         gap = np.zeros(r, dtype=bool)
         gap[rows_gap] = True
         self.gap = gap
