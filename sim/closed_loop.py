@@ -17,7 +17,10 @@ With ``latency=True`` the controller runs in real time: its wall time (at least
 meanwhile and its answer takes over at the first step at or after the measurement's time
 plus that latency. Control instants that fall while a call is still in flight are skipped
 (each one an *overrun*; the last answer stays in force), and an answer still pending at
-the plan's end is dropped. The report then gives each call's charged latency and where its
+the plan's end is dropped. Work a controller reports as preparing its next call after
+answering (``details["preparation_time"]``: a real-time iteration's linearisation) is not
+charged as the answer's latency but keeps the controller busy: an instant that falls
+within it is an overrun too. The report then gives each call's charged latency and where its
 answer was applied, the overruns and the wall times' 99th percentile.
 
 Like the rest of ``sim``, nothing here knows the planner: the service's adapter
@@ -211,6 +214,9 @@ def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: floa
     # and the answer
     pending: list[tuple[int, int, ExecutionPlan | None]] = []
     overruns = 0
+    # the first step the controller is free again: after its answer, the work it reports
+    # as preparing the next call (``preparation_time``) keeps it busy, not its answer late
+    free_at = 0
 
     def land(k: int, t: float, rows: StepRows) -> None:
         """The answer in flight, applied from step ``k`` when it is due by then."""
@@ -223,15 +229,15 @@ def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: floa
             events[i] = replace(e, details={**e.details, "applied_at": t})
 
     def hook(k: int, t: float, rows: StepRows) -> None:
-        nonlocal overruns
+        nonlocal overruns, free_at
         kick(k, t, rows)
         land(k, t, rows)
         if t <= 0.5 * o.timestep or t >= T - 0.5 * o.timestep:
             return
         if round(t / o.timestep) % every:
             return
-        if pending:  # the last call is still in flight: this instant is skipped
-            overruns += 1
+        if pending or k < free_at:  # the last call (or its preparation) is still in
+            overruns += 1          # flight: this instant is skipped
             return
         quat = d.qpos[oq + 3:oq + 7].copy()
         R = np.zeros(9)
@@ -253,13 +259,15 @@ def simulate_closed_loop(plan: ExecutionPlan, controller: Controller, rate: floa
         # work the controller reports as its background's (a reference re-planned in a
         # process of its own, in parallel with the ticks) is not the tick's latency
         background = float(event.details.get("background_time", 0.0))
-        wall -= min(background, wall)
+        preparation = float(event.details.get("preparation_time", 0.0))
+        wall -= min(background + preparation, wall)
         charged = max(wall, min_latency)
         events.append(replace(event, wall_time=wall, details={
             **event.details, "latency_charged": charged, "applied_at": None}))
         # the first step starting at or after t + charged (steps are timestep apart)
         ahead = max(0, math.ceil(charged / o.timestep - 1e-9))
         pending.append((k + ahead, len(events) - 1, frag))
+        free_at = k + max(0, math.ceil((charged + preparation) / o.timestep - 1e-9))
         land(k, t, rows)  # no time charged at all (a clock too coarse to see the call)
 
     report = sim.run(hook)

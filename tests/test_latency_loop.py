@@ -258,6 +258,37 @@ def test_a_silent_answer_keeps_the_reference_but_still_takes_its_time(
     assert np.all(which[:k] == -1) and which[k] == 1
 
 
+@dataclass
+class Preparing(Marking):
+    """A controller that says it prepares its next call for ``preparation`` [s] after
+    answering (a real-time iteration's linearisation): reported, not spent here."""
+
+    preparation: float = 0.15
+
+    def __call__(self, m: SimMeasurement) -> tuple[ExecutionPlan | None, ControlEvent]:
+        frag, event = super().__call__(m)
+        return frag, replace(event, details={**event.details,
+                                             "preparation_time": self.preparation})
+
+
+def test_a_preparation_after_the_answer_keeps_the_controller_busy_not_the_answer_late(
+        plan: ExecutionPlan) -> None:
+    """30 ms charged, 150 ms of preparation reported after each answer, at 10 Hz: each
+    answer takes over 30 ms after its measurement (the preparation is not its latency),
+    and the instant 100 ms on falls within the preparation (an overrun): calls at 0.1,
+    0.3, 0.5, 0.7 and 0.9 s, four overruns."""
+    w = Watched()
+    ctl = Preparing(plan)
+    report = simulate_closed_loop(plan, ctl, RATE, disturbances=w, latency=True,
+                                  min_latency=0.03)
+    calls = [e.t for e in report.events]
+    assert calls == pytest.approx([0.1, 0.3, 0.5, 0.7, 0.9])
+    assert report.overruns == 4
+    for e in report.events:
+        assert e.details["latency_charged"] == pytest.approx(0.03)  # wall - preparation
+        assert e.details["applied_at"] == pytest.approx(e.t + 0.03, abs=DT)
+
+
 def test_without_latency_an_answer_takes_over_at_its_own_tick(plan: ExecutionPlan) -> None:
     """The default: every instant called, each answer in force from its tick's own step,
     no overruns, nothing charged."""

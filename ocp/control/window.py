@@ -40,9 +40,9 @@ from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate
 from ocp.solution import Collocation, ManipulationSolution, Status
-from ocp.solve.attempt import Setup, collocation_of, finish, initial_point, run, setup
-from ocp.solve.ipopt import kkt_residuals, realtime_solver
-from ocp.solve.rti import Linearisation, RtiBackend, rti_support
+from ocp.solve.attempt import Setup, collocation_of, finish, initial_point, setup
+from ocp.solve.backend import WINDOW_BACKENDS, window_backend
+from ocp.solve.rti import rti_support
 from ocp.spec.grasp import ManipulationProblem, contact_charts
 from ocp.spec.motion import Tracking
 from ocp.spec.problem import ProblemError
@@ -53,16 +53,14 @@ from ocp.transcription.values import reference_parameters
 if TYPE_CHECKING:
     from ocp.solve.planner import ManipulationPlanner
 
-__all__ = ["PREPARE_ITERATIONS", "WINDOW_BACKENDS", "ControllerOptions", "Tick",
-           "WindowController"]
+__all__ = ["PREPARE_ITERATIONS", "ControllerOptions", "Tick", "WindowController"]
 
 FloatArray = NDArray[np.float64]
 
 #: IPOPT iterations of :meth:`WindowController.prepare`'s window at t = 0 (to convergence)
 PREPARE_ITERATIONS = 50
 
-#: the solvers a window may be solved by (:attr:`ControllerOptions.backend`)
-WINDOW_BACKENDS = ("ipopt", "rti")
+
 
 
 @dataclass(frozen=True)
@@ -118,10 +116,10 @@ class ControllerOptions:
     #: the initial guess of a tick's window: the previous window shifted (True) or the
     #: reference (False); IPOPT's multipliers are the previous window's either way
     shift_warm: bool = False
-    #: the solver of a tick (:data:`WINDOW_BACKENDS`): "ipopt" (IPOPT warm from the
-    #: previous window, :func:`~ocp.solve.ipopt.realtime_solver`) or "rti" (real-time
-    #: iterations, Gauss-Newton QPs solved by HPIPM, :mod:`~ocp.solve.rti`: the stage-ordered
-    #: NLP; one or two contacts)
+    #: the solver of a tick (:data:`~ocp.solve.backend.WINDOW_BACKENDS`): "ipopt" (IPOPT
+    #: warm from the previous window, :func:`~ocp.solve.ipopt.realtime_solver`) or "rti"
+    #: (real-time iterations by multiple shooting, Gauss-Newton QPs solved by HPIPM,
+    #: :mod:`~ocp.solve.rti`; a smooth timing, every fingertip touching)
     backend: str = "ipopt"
 
     def errors(self) -> list[tuple[str, str]]:
@@ -140,7 +138,8 @@ class ControllerOptions:
         if not 1 <= self.history <= 10_000_000:
             errs.append(("history", f"must be in [1, 1e7], got {self.history}"))
         if self.backend not in WINDOW_BACKENDS:
-            errs.append(("backend", f"must be one of {WINDOW_BACKENDS}, got {self.backend!r}"))
+            errs.append(("backend", f"must be one of {tuple(WINDOW_BACKENDS)}, got "
+                                    f"{self.backend!r}"))
         if not 0 <= self.settle_ticks <= 100_000:
             errs.append(("settle_ticks", f"must be in [0, 100000], got {self.settle_ticks}"))
         return errs
@@ -196,9 +195,11 @@ class WindowController:
 
             planner = default_planner()
         self.options = o = options or ControllerOptions()
-        self._rti = RtiBackend() if o.backend == "rti" else None
-        #: the RTI linearisation prepared for the next tick (its time, the QP)
-        self._prepared: tuple[float, Linearisation] | None = None
+        #: the window's solver (:mod:`ocp.solve.backend`)
+        self.backend = window_backend(o.backend, gauss_newton=o.gauss_newton,
+                                      warm_push=o.warm_push)
+        #: the tick prepared (:meth:`prepare_next`): its time, the preparation's wall time
+        self._prepared: tuple[float, float] | None = None
         errs = [(f"options.{k}", v) for k, v in o.errors()]
         if problem.phases is not None and len(problem.phases) > 1:
             errs.append(("problem.phases", "the window controller tracks plans of one "
@@ -316,23 +317,12 @@ class WindowController:
         self._unsettled -= 1
         deadline = time.perf_counter() + o.time_limit
         prepare_time = 0.0
-        if self._rti is not None:
-            prepared = self._prepared[1] if self._prepared is not None \
-                and self._prepared[0] == t else None
+        if self._prepared is not None:  # (made for this tick, or stale: dropped either way)
+            prepare_time = self._prepared[1] if self._prepared[0] == t else 0.0
             self._prepared = None
-            prepare_time = prepared.time if prepared is not None else 0.0
-            r = self._rti.run(s, self._warm_point(s, guess, point), deadline, budget,
-                              prepared)
-        else:
-            r = run(s, initial_point(s, guess, aux=point is None), point, deadline, budget,
-                    solver=realtime_solver(s.nlp, o.gauss_newton, o.warm_push))
+        r, primal, dual = self.backend.solve(s, self._warm_point(s, guess, point), point,
+                                             deadline, budget)
         col = collocation_of(s, r.w)
-        primal = dual = None
-        if self._rti is not None:  # the shooting rows' violation (no dual residual)
-            primal = r.violation if math.isfinite(r.violation) else None
-        elif r.point is not None:
-            primal, dual = kkt_residuals(s.nlp, r.point.w, s.p, r.point.lam_g,
-                                         r.point.lam_x, s.lbx, s.ubx)
         ok = r.point is not None and np.all(np.isfinite(r.w))
         status = "failed" if not ok else \
             "converged" if r.status is Status.SOLVED else "tracked"
@@ -352,7 +342,7 @@ class WindowController:
         took. A controller calls it right after sending a tick's input. Nothing to
         prepare for IPOPT (0)."""
         last = self._last
-        if self._rti is None or last is None or last.collocation is None:
+        if last is None or last.collocation is None or self.backend.name == "ipopt":
             return 0.0
         t0 = time.perf_counter()
         c = last.collocation
@@ -362,10 +352,10 @@ class WindowController:
         dt = min(max(t - last.t, 0.0), float(tp[-1]))
         x = np.array([np.interp(dt, tp[order], xp[order, j]) for j in range(xp.shape[1])])
         s = self._setup(self.window(t), x)
-        w = self._warm_point(s, self._guess(t, s), last._point)
-        lin = self._rti.prepare(s, self._rti.initial(s, w))
-        self._prepared = (t, lin)
-        return time.perf_counter() - t0
+        self.backend.prepare(s, self._warm_point(s, self._guess(t, s), last._point))
+        wall = time.perf_counter() - t0
+        self._prepared = (t, wall)
+        return wall
 
     @staticmethod
     def _warm_point(s: Setup, guess: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
@@ -387,7 +377,7 @@ class WindowController:
         base = self._base
         if base is None:  # (every window has the same horizon and grid)
             base = setup(self.planner, problem, x)
-            why = rti_support(base) if self._rti is not None else None
+            why = rti_support(base) if self.backend.name == "rti" else None
             if why is not None:
                 raise ProblemError([("options.backend", why)])
             self._base = base

@@ -16,8 +16,9 @@ grasp allows:
   collocation's; the epigraph and internal forces of node ``k`` and of the interval's
   midpoint). Inputs linear over an interval (``u_m`` not free) left one control per input
   for the twelve velocity-closure rows of a fingertip's node and midpoint: the QPs had no
-  solution (HPIPM at its iteration limit, steps of 10 in scaled units); a last stage ``N`` holds node ``N``'s epigraph and forces and
-  copies ``z_N`` into a stage without controls (HPIPM's last stage has none);
+  solution (HPIPM at its iteration limit, steps of 10 in scaled units); a last stage ``N``
+  holds node ``N``'s epigraph and forces and copies ``z_N`` into a stage without
+  controls (HPIPM's last stage has none);
 * dynamics: the rolling equations (the same :meth:`~ocp.transcription.grasp_model.
   PhaseModel.dynamics`) integrated over each interval by explicit Runge-Kutta 4 with the
   quadratic input, and ``u_k+1 = u_1``;
@@ -86,13 +87,14 @@ HPIPM_STATUS: dict[int, Status] = {0: Status.SOLVED, 1: Status.ITERATION_LIMIT,
 #: Runge-Kutta 4 steps per interval of the window
 SUBSTEPS = 1
 
-#: The Levenberg-Marquardt term added to the QP's Hessian on the epigraph and the internal
-#: forces (scaled units): the objective curves them hardly at all (the epigraph is linear
-#: in it, the forces' size weighed 1e-3), and without the constraints' curvature the QPs of
-#: three fingers took steps of 1 in the forces from the third iteration on, 0.4 infeasible
-#: in their cones' rows, HPIPM stopping on its minimal step; with 1e-2 the same from the
-#: sixth; with 1 every iteration converged (3 QP iterations, steps 1e-12)
-AUX_REGULARISATION = 1.0
+#: The Levenberg-Marquardt term added to the QP's Hessian on the internal forces (scaled
+#: units): the objective curves them hardly at all (their size weighed 1e-3), and without
+#: the constraints' curvature the QPs of three fingers took steps of 1 in the forces from
+#: the third iteration on, 0.4 infeasible in their cones' rows, HPIPM stopping on its
+#: minimal step; with 1e-2 the same from the sixth; with 1 every iteration converged (3 QP
+#: iterations, steps 1e-12). On the epigraph too, experiment 2's ticks took 18.4 ms
+#: instead of 14.5 (HPIPM on its minimal step in 241 of 399)
+FORCE_DAMPING = 1.0
 
 
 def rti_support(s: Any) -> str | None:
@@ -130,6 +132,7 @@ class ShootingWindow:
         assert point.z_map is not None and np.array_equal(point.z_map,
                                                           np.arange(layout.size))
         assert point.cost is not None
+        point_cost = point.cost
         rate = rate_block(pm) if m.fingertips else None
         accel = accel_block(m, True) if s.problem.smooth and m.effort_groups()[2] else None
         nz, na = nx + nu, 2 * nu
@@ -182,10 +185,12 @@ class ShootingWindow:
         def point_rows(x: Any, s_: Any, f_: Any, xr: Any, wr: Any) -> tuple[Any, Any]:
             zp = ca.vertcat(x, s_, f_)
             args = [zp, empty, empty, 0.0, xr, wr, Qx, qv]
-            return point.fn(*args), point.cost(*args)
+            return point.fn(*args), point_cost(*args)
 
         def rates(x: Any, u: Any) -> Any:
-            return rate.fn(ca.vertcat(x, u), T, shape_q, charts_q) if rate else empty
+            if rate is None:
+                return empty
+            return rate.fn(ca.vertcat(x, u), T, shape_q, charts_q)
 
         # -- an interval's stage -------------------------------------------------------
         z, v = ca.SX.sym("z", nz), ca.SX.sym("v", nvk)
@@ -290,12 +295,14 @@ class ShootingWindow:
         J = ca.diagcat(*J_blocks, JN_, ca.MX(0, nz))
         H = ca.diagcat(*H_blocks, HN_, ca.MX(nz, nz))
         # the whole diagonal in the pattern, and a Levenberg-Marquardt term on the
-        # epigraph and internal forces (:data:`AUX_REGULARISATION`)
+        # internal forces (:data:`FORCE_DAMPING`)
         aux = np.zeros(nW)
         for k in range(n):
-            aux[self.z_at[:, k][-1] + 1 + na + np.arange(2 * (n_s + n_f))] = 1.0
-        aux[self.vN_at] = 1.0
-        H = H + ca.MX(ca.DM(ca.Sparsity.diag(nW), AUX_REGULARISATION * aux))
+            v0 = self.z_at[:, k][-1] + 1
+            aux[v0 + na + n_s + np.arange(n_f)] = 1.0  # the node's forces
+            aux[v0 + na + 2 * n_s + n_f + np.arange(n_f)] = 1.0  # the midpoint's
+        aux[self.vN_at[n_s:]] = 1.0
+        H = H + ca.MX(ca.DM(ca.Sparsity.diag(nW), FORCE_DAMPING * aux))
         # the gap rows' -I on the next stage's state
         rows_gap: list[int] = []
         cols_gap: list[int] = []
@@ -408,17 +415,17 @@ class Linearisation:
 
 class RtiBackend:
     """Real-time iterations of windows by multiple shooting (see the module), one
-    :class:`ShootingWindow` per window NLP; keeps the last shooting point and multipliers
-    (the next window's warm point)."""
+    :class:`ShootingWindow` per window NLP: a :class:`~ocp.solve.backend.WindowBackend`.
+    ``prepare`` linearises the next window at its guess; ``solve`` takes that
+    linearisation when it was made with the tick's parameters (the reference at the same
+    time), else linearises first (within the tick)."""
 
     name = "rti"
 
     def __init__(self, force_regularisation: float = 1e-3) -> None:
         self._windows: dict[str, ShootingWindow] = {}
         self.force_regularisation = force_regularisation
-        #: the last window's shooting point (W, the QP's multipliers of the rows, of the
-        #: bounds), in the window before the one being solved
-        self.last: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        self._prepared: Linearisation | None = None
 
     def window(self, s: Any) -> ShootingWindow:
         why = rti_support(s)
@@ -432,12 +439,10 @@ class RtiBackend:
 
     def initial(self, s: Any, w0: FloatArray) -> FloatArray:
         """The shooting point of a collocation point ``w0`` (the window's guess)."""
-        win = self.window(s)
-        return win.point(w0)
+        return self.window(s).point(w0)
 
-    def prepare(self, s: Any, W: FloatArray) -> Linearisation:
-        """The QP at the shooting point ``W`` with ``s``'s parameters (the preparation
-        phase, before the measured state is known)."""
+    def linearise(self, s: Any, W: FloatArray) -> Linearisation:
+        """The QP at the shooting point ``W`` with ``s``'s parameters."""
         win = self.window(s)
         t0 = time.perf_counter()
         g, jac, grad, hess, _ = win.lin(W, s.p)
@@ -445,11 +450,29 @@ class RtiBackend:
                              np.asarray(g).ravel(), jac, grad, hess,
                              time.perf_counter() - t0)
 
+    def prepare(self, s: Any, w: FloatArray) -> float:
+        """The preparation phase: the next window linearised at its guess ``w`` (a
+        collocation point of the setup ``s`` the tick will have, the state the last window
+        predicts at its start); the wall time [s]."""
+        self._prepared = self.linearise(s, self.initial(s, w))
+        return self._prepared.time
+
+    def solve(self, s: Any, w0: FloatArray, point: NlpPoint | None, deadline: float,
+              max_iter: int) -> tuple[Any, float | None, float | None]:
+        """The feedback phase (see :meth:`run`), with the prepared linearisation when it
+        was made with ``s``'s parameters; the residual: the shooting rows' and bounds'
+        largest violation after the step (no dual residual)."""
+        prepared, self._prepared = self._prepared, None
+        if prepared is not None and not np.array_equal(prepared.p, s.p):
+            prepared = None
+        r = self.run(s, w0, deadline, max_iter, prepared)
+        return r, (r.violation if math.isfinite(r.violation) else None), None
+
     def run(self, s: Any, w0: FloatArray, deadline: float, max_iter: int,
             prepared: Linearisation | None = None) -> Any:
         """``max_iter`` real-time iterations of the window ``s`` (its bounds fix the
-        measured state) from ``prepared`` (when made with ``s``'s parameters) or from the
-        collocation guess ``w0``: each one QP (HPIPM) and its full step. The outcome as an
+        measured state) from ``prepared`` or from the collocation guess ``w0``: each one
+        QP (HPIPM) and its full step. The outcome as an
         :class:`~ocp.solve.attempt.IpoptRun` on the collocation grid (its ``violation``:
         the shooting rows' largest violation after the step; status: HPIPM's of the last
         QP, solved when the step was below 1e-9 in the scaled variables)."""
@@ -458,13 +481,12 @@ class RtiBackend:
         win = self.window(s)
         t0 = time.perf_counter()
         lbW, ubW = win.bounds(s.lbx, s.ubx)
-        lin = prepared if prepared is not None and np.array_equal(prepared.p, s.p) else None
+        lin = prepared
         W = lin.W.copy() if lin is not None else self.initial(s, w0)
-        lam_g, lam_x = np.zeros(win.n_rows), np.zeros(win.nW)
         status, raw, iterations = Status.ITERATION_LIMIT, "", 0
         for _ in range(max_iter):
             if lin is None:
-                lin = self.prepare(s, W)
+                lin = self.linearise(s, W)
             res = win.qp(h=lin.hess, g=lin.grad, a=lin.jac, lba=win.lbg - lin.g,
                          uba=win.ubg - lin.g, lbx=lbW - W, ubx=ubW - W)
             st = win.qp.stats()
@@ -477,8 +499,6 @@ class RtiBackend:
                 status = HPIPM_STATUS.get(code, Status.NUMERICAL_ERROR)
                 break
             W = W + d
-            lam_g = np.asarray(res["lam_a"]).ravel()
-            lam_x = np.asarray(res["lam_x"]).ravel()
             step = float(np.max(np.abs(d), initial=0.0))
             status = Status.SOLVED if step < 1e-9 and code == 0 else HPIPM_STATUS[code]
             lin = None
@@ -491,8 +511,6 @@ class RtiBackend:
         w = win.collocation_point(W, s.p, np.asarray(w0, dtype=float))
         elapsed = time.perf_counter() - t0
         ok = bool(np.all(np.isfinite(W)))
-        if ok:
-            self.last = (W, lam_g, lam_x)
         return IpoptRun(status, raw, iterations, float(obj), viol if math.isfinite(viol)
                         else math.inf, w, elapsed,
                         NlpPoint(s.nlp.fingerprint, w, np.zeros(len(w)),

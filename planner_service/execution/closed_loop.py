@@ -172,10 +172,15 @@ class TrackingController:
 
     def __init__(self, first: FirstPlan, base: Any, options: Any = None,
                  planner: Any = None, reference_rate: float | None = 4.0,
-                 retarget_distance: float = 1e-3) -> None:
+                 retarget_distance: float = 1e-3, period: float | None = None) -> None:
         from ocp import WindowController
 
         self.control = WindowController(first.problem, first.plan, options, planner)
+        #: the control period [s]: after each answer the next tick is prepared
+        #: (:meth:`~ocp.control.window.WindowController.prepare_next`, the RTI backend's
+        #: linearisation) for the time one period on; its time is reported as
+        #: ``preparation_time``, the controller busy but the answer already sent
+        self.period = period
         #: the reference re-planned from the measured state every 1 / ``reference_rate``
         #: s of simulated time when the object is off it, as a background process would
         #: (its time is not charged to the ticks: ``background_time``), the window
@@ -265,6 +270,8 @@ class TrackingController:
             "estimate_time": t_est, "primal_infeasibility": tick.primal_infeasibility,
             "dual_infeasibility": tick.dual_infeasibility, **details0}
         frag = self.fragment(tick) if tick.collocation is not None else None
+        if self.period is not None:
+            details["preparation_time"] = c.prepare_next(meas.t + self.period)
         return frag, ControlEvent(meas.t, tick.status, 0.0, tick.raw_status, details)
 
     def certify_all(self, every: int = 1) -> dict[str, Any]:
@@ -369,7 +376,7 @@ def compare(first: FirstPlan, base: Any, rate: float, options: Any = None,
     goal = goal_of(first)
     extra: dict[str, Any] = {}
     if control is not None:
-        tracker = TrackingController(first, base, control, planner)
+        tracker = TrackingController(first, base, control, planner, period=1.0 / rate)
         setup = tracker.prepare()
         closed = simulate_closed_loop(base, tracker, rate, options, disturbances,
                                       latency=True)
