@@ -33,7 +33,7 @@ import math
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,6 +59,9 @@ FloatArray = NDArray[np.float64]
 
 #: IPOPT iterations of :meth:`WindowController.prepare`'s window at t = 0 (to convergence)
 PREPARE_ITERATIONS = 50
+
+#: ticks each backend is measured on by ``backend="auto"`` (:meth:`WindowController.prepare`)
+SELECT_TICKS = 10
 
 
 
@@ -119,7 +122,9 @@ class ControllerOptions:
     #: the solver of a tick (:data:`~ocp.solve.backend.WINDOW_BACKENDS`): "ipopt" (IPOPT
     #: warm from the previous window, :func:`~ocp.solve.ipopt.realtime_solver`) or "rti"
     #: (real-time iterations by multiple shooting, Gauss-Newton QPs solved by HPIPM,
-    #: :mod:`~ocp.solve.rti`; a smooth timing, every fingertip touching)
+    #: :mod:`~ocp.solve.rti`; a smooth timing, every fingertip touching); "auto": the
+    #: faster of the two on this problem and machine, measured by
+    #: :meth:`WindowController.prepare`
     backend: str = "ipopt"
 
     def errors(self) -> list[tuple[str, str]]:
@@ -137,8 +142,8 @@ class ControllerOptions:
             errs.append(("settled_tol", f"must be > 0, got {self.settled_tol}"))
         if not 1 <= self.history <= 10_000_000:
             errs.append(("history", f"must be in [1, 1e7], got {self.history}"))
-        if self.backend not in WINDOW_BACKENDS:
-            errs.append(("backend", f"must be one of {tuple(WINDOW_BACKENDS)}, got "
+        if self.backend not in (*WINDOW_BACKENDS, "auto"):
+            errs.append(("backend", f"must be one of {(*WINDOW_BACKENDS, 'auto')}, got "
                                     f"{self.backend!r}"))
         if not 0 <= self.settle_ticks <= 100_000:
             errs.append(("settle_ticks", f"must be in [0, 100000], got {self.settle_ticks}"))
@@ -195,9 +200,12 @@ class WindowController:
 
             planner = default_planner()
         self.options = o = options or ControllerOptions()
-        #: the window's solver (:mod:`ocp.solve.backend`)
-        self.backend = window_backend(o.backend, gauss_newton=o.gauss_newton,
-                                      warm_push=o.warm_push)
+        #: the window's solver (:mod:`ocp.solve.backend`; "auto": IPOPT until
+        #: :meth:`prepare` has measured the backends)
+        self.backend = window_backend("ipopt" if o.backend == "auto" else o.backend,
+                                      gauss_newton=o.gauss_newton, warm_push=o.warm_push)
+        #: ``backend="auto"``: what :meth:`prepare` measured and chose
+        self.selection: dict[str, Any] | None = None
         #: the tick prepared (:meth:`prepare_next`): its time, the preparation's wall time
         self._prepared: tuple[float, float] | None = None
         errs = [(f"options.{k}", v) for k, v in o.errors()]
@@ -288,15 +296,57 @@ class WindowController:
         primal-dual point (from a cold point one iteration left experiment 2's first
         window uncertified in MuJoCo). The wall time [s] it took."""
         t0 = time.perf_counter()
-        o = self.options
-        x, _ = self.state_at(0.0)
-        self.options = replace(o, max_iter=max(o.max_iter, PREPARE_ITERATIONS))
-        try:
-            self.tick(0.0, x)
-        finally:
-            self.options = o
+        if self.options.backend == "auto":
+            self.selection = self._select()
+        self._converge()
         self.ticks.clear()
         return time.perf_counter() - t0
+
+    def _converge(self) -> Tick:
+        """The window at t = 0 from the reference's state, solved to convergence."""
+        o = self.options
+        self.options = replace(o, max_iter=max(o.max_iter, PREPARE_ITERATIONS))
+        try:
+            return self.tick(0.0, self.state_at(0.0)[0])
+        finally:
+            self.options = o
+
+    def _select(self) -> dict[str, Any]:
+        """``backend="auto"``: each backend that can solve the window measured on
+        :data:`SELECT_TICKS` ticks along the reference (every 10 ms from the converged
+        window at t = 0, each tick prepared), its last window certified; the one whose
+        window passed with the least busy time a tick (the tick's wall time and its
+        preparation's, medians) is kept. The measurements and the choice."""
+        o = self.options
+        measured: dict[str, dict[str, Any]] = {}
+        ts = [min(k * 0.01, self.duration) for k in range(1, SELECT_TICKS + 1)]
+        made: dict[str, Any] = {}
+        for name in WINDOW_BACKENDS:
+            if name == "rti":
+                why = rti_support(self._setup(self.window(0.0), self.state_at(0.0)[0]))
+                if why is not None:
+                    measured[name] = {"unsupported": why}
+                    continue
+            self.backend = made[name] = window_backend(name, gauss_newton=o.gauss_newton,
+                                                       warm_push=o.warm_push)
+            self._last, self._prepared, self._unsettled = None, None, 0
+            self._converge()
+            walls, preps = [], []
+            for t in ts:
+                preps.append(self.prepare_next(t))
+                walls.append(self.tick(t, self.state_at(t)[0]).wall_time)
+            last = self.ticks[-1]
+            measured[name] = {
+                "tick_median": float(np.median(walls)),
+                "preparation_median": float(np.median(preps)),
+                "busy_median": float(np.median(np.add(walls, preps))),
+                "certified": bool(self.certify(last).passed)}
+            self.ticks.clear()
+        ok = [n for n in made if measured[n]["certified"]] or list(made)
+        chosen = min(ok, key=lambda n: measured[n]["busy_median"])
+        self.backend = made[chosen]
+        self._last, self._prepared, self._unsettled = None, None, 0
+        return {"chosen": chosen, "measured": measured}
 
     def tick(self, t: float, x: FloatArray, u: FloatArray | None = None) -> Tick:
         """One tick at time ``t`` from the measured state ``x`` and input ``u`` (the
