@@ -200,14 +200,6 @@ class WindowController:
 
             planner = default_planner()
         self.options = o = options or ControllerOptions()
-        #: the window's solver (:mod:`ocp.solve.backend`; "auto": IPOPT until
-        #: :meth:`prepare` has measured the backends)
-        self.backend = window_backend("ipopt" if o.backend == "auto" else o.backend,
-                                      gauss_newton=o.gauss_newton, warm_push=o.warm_push)
-        #: ``backend="auto"``: what :meth:`prepare` measured and chose
-        self.selection: dict[str, Any] | None = None
-        #: the tick prepared (:meth:`prepare_next`): its time, the preparation's wall time
-        self._prepared: tuple[float, float] | None = None
         errs = [(f"options.{k}", v) for k, v in o.errors()]
         if problem.phases is not None and len(problem.phases) > 1:
             errs.append(("problem.phases", "the window controller tracks plans of one "
@@ -217,6 +209,14 @@ class WindowController:
                                             "fingers"))
         if errs:
             raise ProblemError(errs)
+        #: the window's solver (:mod:`ocp.solve.backend`; "auto": IPOPT until
+        #: :meth:`prepare` has measured the backends)
+        self.backend = window_backend("ipopt" if o.backend == "auto" else o.backend,
+                                      gauss_newton=o.gauss_newton, warm_push=o.warm_push)
+        #: ``backend="auto"``: what :meth:`prepare` measured and chose
+        self.selection: dict[str, Any] | None = None
+        #: the tick prepared (:meth:`prepare_next`): its time, the preparation's wall time
+        self._prepared: tuple[float, float] | None = None
         self.planner, self.reference = planner, reference
         self.problem = problem
         self.duration = float(reference.duration)
@@ -505,7 +505,7 @@ class WindowController:
         if not math.isfinite(objective):  # (the RTI backend does not evaluate it)
             objective = float(tick._setup.nlp.oracle(tick._w, tick._setup.p)[0])
         r = IpoptRun(status, raw, tick.iterations, objective, 0.0, tick._w, tick.solve_time,
-                     tick._point)
+                     tick._point, self.backend.name)
         sol = finish(tick._setup, [r], tick.solve_time, math.inf, certify)
         if certify:
             tick.certificate = sol.certificate

@@ -498,9 +498,10 @@ class RtiBackend:
             if code not in (0, 1, 2) or not np.all(np.isfinite(d)):
                 status = HPIPM_STATUS.get(code, Status.NUMERICAL_ERROR)
                 break
-            W = W + d
+            W = np.clip(W + d, lbW, ubW)  # (an interior point's tolerance off a fixed bound)
             step = float(np.max(np.abs(d), initial=0.0))
-            status = Status.SOLVED if step < 1e-9 and code == 0 else HPIPM_STATUS[code]
+            # converged: the QP solved and its step nil; else the budget's end
+            status = Status.SOLVED if step < 1e-9 and code == 0 else Status.ITERATION_LIMIT
             lin = None
             if status is Status.SOLVED or time.perf_counter() > deadline:
                 break
