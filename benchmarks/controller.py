@@ -6,14 +6,16 @@ Per plan (experiment 1, experiment 2, three fingers, the Allegro hand's rolling 
   (``ocp.attempt`` on ``problem.remaining(t)``, the shifted plan as warm start, 30 IPOPT
   iterations at most) every 0.25 s: wall time per call, iterations;
 * **window** (now): ``ocp.WindowController`` ticking every 10 ms along the plan from the
-  plan's own state, its NLP in CasADi's virtual machine and compiled to C: construction
-  (``prepare``: the NLP, its solvers, the converged first window) timed apart from the
-  ticks; per tick the wall time (median, p99), IPOPT's share, iterations, the primal
-  infeasibility left; every ``--certify-every``-th window certified (outside the ticks).
+  plan's own state: IPOPT on its collocation NLP in CasADi's virtual machine and compiled
+  to C, and the real-time-iteration backend (multiple shooting, HPIPM; each tick prepared
+  after the last one's answer, the preparation timed apart); construction (``prepare``:
+  the NLP, its solvers, the converged first window) timed apart from the ticks; per tick
+  the wall time (median, p99), the solver's share, iterations, the primal infeasibility
+  left; every ``--certify-every``-th window certified (outside the ticks).
 
-Then the closed loop in MuJoCo (``--loop``): experiment 2 pushed 3 mm sideways at 2 s
-(and undisturbed), the window controller at 100 Hz with its latency charged in
-simulated time beside the 4 Hz re-planner with MuJoCo paused: final error, recovered,
+Then the closed loop in MuJoCo (``--loop``): experiments 1 and 2 pushed 3 mm sideways at
+2 s (and undisturbed), the window controller (IPOPT, RTI) at 100 Hz with its latency
+charged in simulated time beside the 4 Hz re-planner with MuJoCo paused: final error, recovered,
 ticks, overruns, wall times, windows certified.
 
     PYTHONPATH=. .venv/bin/python benchmarks/controller.py [--only NAME] [--loop]
@@ -28,6 +30,7 @@ import statistics
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -90,7 +93,9 @@ def window_ticks(fp: Any, compiled: Path | None, options: ControllerOptions,
     construction = c.prepare()
     build = time.perf_counter() - t0
     ts = np.arange(0.01, fp.plan.duration, 0.01)
+    preps = []
     for t in ts:
+        preps.append(c.prepare_next(float(t)))  # (RTI: its linearisation; IPOPT: 0)
         c.tick(float(t), c.state_at(float(t))[0])
     ticks = c.ticks
     checked = certified = 0
@@ -105,6 +110,8 @@ def window_ticks(fp: Any, compiled: Path | None, options: ControllerOptions,
     return {"construction_s": build, "prepare_s": construction, "ticks": len(ticks),
             **_ms([tk.wall_time for tk in ticks]),
             "ipopt_median_ms": 1e3 * float(np.median([tk.solve_time for tk in ticks])),
+            "preparation_median_ms": 1e3 * float(np.median(preps)),
+            "selection": c.selection,
             "iterations_median": statistics.median(tk.iterations for tk in ticks),
             "primal_infeasibility_median": float(np.median(pinf)),
             "primal_infeasibility_max": float(np.max(pinf)),
@@ -119,10 +126,13 @@ def closed_loops(fp: Any, request: Any, compiled: Path | None) -> list[dict[str,
     rows = []
     for label, dist in (("none", Disturbances()),
                         ("push 3 mm at 2 s", Disturbances(pushes=(parse_kick("2.0,0,0.003,0"),)))):
-        for kind in ("window 100 Hz (latency charged)", "re-plan 4 Hz (paused)"):
+        for kind in ("window IPOPT 100 Hz (latency charged)",
+                     "window RTI 100 Hz (latency charged)", "re-plan 4 Hz (paused)"):
             t0 = time.perf_counter()
             if kind.startswith("window"):
-                out = compare(fp, base, 100.0, None, dist, control=ControllerOptions(),
+                backend = "rti" if "RTI" in kind else "ipopt"
+                out = compare(fp, base, 100.0, None, dist,
+                              control=ControllerOptions(backend=backend),
                               planner=ManipulationPlanner(compile_dir=compiled))
             else:
                 out = compare(fp, base, 4.0, None, dist)
@@ -153,9 +163,9 @@ def main() -> int:
     options = ControllerOptions(max_iter=args.max_iter)
     out: dict[str, Any] = {"options": repr(options), "plans": {}}
     compiled = Path(tempfile.mkdtemp(prefix="dexroll-controller-"))
-    print("| plan | method | ticks | median ms | p99 ms | IPOPT ms | iterations | "
-          "certified |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| plan | method | ticks | median ms | p99 ms | solver ms | preparation ms | "
+          "iterations | certified |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for name, path in PLANS:
         if args.only and name not in args.only:
             continue
@@ -165,13 +175,17 @@ def main() -> int:
         r = rows["replan"]
         print(f"| {name} | warm re-plan every 0.25 s | {r['calls']} | {r['median_ms']:.1f} "
               f"| {r['p99_ms']:.1f} | | {r['iterations_median']} | |")
-        for label, cdir in (("window, VM", None), ("window, compiled", compiled)):
-            w = window_ticks(fp, cdir, options, args.certify_every)
+        for label, cdir, backend in (("window IPOPT, VM", None, "ipopt"),
+                                     ("window IPOPT, compiled", compiled, "ipopt"),
+                                     ("window RTI (HPIPM), VM", None, "rti")):
+            w = window_ticks(fp, cdir, replace(options, backend=backend),
+                             args.certify_every)
             rows[label] = w
             print(f"| {name} | {label} | {w['ticks']} | {w['median_ms']:.1f} | "
                   f"{w['p99_ms']:.1f} | {w['ipopt_median_ms']:.1f} | "
-                  f"{w['iterations_median']} | {w['certified']}/{w['checked']} |")
-        if args.loop and name == "experiment 2":
+                  f"{w['preparation_median_ms']:.1f} | {w['iterations_median']} | "
+                  f"{w['certified']}/{w['checked']} |")
+        if args.loop and name in ("experiment 1", "experiment 2"):
             rows["closed_loop"] = closed_loops(fp, request, compiled)
             for lr in rows["closed_loop"]:
                 print(f"|   {lr['disturbance']} | {lr['controller']} | final "

@@ -181,6 +181,7 @@ class TrackingController:
         #: linearisation) for the time one period on; its time is reported as
         #: ``preparation_time``, the controller busy but the answer already sent
         self.period = period
+        self._preparation = 0.0
         #: the reference re-planned from the measured state every 1 / ``reference_rate``
         #: s of simulated time when the object is off it, as a background process would
         #: (its time is not charged to the ticks: ``background_time``), the window
@@ -271,7 +272,13 @@ class TrackingController:
             "dual_infeasibility": tick.dual_infeasibility, **details0}
         frag = self.fragment(tick) if tick.collocation is not None else None
         if self.period is not None:
-            details["preparation_time"] = c.prepare_next(meas.t + self.period)
+            # prepared for the first instant the controller will be free at: the call so
+            # far and the last preparation may span more than a period (a tick prepared
+            # for an instant it then skips is solved unprepared)
+            busy = time.perf_counter() - t0 + self._preparation
+            ahead = max(1, math.ceil(busy / self.period - 1e-9))
+            self._preparation = c.prepare_next(meas.t + ahead * self.period)
+            details["preparation_time"] = self._preparation
         return frag, ControlEvent(meas.t, tick.status, 0.0, tick.raw_status, details)
 
     def certify_all(self, every: int = 1) -> dict[str, Any]:

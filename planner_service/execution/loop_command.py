@@ -56,6 +56,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="window: a short window of the plan re-solved at every tick in "
                         "real time, its latency charged in simulated time (default); "
                         "replan: the rest of the motion re-planned with MuJoCo paused")
+    g.add_argument("--backend", choices=("ipopt", "rti", "auto"), default="ipopt",
+                   help="the window's solver: ipopt (IPOPT on the collocation window, "
+                        "default), rti (real-time iterations by multiple shooting, QPs by "
+                        "HPIPM, each tick linearised before its measurement), auto (the "
+                        "faster of the two, measured before the run)")
     g.add_argument("--rate", type=float, default=None, metavar="HZ",
                    help="the controller's rate in simulated time (default 100 Hz for the "
                         "window, 4 Hz for the re-planner)")
@@ -143,7 +148,8 @@ def main(args: argparse.Namespace) -> int:
                 planner = None if args.compile_dir is None else \
                     ManipulationPlanner(compile_dir=Path(args.compile_dir))
                 data = compare(first, base, rate, options, dist,
-                               control=ControllerOptions(max_iter=iterations),
+                               control=ControllerOptions(max_iter=iterations,
+                                                         backend=args.backend),
                                planner=planner)
             else:
                 data = compare(first, base, rate, options, dist,
