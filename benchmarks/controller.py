@@ -177,7 +177,8 @@ def main() -> int:
               f"| {r['p99_ms']:.1f} | | {r['iterations_median']} | |")
         for label, cdir, backend in (("window IPOPT, VM", None, "ipopt"),
                                      ("window IPOPT, compiled", compiled, "ipopt"),
-                                     ("window RTI (HPIPM), VM", None, "rti")):
+                                     ("window RTI (HPIPM), VM", None, "rti"),
+                                     ("window RTI (HPIPM), compiled", compiled, "rti")):
             w = window_ticks(fp, cdir, replace(options, backend=backend),
                              args.certify_every)
             rows[label] = w

@@ -212,7 +212,8 @@ class WindowController:
         #: the window's solver (:mod:`ocp.solve.backend`; "auto": IPOPT until
         #: :meth:`prepare` has measured the backends)
         self.backend = window_backend("ipopt" if o.backend == "auto" else o.backend,
-                                      gauss_newton=o.gauss_newton, warm_push=o.warm_push)
+                                      gauss_newton=o.gauss_newton, warm_push=o.warm_push,
+                                      compile_dir=planner.compile_dir)
         #: ``backend="auto"``: what :meth:`prepare` measured and chose
         self.selection: dict[str, Any] | None = None
         #: the tick prepared (:meth:`prepare_next`): its time, the preparation's wall time
@@ -327,8 +328,9 @@ class WindowController:
                 if why is not None:
                     measured[name] = {"unsupported": why}
                     continue
-            self.backend = made[name] = window_backend(name, gauss_newton=o.gauss_newton,
-                                                       warm_push=o.warm_push)
+            self.backend = made[name] = window_backend(
+                name, gauss_newton=o.gauss_newton, warm_push=o.warm_push,
+                compile_dir=self.planner.compile_dir)
             self._last, self._prepared, self._unsettled = None, None, 0
             self._converge()
             walls, preps = [], []

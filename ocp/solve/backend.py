@@ -84,10 +84,13 @@ class IpoptWindow:
 
 
 #: The window backends by name (``ControllerOptions.backend``), each made from the
-#: controller's options (``gauss_newton``, ``warm_push``)
+#: controller's options (``gauss_newton``, ``warm_push``) and the planner's ``compile_dir``
+#: (IPOPT's window compiles with the planner's NLP)
 WINDOW_BACKENDS: dict[str, Callable[..., Any]] = {
-    "ipopt": lambda gauss_newton=False, warm_push=None: IpoptWindow(gauss_newton, warm_push),
-    "rti": lambda gauss_newton=False, warm_push=None: RtiBackend(),
+    "ipopt": lambda gauss_newton=False, warm_push=None, compile_dir=None:
+        IpoptWindow(gauss_newton, warm_push),
+    "rti": lambda gauss_newton=False, warm_push=None, compile_dir=None:
+        RtiBackend(compile_dir=compile_dir),
 }
 
 

@@ -37,6 +37,7 @@ __all__ = [
     "block_sources",
     "compile_sources",
     "compiled_block_solver",
+    "compiled_functions",
     "load_block_solver",
 ]
 
@@ -146,6 +147,19 @@ def block_sources(oracle: ca.Function, options: dict[str, Any], folder: Path
     return [_generate(solver, "dexroll_nlp", folder),
             _generate_functions([options["jac_g"], options["hess_lag"]],
                                 "dexroll_derivatives", folder)]
+
+
+def compiled_functions(functions: list[ca.Function], key: str, cache_dir: Path,
+                       flags: tuple[str, ...] = ("-O2",), compiler: str = "gcc"
+                       ) -> list[ca.Function]:
+    """The given CasADi functions generated as C into one shared library (cached in
+    ``cache_dir`` under the hash of its C, as every library here) and loaded back, in
+    order. RuntimeError when the compiler is missing or fails."""
+    _check_compiler(compiler, cache_dir)
+    with tempfile.TemporaryDirectory(dir=cache_dir) as tmp:
+        source = _generate_functions(functions, "dexroll_functions", Path(tmp))
+        library, _ = _cached_library(source, key, cache_dir, flags, compiler)
+    return [ca.external(fn.name(), str(library)) for fn in functions]
 
 
 def compile_sources(sources: list[Path], key: str, cache_dir: Path,

@@ -46,6 +46,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -117,7 +118,8 @@ class ShootingWindow:
     the QP's pieces at a point (``lin``), and the maps between its variables ``W`` and the
     collocation NLP's ``w`` (same scaling)."""
 
-    def __init__(self, s: Any, force_regularisation: float) -> None:
+    def __init__(self, s: Any, force_regularisation: float,
+                 compile_dir: Path | None = None) -> None:
         nlp, m = s.nlp, s.model
         self.fingerprint = nlp.fingerprint
         hs = nlp.hs
@@ -364,6 +366,18 @@ class ShootingWindow:
         self.to_w = to_w
         self.Xmi, self.Umi = Xmi, Umi
         self.Ui = Ui
+        #: whether the functions run compiled (``compile_dir``: C generated, compiled with
+        #: gcc, cached there; the virtual machine when there is no compiler)
+        self.compiled = False
+        if compile_dir is not None:
+            from ocp.solve.compiled import compiled_functions
+
+            try:
+                self.lin, self.rows, self.mid = compiled_functions(
+                    [self.lin, self.rows, self.mid], self.fingerprint + ":rti", compile_dir)
+                self.compiled = True
+            except RuntimeError:
+                pass
 
     def point(self, w: FloatArray) -> FloatArray:
         """The shooting variables of a collocation point ``w`` (the last stage a copy of
@@ -422,9 +436,12 @@ class RtiBackend:
 
     name = "rti"
 
-    def __init__(self, force_regularisation: float = 1e-3) -> None:
+    def __init__(self, force_regularisation: float = 1e-3,
+                 compile_dir: Path | None = None) -> None:
         self._windows: dict[str, ShootingWindow] = {}
         self.force_regularisation = force_regularisation
+        #: where the windows' functions are compiled and cached (None: the virtual machine)
+        self.compile_dir = compile_dir
         self._prepared: Linearisation | None = None
 
     def window(self, s: Any) -> ShootingWindow:
@@ -433,8 +450,8 @@ class RtiBackend:
             raise ValueError(why)
         win = self._windows.get(s.nlp.fingerprint)
         if win is None:
-            win = self._windows[s.nlp.fingerprint] = ShootingWindow(s,
-                                                                    self.force_regularisation)
+            win = self._windows[s.nlp.fingerprint] = ShootingWindow(
+                s, self.force_regularisation, self.compile_dir)
         return win
 
     def initial(self, s: Any, w0: FloatArray) -> FloatArray:
