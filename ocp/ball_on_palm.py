@@ -135,10 +135,6 @@ class BallOnPalmPlanner:
         """IPOPT iterations spent on one initial guess before the next one is tried."""
         return self.general.max_iter_per_guess
 
-    @property
-    def _cache(self) -> dict[Any, Any]:
-        return self.general._nlps
-
     def nlp_for(self, problem: BallOnPalmProblem) -> tuple[Any, bool]:
         """The NLP of this problem's structure, and whether it came from the cache."""
         return self.general.build(grasp_problem(problem))

@@ -118,7 +118,7 @@ def test_the_compiled_nlp_plans_what_the_virtual_machine_plans(tmp_path: Path) -
     libraries = sorted(p for p in tmp_path.iterdir() if p.is_file())
     assert {p.suffix for p in libraries} == {".so"}
     structures = 1 + compiled.refinements + 1
-    assert len(compiled_planner._nlps) == structures
+    assert len(compiled_planner.nlps) == structures
     assert len(libraries) == 2 * structures
     stamps = [p.stat().st_mtime_ns for p in libraries]
     again = ManipulationPlanner(compile_dir=tmp_path)
@@ -148,7 +148,7 @@ def test_a_background_compile_takes_over_between_solves(tmp_path: Path) -> None:
     assert planner.compiler is not None and not planner.compiler.errors
     assert first.raw_status == "Solve_Succeeded" and first.refinements == 0
     structures = 1
-    assert len(planner._nlps) == structures
+    assert len(planner.nlps) == structures
     assert not nlp.compiled  # swapped in only between solves
     assert planner.adopt_compiled(wait=300.0) == structures
     assert nlp.compiled and planner.compiler.pending == 0 and not planner.compiler.errors
@@ -184,7 +184,7 @@ def test_the_small_sx_form_is_the_block_nlp() -> None:
     objective, constraints and derivatives as the blocks' at random points, with via-points
     (the input jumps there)."""
     from ocp.ball_on_palm import grasp_problem
-    from ocp.solve.planner import FORCE_REGULARISATION, GraspStructure
+    from ocp.solve.nlp_cache import FORCE_REGULARISATION, GraspStructure
     from ocp.spec.problem import BallOnPalmProblem, ObjectSpec
     from ocp.transcription.nlp_blocks import build_manipulation_nlp
 

@@ -23,6 +23,6 @@ def test_the_least_recently_used_nlp_is_dropped_beyond_the_bound() -> None:
     assert palm.nlp_for(b)[1] is False
     assert palm.nlp_for(a)[1] is True  # a is now the most recently used
     assert palm.nlp_for(c)[1] is False  # drops b, the least recently used
-    assert len(general._nlps) == 2
+    assert len(general.nlps) == 2
     assert palm.nlp_for(a)[1] is True
     assert palm.nlp_for(b)[1] is False  # built again

@@ -53,7 +53,7 @@ def test_bad_problem_names_field_and_reason(problem: BallOnPalmProblem, field: s
     assert field in fields, info.value.errors
     assert words in fields[field], fields[field]
     assert field in str(info.value)
-    assert planner._cache == {}, "no NLP may be built for an invalid problem"
+    assert len(planner.general.nlps) == 0, "no NLP may be built for an invalid problem"
 
 
 def test_every_error_is_reported_at_once() -> None:

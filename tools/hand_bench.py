@@ -78,7 +78,7 @@ def plan_once(raw: dict[str, Any], planners: Any) -> dict[str, Any]:
 
 def nlp_size(planners: Any) -> dict[str, int]:
     """The sizes of the NLPs the manipulation planner holds (the last built)."""
-    nlps = list(planners.fingers.manipulation._nlps.values())
+    nlps = list(planners.fingers.manipulation.nlps.values())
     nlp = nlps[-1]
     jac = nlp.options["jac_g"]
     hess = nlp.options["hess_lag"]
@@ -127,7 +127,7 @@ def profile(raw: dict[str, Any], compile_dir: Path | None, repeats: int = 20
     planners = _planners(None)
     request = REQUEST.validate_python(raw)
     adapter_for(request).prepare(request, planners)
-    nlp = list(planners.fingers.manipulation._nlps.values())[-1]
+    nlp = list(planners.fingers.manipulation.nlps.values())[-1]
     rng = np.random.default_rng(0)
     x = rng.uniform(-0.1, 0.1, nlp.oracle.size1_in(0))
     p = rng.uniform(0.01, 0.1, nlp.oracle.size1_in(1))

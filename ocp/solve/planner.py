@@ -36,11 +36,9 @@ from __future__ import annotations
 
 import math
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,7 +63,7 @@ from ocp.solve.guesses import (
 )
 from ocp.solve.initial import initial_state
 from ocp.solve.ipopt import NLP as _NLP
-from ocp.solve.ipopt import ipopt_solver
+from ocp.solve.nlp_cache import MAX_CACHED_NLPS, GraspStructure, NlpCache
 from ocp.spec.grasp import (
     Fingertip,
     ManipulationProblem,
@@ -76,11 +74,10 @@ from ocp.spec.grasp import (
 )
 from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
 from ocp.spec.patches import pole_clear_patch, recharted, rides_pole
-from ocp.spec.problem import MAX_INTERVALS, ProblemError, Structure
+from ocp.spec.problem import MAX_INTERVALS, ProblemError
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.force_stage import ForceStage
 from ocp.transcription.grasp_model import GraspModel
-from ocp.transcription.nlp_blocks import build_manipulation_nlp
 from ocp.transcription.values import parameters as nlp_parameters
 
 __all__ = [
@@ -104,64 +101,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: Weight of the size of the internal-force variables (3+ contacts) in the objective.
-FORCE_REGULARISATION = 1e-3
-
-
-@dataclass(frozen=True)
-class GraspStructure:
-    """What fixes the shape of a grasp's NLP (everything else is a parameter or a bound):
-    the NLPs are cached by it. The fingers are compared by identity (the key keeps them
-    alive); :meth:`fingerprint` names the same structure alike in another process."""
-
-    shape: str
-    palm: bool
-    segments: tuple[int, ...]
-    goal_mask: tuple[bool, ...]
-    via_masks: tuple[tuple[bool, ...], ...]
-    fingers: tuple[Any, ...]
-    tracking: bool
-    #: the contact forces are planned (``problem.forces``): more variables and rows
-    forces: bool = False
-    #: the smooth timing (``problem.timing``): one input per node, joint-acceleration rows
-    smooth: bool = False
-    #: the contact phases on the grid (``problem.schedule()``): None, one phase with every
-    #: fingertip touching
-    schedule: tuple[tuple[int, tuple[bool, ...]], ...] | None = None
-    #: a reference trajectory tracked (``problem.reference``): its objective terms
-    reference: bool = False
-
-    @staticmethod
-    def of(problem: ManipulationProblem) -> GraspStructure:
-        segments, _ = problem.segments()
-        goal_mask: tuple[bool, ...] = (False,) * 5
-        via_masks: tuple[tuple[bool, ...], ...] = ()
-        if problem.palm is not None:
-            st = Structure.of(problem.palm_problem())
-            goal_mask, via_masks = st.goal_mask, st.via_masks
-        return GraspStructure(problem.object.shape, problem.palm is not None, segments,
-                              goal_mask, via_masks, tuple(c.finger for c in problem.fingers),
-                              problem.motion is not None, problem.forces is not None,
-                              problem.smooth, problem.schedule(),
-                              problem.reference is not None)
-
-    def fingerprint(self, m: GraspModel) -> str:
-        """The structure as a string that another process computes alike: the fingers by
-        their models (URDF, tip frame, mount, fingertip surface), not by identity."""
-        import hashlib
-
-        parts = [repr((self.shape, self.palm, self.segments, self.goal_mask, self.via_masks,
-                       self.tracking, m.nx, m.nu)) + (":forces" if self.forces else "")
-                 + (":smooth" if self.smooth else "")
-                 + (f":phases={self.schedule!r}" if self.schedule is not None else "")
-                 + (":reference" if self.reference else "")]
-        for f in self.fingers:
-            parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
-                      repr(np.asarray(f.base_rotation).round(12).tolist()),
-                      repr(np.asarray(f.base_position).round(12).tolist()),
-                      repr(f.tip_surface),  # the fingertip surface (issue 14)
-                      repr(getattr(f, "couplings", ()))]  # its joints' couplings' rows
-        return hashlib.sha256("|".join(parts).encode()).hexdigest()[:32]
 
 
 def warm_grid_factor(problem: ManipulationProblem,
@@ -187,11 +126,6 @@ def warm_grid_factor(problem: ManipulationProblem,
     return k
 
 
-#: NLPs a planner keeps by default (:attr:`ManipulationPlanner.max_nlps`): a few MB each
-#: for one or two fingers, ~40 MB for the four-finger hand's.
-MAX_CACHED_NLPS = 24
-
-
 @dataclass
 class _Totals:
     """What a plan spent over its guesses and refinements."""
@@ -211,21 +145,10 @@ class ManipulationPlanner:
     def __init__(self, compile_dir: Path | None = None, background: bool = False,
                  max_iter_per_guess: int = 300, max_nlps: int = MAX_CACHED_NLPS,
                  solver: str = "ipopt", stage_order: bool | None = None) -> None:
-        #: When set, each structure's NLP functions are generated as C, compiled with gcc
-        #: and cached there (:func:`ocp.solve.compiled.compiled_block_solver`): seconds the first
-        #: time, IPOPT about 40 % faster on experiment 1 (docs/performance.md).
-        self.compile_dir = compile_dir
-        #: The NLP solver (:data:`~ocp.solve.ipopt.SOLVERS`): "fatrop" solves the
-        #: stage-ordered NLP with IPOPT as its fallback (issue 27; docs/performance.md).
-        self.solver = solver
-        #: Build the stage-ordered NLP (default: when the solver needs it).
-        self.stage_order = solver == "fatrop" if stage_order is None else stage_order
-        #: With ``background``, a new structure is solved in the virtual machine at once and
-        #: compiled in a background thread (:class:`ocp.solve.compiled.BackgroundCompiler`); the
-        #: compiled solver replaces it at the first solve after the compile (a service
-        #: worker: no request waits for gcc). Without, the first solve compiles.
-        self.compiler = BackgroundCompiler(compile_dir) if compile_dir is not None \
-            and background else None
+        #: The NLPs built, by structure, and the grasps' models
+        #: (:class:`~ocp.solve.nlp_cache.NlpCache`: ``compile_dir``, ``background``,
+        #: ``max_nlps``, ``solver``, ``stage_order`` are its).
+        self.nlps = NlpCache(compile_dir, background, max_nlps, solver, stage_order)
         #: IPOPT iterations on one initial guess of the palm's strategy before its next.
         self.max_iter_per_guess = max_iter_per_guess
         #: Re-plan in another patch of the object's chart when a plan's palm contact rides
@@ -236,55 +159,39 @@ class ManipulationPlanner:
         #: when some point admits no forces. False: always the coupled NLP.
         self.two_stage_forces = True
         self._force_stages: dict[GraspModel, ForceStage] = {}
-        # keyed by the finger objects themselves (identity; the key keeps them alive)
-        self._models: dict[tuple[Any, ...], GraspModel] = {}
-        #: The NLPs built, by structure, the least recently used dropped beyond
-        #: ``max_nlps`` (every refined grid is a structure of its own).
-        self.max_nlps = max_nlps
-        self._nlps: OrderedDict[GraspStructure, _NLP] = OrderedDict()
+
+    @property
+    def compile_dir(self) -> Path | None:
+        return self.nlps.compile_dir
+
+    @property
+    def solver(self) -> str:
+        return self.nlps.solver
+
+    @property
+    def stage_order(self) -> bool:
+        return self.nlps.stage_order
+
+    @property
+    def compiler(self) -> BackgroundCompiler | None:
+        return self.nlps.compiler
 
     def model(self, problem: ManipulationProblem) -> GraspModel:
-        key = (problem.object.shape, problem.palm is not None,
-               tuple(c.finger for c in problem.fingers))
-        if key not in self._models:
-            self._models[key] = GraspModel(*key)
-        return self._models[key]
+        return self.nlps.model(problem)
 
     def build(self, problem: ManipulationProblem) -> tuple[_NLP, bool]:
         """The NLP of this problem's structure (:class:`GraspStructure`), built or from
         the cache, and whether it was cached."""
-        key = GraspStructure.of(problem)
-        if key in self._nlps:
-            self._nlps.move_to_end(key)
-            return self._nlps[key], True
-        m = self.model(problem)
-        block = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
-                                       key.tracking, FORCE_REGULARISATION,
-                                       forces=key.forces, smooth=key.smooth,
-                                       schedule=key.schedule, stage_order=self.stage_order,
-                                       reference=key.reference)
-        fingerprint = key.fingerprint(m) + (":stages" if self.stage_order else "")
-        nlp = ipopt_solver(block, fingerprint, None if self.compiler else self.compile_dir,
-                           self.solver)
-        self._nlps[key] = nlp
-        while len(self._nlps) > max(1, self.max_nlps):
-            self._nlps.popitem(last=False)
-        if self.compiler is not None:
-            self.compiler.submit(key, nlp.oracle, nlp.options, nlp.fingerprint)
-        return nlp, False
+        return self.nlps.get(problem)
+
+    def structure_key(self, problem: ManipulationProblem) -> str:
+        """The key of the NLP this problem is solved on (:meth:`NlpCache.structure_key`)."""
+        return self.nlps.structure_key(problem)
 
     def adopt_compiled(self, wait: float = 0.0) -> int:
         """Swap in the compiled solvers of the background compiles that are done (waiting
         up to ``wait`` s for the pending ones); how many. Called before every solve."""
-        if self.compiler is None:
-            return 0
-        done = self.compiler.finished(wait)
-        for key, solver, options in done:
-            nlp = self._nlps.get(key)
-            if nlp is not None:
-                nlp.solver, nlp.options, nlp.compiled = solver, options, True
-                nlp.warm_solver = None  # rebuilt from the compiled options on first use
-        return len(done)
+        return self.nlps.adopt_compiled(wait)
 
     def prepare(self, problem: ManipulationProblem) -> float:
         """Build (and cache) the NLP of this problem's structure and its model's

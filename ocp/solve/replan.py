@@ -151,7 +151,7 @@ class Replanner:
         """Build, before the loop, every NLP the re-plans at ``times`` will use (one per
         structure: the via-points still ahead change it) and its warm-start solver, by a
         one-iteration attempt from the first plan; the wall time [s] it took."""
-        from ocp.solve.planner import GraspStructure
+        from ocp.solve.nlp_cache import GraspStructure
 
         t0 = time.perf_counter()
         seen: set[GraspStructure] = set()
