@@ -98,6 +98,7 @@ def test_windows_along_the_plan_are_certified_and_a_prepared_tick_is_its_qp(
         assert tick.collocation is not None
         np.testing.assert_allclose(tick.collocation.X[0], x, rtol=0, atol=1e-12)
         assert tick.primal_infeasibility is not None and tick.primal_infeasibility < 1e-5
+        assert tick.input is not None and np.array_equal(tick.input, tick.collocation.U0[0])
     cert = c.certify(tick)
     assert cert.passed, _failed(cert)
     # an unprepared tick (nothing prepared for its time) linearises within its own time

@@ -186,6 +186,12 @@ class Tick:
     def certified(self) -> bool | None:
         return None if self.certificate is None else self.certificate.passed
 
+    @property
+    def input(self) -> FloatArray | None:
+        """The window's first input (the grasp's input layout, physical units; joint
+        rates among them): what the tick commands now. None when no window was solved."""
+        return None if self.collocation is None else self.collocation.U0[0]
+
 
 class WindowController:
     """Tracks ``reference`` (a certified plan of ``problem``) over a short window at each

@@ -423,7 +423,8 @@ def closed_loop_report(request: Any, result: Any, plan: Any, options: dict[str, 
         from ocp import ControllerOptions
 
         data = compare(first, plan, float(loop["rate"]), SimOptions.from_dict(options), dist,
-                       control=ControllerOptions(max_iter=int(loop["max_iter"])))
+                       control=ControllerOptions(max_iter=int(loop["max_iter"]),
+                                                 backend=str(loop.get("backend", "ipopt"))))
     else:
         data = compare(first, plan, float(loop["rate"]), SimOptions.from_dict(options),
                        dist, ReplanOptions(max_iter=int(loop["max_iter"]), time_limit=60.0))

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from dexroll_client.common import (
     MAX_DURATION,
@@ -113,6 +113,13 @@ class ClosedLoopOptions(_Request):
     max_iter: Count = Field(default=30, ge=1, le=500,
                             description="IPOPT iterations per re-plan, or per window tick "
                                         "(the command line's window default: 1)")
+    backend: Literal["ipopt", "rti", "auto"] = Field(
+        default="ipopt",
+        description="the window's solver (controller window): ipopt (IPOPT on the "
+                    "collocation window), rti (real-time iterations by multiple shooting, "
+                    "QPs by HPIPM, each tick linearised before its measurement: the faster "
+                    "for one fingertip), auto (both measured before the run, the faster "
+                    "kept; docs/control.md)")
 
     @model_validator(mode="after")
     def _replan_rate(self) -> ClosedLoopOptions:
@@ -120,6 +127,14 @@ class ClosedLoopOptions(_Request):
             raise ValueError("rate: at most 50 Hz for the re-planner (MuJoCo pauses for "
                              "each re-plan); the window controller runs up to 200 Hz")
         return self
+
+    @field_validator("backend")
+    @classmethod
+    def _window_backend(cls, v: str, info: ValidationInfo) -> str:
+        if info.data.get("controller") == "replan" and v != "ipopt":
+            raise ValueError("the re-planner solves with IPOPT; 'rti' and 'auto' are the "
+                             "window controller's (controller 'window')")
+        return v
 
 
 class SimulationOptions(_Request):
