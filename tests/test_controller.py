@@ -17,11 +17,10 @@ import numpy as np
 import pytest
 
 from ocp.control import ControllerOptions, WindowController
-from ocp.geometry.rotations import quaternion_wxyz
-from ocp.solve.estimate import Measurement, estimate_state
 from ocp.spec.problem import ProblemError
-from planner_service.execution.closed_loop import FirstPlan, first_plan
+from planner_service.execution.closed_loop import FirstPlan
 from planner_service.planners import REQUEST
+from tests.window_helpers import experiment2, pushed_estimate
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENT2 = ROOT / "examples" / "experiment2_two_fingers.json"
@@ -29,9 +28,7 @@ EXPERIMENT2 = ROOT / "examples" / "experiment2_two_fingers.json"
 
 @pytest.fixture(scope="module")
 def first() -> FirstPlan:
-    fp = first_plan(REQUEST.validate_python(json.loads(EXPERIMENT2.read_text())))
-    assert fp.plan.certificate.passed
-    return fp
+    return experiment2()
 
 
 @pytest.fixture(scope="module")
@@ -84,14 +81,7 @@ def test_a_pushed_grasp_is_tracked_back_from_where_it_is(first: FirstPlan) -> No
     c = WindowController(first.problem, first.plan,
                          ControllerOptions(max_iter=40, fix_start=True))
     t = 2.0
-    s = first.plan.sample([t])
-    tips = c.model.fingertips
-    meas = Measurement([s.x[0][tip.q_cols] for tip in tips],
-                       s.object_position[0] + np.array([0.0, 1e-3, 0.0]),
-                       quaternion_wxyz(s.object_rotation[0]),
-                       [s.x_dot[0][tip.q_cols] for tip in tips])
-    est = estimate_state(c.problem, c.model, meas, *c.state_at(t))
-    assert est.explained, est.problems
+    est = pushed_estimate(c, first, t, (0.0, 1e-3, 0.0))
     tick = c.tick(t, est.x, est.u)
     assert tick.status == "converged"
     x0, u0, _, _ = _window_ends(c, tick)

@@ -9,7 +9,6 @@ it measured faster; what it cannot shoot is refused naming the field."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -18,23 +17,18 @@ import numpy as np
 import pytest
 
 from ocp.control import ControllerOptions, WindowController
-from ocp.geometry.rotations import quaternion_wxyz
 from ocp.solve.backend import IpoptWindow, window_backend
-from ocp.solve.estimate import Measurement, estimate_state
 from ocp.solve.rti import RtiBackend, rti_support
 from ocp.spec.problem import ProblemError
-from planner_service.execution.closed_loop import FirstPlan, first_plan
-from planner_service.planners import REQUEST
+from planner_service.execution.closed_loop import FirstPlan
+from tests.window_helpers import experiment2, pushed_estimate
 
 ROOT = Path(__file__).resolve().parents[1]
-EXPERIMENT2 = ROOT / "examples" / "experiment2_two_fingers.json"
 
 
 @pytest.fixture(scope="module")
 def first() -> FirstPlan:
-    fp = first_plan(REQUEST.validate_python(json.loads(EXPERIMENT2.read_text())))
-    assert fp.plan.certificate.passed
-    return fp
+    return experiment2()
 
 
 def _failed(cert: object) -> list[tuple[str, float, float]]:
@@ -115,14 +109,7 @@ def test_a_pushed_window_starts_where_measured_and_is_certified(first: FirstPlan
                          ControllerOptions(backend="rti", max_iter=2))
     c.prepare()
     t = 2.0
-    s = first.plan.sample([t])
-    tips = c.model.fingertips
-    meas = Measurement([s.x[0][tip.q_cols] for tip in tips],
-                       s.object_position[0] + np.array([0.0, 1e-3, 0.0]),
-                       quaternion_wxyz(s.object_rotation[0]),
-                       [s.x_dot[0][tip.q_cols] for tip in tips])
-    est = estimate_state(c.problem, c.model, meas, *c.state_at(t))
-    assert est.explained, est.problems
+    est = pushed_estimate(c, first, t, (0.0, 1e-3, 0.0))
     tick = c.tick(t, est.x)
     assert tick.collocation is not None
     np.testing.assert_allclose(tick.collocation.X[0], est.x, rtol=0, atol=1e-12)
