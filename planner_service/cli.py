@@ -1,6 +1,7 @@
 """Command line: ``dexroll serve``, ``dexroll plan request.json``, ``dexroll demo [folder]``,
 ``dexroll bench SUITE`` (docs/benchmarks.md), ``dexroll view RESULT.json`` (docs/viewer.md),
-``dexroll simulate RESULT.json`` (the plan executed in MuJoCo: docs/simulation.md).
+``dexroll simulate RESULT.json`` (the plan executed in MuJoCo: docs/simulation.md),
+``dexroll batch REQUESTS.jsonl`` (many requests on a running service: docs/service.md).
 
 A request file is any planner's request (its ``planner`` field: ``ball_on_palm``, the
 default, ``one_finger`` or ``manipulation``), the same JSON as ``POST /v1/plans`` takes.
@@ -23,6 +24,7 @@ from pydantic import ValidationError
 
 from dexroll_client.models import AnyPlanResult, PlanStatus
 
+from . import batch_command
 from .bench import command as bench_command
 from .execution import command as simulate_command
 from .planners import (
@@ -219,6 +221,11 @@ def main(argv: list[str] | None = None) -> int:
                                         "(docs/simulation.md)")
     simulate_command.add_arguments(s)
     s.set_defaults(func=simulate_command.main)
+    m = sub.add_parser("batch", help="plan many requests (a JSON a line) on a running "
+                                     "service as one batch, with a progress bar "
+                                     "(docs/service.md)")
+    batch_command.add_arguments(m)
+    m.set_defaults(func=batch_command.main)
     args = parser.parse_args(argv)
     return int(args.func(args))
 

@@ -9,6 +9,9 @@ GET  /v1/models          built-in objects, fingers (with URDFs), hands and plann
 POST /v1/plans/{id}/simulation  execute a finished plan in MuJoCo; GET: the stored report
 POST /v1/plans/{id}/replan      the rest of a finished plan re-planned from a measured state
 WS   /v1/plans/{id}/control     a controller session: each measurement, the next window
+POST /v1/batches         many plan requests as one batch (every item checked first)
+GET  /v1/batches/{id}    its jobs by state; /results: the jobs as NDJSON as they end
+DELETE /v1/batches/{id}  cancel its jobs that have not ended
 GET  /healthz, /readyz   liveness; readiness (store writable, a worker ready)
 
 Every error is an ``ErrorBody`` (no traceback ever leaves the service); an invalid request
@@ -37,7 +40,7 @@ from ..models_check import ModelChecker
 from ..settings import Settings
 from .access import Access
 from .deps import ERROR_RESPONSES, Notifier, add_error_handlers, error_response
-from .routes import control, health, models, plans, replan, simulation, view
+from .routes import batches, control, health, models, plans, replan, simulation, view
 from .submission import ModelSubmissions
 
 __all__ = ["BodyLimit", "create_app"]
@@ -131,7 +134,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   description=__doc__, responses=ERROR_RESPONSES)
     app.state.settings, app.state.notifier = settings, Notifier()
     add_error_handlers(app)
-    for routes in (plans, models, health, view, simulation, replan, control):
+    for routes in (plans, batches, models, health, view, simulation, replan, control):
         app.include_router(routes.router)
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
     # outermost: a request from a host not served, or without a key, goes no further

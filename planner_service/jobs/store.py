@@ -20,6 +20,7 @@ store's state is a fault to report, not an exception to die of.
 
 from __future__ import annotations
 
+import builtins
 import contextlib
 import hashlib
 import math
@@ -63,6 +64,18 @@ CREATE TABLE IF NOT EXISTS simulations (
     job_id TEXT PRIMARY KEY,
     report TEXT NOT NULL,
     created_at REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS batches (
+    id TEXT PRIMARY KEY,
+    owner TEXT NOT NULL,
+    size INTEGER NOT NULL,
+    created_at REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS batch_jobs (
+    batch_id TEXT NOT NULL,
+    idx INTEGER NOT NULL,
+    job_id TEXT NOT NULL,
+    PRIMARY KEY (batch_id, idx)
 );
 """
 #: Columns added since the first schema (an older store file gains them when opened).
@@ -363,9 +376,49 @@ class Store:
                     "DELETE FROM jobs WHERE id IN (SELECT id FROM jobs WHERE state NOT IN "
                     "('queued', 'running') ORDER BY finished_at, rowid LIMIT ?)",
                     (total - max_jobs,)).rowcount
-            if deleted:  # a plan's simulation report goes with it
+            if deleted:  # a plan's simulation report goes with it, a batch with its jobs
                 db.execute("DELETE FROM simulations WHERE job_id NOT IN (SELECT id FROM jobs)")
+                db.execute("DELETE FROM batch_jobs WHERE job_id NOT IN (SELECT id FROM jobs)")
+                db.execute("DELETE FROM batches WHERE id NOT IN "
+                           "(SELECT batch_id FROM batch_jobs)")
         return int(deleted)
+
+    # -- batches (docs/service.md, "Batches") ----------------------------------------------
+    def create_batch(self, items: builtins.list[tuple[str, str, float]], owner: str = ""
+                     ) -> tuple[str, builtins.list[str]]:
+        """A batch of queued jobs of ``owner`` (``items``: each job's planner, request and
+        time limit), all or none in one transaction: (its id, its jobs' ids in order)."""
+        batch_id = uuid.uuid4().hex
+        now = time.time()
+        ids = [uuid.uuid4().hex for _ in items]
+        with self._tx() as db:
+            db.executemany(
+                "INSERT INTO jobs (id, idempotency_key, request_hash, planner, request, "
+                "time_limit, state, created_at, owner) "
+                "VALUES (?, NULL, ?, ?, ?, ?, 'queued', ?, ?)",
+                [(job_id, request_hash(request), planner, request, limit, now, owner)
+                 for job_id, (planner, request, limit) in zip(ids, items, strict=True)])
+            db.execute("INSERT INTO batches (id, owner, size, created_at) VALUES (?, ?, ?, ?)",
+                       (batch_id, owner, len(items), now))
+            db.executemany("INSERT INTO batch_jobs (batch_id, idx, job_id) VALUES (?, ?, ?)",
+                           [(batch_id, i, job_id) for i, job_id in enumerate(ids)])
+        return batch_id, ids
+
+    def batch(self, batch_id: str, owner: str | None = None
+              ) -> tuple[float, int, builtins.list[JobRow]] | None:
+        """A batch (``owner``'s when given): its creation time, its size and its jobs
+        still stored, in submission order, without their results; None: no such batch."""
+        db = self._conn()
+        row = db.execute("SELECT owner, size, created_at FROM batches WHERE id = ?",
+                         (batch_id,)).fetchone()
+        if row is None or (owner is not None and row["owner"] != owner):
+            return None
+        head = ", ".join(f"j.{c.strip()}" if " AS " not in c else c
+                         for c in _HEAD.split(", "))
+        rows = db.execute(
+            f"SELECT {head} FROM batch_jobs b JOIN jobs j ON j.id = b.job_id "
+            "WHERE b.batch_id = ? ORDER BY b.idx", (batch_id,)).fetchall()
+        return float(row["created_at"]), int(row["size"]), [JobRow.of(r) for r in rows]
 
     # -- simulation reports (docs/simulation.md) -------------------------------------------
     def put_simulation(self, job_id: str, report: str) -> None:

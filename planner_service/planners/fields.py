@@ -96,8 +96,12 @@ class FieldMap:
 
 def wire_field(loc: Sequence[int | str]) -> str:
     """The dotted field of a pydantic error location in a request body, without the tags
-    that discriminated unions put in it (the planner's first, a motion's kind)."""
+    that discriminated unions put in it (the planner's first, a motion's kind); a batch's
+    item is ``items[i]`` followed by its request's field."""
     parts = [str(p) for p in loc]
+    if len(parts) > 1 and parts[0] == "items" and parts[1].isdigit():
+        rest = wire_field(parts[2:])
+        return f"items[{parts[1]}]" + (f".{rest}" if rest else "")
     if parts and parts[0] in PLANNERS:
         parts = parts[1:]
     if len(parts) > 1 and parts[0] == "motion" and parts[1] in _MOTION_TAGS:

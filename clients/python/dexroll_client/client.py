@@ -55,11 +55,12 @@ these generators with ``httpx.Client`` and ``time.sleep``, the async one with
 from __future__ import annotations
 
 import asyncio
+import builtins
 import math
 import random
 import time
 import uuid
-from collections.abc import Awaitable, Callable, Generator, Mapping
+from collections.abc import Awaitable, Callable, Generator, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any, Self, TypeVar
@@ -77,6 +78,8 @@ from dexroll_client.errors import (
     parse_retry_after,
 )
 from dexroll_client.models import (
+    Batch,
+    BatchRequest,
     CollocationModel,
     FingerPlanResult,
     Job,
@@ -245,6 +248,12 @@ def _replan_call(job_id: str, measured: ReplanRequest | Mapping[str, Any] | None
     return _Call("POST", f"{_job_path(job_id)}/replan",
                  json=model.model_dump(mode="json", exclude_none=True),
                  min_read_timeout=_REPLAN_READ_TIMEOUT)
+
+
+def _batch_path(batch_id: str) -> str:
+    if not isinstance(batch_id, str) or not batch_id:
+        raise ValueError(f"batch_id must be a non-empty string, got {batch_id!r}")
+    return f"/v1/batches/{quote(batch_id, safe='')}"
 
 
 def _cancel_call(job_id: str) -> _Call:
@@ -561,6 +570,59 @@ class DexrollClient:
     def ready(self) -> bool:
         """Whether the service accepts work (``/readyz``); TransportError if unreachable."""
         return self._run(_probe_op("/readyz"))
+
+    # -- batches (docs/service.md, "Batches") -----------------------------------------------
+    def submit_batch(self, requests: Iterable[RequestLike]) -> Batch:
+        """Submit many plan requests as one batch (``POST /v1/batches``, at most
+        :data:`~dexroll_client.batches.MAX_BATCH`): every one checked first, here
+        (pydantic's ValidationError, located at ``("items", i, ...)``) and by the service
+        (InvalidRequestError naming ``items[i].field``), and no job made; then all queued.
+        The batch: its jobs' ids in order and their counts by state."""
+        body = BatchRequest.model_validate({"items": [
+            r.model_dump(mode="json") if isinstance(r, BaseModel) else r for r in requests]})
+        call = _Call("POST", "/v1/batches", json=body.model_dump(mode="json"),
+                     min_read_timeout=_SIMULATE_READ_TIMEOUT)
+        return self._run(_one(call, Batch))
+
+    def batch(self, batch_id: str) -> Batch:
+        """A batch's progress (its jobs' counts by state, ``done``)."""
+        return self._run(_one(_Call("GET", _batch_path(batch_id)), Batch))
+
+    def cancel_batch(self, batch_id: str) -> Batch:
+        """Cancel the batch's jobs that have not ended; the batch then."""
+        return self._run(_one(_Call("DELETE", _batch_path(batch_id),
+                                    min_read_timeout=_CANCEL_READ_TIMEOUT), Batch))
+
+    def batch_results(self, batch_id: str, order: str = "submission",
+                      result: bool = True) -> Iterator[Job]:
+        """The batch's jobs as they end (``GET /v1/batches/{id}/results``, NDJSON): in
+        submission order (``order="submission"``) or as each finishes (``"finished"``),
+        each with its plan unless ``result`` is False; a job purged meanwhile is skipped.
+        Ends when every job has ended."""
+        params = {"order": order, "result": "true" if result else "false"}
+        with self._http.stream("GET", f"{_batch_path(batch_id)}/results", params=params,
+                               timeout=httpx.Timeout(self._http.timeout.connect,
+                                                     read=None)) as response:
+            if not response.is_success:
+                response.read()
+                raise error_from_response(response)
+            for line in response.iter_lines():
+                if not line.strip() or '"state":"purged"' in line:
+                    continue
+                yield Job.model_validate_json(line)
+
+    def plan_many(self, requests: Iterable[RequestLike], *,
+                  progress: Callable[[int, int], None] | None = None) -> builtins.list[Job]:
+        """Plan many requests as one batch and wait for all: their terminal jobs, in the
+        requests' order (each with its plan). ``progress(done, total)`` is called as each
+        one ends."""
+        batch = self.submit_batch(requests)
+        jobs: dict[str, Job] = {}
+        for job in self.batch_results(batch.id, order="finished"):
+            jobs[job.id] = job
+            if progress is not None:
+                progress(len(jobs), batch.size)
+        return [jobs[i] for i in batch.job_ids if i in jobs]
 
     def plan(self, request: RequestLike, *, timeout: float | None = None,
              idempotency_key: str | None = None, poll_initial: float = 0.1,

@@ -15,6 +15,7 @@ This module gathers the whole contract under one import path; the definitions li
 
 from __future__ import annotations
 
+from dexroll_client.batches import MAX_BATCH, Batch, BatchRequest
 from dexroll_client.catalog import (
     FingerInfo,
     HandFingerInfo,
@@ -132,6 +133,7 @@ from dexroll_client.results import Rows as Rows
 __all__ = [
     "BUILTIN_FINGERS",
     "BUILTIN_HANDS",
+    "MAX_BATCH",
     "MAX_DURATION",
     "MAX_FINGERS",
     "MAX_FINGER_JOINTS",
@@ -149,6 +151,8 @@ __all__ = [
     "ActuatorTrajectoryModel",
     "AnyPlanResult",
     "BallOnPalmRequest",
+    "Batch",
+    "BatchRequest",
     "CertificateBase",
     "CertificateModel",
     "CollocationModel",
