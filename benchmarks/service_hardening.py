@@ -7,6 +7,7 @@ loopback: run by hand, print one JSON line per measurement.
     python benchmarks/service_hardening.py clients     # 200 concurrent clients: lost/dup jobs
     python benchmarks/service_hardening.py simulations # 40 long simulations: API latency
     python benchmarks/service_hardening.py models      # 24 hand URDFs: a plain POST's latency
+    python benchmarks/service_hardening.py batch [-n 200 --sims 48]  # a batch and simulations
 
 ``--src DIR`` runs the service from another checkout (``git worktree add /tmp/base <rev>``)
 to measure the code before a change with the same interpreter and packages.
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures as cf
+import contextlib
 import json
 import os
 import socket
@@ -29,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -376,10 +379,76 @@ def bench_models(svc: Service, n: int) -> dict[str, Any]:
             "healthz_during_max_s": round(max(healthz), 4)}
 
 
+def bench_batch(svc: Service, n: int, sims: int) -> dict[str, Any]:
+    """A batch of ``n`` plans (the ball rolled on the palm to ``n`` goals, every third
+    one a finger rolling it: a mixed load) submitted as one, with ``sims`` concurrent
+    long simulations of a finished plan (as :func:`bench_simulations`' clients, leaving
+    after 5 s), while GET /healthz, /readyz, /v1/plans, a job and the batch are timed in
+    turn until the batch is done (issue 39, item 4: the API's routes within 100 ms p99).
+    Then: every job ended once (none lost, none duplicated), the NDJSON stream's lines."""
+    roll = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
+    roll["n_intervals"] = 16
+    job = httpx.post(f"{svc.url}/v1/plans", params={"wait": 120}, json=roll,
+                     timeout=300).json()
+    assert job["state"] == "succeeded", job
+    sim_url = f"{svc.url}/v1/plans/{job['id']}/simulation"
+    items = []
+    for k in range(n):
+        if k % 3 == 2:
+            items.append({**roll, "duration": 1.5 + 0.01 * k})
+        else:
+            items.append({"initial": {"x": 0, "y": 0, "u": 0, "v": 0, "psi": 0},
+                          "goal": {"x": 0.005 + 0.0001 * k}, "duration": 1.0,
+                          "n_intervals": 10})
+
+    def simulate(_: int) -> None:
+        with contextlib.suppress(httpx.TimeoutException):
+            httpx.post(sim_url, json={"timestep": 2e-5, "settle": 2.0}, timeout=5.0)
+
+    t0 = time.perf_counter()
+    r = httpx.post(f"{svc.url}/v1/batches", json={"items": items}, timeout=300)
+    submit_s = time.perf_counter() - t0
+    assert r.status_code == 201, r.text
+    batch = r.json()
+    paths = ["/healthz", "/readyz", "/v1/plans", f"/v1/plans/{job['id']}?result=false",
+             f"/v1/batches/{batch['id']}"]
+    latencies: dict[str, list[float]] = {p: [] for p in paths}
+    started = time.perf_counter()
+    with cf.ThreadPoolExecutor(max(sims, 1)) as pool, httpx.Client(timeout=60) as http:
+        futures = [pool.submit(simulate, i) for i in range(sims)]
+        done = False
+        while not done:
+            for path in paths:
+                t0 = time.perf_counter()
+                got = http.get(f"{svc.url}{path}")
+                latencies[path].append(time.perf_counter() - t0)
+                if path.startswith("/v1/batches"):
+                    done = got.json()["done"]
+            time.sleep(0.1)
+        cf.wait(futures)
+    batch_s = time.perf_counter() - started
+    lines = httpx.get(f"{svc.url}/v1/batches/{batch['id']}/results",
+                      params={"result": "false"}, timeout=300).text.splitlines()
+    ids = [json.loads(x)["id"] for x in lines]
+    final = httpx.get(f"{svc.url}/v1/batches/{batch['id']}", timeout=60).json()
+    every = [x for v in latencies.values() for x in v]
+    return {"plans": n, "simulations": sims, "submit_s": round(submit_s, 3),
+            "batch_s": round(batch_s, 1), "plans_per_s": round(n / batch_s, 2),
+            "counts": final["counts"], "lines": len(lines),
+            "lost": n - len(set(ids)), "duplicated": len(ids) - len(set(ids)),
+            "p99_all_ms": round(1e3 * float(np.percentile(every, 99)), 1),
+            "over_100ms": f"{sum(x > 0.1 for x in every)} of {len(every)}",
+            **{f"{p.split('?')[0]}_p99_ms": round(1e3 * float(np.percentile(v, 99)), 1)
+               for p, v in latencies.items()},
+            **{f"{p.split('?')[0]}_median_ms": round(1e3 * statistics.median(v), 1)
+               for p, v in latencies.items()}}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("what", choices=["healthz", "deadlines", "results", "clients",
-                                            "simulations", "models"])
+                                            "simulations", "models", "batch"])
+    parser.add_argument("--sims", type=int, default=48)
     parser.add_argument("--src", type=Path)
     parser.add_argument("--joints", type=int, default=400)
     parser.add_argument("-n", type=int)
@@ -400,6 +469,8 @@ def main() -> None:
             out = bench_models(svc, args.n or 24)
         elif args.what == "simulations":
             out = bench_simulations(svc, args.n or 40)
+        elif args.what == "batch":
+            out = bench_batch(svc, args.n or 200, args.sims)
         else:
             out = bench_clients(svc, args.n or 200, args.src)
     finally:
