@@ -18,9 +18,16 @@ import pytest
 
 from dexroll_client import DexrollClient
 from dexroll_client.errors import NotFoundError
+from dexroll_client.models import Job, PlanResult
 from tests.conftest import Server
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def final_x(job: Job) -> float:
+    """Where a ball-on-palm job's plan ends the contact's x [m]."""
+    assert isinstance(job.result, PlanResult) and job.result.grid is not None
+    return float(job.result.grid.eta[-1][0])
 
 
 def palm_request(x: float, n: int = 10) -> dict[str, Any]:
@@ -44,8 +51,7 @@ def test_a_batch_plans_every_request_and_streams_them_in_submission_order(
         assert [j.id for j in jobs] == batch.job_ids
         for job, x in zip(jobs, goals, strict=True):
             assert job.state.value == "succeeded", job.message
-            assert job.result is not None and job.result.grid is not None
-            assert job.result.grid.eta[-1][0] == pytest.approx(x, abs=1e-6)
+            assert final_x(job) == pytest.approx(x, abs=1e-6)
             assert client.get(job.id).state.value == "succeeded"
         done = client.batch(batch.id)
         assert done.done and done.counts == {"succeeded": 3}
@@ -53,8 +59,7 @@ def test_a_batch_plans_every_request_and_streams_them_in_submission_order(
         planned = client.plan_many([palm_request(x) for x in goals[:2]],
                                    progress=lambda d, n: seen.append((d, n)))
         assert [j.state.value for j in planned] == ["succeeded", "succeeded"]
-        assert [j.result.grid.eta[-1][0] for j in planned if j.result and j.result.grid] == \
-            pytest.approx(goals[:2], abs=1e-6)
+        assert [final_x(j) for j in planned] == pytest.approx(goals[:2], abs=1e-6)
         assert seen == [(1, 2), (2, 2)]
 
 
@@ -128,3 +133,18 @@ def test_dexroll_batch_plans_a_jsonl_file_with_a_progress_bar(live_server: Serve
     assert proc.returncode == 2, proc.stderr
     assert "line 2" in proc.stderr and "n_intervals" in proc.stderr
     assert not (tmp_path / "bad.results.jsonl").exists()
+
+
+def test_the_async_client_plans_a_batch_too(live_server: Server) -> None:
+    """``AsyncDexrollClient.plan_many``: the same terminal jobs in the requests' order."""
+    import asyncio
+
+    from dexroll_client import AsyncDexrollClient
+
+    async def run() -> list[Job]:
+        async with AsyncDexrollClient.from_url(live_server.url) as client:
+            return await client.plan_many([palm_request(x) for x in (0.012, 0.018)])
+
+    jobs = asyncio.run(run())
+    assert [j.state.value for j in jobs] == ["succeeded", "succeeded"]
+    assert [final_x(j) for j in jobs] == pytest.approx([0.012, 0.018], abs=1e-6)

@@ -60,7 +60,15 @@ import math
 import random
 import time
 import uuid
-from collections.abc import Awaitable, Callable, Generator, Iterable, Iterator, Mapping
+from collections.abc import (
+    AsyncIterator,
+    Awaitable,
+    Callable,
+    Generator,
+    Iterable,
+    Iterator,
+    Mapping,
+)
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any, Self, TypeVar
@@ -254,6 +262,22 @@ def _batch_path(batch_id: str) -> str:
     if not isinstance(batch_id, str) or not batch_id:
         raise ValueError(f"batch_id must be a non-empty string, got {batch_id!r}")
     return f"/v1/batches/{quote(batch_id, safe='')}"
+
+
+def _batch_call(requests: Iterable[RequestLike]) -> _Call:
+    """``POST /v1/batches`` of the requests, checked here first (pydantic's
+    ValidationError located at ``("items", i, ...)``)."""
+    body = BatchRequest.model_validate({"items": [
+        r.model_dump(mode="json") if isinstance(r, BaseModel) else r for r in requests]})
+    return _Call("POST", "/v1/batches", json=body.model_dump(mode="json"),
+                 min_read_timeout=_SIMULATE_READ_TIMEOUT)
+
+
+def _batch_line(line: str) -> Job | None:
+    """A job of a batch's NDJSON results (None: a blank line, a purged job)."""
+    if not line.strip() or '"state":"purged"' in line:
+        return None
+    return Job.model_validate_json(line)
 
 
 def _cancel_call(job_id: str) -> _Call:
@@ -578,11 +602,7 @@ class DexrollClient:
         (pydantic's ValidationError, located at ``("items", i, ...)``) and by the service
         (InvalidRequestError naming ``items[i].field``), and no job made; then all queued.
         The batch: its jobs' ids in order and their counts by state."""
-        body = BatchRequest.model_validate({"items": [
-            r.model_dump(mode="json") if isinstance(r, BaseModel) else r for r in requests]})
-        call = _Call("POST", "/v1/batches", json=body.model_dump(mode="json"),
-                     min_read_timeout=_SIMULATE_READ_TIMEOUT)
-        return self._run(_one(call, Batch))
+        return self._run(_one(_batch_call(requests), Batch))
 
     def batch(self, batch_id: str) -> Batch:
         """A batch's progress (its jobs' counts by state, ``done``)."""
@@ -607,9 +627,9 @@ class DexrollClient:
                 response.read()
                 raise error_from_response(response)
             for line in response.iter_lines():
-                if not line.strip() or '"state":"purged"' in line:
-                    continue
-                yield Job.model_validate_json(line)
+                job = _batch_line(line)
+                if job is not None:
+                    yield job
 
     def plan_many(self, requests: Iterable[RequestLike], *,
                   progress: Callable[[int, int], None] | None = None) -> builtins.list[Job]:
@@ -771,6 +791,46 @@ class AsyncDexrollClient:
     async def ready(self) -> bool:
         """See :meth:`DexrollClient.ready`."""
         return await self._run(_probe_op("/readyz"))
+
+    async def submit_batch(self, requests: Iterable[RequestLike]) -> Batch:
+        """:meth:`DexrollClient.submit_batch`, awaited."""
+        return await self._run(_one(_batch_call(requests), Batch))
+
+    async def batch(self, batch_id: str) -> Batch:
+        """:meth:`DexrollClient.batch`, awaited."""
+        return await self._run(_one(_Call("GET", _batch_path(batch_id)), Batch))
+
+    async def cancel_batch(self, batch_id: str) -> Batch:
+        """:meth:`DexrollClient.cancel_batch`, awaited."""
+        return await self._run(_one(_Call("DELETE", _batch_path(batch_id),
+                                          min_read_timeout=_CANCEL_READ_TIMEOUT), Batch))
+
+    async def batch_results(self, batch_id: str, order: str = "submission",
+                            result: bool = True) -> AsyncIterator[Job]:
+        """:meth:`DexrollClient.batch_results`, as an async iterator."""
+        params = {"order": order, "result": "true" if result else "false"}
+        async with self._http.stream("GET", f"{_batch_path(batch_id)}/results",
+                                     params=params, timeout=httpx.Timeout(
+                                         self._http.timeout.connect, read=None)) as response:
+            if not response.is_success:
+                await response.aread()
+                raise error_from_response(response)
+            async for line in response.aiter_lines():
+                job = _batch_line(line)
+                if job is not None:
+                    yield job
+
+    async def plan_many(self, requests: Iterable[RequestLike], *,
+                        progress: Callable[[int, int], None] | None = None
+                        ) -> builtins.list[Job]:
+        """:meth:`DexrollClient.plan_many`, awaited."""
+        batch = await self.submit_batch(requests)
+        jobs: dict[str, Job] = {}
+        async for job in self.batch_results(batch.id, order="finished"):
+            jobs[job.id] = job
+            if progress is not None:
+                progress(len(jobs), batch.size)
+        return [jobs[i] for i in batch.job_ids if i in jobs]
 
     async def plan(self, request: RequestLike, *, timeout: float | None = None,
                    idempotency_key: str | None = None, poll_initial: float = 0.1,
