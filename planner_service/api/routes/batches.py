@@ -20,10 +20,9 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import StreamingResponse
 
-from dexroll_client.models import MAX_BATCH, Batch, BatchRequest, FieldError, JobState
+from dexroll_client.models import MAX_BATCH, Batch, BatchRequest, JobState
 
 from ...jobs.store import JobRow, StorageError, Store
-from ...models_check import CheckerBusyError
 from ..access import OwnerDep
 from ..body import JSONBodyRoute
 from ..deps import (
@@ -34,8 +33,7 @@ from ..deps import (
     StoreDep,
     store_fault_error,
 )
-from ..submission import ModelSubmissions, StoreUnavailableError, checked_apart, submission_errors
-from .plans import QUEUE_FULL_RETRY_AFTER, job_model
+from .plans import QUEUE_FULL_RETRY_AFTER, checked, invalid_request, job_model
 
 __all__ = ["router"]
 
@@ -73,25 +71,13 @@ async def submit_batch(body: BatchRequest, request: Request, owner: OwnerDep,
     refused = store_fault_error(store)
     if refused is not None:
         raise refused
-    models: ModelSubmissions = request.app.state.model_submissions
     items, errors = [], []
-    try:
-        for i, item in enumerate(body.items):
-            run = models.run if checked_apart(item) else asyncio.to_thread
-            checked, errs = await run(submission_errors, item, store, checker, owner)
-            items.append(checked)
-            errors += [(f"items[{i}].{f}", r) for f, r in errs]
-    except CheckerBusyError as exc:
-        raise ServiceError(503, "checker_busy", f"the service is checking other model files: "
-                           f"{exc}", headers={"Retry-After": "2"}) from exc
-    except StoreUnavailableError as exc:
-        raise ServiceError(503, "store_unavailable", f"the job store cannot be read to "
-                           f"look up a warm_start.job_id: {exc}",
-                           headers={"Retry-After": "1"}) from exc
+    for i, item in enumerate(body.items):
+        item, errs = await checked(item, request, store, checker, owner)
+        items.append(item)
+        errors += [(f"items[{i}].{f}", r) for f, r in errs]
     if errors:
-        detail = [FieldError(field=f, reason=r) for f, r in errors]
-        raise ServiceError(422, "invalid_request",
-                           "; ".join(f"{f}: {r}" for f, r in errors[:50]), detail[:50])
+        raise invalid_request(errors)
     room = settings.max_queue + MAX_BATCH - store.count("queued")
     if len(items) > room:
         raise ServiceError(503, "queue_full",

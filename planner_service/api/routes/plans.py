@@ -12,7 +12,7 @@ import asyncio
 from collections.abc import Iterator
 from contextlib import suppress
 from datetime import UTC, datetime
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Header, Query, Request, Response
 from fastapi.responses import StreamingResponse
@@ -41,7 +41,7 @@ from ..submission import (
 )
 from .view import JobLinks, LinkedJob, with_links
 
-__all__ = ["job_model", "router"]
+__all__ = ["checked", "invalid_request", "job_model", "router"]
 
 router = APIRouter(route_class=JSONBodyRoute)
 
@@ -110,6 +110,38 @@ def _row(store: Store, job_id: str, owner: str | None) -> JobRow:
     return row
 
 
+async def checked(body: PlanRequest, request: Request, store: Store, checker: Any,
+                  owner: str | None) -> tuple[PlanRequest, list[tuple[str, str]]]:
+    """A request checked as a submission is (:func:`~..submission.submission_errors`):
+    cheap checks in a thread, a request carrying a model or searching a grasp in a checker
+    process, waiting in threads of its own (the others never wait behind those); a warm
+    start's job id replaced by that job's plan. The request and its (field, reason)
+    errors; a busy checker or an unreadable store is a 503."""
+    models: ModelSubmissions = request.app.state.model_submissions
+    run = models.run if checked_apart(body) else asyncio.to_thread
+    try:
+        return await run(submission_errors, body, store, checker, owner)
+    except CheckerBusyError as exc:
+        raise ServiceError(503, "checker_busy", f"the service is checking other model files: "
+                           f"{exc}", headers={"Retry-After": "2"}) from exc
+    except StoreUnavailableError as exc:
+        raise ServiceError(503, "store_unavailable", f"the job store cannot be read to "
+                           f"look up warm_start.job_id: {exc}",
+                           headers={"Retry-After": "1"}) from exc
+
+
+#: The most fields a 422 of a submission lists.
+MAX_FIELD_ERRORS = 50
+
+
+def invalid_request(errors: list[tuple[str, str]]) -> ServiceError:
+    """The 422 of a submission's (field, reason) errors (the first
+    :data:`MAX_FIELD_ERRORS`)."""
+    shown = errors[:MAX_FIELD_ERRORS]
+    return ServiceError(422, "invalid_request", "; ".join(f"{f}: {r}" for f, r in shown),
+                        [FieldError(field=f, reason=r) for f, r in shown])
+
+
 @router.post("/v1/plans", status_code=201, response_model=LinkedJob,
              responses={202: {"model": LinkedJob, "description": "accepted; poll Location"}})
 async def submit_plan(
@@ -135,26 +167,12 @@ async def submit_plan(
     refused = store_fault_error(store)
     if refused is not None:
         raise refused
-    # cheap checks (no NLP), in a thread: a finger's URDF and the inverse kinematics
-    # of its initial grasp take milliseconds; a warm start's job id is replaced by
-    # that job's plan (the new job is self-contained). A request carrying a model or
-    # searching a grasp is checked in a checker process, waiting in threads of its own:
-    # the others never wait behind those
-    models: ModelSubmissions = request.app.state.model_submissions
-    run = models.run if checked_apart(body) else asyncio.to_thread
-    try:
-        body, errors = await run(submission_errors, body, store, checker, owner)
-    except CheckerBusyError as exc:
-        raise ServiceError(503, "checker_busy", f"the service is checking other model files: "
-                           f"{exc}", headers={"Retry-After": "2"}) from exc
-    except StoreUnavailableError as exc:
-        raise ServiceError(503, "store_unavailable", f"the job store cannot be read to "
-                           f"look up warm_start.job_id: {exc}",
-                           headers={"Retry-After": "1"}) from exc
+    # cheap checks (no NLP): a finger's URDF and the inverse kinematics of its initial
+    # grasp take milliseconds; a warm start's job id is replaced by that job's plan (the
+    # new job is self-contained)
+    body, errors = await checked(body, request, store, checker, owner)
     if errors:
-        detail = [FieldError(field=f, reason=r) for f, r in errors]
-        raise ServiceError(422, "invalid_request",
-                           "; ".join(f"{f}: {r}" for f, r in errors), detail)
+        raise invalid_request(errors)
     capped = min(body.solver.time_limit, settings.max_time_limit)
     body = body.model_copy(update={"solver": body.solver.model_copy(
         update={"time_limit": capped})})
