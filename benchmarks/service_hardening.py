@@ -230,17 +230,23 @@ def bench_clients(svc: Service, n: int, src: Path | None) -> dict[str, Any]:
             "duplicated": listed["total"] - n}
 
 
+def finished_roll(svc: Service) -> tuple[dict[str, Any], dict[str, Any], str]:
+    """The one-finger roll (16 intervals) planned on the service: its request, its
+    finished job and the job's simulation URL."""
+    roll = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
+    roll["n_intervals"] = 16
+    job = httpx.post(f"{svc.url}/v1/plans", params={"wait": 120}, json=roll,
+                     timeout=300).json()
+    assert job["state"] == "succeeded", job
+    return roll, job, f"{svc.url}/v1/plans/{job['id']}/simulation"
+
+
 def bench_simulations(svc: Service, n: int) -> dict[str, Any]:
     """``n`` concurrent long simulations of a one-finger plan (timestep 2e-5 s, settle
     2 s: about 200 000 steps each), every client leaving after 5 s, while GET /healthz,
     /readyz, /v1/plans, the job and /v1/models and a POST of a plan are timed in turn
     (issue 25: the API kept busy for about an hour by 45 of them)."""
-    req = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
-    req["n_intervals"] = 16
-    job = httpx.post(f"{svc.url}/v1/plans", params={"wait": 120}, json=req,
-                     timeout=300).json()
-    assert job["state"] == "succeeded", job
-    sim_url = f"{svc.url}/v1/plans/{job['id']}/simulation"
+    _, job, sim_url = finished_roll(svc)
     httpx.post(sim_url, json={}, timeout=300)  # the simulation process started
     codes: list[str] = []
     lock = threading.Lock()
@@ -386,12 +392,7 @@ def bench_batch(svc: Service, n: int, sims: int) -> dict[str, Any]:
     after 5 s), while GET /healthz, /readyz, /v1/plans, a job and the batch are timed in
     turn until the batch is done (issue 39, item 4: the API's routes within 100 ms p99).
     Then: every job ended once (none lost, none duplicated), the NDJSON stream's lines."""
-    roll = json.loads((ROOT / "examples" / "one_finger_roll.json").read_text())
-    roll["n_intervals"] = 16
-    job = httpx.post(f"{svc.url}/v1/plans", params={"wait": 120}, json=roll,
-                     timeout=300).json()
-    assert job["state"] == "succeeded", job
-    sim_url = f"{svc.url}/v1/plans/{job['id']}/simulation"
+    roll, job, sim_url = finished_roll(svc)
     items = []
     for k in range(n):
         if k % 3 == 2:
