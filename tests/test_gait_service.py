@@ -85,6 +85,39 @@ def test_a_gait_is_planned_and_executed_over_http(live_server: Server) -> None:
                 act = np.array(c.active)[inside]
                 assert act.min() == 0.0
                 assert np.all(np.linalg.norm(np.array(c.force)[inside], axis=1) == 0.0)
+        # the ball's velocity: the rate of its samples' positions and orientations (central
+        # differences within a roll, 10 ms apart: within 5 % of the roll's peak, the
+        # difference's own error in the clock's ramps), at rest while a fingertip is
+        # re-placed; the touching flags: every fingertip but the one a swing carries
+        v = np.array(gait.samples.object_velocity)
+        w = np.array(gait.samples.object_angular_velocity)
+        pos = np.array(gait.samples.object_position)
+        Rs = [_matrix(q) for q in gait.samples.object_orientation_wxyz]
+        for p in gait.phases:
+            inside = np.flatnonzero((t > p.start + 0.02) & (t < p.end - 0.02))
+            if p.kind != "roll":
+                assert np.all(v[inside] == 0.0) and np.all(w[inside] == 0.0)
+                continue
+            v_peak = np.linalg.norm(v[inside], axis=1).max()
+            w_peak = np.linalg.norm(w[inside], axis=1).max()
+            assert w_peak > 0.0
+            for i in inside[1:-1]:
+                dt = t[i + 1] - t[i - 1]
+                fd = (pos[i + 1] - pos[i - 1]) / dt
+                assert np.linalg.norm(fd - v[i]) <= 0.05 * v_peak + 2e-7  # (a held centre)
+                dR = Rs[i + 1] @ Rs[i - 1].T  # the spatial angular velocity's rotation
+                wfd = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0],
+                                dR[1, 0] - dR[0, 1]]) / (2 * dt)
+                assert np.linalg.norm(wfd - w[i]) <= 0.05 * w_peak
+        touched = [p.touching for p in jt.points]
+        for c in gait.samples.contacts:
+            assert c.touching is not None
+            assert c.touching == [c.name in names for names in touched]
+        for p in gait.phases:
+            if p.kind == "swing":
+                c = next(c for c in gait.samples.contacts if c.name == p.lifted_finger)
+                inside = (t >= p.start) & (t < p.end)
+                assert c.touching is not None and not any(np.array(c.touching)[inside])
         # joints continuous, at rest at every switch: no jump between samples beyond what
         # the rates allow, zero rates where a phase ends
         q = np.array([p.positions for p in jt.points])

@@ -53,6 +53,15 @@ class GaitSamples:
     #: every finger's joint torques [N m] (columns as ``q``):
     #: :func:`~ocp.solution.joint_torques`
     effort: FloatArray | None = None
+    #: the object's velocity [m/s] and angular velocity [rad/s] (palm frame): a roll's,
+    #: interpolated in its plan's dense samples and timed by the gait's clock; zero in the
+    #: holds and swings (the object at rest)
+    object_velocity: FloatArray | None = None
+    object_angular_velocity: FloatArray | None = None
+    #: per fingertip (axis 1) whether it touches the object: all but the fingertip a
+    #: swing phase carries (its unloading and loading touch; a switch's time belongs to
+    #: the phase it starts)
+    touching: NDArray[np.bool_] | None = None
 
 
 #: The least time [s] between two samples of a gait's trajectories.
@@ -81,7 +90,9 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
     Q, QD, QDD = (np.zeros((n, int(cut[-1]))) for _ in range(3))
     pos, wxyz = np.zeros((n, 3)), np.zeros((n, 4))
     force, torsion = np.zeros((n, nf, 3)), np.zeros((n, nf))
+    vel, omega = np.zeros((n, 3)), np.zeros((n, 3))
     active = np.ones((n, nf))
+    touching = np.ones((n, nf), dtype=bool)
     pose = problem.initial_pose
     last = (np.asarray(pose.position, dtype=float), pose.rotation)
     phase_of = np.array([next((j for j, p in enumerate(gait.phases) if t <= p.end + 1e-12),
@@ -98,8 +109,12 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
         tl = ts[rows] - ph.start
         if ph.kind == "roll":  # the roll's own polynomials on its clock, every time at once
             Q[rows], QD[rows], QDD[rows] = gait.roll_joints(ph.index, tl)
-            s = gait.clock(ph.index)(tl)[0]
+            s, ds, _ = gait.clock(ph.index)(tl)
             smp = sol.sample(s)
+            for j3 in range(3):  # (the roll's frame change is a fixed right factor: the
+                # palm-frame angular velocity is the roll's own)
+                vel[rows, j3] = ds * np.interp(s, sol.t, sol.object_velocity[:, j3])
+                omega[rows, j3] = ds * np.interp(s, sol.t, sol.object_angular_velocity[:, j3])
             pos[rows] = smp.object_position
             wxyz[rows] = quaternion_wxyz(gait.rotation(ph.index, smp.object_rotation))
             force[rows], torsion[rows] = sol.forces(s)
@@ -119,6 +134,12 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
         else:
             force[rows] = np.array([step.ramp_forces(ph.kind, float(x)) for x in s])
             active[rows, k] = np.maximum(1.0 - s if ph.kind == "unload" else s, TRANSITION)
+    # touching: a switch's time belongs to the phase it starts (the last time to the last
+    # phase): a swing's lift-off instant is the swing's, its landing the load's
+    for i, t in enumerate(ts):
+        ph = next((p for p in gait.phases if p.start <= t < p.end), gait.phases[-1])
+        if ph.kind == "swing" and ph.lifted is not None:
+            touching[i, ph.lifted] = False
     points, normals = np.zeros((n, nf, 3)), np.zeros((n, nf, 3))
     tip_p, tip_q = np.zeros((n, nf, 3)), np.zeros((n, nf, 4))
     for c, f in enumerate(fingers):  # contact_of's line of centres, every sample at once
@@ -132,7 +153,7 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
                                       normals[:, c], force[:, c], torsion[:, c], gravity)
                         for c, f in enumerate(fingers)])
     return GaitSamples(ts, Q, QD, QDD, pos, wxyz, points, normals, force, active, tip_p,
-                       tip_q, torsion, effort)
+                       tip_q, torsion, effort, vel, omega, touching)
 
 
 #: Samples a second at which a gait's links are checked (its rolls' own certificates check

@@ -116,16 +116,10 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
     return gait_result(gait, problem, rate, smp), gait
 
 
-def _touching(gait: GaitPlan, names: list[str], t: np.ndarray) -> list[list[str]]:
-    """At each time, the fingertips touching the ball: all but the one a swing phase has
-    lifted (its unloading and loading touch; a switch's time belongs to the phase it
-    starts, the last time to the last phase)."""
-    out = []
-    for tt in t:
-        ph = next((p for p in gait.phases if p.start <= tt < p.end), gait.phases[-1])
-        lifted = names[ph.lifted] if ph.kind == "swing" and ph.lifted is not None else None
-        out.append([n for n in names if n != lifted])
-    return out
+def _touching(names: list[str], smp: GaitSamples) -> list[list[str]]:
+    """At each sample, the fingertips touching the ball (:attr:`GaitSamples.touching`)."""
+    assert smp.touching is not None
+    return [[n for n, on in zip(names, row, strict=True) if on] for row in smp.touching]
 
 
 def _message(gait: GaitPlan) -> str:
@@ -168,11 +162,16 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float,
         jt = joint_trajectory_model(JointTrajectory(tuple(joint_names), smp.t, smp.q,
                                                     smp.q_dot, smp.q_ddot, (),
                                                     smp.effort),
-                                    _touching(gait, names, smp.t))
+                                    _touching(names, smp))
+        assert smp.touching is not None and smp.object_velocity is not None
+        assert smp.object_angular_velocity is not None
         samples = GaitSamplesModel(
             t=smp.t.tolist(), object_position=rows(smp.object_position),
             object_orientation_wxyz=rows(smp.object_wxyz),
+            object_velocity=rows(smp.object_velocity),
+            object_angular_velocity=rows(smp.object_angular_velocity),
             contacts=[GaitContactModel(name=nm, active=smp.active[:, k].tolist(),
+                                       touching=smp.touching[:, k].tolist(),
                                        point=rows(smp.point[:, k]),
                                        normal=rows(smp.normal[:, k]),
                                        force=rows(smp.force[:, k]))

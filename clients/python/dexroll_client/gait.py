@@ -74,6 +74,10 @@ class GaitContactModel(_Response):
     name: str
     active: list[float] = Field(description="1 touching, 0 lifted clear of the ball, between: "
                                             "its force ramping, or lifting off and landing")
+    touching: list[bool] | None = Field(
+        default=None, description="whether the fingertip touches the ball at each sample "
+                                  "(false while a swing carries it; a switch's time belongs "
+                                  "to the phase it starts)")
     point: Rows = Field(description="where the line of centres meets the ball [m], palm "
                                     "frame (the contact while it touches)")
     normal: Rows = Field(description="the ball's outward normal there")
@@ -101,6 +105,11 @@ class GaitSamplesModel(_Response):
     t: list[float]
     object_position: Rows
     object_orientation_wxyz: Rows
+    object_velocity: Rows | None = Field(default=None, description="the ball's velocity "
+                                                                   "[m/s], palm frame")
+    object_angular_velocity: Rows | None = Field(default=None, description=(
+        "the ball's angular velocity [rad/s], palm frame (zero while a fingertip is "
+        "re-placed: the ball at rest)"))
     contacts: list[GaitContactModel]
     fingers: list[GaitFingerModel]
 
