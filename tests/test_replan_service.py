@@ -275,3 +275,32 @@ def test_a_controller_session_answers_each_tick_with_the_next_window(
             pytest.raises(ControlError) as refused:
         client.controller("no-such-job")
     assert refused.value.error == "rejected"
+
+
+def test_a_controller_session_on_real_time_iterations(
+        live_server: Server, roll: tuple[str, dict[str, Any]]) -> None:
+    """``?backend=rti``: the same session's ticks solved by the RTI backend (each window
+    starts at the measured joints, an HPIPM QP a tick, nearly feasible); an unknown
+    backend is refused before the handshake, naming it."""
+    from dexroll_client.control import ControlError
+
+    job_id, result = roll
+    with DexrollClient.from_url(live_server.url) as client:
+        with client.controller(job_id, backend="rti") as ctl:
+            for t in np.arange(0.5, 0.6, 0.01):
+                body = measured(result, float(t))
+                a = ctl.tick(body["t"], body["q"], body["object_position"],
+                             body["object_wxyz"])
+                assert a.status in ("tracked", "converged"), a
+                assert a.window is not None
+                np.testing.assert_allclose(a.window.q[0][0], body["q"][0], atol=1e-6)
+                assert a.primal_infeasibility is not None and a.primal_infeasibility < 1e-3
+        with pytest.raises(ValueError, match="backend"):  # refused here first
+            client.controller(job_id, backend="acados")
+    # ... and by the service before the handshake (1008, the reason naming it)
+    ws_url = live_server.url.replace("http", "ws", 1)
+    with pytest.raises(ControlError) as refused:
+        from dexroll_client.control import ControlSession
+
+        ControlSession(f"{ws_url}/v1/plans/{job_id}/control?backend=acados", {}, 30.0)
+    assert refused.value.error == "rejected" and "backend" in str(refused.value)

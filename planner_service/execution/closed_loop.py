@@ -586,18 +586,21 @@ def _rate_times(duration: float, rate: float) -> np.ndarray:
 class TrackingSession:
     """A stored plan's window controller in the service's re-plan process (``WebSocket
     /v1/plans/{id}/control``; docs/control.md "Through the service"): the plan planned
-    again warm from its stored result and its :class:`ocp.WindowController`, prepared,
-    kept from tick to tick. ValueError when the request cannot be planned again here."""
+    again warm from its stored result and its :class:`ocp.WindowController` (its
+    ``backend``: :class:`ocp.ControllerOptions`'), prepared, kept from tick to tick.
+    ValueError when the request cannot be planned again here, or the backend cannot solve
+    its window."""
 
-    def __init__(self, request: Any, result: Any) -> None:
-        from ocp import ProblemError, WindowController
+    def __init__(self, request: Any, result: Any, backend: str = "ipopt") -> None:
+        from ocp import ControllerOptions, ProblemError, WindowController
 
         try:
             self.first = stored_first_plan(request, result)
-            self.control = WindowController(self.first.problem, self.first.plan)
+            self.control = WindowController(self.first.problem, self.first.plan,
+                                            ControllerOptions(backend=backend))
+            self.control.prepare()  # (a backend that cannot solve the window says so)
         except ProblemError as exc:
-            raise ValueError(str(exc.errors)) from exc
-        self.control.prepare()
+            raise ValueError("; ".join(f"{f}: {r}" for f, r in exc.errors)) from exc
         self.control.ticks.clear()  # the session keeps no history: a robot ticks for hours
 
     def tick(self, body: Any, setup: float) -> tuple[str, Any]:

@@ -56,8 +56,8 @@ START_TIMEOUT = 120.0
 #: pipes [s].
 CALL_MARGIN = 5.0
 
-#: (job id, the job's end time): a plan as a process keeps it.
-Key = tuple[str, float | None]
+#: (job id, the job's end time[, a controller's backend]): a plan as a process keeps it.
+Key = tuple[str, float | None] | tuple[str, float | None, str]
 
 
 class ReplanRefusedError(Exception):
@@ -114,8 +114,9 @@ def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float
                 if why is not None:
                     conn.send(("not_replannable", why))
                     continue
-                try:
-                    session = session_type(request, result)
+                try:  # (a controller's key ends with its backend)
+                    session = session_type(request, result, *key[2:]) \
+                        if kind == "control" else session_type(request, result)
                 except ValueError as exc:
                     conn.send(("not_replannable", f"its request cannot be planned again "
                                                   f"here: {exc}"))

@@ -569,18 +569,25 @@ class DexrollClient:
         NotFoundError for an unknown id."""
         return self._run(_one(_replan_call(job_id, measured, fields), ReplanResult))
 
-    def controller(self, job_id: str, open_timeout: float = 30.0) -> ControlSession:
+    def controller(self, job_id: str, open_timeout: float = 30.0,
+                   backend: str = "ipopt") -> ControlSession:
         """A controller session on a finished job's rolling plan
         (``WebSocket /v1/plans/{id}/control``, docs/control.md "Through the service"):
         its ``tick(t, q, object_position, object_wxyz)`` answers each measurement with
         the next window of the plan from it (:class:`~dexroll_client.control.ControlAnswer`);
         close it (or use ``with``) when the motion ends. The session's first tick builds
-        the service's controller (seconds: ``setup_time``)."""
+        the service's controller (seconds: ``setup_time``). ``backend``: the window's
+        solver, ``"ipopt"`` (the default), ``"rti"`` (real-time iterations, faster for one
+        fingertip) or ``"auto"`` (docs/control.md)."""
         base = str(self._http.base_url).rstrip("/")
         url = "ws" + base[4:] if base.startswith("http") else base
         headers = {k: v for k, v in self._http.headers.items()
                    if k.lower() in ("authorization", "x-api-key")}
-        return ControlSession(f"{url}{_job_path(job_id)}/control", headers, open_timeout)
+        if backend not in ("ipopt", "rti", "auto"):
+            raise ValueError(f"backend: one of 'ipopt', 'rti', 'auto', not {backend!r}")
+        query = "" if backend == "ipopt" else f"?backend={quote(backend, safe='')}"
+        return ControlSession(f"{url}{_job_path(job_id)}/control{query}", headers,
+                              open_timeout)
 
     def simulation(self, job_id: str) -> SimulationReport:
         """A job's latest simulation report (NotFoundError: none yet)."""

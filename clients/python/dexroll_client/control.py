@@ -116,7 +116,8 @@ class ControlSession:
         except InvalidHandshake as exc:  # the service closed it before the handshake
             raise ControlError("rejected", f"the session was refused: {exc} (an unknown "
                                            "job, one not finished or not a rolling plan, "
-                                           "a missing API key)", []) from exc
+                                           "an unknown backend, a missing API key)",
+                               []) from exc
         self.round_trips: list[float] = []
 
     def tick(self, t: float, q: Any, object_position: Any, object_wxyz: Any,

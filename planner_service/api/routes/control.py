@@ -9,7 +9,9 @@ measurement that does not fit the plan, a state the grasp cannot explain, a busy
 failed process), after which the session goes on. The ticks run in the re-plan
 processes (:class:`~planner_service.jobs.replans.ReplanPool`, kind "control"), which keep
 each plan's :class:`ocp.WindowController` (its NLP, the previous window's point) from
-tick to tick; the first tick builds it (seconds). Before the handshake the job is checked:
+tick to tick; the first tick builds it (seconds). ``?backend=`` picks its solver (ipopt,
+the default; rti; auto: :class:`ocp.ControllerOptions`'). Before the handshake the job is
+checked:
 closed with 1008 (policy) and the reason for an unknown job, one not finished or not
 re-plannable; the API key and Host as for every route (``Access``).
 """
@@ -41,10 +43,18 @@ def _error(error: str, message: str, detail: list[tuple[str, str]] | None = None
                        "detail": [{"field": f, "reason": r} for f, r in detail or []]})
 
 
+#: The window controller's solvers a session may ask for (``?backend=``; docs/control.md)
+BACKENDS = ("ipopt", "rti", "auto")
+
+
 @router.websocket("/v1/plans/{job_id}/control")
-async def control_plan(websocket: WebSocket, job_id: str) -> None:
+async def control_plan(websocket: WebSocket, job_id: str, backend: str = "ipopt") -> None:
     store = websocket.app.state.store
     owner = getattr(websocket.state, "owner", None)
+    if backend not in BACKENDS:
+        await websocket.close(code=1008, reason=f"invalid_request: backend: one of "
+                                                f"{', '.join(BACKENDS)}, not {backend!r}"[:120])
+        return
     try:
         row, fetch = await replannable_job(store, job_id, owner, "it can be controlled")
     except ServiceError as exc:
@@ -67,7 +77,7 @@ async def control_plan(websocket: WebSocket, job_id: str) -> None:
                 continue
             try:
                 answer = await loop.run_in_executor(
-                    pool.executor, pool.call, (job_id, row.finished_at),
+                    pool.executor, pool.call, (job_id, row.finished_at, backend),
                     body.model_dump_json(), TICK_TIME_LIMIT, fetch, "control")
             except ReplanRefusedError as exc:
                 await websocket.send_text(_error(exc.error, exc.message, exc.detail))
