@@ -109,6 +109,19 @@ def test_a_gait_is_planned_and_executed_over_http(live_server: Server) -> None:
                 wfd = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0],
                                 dR[1, 0] - dR[0, 1]]) / (2 * dt)
                 assert np.linalg.norm(wfd - w[i]) <= 0.05 * w_peak
+        # the tips' bodies: where a fingertip touches, its cap's surface meets the ball's
+        # (the distance from the ball's centre to its cap's centre is the two radii)
+        rho = float(small()["object"]["dimensions"][0])
+        for f, c in zip(gait.samples.fingers, gait.samples.contacts, strict=True):
+            assert f.tip is not None and f.tip.kind in ("sphere", "capsule")
+            a = np.array(f.tip.a)
+            cap = [np.array(p_) + _matrix(q_) @ a
+                   for p_, q_ in zip(f.tip_position, f.tip_orientation_wxyz, strict=True)]
+            gap = np.linalg.norm(np.array(cap) - pos, axis=1) - rho - f.tip.radius
+            on = np.array(c.touching, dtype=bool)
+            assert on.any() and np.abs(gap[on]).max() < 1e-5, np.abs(gap[on]).max()
+            if (~on).any():
+                assert gap[~on].max() > 1e-4  # lifted clear somewhere in its swing
         touched = [p.touching for p in jt.points]
         for c in gait.samples.contacts:
             assert c.touching is not None

@@ -17,6 +17,7 @@ from dexroll_client.models import (
     GaitPhaseModel,
     GaitResultModel,
     GaitSamplesModel,
+    GaitTipModel,
     ManipulationCertificateModel,
     ManipulationRequest,
     ManipulationResult,
@@ -32,6 +33,7 @@ from ocp.gait.samples import (
     gait_times,
     with_link_clearance,
 )
+from ocp.geometry.bodies import tip_body
 from ocp.solution import JointTrajectory, trajectory_joint_names
 from ocp.spec.grasp import ManipulationProblem
 
@@ -116,6 +118,13 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
     return gait_result(gait, problem, rate, smp), gait
 
 
+def _tip(finger: Any) -> GaitTipModel:
+    """A finger's tip body on the wire (:func:`ocp.geometry.bodies.tip_body`)."""
+    body = tip_body(finger)
+    return GaitTipModel(kind=finger.tip_surface.kind, radius=float(body.r),
+                        a=[float(v) for v in body.a], b=[float(v) for v in body.b])
+
+
 def _touching(names: list[str], smp: GaitSamples) -> list[list[str]]:
     """At each sample, the fingertips touching the ball (:attr:`GaitSamples.touching`)."""
     assert smp.touching is not None
@@ -178,8 +187,10 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float,
                       for k, nm in enumerate(names)],
             fingers=[GaitFingerModel(name=nm, tip_position=rows(smp.tip_position[:, k]),
                                      tip_orientation_wxyz=rows(smp.tip_wxyz[:, k]),
+                                     tip=_tip(tip.finger),
                                      joint_names=list(joint_names[cut[k]:cut[k + 1]]))
-                     for k, nm in enumerate(names)])
+                     for k, (nm, tip) in enumerate(zip(names, problem.fingers,
+                                                       strict=True))])
     block = GaitResultModel(
         phases=[GaitPhaseModel(kind=p.kind, start=p.start, end=p.end,
                                touching=list(p.touching),

@@ -10,8 +10,15 @@ from pydantic import Field
 
 from dexroll_client.common import Real, _Request, _Response
 
-__all__ = ["GaitContactModel", "GaitFingerModel", "GaitModel", "GaitPhaseModel",
-           "GaitResultModel", "GaitSamplesModel"]
+__all__ = [
+    "GaitContactModel",
+    "GaitFingerModel",
+    "GaitModel",
+    "GaitPhaseModel",
+    "GaitResultModel",
+    "GaitSamplesModel",
+    "GaitTipModel",
+]
 
 
 class GaitModel(_Request):
@@ -85,12 +92,25 @@ class GaitContactModel(_Response):
                                     "[N], palm frame (zero while lifted)")
 
 
+class GaitTipModel(_Response):
+    """A fingertip's body in its tip frame (the frame ``tip_position`` and
+    ``tip_orientation_wxyz`` give): the segment from ``a`` (the cap's centre, where
+    contacts are) to ``b`` [m] swept by a sphere of ``radius`` [m] (a sphere tip: a = b)."""
+
+    kind: Literal["sphere", "capsule"]
+    radius: float
+    a: list[float]
+    b: list[float]
+
+
 class GaitFingerModel(_Response):
     """A finger's tip frame over the gait (its joints: the result's joint_trajectory)."""
 
     name: str
     tip_position: Rows
     tip_orientation_wxyz: Rows
+    tip: GaitTipModel | None = Field(default=None, description="the fingertip's body in "
+                                                               "that frame")
     joint_names: list[str] = Field(
         default_factory=list,
         description="this finger's columns of the result's joint_trajectory, by name (the "

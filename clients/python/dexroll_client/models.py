@@ -48,6 +48,7 @@ from dexroll_client.gait import (
     GaitPhaseModel,
     GaitResultModel,
     GaitSamplesModel,
+    GaitTipModel,
 )
 from dexroll_client.jobs import ErrorBody, Job, JobList, JobState
 from dexroll_client.requests import (
@@ -180,6 +181,7 @@ __all__ = [
     "GaitPhaseModel",
     "GaitResultModel",
     "GaitSamplesModel",
+    "GaitTipModel",
     "GraspFingerModel",
     "GraspModel",
     "GraspSearchModel",
