@@ -42,7 +42,6 @@ from ocp.certify.certificate import Certificate
 from ocp.solution import Collocation, ManipulationSolution, Status
 from ocp.solve.attempt import Setup, collocation_of, finish, initial_point, setup
 from ocp.solve.backend import WINDOW_BACKENDS, window_backend
-from ocp.solve.rti import rti_support
 from ocp.spec.grasp import ManipulationProblem, contact_charts
 from ocp.spec.motion import Tracking
 from ocp.spec.problem import ProblemError
@@ -64,6 +63,14 @@ PREPARE_ITERATIONS = 50
 SELECT_TICKS = 10
 
 
+def _window_points(c: Collocation) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """A window's collocation points in time order: their times (nodes and midpoints),
+    states and inputs."""
+    tp = np.concatenate([c.t_nodes, (c.t_nodes[:-1] + c.t_nodes[1:]) / 2])
+    order = np.argsort(tp)
+    xp = np.vstack([c.X, c.Xm])[order]
+    up = np.vstack([np.vstack([c.U0, c.U1[-1:]]), c.Um])[order]
+    return tp[order], xp, up
 
 
 @dataclass(frozen=True)
@@ -180,7 +187,7 @@ class Tick:
     _setup: Setup | None = field(default=None, repr=False)
     _point: NlpPoint | None = field(default=None, repr=False)
     _w: FloatArray | None = field(default=None, repr=False)
-    _raw: tuple[Status, str, float] | None = field(default=None, repr=False)
+    _raw: tuple[Status, str, float, str] | None = field(default=None, repr=False)
 
     @property
     def certified(self) -> bool | None:
@@ -329,14 +336,14 @@ class WindowController:
         ts = [min(k * 0.01, self.duration) for k in range(1, SELECT_TICKS + 1)]
         made: dict[str, Any] = {}
         for name in WINDOW_BACKENDS:
-            if name == "rti":
-                why = rti_support(self._setup(self.window(0.0), self.state_at(0.0)[0]))
-                if why is not None:
-                    measured[name] = {"unsupported": why}
-                    continue
-            self.backend = made[name] = window_backend(
-                name, gauss_newton=o.gauss_newton, warm_push=o.warm_push,
-                compile_dir=self.planner.compile_dir)
+            backend = window_backend(name, gauss_newton=o.gauss_newton,
+                                     warm_push=o.warm_push,
+                                     compile_dir=self.planner.compile_dir)
+            why = backend.unsupported(self._setup(self.window(0.0), self.state_at(0.0)[0]))
+            if why is not None:
+                measured[name] = {"unsupported": why}
+                continue
+            self.backend = made[name] = backend
             self._last, self._prepared, self._unsettled = None, None, 0
             self._converge()
             walls, preps = [], []
@@ -386,7 +393,7 @@ class WindowController:
             "converged" if r.status is Status.SOLVED else "tracked"
         out = Tick(t, status, problem.duration, col if ok else None, r.iterations, r.time,
                    0.0, primal, dual, r.raw, prepare_time=prepare_time, _setup=s,
-                   _point=r.point, _w=r.w, _raw=(r.status, r.raw, r.objective))
+                   _point=r.point, _w=r.w, _raw=(r.status, r.raw, r.objective, r.solver))
         out.wall_time = time.perf_counter() - t_start
         if ok:
             self._last = out
@@ -400,15 +407,12 @@ class WindowController:
         took. A controller calls it right after sending a tick's input. Nothing to
         prepare for IPOPT (0)."""
         last = self._last
-        if last is None or last.collocation is None or self.backend.name == "ipopt":
+        if last is None or last.collocation is None or not self.backend.prepares:
             return 0.0
         t0 = time.perf_counter()
-        c = last.collocation
-        tp = np.concatenate([c.t_nodes, (c.t_nodes[:-1] + c.t_nodes[1:]) / 2])
-        xp = np.vstack([c.X, c.Xm])
-        order = np.argsort(tp)
+        tp, xp, _ = _window_points(last.collocation)
         dt = min(max(t - last.t, 0.0), float(tp[-1]))
-        x = np.array([np.interp(dt, tp[order], xp[order, j]) for j in range(xp.shape[1])])
+        x = np.array([np.interp(dt, tp, xp[:, j]) for j in range(xp.shape[1])])
         s = self._setup(self.window(t), x)
         self.backend.prepare(s, self._warm_point(s, self._guess(t, s), last._point))
         wall = time.perf_counter() - t0
@@ -435,7 +439,7 @@ class WindowController:
         base = self._base
         if base is None:  # (every window has the same horizon and grid)
             base = setup(self.planner, problem, x)
-            why = rti_support(base) if self.backend.name == "rti" else None
+            why = self.backend.unsupported(base)
             if why is not None:
                 raise ProblemError([("options.backend", why)])
             self._base = base
@@ -471,12 +475,8 @@ class WindowController:
         Xm, Um = ref.at(tm)
         prev = self._last
         if self.options.shift_warm and prev is not None and prev.collocation is not None:
-            c, dt = prev.collocation, t - prev.t
-            tp = np.concatenate([c.t_nodes, (c.t_nodes[:-1] + c.t_nodes[1:]) / 2])
-            order = np.argsort(tp)
-            tp = tp[order]
-            xp = np.vstack([c.X, c.Xm])[order]
-            up = np.vstack([np.vstack([c.U0, c.U1[-1:]]), c.Um])[order]
+            dt = t - prev.t
+            tp, xp, up = _window_points(prev.collocation)
 
             def shift(values: FloatArray, base: FloatArray, ts: FloatArray) -> FloatArray:
                 inside = ts + dt <= tp[-1]
@@ -509,11 +509,9 @@ class WindowController:
             raise ValueError(f"the tick at t = {tick.t:g} s solved no window ({tick.status})")
         from ocp.solve.attempt import IpoptRun
 
-        status, raw, objective = tick._raw
-        if not math.isfinite(objective):  # (the RTI backend does not evaluate it)
-            objective = float(tick._setup.nlp.oracle(tick._w, tick._setup.p)[0])
+        status, raw, objective, solver = tick._raw
         r = IpoptRun(status, raw, tick.iterations, objective, 0.0, tick._w, tick.solve_time,
-                     tick._point, self.backend.name)
+                     tick._point, solver)
         sol = finish(tick._setup, [r], tick.solve_time, math.inf, certify)
         if certify:
             tick.certificate = sol.certificate

@@ -6,7 +6,8 @@ iteration budget, from the previous window's point. Every solver does it through
 
 * ``prepare(s, w)``: work that can be done before the tick's state is measured, at the
   window's guess ``w`` for the setup ``s`` it will have (its parameters: the reference at
-  the tick's time); the wall time [s] it took (0: nothing to prepare);
+  the tick's time); the wall time [s] it took (``prepares`` False: nothing to prepare);
+* ``unsupported(s)``: why it cannot solve the window ``s`` (None: it can);
 * ``solve(s, w0, point, deadline, max_iter)``: the tick itself, the measured state in
   ``s``'s bounds, from ``w0`` and the previous window's primal-dual ``point``: the run
   (:class:`~ocp.solve.attempt.IpoptRun`, the status in our :class:`~ocp.solution.Status`:
@@ -45,9 +46,15 @@ FloatArray = NDArray[np.float64]
 
 
 class WindowBackend(Protocol):
-    """A window's solver (see the module)."""
+    """A window's solver (see the module): its ``name``; whether its ``prepare`` does any
+    work (``prepares``: the controller then predicts the next window's start for it); why
+    it cannot solve a window (``unsupported``: None when it can)."""
 
     name: str
+    prepares: bool
+
+    def unsupported(self, s: Setup) -> str | None:
+        ...
 
     def prepare(self, s: Setup, w: FloatArray) -> float:
         ...
@@ -63,9 +70,14 @@ class IpoptWindow:
     prepare; the residuals are the KKT conditions' (:func:`~ocp.solve.ipopt.kkt_residuals`)."""
 
     name = "ipopt"
+    prepares = False
 
     def __init__(self, gauss_newton: bool = False, push: float | None = None) -> None:
         self.gauss_newton, self.push = gauss_newton, push
+
+    @staticmethod
+    def unsupported(s: Setup) -> str | None:
+        return None
 
     def prepare(self, s: Setup, w: FloatArray) -> float:
         return 0.0

@@ -123,8 +123,8 @@ class ShootingWindow:
         nlp, m = s.nlp, s.model
         self.fingerprint = nlp.fingerprint
         hs = nlp.hs
-        n = self.n = hs.n_intervals
-        nx, nu = self.nx, self.nu = m.nx, m.nu
+        n = hs.n_intervals
+        nx, nu = m.nx, m.nu
         pm = m.phase((True,) * len(m.fingertips))
         n_s, n_f = nlp.n_epigraph, 3 * nlp.n_force + LOAD_VARS * nlp.n_load
         npts = 2 * n + 1
@@ -140,7 +140,6 @@ class ShootingWindow:
         nz, na = nx + nu, 2 * nu
         nvk = na + 2 * (n_s + n_f)  # u_m, u_1, (s, f) at the node and at the midpoint
         nvN = n_s + n_f
-        self.nz, self.nvk, self.nvN = nz, nvk, nvN
 
         # -- symbols ------------------------------------------------------------------
         decl = nlp.params
@@ -237,8 +236,8 @@ class ShootingWindow:
         assert point.keep0 is not None
         free0 = np.ones(point.n_rows, dtype=bool)
         free0[point.keep0] = False
-        self.lo_k, self.hi_k = np.concatenate(lo), np.concatenate(hi)
-        self.free0 = np.flatnonzero(free0)
+        lo_k, hi_k = np.concatenate(lo), np.concatenate(hi)
+        free0_rows = np.flatnonzero(free0)
         F = ca.vertcat(x1, u1)
         zv = ca.vertcat(z, v)
         G = ca.vertcat(F, c_rows)
@@ -246,7 +245,7 @@ class ShootingWindow:
         stage_k = ca.Function("stage", [z, v, pk, p],
                               [G, ca.jacobian(G, zv), ca.gradient(cost, zv), H, cost])
         values_k = ca.Function("stage_values", [z, v, pk, p], [G, cost])
-        self.mid = ca.Function("midpoint", [z, v, p], [xm, um]).map(n)
+        self.mid = ca.Function("midpoint", [z, v, p], [xm]).map(n)
         # -- the last node's stage -----------------------------------------------------
         zN, vN = ca.SX.sym("zN", nz), ca.SX.sym("vN", nvN)
         xN, uN = zN[:nx], zN[nx:]
@@ -259,8 +258,8 @@ class ShootingWindow:
                               [GN_all, ca.jacobian(GN_all, zvN), ca.gradient(costN, zvN),
                                ca.hessian(costN, zvN)[0], costN])
         values_N = ca.Function("stage_last_values", [zN, vN, pN, p], [GN_all, costN])
-        self.lo_N = np.concatenate([point.lo, [0.0] * n_rate])
-        self.hi_N = np.concatenate([point.hi, [0.0] * n_rate])
+        lo_N = np.concatenate([point.lo, [0.0] * n_rate])
+        hi_N = np.concatenate([point.hi, [0.0] * n_rate])
 
         # -- the whole window: W = (z_0, v_0, ..., z_N-1, v_N-1, z_N, v_N, z_N+1) --------
         nW = n * (nz + nvk) + nz + nvN + nz
@@ -290,7 +289,6 @@ class ShootingWindow:
         GNv, cNv = values_N(zN_, vN_, PN, P)
         nck = int(G.numel()) - nz
         ncN = int(GN_all.numel()) - nz
-        self.nck, self.ncN = nck, ncN
         cols_k = nz + nvk
         J_blocks = [Js[:, k * cols_k:(k + 1) * cols_k] for k in range(n)]
         H_blocks = [Hs[:, k * cols_k:(k + 1) * cols_k] for k in range(n)]
@@ -314,7 +312,6 @@ class ShootingWindow:
             rows_gap += list(range(r, r + nz))
             cols_gap += [int(c) for c in nxt[k]]
             r += nz + (nck if k < n else ncN)
-        self.n_rows = r
         E = ca.DM(ca.Sparsity.triplet(r, nW, rows_gap, cols_gap), -1.0)
         J = J + E
         g = ca.vertcat(ca.vec(Gs), GN_) + ca.mtimes(E, Wm)
@@ -324,17 +321,14 @@ class ShootingWindow:
         self.rows = ca.Function("rti_rows", [Wm, P],
                                 [ca.vertcat(ca.vec(Gv), GNv) + ca.mtimes(E, Wm),
                                  ca.sum2(cv) + cNv])
-        gap = np.zeros(r, dtype=bool)
-        gap[rows_gap] = True
-        self.gap = gap
         lbg, ubg = np.zeros(r), np.zeros(r)
         r = 0
         for k in range(n + 1):
             r += nz
-            lo_, hi_ = (self.lo_k, self.hi_k) if k < n else (self.lo_N, self.hi_N)
+            lo_, hi_ = (lo_k, hi_k) if k < n else (lo_N, hi_N)
             lbg[r:r + len(lo_)], ubg[r:r + len(hi_)] = lo_, hi_
             if k == 0:
-                lbg[r + self.free0], ubg[r + self.free0] = -np.inf, np.inf
+                lbg[r + free0_rows], ubg[r + free0_rows] = -np.inf, np.inf
             r += len(lo_)
         self.lbg, self.ubg = lbg, ubg
         self.qp = ca.conic("rti_qp", "hpipm", {"h": self.lin.sparsity_out(3),
@@ -364,8 +358,7 @@ class ShootingWindow:
         to_w[self.vN_at[:n_s]] = Si[:, n]
         to_w[self.vN_at[n_s:]] = Fi[:, n]
         self.to_w = to_w
-        self.Xmi, self.Umi = Xmi, Umi
-        self.Ui = Ui
+        self.Xmi = Xmi
         #: whether the functions run compiled (``compile_dir``: C generated, compiled with
         #: gcc, cached there; the virtual machine when there is no compiler)
         self.compiled = False
@@ -399,16 +392,12 @@ class ShootingWindow:
     def collocation_point(self, W: FloatArray, p: FloatArray, w_base: FloatArray
                           ) -> FloatArray:
         """The collocation NLP's point of the shooting variables ``W`` (``w_base`` gives
-        what the shooting does not have): nodes, inputs, epigraph and forces, and the
-        midpoints' states and inputs (the Hermite midpoint, the linear input)."""
+        what the shooting does not have): nodes, inputs (the midpoints' among the
+        controls), epigraph and forces, and the midpoints' states (the Hermite midpoint)."""
         w = w_base.copy()
         mapped = self.to_w >= 0
         w[self.to_w[mapped]] = W[mapped]
-        Z = W[self.z_at]
-        V = W[self.v_at]
-        xm, um = self.mid(Z, V, p)
-        w[self.Xmi] = np.asarray(xm)
-        w[self.Umi] = np.asarray(um)
+        w[self.Xmi] = np.asarray(self.mid(W[self.z_at], W[self.v_at], p))
         return w
 
 
@@ -435,6 +424,8 @@ class RtiBackend:
     time), else linearises first (within the tick)."""
 
     name = "rti"
+    #: its preparation linearises the next window (:meth:`prepare`)
+    prepares = True
 
     def __init__(self, force_regularisation: float = 1e-3,
                  compile_dir: Path | None = None) -> None:
@@ -443,6 +434,11 @@ class RtiBackend:
         #: where the windows' functions are compiled and cached (None: the virtual machine)
         self.compile_dir = compile_dir
         self._prepared: Linearisation | None = None
+
+    @staticmethod
+    def unsupported(s: Any) -> str | None:
+        """Why this backend cannot solve the window ``s`` (:func:`rti_support`)."""
+        return rti_support(s)
 
     def window(self, s: Any) -> ShootingWindow:
         why = rti_support(s)

@@ -413,11 +413,9 @@ class Store:
                          (batch_id,)).fetchone()
         if row is None or (owner is not None and row["owner"] != owner):
             return None
-        head = ", ".join(f"j.{c.strip()}" if " AS " not in c else c
-                         for c in _HEAD.split(", "))
-        rows = db.execute(
-            f"SELECT {head} FROM batch_jobs b JOIN jobs j ON j.id = b.job_id "
-            "WHERE b.batch_id = ? ORDER BY b.idx", (batch_id,)).fetchall()
+        rows = db.execute(  # (no column of batch_jobs is named as one of jobs)
+            f"SELECT {_HEAD} FROM batch_jobs JOIN jobs ON jobs.id = batch_jobs.job_id "
+            "WHERE batch_jobs.batch_id = ? ORDER BY batch_jobs.idx", (batch_id,)).fetchall()
         return float(row["created_at"]), int(row["size"]), [JobRow.of(r) for r in rows]
 
     # -- simulation reports (docs/simulation.md) -------------------------------------------
