@@ -5,7 +5,10 @@
 | DEXROLL_HOST | 127.0.0.1 | address to listen on |
 | DEXROLL_PORT | 8000 | port |
 | DEXROLL_DATA_DIR | ./data | folder of the SQLite job store (created) |
-| DEXROLL_WORKERS | CPU count | solver worker processes |
+| DEXROLL_WORKERS | CPU count | solver workers (processes, or Ray actors) |
+| DEXROLL_EXECUTOR | local | where workers run: `local` processes or `ray` actors |
+| DEXROLL_RAY_ADDRESS | auto | the Ray cluster of the `ray` executor (`ray start`'s address) |
+| DEXROLL_RETRIES | 1 | times a job is queued again when its worker is lost under it |
 | DEXROLL_MAX_TIME_LIMIT | 120 | cap on a request's solver.time_limit [s] |
 | DEXROLL_KILL_GRACE | 5 | extra time before a worker past its time limit is killed [s] |
 | DEXROLL_MAX_QUEUE | 64 | queued jobs accepted before POST answers 503 |
@@ -57,6 +60,7 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
+from typing import Literal
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -73,6 +77,10 @@ class Settings(BaseSettings):
     port: int = Field(default=8000, ge=0, le=65535)
     data_dir: Path = Path("data")
     workers: int = Field(default_factory=lambda: max(1, os.cpu_count() or 1), ge=1, le=256)
+    #: where the solver workers run (planner_service.executors): "local" or "ray"
+    executor: Literal["local", "ray"] = "local"
+    ray_address: str = "auto"
+    retries: int = Field(default=1, ge=0, le=10)
     max_time_limit: float = Field(default=120.0, gt=0.0, le=3600.0)
     kill_grace: float = Field(default=5.0, ge=0.0, le=600.0)
     max_queue: int = Field(default=64, ge=1, le=100_000)

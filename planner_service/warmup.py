@@ -29,7 +29,7 @@ from .planners import (
     request_errors,
 )
 
-__all__ = ["request_files", "warm", "warm_up"]
+__all__ = ["request_files", "warm", "warm_text", "warm_up"]
 
 log = logging.getLogger("dexroll.warmup")
 
@@ -65,13 +65,29 @@ def warm_up(files: Iterable[Path], palm: BallOnPalmPlanner, fingers: FingerCache
     done: list[tuple[str, float]] = []
     for path in files:
         try:
-            request = REQUEST.validate_python(json.loads(path.read_text(encoding="utf-8")))
-            errors = request_errors(request, fingers)
-            if errors:
-                log.warning("warm-up: %s is not a valid request (%s); skipped", path,
-                            "; ".join(f"{f}: {r}" for f, r in errors))
-                continue
-            done.append((path.name, warm(request, palm, fingers)))
-        except (OSError, ValueError, ValidationError, ProblemError) as exc:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
             log.warning("warm-up: %s skipped: %s", path, exc)
+            continue
+        built = warm_text(path.name, text, palm, fingers)
+        if built is not None:
+            done.append((path.name, built))
     return done
+
+
+def warm_text(name: str, text: str, palm: BallOnPalmPlanner, fingers: FingerCache
+              ) -> float | None:
+    """Warm the request of the JSON ``text`` (from the file ``name``): its build time
+    [s], or None when it is not a valid request (logged: a warm-up never stops a worker).
+    Workers on other machines (a Ray cluster) are sent the text, not the file's path."""
+    try:
+        request = REQUEST.validate_python(json.loads(text))
+        errors = request_errors(request, fingers)
+        if errors:
+            log.warning("warm-up: %s is not a valid request (%s); skipped", name,
+                        "; ".join(f"{f}: {r}" for f, r in errors))
+            return None
+        return warm(request, palm, fingers)
+    except (ValueError, ValidationError, ProblemError) as exc:
+        log.warning("warm-up: %s skipped: %s", name, exc)
+        return None

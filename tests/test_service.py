@@ -186,15 +186,23 @@ def test_too_short_time_limit_times_out_and_service_stays_healthy(live_server: S
     assert_certified_triangle(post(live_server, TRIANGLE, wait=60).json())
 
 
-def test_killed_worker_fails_its_job_with_reason_and_next_job_succeeds(live_server: Server
-                                                                       ) -> None:
+def test_a_job_whose_worker_is_lost_is_queued_again_once_then_fails_with_reason(
+        live_server: Server) -> None:
+    """A worker killed under a job puts it back in the queue (DEXROLL_RETRIES=1); killed
+    again, the job fails worker_died naming the process and how it died; the next job
+    succeeds."""
     job = post(live_server, SLOW, wait=0.0).json()
-    job = wait_until(live_server, job["id"],
-                     lambda j: j["state"] == "running" and j["worker_pid"] is not None)
-    os.kill(job["worker_pid"], signal.SIGKILL)
+    first = wait_until(live_server, job["id"],
+                       lambda j: j["state"] == "running" and j["worker_pid"] is not None)
+    os.kill(first["worker_pid"], signal.SIGKILL)
+    second = wait_until(live_server, job["id"],
+                        lambda j: j["state"] == "running" and j["worker_pid"] is not None
+                        and j["worker_pid"] != first["worker_pid"])
+    os.kill(second["worker_pid"], signal.SIGKILL)
     job = wait_until(live_server, job["id"], terminal)
     assert job["state"] == "failed" and job["code"] == "worker_died"
-    assert str(job["worker_pid"]) in job["message"] and "exit code" in job["message"]
+    assert str(second["worker_pid"]) in job["message"] and "exit code -9" in job["message"]
+    assert "attempt 2" in job["message"]
     assert_certified_triangle(post(live_server, TRIANGLE, wait=60).json())
 
 

@@ -32,6 +32,7 @@ from typing import Any
 from fastapi import FastAPI
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from ..executors import executor
 from ..jobs.replans import ReplanPool
 from ..jobs.simulations import SimulationPool
 from ..jobs.store import Store
@@ -103,7 +104,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         dispatcher = Dispatcher(
             store, settings.workers, settings.kill_grace, notifier.notify, settings.warmup,
             None if settings.compile_dir is None else str(settings.compile_dir.resolve()),
-            settings.max_result_bytes, warmup_first=settings.warmup_first)
+            settings.max_result_bytes, warmup_first=settings.warmup_first,
+            executor=executor(settings.executor, settings.ray_address),
+            retries=settings.retries)
         dispatcher.housekeeping = purge
         dispatcher.start()
         checker = ModelChecker(settings.model_limits(), settings.model_checkers)

@@ -37,6 +37,7 @@ __all__ = [
     "add_error_handlers",
     "error_response",
     "store_fault_error",
+    "unavailable_error",
 ]
 
 log = logging.getLogger("dexroll.service")
@@ -164,6 +165,23 @@ def error_response(status: int, error: str, message: str,
 #: Retry-After of an answer refused because the job store cannot be written [s]: the
 #: dispatcher probes the store every second and resumes as soon as a write succeeds.
 STORE_RETRY_AFTER = 5
+
+
+#: Retry-After of a submission refused while no worker can be started [s]: the dispatcher
+#: tries again with a back-off of at most 30 s.
+UNAVAILABLE_RETRY_AFTER = 10
+
+
+def unavailable_error(dispatcher: Dispatcher) -> ServiceError | None:
+    """The 503 that refuses new jobs while no worker is ready and none can be started (a
+    Ray cluster that went away); None: jobs can be run."""
+    reason = dispatcher.unavailable()
+    if reason is None:
+        return None
+    return ServiceError(503, "workers_unavailable",
+                        f"no solver worker can run jobs now: {reason}; jobs already "
+                        "queued wait, new ones are refused until a worker is ready",
+                        headers={"Retry-After": str(UNAVAILABLE_RETRY_AFTER)})
 
 
 def store_fault_error(store: Store) -> ServiceError | None:

@@ -15,7 +15,6 @@ sorted by (family, problem id, method).
 from __future__ import annotations
 
 import contextlib
-import json
 import multiprocessing as mp
 import os
 import threading
@@ -26,6 +25,7 @@ from multiprocessing.connection import Connection
 from multiprocessing.connection import wait as mp_wait
 from typing import Any
 
+from ..planners.structure import structure_key
 from .rows import error_row, row_from_result, run_unit
 from .suite import PEER_METHODS, Unit
 
@@ -82,22 +82,10 @@ def dispatch_order(units: list[Unit]) -> list[Unit]:
 
 
 def affinity_key(unit: Unit) -> str:
-    """What decides which cached NLPs a unit needs (close to the planners' own structure
-    keys): units with the same key reuse the NLPs a worker built for the first of them."""
-    r = unit.request
-    goal = sorted(r.get("goal", {}))
-    vias = len(r.get("via_points", []))
-    shape = r.get("object", {}).get("shape", "sphere")
-    n = r.get("n_intervals", 50)
-    if unit.planner == "manipulation":
-        fingers = json.dumps([f.get("finger") or f.get("hand_finger") for f in r["fingers"]],
-                             sort_keys=True)
-        return json.dumps(["manipulation", unit.method, shape, n, r.get("hand"), fingers,
-                           r.get("palm") is not None])
-    if unit.planner == "one_finger":
-        return json.dumps(["one_finger", unit.method, shape, n, goal, vias,
-                           r.get("finger")], sort_keys=True)
-    return json.dumps([unit.planner, unit.method, shape, n, goal, vias])
+    """What decides which cached NLPs a unit needs: the service's own structure key
+    (:func:`planner_service.planners.structure.structure_key`), with the unit's method.
+    Units with the same key reuse the NLPs a worker built for the first of them."""
+    return structure_key(unit.planner, unit.request, unit.method)
 
 
 class Scheduler:

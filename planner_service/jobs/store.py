@@ -29,7 +29,7 @@ import sqlite3
 import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -80,7 +80,8 @@ CREATE TABLE IF NOT EXISTS batch_jobs (
 """
 #: Columns added since the first schema (an older store file gains them when opened).
 _MIGRATIONS = {"owner": "ALTER TABLE jobs ADD COLUMN owner TEXT NOT NULL DEFAULT ''",
-               "has_plan": "ALTER TABLE jobs ADD COLUMN has_plan INTEGER"}
+               "has_plan": "ALTER TABLE jobs ADD COLUMN has_plan INTEGER",
+               "structure": "ALTER TABLE jobs ADD COLUMN structure TEXT NOT NULL DEFAULT ''"}
 _INDEXES = """
 CREATE INDEX IF NOT EXISTS jobs_by_owner ON jobs(owner, created_at);
 CREATE INDEX IF NOT EXISTS jobs_by_finish ON jobs(finished_at);
@@ -91,6 +92,10 @@ CHUNK = 1 << 16
 ACTIVE = ("queued", "running")
 #: A job interrupted this many times by service restarts is failed instead of re-run.
 MAX_ATTEMPTS = 3
+#: How many of the oldest queued jobs a worker's claim looks through for one whose
+#: structure it holds (:meth:`Store.claim_next`): a job waits behind at most this many
+#: younger ones.
+CLAIM_WINDOW = 32
 
 
 class StorageError(sqlite3.OperationalError):
@@ -142,6 +147,10 @@ class JobRow:
     owner: str = ""
     #: whether the result holds a plan to show (None: not known, a store before it)
     has_plan: int | None = None
+    #: the request's structure key (planner_service.planners.structure; '': not known)
+    structure: str = ""
+    #: times a worker has taken it
+    attempts: int = 0
 
     @staticmethod
     def of(row: sqlite3.Row) -> JobRow:
@@ -152,7 +161,7 @@ class JobRow:
 #: The columns of a job without its result (its size instead).
 _HEAD = ("id, planner, '' AS request, time_limit, state, code, message, raw_status, "
          "NULL AS result, created_at, started_at, finished_at, worker_pid, owner, has_plan, "
-         "length(CAST(result AS BLOB)) AS result_bytes")
+         "structure, attempts, length(CAST(result AS BLOB)) AS result_bytes")
 
 
 def request_hash(body: str) -> str:
@@ -286,9 +295,10 @@ class Store:
 
     # -- jobs ------------------------------------------------------------------------------
     def create(self, planner: str, request: str, time_limit: float,
-               idempotency_key: str | None, owner: str = "") -> tuple[JobRow, bool]:
-        """Insert a queued job of ``owner``; with an idempotency key this owner used
-        already, return that job instead.
+               idempotency_key: str | None, owner: str = "", structure: str = ""
+               ) -> tuple[JobRow, bool]:
+        """Insert a queued job of ``owner`` (``structure``: its request's structure key);
+        with an idempotency key this owner used already, return that job instead.
 
         Returns (job, created). Raises :class:`IdempotencyConflictError` when the key is known
         with a different request.
@@ -308,9 +318,10 @@ class Store:
             job_id = uuid.uuid4().hex
             db.execute(
                 "INSERT INTO jobs (id, idempotency_key, request_hash, planner, request, "
-                "time_limit, state, created_at, owner) "
-                "VALUES (?, ?, ?, ?, ?, ?, 'queued', ?, ?)",
-                (job_id, scoped, digest, planner, request, time_limit, time.time(), owner))
+                "time_limit, state, created_at, owner, structure) "
+                "VALUES (?, ?, ?, ?, ?, ?, 'queued', ?, ?, ?)",
+                (job_id, scoped, digest, planner, request, time_limit, time.time(), owner,
+                 structure))
             row = db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return JobRow.of(row), True
 
@@ -384,20 +395,21 @@ class Store:
         return int(deleted)
 
     # -- batches (docs/service.md, "Batches") ----------------------------------------------
-    def create_batch(self, items: builtins.list[tuple[str, str, float]], owner: str = ""
-                     ) -> tuple[str, builtins.list[str]]:
-        """A batch of queued jobs of ``owner`` (``items``: each job's planner, request and
-        time limit), all or none in one transaction: (its id, its jobs' ids in order)."""
+    def create_batch(self, items: builtins.list[tuple[str, str, float, str]],
+                     owner: str = "") -> tuple[str, builtins.list[str]]:
+        """A batch of queued jobs of ``owner`` (``items``: each job's planner, request,
+        time limit and structure key), all or none in one transaction: (its id, its jobs'
+        ids in order)."""
         batch_id = uuid.uuid4().hex
         now = time.time()
         ids = [uuid.uuid4().hex for _ in items]
         with self._tx() as db:
             db.executemany(
                 "INSERT INTO jobs (id, idempotency_key, request_hash, planner, request, "
-                "time_limit, state, created_at, owner) "
-                "VALUES (?, NULL, ?, ?, ?, ?, 'queued', ?, ?)",
-                [(job_id, request_hash(request), planner, request, limit, now, owner)
-                 for job_id, (planner, request, limit) in zip(ids, items, strict=True)])
+                "time_limit, state, created_at, owner, structure) "
+                "VALUES (?, NULL, ?, ?, ?, ?, 'queued', ?, ?, ?)",
+                [(job_id, request_hash(request), planner, request, limit, now, owner, key)
+                 for job_id, (planner, request, limit, key) in zip(ids, items, strict=True)])
             db.execute("INSERT INTO batches (id, owner, size, created_at) VALUES (?, ?, ?, ?)",
                        (batch_id, owner, len(items), now))
             db.executemany("INSERT INTO batch_jobs (batch_id, idx, job_id) VALUES (?, ?, ?)",
@@ -435,17 +447,35 @@ class Store:
         return int(self._conn().execute("SELECT COUNT(*) FROM jobs WHERE state = ?",
                                         (state,)).fetchone()[0])
 
-    def claim_next(self) -> JobRow | None:
-        """Move the oldest queued job to running and return it (atomically)."""
+    def claim_next(self, holds: Collection[str] = (), others: Collection[str] = ()
+                   ) -> JobRow | None:
+        """Move a queued job to running and return it (atomically): of the
+        :data:`CLAIM_WINDOW` oldest, the oldest whose structure key is in ``holds`` (the
+        claiming worker's cache holds its NLP), else the oldest whose structure no other
+        worker holds (``others``: building it here spreads the structures), else the
+        oldest."""
         with self._tx() as db:
-            row = db.execute("SELECT id FROM jobs WHERE state = 'queued' "
-                             "ORDER BY created_at, rowid LIMIT 1").fetchone()
-            if row is None:
+            rows = db.execute("SELECT id, structure FROM jobs WHERE state = 'queued' "
+                              "ORDER BY created_at, rowid LIMIT ?",
+                              (CLAIM_WINDOW,)).fetchall()
+            if not rows:
                 return None
+            pick = next((r for r in rows if r["structure"] and r["structure"] in holds),
+                        None) or next((r for r in rows if r["structure"] not in others),
+                                      rows[0])
             db.execute("UPDATE jobs SET state = 'running', started_at = ?, "
-                       "attempts = attempts + 1 WHERE id = ?", (time.time(), row["id"]))
-            claimed = db.execute("SELECT * FROM jobs WHERE id = ?", (row["id"],)).fetchone()
+                       "attempts = attempts + 1 WHERE id = ?", (time.time(), pick["id"]))
+            claimed = db.execute("SELECT * FROM jobs WHERE id = ?", (pick["id"],)).fetchone()
         return JobRow.of(claimed)
+
+    def requeue(self, job_id: str) -> bool:
+        """Put a running job back in the queue (its worker was lost under it); False if it
+        is not running any more."""
+        with self._tx() as db:
+            cur = db.execute("UPDATE jobs SET state = 'queued', started_at = NULL, "
+                             "worker_pid = NULL WHERE id = ? AND state = 'running'",
+                             (job_id,))
+            return cur.rowcount == 1
 
     def set_worker(self, job_id: str, pid: int) -> None:
         """Record the worker process running a job."""

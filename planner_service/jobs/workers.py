@@ -1,9 +1,10 @@
-"""Solver worker processes and the dispatcher that feeds them.
+"""The dispatcher: it hands the store's queued jobs to solver workers and ends every job once.
 
-Each worker is a *spawned* process (no fork: CasADi/IPOPT state is never shared) that
-keeps its planner, and so its cache of built NLPs, from job to job. The dispatcher is a
-thread of the service process. It hands queued jobs from the store to idle workers, and
-makes sure every job ends exactly once:
+The workers run where the service's executor puts them (:mod:`planner_service.executors`:
+spawned local processes by default, or actors on a Ray cluster); each keeps its planners,
+and so its cache of built NLPs, from job to job (:class:`.solver.SolverWorker`). The
+dispatcher is a thread of the service process that reacts to events (a worker's reply, a
+worker lost, a submission, a cancellation) and makes sure every job ends exactly once:
 
 * a worker's reply ends its job with the plan's typed status;
 * one deadline per job, from the moment a worker takes it: the worker's planner gets the
@@ -13,10 +14,20 @@ makes sure every job ends exactly once:
   there, without a plan; its worker finishes what it was doing (an NLP it builds stays
   cached for the next job of that structure) and its late reply is dropped;
 * a worker still busy ``kill_grace`` past the deadline is killed and replaced (the last
-  resort: its NLP cache is lost); a replaced worker reports ready at once and builds its
-  warm-up structures between jobs, never ahead of a queued one;
+  resort: its NLP cache is lost);
 * a cancelled running job gets its worker killed and replaced, and ends ``cancelled``;
-* a worker that dies mid-solve ends its job ``failed`` with the exit code, and is replaced.
+* a worker lost under a job (its process died, its node or the cluster went away) puts the
+  job back in the queue once (``retries``), and the job ends ``failed`` (``worker_died``,
+  naming where it ran and how it died) when it is lost again; the worker is replaced (a
+  worker that was lost before it ever became ready is replaced after a back-off, so that
+  an unreachable cluster is not asked again many times a second).
+
+Jobs go to workers by structure (:func:`planner_service.planners.structure.structure_key`,
+stored with each job): an idle worker takes the oldest queued job whose NLP it holds, else
+one whose structure no other worker holds, else the oldest (:meth:`.store.Store.claim_next`);
+the workers' cache hits are counted (:attr:`Dispatcher.cache`). A worker is ready once it
+has imported the planners; it builds the warm-up requests' NLPs one at a time while no job
+is queued (``warmup_first``: before it reports ready).
 
 The store's faults are states, not crashes (docs/service.md, "Storage faults"): a job
 whose result would not fit on the store's disk ends ``failed`` (``storage_error``)
@@ -32,20 +43,20 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import multiprocessing as mp
-import os
 import queue
 import sqlite3
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass, field
-from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
 
-from dexroll_client.models import JobState, PlanStatus
+from dexroll_client.models import JobState
 
+from ..executors import Executor, Resources, Worker, WorkerError, WorkerLostError
+from .solver import SolverWorker, job_outcome
 from .store import JobRow, StorageError, Store
 
 __all__ = ["DEADLINE_MARGIN", "Dispatcher", "job_outcome"]
@@ -53,151 +64,83 @@ __all__ = ["DEADLINE_MARGIN", "Dispatcher", "job_outcome"]
 #: How long past its deadline a job waits for its worker's own time-limit reply (IPOPT's
 #: last iterate) before the dispatcher ends it without a plan [s].
 DEADLINE_MARGIN = 0.3
-#: The worker's planner is given the time left minus this much, for the reply to travel [s].
-_REPLY_TIME = 0.05
 #: How often a faulted store is probed for a write [s].
 PROBE_INTERVAL = 1.0
+#: Back-off before a worker lost before it became ready is started again: doubled at each
+#: such loss in a row, from this, up to :data:`MAX_BACKOFF` [s].
+BACKOFF = 1.0
+MAX_BACKOFF = 30.0
 
 log = logging.getLogger("dexroll.workers")
 
 
-def job_outcome(status: PlanStatus) -> JobState:
-    """The terminal job state for a plan's status."""
-    return {
-        PlanStatus.SOLVED: JobState.SUCCEEDED,
-        PlanStatus.INFEASIBLE: JobState.INFEASIBLE,
-        PlanStatus.TIME_LIMIT: JobState.TIMED_OUT,
-    }.get(status, JobState.FAILED)
-
-
-def _worker_main(conn: Connection, warmup: str = "", compile_dir: str | None = None,
-                 parent: int | None = None, background_warmup: bool = False,
-                 max_result_bytes: int = 1 << 62) -> None:
-    """Body of a worker process: plan each request received, reply with the result.
-
-    The process keeps one planner per kind, and so their caches of built NLPs, from job to
-    job: the ball-on-palm planner, and the finger planners (one-finger and manipulation,
-    one NLP cache) with the finger models and hands they were built for (``FingerCache``).
-    Before it reports ready it builds the NLPs of the warm-up requests (``warmup``: files
-    or folders, see :mod:`planner_service.warmup`); with ``background_warmup`` (a
-    replacement worker) it reports ready first and builds them one at a time while no job
-    is waiting. It dies with the service (``parent``: see :mod:`.lifeline`).
-
-    A job comes as (id, request JSON, deadline on the monotonic clock); the reply is
-    ("done", (id, job state, code, message, raw status, result JSON or None, whether the
-    result holds a plan to view)); between jobs "ready" and "warming" say whether it
-    takes one."""
-    from .lifeline import die_with_parent
-
-    die_with_parent(parent)
-    # Imports happen in the child: the parent's modules are not inherited under spawn.
-    from ..planners import (
-        REQUEST,
-        BallOnPalmPlanner,
-        FingerCache,
-        ProblemError,
-        error_result,
-        invalid_result,
-        solve,
-    )
-    from ..view import has_plan
-
-    if not logging.getLogger().handlers:  # spawned: the service's logging is not inherited
-        logging.basicConfig(level=logging.INFO,
-                            format="%(asctime)s %(levelname)s [worker %(process)d] %(name)s: "
-                                   "%(message)s")
-    compiled = None if compile_dir is None else Path(compile_dir)
-    # The finger NLPs compile in the background (a few seconds of gcc each, the virtual
-    # machine solving meanwhile); the ball-on-palm NLP is not compiled here: it is written
-    # out in SX, its compile takes tens of seconds in the foreground, and since the
-    # closed-form geometry its function evaluations are a small part of its solve.
-    palm = BallOnPalmPlanner()
-    fingers = FingerCache(compile_dir=compiled, background=True)
-    pending: list[Path] = []
-    if warmup:
-        from ..warmup import request_files, warm_up
-
-        pending = request_files(warmup)
-        if not background_warmup:
-            t0 = time.perf_counter()
-            built = warm_up(pending, palm, fingers)
-            pending = []
-            log.info("warm-up: %d structures built in %.1f s (%s)", len(built),
-                     time.perf_counter() - t0, ", ".join(f"{n} {t:.2f} s" for n, t in built))
-    conn.send(("ready", None))
-    built_between: list[tuple[str, float]] = []
-    while True:
-        if pending and not conn.poll(0):  # no job waiting: build one warm-up structure
-            conn.send(("warming", None))  # the dispatcher gives jobs to other workers
-            if not conn.poll(0):
-                built_between += warm_up([pending.pop(0)], palm, fingers)
-                if not pending:
-                    log.info("warm-up: %d structures built between jobs (%s)",
-                             len(built_between),
-                             ", ".join(f"{n} {t:.2f} s" for n, t in built_between))
-            conn.send(("ready", None))
-            continue
-        try:
-            msg = conn.recv()
-        except (EOFError, KeyboardInterrupt):
-            return
-        if msg is None:
-            return
-        job_id, request_json, deadline = msg
-        planner = "ball_on_palm"
-        try:
-            request = REQUEST.validate_json(request_json)
-            planner = request.planner
-            # the time left of the job's one deadline (it started when the dispatcher
-            # handed the job over), for the planner's own (build, guesses, IPOPT, ...)
-            left = deadline - time.monotonic() - _REPLY_TIME
-            request = request.model_copy(update={"solver": request.solver.model_copy(
-                update={"time_limit": max(left, 1e-3)})})
-            result, _ = solve(request, palm, fingers)
-        except ProblemError as exc:  # checked at submission; the store may be older
-            result = invalid_result(exc.errors, planner)
-        except Exception as exc:  # reply with a typed error, never die on a bad job
-            log.exception("job %s failed in the worker", job_id)
-            result = error_result(f"planner failed: {exc!r}", planner)
-        result_json = result.model_dump_json()
-        raw = result.stats.raw_status if result.stats else None
-        state = job_outcome(result.status).value
-        if len(result_json) > max_result_bytes:
-            conn.send(("done", (job_id, JobState.FAILED.value, "result_too_large",
-                                f"the plan ended {result.status.value}, but its JSON is "
-                                f"{len(result_json)} bytes, over the service's limit of "
-                                f"{max_result_bytes} (DEXROLL_MAX_RESULT_BYTES): ask for "
-                                "fewer intervals or sample times", raw, None, False)))
-            continue
-        conn.send(("done", (job_id, state, result.status.value, result.message, raw,
-                            result_json, has_plan(result))))
-
-
 @dataclass(eq=False)
 class _Slot:
-    process: Any  # multiprocessing SpawnProcess
-    conn: Connection
+    """One worker's place in the pool and what the dispatcher knows of it."""
+
+    worker: Worker | None  # None: waiting to be started at ``start_at``
+    start_at: float = 0.0
     ready: bool = False
+    #: a call (ready, warm or solve) is outstanding
+    busy: bool = False
+    lost: bool = False
     job: JobRow | None = None
     #: the job's deadline and the kill deadline (+ kill_grace), on the monotonic clock
     job_deadline: float = float("inf")
     deadline: float = float("inf")
     #: the job ended at its deadline; the worker has not replied yet
     draining: bool = False
-    #: the worker is building a warm-up structure (ready, but not taking jobs)
-    warming: bool = False
+    #: structure keys whose NLPs the worker holds (built or used)
+    holds: set[str] = field(default_factory=set)
+    #: warm-up requests left to build: (file name, JSON text, structure key)
+    warmup: list[tuple[str, str, str]] = field(default_factory=list)
+    #: warm-up requests built: (file name, build time [s])
+    built: list[tuple[str, float]] = field(default_factory=list)
+    pid: int | None = None
+    #: the warm-up request being built
+    warming: str = ""
+    #: losses before ready in a row (the back-off's exponent)
+    failures: int = 0
     started: float = field(default_factory=time.monotonic)
 
 
+def warmup_requests(spec: str) -> list[tuple[str, str, str]]:
+    """The warm-up requests of ``spec`` (DEXROLL_WARMUP): (file name, JSON text, structure
+    key), read here so that workers on other machines are sent the text."""
+    import json
+
+    from ..planners.structure import structure_key
+    from ..warmup import request_files
+
+    out = []
+    for path in request_files(spec):
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+            body = json.loads(text)
+            key = structure_key(str(body.get("planner", "ball_on_palm")), body)
+        except (OSError, ValueError, AttributeError) as exc:
+            log.warning("warm-up: %s skipped: %s", path, exc)
+            continue
+        out.append((Path(path).name, text, key))
+    return out
+
+
 class Dispatcher(threading.Thread):
-    """Feeds queued jobs to ``n_workers`` worker processes and ends every job once."""
+    """Feeds queued jobs to ``n_workers`` solver workers started by ``executor`` and ends
+    every job once."""
 
     def __init__(self, store: Store, n_workers: int, kill_grace: float,
                  on_finish: Callable[[str], None], warmup: str = "",
                  compile_dir: str | None = None, max_result_bytes: int = 1 << 62,
-                 warmup_first: bool = False) -> None:
+                 warmup_first: bool = False, executor: Executor | None = None,
+                 retries: int = 1) -> None:
         super().__init__(name="dexroll-dispatcher", daemon=True)
+        if executor is None:
+            from ..executors.local import LocalProcesses
+
+            executor = LocalProcesses()
         self.store = store
+        self.executor = executor
         self.n_workers = n_workers
         self.kill_grace = kill_grace
         self.on_finish = on_finish
@@ -206,14 +149,16 @@ class Dispatcher(threading.Thread):
         self.max_result_bytes = max_result_bytes
         #: workers build their warm-up NLPs before they report ready (else between jobs)
         self.warmup_first = warmup_first
+        #: times a job is put back in the queue when its worker is lost under it
+        self.retries = retries
         #: called every minute or so from the dispatcher thread (the store's retention)
         self.housekeeping: Callable[[], None] | None = None
         self._housekept = 0.0
-        self._ctx = mp.get_context("spawn")
         self._slots: list[_Slot] = []
+        self._warmup: list[tuple[str, str, str]] = []
+        self._events: queue.SimpleQueue[tuple[_Slot, str, Future[Any]] | None] = \
+            queue.SimpleQueue()
         self._cancel: queue.SimpleQueue[str] = queue.SimpleQueue()
-        self._wake_r, self._wake_w = self._ctx.Pipe(duplex=False)
-        self._wake_lock = threading.Lock()
         self._stopping = threading.Event()
         #: job ends the store could not write yet (job id -> the end's fields), written
         #: once it can be written again
@@ -221,12 +166,15 @@ class Dispatcher(threading.Thread):
         self._probed = 0.0
         #: the last unexpected error of a step (None: the last step went through)
         self.last_error: str | None = None
+        #: jobs whose NLP came from their worker's cache, and those that built it
+        self.cache = {"hits": 0, "misses": 0}
+        #: jobs put back in the queue after their worker was lost
+        self.requeued = 0
 
     # -- called from other threads -----------------------------------------------------------
     def wake(self) -> None:
         """New work (a job or a cancellation) is waiting."""
-        with self._wake_lock:
-            self._wake_w.send(None)
+        self._events.put(None)
 
     def cancel_running(self, job_id: str) -> None:
         self._cancel.put(job_id)
@@ -239,30 +187,45 @@ class Dispatcher(threading.Thread):
 
     @property
     def ready_workers(self) -> int:
-        return sum(1 for s in self._slots if s.ready and s.process.is_alive())
+        return sum(1 for s in list(self._slots) if s.ready and not s.lost)
+
+    def unavailable(self) -> str | None:
+        """Why new jobs cannot be run now (the executor's reason, when no worker is
+        ready); None: they can."""
+        reason = self.executor.unavailable()
+        return None if reason is None or self.ready_workers else reason
 
     # -- the dispatcher thread -----------------------------------------------------------------
-    def _spawn(self, replacement: bool = False) -> _Slot:
-        # One BLAS/OpenMP thread per worker: the workers are the parallelism (one per core
-        # by default), and a plan's last digits then do not depend on the machine's thread
-        # count (docs/benchmarks.md). Set before the child starts: spawned children inherit
-        # the environment and load their numeric libraries while importing.
-        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-            os.environ.setdefault(var, "1")
-        parent, child = self._ctx.Pipe()
-        proc = self._ctx.Process(target=_worker_main, name="dexroll-worker", daemon=True,
-                                 args=(child, self.warmup, self.compile_dir, os.getpid(),
-                                       replacement, self.max_result_bytes))
-        proc.start()
-        child.close()
-        return _Slot(process=proc, conn=parent)
+    def _start(self, slot: _Slot) -> None:
+        """Start ``slot``'s worker and ask it whether it is up."""
+        slot.worker = self.executor.start(
+            SolverWorker, (self.compile_dir, self.max_result_bytes), Resources(cpus=1.0),
+            "worker")
+        slot.started = time.monotonic()
+        self._call(slot, "ready")
+
+    def _call(self, slot: _Slot, method: str, *args: Any) -> None:
+        assert slot.worker is not None
+        slot.busy = True
+        future = slot.worker.call(method, *args)
+        future.add_done_callback(lambda f: self._events.put((slot, method, f)))
+
+    def _new_slot(self, failures: int = 0) -> _Slot:
+        slot = _Slot(worker=None, warmup=list(self._warmup), failures=failures)
+        if failures:
+            slot.start_at = time.monotonic() + min(MAX_BACKOFF, BACKOFF * 2 ** (failures - 1))
+        else:
+            self._start(slot)
+        return slot
 
     def _replace(self, slot: _Slot) -> None:
-        if slot.process.is_alive():
-            slot.process.kill()
-        slot.process.join(timeout=5)
-        slot.conn.close()
-        self._slots[self._slots.index(slot)] = self._spawn(replacement=True)
+        """Kill ``slot``'s worker and put a new one in its place (its late events are
+        ignored: they name a slot no longer in the pool)."""
+        slot.lost = True
+        if slot.worker is not None:
+            slot.worker.kill()
+        failures = 0 if slot.ready else slot.failures + 1
+        self._slots[self._slots.index(slot)] = self._new_slot(failures)
 
     def _end(self, job_id: str, state: JobState, code: str, message: str,
              raw_status: str | None = None, result: str | None = None,
@@ -320,8 +283,9 @@ class Dispatcher(threading.Thread):
         return self.store.fault is None and not self._unwritten
 
     def run(self) -> None:
-        self._slots = [self._spawn(replacement=not self.warmup_first)
-                       for _ in range(self.n_workers)]
+        if self.warmup:
+            self._warmup = warmup_requests(self.warmup)
+        self._slots = [self._new_slot() for _ in range(self.n_workers)]
         try:
             while not self._stopping.is_set():
                 try:
@@ -332,54 +296,52 @@ class Dispatcher(threading.Thread):
                     self.last_error = f"{type(exc).__name__}: {exc}"
                     self._stopping.wait(PROBE_INTERVAL)
         finally:
-            for slot in self._slots:
-                with contextlib.suppress(OSError, BrokenPipeError):
-                    slot.conn.send(None)
-            for slot in self._slots:
-                slot.process.join(timeout=2)
-                if slot.process.is_alive():
-                    slot.process.kill()
+            self.executor.close()
 
     def _step(self) -> None:
+        now = time.monotonic()
+        for slot in self._slots:  # workers whose back-off is over
+            if slot.worker is None and now >= slot.start_at:
+                self._start(slot)
         # hand queued jobs to idle, ready workers (none while the store cannot be written)
         writable = self._store_writable()
+        queue_empty = False
         for slot in self._slots:
-            if writable and slot.ready and not slot.warming and slot.job is None:
+            if not (slot.ready and not slot.busy and slot.job is None):
+                continue
+            if writable and not queue_empty:
+                others = set().union(*(s.holds for s in self._slots if s is not slot))
                 try:
-                    job = self.store.claim_next()
+                    job = self.store.claim_next(slot.holds, others)
                 except sqlite3.OperationalError as exc:
                     log.warning("no job handed out: the job store cannot be written (%s)",
                                 exc)
-                    break
-                if job is None:
-                    break
-                slot.job, slot.draining = job, False
-                with contextlib.suppress(sqlite3.OperationalError):  # the pid is a hint
-                    self.store.set_worker(job.id, slot.process.pid)
-                slot.started = time.monotonic()
-                slot.job_deadline = slot.started + job.time_limit
-                slot.deadline = slot.job_deadline + self.kill_grace
-                # if the worker died, its sentinel reports it below
-                with contextlib.suppress(OSError, BrokenPipeError):
-                    slot.conn.send((job.id, job.request, slot.job_deadline))
-        waitables: list[Any] = [self._wake_r]
-        for slot in self._slots:
-            waitables += [slot.conn, slot.process.sentinel]
-        now = time.monotonic()
+                    writable = False
+                    continue
+                if job is not None:
+                    self._hand(slot, job)
+                    continue
+                queue_empty = True
+            if queue_empty and slot.warmup:  # nothing waits: build a warm-up structure
+                self._warm_next(slot)
         timeout = min([0.5 if writable else PROBE_INTERVAL]
                       + [max(0.0, (s.deadline if s.draining else
                                    s.job_deadline + DEADLINE_MARGIN) - now)
-                         for s in self._slots if s.job])
-        ready = wait(waitables, timeout=timeout)
-        if self._wake_r in ready:
-            while self._wake_r.poll():
-                self._wake_r.recv()
-        for slot in list(self._slots):
-            if slot.conn in ready:
-                self._receive(slot)
-        for slot in list(self._slots):
-            if not slot.process.is_alive():
-                self._died(slot)
+                         for s in self._slots if s.job]
+                      + [max(0.0, s.start_at - now) for s in self._slots if s.worker is None])
+        try:
+            event = self._events.get(timeout=timeout)
+        except queue.Empty:
+            event = None
+        while True:
+            if event is not None:
+                slot, method, future = event
+                if slot in self._slots and not slot.lost:
+                    self._reply(slot, method, future)
+            try:
+                event = self._events.get_nowait()
+            except queue.Empty:
+                break
         self._cancels()
         self._deadlines()
         if self.housekeeping is not None and now - self._housekept > 60.0:
@@ -389,35 +351,111 @@ class Dispatcher(threading.Thread):
             except Exception:  # housekeeping never stops the dispatcher
                 log.exception("housekeeping failed")
 
-    def _receive(self, slot: _Slot) -> None:
+    def _hand(self, slot: _Slot, job: JobRow) -> None:
+        """Give ``job`` (claimed) to ``slot``'s idle worker, its one deadline starting now."""
+        slot.job, slot.draining = job, False
+        if slot.pid is not None:
+            with contextlib.suppress(sqlite3.OperationalError):  # the pid is a hint
+                self.store.set_worker(job.id, slot.pid)
+        slot.started = time.monotonic()
+        slot.job_deadline = slot.started + job.time_limit
+        slot.deadline = slot.job_deadline + self.kill_grace
+        self._call(slot, "solve", job.id, job.request, job.time_limit)
+
+    def _reply(self, slot: _Slot, method: str, future: Future[Any]) -> None:
+        """A call of ``slot``'s worker ended."""
+        slot.busy = False
         try:
-            kind, payload = slot.conn.recv()
-        except (EOFError, OSError):
-            return  # the process is gone; handled by _died
-        if kind in ("ready", "warming"):
-            slot.ready, slot.warming = True, kind == "warming"
+            value = future.result()
+        except WorkerLostError as exc:
+            self._lost(slot, exc)
             return
-        # the worker's verdict as it is: its result is stored, never parsed here
-        job_id, state, code, message, raw, result_json, plan = payload
-        draining = slot.draining
+        except WorkerError as exc:  # the body's own failure: the worker lives on
+            log.error("worker %s: %s failed: %s", slot.pid, method, exc)
+            value = None
+            if method == "ready":  # it cannot work: replaced after a back-off
+                self._lost(slot, WorkerLostError(str(exc)))
+                return
+            if method == "solve" and slot.job is not None:
+                value = (JobState.FAILED.value, "error", f"the worker failed: {exc}", None,
+                         None, False, None)
+        if method == "ready":
+            slot.pid = int(value["pid"]) if isinstance(value, dict) else None
+            slot.failures = 0
+            log.info("solver worker ready: %s (%s)", slot.worker and slot.worker.where(),
+                     value.get("host") if isinstance(value, dict) else "?")
+            slot.started = time.monotonic()
+            if self.warmup_first and slot.warmup:
+                self._warm_next(slot)
+                return
+            slot.ready = True
+        elif method == "warm":
+            if value is not None:
+                slot.built.append((slot.warming, float(value)))
+            if not slot.warmup:
+                log.info("warm-up: %d structures built %s (%s)", len(slot.built),
+                         "between jobs" if slot.ready else
+                         f"in {time.monotonic() - slot.started:.1f} s",
+                         ", ".join(f"{n} {t:.2f} s" for n, t in slot.built))
+            if self.warmup_first and slot.warmup:
+                self._warm_next(slot)
+                return
+            slot.ready = True
+        elif method == "solve":
+            self._solved(slot, value)
+
+    def _warm_next(self, slot: _Slot) -> None:
+        """Have ``slot``'s worker build its next warm-up structure."""
+        name, text, key = slot.warmup.pop(0)
+        slot.holds.add(key)
+        slot.warming = name
+        self._call(slot, "warm", name, text)
+
+    def _solved(self, slot: _Slot, verdict: Any) -> None:
+        job, draining = slot.job, slot.draining
         slot.job, slot.deadline, slot.draining = None, float("inf"), False
         slot.job_deadline = float("inf")
+        if job is None or verdict is None:
+            return
+        state, code, message, raw, result_json, plan, hit = verdict
+        if job.structure:
+            slot.holds.add(job.structure)
+        if hit is not None:
+            self.cache["hits" if hit else "misses"] += 1
         if draining:  # the job already ended at its deadline
             log.info("job %s: its worker replied %s after the job ended at its deadline",
-                     job_id, code)
+                     job.id, code)
             return
-        self._end(job_id, JobState(state), code, message, raw, result_json, plan)
+        # the worker's verdict as it is: its result is stored, never parsed here
+        self._end(job.id, JobState(state), code, message, raw, result_json, plan)
 
-    def _died(self, slot: _Slot) -> None:
-        code = slot.process.exitcode
-        if slot.job is not None and not slot.draining:
-            self._end(slot.job.id, JobState.FAILED, "worker_died",
-                      f"the worker process (pid {slot.process.pid}) died during the solve "
-                      f"(exit code {code}); the service replaced it")
+    def _lost(self, slot: _Slot, exc: WorkerLostError) -> None:
+        """``slot``'s worker is gone: its job is put back once, or failed; it is replaced."""
+        job = slot.job
+        where = slot.worker.where() if slot.worker is not None else "?"
+        if job is not None and not slot.draining:
+            if job.attempts <= self.retries and self._requeue(job):
+                log.warning("job %s: its worker (%s) was lost (%s); queued again",
+                            job.id, where, exc.reason)
+            else:
+                self._end(job.id, JobState.FAILED, "worker_died",
+                          f"the worker ({where}) was lost during the solve: {exc.reason}; "
+                          f"the service replaced it (attempt {job.attempts}, "
+                          f"{self.retries} retry after a lost worker)")
+        elif slot.ready:
+            log.warning("idle worker %s lost (%s); replacing it", where, exc.reason)
         else:
-            log.warning("idle worker %s exited with code %s; replacing it",
-                        slot.process.pid, code)
+            log.warning("worker %s could not start (%s); trying again", where, exc.reason)
         self._replace(slot)
+
+    def _requeue(self, job: JobRow) -> bool:
+        try:
+            done = self.store.requeue(job.id)
+        except sqlite3.OperationalError:
+            return False
+        if done:
+            self.requeued += 1
+        return done
 
     def _cancels(self) -> None:
         while True:

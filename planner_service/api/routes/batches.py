@@ -23,6 +23,7 @@ from fastapi.responses import StreamingResponse
 from dexroll_client.models import MAX_BATCH, Batch, BatchRequest, JobState
 
 from ...jobs.store import JobRow, StorageError, Store
+from ...planners.structure import structure_key
 from ..access import OwnerDep
 from ..body import JSONBodyRoute
 from ..deps import (
@@ -32,6 +33,7 @@ from ..deps import (
     SettingsDep,
     StoreDep,
     store_fault_error,
+    unavailable_error,
 )
 from .plans import QUEUE_FULL_RETRY_AFTER, checked, invalid_request, job_model
 
@@ -84,12 +86,16 @@ async def submit_batch(body: BatchRequest, request: Request, owner: OwnerDep,
                            f"{store.count('queued')} jobs are queued: no room for "
                            f"{len(items)} more", headers={"Retry-After": str(
                                QUEUE_FULL_RETRY_AFTER)})
-    rows: list[tuple[str, str, float]] = []
+    refused = unavailable_error(dispatcher)
+    if refused is not None:
+        raise refused
+    rows: list[tuple[str, str, float, str]] = []
     for item in items:
         capped = min(item.solver.time_limit, settings.max_time_limit)
         item = item.model_copy(update={"solver": item.solver.model_copy(
             update={"time_limit": capped})})
-        rows.append((str(item.planner), item.model_dump_json(), capped))
+        rows.append((str(item.planner), item.model_dump_json(), capped,
+                     structure_key(str(item.planner), item.model_dump(mode="json"))))
     try:
         batch_id, _ = store.create_batch(rows, owner or "")
     except StorageError as exc:

@@ -50,8 +50,10 @@ def readyz(request: Request, store: StoreDep, dispatcher: DispatcherDep) -> Any:
         return error_response(503, "not_ready", "the dispatcher is not running")
     workers = dispatcher.ready_workers
     if workers < 1:
-        return error_response(503, "not_ready", "no solver worker is ready yet",
-                              headers={"Retry-After": "1"})
+        reason = dispatcher.executor.unavailable()
+        return error_response(503, "not_ready", "no solver worker is ready yet" + (
+            f": {reason}" if reason else ""), headers={"Retry-After": "1"})
     simulations = request.app.state.simulations.stats()
     return {"status": "ready", "workers": workers, "queued": queued,
-            "simulations": simulations}
+            "simulations": simulations, "executor": dispatcher.executor.describe(),
+            "cache": dict(dispatcher.cache), "requeued": dispatcher.requeued}

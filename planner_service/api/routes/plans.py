@@ -22,6 +22,7 @@ from dexroll_client.models import FieldError, Job, JobList, JobState, PlanReques
 from ...jobs.store import IdempotencyConflictError, JobRow, StorageError, Store
 from ...models_check import CheckerBusyError
 from ...planners import RESULT
+from ...planners.structure import structure_key
 from ..access import OwnerDep
 from ..body import JSONBodyRoute
 from ..deps import (
@@ -32,6 +33,7 @@ from ..deps import (
     SettingsDep,
     StoreDep,
     store_fault_error,
+    unavailable_error,
 )
 from ..submission import (
     ModelSubmissions,
@@ -179,13 +181,17 @@ async def submit_plan(
     refused = store_fault_error(store)  # faulted while the request was checked
     if refused is not None:
         raise refused
+    refused = unavailable_error(dispatcher)
+    if refused is not None:
+        raise refused
     if store.count("queued") >= settings.max_queue:
         raise ServiceError(503, "queue_full",
                            f"{settings.max_queue} jobs are already queued",
                            headers={"Retry-After": str(QUEUE_FULL_RETRY_AFTER)})
     try:
         row, created = store.create(body.planner, body.model_dump_json(), capped,
-                                    idempotency_key, owner or "")
+                                    idempotency_key, owner or "",
+                                    structure_key(body.planner, body.model_dump(mode="json")))
     except IdempotencyConflictError as exc:
         raise ServiceError(409, "idempotency_conflict", str(exc)) from exc
     except StorageError as exc:  # the store faulted on this very write
