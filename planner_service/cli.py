@@ -158,11 +158,15 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     overrides = {k: v for k, v in (("host", args.host), ("port", args.port),
                                    ("data_dir", args.data_dir), ("workers", args.workers))
                  if v is not None}
+    if args.ray is not None:  # the solver workers as actors on this Ray cluster
+        overrides.update(executor="ray", ray_address=args.ray)
     settings = Settings(**overrides)
     logging.basicConfig(level=settings.log_level.upper(),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    log.info("dexroll service on http://%s:%d (data in %s, %d workers)", settings.host,
-             settings.port, settings.data_dir, settings.workers)
+    log.info("dexroll service on http://%s:%d (data in %s, %d workers, %s)", settings.host,
+             settings.port, settings.data_dir, settings.workers,
+             "local processes" if settings.executor == "local" else
+             f"Ray actors on {settings.ray_address}")
     if not settings.keys() and settings.host not in ("127.0.0.1", "localhost", "::1"):
         log.warning("*** NO API KEYS: anyone who reaches %s:%d can plan, read and cancel "
                     "every job. Set DEXROLL_API_KEYS (or DEXROLL_API_KEYS_FILE), or bind "
@@ -204,6 +208,10 @@ def main(argv: list[str] | None = None) -> int:
     v.add_argument("--port", type=int)
     v.add_argument("--data-dir")
     v.add_argument("--workers", type=int)
+    v.add_argument("--ray", metavar="ADDRESS", nargs="?", const="auto",
+                   help="run the solver workers as actors on the Ray cluster at ADDRESS "
+                        "(default 'auto': the one this machine joined with `ray start`); "
+                        "needs the distributed extra (pip install 'dexroll[distributed]')")
     v.set_defaults(func=_cmd_serve)
     o = sub.add_parser("openapi", help="print the service's OpenAPI document (the contract "
                                        "committed as openapi.json)")

@@ -73,6 +73,11 @@ class Worker(Protocol):
         """Stop the worker at once, whatever it is doing (its pending calls are lost)."""
         ...
 
+    def when_lost(self, callback: Callable[[WorkerLostError], None]) -> None:
+        """Call ``callback`` once when the worker dies (killed, its process or node lost),
+        busy or idle; at once when it already has."""
+        ...
+
     def where(self) -> str:
         """Where the worker runs, for logs and messages ("pid 123", "Ray actor … on node …")."""
         ...

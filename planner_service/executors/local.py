@@ -16,6 +16,7 @@ import logging
 import multiprocessing as mp
 import os
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future, InvalidStateError
 from multiprocessing.connection import Connection
 from typing import Any
@@ -79,6 +80,7 @@ class ProcessWorker:
         self._send_lock = threading.Lock()
         self._pending: dict[int, Future[Any]] = {}
         self._lost: WorkerLostError | None = None
+        self._on_lost: list[Callable[[WorkerLostError], None]] = []
         threading.Thread(target=self._read, name=f"dexroll-{label}-reader",
                          daemon=True).start()
 
@@ -103,6 +105,14 @@ class ProcessWorker:
     def kill(self) -> None:
         with contextlib.suppress(Exception):
             self.process.kill()
+
+    def when_lost(self, callback: Callable[[WorkerLostError], None]) -> None:
+        with self._lock:
+            lost = self._lost
+            if lost is None:
+                self._on_lost.append(callback)
+        if lost is not None:
+            callback(lost)
 
     def stop(self) -> None:
         """Ask the worker to end after its current call (the pipe's None), then kill it
@@ -132,9 +142,12 @@ class ProcessWorker:
         with self._lock:
             self._lost = lost
             pending, self._pending = list(self._pending.values()), {}
+            callbacks, self._on_lost = self._on_lost, []
         for future in pending:
             with contextlib.suppress(InvalidStateError):
                 future.set_exception(lost)
+        for callback in callbacks:
+            callback(lost)
         with contextlib.suppress(OSError):
             self._conn.close()
 

@@ -26,7 +26,8 @@ import multiprocessing as mp
 import os
 import threading
 import time
-from concurrent.futures import Future, InvalidStateError
+from collections.abc import Callable
+from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -73,7 +74,9 @@ def _bridge_main(conn: Connection, parent: int, address: str) -> None:
     """The bridge process: the Ray driver. Messages in: ("start", worker id, body, args,
     cpus, memory), ("call", worker id, call id, method, args), ("kill", worker id), None
     (stop). Out: ("connected", info) or ("unavailable", reason) first, then ("where",
-    worker id, info), ("result", call id, ok, value) and ("lost", worker id, reason)."""
+    worker id, info), ("result", call id, ok, value), ("lost", worker id, reason) and
+    ("cluster", its live nodes and CPUs) every :data:`PING_INTERVAL`, or ("gone", reason)
+    before it exits when the cluster does not answer."""
     from ..jobs.lifeline import die_with_parent, received
 
     die_with_parent(parent)
@@ -134,9 +137,21 @@ def _bridge_main(conn: Connection, parent: int, address: str) -> None:
             in_flight[wid] = in_flight.get(wid, 0) + 1
         ref.future().add_done_callback(lambda f: settle(wid, call_id, f))
 
+    asker = ThreadPoolExecutor(1, thread_name_prefix="dexroll-ray-gcs")
+
+    def cluster() -> dict[str, Any]:
+        return {"nodes": sum(1 for n in ray.nodes() if n.get("Alive")),
+                "cpus": float(ray.cluster_resources().get("CPU", 0.0))}
+
     def watch() -> None:  # idle actors are pinged: a lost node is found without a job
         while True:
             time.sleep(PING_INTERVAL)
+            try:  # the cluster's size, for /readyz; no answer: the cluster is gone
+                send(("cluster", asker.submit(cluster).result(timeout=PING_TIMEOUT)))
+            except Exception as exc:
+                send(("gone", f"the Ray cluster at {address!r} does not answer "
+                              f"({type(exc).__name__}: {exc})"))
+                os._exit(3)
             with lock:
                 idle = [(w, a) for w, a in actors.items() if not in_flight.get(w)]
             for wid, actor in idle:
@@ -191,6 +206,22 @@ class RayWorker:
         self.pid: int | None = None
         self.host = self.node = ""
         self.lost: WorkerLostError | None = None
+        self._on_lost: list[Callable[[WorkerLostError], None]] = []
+
+    def _died(self, lost: WorkerLostError) -> None:
+        """Record the worker's loss (once) and tell who asked."""
+        if self.lost is not None:
+            return
+        self.lost = lost
+        callbacks, self._on_lost = self._on_lost, []
+        for callback in callbacks:
+            callback(lost)
+
+    def when_lost(self, callback: Callable[[WorkerLostError], None]) -> None:
+        if self.lost is not None:
+            callback(self.lost)
+        else:
+            self._on_lost.append(callback)
 
     def where(self) -> str:
         if self.pid is None:
@@ -226,6 +257,7 @@ class RayExecutor:
         self._calls: dict[int, tuple[int, Future[Any]]] = {}
         self._waiting: list[Any] = []  # messages for a bridge still connecting
         self._closed = False
+        self._gone: str | None = None  # why the bridge found the cluster gone
         self._connect()
 
     # -- the bridge --------------------------------------------------------------------------
@@ -246,6 +278,7 @@ class RayExecutor:
                             self.address)
         reason = "the Ray bridge process did not connect within " \
                  f"{CONNECT_TIMEOUT:g} s"
+        self._gone = None
         try:
             if bridge.conn.poll(CONNECT_TIMEOUT):
                 kind, payload = bridge.conn.recv()
@@ -258,8 +291,8 @@ class RayExecutor:
                     for msg in waiting:
                         self._send(msg)
                     self._read(bridge)
-                    reason = "the Ray bridge process (the cluster's driver) exited: the " \
-                             "cluster may be unreachable"
+                    reason = self._gone or "the Ray bridge process (the cluster's driver) " \
+                                           "exited: the cluster may be unreachable"
                 else:
                     reason = str(payload)
         except (EOFError, OSError) as exc:
@@ -279,11 +312,11 @@ class RayExecutor:
         if not self._closed:
             log.warning("Ray executor unavailable: %s", reason)
         lost = WorkerLostError(reason)
-        for worker in workers:
-            worker.lost = lost
         for _, future in calls:
             with contextlib.suppress(InvalidStateError):
                 future.set_exception(lost)
+        for worker in workers:
+            worker._died(lost)
 
     def _read(self, bridge: Any) -> None:
         while True:
@@ -310,18 +343,22 @@ class RayExecutor:
                         info["node"]
             elif kind == "lost":
                 self._lose(msg[1], WorkerLostError(msg[2]))
+            elif kind == "cluster":
+                with self._lock:
+                    self._info.update(msg[1])
+            elif kind == "gone":
+                self._gone = str(msg[1])
 
     def _lose(self, wid: int, lost: WorkerLostError) -> None:
         with self._lock:
             worker = self._workers.pop(wid, None)
             calls = [cid for cid, (w, _) in self._calls.items() if w == wid]
             futures = [self._calls.pop(cid)[1] for cid in calls]
-        if worker is not None:
-            worker.lost = WorkerLostError(f"{worker.where()}: {lost.reason}")
-            lost = worker.lost
         for future in futures:
             with contextlib.suppress(InvalidStateError):
                 future.set_exception(lost)
+        if worker is not None:
+            worker._died(lost)
 
     def _send(self, msg: Any) -> bool:
         """Send to the bridge (kept while it connects); False when there is none."""
@@ -349,7 +386,6 @@ class RayExecutor:
             self._workers[worker.id] = worker
         if not self._send(("start", worker.id, body, args, resources.cpus, resources.memory)):
             self._lose(worker.id, WorkerLostError(self._reason or "no Ray bridge"))
-            worker.lost = worker.lost or WorkerLostError(self._reason or "no Ray bridge")
         return worker
 
     def _call(self, worker: RayWorker, method: str, args: tuple[Any, ...]) -> Future[Any]:

@@ -125,6 +125,12 @@ def warmup_requests(spec: str) -> list[tuple[str, str, str]]:
     return out
 
 
+def _failed(exc: BaseException) -> Future[Any]:
+    future: Future[Any] = Future()
+    future.set_exception(exc)
+    return future
+
+
 class Dispatcher(threading.Thread):
     """Feeds queued jobs to ``n_workers`` solver workers started by ``executor`` and ends
     every job once."""
@@ -202,6 +208,7 @@ class Dispatcher(threading.Thread):
             SolverWorker, (self.compile_dir, self.max_result_bytes), Resources(cpus=1.0),
             "worker")
         slot.started = time.monotonic()
+        slot.worker.when_lost(lambda lost: self._events.put((slot, "lost", _failed(lost))))
         self._call(slot, "ready")
 
     def _call(self, slot: _Slot, method: str, *args: Any) -> None:
@@ -363,8 +370,9 @@ class Dispatcher(threading.Thread):
         self._call(slot, "solve", job.id, job.request, job.time_limit)
 
     def _reply(self, slot: _Slot, method: str, future: Future[Any]) -> None:
-        """A call of ``slot``'s worker ended."""
-        slot.busy = False
+        """A call of ``slot``'s worker ended (or, ``lost``, the worker did)."""
+        if method != "lost":
+            slot.busy = False
         try:
             value = future.result()
         except WorkerLostError as exc:
