@@ -3,22 +3,15 @@ started with `ray start` on loopback (each with one CPU, its own temporary folde
 service started with DEXROLL_EXECUTOR=ray against it.
 
 * a batch runs on both nodes;
-* the second node killed (its raylet SIGKILLed) while a job runs there: nothing lost or
-  duplicated, the job queued again and finished on the head;
+* the second node killed (its raylet and what it started SIGKILLed) while a job runs
+  there: nothing lost or duplicated, the job queued again and finished on the head;
 * the cluster gone: the API keeps answering, /readyz says why it is not ready, a submission
   gets 503 workers_unavailable with Retry-After.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
-import shutil
-import signal
-import subprocess
-import sys
-import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -27,88 +20,28 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.conftest import Server, free_port, start_server
+from planner_service.executors.local_cluster import RAY_ENV, LocalRayCluster, descendants
+from tests.conftest import Server, start_server
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIANGLE = json.loads((ROOT / "examples" / "triangle.json").read_text())
-RAY = Path(sys.executable).with_name("ray")
-
 pytest.importorskip("ray")
 
 
-class Cluster:
-    """A Ray cluster of this machine's own processes (found by their temporary folder)."""
-
-    def __init__(self) -> None:
-        self.temp = Path(tempfile.mkdtemp(prefix="dxr-", dir="/tmp"))  # short: unix sockets
-        self.port = free_port()
-        self.address = f"127.0.0.1:{self.port}"
-        self.env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token",
-                    "RAY_DISABLE_IMPORT_WARNING": "1"}
-        self.ray("start", "--head", f"--port={self.port}", "--num-cpus=1",
-                 "--include-dashboard=false", "--disable-usage-stats")
-        self.ray("start", f"--address={self.address}", "--num-cpus=1",
-                 '--resources={"second": 1}')
-
-    def ray(self, *args: str) -> None:
-        subprocess.run([str(RAY), *args, f"--temp-dir={self.temp}"], env=self.env,
-                       check=True, capture_output=True, timeout=120)
-
-    def raylets(self) -> list[tuple[int, str]]:
-        """(pid, command line) of this cluster's raylets."""
-        out = subprocess.run(["ps", "-ww", "-eo", "pid,args"], capture_output=True,
-                             text=True).stdout
-        return [(int(line.split()[0]), line) for line in out.splitlines()[1:]
-                if "raylet/raylet" in line and str(self.temp) in line]
-
-    def second_raylet(self) -> int:
-        """The second node's raylet: the one whose resources name 'second'."""
-        for pid, line in self.raylets():
-            if "second" in line:
-                return pid
-        raise AssertionError(f"no raylet of the second node among {self.raylets()}")
-
-    def kill_all(self) -> None:
-        """SIGKILL every process of the cluster and all they started (agents, workers)."""
-        out = subprocess.run(["ps", "-ww", "-eo", "pid,args"], capture_output=True,
-                             text=True).stdout
-        own = {int(line.split()[0]) for line in out.splitlines()[1:] if str(self.temp) in line}
-        for pid in own | set().union(*(descendants(p) for p in own)):
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
-
-
-def descendants(pid: int) -> set[int]:
-    """The processes started by ``pid`` (a raylet's workers), at any depth."""
-    out = subprocess.run(["ps", "-eo", "pid,ppid"], capture_output=True, text=True).stdout
-    parent = {int(a): int(b) for a, b in (line.split() for line in out.splitlines()[1:])}
-    found: set[int] = set()
-    for child in parent:
-        p = child
-        while p in parent and p > 1:
-            p = parent[p]
-            if p == pid:
-                found.add(child)
-                break
-    return found
-
-
 @pytest.fixture(scope="module")
-def cluster() -> Iterator[Cluster]:
-    c = Cluster()
+def cluster() -> Iterator[LocalRayCluster]:
+    c = LocalRayCluster(head_cpus=1, node_cpus=(1,))
     try:
         yield c
     finally:
-        c.kill_all()
-        time.sleep(1.0)
-        shutil.rmtree(c.temp, ignore_errors=True)
+        c.stop()
 
 
 @pytest.fixture(scope="module")
-def service(cluster: Cluster, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+def service(cluster: LocalRayCluster, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     server = start_server(tmp_path_factory.mktemp("ray-service"), DEXROLL_EXECUTOR="ray",
                           DEXROLL_RAY_ADDRESS=cluster.address, DEXROLL_WORKERS="2",
-                          RAY_AUTH_MODE="token", RAY_USAGE_STATS_ENABLED="0")
+                          **RAY_ENV)
     try:
         deadline = time.monotonic() + 120
         while httpx.get(f"{server.url}/readyz").json().get("workers") != 2:
@@ -133,20 +66,17 @@ def results(server: Server, batch_id: str) -> list[dict[str, Any]]:
     return [json.loads(line) for line in r.text.splitlines()]
 
 
-def test_a_batch_runs_on_both_nodes(service: Server, cluster: Cluster) -> None:
+def test_a_batch_runs_on_both_nodes(service: Server, cluster: LocalRayCluster) -> None:
     ready = httpx.get(f"{service.url}/readyz").json()
     assert ready["executor"]["name"] == "ray" and ready["executor"]["nodes"] == 2
     jobs = results(service, batch(service, 8))
     assert len(jobs) == 8 and all(j["state"] == "succeeded" for j in jobs)
-    pids = {j["worker_pid"] for j in jobs}
-    raylets = {pid for pid, _ in cluster.raylets()}
-    nodes = {r for r in raylets if pids & descendants(r)}
-    assert len(nodes) == 2, (pids, {r: descendants(r) for r in raylets})  # both nodes
+    nodes = {cluster.node_of(j["worker_pid"]) for j in jobs}
+    assert len(nodes) == 2 and None not in nodes  # actors on the head and on node1
 
 
-def test_a_node_killed_mid_batch_loses_nothing(service: Server, cluster: Cluster) -> None:
-    second = cluster.second_raylet()
-    on_second = descendants(second)
+def test_a_node_killed_mid_batch_loses_nothing(service: Server, cluster: LocalRayCluster) -> None:
+    on_second = descendants(cluster.raylet("node1"))
     batch_id = batch(service, 10, n_intervals=300)
     deadline = time.monotonic() + 120
     while True:  # a job running on the second node's actor
@@ -159,7 +89,7 @@ def test_a_node_killed_mid_batch_loses_nothing(service: Server, cluster: Cluster
             break
         assert time.monotonic() < deadline, "no job ran on the second node"
         time.sleep(0.1)
-    os.kill(second, signal.SIGKILL)
+    cluster.kill_node("node1")
     ended = results(service, batch_id)
     assert len(ended) == 10 and len({j["id"] for j in ended}) == 10  # none lost or twice
     assert all(j["state"] == "succeeded" or j["code"] for j in ended)
@@ -171,8 +101,8 @@ def test_a_node_killed_mid_batch_loses_nothing(service: Server, cluster: Cluster
 
 
 def test_when_the_cluster_is_gone_the_api_answers_and_refuses_new_work(
-        service: Server, cluster: Cluster) -> None:
-    cluster.kill_all()
+        service: Server, cluster: LocalRayCluster) -> None:
+    cluster.stop()
     deadline = time.monotonic() + 120
     while True:
         r = httpx.get(f"{service.url}/readyz")

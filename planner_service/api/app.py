@@ -101,20 +101,22 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
         purge()
         notifier: Notifier = app.state.notifier
+        # where the heavy work runs: local processes, or Ray actors (one bridge for all)
+        work = executor(settings.executor, settings.ray_address)
         dispatcher = Dispatcher(
             store, settings.workers, settings.kill_grace, notifier.notify, settings.warmup,
             None if settings.compile_dir is None else str(settings.compile_dir.resolve()),
             settings.max_result_bytes, warmup_first=settings.warmup_first,
-            executor=executor(settings.executor, settings.ray_address),
+            executor=work,
             retries=settings.retries)
         dispatcher.housekeeping = purge
         dispatcher.start()
         checker = ModelChecker(settings.model_limits(), settings.model_checkers)
         simulations = SimulationPool(settings.sim_processes, settings.sim_queue,
-                                     settings.sim_time_limit, settings.sim_cpu_seconds)
+                                     settings.sim_time_limit, settings.sim_cpu_seconds, work)
         app.state.replans = replans = ReplanPool(
             settings.replan_processes, settings.replan_cache, settings.replan_queue,
-            settings.replan_time_limit, settings.replan_setup_limit)
+            settings.replan_time_limit, settings.replan_setup_limit, work)
         app.state.store, app.state.dispatcher = store, dispatcher
         app.state.checker, app.state.simulations = checker, simulations
         app.state.model_submissions = submissions = ModelSubmissions(settings.model_checkers,
@@ -131,6 +133,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             simulations.close()
             checker.close()
             dispatcher.stop()
+            work.close()
             store.close()
 
     app = FastAPI(title="dexroll", version="0.1.0", lifespan=lifespan,

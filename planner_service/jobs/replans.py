@@ -7,8 +7,9 @@ minutes; a controller's re-plan queued behind it would wait those minutes, and I
 cannot be interrupted to take it in between. Why not the API process: a re-plan holds
 the interpreter for its whole IPOPT call (tens of milliseconds to seconds), which every
 other route would wait for, and a crash in CasADi would take the API down. So re-plans
-have processes of their own (``DEXROLL_REPLAN_PROCESSES``, one by default), spawned at the
-first re-plan: each keeps, per plan (job id and end time), a
+have workers of their own (``DEXROLL_REPLAN_PROCESSES``, one by default; each a
+:class:`ReplanWorker` started by the service's executor, a spawned process or a Ray actor)
+started at the first re-plan: each keeps, per plan (job id and end time), a
 :class:`~ocp.solve.replan.Replanner`: the plan's problem, the NLP of its structure with
 its warm-start solver, and the plan being executed (the last re-plan), so that the
 controller's next call is warm-started from it. A plan's re-plans always go to the same
@@ -31,20 +32,16 @@ beyond); past its deadline (its time limit plus, on a first call, the setup's
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import multiprocessing as mp
-import os
 import threading
 import time
 import zlib
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from .lifeline import PipedChild, received
+from ..executors import Executor, Resources, Worker, WorkerError, WorkerLostError
 
 __all__ = ["ReplanPool", "ReplanRefusedError"]
 
@@ -72,57 +69,59 @@ class ReplanRefusedError(Exception):
         self.detail, self.retry_after = detail or [], retry_after
 
 
-def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float) -> None:
-    """A re-plan process: answer each ("replan", key, body JSON, result JSON or None,
-    request JSON or None) with ("ok", ReplanResult dict), ("need", None) (no re-planner
-    of that plan here yet: send the stored plan), or (error kind, payload)."""
-    from .lifeline import die_with_parent
+class ReplanWorker:
+    """A re-plan worker's body: it keeps, per kind of call, the sessions of the plans it
+    served last (re-planners, window controllers; ``cache_size`` each, the least recently
+    used dropped) and answers each call with ("ok", answer JSON), ("need", None) (no
+    session of that plan here yet: send the stored plan), or (error kind, payload)."""
 
-    die_with_parent(parent)
-    if not logging.getLogger().handlers:
-        logging.basicConfig(level=logging.INFO,
-                            format="%(asctime)s %(levelname)s [replan %(process)d] %(name)s: "
-                                   "%(message)s")
-    from dexroll_client.control import ControlAnswer, ControlMeasurement
-    from dexroll_client.replan import ReplanRequest, ReplanResult
+    def __init__(self, cache_size: int, time_cap: float) -> None:
+        from dexroll_client.control import ControlAnswer, ControlMeasurement
+        from dexroll_client.replan import ReplanRequest, ReplanResult
 
-    from ..execution.closed_loop import ReplanSession, TrackingSession, replannable
-    from ..planners import REQUEST, RESULT
+        from ..execution.closed_loop import ReplanSession, TrackingSession
 
-    #: per kind of call, its sessions: the re-planners, the window controllers
-    kinds: dict[str, tuple[Any, Any, Any]] = {
-        "replan": (ReplanRequest, ReplanResult, ReplanSession),
-        "control": (ControlMeasurement, ControlAnswer, TrackingSession)}
-    sessions: dict[str, OrderedDict[Key, Any]] = {k: OrderedDict() for k in kinds}
-    conn.send(("ready", None))
-    for msg in received(conn):
-        kind, key, body_json, result_json, request_json = msg
-        body_type, answer_type, session_type = kinds[kind]
-        held = sessions[kind]
+        self.cache_size, self.time_cap = cache_size, time_cap
+        #: per kind of call: its body and answer types, its session type
+        self.kinds: dict[str, tuple[Any, Any, Any]] = {
+            "replan": (ReplanRequest, ReplanResult, ReplanSession),
+            "control": (ControlMeasurement, ControlAnswer, TrackingSession)}
+        self.sessions: dict[str, OrderedDict[Key, Any]] = {k: OrderedDict()
+                                                           for k in self.kinds}
+
+    def ready(self) -> None:
+        """The worker is up (CasADi and the planners imported)."""
+
+    def handle(self, kind: str, key: Key, body_json: str, result_json: str | None,
+               request_json: str | None) -> tuple[str, Any]:
+        """One call of ``kind`` for the plan ``key``; ``result_json`` and
+        ``request_json``: the stored plan, sent only when asked for ("need")."""
+        from ..execution.closed_loop import replannable
+        from ..planners import REQUEST, RESULT
+
+        body_type, answer_type, session_type = self.kinds[kind]
+        held = self.sessions[kind]
         try:
             body = body_type.model_validate_json(body_json)
             setup = 0.0
             session = held.get(key)
             if session is None:
-                if result_json is None:
-                    conn.send(("need", None))
-                    continue
+                if result_json is None or request_json is None:
+                    return "need", None
                 t0 = time.perf_counter()
                 request = REQUEST.validate_json(request_json)
                 result = RESULT.validate_json(result_json)
                 why = replannable(request, result)
                 if why is not None:
-                    conn.send(("not_replannable", why))
-                    continue
+                    return "not_replannable", why
                 try:  # (a controller's key ends with its backend)
                     session = session_type(request, result, *key[2:]) \
                         if kind == "control" else session_type(request, result)
                 except ValueError as exc:
-                    conn.send(("not_replannable", f"its request cannot be planned again "
-                                                  f"here: {exc}"))
-                    continue
+                    return "not_replannable", (f"its request cannot be planned again "
+                                               f"here: {exc}")
                 held[key] = session
-                while len(held) > cache_size:
+                while len(held) > self.cache_size:
                     held.popitem(last=False)
                 setup = time.perf_counter() - t0
                 log.info("%s session of job %s built in %.2f s", kind, key[0], setup)
@@ -130,21 +129,21 @@ def _replan_main(conn: Connection, parent: int, cache_size: int, time_cap: float
             if kind == "control":
                 reply, payload = session.tick(body, setup)
             else:
-                reply, payload = session.replan(key[0], body, setup, time_cap)
+                reply, payload = session.replan(key[0], body, setup, self.time_cap)
             if reply == "ok":
                 payload = answer_type.model_validate(payload).model_dump_json()
-            conn.send((reply, payload))
+            return reply, payload
         except ValueError as exc:  # a measurement the estimate refuses (shapes)
-            conn.send(("invalid", [("q", str(exc))]))
-        except Exception as exc:  # a typed answer, never a dead process
+            return "invalid", [("q", str(exc))]
+        except Exception as exc:  # a typed answer, never a dead worker
             log.exception("%s failed", kind)
-            conn.send(("replan_failed", f"the {kind} call failed: {exc!r}"))
+            return "replan_failed", f"the {kind} call failed: {exc!r}"
 
 
 class _Slot:
     def __init__(self) -> None:
         self.lock = threading.Lock()
-        self.proc: PipedChild | None = None
+        self.worker: Worker | None = None
 
 
 #: How each reply other than an answer is refused: (status, error).
@@ -163,10 +162,15 @@ class ReplanPool:
     RETRY_AFTER = 1
 
     def __init__(self, processes: int = 1, cache_size: int = 8, max_waiting: int = 8,
-                 time_cap: float = 10.0, setup_limit: float = 300.0) -> None:
+                 time_cap: float = 10.0, setup_limit: float = 300.0,
+                 executor: Executor | None = None) -> None:
         self.cache_size, self.max_waiting = cache_size, max_waiting
         self.time_cap, self.setup_limit = time_cap, setup_limit
-        self._ctx = mp.get_context("spawn")
+        if executor is None:
+            from ..executors.local import LocalProcesses
+
+            executor = LocalProcesses()
+        self.work = executor
         self._slots = [_Slot() for _ in range(processes)]
         self._lock = threading.Lock()
         self._waiting = 0
@@ -185,11 +189,9 @@ class ReplanPool:
             self._closed = True
         for slot in self._slots:
             with slot.lock:
-                if slot.proc is not None:
-                    with contextlib.suppress(OSError, BrokenPipeError):
-                        slot.proc.conn.send(None)
-                    slot.proc.kill()
-                    slot.proc = None
+                if slot.worker is not None:
+                    slot.worker.kill()
+                    slot.worker = None
         self.executor.shutdown(wait=False, cancel_futures=True)
 
     def call(self, key: Key, body_json: str, time_limit: float,
@@ -213,8 +215,8 @@ class ReplanPool:
         with slot.lock:
             with self._lock:
                 self._waiting -= 1
-            if slot.proc is None or not slot.proc.process.is_alive():
-                slot.proc = self._start()
+            if slot.worker is None:
+                slot.worker = self._start()
             budget = min(time_limit, self.time_cap) + CALL_MARGIN
             reply, payload = self._exchange(slot, (kind, key, body_json, None, None), budget)
             if reply == "need":
@@ -233,48 +235,38 @@ class ReplanPool:
             raise ReplanRefusedError(status, error, message, detail)
         raise ReplanRefusedError(status, error, str(payload))
 
-    def _start(self) -> PipedChild:
-        proc = PipedChild(self._ctx, _replan_main, "dexroll-replan", os.getpid(),
-                          self.cache_size, self.time_cap)
-        if not proc.conn.poll(START_TIMEOUT):
-            proc.kill()
+    def _start(self) -> Worker:
+        worker = self.work.start(ReplanWorker, (self.cache_size, self.time_cap),
+                                 Resources(cpus=1.0), "replan")
+        try:
+            worker.call("ready").result(timeout=START_TIMEOUT)
+        except (TimeoutError, WorkerLostError, WorkerError) as exc:
+            worker.kill()
             raise ReplanRefusedError(503, "replan_unavailable",
-                                     "the re-plan process did not start",
-                                     retry_after=self.RETRY_AFTER)
-        kind, message = proc.conn.recv()
-        if kind != "ready":
-            proc.kill()
-            raise ReplanRefusedError(503, "replan_unavailable", str(message))
-        return proc
+                                     f"the re-plan worker did not start: {exc}",
+                                     retry_after=self.RETRY_AFTER) from exc
+        return worker
 
     def _exchange(self, slot: _Slot, msg: tuple[Any, ...], budget: float
                   ) -> tuple[str, Any]:
-        """Send one message to the slot's process and wait at most ``budget`` [s] for its
-        reply; past it the process is killed (and replaced at the next call)."""
-        proc = slot.proc
-        assert proc is not None
+        """One call of the slot's worker, waited for at most ``budget`` [s]; past it the
+        worker is killed (and replaced at the next call)."""
+        worker = slot.worker
+        assert worker is not None
         try:
-            proc.conn.send(msg)
-        except (OSError, BrokenPipeError) as exc:
-            proc.kill()
-            slot.proc = None
-            raise ReplanRefusedError(503, "replan_failed", "the re-plan process is gone; "
-                                     "it is replaced at the next call",
-                                     retry_after=self.RETRY_AFTER) from exc
-        ready = wait([proc.conn, proc.process.sentinel], timeout=budget)
-        if proc.conn in ready:
-            with contextlib.suppress(EOFError, OSError):
-                kind, payload = proc.conn.recv()
-                return str(kind), payload
-        code = proc.process.exitcode
-        proc.kill()
-        slot.proc = None
-        if not ready:
+            kind, payload = worker.call("handle", *msg).result(timeout=budget)
+            return str(kind), payload
+        except TimeoutError as exc:
+            worker.kill()
+            slot.worker = None
             raise ReplanRefusedError(
                 503, "replan_time_limit", f"the re-plan did not answer within {budget:g} s "
                 "(its time limit and margin, and a first call's setup: "
-                "DEXROLL_REPLAN_SETUP_LIMIT); its process was replaced",
-                retry_after=self.RETRY_AFTER)
-        raise ReplanRefusedError(503, "replan_failed", f"the re-plan process died (exit "
-                                                       f"code {code}); it is replaced",
-                                 retry_after=self.RETRY_AFTER)
+                "DEXROLL_REPLAN_SETUP_LIMIT); its worker was replaced",
+                retry_after=self.RETRY_AFTER) from exc
+        except (WorkerLostError, WorkerError) as exc:
+            worker.kill()
+            slot.worker = None
+            raise ReplanRefusedError(503, "replan_failed", f"the re-plan worker failed "
+                                     f"({exc}); it is replaced",
+                                     retry_after=self.RETRY_AFTER) from exc

@@ -6,15 +6,18 @@ A simulation costs what its options ask: a 20 s plan at ``timestep`` 1e-5 is two
 MuJoCo steps, over a minute of a core. Run in the API process (as it was), such runs queued
 behind one lock, each waiting request held an API thread, and each went on after its
 client had left. Here each :class:`SimulationPool` slot is a thread of the service that owns
-one spawned process (MuJoCo and the planners' models imported once, kept from run to run)
-and runs one simulation at a time in it:
+one worker (:class:`SimulationWorker`, started by the service's executor: a spawned local
+process, or a Ray actor; MuJoCo and the planners' models imported once, kept from run to
+run) and runs one simulation at a time on it:
 
 * at most ``max_queue`` simulations wait for a slot; beyond, :meth:`SimulationPool.submit`
   refuses (:class:`SimulationRefusedError`, a 503 with ``Retry-After``);
 * each run has a wall-clock deadline (``time_limit``) and a CPU budget (``cpu_seconds``,
   the process's ``RLIMIT_CPU`` raised to its CPU time so far plus the budget before each
-  run: the kernel stops a run past it with SIGXCPU); past either, the process is killed and
-  replaced, and the run refused with the reason;
+  run: the kernel stops a run past it with SIGXCPU); past either, the worker is killed and
+  replaced, and the run refused with the reason (on Ray, whose actors' exit codes do not
+  reach the service, a run stopped by its CPU budget reads ``simulation_failed`` naming the
+  actor's death);
 * a run nobody waits for any more (:meth:`SimulationPool.cancel`: its client left) is
   dropped from the queue, or its process killed and replaced.
 """
@@ -24,18 +27,15 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import multiprocessing as mp
-import os
 import queue
 import signal
 import threading
 import time
 from concurrent.futures import Future, InvalidStateError
 from dataclasses import dataclass, field
-from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from .lifeline import PipedChild, received
+from ..executors import Executor, Resources, Worker, WorkerError, WorkerLostError
 
 __all__ = ["SimulationPool", "SimulationRefusedError", "SimulationTask"]
 
@@ -51,10 +51,12 @@ class SimulationRefusedError(Exception):
     ``retry_after`` [s] when a retry may succeed."""
 
     def __init__(self, status: int, error: str, message: str,
-                 retry_after: int | None = None) -> None:
+                 retry_after: int | None = None, lost: bool = False) -> None:
         super().__init__(message)
         self.status, self.error, self.message = status, error, message
         self.retry_after = retry_after
+        #: the worker was killed or died: the slot starts a new one
+        self.lost = lost
 
 
 @dataclass(eq=False)
@@ -69,27 +71,37 @@ class SimulationTask:
     cancelled: threading.Event = field(default_factory=threading.Event)
 
 
-def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
-    """A simulation process: execute each (result, request, options) received in MuJoCo,
-    under a CPU budget per run; reply ("ok", report dict) or (error, message)."""
-    import resource
+class SimulationWorker:
+    """A simulation worker's body: execute each (result, request, options) it is given in
+    MuJoCo, under a CPU budget per run (``RLIMIT_CPU`` raised to the process's CPU time so
+    far plus ``cpu_seconds`` before each run: the kernel stops a run past it)."""
 
-    from .lifeline import die_with_parent
+    def __init__(self, cpu_seconds: float) -> None:
+        self.cpu_seconds = cpu_seconds
+        self.missing: str | None = None
+        try:
+            import sim  # noqa: F401  (MuJoCo: the sim extra)
 
-    die_with_parent(parent)
-    try:
-        from sim import SimOptions, simulate  # MuJoCo: the sim extra
+            from .. import execution  # noqa: F401
+        except ImportError as exc:
+            self.missing = f"MuJoCo is not installed: {exc}"
+
+    def ready(self) -> str | None:
+        """None when simulations can run here, else why not."""
+        return self.missing
+
+    def run(self, result_json: str, request_json: str, options: dict[str, Any]
+            ) -> tuple[str, Any]:
+        """One simulation: ("ok", report dict) or (error, message)."""
+        import resource
+
+        from sim import SimOptions, simulate
 
         from ..execution import NotExecutableError, execution_plan
         from ..planners import REQUEST, RESULT, ProblemError
-    except ImportError as exc:
-        conn.send(("simulation_unavailable", f"MuJoCo is not installed: {exc}"))
-        return
-    conn.send(("ready", None))
-    for msg in received(conn):
-        result_json, request_json, options = msg
+
         usage = resource.getrusage(resource.RUSAGE_SELF)
-        soft = math.ceil(usage.ru_utime + usage.ru_stime + cpu_seconds)
+        soft = math.ceil(usage.ru_utime + usage.ru_stime + self.cpu_seconds)
         _, hard = resource.getrlimit(resource.RLIMIT_CPU)
         with contextlib.suppress(ValueError, OSError):
             resource.setrlimit(resource.RLIMIT_CPU,
@@ -133,7 +145,7 @@ def _sim_main(conn: Connection, parent: int, cpu_seconds: float) -> None:
         except Exception as exc:  # a typed answer, never a dead process
             log.exception("simulation failed")
             reply = ("simulation_failed", f"the simulation failed: {exc!r}")
-        conn.send(reply)
+        return reply
 
 
 #: How a process's reply other than a report is answered: (status, retry-after).
@@ -162,10 +174,14 @@ class SimulationPool:
     RETRY_AFTER = 5
 
     def __init__(self, processes: int = 1, max_queue: int = 4, time_limit: float = 120.0,
-                 cpu_seconds: float = 120.0) -> None:
+                 cpu_seconds: float = 120.0, executor: Executor | None = None) -> None:
         self.processes, self.max_queue = processes, max_queue
         self.time_limit, self.cpu_seconds = time_limit, cpu_seconds
-        self._ctx = mp.get_context("spawn")
+        if executor is None:
+            from ..executors.local import LocalProcesses
+
+            executor = LocalProcesses()
+        self.executor = executor
         self._tasks: queue.Queue[SimulationTask | None] = queue.Queue()
         self._lock = threading.Lock()
         self._queued = self._running = 0
@@ -212,21 +228,23 @@ class SimulationPool:
             thread.join(timeout=10)
 
     # -- a slot's thread ---------------------------------------------------------------------
-    def _start(self) -> PipedChild:
-        proc = PipedChild(self._ctx, _sim_main, "dexroll-simulation", os.getpid(),
-                          self.cpu_seconds)
-        if not proc.conn.poll(START_TIMEOUT):
-            proc.kill()
+    def _start(self) -> Worker:
+        worker = self.executor.start(SimulationWorker, (self.cpu_seconds,),
+                                     Resources(cpus=1.0), "simulation")
+        try:
+            missing = worker.call("ready").result(timeout=START_TIMEOUT)
+        except (TimeoutError, WorkerLostError, WorkerError) as exc:
+            worker.kill()
             raise SimulationRefusedError(503, "simulation_unavailable",
-                                    "the simulation process did not start", self.RETRY_AFTER)
-        kind, message = proc.conn.recv()
-        if kind != "ready":
-            proc.kill()
-            raise SimulationRefusedError(503, kind, message)
-        return proc
+                                         f"the simulation worker did not start: {exc}",
+                                         self.RETRY_AFTER) from exc
+        if missing is not None:
+            worker.kill()
+            raise SimulationRefusedError(503, "simulation_unavailable", str(missing))
+        return worker
 
     def _slot(self) -> None:
-        proc: PipedChild | None = None
+        worker: Worker | None = None
         try:
             while True:
                 task = self._tasks.get()
@@ -238,67 +256,65 @@ class SimulationPool:
                 try:
                     if task.cancelled.is_set():
                         raise SimulationRefusedError(499, "cancelled", "nobody waits for it")
-                    if proc is None or not proc.process.is_alive():
-                        proc = self._start()
-                    _settle(task, self._run(proc, task))
+                    if worker is None:
+                        worker = self._start()
+                    _settle(task, self._run(worker, task))
                 except SimulationRefusedError as exc:
-                    if proc is not None and not proc.process.is_alive():
-                        proc.kill()
-                        proc = None
+                    if exc.lost and worker is not None:
+                        worker = None
                     _settle(task, exc)
-                except Exception as exc:  # the slot goes on: its process is replaced
+                except Exception as exc:  # the slot goes on: its worker is replaced
                     log.exception("simulation slot error")
-                    if proc is not None:
-                        proc.kill()
-                        proc = None
+                    if worker is not None:
+                        worker.kill()
+                        worker = None
                     _settle(task, SimulationRefusedError(
                         500, "simulation_failed", f"the simulation failed: {exc!r}"))
                 finally:
                     with self._lock:
                         self._running -= 1
         finally:
-            if proc is not None:
-                with contextlib.suppress(OSError, BrokenPipeError):
-                    proc.conn.send(None)
-                proc.kill()
+            if worker is not None:
+                worker.kill()
 
-    def _run(self, proc: PipedChild, task: SimulationTask) -> dict[str, Any]:
-        """One run in ``proc``: its report, or SimulationRefusedError (its process killed when
-        it ran out of time, of CPU, or of anyone waiting)."""
-        proc.conn.send((task.result_json, task.request_json, task.options))
+    def _run(self, worker: Worker, task: SimulationTask) -> dict[str, Any]:
+        """One run on ``worker``: its report, or SimulationRefusedError (``lost`` when the
+        worker was killed: it ran out of time, of CPU, or of anyone waiting)."""
+        future = worker.call("run", task.result_json, task.request_json, task.options)
         deadline = time.monotonic() + self.time_limit
         while True:
-            ready = wait([proc.conn, proc.process.sentinel], timeout=0.1)
-            if proc.conn in ready:
-                try:
-                    kind, payload = proc.conn.recv()
-                except (EOFError, OSError):
-                    kind, payload = "", None
-                if kind == "ok":
-                    return dict(payload)
-                if kind:
-                    status, retry = _REPLIES.get(kind, (500, None))
-                    raise SimulationRefusedError(status, kind, str(payload), retry)
-            if not proc.process.is_alive() or (proc.conn not in ready and ready):
-                proc.process.join(timeout=5)
-                code = proc.process.exitcode
-                proc.kill()
-                if code == -signal.SIGXCPU:
+            try:
+                kind, payload = future.result(timeout=0.1)
+            except TimeoutError:
+                pass
+            except WorkerError as exc:
+                raise SimulationRefusedError(500, "simulation_failed",
+                                             f"the simulation failed: {exc}") from exc
+            except WorkerLostError as exc:
+                worker.kill()
+                if exc.exitcode == -signal.SIGXCPU:
                     raise SimulationRefusedError(
                         503, "simulation_cpu_limit",
                         f"the simulation used its CPU budget of {self.cpu_seconds:g} s "
                         "(DEXROLL_SIM_CPU_SECONDS) and was stopped: ask for a larger "
-                        "timestep or a shorter plan")
+                        "timestep or a shorter plan", lost=True) from exc
                 raise SimulationRefusedError(500, "simulation_failed",
-                                        f"the simulation process died (exit code {code})")
+                                             f"the simulation worker died: {exc.reason}",
+                                             lost=True) from exc
+            else:
+                if kind == "ok":
+                    return dict(payload)
+                status, retry = _REPLIES.get(kind, (500, None))
+                raise SimulationRefusedError(status, kind, str(payload), retry)
             if task.cancelled.is_set():
-                proc.kill()
+                worker.kill()
                 log.info("simulation stopped: its client left")
-                raise SimulationRefusedError(499, "cancelled", "nobody waits for it")
+                raise SimulationRefusedError(499, "cancelled", "nobody waits for it",
+                                             lost=True)
             if time.monotonic() > deadline:
-                proc.kill()
+                worker.kill()
                 raise SimulationRefusedError(
                     503, "simulation_time_limit",
                     f"the simulation did not end within {self.time_limit:g} s "
                     "(DEXROLL_SIM_TIME_LIMIT) and was stopped: ask for a larger timestep "
-                    "or a shorter plan")
+                    "or a shorter plan", lost=True)

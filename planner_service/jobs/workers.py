@@ -141,6 +141,8 @@ class Dispatcher(threading.Thread):
                  warmup_first: bool = False, executor: Executor | None = None,
                  retries: int = 1) -> None:
         super().__init__(name="dexroll-dispatcher", daemon=True)
+        #: the executor is closed with the dispatcher only when it made its own
+        self._owns_executor = executor is None
         if executor is None:
             from ..executors.local import LocalProcesses
 
@@ -303,7 +305,11 @@ class Dispatcher(threading.Thread):
                     self.last_error = f"{type(exc).__name__}: {exc}"
                     self._stopping.wait(PROBE_INTERVAL)
         finally:
-            self.executor.close()
+            for slot in self._slots:
+                if slot.worker is not None:
+                    slot.worker.kill()
+            if self._owns_executor:
+                self.executor.close()
 
     def _step(self) -> None:
         now = time.monotonic()
