@@ -66,11 +66,13 @@ class SolverWorker:
         return warm_text(name, text, self.palm, self.fingers)
 
     def solve(self, job_id: str, request_json: str, seconds: float
-              ) -> tuple[str, str, str, str | None, str | None, bool, bool | None]:
+              ) -> tuple[str, str, str, str | None, str | None, bool, bool | None, float]:
         """Plan one job within ``seconds`` (the time left of its one deadline, which
         started when the dispatcher handed it over). The verdict: (job state, code,
         message, raw solver status, result JSON or None, whether the result holds a plan
-        to view, whether its NLP came from this worker's cache (None: not known))."""
+        to view, whether its NLP came from this worker's cache (None: not known), the
+        seconds spent here)."""
+        started = time.perf_counter()
         from ..planners import REQUEST, ProblemError, error_result, invalid_result, solve
         from ..view import has_plan
 
@@ -81,9 +83,7 @@ class SolverWorker:
             left = seconds - REPLY_TIME
             request = request.model_copy(update={"solver": request.solver.model_copy(
                 update={"time_limit": max(left, 1e-3)})})
-            t0 = time.perf_counter()
             result, _ = solve(request, self.palm, self.fingers)
-            log.debug("job %s planned in %.2f s", job_id, time.perf_counter() - t0)
         except ProblemError as exc:  # checked at submission; the store may be older
             result = invalid_result(exc.errors, planner)
         except Exception as exc:  # a typed error, never a dead worker on a bad job
@@ -92,12 +92,16 @@ class SolverWorker:
         result_json = result.model_dump_json()
         stats = result.stats
         raw = stats.raw_status if stats else None
-        hit = getattr(stats, "cache_hit", None)
+        hit = getattr(stats, "cache_hit", None)  # else: nothing built is a cache hit
+        build = getattr(stats, "build_time", None)
+        if hit is None and build is not None:
+            hit = bool(build == 0.0)
         if len(result_json) > self.max_result_bytes:
             return (JobState.FAILED.value, "result_too_large",
                     f"the plan ended {result.status.value}, but its JSON is "
                     f"{len(result_json)} bytes, over the service's limit of "
                     f"{self.max_result_bytes} (DEXROLL_MAX_RESULT_BYTES): ask for fewer "
-                    "intervals or sample times", raw, None, False, hit)
+                    "intervals or sample times", raw, None, False, hit,
+                    time.perf_counter() - started)
         return (job_outcome(result.status).value, result.status.value, result.message, raw,
-                result_json, has_plan(result), hit)
+                result_json, has_plan(result), hit, time.perf_counter() - started)

@@ -47,6 +47,7 @@ import queue
 import sqlite3
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, field
@@ -178,6 +179,9 @@ class Dispatcher(threading.Thread):
         self.cache = {"hits": 0, "misses": 0}
         #: jobs put back in the queue after their worker was lost
         self.requeued = 0
+        #: the last jobs' dispatch overheads: the time from handing a job over to its
+        #: verdict back, less the worker's own time on it [s]
+        self._overheads: deque[float] = deque(maxlen=1000)
 
     # -- called from other threads -----------------------------------------------------------
     def wake(self) -> None:
@@ -196,6 +200,14 @@ class Dispatcher(threading.Thread):
     @property
     def ready_workers(self) -> int:
         return sum(1 for s in list(self._slots) if s.ready and not s.lost)
+
+    def dispatch(self) -> dict[str, float | int]:
+        """The last jobs' dispatch overheads (median and 99th percentile [ms], count)."""
+        values = sorted(self._overheads)
+        if not values:
+            return {"jobs": 0}
+        return {"jobs": len(values), "median_ms": 1e3 * values[len(values) // 2],
+                "p99_ms": 1e3 * values[min(len(values) - 1, int(0.99 * len(values)))]}
 
     def unavailable(self) -> str | None:
         """Why new jobs cannot be run now (the executor's reason, when no worker is
@@ -392,7 +404,7 @@ class Dispatcher(threading.Thread):
                 return
             if method == "solve" and slot.job is not None:
                 value = (JobState.FAILED.value, "error", f"the worker failed: {exc}", None,
-                         None, False, None)
+                         None, False, None, None)
         if method == "ready":
             slot.pid = int(value["pid"]) if isinstance(value, dict) else None
             slot.failures = 0
@@ -431,7 +443,9 @@ class Dispatcher(threading.Thread):
         slot.job_deadline = float("inf")
         if job is None or verdict is None:
             return
-        state, code, message, raw, result_json, plan, hit = verdict
+        state, code, message, raw, result_json, plan, hit, inside = verdict
+        if inside is not None:  # the round trip's time outside the worker's solve
+            self._overheads.append(time.monotonic() - slot.started - float(inside))
         if job.structure:
             slot.holds.add(job.structure)
         if hit is not None:

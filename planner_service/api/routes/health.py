@@ -56,4 +56,5 @@ def readyz(request: Request, store: StoreDep, dispatcher: DispatcherDep) -> Any:
     simulations = request.app.state.simulations.stats()
     return {"status": "ready", "workers": workers, "queued": queued,
             "simulations": simulations, "executor": dispatcher.executor.describe(),
-            "cache": dict(dispatcher.cache), "requeued": dispatcher.requeued}
+            "cache": dict(dispatcher.cache), "requeued": dispatcher.requeued,
+            "dispatch": dispatcher.dispatch()}
