@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import socket
 import statistics
 import subprocess
@@ -102,10 +103,12 @@ class Service:
         except subprocess.TimeoutExpired:
             self.proc.kill()
         self.log.close()
+        shutil.rmtree(self.data, ignore_errors=True)
 
 
-def run_batch(service: Service, items: list[dict[str, Any]],
-              on_progress: Any = None) -> dict[str, Any]:
+def run_batch(service: Service, items: list[dict[str, Any]], on_progress: Any = None,
+              cluster: LocalRayCluster | None = None) -> dict[str, Any]:
+    daemons0 = cluster.daemon_cpu() if cluster is not None else 0.0
     cpu0, t0 = service.cpu(), time.perf_counter()
     r = httpx.post(f"{service.url}/v1/batches", json={"items": items}, timeout=120)
     r.raise_for_status()
@@ -117,6 +120,7 @@ def run_batch(service: Service, items: list[dict[str, Any]],
                       params={"order": "finished"}, timeout=3600).text.splitlines()
     wall = time.perf_counter() - t0
     cpu = service.cpu() - cpu0
+    daemons = cluster.daemon_cpu() - daemons0 if cluster is not None else None
     jobs = [json.loads(line) for line in lines]
     ready = httpx.get(f"{service.url}/readyz").json()
     firsts: set[tuple[str, int]] = set()
@@ -143,7 +147,8 @@ def run_batch(service: Service, items: list[dict[str, Any]],
             "cache_hits": ready["cache"]["hits"], "cache_misses": ready["cache"]["misses"],
             "hits": hits, "repeats_on_a_worker": after,
             "dispatch": ready.get("dispatch"), "service_cpu_per_job_ms":
-            round(1e3 * cpu / max(1, len(jobs)), 2), "requeued": ready.get("requeued")}
+            round(1e3 * cpu / max(1, len(jobs)), 2), "requeued": ready.get("requeued"),
+            "ray_daemons_cpu_s": None if daemons is None else round(daemons, 2)}
 
 
 def configuration(kind: str, actors: int, items: list[dict[str, Any]]) -> dict[str, Any]:
@@ -156,7 +161,8 @@ def configuration(kind: str, actors: int, items: list[dict[str, Any]]) -> dict[s
                    cluster.address}
         service = Service(actors, env)
         try:
-            return {"executor": kind, "workers": actors, **run_batch(service, items)}
+            return {"executor": kind, "workers": actors,
+                    **run_batch(service, items, cluster=cluster)}
         finally:
             service.stop()
     finally:
@@ -182,7 +188,7 @@ def node_lost(items: list[dict[str, Any]]) -> dict[str, Any]:
                 time.sleep(0.2)
 
         try:
-            out = run_batch(service, items, kill_when_a_third_ended)
+            out = run_batch(service, items, kill_when_a_third_ended, cluster)
         finally:
             service.stop()
         return {"executor": "ray", "workers": 2, "node_killed": killed, **out,
@@ -199,15 +205,23 @@ def main() -> None:
     parser.add_argument("--configs", nargs="*",
                         default=["local:1", "ray:1", "local:2", "ray:2", "ray:4"],
                         help="executor:workers, run in this order")
+    parser.add_argument("--repeats", type=int, default=1,
+                        help="runs of every configuration, interleaved (the summary gives "
+                             "their median plans per second)")
     parser.add_argument("--no-node-loss", action="store_true")
     args = parser.parse_args()
     items = requests(args.n)
     rows = []
-    for spec in args.configs:
-        kind, workers = spec.split(":")
-        row = configuration(kind, int(workers), items)
-        rows.append(row)
-        print(json.dumps(row), flush=True)
+    runs: dict[str, list[float]] = {}
+    for _ in range(args.repeats):
+        for spec in args.configs:
+            kind, workers = spec.split(":")
+            row = configuration(kind, int(workers), items)
+            rows.append(row)
+            runs.setdefault(spec, []).append(row["plans_per_s"])
+            print(json.dumps(row), flush=True)
+    print(json.dumps({"median_plans_per_s": {k: statistics.median(v) for k, v in runs.items()},
+                      "runs": runs}), flush=True)
     one = next((r for r in rows if r["workers"] == 1), None)
     if one is not None:  # one worker builds each structure once: their number
         structures = one["cache_misses"]

@@ -36,8 +36,6 @@ import hashlib
 import importlib
 import json
 import logging
-import multiprocessing as mp
-import os
 import queue
 import re
 import threading
@@ -46,12 +44,11 @@ import xml.etree.ElementTree as ET
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
-from multiprocessing.connection import Connection
 from typing import Any, cast
 
 from pydantic import BaseModel
 
-from .jobs.lifeline import PipedChild
+from .executors import Executor, Resources, Worker, WorkerError, WorkerLostError
 
 __all__ = [
     "COUNTERS",
@@ -374,64 +371,50 @@ _WARM_UP = {"urdf": '<robot name="warm-up"><link name="fingertip"/></robot>',
                     '</worldbody></mujoco>'}
 
 
-def _checker_main(conn: Connection, limits: dict[str, Any], parent: int) -> None:
-    """Body of a checker process: check each model received, reply with its errors."""
-    from .jobs.lifeline import die_with_parent
+class CheckWorker:
+    """A checker worker's body: the loaders' libraries imported (a small model of each
+    kind loaded), then the process's address space capped at its size plus the limits'
+    memory (``RLIMIT_AS``) before it checks anything."""
 
-    die_with_parent(parent, pdeathsig=False)  # replacements start from pool threads
-    lim = ModelLimits(**limits)
-    import resource
+    def __init__(self, limits: dict[str, Any]) -> None:
+        import resource
 
-    for kind in LOADERS:  # import the loaders' libraries before the memory limit
-        with contextlib.suppress(Exception):
-            LOADERS[kind](_WARM_UP.get(kind, ""), {})
-    with contextlib.suppress(ValueError, OSError):
-        size = 0
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmSize:"):
-                    size = int(line.split()[1]) * 1024
-        if size:
-            cap = size + lim.memory_bytes
-            resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
-    conn.send("ready")
-    while True:
+        self.limits = ModelLimits(**limits)
+        for kind in LOADERS:  # import the loaders' libraries before the memory limit
+            with contextlib.suppress(Exception):
+                LOADERS[kind](_WARM_UP.get(kind, ""), {})
+        with contextlib.suppress(ValueError, OSError):
+            size = 0
+            with open("/proc/self/status") as f:
+                for line in f:
+                    if line.startswith("VmSize:"):
+                        size = int(line.split()[1]) * 1024
+            if size:
+                cap = size + self.limits.memory_bytes
+                resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+
+    def ready(self) -> None:
+        """The worker is up, under its memory limit."""
+
+    def check(self, model: ModelText) -> FieldErrors:
+        """The model's errors (:func:`check_model`), a refusal for one past the limits."""
         try:
-            model = conn.recv()
-        except (EOFError, OSError, KeyboardInterrupt):
-            return
-        if isinstance(model, Task):
-            conn.send(_run_task(model, lim))
-            continue
-        try:
-            errors = check_model(model, lim)
+            return check_model(model, self.limits)
         except MemoryError:
-            errors = [(model.field, f"loading the model needs more than the "
-                                    f"{lim.memory_bytes >> 20} MB allowed")]
+            return [(model.field, f"loading the model needs more than the "
+                                  f"{self.limits.memory_bytes >> 20} MB allowed")]
         except Exception as exc:  # never die on a model
-            errors = [(model.field, f"the model cannot be loaded: {exc!r}")]
-        conn.send(errors)
+            return [(model.field, f"the model cannot be loaded: {exc!r}")]
+
+    def task(self, task: Task) -> tuple[str, Any, str]:
+        """(status, value, detail) of a task (:func:`_run_task`)."""
+        return _run_task(task, self.limits)
 
 
 # -- the checker pool (in the API process) ---------------------------------------------------
 
 class CheckerBusyError(Exception):
     """Every checker process stayed busy for longer than a check may take."""
-
-
-class _Proc(PipedChild):
-    def __init__(self, ctx: Any, limits: ModelLimits) -> None:
-        super().__init__(ctx, _checker_main, "dexroll-model-check", asdict(limits),
-                         os.getpid())
-        self.ready = False
-
-    def wait_ready(self, timeout: float) -> bool:
-        if not self.ready and self.conn.poll(timeout):
-            try:
-                self.ready = self.conn.recv() == "ready"
-            except (EOFError, OSError):
-                return False
-        return self.ready
 
 
 class ModelChecker:
@@ -443,11 +426,18 @@ class ModelChecker:
     START_TIMEOUT = 60.0
 
     def __init__(self, limits: ModelLimits | None = None, processes: int = 1,
-                 cache_size: int = 256, lazy: bool = False) -> None:
+                 cache_size: int = 256, lazy: bool = False,
+                 executor: Executor | None = None) -> None:
         self.limits = limits or ModelLimits()
-        self._ctx = mp.get_context("spawn")
-        self._idle: queue.Queue[_Proc] = queue.Queue()
-        self._all: list[_Proc] = []
+        if executor is None:
+            from .executors.local import LocalProcesses
+
+            executor = LocalProcesses()
+        self.executor = executor
+        self._idle: queue.Queue[Worker] = queue.Queue()
+        self._all: list[Worker] = []
+        #: the workers known to be up (their ``ready`` answered)
+        self._up: set[int] = set()
         self._lock = threading.Lock()
         self._cache: OrderedDict[str, FieldErrors] = OrderedDict()
         self._cache_size = cache_size
@@ -464,25 +454,28 @@ class ModelChecker:
             self._add()
 
     def _add(self) -> None:
-        proc = _Proc(self._ctx, self.limits)
+        # pdeathsig off: replacements start from the API's pool threads, which may end
+        worker = self.executor.start(CheckWorker, (asdict(self.limits),),
+                                     Resources(cpus=1.0, pdeathsig=False), "model-check")
         with self._lock:
-            self._all.append(proc)
-        self._idle.put(proc)
+            self._all.append(worker)
+        self._idle.put(worker)
 
-    def _drop(self, proc: _Proc) -> None:
-        proc.kill()
+    def _drop(self, worker: Worker) -> None:
+        worker.kill()
         with self._lock:
-            if proc in self._all:
-                self._all.remove(proc)
+            if worker in self._all:
+                self._all.remove(worker)
+            self._up.discard(id(worker))
         if not self._closed:
             self._add()  # its replacement starts importing now
 
     def close(self) -> None:
         self._closed = True
         with self._lock:
-            procs = list(self._all)
-        for proc in procs:
-            proc.kill()
+            workers = list(self._all)
+        for worker in workers:
+            worker.kill()
 
     def check(self, model: ModelText) -> FieldErrors:
         """The model's errors (under its own fields, see :func:`check_model`); [] when the
@@ -510,59 +503,66 @@ class ModelChecker:
         is replaced), TaskError when the task raised, CheckerBusyError when no checker
         process came free."""
         limit = self.limits.time_limit if time_limit is None else time_limit
-        proc = self._take()
+        worker = self._take()
         try:
-            proc.conn.send(task)
-            if proc.conn.poll(limit):
-                status, value, detail = proc.conn.recv()
-                self._idle.put(proc)
-                if status == "ok":
-                    return value
-                if status == "error":
-                    raise TaskError(str(value), detail)
-                raise TaskLimitError(detail)
+            status, value, detail = worker.call("task", task).result(timeout=limit)
+        except TimeoutError:
             reason = f"it took longer than the {limit:g} s allowed"
-        except (EOFError, OSError, BrokenPipeError):
+        except (WorkerLostError, WorkerError):
             reason = (f"its process died (beyond its {self.limits.memory_bytes >> 20} MB "
                       "memory limit?)")
+        else:
+            self._idle.put(worker)
+            if status == "ok":
+                return value
+            if status == "error":
+                raise TaskError(str(value), detail)
+            raise TaskLimitError(detail)
         log.warning("%s task refused: %s", task.name, reason)
-        self._drop(proc)
+        self._drop(worker)
         raise TaskLimitError(reason)
 
-    def _take(self) -> _Proc:
-        """An idle checker process, alive and ready (a dead one is replaced)."""
+    def _take(self) -> Worker:
+        """An idle checker worker, up and ready (a dead one is replaced)."""
         if self._unstarted:
             self._start()
         for _ in range(3):
             try:
-                proc = self._idle.get(timeout=self.START_TIMEOUT)
+                worker = self._idle.get(timeout=self.START_TIMEOUT)
             except queue.Empty as exc:
                 raise CheckerBusyError("every model checker is busy") from exc
-            if proc.process.is_alive() and proc.wait_ready(self.START_TIMEOUT):
-                return proc
-            log.warning("model checker %s gone (exit code %s); replacing it",
-                        proc.process.pid, proc.process.exitcode)
-            self._drop(proc)
+            if id(worker) in self._up:
+                return worker
+            try:
+                worker.call("ready").result(timeout=self.START_TIMEOUT)
+            except (TimeoutError, WorkerLostError, WorkerError) as exc:
+                log.warning("model checker %s gone (%s); replacing it", worker.where(), exc)
+                self._drop(worker)
+                continue
+            with self._lock:
+                self._up.add(id(worker))
+            return worker
         raise CheckerBusyError("the model checkers do not start")
 
     def _run(self, model: ModelText) -> FieldErrors:
-        proc = self._take()
+        worker = self._take()
         t0 = time.monotonic()
         try:
-            proc.conn.send(model)
-            if proc.conn.poll(self.limits.time_limit):
-                errors: FieldErrors = proc.conn.recv()
-                self._idle.put(proc)
-                log.info("model %s checked in %.3f s: %s", model.where,
-                         time.monotonic() - t0, "ok" if not errors else errors[0][1])
-                return errors
+            errors: FieldErrors = worker.call("check", model).result(
+                timeout=self.limits.time_limit)
+        except TimeoutError:
             reason = (f"loading the model took longer than the {self.limits.time_limit:g} s "
                       "allowed")
-        except (EOFError, OSError, BrokenPipeError):
+        except (WorkerLostError, WorkerError):
             reason = (f"the model checker died loading the model (beyond its "
                       f"{self.limits.memory_bytes >> 20} MB memory limit?)")
+        else:
+            self._idle.put(worker)
+            log.info("model %s checked in %.3f s: %s", model.where, time.monotonic() - t0,
+                     "ok" if not errors else errors[0][1])
+            return errors
         log.warning("model %s refused: %s", model.where, reason)
-        self._drop(proc)
+        self._drop(worker)
         return [(model.field, reason)]
 
 

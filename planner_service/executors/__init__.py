@@ -24,13 +24,14 @@ class that has :class:`Executor`'s methods, and a line in :data:`EXECUTORS`.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
-from concurrent.futures import Future
+from concurrent.futures import Future, InvalidStateError
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 __all__ = ["EXECUTORS", "Executor", "Resources", "Worker", "WorkerError", "WorkerLostError",
-           "executor"]
+           "executor", "resolve"]
 
 
 class WorkerLostError(Exception):
@@ -107,6 +108,18 @@ class Executor(Protocol):
     def close(self) -> None:
         """Stop every worker it started."""
         ...
+
+
+def resolve(future: Future[Any] | None, ok: bool, value: Any) -> None:
+    """End a call's future with the worker's answer: its value, or (``ok`` false) a
+    :class:`WorkerError` with the error's text; nothing when it has ended already."""
+    if future is None:
+        return
+    with contextlib.suppress(InvalidStateError):
+        if ok:
+            future.set_result(value)
+        else:
+            future.set_exception(WorkerError(value))
 
 
 def _local(address: str | None) -> Executor:

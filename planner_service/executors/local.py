@@ -21,7 +21,7 @@ from concurrent.futures import Future, InvalidStateError
 from multiprocessing.connection import Connection
 from typing import Any
 
-from . import Resources, WorkerError, WorkerLostError
+from . import Resources, WorkerLostError, resolve
 
 __all__ = ["LocalProcesses", "ProcessWorker", "serve"]
 
@@ -130,12 +130,7 @@ class ProcessWorker:
                 break
             with self._lock:
                 future = self._pending.pop(call_id, None)
-            if future is not None:
-                with contextlib.suppress(InvalidStateError):
-                    if ok:
-                        future.set_result(value)
-                    else:
-                        future.set_exception(WorkerError(value))
+            resolve(future, ok, value)
         self.process.join(timeout=5)
         lost = WorkerLostError(f"the worker process (pid {self.pid}) died (exit code "
                           f"{self.process.exitcode})", self.process.exitcode)

@@ -101,6 +101,20 @@ class LocalRayCluster:
         """The raylet whose node runs the process ``pid`` (None: none of this cluster's)."""
         return next((r for r in self.raylets() if pid in descendants(r)), None)
 
+    def daemon_cpu(self) -> float:
+        """CPU seconds used so far by the cluster's own processes (GCS, raylets, agents,
+        idle workers): everything of it but the actors' processes (``ray::_Host...``)."""
+        procs = _processes()
+        own = {pid for pid, (_, args) in procs.items() if str(self.temp) in args}
+        total = 0.0
+        for pid in own | set().union(*(descendants(p) for p in own)):
+            if procs.get(pid, (0, ""))[1].startswith("ray::_Host"):
+                continue
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        return total
+
     def kill_node(self, node: str) -> None:
         """SIGKILL ``node``'s raylet and what it started: the node is lost, as if its
         machine went away."""

@@ -31,7 +31,7 @@ from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
 from multiprocessing.connection import Connection
 from typing import Any
 
-from . import Resources, WorkerError, WorkerLostError
+from . import Resources, WorkerLostError, resolve
 
 __all__ = ["PING_INTERVAL", "RECONNECT_AFTER", "RayExecutor", "RayWorker"]
 
@@ -89,7 +89,11 @@ def _bridge_main(conn: Connection, parent: int, address: str) -> None:
     try:
         import ray
         from ray.exceptions import RayTaskError
-
+    except ImportError as exc:
+        send(("unavailable", f"Ray is not installed here ({exc}): pip install "
+                             "'dexroll[distributed]'"))
+        return
+    try:
         ray.init(address=address, namespace="dexroll", log_to_driver=False,
                  logging_level=logging.WARNING, include_dashboard=False)
         nodes = [n for n in ray.nodes() if n.get("Alive")]
@@ -329,12 +333,7 @@ class RayExecutor:
                 _, call_id, ok, value = msg
                 with self._lock:
                     _, future = self._calls.pop(call_id, (None, None))
-                if future is not None:
-                    with contextlib.suppress(InvalidStateError):
-                        if ok:
-                            future.set_result(value)
-                        else:
-                            future.set_exception(WorkerError(value))
+                resolve(future, ok, value)
             elif kind == "where":
                 worker = self._workers.get(msg[1])
                 if worker is not None:
