@@ -25,9 +25,12 @@ printed side by side.
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --repeats 3
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --ref 1d51bdd --repeats 2
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --replace --repeats 1
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --fast --repeats 1
 
 ``--replace`` plans every turn with the request's ``gait.replace`` "all" and "spent" side
-by side instead (robot time and re-placements are the plans', the same every run).
+by side instead (robot time and re-placements are the plans', the same every run);
+``--fast`` with the requests' own gait options and with :data:`FAST`'s (spent
+re-placements, fastest swings and rolls, 0.1 s force ramps).
 """
 
 from __future__ import annotations
@@ -64,9 +67,14 @@ def targets(root: Path = ROOT) -> dict[str, dict[str, Any]]:
     return out
 
 
-def _worker(names: list[str], replace: str | None = None) -> None:
+#: The gait options of ``--fast``: only spent fingertips re-placed, swings and rolls as fast
+#: as the hand allows, 0.1 s force ramps.
+FAST = {"replace": "spent", "fastest_swings": True, "fastest_rolls": True, "hold_time": 0.1}
+
+
+def _worker(names: list[str], gait: dict[str, Any] | None = None) -> None:
     """One run: every named turn planned in this process, one JSON line each
-    (``replace``: the requests' ``gait.replace``, default theirs)."""
+    (``gait``: fields set in the requests' ``gait``, default theirs)."""
     from dexroll_client import ManipulationRequest
     from ocp.gait.swing import prepare_swings
     from planner_service.planners import REQUEST
@@ -76,8 +84,7 @@ def _worker(names: list[str], replace: str | None = None) -> None:
 
     reqs = targets(Path.cwd())
     for name in names:
-        if replace is not None:
-            reqs[name]["gait"]["replace"] = replace
+        reqs[name]["gait"].update(gait or {})
         t0 = time.perf_counter()
         req = REQUEST.validate_python(reqs[name])
         assert isinstance(req, ManipulationRequest)
@@ -98,11 +105,12 @@ def _worker(names: list[str], replace: str | None = None) -> None:
             "gait": t3 - t2}), flush=True)
 
 
-def _run(tree: Path, names: list[str], replace: str | None = None) -> list[dict[str, Any]]:
+def _run(tree: Path, names: list[str], gait: dict[str, Any] | None = None
+         ) -> list[dict[str, Any]]:
     """One run in a fresh process whose ``ocp`` and ``planner_service`` are ``tree``'s
-    (``replace``: the requests' ``gait.replace``)."""
+    (``gait``: fields set in the requests' ``gait``)."""
     env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1"}
-    extra = [] if replace is None else ["--worker-replace", replace]
+    extra = [] if not gait else ["--worker-gait", json.dumps(gait)]
     out = subprocess.run([sys.executable, str(Path(__file__).resolve()), *extra,
                           "--worker", *names], cwd=tree, env=env, capture_output=True,
                          text=True, check=True)
@@ -159,24 +167,28 @@ def main() -> None:
     ap.add_argument("--out", default=None, help="write every run's rows as JSON here")
     ap.add_argument("--replace", action="store_true",
                     help="time gait.replace 'all' and 'spent' side by side (this tree)")
+    ap.add_argument("--fast", action="store_true",
+                    help="time the requests as they are and with FAST's gait options "
+                         "side by side (this tree)")
     ap.add_argument("--worker", nargs="*", help=argparse.SUPPRESS)
-    ap.add_argument("--worker-replace", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--worker-gait", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker is not None:
-        _worker(args.worker, args.worker_replace)
+        _worker(args.worker, json.loads(args.worker_gait) if args.worker_gait else None)
         return
     names = list(targets())
     if args.turns:
         names = [n for n in names if n in args.turns.split(",")]
-    runs: dict[str, tuple[Path, str | None]] = \
-        {"all": (ROOT, "all"), "spent": (ROOT, "spent")} if args.replace else \
-        {"new": (ROOT, None)} if args.ref is None else \
+    runs: dict[str, tuple[Path, dict[str, Any] | None]] = \
+        {"all": (ROOT, {"replace": "all"}), "spent": (ROOT, {"replace": "spent"})} \
+        if args.replace else {"default": (ROOT, None), "fast": (ROOT, FAST)} if args.fast \
+        else {"new": (ROOT, None)} if args.ref is None else \
         {"old": (_worktree(args.ref), None), "new": (ROOT, None)}
     sides: dict[str, list[list[dict[str, Any]]]] = {side: [] for side in runs}
     for k in range(args.repeats):
-        for side, (tree, replace) in runs.items():
+        for side, (tree, gait) in runs.items():
             print(f"run {k + 1}/{args.repeats}, {side}", file=sys.stderr, flush=True)
-            sides[side].append(_run(tree, names, replace))
+            sides[side].append(_run(tree, names, gait))
     if args.out:
         Path(args.out).write_text(json.dumps(sides, indent=1))
     print(_table(sides))

@@ -35,7 +35,7 @@ from ocp.gait.step import (
     liftable,
     replace_finger,
 )
-from ocp.gait.warp import RollClock
+from ocp.gait.warp import RollClock, fastest_speed
 from ocp.geometry.bodies import segments_distance, tip_body
 from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
 from ocp.solution import ManipulationSolution
@@ -327,7 +327,66 @@ def _clock_checks(plan: GaitPlan, r: int, template: ManipulationProblem, t0: flo
     gap, at = tips_gaps(tuple(f.finger for f in template.fingers), q, plan.nq)
     out.append(Check(f"roll{r}_tip_gap", gap, -TIP_GAP_TOL, CheckKind.PHYSICS,
                      lower_bound=True, time=t0 + float(tau[::TIP_GAP_STRIDE][at])))
+    if clock.speed > 1.0:  # run faster than planned: the damping's share certified
+        out += _clock_torques(plan, r, template, t0, tau[::TIP_GAP_STRIDE])
     return out
+
+
+def roll_speed(sol: ManipulationSolution, template: ManipulationProblem,
+               nq: tuple[int, ...]) -> float:
+    """The speed (at least 1) a roll's path can be run at (:func:`~ocp.gait.warp.
+    fastest_speed`): within the joints' velocity limits, the acceleration bound, and the
+    share of the actuators' range its forces leave to the damping (1 - the force stage's
+    :data:`~ocp.solve.force_plan.ROLL_TORQUE_SHARE`)."""
+    from ocp.solve.force_plan import ROLL_TORQUE_SHARE
+
+    dur = float(sol.duration)
+    s = np.linspace(0.0, dur, max(int(dur * CLOCK_SAMPLES), 2) + 1)
+    jt = sol.joint_trajectory(s, efforts=False)
+    vmax = np.concatenate([np.asarray(f.finger.velocity_limit, dtype=float)
+                           for f in template.fingers])
+    overrun = 0.0
+    limits = torque_limits(template, 1.0 - ROLL_TORQUE_SHARE)
+    if limits is not None:
+        cut = np.cumsum((0, *nq))
+        overrun = max(limits.damping_overrun(i, jt.positions[:, cut[i]:cut[i + 1]],
+                                             jt.velocities[:, cut[i]:cut[i + 1]])
+                      for i in range(len(nq)))
+    return fastest_speed(dur, jt.velocities, jt.accelerations, vmax,
+                         SPEED_MARGIN * float(template.max_joint_acceleration), overrun)
+
+
+#: The share of the acceleration bound a fastest roll is timed to: its speed is found on
+#: its plan's samples, the certificate checks the clock's own (denser) samples.
+SPEED_MARGIN = 0.98
+
+
+def _clock_torques(plan: GaitPlan, r: int, template: ManipulationProblem, t0: float,
+                   tau: FloatArray) -> list[Check]:
+    """Roll ``r``'s joint torques on its clock within the actuators' whole range: its
+    forces' (at the plan's times) plus its joints' damping at the clock's rates (a roll
+    run faster than planned asks more of the damping)."""
+    limits = torque_limits(template, 1.0)
+    if limits is None or not limits.damping:
+        return []
+    clock = plan.clock(r)
+    s = clock(tau)[0]
+    q, v, _ = plan.roll_joints(r, tau)
+    static = plan.rolls[r].joint_torques(s)
+    cut = np.cumsum((0, *plan.nq))
+    worst, at = 0.0, 0
+    for i in range(len(plan.nq)):
+        c = np.asarray(limits.damping[i], dtype=float)
+        for k in range(len(tau)):
+            lo, hi = limits.at(i, q[k, cut[i]:cut[i + 1]])
+            need = static[i][k] + c * v[k, cut[i]:cut[i + 1]]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.where(need > 0, need / hi, np.where(need < 0, need / lo, 0.0))
+            ratio = np.where(np.isnan(ratio), 0.0, np.where(ratio < 0, np.inf, ratio))
+            if ratio.max(initial=0.0) > worst:
+                worst, at = float(ratio.max()), k
+    return [Check(f"roll{r}_clock_torque", worst, 1.0 + 1e-9, CheckKind.LIMITS,
+                  time=t0 + float(tau[at]))]
 
 
 #: How far [rad or m] a roll's first joints may be from the joints the phase before it
@@ -617,8 +676,8 @@ def _replace_spent(plan: GaitPlan, checks: list[Check], template: ManipulationPr
 def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, angle: float,
               roll_step: float = math.radians(10.0), seconds_per_radian: float = 8.0,
               planner: Any = None, swing: dict[str, Any] | None = None,
-              hold_time: float = 0.2, max_rolls: int = 40, replace_all: bool = True
-              ) -> GaitPlan:
+              hold_time: float = 0.2, max_rolls: int = 40, replace_all: bool = True,
+              fastest_rolls: bool = False) -> GaitPlan:
     """Turn the ball of ``template`` (a grasp of round fingertips on a ball, with
     ``forces``: the holds need the object's weight) by ``angle`` [rad] about ``axis``
     (palm frame) from the joints ``qs`` (one array per finger), rolling by at most
@@ -632,7 +691,11 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     (:func:`spent_fingers`), each where it touched when the gait began (the ball turned
     about its centre fills the same space: that contact gives the grasp's searched
     reach again), or every one there when one of them cannot be lifted or finds no
-    swing, and where it touched when the roll began when it finds no swing home."""
+    swing, and where it touched when the roll began when it finds no swing home.
+    ``fastest_rolls``: each roll's path run as fast as the joints' velocity limits, the
+    acceleration bound and the actuators' damping share allow (:func:`roll_speed`; its
+    duration from ``seconds_per_radian`` an upper bound), its torques, damping's included,
+    certified on its clock."""
     from ocp.solve.planner import ManipulationPlanner
 
     t_wall = time.perf_counter()
@@ -717,7 +780,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         plan.rolls.append(sol)
         roll_starts.append(q_now)
         plan.frames.append(pose.rotation)
-        clock = RollClock.of(dur)
+        clock = RollClock.of(dur, roll_speed(sol, template, plan.nq) if fastest_rolls
+                             and sol.ok else 1.0)
         plan.clocks.append(clock)
         plan.phases.append(GaitPhase("roll", t, t + clock.length, (True,) * nf, None, r))
         checks += [replace(c, name=f"roll{r}_{c.name}",

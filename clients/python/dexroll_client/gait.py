@@ -38,6 +38,14 @@ class GaitModel(_Request):
         description="swing_duration an upper bound: each swing found is timed as fast as "
                     "the joints' velocity limits, an acceleration of 20 rad/s^2 and the "
                     "actuators' damping allow (its path unchanged), at least 0.15 s")
+    fastest_rolls: bool = Field(
+        default=False,
+        description="each roll's duration (from the motion's rate) an upper bound: its path "
+                    "is run as fast as the joints' velocity limits, an acceleration of 20 "
+                    "rad/s^2 and the share of the actuators' torque its forces leave to "
+                    "the joints' damping allow (the same path: no slip, the same forces), "
+                    "at least 0.3 s between its ramps; its torques, damping included, "
+                    "certified on its clock")
     hold_time: Real = Field(default=0.2, ge=0.01, le=5.0,
                             description="the unloading before a lift-off and the loading "
                                         "after a touch-down, each [s]")
