@@ -72,9 +72,9 @@ def targets(root: Path = ROOT) -> dict[str, dict[str, Any]]:
 FAST = {"replace": "spent", "fastest_swings": True, "fastest_rolls": True, "hold_time": 0.1}
 
 
-def _worker(names: list[str], gait: dict[str, Any] | None = None) -> None:
+def _worker(names: list[str], options: dict[str, Any] | None = None) -> None:
     """One run: every named turn planned in this process, one JSON line each
-    (``gait``: fields set in the requests' ``gait``, default theirs)."""
+    (``options``: fields set in the requests' ``gait``, default theirs)."""
     from dexroll_client import ManipulationRequest
     from ocp.gait.swing import prepare_swings
     from planner_service.planners import REQUEST
@@ -84,7 +84,7 @@ def _worker(names: list[str], gait: dict[str, Any] | None = None) -> None:
 
     reqs = targets(Path.cwd())
     for name in names:
-        reqs[name]["gait"].update(gait or {})
+        reqs[name]["gait"].update(options or {})
         t0 = time.perf_counter()
         req = REQUEST.validate_python(reqs[name])
         assert isinstance(req, ManipulationRequest)
