@@ -5,8 +5,7 @@ Laws: the clock at speed k runs the plan's whole path (s from 0 to its duration)
 times its rate on the plateau, its rate and acceleration continuous (the finite
 differences of s and s'), and at speed 1 it is the clock it always was; the speed found
 keeps the clock's accelerations within the bound, and is 1 when the bound is already
-reached. On examples/allegro_turn_90.json (spent re-placements, fastest swings, 0.1 s
-holds): the fast gait is certified, its rolls shorter on the gait's clock than their plans
+reached. On examples/allegro_turn_90.json (spent re-placements, fastest swings): the fast gait is certified, its rolls shorter on the gait's clock than their plans
 and each at one of its limits, its torques (damping included) certified on the clock, its
 robot time shorter than the same gait with rolls at the motion's rate, and it executes in
 MuJoCo."""
@@ -79,8 +78,7 @@ def _gait(fast_rolls: bool):
     from planner_service.planners.manipulation import manipulation_problem
 
     body = json.loads((ROOT / "examples" / "allegro_turn_90.json").read_text())
-    body["gait"].update(replace="spent", fastest_swings=True, fastest_rolls=fast_rolls,
-                        hold_time=0.1)
+    body["gait"].update(replace="spent", fastest_swings=True, fastest_rolls=fast_rolls)
     request = REQUEST.validate_python(body)
     cache = FingerCache()
     problem = manipulation_problem(request, cache)
@@ -96,7 +94,7 @@ def test_fast_rolls_are_certified_shorter_and_execute() -> None:
     request, result, gait = _gait(True)
     assert gait.ok and result.certificate is not None and result.certificate.passed
     assert math.degrees(gait.turned) == pytest.approx(90.0, abs=1e-3)
-    assert gait.duration < slow.duration - 5.0  # measured: 20.7 s against 30.3 s
+    assert gait.duration < slow.duration - 5.0  # measured: 28.6 s against 39.1 s
     values = result.certificate.values
     for r, (clock, roll) in enumerate(zip(gait.clocks, gait.rolls, strict=True)):
         assert clock.speed > 1.0 and clock.length < roll.duration
