@@ -30,7 +30,9 @@ printed side by side.
 ``--replace`` plans every turn with the request's ``gait.replace`` "all" and "spent" side
 by side instead (robot time and re-placements are the plans', the same every run);
 ``--fast`` with the requests' own gait options and with :data:`FAST`'s (spent
-re-placements, fastest swings and rolls).
+re-placements, fastest swings and rolls); ``--farthest`` :data:`FAST`'s against
+:data:`FARTHEST`'s (spent fingertips landing where they roll farthest, rolls of up to
+30 deg).
 """
 
 from __future__ import annotations
@@ -71,6 +73,9 @@ def targets(root: Path = ROOT) -> dict[str, dict[str, Any]]:
 #: as the hand allows (the holds' force ramps as the request's: with 0.1 s instead of 0.2 s,
 #: 3 of the 8 turns lost a contact for 1.5-4.5 ms at a load in MuJoCo; docs/gait.md).
 FAST = {"replace": "spent", "fastest_swings": True, "fastest_rolls": True}
+#: ``--farthest``: FAST with the spent fingertips landing where they roll farthest, and
+#: rolls of up to 30 deg.
+FARTHEST = {**FAST, "landing": "farthest", "roll_step": 0.5236}
 
 
 def _worker(names: list[str], options: dict[str, Any] | None = None) -> None:
@@ -171,6 +176,8 @@ def main() -> None:
     ap.add_argument("--fast", action="store_true",
                     help="time the requests as they are and with FAST's gait options "
                          "side by side (this tree)")
+    ap.add_argument("--farthest", action="store_true",
+                    help="time FAST's and FARTHEST's gait options side by side (this tree)")
     ap.add_argument("--worker", nargs="*", help=argparse.SUPPRESS)
     ap.add_argument("--worker-gait", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -183,6 +190,7 @@ def main() -> None:
     runs: dict[str, tuple[Path, dict[str, Any] | None]] = \
         {"all": (ROOT, {"replace": "all"}), "spent": (ROOT, {"replace": "spent"})} \
         if args.replace else {"default": (ROOT, None), "fast": (ROOT, FAST)} if args.fast \
+        else {"fast": (ROOT, FAST), "farthest": (ROOT, FARTHEST)} if args.farthest \
         else {"new": (ROOT, None)} if args.ref is None else \
         {"old": (_worktree(args.ref), None), "new": (ROOT, None)}
     sides: dict[str, list[list[dict[str, Any]]]] = {side: [] for side in runs}

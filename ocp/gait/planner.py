@@ -595,6 +595,60 @@ SPENT_MARGIN = 1.0
 #: every joint starts within this [rad] of where the last one started (the grasp recurs;
 #: re-placing every one, it recurs but for the never-lifted fingertips, and always is).
 RECUR_TOL = 0.05
+#: The landing candidates of :func:`farthest_landings`: shares of the turn back.
+LANDING_SHARES = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, ...],
+                      centre: FloatArray, rho: float, axis: FloatArray, back: float
+                      ) -> tuple[FloatArray, ...]:
+    """Per fingertip, where a spent one lands: of its home contact (the joints ``q_home``)
+    and that contact rolled back about ``axis`` (:func:`~ocp.robots.grasp_reach.roll`
+    with the ball turned by -``back`` times each of :data:`LANDING_SHARES`, as far as it
+    rolls back without stopping: never at a joint limit, a seam kept ``pad_margin`` away,
+    or a fold of its motion), the one from which it rolls forward the farthest, the
+    nearest home among those within 1 mrad of it; each placed on the ball to 1e-12 m (the rolled
+    joints drift by up to a micrometre) so that the roll after its landing starts where
+    its joints are."""
+    from ocp.robots.grasp_reach import roll
+    from ocp.robots.turn_reach import rolls
+
+    out = []
+    for k, f in enumerate(template.fingers):
+        best, best_reach = q_home[k], -1.0
+        if rolls(f.finger):
+            for share in LANDING_SHARES:
+                q = q_home[k]
+                if share > 0.0:
+                    behind = roll(f.finger, q_home[k], centre, rho, -axis, share * back,
+                                  template.pad_margin)
+                    if behind.why:  # stopped short (a joint limit, a seam, singular):
+                        break  # no landing at the edge of its reach
+                    q = _on_ball(f.finger, np.asarray(behind.q, dtype=float), centre, rho)
+                reach = roll(f.finger, q, centre, rho, axis, math.pi,
+                             template.pad_margin).reach
+                if reach > best_reach + 1e-3:
+                    best, best_reach = q, reach
+        out.append(best)
+    return tuple(out)
+
+
+def _on_ball(finger: Any, q: FloatArray, centre: FloatArray, rho: float) -> FloatArray:
+    """The joints ``q`` moved the least (Gauss-Newton on the tip's gap along the contact
+    normal) to put the round tip on the ball (its gap below 1e-12 m)."""
+    from ocp.robots.grasp_reach import tip_state
+
+    q = np.array(q, dtype=float)
+    for _ in range(5):
+        s = tip_state(finger, q, centre, rho)
+        if abs(s.gap) < 1e-12:
+            break
+        J = finger.frame_jacobian_pin(q)
+        row = s.n @ (J[:3] + np.cross(J[3:].T, s.centre - s.p_l).T)  # d gap / d q
+        q = q - row * (s.gap / float(row @ row))
+    return q
+
+
 def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
                      q_start: tuple[FloatArray, ...], q_now: tuple[FloatArray, ...],
                      pose: ObjectPose, t: float, load: FloatArray,
@@ -677,7 +731,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
               roll_step: float = math.radians(10.0), seconds_per_radian: float = 8.0,
               planner: Any = None, swing: dict[str, Any] | None = None,
               hold_time: float = 0.2, max_rolls: int = 40, replace_all: bool = True,
-              fastest_rolls: bool = False) -> GaitPlan:
+              fastest_rolls: bool = False, landing: str = "home") -> GaitPlan:
     """Turn the ball of ``template`` (a grasp of round fingertips on a ball, with
     ``forces``: the holds need the object's weight) by ``angle`` [rad] about ``axis``
     (palm frame) from the joints ``qs`` (one array per finger), rolling by at most
@@ -695,7 +749,10 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     ``fastest_rolls``: each roll's path run as fast as the joints' velocity limits, the
     acceleration bound and the actuators' damping share allow (:func:`roll_speed`; its
     duration from ``seconds_per_radian`` an upper bound), its torques, damping's included,
-    certified on its clock."""
+    certified on its clock. ``landing`` (with the spent fingertips re-placed): "home",
+    where each touched when the gait began, or "farthest", of that contact rolled back
+    about the axis by up to ``roll_step``, the one from which it rolls forward the farthest
+    (:func:`farthest_landings`)."""
     from ocp.solve.planner import ManipulationPlanner
 
     t_wall = time.perf_counter()
@@ -713,6 +770,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     rho = float(template.object.dimensions[0])
     q_now = tuple(np.asarray(q, dtype=float) for q in qs)
     q_home = q_now  # where each fingertip touched when the gait began
+    q_land: tuple[FloatArray, ...] | None = None  # where the spent ones land (made once)
     roll_starts: list[tuple[FloatArray, ...]] = []  # each roll's joints at its start
     pose = pose0
     plan = GaitPlan("solved", "", nq=tuple(int(f.nq) for f in fingers))
@@ -805,7 +863,10 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         if done >= angle - 1e-12:
             break
         if not replace_all:
-            got = _replace_spent(plan, checks, template, q_home, q_start, q_now, pose, t,
+            if q_land is None:
+                q_land = q_home if landing == "home" else farthest_landings(
+                    template, q_home, centre, rho, ax, roll_step)
+            got = _replace_spent(plan, checks, template, q_land, q_start, q_now, pose, t,
                                  load, swing, hold_time, never_lifted, ax,
                                  min(cap, angle - done))
             if got is not None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, ValidationInfo, field_validator
 
 from dexroll_client.common import Real, _Request, _Response
 
@@ -58,6 +58,23 @@ class GaitModel(_Request):
                     "another), each where it touched when the gait began (all of them "
                     "there when one cannot be lifted or finds no swing): fewer "
                     "re-placements, a shorter motion (docs/gait.md)")
+    landing: Literal["home", "farthest"] = Field(
+        default="home",
+        description="where a spent fingertip lands (with replace 'spent'): 'home', where "
+                    "it touched when the gait began; 'farthest', of that contact and the "
+                    "contacts it would have rolled back to (the ball turned back by 1/4, "
+                    "1/2, 3/4 and all of roll_step), the one from which it rolls forward "
+                    "the farthest: fewer, longer rolls (docs/gait.md)")
+
+    @field_validator("landing")
+    @classmethod
+    def _landing_needs_spent(cls, value: str, info: ValidationInfo) -> str:
+        if value != "home" and info.data.get("replace") != "spent":
+            raise ValueError("landing 'farthest' chooses where a spent fingertip lands: it "
+                             "needs replace 'spent' (replace 'all' resets every fingertip "
+                             "where it touched when its roll began)")
+        return value
+
     clearance: Real = Field(default=0.003, ge=0.0, le=0.05,
                             description="the least distance [m] between a swinging "
                                         "fingertip's surface and the ball's, and (or the "
