@@ -64,6 +64,13 @@ def test_fewer_than_three_fingertips_is_422_naming_the_fingers(live_server: Serv
         assert "at least three fingertips" in reason and f"got {n}" in reason
 
 
+def test_a_farthest_landing_without_spent_re_placements_is_422(live_server: Server) -> None:
+    body = copy.deepcopy(EXAMPLE)
+    body["gait"]["landing"] = "farthest"
+    reason = _fields(_post(live_server, body))["gait.landing"]
+    assert "needs replace 'spent'" in reason
+
+
 def test_a_grasp_no_fingertip_of_which_can_be_lifted_is_infeasible(live_server: Server
                                                                     ) -> None:
     """Index, middle and thumb hold the ball (the request is valid, and rolls), but no two
