@@ -378,13 +378,10 @@ def _clock_torques(plan: GaitPlan, r: int, template: ManipulationProblem, t0: fl
     for i in range(len(plan.nq)):
         c = np.asarray(limits.damping[i], dtype=float)
         for k in range(len(tau)):
-            lo, hi = limits.at(i, q[k, cut[i]:cut[i + 1]])
-            need = static[i][k] + c * v[k, cut[i]:cut[i + 1]]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ratio = np.where(need > 0, need / hi, np.where(need < 0, need / lo, 0.0))
-            ratio = np.where(np.isnan(ratio), 0.0, np.where(ratio < 0, np.inf, ratio))
-            if ratio.max(initial=0.0) > worst:
-                worst, at = float(ratio.max()), k
+            over = limits.overrun(i, q[k, cut[i]:cut[i + 1]],
+                                  static[i][k] + c * v[k, cut[i]:cut[i + 1]])
+            if over > worst:
+                worst, at = over, k
     return [Check(f"roll{r}_clock_torque", worst, 1.0 + 1e-9, CheckKind.LIMITS,
                   time=t0 + float(tau[at]))]
 
@@ -597,6 +594,8 @@ SPENT_MARGIN = 1.0
 RECUR_TOL = 0.05
 #: The landing candidates of :func:`farthest_landings`: shares of the turn back.
 LANDING_SHARES = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: How far [m] a landing candidate's tip centre may be from where it touches the ball.
+LANDING_TOL = 1e-12
 
 
 def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, ...],
@@ -607,10 +606,11 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
     with the ball turned by -``back`` times each of :data:`LANDING_SHARES`, as far as it
     rolls back without stopping: never at a joint limit, a seam kept ``pad_margin`` away,
     or a fold of its motion), the one from which it rolls forward the farthest, the
-    nearest home among those within 1 mrad of it; each placed on the ball to 1e-12 m (the rolled
-    joints drift by up to a micrometre) so that the roll after its landing starts where
-    its joints are."""
-    from ocp.robots.grasp_reach import roll
+    nearest home among those within 1 mrad of it; each placed on the ball to
+    :data:`LANDING_TOL` (the rolled joints drift by up to a micrometre;
+    :func:`~ocp.robots.grasp_reach.grasp_on_ball`, its couplings kept) so that the roll
+    after its landing starts where its joints are."""
+    from ocp.robots.grasp_reach import grasp_on_ball, roll, tip_state
     from ocp.robots.turn_reach import rolls
 
     out = []
@@ -624,29 +624,19 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
                                   template.pad_margin)
                     if behind.why:  # stopped short (a joint limit, a seam, singular):
                         break  # no landing at the edge of its reach
-                    q = _on_ball(f.finger, np.asarray(behind.q, dtype=float), centre, rho)
+                    # on the ball exactly: its contact's normal kept, the couplings too
+                    placed = grasp_on_ball(f.finger, behind.q, centre, rho,
+                                           tip_state(f.finger, behind.q, centre, rho).n,
+                                           LANDING_TOL, template.pad_margin)
+                    if placed is None:
+                        break
+                    q = placed
                 reach = roll(f.finger, q, centre, rho, axis, math.pi,
                              template.pad_margin).reach
                 if reach > best_reach + 1e-3:
                     best, best_reach = q, reach
         out.append(best)
     return tuple(out)
-
-
-def _on_ball(finger: Any, q: FloatArray, centre: FloatArray, rho: float) -> FloatArray:
-    """The joints ``q`` moved the least (Gauss-Newton on the tip's gap along the contact
-    normal) to put the round tip on the ball (its gap below 1e-12 m)."""
-    from ocp.robots.grasp_reach import tip_state
-
-    q = np.array(q, dtype=float)
-    for _ in range(5):
-        s = tip_state(finger, q, centre, rho)
-        if abs(s.gap) < 1e-12:
-            break
-        J = finger.frame_jacobian_pin(q)
-        row = s.n @ (J[:3] + np.cross(J[3:].T, s.centre - s.p_l).T)  # d gap / d q
-        q = q - row * (s.gap / float(row @ row))
-    return q
 
 
 def _replace_fingers(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,

@@ -182,13 +182,18 @@ class TorqueLimits:
             return worst
         c = np.asarray(self.damping[i], dtype=float)
         for q, v in zip(Q, V, strict=True):
-            lo, hi = self.at(i, q)
-            need = c * np.asarray(v, dtype=float)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                r = np.where(need > 0, need / hi, np.where(need < 0, need / lo, 0.0))
-            r = np.where(np.isnan(r), 0.0, np.where(r < 0, np.inf, r))
-            worst = max(worst, float(r.max(initial=0.0)))
+            worst = max(worst, self.overrun(i, q, c * np.asarray(v, dtype=float)))
         return worst
+
+    def overrun(self, i: int, q: Any, need: FloatArray) -> float:
+        """How many times more than finger ``i``'s actuators give at its joints ``q``
+        (:meth:`at`) the joint torques ``need`` ask, at worst over its joints (1: just
+        enough; inf: a torque against an actuator that gives nothing that way)."""
+        lo, hi = self.at(i, q)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.where(need > 0, need / hi, np.where(need < 0, need / lo, 0.0))
+        r = np.where(np.isnan(r), 0.0, np.where(r < 0, np.inf, r))
+        return float(r.max(initial=0.0))
 
     def at(self, i: int, q: Any) -> tuple[FloatArray, FloatArray]:
         """Finger ``i``'s joint torque bounds at its joints ``q``: ``lower`` and ``upper``,

@@ -25,6 +25,7 @@ from multiprocessing.connection import Connection
 from multiprocessing.connection import wait as mp_wait
 from typing import Any
 
+from ..executors import THREAD_VARIABLES, worker_env
 from ..planners.structure import structure_key
 from .rows import error_row, row_from_result, run_unit
 from .suite import PEER_METHODS, Unit
@@ -37,19 +38,6 @@ OnRow = Callable[[Row], None]
 
 #: Heavier planners first, so that the long units do not end a run on one busy worker.
 _WEIGHT = {"manipulation": 0, "one_finger": 1, "ball_on_palm": 2}
-
-
-#: Threads of the linear algebra libraries in a worker. The last digits of a plan depend on
-#: them (the order of a parallel reduction), so every runner gives its workers the same: one
-#: thread each (Ray's own default for a one-CPU actor; N workers on N cores besides), unless
-#: this process's environment says otherwise.
-THREAD_VARIABLES: tuple[str, ...] = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                     "MKL_NUM_THREADS")
-
-
-def worker_env() -> dict[str, str]:
-    """The thread settings of every worker (pool process or Ray actor)."""
-    return {k: os.environ.get(k, "1") for k in THREAD_VARIABLES}
 
 
 @contextlib.contextmanager

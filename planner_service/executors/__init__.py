@@ -25,13 +25,27 @@ class that has :class:`Executor`'s methods, and a line in :data:`EXECUTORS`.
 from __future__ import annotations
 
 import contextlib
+import os
 from collections.abc import Callable
 from concurrent.futures import Future, InvalidStateError
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-__all__ = ["EXECUTORS", "Executor", "Resources", "Worker", "WorkerError", "WorkerLostError",
-           "executor", "resolve"]
+__all__ = ["EXECUTORS", "THREAD_VARIABLES", "Executor", "Resources", "Worker", "WorkerError",
+           "WorkerLostError", "executor", "resolve", "worker_env"]
+
+#: Threads of the linear algebra libraries in a worker. The last digits of a plan depend on
+#: them (the order of a parallel reduction), so every worker gets the same: one thread each
+#: (the workers are the parallelism; Ray's own default for a one-CPU actor), unless this
+#: process's environment says otherwise.
+THREAD_VARIABLES: tuple[str, ...] = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                     "MKL_NUM_THREADS")
+
+
+def worker_env() -> dict[str, str]:
+    """The thread settings of every worker (a local process, a Ray actor, a bench
+    runner's process)."""
+    return {k: os.environ.get(k, "1") for k in THREAD_VARIABLES}
 
 
 class WorkerLostError(Exception):

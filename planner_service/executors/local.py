@@ -21,16 +21,11 @@ from concurrent.futures import Future, InvalidStateError
 from multiprocessing.connection import Connection
 from typing import Any
 
-from . import Resources, WorkerLostError, resolve
+from . import Resources, WorkerLostError, resolve, worker_env
 
 __all__ = ["LocalProcesses", "ProcessWorker", "serve"]
 
 log = logging.getLogger("dexroll.executors")
-
-#: Threads of the numeric libraries in a worker: one (the workers are the parallelism, and
-#: a plan's last digits then do not depend on the machine's thread count).
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
 
 def serve(conn: Connection, parent: int, pdeathsig: bool, body: type,
           args: tuple[Any, ...]) -> None:
@@ -67,8 +62,8 @@ class ProcessWorker:
 
     def __init__(self, ctx: Any, body: type, args: tuple[Any, ...], resources: Resources,
                  label: str) -> None:
-        for var in THREAD_VARIABLES:  # spawned children copy the environment
-            os.environ.setdefault(var, "1")
+        for var, value in worker_env().items():  # spawned children copy the environment
+            os.environ.setdefault(var, value)
         self._conn, child = ctx.Pipe()
         self.process = ctx.Process(target=serve, name=f"dexroll-{label}", daemon=True,
                                    args=(child, os.getpid(), resources.pdeathsig, body, args))
@@ -114,13 +109,10 @@ class ProcessWorker:
         if lost is not None:
             callback(lost)
 
-    def stop(self) -> None:
-        """Ask the worker to end after its current call (the pipe's None), then kill it
-        if it has not within 2 s."""
+    def ask_to_end(self) -> None:
+        """Ask the worker to end after its current call (the pipe's None)."""
         with contextlib.suppress(OSError, ValueError), self._send_lock:
             self._conn.send(None)
-        self.process.join(timeout=2)
-        self.kill()
 
     def _read(self) -> None:
         while True:
@@ -173,9 +165,8 @@ class LocalProcesses:
     def close(self) -> None:
         with self._lock:
             workers, self._workers = self._workers, []
-        for worker in workers:
-            with contextlib.suppress(OSError, ValueError), worker._send_lock:
-                worker._conn.send(None)
+        for worker in workers:  # all asked first: they end together
+            worker.ask_to_end()
         for worker in workers:
             worker.process.join(timeout=2)
             worker.kill()

@@ -31,7 +31,7 @@ from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
 from multiprocessing.connection import Connection
 from typing import Any
 
-from . import Resources, WorkerLostError, resolve
+from . import Resources, WorkerLostError, resolve, worker_env
 
 __all__ = ["PING_INTERVAL", "RECONNECT_AFTER", "RayExecutor", "RayWorker"]
 
@@ -45,8 +45,6 @@ RECONNECT_AFTER = 5.0
 PING_INTERVAL = 2.0
 #: A ping not answered within this long means the actor (or its node) is lost [s].
 PING_TIMEOUT = 10.0
-#: The numeric libraries' threads in an actor (as a local worker's: one).
-ACTOR_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 class _Host:
@@ -173,7 +171,7 @@ def _bridge_main(conn: Connection, parent: int, address: str) -> None:
             if kind == "start":
                 _, wid, body, args, cpus, memory = msg
                 options: dict[str, Any] = {"num_cpus": cpus, "max_restarts": 0,
-                                           "runtime_env": {"env_vars": ACTOR_ENV}}
+                                           "runtime_env": {"env_vars": worker_env()}}
                 if memory:
                     options["memory"] = memory
                 actor: Any = host.options(**options).remote(body, args)

@@ -51,7 +51,6 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from dexroll_client.models import JobState
@@ -116,13 +115,13 @@ def warmup_requests(spec: str) -> list[tuple[str, str, str]]:
     out = []
     for path in request_files(spec):
         try:
-            text = Path(path).read_text(encoding="utf-8")
+            text = path.read_text(encoding="utf-8")
             body = json.loads(text)
             key = structure_key(str(body.get("planner", "ball_on_palm")), body)
         except (OSError, ValueError, AttributeError) as exc:
             log.warning("warm-up: %s skipped: %s", path, exc)
             continue
-        out.append((Path(path).name, text, key))
+        out.append((path.name, text, key))
     return out
 
 
@@ -405,16 +404,15 @@ class Dispatcher(threading.Thread):
             if method == "solve" and slot.job is not None:
                 value = (JobState.FAILED.value, "error", f"the worker failed: {exc}", None,
                          None, False, None, None)
+        if method == "solve":
+            self._solved(slot, value)
+            return
         if method == "ready":
             slot.pid = int(value["pid"]) if isinstance(value, dict) else None
             slot.failures = 0
             log.info("solver worker ready: %s (%s)", slot.worker and slot.worker.where(),
                      value.get("host") if isinstance(value, dict) else "?")
             slot.started = time.monotonic()
-            if self.warmup_first and slot.warmup:
-                self._warm_next(slot)
-                return
-            slot.ready = True
         elif method == "warm":
             if value is not None:
                 slot.built.append((slot.warming, float(value)))
@@ -423,12 +421,11 @@ class Dispatcher(threading.Thread):
                          "between jobs" if slot.ready else
                          f"in {time.monotonic() - slot.started:.1f} s",
                          ", ".join(f"{n} {t:.2f} s" for n, t in slot.built))
-            if self.warmup_first and slot.warmup:
-                self._warm_next(slot)
-                return
+        # up, or one more warm-up structure built: the next one first, or jobs
+        if self.warmup_first and slot.warmup:
+            self._warm_next(slot)
+        else:
             slot.ready = True
-        elif method == "solve":
-            self._solved(slot, value)
 
     def _warm_next(self, slot: _Slot) -> None:
         """Have ``slot``'s worker build its next warm-up structure."""
