@@ -15,7 +15,8 @@ settings are presets of it, :mod:`ocp.presets`), one pipeline, one solution type
 
 The data flow is in the folder names: ``certify`` (the certificate's types: checks with
 name, value, tolerance and kind; a leaf), ``geometry`` (surfaces, Montana's contact
-kinematics, rotations, grasp geometry) and ``robots`` (fingers from URDF through
+kinematics, rotations, grasp geometry), ``shapes`` (the objects' shapes: each one's
+surface, mass properties, MuJoCo geom) and ``robots`` (fingers from URDF through
 Pinocchio, the built-in hands) -> ``spec`` (the object, the palm and fingertips, the
 motion, the problems: data) -> ``contacts`` (each contact kind's CasADi model) ->
 ``transcription`` (collocation, the NLP's parameters, the grasp model, the NLP from
@@ -45,6 +46,7 @@ if TYPE_CHECKING:
     from ocp.one_finger import FingerContact, OneFingerPlanner, OneFingerProblem
     from ocp.robots.finger import FingerModel, load_finger
     from ocp.robots.hands import HAND_NAMES, Hand, load_hand
+    from ocp.shapes import SHAPES, Shape, shape_of
     from ocp.solution import (
         GraspSample,
         ManipulationSolution,
@@ -134,6 +136,8 @@ _EXPORTS = {
     "node_times": "ocp.transcription.collocation",
     # what the plan viewer draws with (planner_service/view/)
     "HAND_NAMES": "ocp.robots.hands", "quaternion_wxyz": "ocp.geometry.rotations",
+    # the objects' shapes (ocp/shapes/)
+    "SHAPES": "ocp.shapes", "Shape": "ocp.shapes", "shape_of": "ocp.shapes",
 }
 
 __all__ = [
@@ -142,6 +146,7 @@ __all__ = [
     "IPOPT_OPTIONS",
     "PALM_NX",
     "PERIODIC",
+    "SHAPES",
     "SURFACES",
     "AttemptOptions",
     "BallOnPalmPlanner",
@@ -181,6 +186,7 @@ __all__ = [
     "Replan",
     "ReplanOptions",
     "Replanner",
+    "Shape",
     "Solution",
     "SolverOptions",
     "StateEstimate",
@@ -215,6 +221,7 @@ __all__ = [
     "reference_input",
     "replace_finger",
     "rotation_symmetric",
+    "shape_of",
     "shifted",
     "simulate_guess",
     "status_from_ipopt",

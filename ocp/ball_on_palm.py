@@ -183,7 +183,7 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
     the nodes, and at any times."""
     col = plan.collocation
     assert col is not None and plan.stats is not None
-    model = model_for(problem.object.shape)
+    model = model_for(problem.object.surface.name)
     params = np.asarray(problem.object.dimensions, dtype=float)
     patch = plan.object_chart_rotation or problem.object.chart_rotation
     chart = rotation_from_vector(patch)

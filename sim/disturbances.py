@@ -135,12 +135,8 @@ class Disturbances:
         """The plan whose scene is the disturbed world: the friction scaled, the object's
         size and mass changed (the references are the plan's own)."""
         obj = plan.object
-        if self.size_change:
-            if obj.shape == "sphere":
-                dims: tuple[float, ...] = (obj.dimensions[0] + self.size_change,)
-            else:
-                dims = tuple(d + self.size_change for d in obj.dimensions[:2])
-            obj = replace(obj, dimensions=dims)
+        if self.size_change:  # each of the geom's sizes (semi-axes, radii) grown
+            obj = replace(obj, geom_size=tuple(d + self.size_change for d in obj.geom_size))
         obj = replace(obj, mass=obj.mass * self.mass_scale)
         return replace(plan, object=obj, mu=plan.mu * self.friction_scale)
 

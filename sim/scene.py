@@ -109,11 +109,8 @@ def mjcf(plan: ExecutionPlan, options: SimOptions) -> str:
     obj.set("quat", _v(plan.object_wxyz[0] / np.linalg.norm(plan.object_wxyz[0])))
     ET.SubElement(obj, "freejoint", name="object")
     mass = options.object_mass if options.object_mass is not None else plan.object.mass
-    a, b, c = plan.object.semi_axes
-    shape = "sphere" if plan.object.shape == "sphere" else "ellipsoid"
-    ET.SubElement(obj, "geom", name="object", type=shape,
-                  size=_v([a] if shape == "sphere" else [a, b, c]), mass=f"{mass:.17g}",
-                  contype="1", conaffinity="1", rgba="0.9 0.5 0.1 1")
+    ET.SubElement(obj, "geom", plan.object.geom_attributes(), name="object",
+                  mass=f"{mass:.17g}", contype="1", conaffinity="1", rgba="0.9 0.5 0.1 1")
     for finger in plan.fingers:
         _finger(world, finger, options)
     actuators = ET.SubElement(root, "actuator")

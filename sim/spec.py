@@ -51,27 +51,22 @@ def _a(x: Any) -> FloatArray:
 
 @dataclass(frozen=True)
 class ObjectSpec:
-    """The object: ``shape`` 'sphere' (``dimensions`` (radius,)) or 'ellipsoid' (an
-    ellipsoid of revolution about its z axis, (a, c): semi-axes a, a, c) [m]; ``mass``
-    [kg], its inertia the solid body's."""
+    """The object as MuJoCo collides and weighs it: its geom's ``geom_type`` and
+    ``geom_size`` as MJCF reads them [m], in the object's frame (its centre and axes), its
+    ``mass`` [kg] (MuJoCo gives it the inertia of that uniform solid); and, for the
+    reports, the ``shape`` and ``dimensions`` the plan's request named (the planner's
+    shapes make the geom: ``ocp.shapes.Shape.mujoco_geom``)."""
 
-    shape: str
-    dimensions: tuple[float, ...]
+    geom_type: str
+    geom_size: tuple[float, ...]
     mass: float = DEFAULT_MASS
+    shape: str = ""
+    dimensions: tuple[float, ...] = ()
 
-    @property
-    def semi_axes(self) -> tuple[float, float, float]:
-        if self.shape == "sphere":
-            r = float(self.dimensions[0])
-            return r, r, r
-        if self.shape == "ellipsoid":
-            a, c = (float(x) for x in self.dimensions[:2])
-            return a, a, c
-        raise ValueError(f"unknown object shape {self.shape!r}")
-
-    @property
-    def length_scale(self) -> float:
-        return max(self.semi_axes)
+    def geom_attributes(self) -> dict[str, str]:
+        """The geom element's ``type`` and ``size``, at full precision."""
+        return {"type": self.geom_type,
+                "size": " ".join(f"{float(x):.17g}" for x in self.geom_size)}
 
 
 @dataclass(frozen=True)
@@ -256,8 +251,9 @@ class ExecutionPlan:
 
         return {
             "t": self.t.tolist(),
-            "object": {"shape": self.object.shape, "dimensions": list(self.object.dimensions),
-                       "mass": self.object.mass},
+            "object": {"geom_type": self.object.geom_type,
+                       "geom_size": list(self.object.geom_size), "mass": self.object.mass,
+                       "shape": self.object.shape, "dimensions": list(self.object.dimensions)},
             "object_position": self.object_position.tolist(),
             "object_wxyz": self.object_wxyz.tolist(),
             "fingers": [finger(f, r) for f, r in zip(self.fingers, self.references,
@@ -297,8 +293,10 @@ class ExecutionPlan:
         o = raw["object"]
         g = [float(x) for x in raw.get("gravity", (0.0, 0.0, -9.81))]
         plan = ExecutionPlan(
-            _a(raw["t"]), ObjectSpec(str(o["shape"]), tuple(float(d) for d in o["dimensions"]),
-                                     float(o.get("mass", DEFAULT_MASS))),
+            _a(raw["t"]), ObjectSpec(str(o["geom_type"]),
+                                     tuple(float(d) for d in o["geom_size"]),
+                                     float(o.get("mass", DEFAULT_MASS)), str(o.get("shape", "")),
+                                     tuple(float(d) for d in o.get("dimensions", ()))),
             _a(raw["object_position"]), _a(raw["object_wxyz"]), tuple(fingers), tuple(refs),
             tuple(ContactSpec(str(c["name"]), str(c["body"]), c.get("finger"), _a(c["point"]),
                               None if c.get("normal") is None else _a(c["normal"]),

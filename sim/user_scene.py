@@ -108,11 +108,8 @@ def user_scene(plan: ExecutionPlan, model: UserModel, options: SimOptions
                         quat=_v(plan.object_wxyz[0] / np.linalg.norm(plan.object_wxyz[0])))
     ET.SubElement(obj, "freejoint", name=OBJECT)
     mass = options.object_mass if options.object_mass is not None else plan.object.mass
-    a, b, c = plan.object.semi_axes
-    shape = "sphere" if plan.object.shape == "sphere" else "ellipsoid"
-    ET.SubElement(obj, "geom", name=OBJECT, type=shape,
-                  size=_v([a] if shape == "sphere" else [a, b, c]), mass=f"{mass:.17g}",
-                  contype="1", conaffinity="1", condim=str(options.condim),
+    ET.SubElement(obj, "geom", plan.object.geom_attributes(), name=OBJECT,
+                  mass=f"{mass:.17g}", contype="1", conaffinity="1", condim=str(options.condim),
                   friction=_v([plan.mu, torsion, options.rolling_friction]),
                   solmix=f"{OBJECT_SOLMIX:.17g}", priority="0", margin="0", gap="0",
                   rgba="0.9 0.5 0.1 1")

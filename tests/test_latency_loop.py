@@ -61,7 +61,7 @@ def swing_plan() -> ExecutionPlan:
                         np.array([0.0, 0.0, 0.05]), TipShape("sphere", (0.01,)), "f")
     n = t.size
     palm = ContactSpec("palm", "palm", None, np.zeros((n, 3)), np.tile([0.0, 0, -1], (n, 1)))
-    return ExecutionPlan(t, ObjectSpec("sphere", (RADIUS,), 0.05),
+    return ExecutionPlan(t, ObjectSpec("sphere", (RADIUS,), 0.05, "sphere", (RADIUS,)),
                          np.tile([0.0, 0.0, RADIUS], (n, 1)), np.tile([1.0, 0, 0, 0], (n, 1)),
                          (finger,), (FingerReference(q, q_dot),), (palm,), 0.1, 0.5)
 

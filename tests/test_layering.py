@@ -46,6 +46,22 @@ def test_wire_statuses_and_limits_match_the_core() -> None:
         assert getattr(core, name) == getattr(wire, name), name
 
 
+def test_the_wires_object_shapes_are_the_core_registry() -> None:
+    """``object.shape``'s names on the wire are :data:`ocp.shapes.SHAPES`'s, and its
+    dimensions allow each shape's longest form."""
+    import typing
+
+    from dexroll_client.requests import ObjectModel
+    from ocp.shapes import SHAPES
+
+    field = ObjectModel.model_fields["shape"]
+    assert set(typing.get_args(field.annotation)) == set(SHAPES)
+    longest = max(len(s.parameters) for s in SHAPES.values())
+    lengths = [m.max_length for m in ObjectModel.model_fields["dimensions"].metadata
+               if hasattr(m, "max_length")]
+    assert lengths == [longest]
+
+
 # -- the service's own layers ----------------------------------------------------------------
 #
 # planner_service.planners (the adapters: the only door to ocp) <- planner_service.jobs (store,
@@ -152,7 +168,8 @@ def test_the_service_folders_keep_their_places() -> None:
 #
 # The data flow in the folder names: certify (the certificate's types: a leaf that imports
 # nothing of the core and that every layer may use); geometry (surfaces, contact
-# kinematics, rotations, grasp geometry) and robots (fingers, hands) at the bottom; spec
+# kinematics, rotations, grasp geometry), shapes (the objects' shapes, on geometry) and
+# robots (fingers, hands) at the bottom; spec
 # (the problems: data) on them; contacts (each contact kind's CasADi model) on spec;
 # transcription (collocation, parameters, the grasp model, the NLP from blocks); the
 # solution; solve (IPOPT, guesses and strategies, the pipeline, the certification of a
@@ -164,19 +181,23 @@ def test_the_service_folders_keep_their_places() -> None:
 CORE_LAYERS: dict[str, set[str]] = {
     "certify": set(),
     "geometry": set(),
-    "robots": {"geometry"},
-    "spec": {"geometry", "robots"},
-    "contacts": {"geometry", "robots", "spec"},
-    "transcription": {"geometry", "robots", "spec", "contacts"},
-    "solution": {"geometry", "spec", "transcription"},
-    "solve": {"geometry", "robots", "spec", "contacts", "transcription", "solution"},
-    "ball_on_palm": {"geometry", "spec", "contacts", "transcription", "solution", "solve"},
-    "one_finger": {"geometry", "robots", "spec", "transcription", "solution", "solve"},
-    "presets": {"robots", "spec", "ball_on_palm", "one_finger"},
-    "methods": {"geometry", "robots", "spec", "contacts", "transcription", "solution", "solve",
-                "ball_on_palm", "one_finger"},
-    "gait": {"geometry", "robots", "spec", "contacts", "transcription", "solution", "solve"},
-    "control": {"spec", "transcription", "solution", "solve"},
+    "shapes": {"geometry"},
+    "robots": {"geometry", "shapes"},
+    "spec": {"geometry", "shapes", "robots"},
+    "contacts": {"geometry", "shapes", "robots", "spec"},
+    "transcription": {"geometry", "shapes", "robots", "spec", "contacts"},
+    "solution": {"geometry", "shapes", "spec", "transcription"},
+    "solve": {"geometry", "shapes", "robots", "spec", "contacts", "transcription", "solution"},
+    "ball_on_palm": {"geometry", "shapes", "spec", "contacts", "transcription", "solution",
+                     "solve"},
+    "one_finger": {"geometry", "shapes", "robots", "spec", "transcription", "solution",
+                   "solve"},
+    "presets": {"robots", "shapes", "spec", "ball_on_palm", "one_finger"},
+    "methods": {"geometry", "shapes", "robots", "spec", "contacts", "transcription",
+                "solution", "solve", "ball_on_palm", "one_finger"},
+    "gait": {"geometry", "shapes", "robots", "spec", "contacts", "transcription", "solution",
+             "solve"},
+    "control": {"shapes", "spec", "transcription", "solution", "solve"},
 }
 
 

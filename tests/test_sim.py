@@ -277,8 +277,8 @@ def test_the_scene_is_the_plans(plans: dict[str, tuple[AnyPlanResult, PlanReques
     # the object's mass is an option: a heavier ball, the same run otherwise
     heavy = Simulation(plan, SimOptions(object_mass=0.2))
     assert heavy.model.body_mass[heavy.object_body] == pytest.approx(0.2)
-    # an ellipsoid of revolution (a, a, c): MuJoCo's solid ellipsoid, axis the object's z
-    egg = Simulation(replace(plan, object=ObjectSpec("ellipsoid", (0.02, 0.03), 0.1)))
+    # the geom it is given: an ellipsoid (a, a, c), MuJoCo's solid ellipsoid
+    egg = Simulation(replace(plan, object=ObjectSpec("ellipsoid", (0.02, 0.02, 0.03), 0.1)))
     em = egg.model
     assert em.geom_type[egg.object_geom] == mujoco.mjtGeom.mjGEOM_ELLIPSOID
     assert em.geom_size[egg.object_geom] == pytest.approx([0.02, 0.02, 0.03])

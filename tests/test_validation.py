@@ -23,7 +23,7 @@ GOOD = BallOnPalmProblem(object=ObjectSpec("sphere", (0.025,)), initial=(0, 0, 0
     (replace(GOOD, object=ObjectSpec("sphere", (-0.01,))), "object.dimensions", "> 0"),
     (replace(GOOD, object=ObjectSpec("sphere", (math.nan,))), "object.dimensions", "finite"),
     (replace(GOOD, object=ObjectSpec("cube", (0.02,))), "object.shape", "unknown"),
-    (replace(GOOD, object=ObjectSpec("ellipsoid", (0.02,))), "object.dimensions", "2 param"),
+    (replace(GOOD, object=ObjectSpec("ellipsoid", (0.02,))), "object.dimensions", "2 dim"),
     (replace(GOOD, initial=(0, math.nan, 0, 0, 0)), "initial.y", "finite"),
     (replace(GOOD, initial=(0, 0, 0, 0)), "initial", "5 coordinates"),  # type: ignore[arg-type]
     (replace(GOOD, goal={"w": 1.0}), "goal.w", "unknown coordinate"),

@@ -35,12 +35,24 @@ ROOT = Path(__file__).resolve().parents[1]
 BASELINE = json.loads((ROOT / "tests" / "data" / "openapi_baseline.json").read_text())
 
 
+#: Bounds whose growth (upper) or decrease (lower) accepts more than before: what was
+#: valid stays valid (an ellipsoid's dimensions: 2 semi-axes, now 2 or 3).
+_UPPER = ("maxItems", "maxLength", "maximum", "exclusiveMaximum")
+_LOWER = ("minItems", "minLength", "minimum", "exclusiveMinimum")
+
+
+def _widened(key: str, old: Any, new: Any) -> bool:
+    """Whether a bound ``key`` went from ``old`` to ``new`` by accepting more."""
+    numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (old, new))
+    return numbers and ((key in _UPPER and new >= old) or (key in _LOWER and new <= old))
+
+
 def _missing(old: Any, new: Any, where: str) -> list[str]:
     """What of ``old`` (a JSON schema document) ``new`` lacks or states otherwise: every
     key of an object, every item of a list (``required`` and ``enum`` as sets), every
-    scalar equal. Descriptions and summaries are prose: they may be reworded when what
-    they describe grows (a route's readiness checking more), the contract they describe
-    may not shrink."""
+    scalar equal, but for bounds that widen (:func:`_widened`). Descriptions and summaries
+    are prose: they may be reworded when what they describe grows (a route's readiness
+    checking more), the contract they describe may not shrink."""
     if isinstance(old, dict):
         if not isinstance(new, dict):
             return [f"{where}: was an object"]
@@ -48,8 +60,8 @@ def _missing(old: Any, new: Any, where: str) -> list[str]:
         for key, value in old.items():
             if key not in new:
                 out.append(f"{where}/{key}: removed")
-            elif key in ("description", "summary") and isinstance(value, str) \
-                    and isinstance(new[key], str):
+            elif (key in ("description", "summary") and isinstance(value, str)
+                  and isinstance(new[key], str)) or _widened(key, value, new[key]):
                 continue
             else:
                 out += _missing(value, new[key], f"{where}/{key}")

@@ -14,7 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.contact import ContactPair
-from ocp.geometry.surfaces import SURFACES, Plane, Surface, rotation_from_vector
+from ocp.geometry.surfaces import Plane, Surface, rotation_from_vector
+from ocp.shapes import object_surface
 from ocp.spec.problem import ObjectSpec
 
 __all__ = ["NU", "NX", "BallOnPalmModel", "contact_coordinates", "model_for", "object_pose"]
@@ -75,9 +76,10 @@ class BallOnPalmModel:
 
 
 @cache
-def model_for(shape: str) -> BallOnPalmModel:
-    """The (cached) model for an object shape name ("sphere", "ellipsoid")."""
-    return BallOnPalmModel.build(SURFACES[shape])
+def model_for(surface: str) -> BallOnPalmModel:
+    """The (cached) model for an object surface's name (``ObjectSpec.surface.name``:
+    "sphere", "ellipsoid", ...)."""
+    return BallOnPalmModel.build(object_surface(surface))
 
 
 def contact_coordinates(obj: ObjectSpec, position_xy: ArrayLike, rotation: ArrayLike
@@ -103,7 +105,7 @@ def contact_coordinates(obj: ObjectSpec, position_xy: ArrayLike, rotation: Array
 
 def object_pose(obj: ObjectSpec, eta: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """(R_po, p_po): the object's pose in the palm frame at contact coordinates ``eta``."""
-    model = model_for(obj.shape)
+    model = model_for(obj.surface.name)
     chart = rotation_from_vector(obj.chart_rotation)
     R, p, _, _, _ = model.kinematics(np.asarray(eta, dtype=float), [0.0, 0.0],
                                      list(obj.dimensions), chart)

@@ -79,6 +79,19 @@ def ball_on_plane_eq8(eta: Sym, w: Sym, rho: Sym) -> Sym:
     return g1 * w[0] + g2 * w[1]
 
 
+def _solve_metric(M: Sym, v: Sym) -> Sym:
+    """alpha_dot (chart rates) with M alpha_dot = v, for a metric M (2x2) [m] and a velocity
+    v [m/s]. A diagonal M (off-diagonal entries structurally zero, as the orthogonal charts
+    build it) is divided through, an upper triangular one (the general charts') solved by
+    back-substitution, any other by ca.solve."""
+    if M[0, 1].is_zero() and M[1, 0].is_zero():
+        return ca.vertcat(v[0] / M[0, 0], v[1] / M[1, 1])
+    if not M[1, 0].is_zero():
+        return ca.solve(M, v)
+    v_dot = v[1] / M[1, 1]
+    return ca.vertcat((v[0] - M[0, 1] * v_dot) / M[0, 0], v_dot)
+
+
 @dataclass(frozen=True)
 class ContactPair:
     """Rolling contact between surface ``a`` (on body A) and surface ``b`` (on body B)."""
@@ -91,14 +104,15 @@ class ContactPair:
         """eta_dot when the contact point moves over A at ``alpha_a_dot`` (no slip, no spin).
 
         Rolling without slip makes the contact point move equally fast over both surfaces:
-        M_b alpha_b_dot = R_psi M_a alpha_a_dot (eq. 3 with the curvature factor cancelled),
-        and psi_dot = T_a M_a alpha_a_dot + T_b M_b alpha_b_dot (eq. 3, third row).
+        M_b alpha_b_dot = R_psi M_a alpha_a_dot (eq. 3 with the curvature factor cancelled;
+        M_b diagonal or upper triangular), and
+        psi_dot = T_a M_a alpha_a_dot + T_b M_b alpha_b_dot (eq. 3, third row).
         """
         alpha_a, alpha_b, psi = eta[0:2], eta[2:4], eta[4]
         _, _, M_a, _, T_a = self.a.geometry(alpha_a, params_a)
         _, _, M_b, _, T_b = self.b.geometry(alpha_b, params_b)
         v_b = R_psi(psi) @ (M_a @ alpha_a_dot)
-        alpha_b_dot = ca.vertcat(v_b[0] / M_b[0, 0], v_b[1] / M_b[1, 1])
+        alpha_b_dot = _solve_metric(M_b, v_b)
         psi_dot = T_a @ M_a @ alpha_a_dot + T_b @ v_b
         return ca.vertcat(alpha_a_dot, alpha_b_dot, psi_dot)
 
@@ -109,7 +123,7 @@ class ContactPair:
         _, _, M_a, _, T_a = self.a.geometry(alpha_a, params_a)
         _, _, M_b, _, T_b = self.b.geometry(alpha_b, params_b)
         v_a = R_psi(psi) @ (M_b @ alpha_b_dot)
-        alpha_a_dot = ca.vertcat(v_a[0] / M_a[0, 0], v_a[1] / M_a[1, 1])
+        alpha_a_dot = _solve_metric(M_a, v_a)
         psi_dot = T_a @ v_a + T_b @ M_b @ alpha_b_dot
         return ca.vertcat(alpha_a_dot, alpha_b_dot, psi_dot)
 

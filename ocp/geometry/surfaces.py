@@ -1,14 +1,21 @@
-"""Parameterised surfaces: an orthogonal chart f(u, v) written once, its geometry derived.
+"""Parameterised surfaces: a chart f(u, v) written once, its geometry derived.
 
 A :class:`Surface` holds one CasADi expression, the chart ``f(u, v; params)`` in the body
 frame. Everything Montana's contact equations need is derived from it symbolically
-(Murray, Li, Sastry 1994, ch. 5.2; Montana 1988):
+(Murray, Li, Sastry 1994, ch. 5.2; Montana 1988), with the frame-based definitions:
 
-* Gauss frame ``R = [x y z]``, ``x = f_u/|f_u|``, ``y = f_v/|f_v|``,
-  ``z = f_u x f_v / |f_u x f_v|`` (outward normal);
-* metric ``M = diag(|f_u|, |f_v|)``                       [m];
-* curvature ``K = [x y]^T [z_u/|f_u|, z_v/|f_v|]``         [1/m];
-* torsion ``T = y^T [x_u/|f_u|, x_v/|f_v|]``               [1/m].
+* Gauss frame ``R = [x y z]``, ``x = f_u/|f_u|``,
+  ``z = f_u x f_v / |f_u x f_v|`` (outward normal), ``y = z x x``;
+* metric ``M = [x y]^T [f_u f_v] = [[|f_u|, x.f_v], [0, y.f_v]]``   [m];
+* curvature ``K = [x y]^T [z_u z_v] M^-1``                          [1/m];
+* torsion ``T = y^T [x_u x_v] M^-1``                                [1/m].
+
+So the contact point moves at ``[x y] M alpha_dot`` over the surface, the normal turns at
+``[x y] K M alpha_dot`` and ``y . x_dot = T M alpha_dot``: Montana's eq. 3 holds with these
+M, K, T for any regular chart. K is the shape operator in the basis (x, y), symmetric. For
+an orthogonal chart (``f_u . f_v = 0``, :attr:`Surface.orthogonal`) ``y = f_v/|f_v|`` and
+``M = diag(|f_u|, |f_v|)``, and the derivation is written in that form
+(``K = [x y]^T [z_u/|f_u|, z_v/|f_v|]``, ``T = y^T [x_u/|f_u|, x_v/|f_v|]``).
 
 The sphere and the spheroid also write these out in closed form
 (:meth:`Surface.closed_form_geometry`), which the NLPs use: the same geometry (tested
@@ -56,7 +63,7 @@ ChartExpr = Callable[[ca.SX, ca.SX, ca.SX], ca.SX]
 
 
 class Surface:
-    """A smooth surface given by an orthogonal, right-handed chart f(u, v; params).
+    """A smooth surface given by a right-handed chart f(u, v; params).
 
     Parameters
     ----------
@@ -72,6 +79,10 @@ class Surface:
         Chart latitude |u| at which the chart is singular (pi/2 for the sphere), or None
         when the chart has no singular points.
     """
+
+    #: Whether the chart is orthogonal (f_u . f_v = 0 everywhere): its geometry is then
+    #: derived with M = diag(|f_u|, |f_v|); otherwise with the general, upper triangular M.
+    orthogonal: bool = True
 
     def __init__(
         self,
@@ -129,11 +140,26 @@ class Surface:
     @cached_property
     def derived_geometry(self) -> ca.Function:
         """``(alpha, params) -> (p, R, M, K, T)`` derived symbolically from the chart (the
-        definitions in the module's doc), whatever the surface."""
+        definitions in the module's doc), whatever the surface: in the orthogonal form
+        when :attr:`orthogonal`, else in the general one."""
         u = ca.SX.sym("u")
         v = ca.SX.sym("v")
         params = ca.SX.sym("params", self.n_params)
         f = self._chart(u, v, params)
+        R, M, K, T = (self._orthogonal_frame if self.orthogonal else self._general_frame)(
+            f, u, v)
+        alpha = ca.vertcat(u, v)
+        return ca.Function(
+            f"{self.name}_derived_geometry",
+            [alpha, params],
+            [f, R, M, K, T],
+            ["alpha", "params"],
+            ["p", "R", "M", "K", "T"],
+        )
+
+    @staticmethod
+    def _orthogonal_frame(f: ca.SX, u: ca.SX, v: ca.SX) -> tuple[ca.SX, ...]:
+        """(R, M, K, T) of an orthogonal chart f(u, v): M = diag(|f_u|, |f_v|) [m]."""
         f_u = ca.jacobian(f, u)
         f_v = ca.jacobian(f, v)
         m_u = safe_norm(f_u)
@@ -153,14 +179,38 @@ class Surface:
             ca.horzcat(ca.dot(y, z_u) / m_u, ca.dot(y, z_v) / m_v),
         )
         T = ca.horzcat(ca.dot(y, x_u) / m_u, ca.dot(y, x_v) / m_v)
-        alpha = ca.vertcat(u, v)
-        return ca.Function(
-            f"{self.name}_derived_geometry",
-            [alpha, params],
-            [f, R, M, K, T],
-            ["alpha", "params"],
-            ["p", "R", "M", "K", "T"],
+        return R, M, K, T
+
+    @staticmethod
+    def _general_frame(f: ca.SX, u: ca.SX, v: ca.SX) -> tuple[ca.SX, ...]:
+        """(R, M, K, T) of any regular chart f(u, v): x = f_u/|f_u|, z = f_u x f_v
+        normalised, y = z x x; M = [[|f_u|, x.f_v], [0, y.f_v]] [m] (structurally upper
+        triangular), K = [x y]^T [z_u z_v] M^-1 and T = y^T [x_u x_v] M^-1 [1/m]."""
+        f_u = ca.jacobian(f, u)
+        f_v = ca.jacobian(f, v)
+        m_u = safe_norm(f_u)
+        x = f_u / m_u
+        n = ca.cross(f_u, f_v)
+        z = n / safe_norm(n)
+        y = ca.cross(z, x)
+        m_uv = ca.dot(x, f_v)
+        m_v = ca.dot(y, f_v)
+        z_u = ca.jacobian(z, u)
+        z_v = ca.jacobian(z, v)
+        x_u = ca.jacobian(x, u)
+        x_v = ca.jacobian(x, v)
+        # [w_u w_v] M^-1 = [w_u / m_u, (w_v - (m_uv / m_u) w_u) / m_v]
+        shear = m_uv / m_u
+        dz_x, dz_y = z_u / m_u, (z_v - shear * z_u) / m_v
+        dx_x, dx_y = x_u / m_u, (x_v - shear * x_u) / m_v
+        R = ca.horzcat(x, y, z)
+        M = ca.SX(ca.Sparsity.upper(2), ca.vertcat(m_u, m_uv, m_v))
+        K = ca.vertcat(
+            ca.horzcat(ca.dot(x, dz_x), ca.dot(x, dz_y)),
+            ca.horzcat(ca.dot(y, dz_x), ca.dot(y, dz_y)),
         )
+        T = ca.horzcat(ca.dot(y, dx_x), ca.dot(y, dx_y))
+        return R, M, K, T
 
     @cached_property
     def orthogonality(self) -> ca.Function:
@@ -199,11 +249,16 @@ class Surface:
     #: Which rotations of the chart patch leave the surface itself unchanged, so that the
     #: rotated patch is another coordinate patch of the same body surface: "any" (sphere),
     #: "axis" (rotations that map the body z axis to itself: +-z for a body symmetric about
-    #: its equator), "axis+" (rotations about +z only: the plane, whose normal is +z).
+    #: its equator), "axis+" (rotations about +z only: the plane, whose normal is +z),
+    #: "axes" (the triaxial ellipsoid: the rotations that map it to itself, which its
+    #: :meth:`chart_rotation_error` decides from its semi-axes).
     chart_symmetry: str = "axis+"
 
-    def chart_rotation_error(self, rotation: ArrayLike) -> str | None:
-        """Why ``rotation`` (3x3) is not a valid patch rotation of this surface, or None."""
+    def chart_rotation_error(self, rotation: ArrayLike,
+                             params: Sequence[float] | None = None) -> str | None:
+        """Why ``rotation`` (3x3) is not a valid patch rotation of this surface, or None.
+        ``params`` (the shape's parameters [m], when known) matter only to surfaces whose
+        symmetries depend on them."""
         R = np.asarray(rotation, dtype=float).reshape(3, 3)
         if not np.allclose(R.T @ R, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
             return "not a rotation"
@@ -310,9 +365,8 @@ class _Ellipsoid(Surface):
     """Ellipsoid of revolution with semi-axes (a, a, c) about the body z axis.
 
     f = (a cos u cos v, -a cos u sin v, c sin u). This latitude/longitude chart is
-    orthogonal only when the two equatorial semi-axes are equal, which is why the
-    ellipsoid shipped here is one of revolution (a spheroid, prolate or oblate); its
-    curvature is not a multiple of the identity, so it exercises the general derivation.
+    orthogonal because the two equatorial semi-axes are equal (the triaxial ellipsoid's,
+    :mod:`ocp.shapes.ellipsoid`, is not); its curvature is not a multiple of the identity.
     """
 
     chart_symmetry = "axis"
@@ -386,7 +440,7 @@ class Chart:
     def of(surface: Surface, params: Sequence[float] = (), rotvec: ArrayLike | None = None
            ) -> Chart:
         R = np.eye(3) if rotvec is None else rotation_from_vector(rotvec)
-        error = surface.chart_rotation_error(R)
+        error = surface.chart_rotation_error(R, params if len(params) else None)
         if error is not None:
             raise ValueError(error)
         return Chart(surface, tuple(float(p) for p in params),

@@ -73,7 +73,7 @@ from numpy.typing import ArrayLike, NDArray
 from ocp.ball_on_palm import BallOnPalmPlanner, coordinate_error
 from ocp.geometry.contact import ContactPair
 from ocp.geometry.grasp import grasp_cosines
-from ocp.geometry.surfaces import SURFACES, Plane, Surface, rotation_from_vector
+from ocp.geometry.surfaces import Plane, Surface, rotation_from_vector
 from ocp.methods.greedy_result import GreedyResult
 from ocp.one_finger import OneFingerPlanner, OneFingerProblem
 from ocp.solution import Solution
@@ -242,8 +242,8 @@ class _Kinematics:
 
 
 @cache
-def _kinematics(shape: str) -> _Kinematics:
-    return _Kinematics(SURFACES[shape])
+def _kinematics(surface: Surface) -> _Kinematics:
+    return _Kinematics(surface)
 
 
 # -- helpers ----------------------------------------------------------------------------------
@@ -445,7 +445,7 @@ def greedy_plan(
             raise ProblemError([("base", f"the ball-on-palm plan failed: {palm_plan.message}")])
     palm_plan_time = time.perf_counter() - t_palm
 
-    kin = _kinematics(base.object.shape)
+    kin = _kinematics(base.object.surface)
     shape = np.asarray(base.object.dimensions, dtype=float)
     Rcp = rotation_from_vector(base.object.chart_rotation)
     Rcf = rotation_from_vector(problem.contact.chart_rotation)

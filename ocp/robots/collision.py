@@ -13,7 +13,7 @@ purpose (a fingertip's geoms and the object, while that fingertip's contact is a
 are left out; what remains must keep :data:`LINK_CLEARANCE`.
 
 Mesh geoms are not checked: their files are never read (a collision mesh is left out,
-as a visual one). The object is a sphere or an ellipsoid geom whose
+as a visual one). The object is its shape's geom (:meth:`ocp.shapes.Shape.mujoco_geom`) whose
 ``contype`` and ``conaffinity`` are 1, as in the execution's scene (``sim.user_model``).
 Frames: the hand's world frame sits at ``mount`` (R, p) in the palm frame, as for
 :func:`ocp.robots.whole_hand.load_whole_hand`.
@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from ocp.shapes import shape_of
 
 __all__ = ["LINK_CLEARANCE", "WINDOW", "Clearance", "HandCollision", "collision_text"]
 
@@ -168,10 +170,8 @@ class HandCollision:
         assert world is not None
         obj = ET.SubElement(world, "body", name=OBJECT)
         ET.SubElement(obj, "freejoint", name=OBJECT)
-        size = [dims[0]] if shape == "sphere" else list(dims)
-        ET.SubElement(obj, "geom", name=OBJECT, type="sphere" if shape == "sphere"
-                      else "ellipsoid", size=" ".join(f"{float(x):.17g}" for x in size),
-                      contype="1", conaffinity="1")
+        ET.SubElement(obj, "geom", shape_of(shape).mujoco_geom(dims).attributes(),
+                      name=OBJECT, contype="1", conaffinity="1")
         mj = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
         mj.geom_margin[:] = WINDOW
         mj.geom_gap[:] = 0.0

@@ -322,7 +322,7 @@ def simulate_guess(problem: BallOnPalmProblem, t_nodes: FloatArray,
     times = (t_nodes[:-1, None] + h[:, None] * frac[None, :]).ravel()
     W = w_of_t(times)  # nu x (n * (2 substeps + 1))
     u_lim = math.pi / 2 - problem.pole_margin
-    Xn, Xm = guess_simulator(problem.object.shape, n)(
+    Xn, Xm = guess_simulator(problem.object.surface.name, n)(
         np.asarray(problem.initial, dtype=float), W, h, list(problem.object.dimensions), u_lim)
     X = np.vstack([np.asarray(problem.initial, dtype=float), np.asarray(Xn).T])
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
@@ -355,7 +355,7 @@ def guess_loops(problem: BallOnPalmProblem) -> list[float]:
 
 @cache
 def guess_simulator(shape: str, n: int) -> ca.Function:
-    """RK4 of the palm contact's rolling equations for an object ``shape`` over n
+    """RK4 of the palm contact's rolling equations for an object surface (its name) over n
     intervals: (x0, W, h, params, u_lim) -> (X nodes 1..n, X midpoints).
 
     W holds the input at 2 * _GUESS_SUBSTEPS + 1 equally spaced times per interval

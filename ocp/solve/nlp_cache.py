@@ -46,6 +46,7 @@ class GraspStructure:
     the NLPs are cached by it. The fingers are compared by identity (the key keeps them
     alive); :meth:`fingerprint` names the same structure alike in another process."""
 
+    #: the object surface's name (``ObjectSpec.surface.name``)
     shape: str
     palm: bool
     segments: tuple[int, ...]
@@ -71,7 +72,7 @@ class GraspStructure:
         if problem.palm is not None:
             st = Structure.of(problem.palm_problem())
             goal_mask, via_masks = st.goal_mask, st.via_masks
-        return GraspStructure(problem.object.shape, problem.palm is not None, segments,
+        return GraspStructure(problem.object.surface.name, problem.palm is not None, segments,
                               goal_mask, via_masks, tuple(c.finger for c in problem.fingers),
                               problem.motion is not None, problem.forces is not None,
                               problem.smooth, problem.schedule(),
@@ -133,7 +134,7 @@ class NlpCache:
     def model(self, problem: ManipulationProblem) -> GraspModel:
         """The grasp's model (its CasADi functions), built once per (shape, palm,
         fingers)."""
-        key = (problem.object.shape, problem.palm is not None,
+        key = (problem.object.surface.name, problem.palm is not None,
                tuple(c.finger for c in problem.fingers))
         if key not in self._models:
             self._models[key] = GraspModel(*key)

@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ocp.certify.certificate import GRASP_TOLERANCES, PALM_TOLERANCES, TolerancePolicy
 from ocp.geometry.rotations import log_rotation
-from ocp.geometry.surfaces import SURFACES, rotation_from_vector
+from ocp.geometry.surfaces import rotation_from_vector
 from ocp.robots.couplings import coupled_step
 from ocp.robots.grasp_reach import at_tendon_bounds
 from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
@@ -84,7 +84,7 @@ def fingertip_errors(name: str, tip: Fingertip, obj: ObjectSpec, pad_margin: flo
     """Why a fingertip's initial contact is invalid, as (field, reason) under ``name``:
     its chart patch, its coordinates, the pad (less ``pad_margin``) and the patch's poles."""
     errs: list[tuple[str, str]] = []
-    if obj.shape in SURFACES and len(tip.chart_rotation) == 3 and \
+    if not obj.errors() and len(tip.chart_rotation) == 3 and \
             all(map(math.isfinite, tip.chart_rotation)):
         bad = obj.surface.chart_rotation_error(rotation_from_vector(tip.chart_rotation))
         if bad is not None:

@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ocp.geometry.surfaces import SURFACES, Surface, rotation_from_vector
+from ocp.geometry.surfaces import Surface, rotation_from_vector
+from ocp.shapes import SHAPES, Shape
 
 FloatArray = NDArray[np.float64]
 
@@ -88,8 +89,8 @@ class ProblemError(ValueError):
 class ObjectSpec:
     """The rolled object: a closed surface with its chart.
 
-    ``shape`` is ``"sphere"`` (dimensions = (radius,)) or ``"ellipsoid"`` (an ellipsoid of
-    revolution, dimensions = (equatorial semi-axis a, polar semi-axis c)), in m.
+    ``shape`` names one of :data:`ocp.shapes.SHAPES` (``"sphere"``: dimensions (radius,);
+    ``"ellipsoid"``: (a, c) of revolution about z, or (a, b, c)), ``dimensions`` in m.
     ``chart_rotation`` is the rotation vector [rad] of the object's chart patch in the
     object frame; the contact coordinates (u, v, psi) are measured in that patch.
     """
@@ -99,13 +100,27 @@ class ObjectSpec:
     chart_rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
+    def kind(self) -> Shape:
+        """The shape (:mod:`ocp.shapes`; KeyError for a name none has)."""
+        return SHAPES[self.shape]
+
+    @property
     def surface(self) -> Surface:
-        return SURFACES[self.shape]
+        """The surface the contact coordinates are measured on; its ``name`` keys the
+        NLPs built for it."""
+        return self.kind.surface(self.dimensions)
 
     @property
     def length_scale(self) -> float:
-        """Characteristic length [m] used to scale the NLP (the largest semi-axis)."""
-        return float(max(self.dimensions))
+        """Characteristic length [m] used to scale the NLP (the largest half extent)."""
+        return self.kind.length_scale(self.dimensions)
+
+    def errors(self) -> list[tuple[str, str]]:
+        """Why the shape and dimensions describe no object, as (field, reason)."""
+        if self.shape not in SHAPES:
+            return [("object.shape", f"unknown object shape {self.shape!r}; one of "
+                                     f"{sorted(SHAPES)}")]
+        return [("object.dimensions", r) for r in self.kind.errors(self.dimensions)]
 
 
 @dataclass(frozen=True)
@@ -129,10 +144,7 @@ class ForceSpec:
         """The inertia given, else the solid body's of ``obj`` with this mass."""
         if self.inertia is not None:
             return self.inertia
-        d = tuple(float(x) for x in obj.dimensions)
-        a, c = (d[0], d[0]) if obj.shape == "sphere" else (d[0], d[1])
-        side = self.mass * (a * a + c * c) / 5
-        return (side, side, 2 * self.mass * a * a / 5)
+        return obj.kind.inertia(obj.dimensions, self.mass)
 
     def errors(self, name: str, mu: float) -> list[tuple[str, str]]:
         """Every reason these fields are invalid, as (field, reason) under ``name``."""
@@ -221,16 +233,12 @@ class BallOnPalmProblem:
         """Every reason this problem is invalid, as (field, reason); empty when valid."""
         errs: list[tuple[str, str]] = []
         obj = self.object
-        if obj.shape not in SURFACES or SURFACES[obj.shape].singular_u is None:
-            closed = sorted(n for n, s in SURFACES.items() if s.singular_u is not None)
-            errs.append(("object.shape", f"unknown object shape {obj.shape!r}; one of {closed}"))
-        else:
-            errs += [("object.dimensions", r)
-                     for r in obj.surface.validate_params(obj.dimensions)]
+        shape_errors = obj.errors()
+        errs += shape_errors
         if len(obj.chart_rotation) != 3 or not all(map(math.isfinite, obj.chart_rotation)):
             errs.append(("object.chart_rotation",
                          "must be 3 finite numbers (rotation vector, rad)"))
-        elif obj.shape in SURFACES:
+        elif not shape_errors:
             why = obj.surface.chart_rotation_error(rotation_from_vector(obj.chart_rotation))
             if why is not None:
                 errs.append(("object.chart_rotation", why))
@@ -308,8 +316,9 @@ class BallOnPalmProblem:
                 errs.append((where, f"|{key}| = {abs(value):.4g} m is outside the palm "
                                     f"(palm_half_extent = {self.palm_half_extent} m)"))
             elif key == "u" and abs(value) > u_max:
+                turns = self.object.surface.chart_symmetry == "any"
                 remedy = ("rotate the object chart (object.chart_rotation) so the contact "
-                          "is away from its poles") if self.object.shape == "sphere" else \
+                          "is away from its poles") if turns else \
                     ("the poles are the ends of the object's axis of revolution: keep the "
                      "contact away from them or lower pole_margin")
                 errs.append((where,
@@ -363,6 +372,7 @@ def coordinate_error(coord: str, value: float, target: float) -> float:
 class Structure:
     """What fixes the shape of the NLP; everything else is a parameter or a bound."""
 
+    #: the object surface's name (``ObjectSpec.surface.name``)
     shape: str
     segments: tuple[int, ...]
     goal_mask: tuple[bool, ...]
@@ -373,7 +383,7 @@ class Structure:
         def mask(coords: Any) -> tuple[bool, ...]:
             return tuple(c in coords for c in CONTACT_COORDS)
 
-        return Structure(problem.object.shape, problem.segment_intervals(),
+        return Structure(problem.object.surface.name, problem.segment_intervals(),
                          mask(problem.goal), tuple(mask(vp.coords) for vp in problem.via_points))
 
 

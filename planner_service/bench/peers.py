@@ -264,7 +264,7 @@ def casadi_plain(request: BallOnPalmRequest) -> PeerOutcome:
     """The project's NLP built per request, values baked in, MX + ``expand=True``."""
     problem = _problem(request)
     grid = _Grid.of(problem)
-    model = palm_model(problem.object.shape)  # process-wide, as for the project's planner
+    model = palm_model(problem.object.surface.name)  # process-wide, as for the project's planner
     X0, Xm0, U0g, Um0 = _first_guess(problem, grid)
 
     t0 = time.perf_counter()

@@ -87,6 +87,16 @@ def _limit(x: object) -> float | None:
     return v if math.isfinite(v) else None
 
 
+def object_spec(shape: str, dimensions: tuple[float, ...], mass: float) -> Any:
+    """The simulator's object (a ``sim.ObjectSpec``): the shape's MuJoCo geom
+    (:meth:`ocp.shapes.Shape.mujoco_geom`) and ``mass`` [kg]."""
+    from ocp import shape_of
+    from sim import ObjectSpec
+
+    geom = shape_of(shape).mujoco_geom(dimensions)
+    return ObjectSpec(geom.type, geom.size, mass, shape, tuple(dimensions))
+
+
 def _tip_shape(model: Any, tip_shape: Any) -> Any:
     """The simulator's fingertip (a ``sim.TipShape``) of a finger model: its tip surface
     (``model.tip``, ocp/geometry/tips.py: pad, sphere, spheroid, capsule cap) placed as
@@ -140,7 +150,7 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
     request's models when given (inferred from the result otherwise, as the viewer
     does). :class:`NotExecutableError` when there is nothing a hand executes;
     ProblemError when the request's fingers cannot be loaded."""
-    from sim import DEFAULT_MASS, ContactSpec, ExecutionPlan, FingerReference, ObjectSpec
+    from sim import DEFAULT_MASS, ContactSpec, ExecutionPlan, FingerReference
 
     try:
         tracks = tracks_of(result)
@@ -181,8 +191,8 @@ def execution_plan(result: AnyPlanResult, request: PlanRequest | None = None
     if mass is None:
         notes.append(f"object mass: not in the plan, {DEFAULT_MASS} kg (solid)")
     plan = ExecutionPlan(
-        tracks.t, ObjectSpec(models.shape, tuple(models.dimensions),
-                             float(mass) if mass is not None else DEFAULT_MASS),
+        tracks.t, object_spec(models.shape, tuple(models.dimensions),
+                              float(mass) if mass is not None else DEFAULT_MASS),
         tracks.object_position, tracks.object_wxyz, tuple(fingers), tuple(refs), contacts,
         models.palm_half_extent, mu, None if torsion is None else float(torsion),
         (0.0, 0.0, -9.81) if gravity is None else

@@ -10,7 +10,7 @@ import numpy as np
 
 from ocp import GaitPlan, GaitSamples, gait_samples, gait_times
 
-from . import finger_spec
+from . import finger_spec, object_spec
 
 __all__ = ["GAIT_FORCE_CONTROL", "GAIT_SQUEEZE", "gait_execution_plan",
            "samples_execution_plan"]
@@ -48,7 +48,7 @@ def samples_execution_plan(smp: GaitSamples, names: tuple[str, ...], models: tup
     forward (J^T f), the squeeze :data:`GAIT_SQUEEZE` and the force control
     :data:`GAIT_FORCE_CONTROL` unless the options give them; a lifted fingertip has no
     force, no squeeze, no grip and no force feedback (its contact's ``active``)."""
-    from sim import ContactSpec, ExecutionPlan, FingerReference, ObjectSpec
+    from sim import ContactSpec, ExecutionPlan, FingerReference
 
     cut = np.cumsum((0, *(int(m.nq) for m in models)))
     specs = tuple(finger_spec(nm, m) for nm, m in zip(names, models, strict=True))
@@ -56,7 +56,7 @@ def samples_execution_plan(smp: GaitSamples, names: tuple[str, ...], models: tup
                                  None, smp.force[:, k]) for k in range(len(models)))
     contacts = tuple(ContactSpec(nm, "finger", nm, smp.point[:, k], smp.normal[:, k],
                                  smp.active[:, k]) for k, nm in enumerate(names))
-    plan = ExecutionPlan(smp.t, ObjectSpec(shape, dimensions, mass), smp.object_position,
+    plan = ExecutionPlan(smp.t, object_spec(shape, dimensions, mass), smp.object_position,
                          smp.object_wxyz, specs, refs, contacts, None, mu, None,
                          (float(gravity[0]), float(gravity[1]), float(gravity[2])),
                          ("a gait: planned lift-offs and touch-downs (contacts' activity)",

@@ -21,7 +21,7 @@ from dexroll_client.models import (
     ObjectInfo,
 )
 from ocp.geometry.rotations import quaternion_wxyz
-from ocp.geometry.surfaces import SURFACES
+from ocp.shapes import SHAPES
 from ocp.solve.planner import hand_fingertips
 
 from .cache import FingerCache, hand_finger_name
@@ -42,9 +42,8 @@ def rotation_vector(R: Any) -> list[float]:
 def model_catalog(cache: FingerCache) -> ModelCatalog:
     """Built-in objects, fingers (with their URDFs), hands and planners; the fingers and
     hands loaded through ``cache``."""
-    objects = [ObjectInfo(shape=name, parameters=list(s.param_names),
-                          description=(s.__doc__ or name).strip().splitlines()[0])
-               for name, s in SURFACES.items() if s.singular_u is not None]
+    objects = [ObjectInfo(shape=name, parameters=list(s.parameters), description=s.description)
+               for name, s in SHAPES.items()]
     fingers = []
     for name in BUILTIN_FINGERS:
         f = cache.finger(FingerModelSpec(builtin=name))

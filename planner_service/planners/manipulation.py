@@ -24,7 +24,6 @@ from dexroll_client.models import (
 )
 from ocp.ball_on_palm import object_pose
 from ocp.geometry.rotations import quaternion_wxyz
-from ocp.geometry.surfaces import SURFACES
 from ocp.robots.finger import FingerModel
 from ocp.robots.hands import Hand
 from ocp.solve.planner import (
@@ -109,7 +108,7 @@ def _motion(request: ManipulationRequest, start: ObjectPose | None
 def _palm_pose(obj: ObjectSpec, palm: Palm) -> ObjectPose | None:
     """The object's pose on the palm at t = 0 (None when the object's data cannot give
     one: the core's checks name the field)."""
-    if obj.shape not in SURFACES or obj.surface.validate_params(obj.dimensions):
+    if obj.errors():
         return None
     try:
         R, p = object_pose(obj, palm.initial)

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from ocp import quaternion_wxyz
+from ocp import quaternion_wxyz, shape_of
 
 from ..plans.models import SceneModels, quaternion_matrices
 from ..plans.shapes import pad_thickness
@@ -67,13 +67,6 @@ def _pose(position: np.ndarray, wxyz: np.ndarray) -> dict[str, list[float]]:
     return {"p": _flat(position), "q": _flat(q)}
 
 
-def _semi_axes(shape: str, dims: tuple[float, ...]) -> list[float]:
-    if shape == "ellipsoid" and len(dims) >= 2:
-        return [dims[0], dims[0], dims[1]]
-    r = dims[0] if dims else 0.025
-    return [r, r, r]
-
-
 def _round_tip(tip: Any) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
     """A round fingertip's shape record and its frame (R, p) in the tip frame: a sphere's
     and a spheroid's the tip surface's; a capsule's at the capsule's centre, z along its
@@ -98,7 +91,8 @@ def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "",
     ``phases``: a gait's (kind, start, end, lifted), its contact schedule."""
     R_obj = quaternion_matrices(tracks.object_wxyz)
     c = tracks.object_position
-    semi = _semi_axes(models.shape, models.dimensions)
+    object_shape = shape_of(models.shape)
+    semi = object_shape.semi_axes(models.dimensions)
     contacts: list[dict[str, Any]] = []
     fingertips: list[dict[str, Any]] = []
     bodies: list[dict[str, Any]] = []
@@ -165,7 +159,7 @@ def build_scene(tracks: PlanTracks, models: SceneModels, title: str = "",
         "cone_half_angle": tracks.cone_half_angle,
         "bounds": {"center": _flat((lo + hi) / 2),
                    "radius": max(float(np.linalg.norm(hi - lo)) / 2, 0.02)},
-        "object": {"shape": {"kind": "ellipsoid", "semi_axes": semi,
+        "object": {"shape": {**object_shape.viewer(models.dimensions),
                              "object": models.shape},
                    "pose": _pose(c, tracks.object_wxyz)},
         "palm": palm,

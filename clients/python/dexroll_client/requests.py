@@ -117,11 +117,11 @@ class ObjectModel(_Request):
 
     shape: Literal["sphere", "ellipsoid"] = Field(
         default="sphere",
-        description="'sphere' or 'ellipsoid' (of revolution about its z axis)")
+        description="'sphere' or 'ellipsoid' (the service's catalog describes each)")
     dimensions: list[Annotated[Real, Field(ge=MIN_SIZE, le=1.0)]] = Field(
-        default_factory=lambda: [0.025], min_length=1, max_length=2,
-        description="sphere: [radius] [m]; ellipsoid: [equatorial semi-axis, polar "
-                    "semi-axis] [m]")
+        default_factory=lambda: [0.025], min_length=1, max_length=3,
+        description="sphere: [radius]; ellipsoid: [a, c], semi-axes a, a, c of revolution "
+                    "about its z axis, or [a, b, c] along its x, y, z axes [m]")
     chart_rotation: list[Annotated[Real, Field(ge=-2 * math.pi, le=2 * math.pi)]] = Field(
         default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
         description="rotation vector [rad] of the object's chart patch in the object frame")

@@ -1,0 +1,112 @@
+"""What a shape of object is to the project (:class:`Shape`): its surface chart, its size
+checks, its mass properties, its MuJoCo geom and its viewer record. One subclass per
+shape, each in its own module of :mod:`ocp.shapes`, registered there by its wire name.
+
+A shape's ``dimensions`` are the request's ``object.dimensions`` [m], and the surface's
+parameters are the same numbers in the same order: the NLPs receive them as they are."""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ocp.geometry.surfaces import Surface
+
+__all__ = ["MujocoGeom", "Shape"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class MujocoGeom:
+    """A MuJoCo geom of the object, in the object's frame (its centre, its axes): ``type``
+    as MJCF names it and ``size`` as MJCF reads it for that type [m]."""
+
+    type: str
+    size: tuple[float, ...]
+
+    def attributes(self) -> dict[str, str]:
+        """The geom element's ``type`` and ``size`` attributes, at full precision."""
+        return {"type": self.type, "size": " ".join(f"{x:.17g}" for x in self.size)}
+
+
+class Shape(ABC):
+    """One kind of object (a sphere, an ellipsoid, ...): everything that depends on its
+    form, given its ``dimensions`` [m]."""
+
+    #: The wire name (``object.shape``).
+    name: str
+    #: What ``object.dimensions`` holds, for the request's schema and its errors.
+    description: str
+    #: The names of ``object.dimensions`` in its longest form, in order.
+    parameters: tuple[str, ...]
+
+    @abstractmethod
+    def surface(self, dimensions: Sequence[float]) -> Surface:
+        """The surface whose chart the contact coordinates are measured in."""
+
+    @abstractmethod
+    def surfaces(self) -> tuple[Surface, ...]:
+        """Every surface :meth:`surface` may give."""
+
+    @abstractmethod
+    def count_error(self, dimensions: Sequence[float]) -> str | None:
+        """Why this many dimensions do not describe the shape, or None."""
+
+    def errors(self, dimensions: Sequence[float]) -> list[str]:
+        """Every reason ``dimensions`` do not describe this shape (empty when they do)."""
+        why = self.count_error(dimensions)
+        if why is not None:
+            return [why]
+        return self.surface(dimensions).validate_params(dimensions)
+
+    @abstractmethod
+    def semi_axes(self, dimensions: Sequence[float]) -> tuple[float, float, float]:
+        """Half the extent of the object's bounding box along its own axes [m]."""
+
+    def length_scale(self, dimensions: Sequence[float]) -> float:
+        """The characteristic length the NLPs are scaled by: the largest half extent [m]."""
+        return float(max(self.semi_axes(dimensions)))
+
+    @abstractmethod
+    def volume(self, dimensions: Sequence[float]) -> float:
+        """The solid's volume [m^3]."""
+
+    @abstractmethod
+    def inertia(self, dimensions: Sequence[float], mass: float
+                ) -> tuple[float, float, float]:
+        """The principal moments of inertia [kg m^2] of a uniform solid of ``mass`` about
+        its centre, along its own axes: what MuJoCo computes for its geom."""
+
+    def mass_of_density(self, dimensions: Sequence[float], density: float) -> float:
+        """The mass of a uniform solid of ``density`` [kg/m^3]."""
+        return density * self.volume(dimensions)
+
+    @abstractmethod
+    def mujoco_geom(self, dimensions: Sequence[float]) -> MujocoGeom:
+        """The geom MuJoCo collides and weighs as this object."""
+
+    @abstractmethod
+    def viewer(self, dimensions: Sequence[float]) -> dict[str, Any]:
+        """The viewer's tagged record of the shape (``kind`` and its sizes [m])."""
+
+    def support_heights(self, normals: ArrayLike, dimensions: Sequence[float]) -> FloatArray:
+        """h(n) = max over the surface of n . p for unit directions (k, 3) [m]."""
+        return self.surface(dimensions).support_heights(normals, dimensions)
+
+    def sample_points(self, dimensions: Sequence[float], n: int = 400) -> FloatArray:
+        """About ``n`` points spread over the surface (k, 3) [m], in the object's frame:
+        the support points of directions on a Fibonacci sphere."""
+        k = np.arange(n) + 0.5
+        z = 1.0 - 2.0 * k / n
+        phi = math.pi * (1.0 + math.sqrt(5.0)) * k
+        r = np.sqrt(1.0 - z * z)
+        d = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+        surface = self.surface(dimensions)
+        return np.array([surface.support_point(di, dimensions) for di in d])

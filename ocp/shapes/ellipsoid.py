@@ -1,0 +1,182 @@
+"""The ellipsoid (:data:`ELLIPSOID`): of revolution about its z axis, ``dimensions``
+(a, c) (semi-axes a, a, c; the chart :data:`ocp.geometry.surfaces.Ellipsoid`), or with
+three semi-axes (a, b, c) [m] along the body's x, y, z (the surface below).
+
+Its latitude/longitude chart f = (a cos u cos v, -b cos u sin v, c sin u) is not orthogonal
+when a != b (f_u . f_v = (a^2 - b^2) sin u cos u sin v cos v), so its geometry is the
+general one of :mod:`ocp.geometry.surfaces`: M upper triangular. With
+Q = diag(a^2, b^2, c^2), the outward normal is along Q^-1 p, the support function is
+h(n) = sqrt(n^T Q n) and the point of outward normal d is Q d / sqrt(d^T Q d).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ocp.geometry.surfaces import Ellipsoid, Surface
+from ocp.shapes.base import MujocoGeom, Shape
+
+__all__ = ["ELLIPSOID", "EllipsoidShape", "TriaxialEllipsoid", "TriaxialEllipsoidSurface"]
+
+FloatArray = NDArray[np.float64]
+
+#: Relative tolerance on R Q R^T = Q for a patch rotation R to map the body to itself.
+_SYMMETRY_RTOL = 1e-9
+
+
+def _triaxial_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
+    a, b, c = params[0], params[1], params[2]
+    return ca.vertcat(a * ca.cos(u) * ca.cos(v), -b * ca.cos(u) * ca.sin(v), c * ca.sin(u))
+
+
+def _triaxial_geometry(u: ca.SX, v: ca.SX, a: ca.SX, b: ca.SX, c: ca.SX
+                       ) -> tuple[ca.SX, ...]:
+    """(p, R, M, K, T) of the chart f = (a cos u cos v, -b cos u sin v, c sin u) for
+    |u| < pi/2, in closed form. With E = |f_u|, N = Q^-1 f = (cos u cos v / a,
+    -cos u sin v / b, sin u / c) (the outward normal's direction) and G = |N|:
+    x = f_u / E, z = N / G, y = z x x; M = [[E, x.f_v], [0, y.f_v]] [m];
+    K = [x y]^T Q^-1 [x y] / G [1/m] (the normal's derivative along a tangent t is
+    (I - z z^T) Q^-1 t / G); T = [y.f_uu, y.f_uv] M^-1 / E [1/m] (y is normal to f_u),
+    with f_uu = -f and f_uv = (a sin u sin v, b sin u cos v, 0)."""
+    cu, su, cv, sv = ca.cos(u), ca.sin(u), ca.cos(v), ca.sin(v)
+    p = ca.vertcat(a * cu * cv, -b * cu * sv, c * su)
+    f_u = ca.vertcat(-a * su * cv, b * su * sv, c * cu)
+    f_v = ca.vertcat(-a * cu * sv, -b * cu * cv, 0)
+    f_uv = ca.vertcat(a * su * sv, b * su * cv, 0)
+    q_inv = ca.vertcat(1 / a**2, 1 / b**2, 1 / c**2)
+    E = ca.norm_2(f_u)
+    N = ca.vertcat(cu * cv / a, -cu * sv / b, su / c)
+    G = ca.norm_2(N)
+    x = f_u / E
+    z = N / G
+    y = ca.cross(z, x)
+    m_uv, m_v = ca.dot(x, f_v), ca.dot(y, f_v)
+    R = ca.horzcat(x, y, z)
+    M = ca.SX(ca.Sparsity.upper(2), ca.vertcat(E, m_uv, m_v))
+    k_xy = ca.dot(x, q_inv * y) / G
+    K = ca.vertcat(ca.horzcat(ca.dot(x, q_inv * x) / G, k_xy),
+                   ca.horzcat(k_xy, ca.dot(y, q_inv * y) / G))
+    t_u = -ca.dot(y, p) / E
+    t_v = ca.dot(y, f_uv) / E
+    T = ca.horzcat(t_u / E, (t_v - t_u * m_uv / E) / m_v)
+    return p, R, M, K, T
+
+
+class TriaxialEllipsoidSurface(Surface):
+    """Ellipsoid with semi-axes (a, b, c) [m] along the body's x, y, z axes.
+
+    f = (a cos u cos v, -b cos u sin v, c sin u): (u, v) = (0, 0) is the +x point, the
+    poles u = +-pi/2 are on the z axis (as the sphere's and the spheroid's charts). The
+    chart is not orthogonal for a != b, so its geometry has an upper triangular metric.
+    Its patch may only be turned by rotations that map the ellipsoid to itself: the
+    half turns about its axes (and, for equal semi-axes, the turns about the third).
+    """
+
+    orthogonal = False
+    chart_symmetry = "axes"
+
+    def __init__(self) -> None:
+        super().__init__("triaxial_ellipsoid", _triaxial_chart,
+                         ("semi_axis_x", "semi_axis_y", "semi_axis_z"), (False, True),
+                         np.pi / 2, ("u", "v"))
+
+    def closed_form_geometry(self, u: ca.SX, v: ca.SX, params: ca.SX
+                             ) -> tuple[ca.SX, ...] | None:
+        return _triaxial_geometry(u, v, params[0], params[1], params[2])
+
+    def chart_rotation_error(self, rotation: ArrayLike,
+                             params: Sequence[float] | None = None) -> str | None:
+        """None when ``rotation`` maps the ellipsoid to itself: R Q R^T = Q to 1e-9
+        relative, Q = diag(a^2, b^2, c^2). Without ``params`` (or with other than three)
+        the semi-axes are taken as distinct: only the half turns about the axes (and the
+        identity) pass."""
+        R = np.asarray(rotation, dtype=float).reshape(3, 3)
+        if not np.allclose(R.T @ R, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+            return "not a rotation"
+        known = params is not None and len(params) == 3
+        axes = np.asarray(params, dtype=float) if known else np.array([1.0, 2.0, 3.0])
+        Q = np.diag(axes**2)
+        if np.max(np.abs(R @ Q @ R.T - Q)) <= _SYMMETRY_RTOL * np.max(Q):
+            return None
+        return (f"a {self.name}'s chart patch can only be turned by a rotation that maps "
+                "it to itself (a half turn about one of its axes): any other rotation "
+                f"would describe a different, rotated {self.name}")
+
+    def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
+        p = np.asarray(point, dtype=float)
+        a, b, c = np.asarray(params, dtype=float)
+        x, y, z = p[..., 0] / a, p[..., 1] / b, p[..., 2] / c
+        return np.stack([np.arctan2(z, np.hypot(x, y)), np.arctan2(-y, x)], axis=-1)
+
+    def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
+        n = np.asarray(normal, dtype=float)
+        q = np.asarray(params, dtype=float) ** 2
+        return float(np.sqrt(np.sum(q * n * n)))
+
+    def support_heights(self, normals: ArrayLike, params: ArrayLike) -> FloatArray:
+        n = np.asarray(normals, dtype=float)
+        return np.asarray(np.sqrt(n**2 @ np.asarray(params, dtype=float) ** 2))
+
+    def support_point(self, direction: ArrayLike, params: ArrayLike) -> FloatArray:
+        d = np.asarray(direction, dtype=float)
+        q = np.asarray(params, dtype=float) ** 2
+        return np.asarray(q * d / np.sqrt(np.sum(q * d * d)))
+
+
+#: Triaxial ellipsoid (a, b, c) (latitude u, longitude v).
+TriaxialEllipsoid: Surface = TriaxialEllipsoidSurface()
+
+
+class EllipsoidShape(Shape):
+    """An ellipsoid: ``dimensions`` (a, c), of revolution about its z axis (semi-axes
+    a, a, c: the chart :data:`ocp.geometry.surfaces.Ellipsoid`), or (a, b, c) along its
+    x, y, z axes (:data:`TriaxialEllipsoid`, a chart that is not orthogonal)."""
+
+    name = "ellipsoid"
+    description = ("[a, c]: semi-axes a, a, c, of revolution about its z axis; or [a, b, c]: "
+                   "the semi-axes along its x, y, z axes [m]")
+    parameters = ("semi_axis_x", "semi_axis_y", "semi_axis_z")
+
+    def surface(self, dimensions: Sequence[float]) -> Surface:
+        return Ellipsoid if len(dimensions) == 2 else TriaxialEllipsoid
+
+    def surfaces(self) -> tuple[Surface, ...]:
+        return (Ellipsoid, TriaxialEllipsoid)
+
+    def count_error(self, dimensions: Sequence[float]) -> str | None:
+        if len(dimensions) not in (2, 3):
+            return (f"an ellipsoid has 2 dimensions (a, c: of revolution about z) or 3 "
+                    f"(a, b, c), got {len(dimensions)}")
+        return None
+
+    def semi_axes(self, dimensions: Sequence[float]) -> tuple[float, float, float]:
+        d = [float(x) for x in dimensions]
+        return (d[0], d[0], d[1]) if len(d) == 2 else (d[0], d[1], d[2])
+
+    def volume(self, dimensions: Sequence[float]) -> float:
+        a, b, c = self.semi_axes(dimensions)
+        return 4.0 / 3.0 * math.pi * a * b * c
+
+    def inertia(self, dimensions: Sequence[float], mass: float
+                ) -> tuple[float, float, float]:
+        a, b, c = self.semi_axes(dimensions)
+        if len(dimensions) == 2:  # of revolution: the moments as they were always written
+            side = mass * (a * a + c * c) / 5
+            return (side, side, 2 * mass * a * a / 5)
+        return (mass * (b * b + c * c) / 5, mass * (a * a + c * c) / 5,
+                mass * (a * a + b * b) / 5)
+
+    def mujoco_geom(self, dimensions: Sequence[float]) -> MujocoGeom:
+        return MujocoGeom("ellipsoid", self.semi_axes(dimensions))
+
+    def viewer(self, dimensions: Sequence[float]) -> dict[str, Any]:
+        return {"kind": "ellipsoid", "semi_axes": list(self.semi_axes(dimensions))}
+
+
+ELLIPSOID = EllipsoidShape()
