@@ -155,7 +155,7 @@ class FingertipContact(Contact):
 
     def bounds(self, problem: ManipulationProblem) -> tuple[list[float], list[float],
                                                           list[float]]:
-        u_lim = math.pi / 2 - problem.pole_margin
+        u_lim = problem.object.u_limit(problem.pole_margin)
         inf = math.inf
         (a_lo, a_hi), (b_lo, b_hi) = self.tip.bounds(problem.pad_margin, problem.pole_margin)
         lower, upper = backed_off_joint_limits(self.finger)

@@ -68,7 +68,7 @@ class SupportContact(ObjectBlock):
     def bounds(self, problem: ManipulationProblem) -> tuple[list[float], list[float],
                                                           list[float]]:
         assert problem.palm is not None
-        u_lim = math.pi / 2 - problem.pole_margin
+        u_lim = problem.object.u_limit(problem.pole_margin)
         ext = problem.palm.palm_half_extent
         hi = [ext, ext, u_lim, math.inf, math.inf]
         return [-h for h in hi], hi, [problem.palm.max_contact_speed] * 2

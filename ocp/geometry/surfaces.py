@@ -30,6 +30,7 @@ contact goes. Rotating the patch rotates ``f`` and the Gauss frame; ``M``, ``K``
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -103,6 +104,16 @@ class Surface:
     @property
     def n_params(self) -> int:
         return len(self.param_names)
+
+    #: What :meth:`u_limit` is, for the errors that name it.
+    u_limit_name = "chart pole limit pi/2 - pole_margin"
+
+    def u_limit(self, params: Sequence[float], pole_margin: float) -> float:
+        """The bound on |u| a contact keeps on this chart: ``pole_margin`` [rad] inside its
+        singular latitude (the poles)."""
+        if self.singular_u is None:
+            return math.inf
+        return self.singular_u - pole_margin
 
     def chart_expr(self, u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
         """The chart f(u, v; params) in the body frame [m]."""

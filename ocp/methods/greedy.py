@@ -352,7 +352,7 @@ def _greedy_steps(problem: OneFingerProblem, kin: Any, eta_p: FloatArray, q0: Fl
     grasp_map = kin.grasp_map(n_c)
     cone = math.atan(problem.mu)
     pad_lim = float(finger.pad_half_size) - problem.pad_margin
-    u_lim = math.pi / 2 - base.pole_margin
+    u_lim = base.object.u_limit(base.pole_margin)
     L = base.object.length_scale
 
     nq = finger.nq

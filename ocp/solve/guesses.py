@@ -19,7 +19,6 @@ one, and which bounds it adds. Two exist:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator
 from functools import cache
 from typing import TYPE_CHECKING, Any
@@ -321,7 +320,7 @@ def simulate_guess(problem: BallOnPalmProblem, t_nodes: FloatArray,
     frac = np.arange(_GUESS_SUBSTEPS * 2 + 1) / (_GUESS_SUBSTEPS * 2)
     times = (t_nodes[:-1, None] + h[:, None] * frac[None, :]).ravel()
     W = w_of_t(times)  # nu x (n * (2 substeps + 1))
-    u_lim = math.pi / 2 - problem.pole_margin
+    u_lim = problem.object.u_limit(problem.pole_margin)
     Xn, Xm = guess_simulator(problem.object.surface.name, n)(
         np.asarray(problem.initial, dtype=float), W, h, list(problem.object.dimensions), u_lim)
     X = np.vstack([np.asarray(problem.initial, dtype=float), np.asarray(Xn).T])

@@ -118,7 +118,7 @@ def fingertip_errors(name: str, tip: Fingertip, obj: ObjectSpec, pad_margin: flo
                              f"{coord} = {tip.initial[k]:.4f} rad (the {surface.kind} tip's "
                              f"chart coordinate) is outside [{lo:.4f}, {hi:.4f}]: "
                              f"{why[surface.kind]}"))
-    u_lim = math.pi / 2 - pole_margin
+    u_lim = obj.u_limit(pole_margin) if not obj.errors() else math.pi / 2
     if abs(tip.initial[2]) > u_lim:
         errs.append((f"{name}.initial.u_f",
                      f"|u_f| = {abs(tip.initial[2]):.4f} rad is beyond the chart pole "

@@ -115,6 +115,11 @@ class ObjectSpec:
         """Characteristic length [m] used to scale the NLP (the largest half extent)."""
         return self.kind.length_scale(self.dimensions)
 
+    def u_limit(self, pole_margin: float) -> float:
+        """The bound on a contact's |u| on the object's chart (its poles less
+        ``pole_margin`` [rad], or a seam)."""
+        return self.surface.u_limit(self.dimensions, pole_margin)
+
     def errors(self) -> list[tuple[str, str]]:
         """Why the shape and dimensions describe no object, as (field, reason)."""
         if self.shape not in SHAPES:
@@ -277,7 +282,8 @@ class BallOnPalmProblem:
         if not (math.isfinite(o.tol) and 0 < o.tol < 1):
             errs.append(("options.tol", f"must be in (0, 1), got {o.tol}"))
 
-        u_max = math.pi / 2 - self.pole_margin if margin_ok else math.pi / 2
+        u_max = self.object.u_limit(self.pole_margin if margin_ok else 0.0) \
+            if not self.object.errors() else math.pi / 2
         if len(self.initial) != 5:
             errs.append(("initial", f"must have 5 coordinates {CONTACT_COORDS}, "
                                     f"got {len(self.initial)}"))
@@ -316,14 +322,16 @@ class BallOnPalmProblem:
                 errs.append((where, f"|{key}| = {abs(value):.4g} m is outside the palm "
                                     f"(palm_half_extent = {self.palm_half_extent} m)"))
             elif key == "u" and abs(value) > u_max:
-                turns = self.object.surface.chart_symmetry == "any"
+                surface = self.object.surface
                 remedy = ("rotate the object chart (object.chart_rotation) so the contact "
-                          "is away from its poles") if turns else \
-                    ("the poles are the ends of the object's axis of revolution: keep the "
-                     "contact away from them or lower pole_margin")
+                          "is away from its poles") if surface.chart_symmetry == "any" else \
+                    ("the poles are the ends of the object's z axis: keep the "
+                     "contact away from them or lower pole_margin") \
+                    if surface.singular_u is not None else \
+                    "keep the contact within the chart"
                 errs.append((where,
-                             f"|u| = {abs(value):.4f} rad is at or beyond the chart pole "
-                             f"limit pi/2 - pole_margin = {u_max:.4f} rad; {remedy}"))
+                             f"|u| = {abs(value):.4f} is at or beyond the "
+                             f"{surface.u_limit_name} = {u_max:.4f}; {remedy}"))
         return errs
 
     def validate(self) -> None:
