@@ -15,7 +15,8 @@ from ocp.spec.problem import ForceSpec, ObjectSpec
 
 #: Dimensions of every form of every shape [m].
 CASES = [("sphere", (0.03,)), ("ellipsoid", (0.025, 0.04)),
-         ("ellipsoid", (0.03, 0.03, 0.04)), ("ellipsoid", (0.02, 0.035, 0.05))]
+         ("ellipsoid", (0.03, 0.03, 0.04)), ("ellipsoid", (0.02, 0.035, 0.05)),
+         ("capsule", (0.012, 0.028))]
 DENSITY = 1100.0
 
 
@@ -51,8 +52,9 @@ def test_the_charts_points_lie_on_mujocos_geom(shape: str, dims: tuple[float, ..
     model, data = _mujoco(shape, dims)
     surface = ObjectSpec(shape, dims).surface
     rng = np.random.default_rng(7)
+    lim = min(1.3, surface.u_limit(dims, 0.0))  # the chart's latitudes, or a capsule's seams
     points = [np.asarray(surface.geometry([u, v], dims)[0]).ravel()
-              for u, v in zip(rng.uniform(-1.3, 1.3, 12), rng.uniform(-math.pi, math.pi, 12),
+              for u, v in zip(rng.uniform(-lim, lim, 12), rng.uniform(-math.pi, math.pi, 12),
                               strict=True)]
     points += list(shape_of(shape).sample_points(dims, 24))
     o, probe = (mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in ("o", "probe"))
@@ -110,3 +112,65 @@ def test_a_triaxial_ellipsoid_turned_between_two_pads_is_certified_and_executed(
     assert report.passed, report.failures
     assert report.position_error.max <= 1e-3 and math.degrees(report.angle_error.max) <= 1.0
     assert all(c.lost_time == 0.0 for c in report.contacts)
+
+
+@pytest.mark.parametrize(("shape", "dims"), CASES)
+def test_each_surfaces_closed_form_is_its_derivation(shape: str, dims: tuple[float, ...]
+                                                     ) -> None:
+    surface = ObjectSpec(shape, dims).surface
+    lim = min(1.3, surface.u_limit(dims, 0.0))
+    rng = np.random.default_rng(3)
+    for u, v in zip(rng.uniform(-lim, lim, 10), rng.uniform(-math.pi, math.pi, 10),
+                    strict=True):
+        closed = surface.geometry([u, v], dims)
+        derived = surface.derived_geometry([u, v], dims)
+        for a, b in zip(closed, derived, strict=True):
+            assert np.asarray(a) == pytest.approx(np.asarray(b), abs=1e-12 / dims[0])
+
+
+@pytest.mark.parametrize("drive", ["a", "b", "eq3"])
+def test_a_ball_tip_rolls_on_the_capsules_cylinder_without_slip_or_spin(drive: str) -> None:
+    """Montana's equations on the capsule's cylinder chart (A) under a 12 mm ball tip
+    (B): along a motion driven each way, the pose the contact coordinates give has its
+    contact point at rest and no spin about the normal (the laws of
+    tests/test_general_charts.py)."""
+    from test_general_charts import Motion, rolling_defects
+
+    from ocp.geometry.contact import ContactPair
+    from ocp.geometry.surfaces import Sphere
+    from ocp.shapes.capsule import CapsuleSide
+
+    motion = Motion(ContactPair(CapsuleSide, Sphere), drive, [0.012, 0.03], [0.012],
+                    np.eye(3), np.eye(3), np.array([[0.3, -0.5], [0.4, 0.2], [-0.1, 0.3]]),
+                    0.05 if drive == "eq3" else 0.02)
+    for t, eta in motion.integrate(np.array([0.005, 0.3, 0.2, -0.4, 0.7])):
+        assert abs(eta[0]) < 0.03  # on the cylinder
+        d = rolling_defects(motion, t, eta)
+        assert d.slip < 1e-6 and d.spin < 1e-6, (t, d)
+
+
+def test_a_line_contact_is_refused_by_field() -> None:
+    """A capsule's cylinder touches a flat palm or a flat pad along a line: the planner's
+    contacts are points, so such requests name the field and why (round fingertips are
+    points on it)."""
+    import json
+    from pathlib import Path
+
+    from dexroll_client.models import PlanStatus
+    from planner_service.cli import plan_request
+
+    palm = {"planner": "ball_on_palm", "object": {"shape": "capsule",
+                                                  "dimensions": [0.012, 0.028]},
+            "initial": {"x": 0, "y": 0, "u": 0, "v": 0, "psi": 0}, "goal": {"x": 0.02},
+            "duration": 2.0}
+    result, _ = plan_request(palm)
+    assert result.status is PlanStatus.INVALID_INPUT
+    assert [(e.field, "along a line" in e.reason) for e in result.errors] == [
+        ("object.shape", True)]
+    pads = json.loads((Path(__file__).parents[1] / "examples" /
+                       "experiment2_two_fingers.json").read_text())
+    pads["object"] = {"shape": "capsule", "dimensions": [0.012, 0.028]}
+    result, _ = plan_request(pads)
+    assert result.status is PlanStatus.INVALID_INPUT
+    assert {(e.field, "along a line" in e.reason) for e in result.errors} == {
+        ("fingers[0]", True), ("fingers[1]", True)}

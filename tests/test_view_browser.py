@@ -205,6 +205,26 @@ def test_round_fingertips_draw_without_errors(browser: Any, tmp_path: Path) -> N
     assert seen.failure is None and seen.errors == []
 
 
+def test_a_capsule_object_draws_without_errors(browser: Any, tmp_path: Path) -> None:
+    """The object drawn as its shape's record says: a capsule (three's capsule turned onto
+    the object's z axis), shaded, without errors."""
+    from test_view import allegro_plan
+
+    from ocp import shape_of
+    from planner_service.view.page import page_html
+
+    _, scene = allegro_plan()
+    scene["object"]["shape"] = {**shape_of("capsule").viewer((0.012, 0.028)),
+                                "object": "capsule"}
+    file = tmp_path / "capsule.html"
+    file.write_text(page_html(scene), encoding="utf-8")
+    seen = visit(browser, file.as_uri(), {"start": 0.0})
+    assert seen.failure is None and seen.errors == []
+    shot = seen.shots["start"]
+    background = np.array([0xF4, 0xF5, 0xF7], dtype=float)
+    assert np.mean(np.any(np.abs(shot - background) > 8, axis=2)) > 0.02
+
+
 #: A gait planned once (tests/data/gait_small_request.json: examples/allegro_gait.json
 #: turned 8 deg in two rolls of 4 deg, index, middle and ring re-placed; 20 Hz samples) and
 #: its result as the service returned it: still a valid result of today's schema.

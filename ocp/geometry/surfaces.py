@@ -105,6 +105,10 @@ class Surface:
     def n_params(self) -> int:
         return len(self.param_names)
 
+    #: Whether one of the surface's principal curvatures is zero everywhere (the plane, a
+    #: cylinder): two such surfaces touch along a line, not at a point.
+    developable: bool = False
+
     #: What :meth:`u_limit` is, for the errors that name it.
     u_limit_name = "chart pole limit pi/2 - pole_margin"
 
@@ -334,6 +338,8 @@ def _revolution_geometry(u: ca.SX, v: ca.SX, a: ca.SX, c: ca.SX) -> tuple[ca.SX,
 
 
 class _Plane(Surface):
+    developable = True
+
     def __init__(self) -> None:
         super().__init__("plane", _plane_chart, (), (False, False), None, ("x", "y"))
 

@@ -14,13 +14,14 @@ from __future__ import annotations
 
 from ocp.geometry.surfaces import Surface
 from ocp.shapes.base import MujocoGeom, Shape
+from ocp.shapes.capsule import CAPSULE
 from ocp.shapes.ellipsoid import ELLIPSOID
 from ocp.shapes.sphere import SPHERE
 
 __all__ = ["SHAPES", "MujocoGeom", "Shape", "object_surface", "shape_of"]
 
 #: Every shape, by its wire name.
-SHAPES: dict[str, Shape] = {s.name: s for s in (SPHERE, ELLIPSOID)}
+SHAPES: dict[str, Shape] = {s.name: s for s in (SPHERE, ELLIPSOID, CAPSULE)}
 
 
 def shape_of(name: str) -> Shape:

@@ -27,6 +27,7 @@ from ocp.spec.problem import (
     DEFAULT_MAX_JOINT_ACCELERATION,
     DEFAULT_RAMP_FRACTION,
     MAX_POSITION,
+    PALM_LINE_CONTACT,
     BallOnPalmProblem,
     ForceSpec,
     ObjectSpec,
@@ -84,14 +85,16 @@ def fingertip_errors(name: str, tip: Fingertip, obj: ObjectSpec, pad_margin: flo
     """Why a fingertip's initial contact is invalid, as (field, reason) under ``name``:
     its chart patch, its coordinates, the pad (less ``pad_margin``) and the patch's poles."""
     errs: list[tuple[str, str]] = []
-    if not obj.errors() and len(tip.chart_rotation) == 3 and \
-            all(map(math.isfinite, tip.chart_rotation)):
+    if len(tip.chart_rotation) != 3 or not all(map(math.isfinite, tip.chart_rotation)):
+        errs.append((f"{name}.chart_rotation", "must be 3 finite numbers "
+                                               "(rotation vector, rad)"))
+    elif not obj.errors():
         bad = obj.surface.chart_rotation_error(rotation_from_vector(tip.chart_rotation))
         if bad is not None:
             errs.append((f"{name}.chart_rotation", bad))
-    else:
-        errs.append((f"{name}.chart_rotation", "must be 3 finite numbers "
-                                               "(rotation vector, rad)"))
+        elif tip.finger.tip_surface.surface.developable and obj.surface.developable:
+            errs.append((name, f"a flat pad touches a {obj.shape} along a line, not at a "
+                               "point as the planner's contacts do: use round fingertips"))
     if len(tip.initial) != 5 or not all(map(math.isfinite, tip.initial)):
         return [*errs, (f"{name}.initial", "must be 5 finite numbers "
                                            "(x_f, y_f, u_f, v_f, psi_f)")]
@@ -303,12 +306,12 @@ class ManipulationProblem:
                 errs.append((f"palm.{name}" if head in palm_fields else name, why))
         else:
             # the object, grid and solver fields, checked by the palm problem's own rules
-            errs += BallOnPalmProblem(self.object, (0.0, 0.0, 0.0, 0.0, 0.0), {"x": 0.0},
-                                      self.duration, n_intervals=self.n_intervals,
-                                      pole_margin=self.pole_margin,
-                                      max_refinements=self.max_refinements,
-                                      options=self.options, timing=self.timing,
-                                      ramp_time=self.ramp_time).errors()
+            errs += [e for e in BallOnPalmProblem(
+                self.object, (0.0, 0.0, 0.0, 0.0, 0.0), {"x": 0.0}, self.duration,
+                n_intervals=self.n_intervals, pole_margin=self.pole_margin,
+                max_refinements=self.max_refinements, options=self.options,
+                timing=self.timing, ramp_time=self.ramp_time).errors()
+                if PALM_LINE_CONTACT not in e[1]]  # no palm here
             if self.initial_pose is None:
                 errs.append(("initial_pose", "required when no palm carries the object"))
             else:

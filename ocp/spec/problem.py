@@ -85,6 +85,10 @@ class ProblemError(ValueError):
         super().__init__("; ".join(f"{f}: {r}" for f, r in self.errors))
 
 
+#: Why an object whose surface has a straight direction cannot lie on the palm.
+PALM_LINE_CONTACT = "touches the flat palm along a line"
+
+
 @dataclass(frozen=True)
 class ObjectSpec:
     """The rolled object: a closed surface with its chart.
@@ -247,6 +251,9 @@ class BallOnPalmProblem:
             why = obj.surface.chart_rotation_error(rotation_from_vector(obj.chart_rotation))
             if why is not None:
                 errs.append(("object.chart_rotation", why))
+        if not shape_errors and obj.surface.developable:
+            errs.append(("object.shape", f"a {obj.shape} {PALM_LINE_CONTACT}, not at a point "
+                                         "as the planner's contacts do"))
 
         margin_ok = math.isfinite(self.pole_margin) and 0.0 < self.pole_margin < math.pi / 2
         if not margin_ok:

@@ -141,11 +141,15 @@
     t.colorSpace = T.SRGBColorSpace;
     return t;
   })();
-  const ax = data.object.shape.semi_axes;
-  const ballGeom = new T.SphereGeometry(1, 48, 32);
+  const shape = data.object.shape;  // an ellipsoid (a ball: equal semi-axes) or a capsule
+  const capsule = shape.kind === "capsule";
+  const ax = capsule ? [shape.radius, shape.radius, shape.length / 2 + shape.radius]
+    : shape.semi_axes;
+  const ballGeom = capsule ? new T.CapsuleGeometry(shape.radius, shape.length, 16, 48)
+    : new T.SphereGeometry(1, 48, 32);
   ballGeom.rotateX(Math.PI / 2);  // three's poles are on y; the object's axis is its z
   const ball = new T.Mesh(ballGeom, new T.MeshStandardMaterial({ map: tex, roughness: 0.5 }));
-  ball.scale.set(ax[0], ax[1], ax[2]);
+  if (!capsule) ball.scale.set(ax[0], ax[1], ax[2]);
   object.add(ball);
   const axes = new T.Group();  // the object's x, y, z: red, green, blue rods
   const rod = 1.45 * Math.max(ax[0], ax[1], ax[2]);
