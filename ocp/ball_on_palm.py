@@ -112,7 +112,7 @@ def certify(problem: BallOnPalmProblem, t_nodes: FloatArray, X: FloatArray, U0: 
     grasp = grasp_problem(problem)
     general = planner or _DEFAULT.general
     m = general.model(grasp)
-    prm = m.params(np.asarray(problem.object.dimensions, dtype=float),
+    prm = m.params(np.asarray(problem.object.params, dtype=float),
                    [rotation_from_vector(problem.object.chart_rotation)])
     traj = m.interpolant(np.asarray(t_nodes, dtype=float), X, U0, Um, U1, prm)
     return palm_certificate(certify_grasp(grasp, m, traj, prm, grasp.tolerances))
@@ -184,7 +184,7 @@ def palm_solution(problem: BallOnPalmProblem, plan: ManipulationSolution) -> Sol
     col = plan.collocation
     assert col is not None and plan.stats is not None
     model = model_for(problem.object.surface.name)
-    params = np.asarray(problem.object.dimensions, dtype=float)
+    params = np.asarray(problem.object.params, dtype=float)
     patch = plan.object_chart_rotation or problem.object.chart_rotation
     chart = rotation_from_vector(patch)
     t_nodes = col.t_nodes

@@ -135,8 +135,13 @@ class Disturbances:
         """The plan whose scene is the disturbed world: the friction scaled, the object's
         size and mass changed (the references are the plan's own)."""
         obj = plan.object
-        if self.size_change:  # each of the geom's sizes (semi-axes, radii) grown
-            obj = replace(obj, geom_size=tuple(d + self.size_change for d in obj.geom_size))
+        if self.size_change:  # each of the geom's sizes (semi-axes, radii) grown, a
+            # mesh's vertices moved out along their directions from its centre
+            v = np.asarray(obj.geom_vertices, dtype=float).reshape(-1, 3)
+            v = v + self.size_change * v / np.maximum(np.linalg.norm(v, axis=1,
+                                                                     keepdims=True), 1e-12)
+            obj = replace(obj, geom_size=tuple(d + self.size_change for d in obj.geom_size),
+                          geom_vertices=tuple(float(x) for x in v.ravel()))
         obj = replace(obj, mass=obj.mass * self.mass_scale)
         return replace(plan, object=obj, mu=plan.mu * self.friction_scale)
 

@@ -109,6 +109,7 @@ def mjcf(plan: ExecutionPlan, options: SimOptions) -> str:
     obj.set("quat", _v(plan.object_wxyz[0] / np.linalg.norm(plan.object_wxyz[0])))
     ET.SubElement(obj, "freejoint", name="object")
     mass = options.object_mass if options.object_mass is not None else plan.object.mass
+    plan.object.add_asset(root)
     ET.SubElement(obj, "geom", plan.object.geom_attributes(), name="object",
                   mass=f"{mass:.17g}", contype="1", conaffinity="1", rgba="0.9 0.5 0.1 1")
     for finger in plan.fingers:

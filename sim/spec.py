@@ -21,6 +21,7 @@ adapter (``planner_service.execution``) builds a plan from a result and its requ
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,6 +44,8 @@ FloatArray = NDArray[np.float64]
 #: The object's mass when the plan does not state one [kg]: 50 g (a 25 mm-radius ball of
 #: density 764 kg/m^3, a light wooden ball). Inertia: the solid body's, from its shape.
 DEFAULT_MASS = 0.05
+#: The name of the object's mesh in a scene's ``<asset>``, when its geom is a mesh.
+OBJECT_MESH = "dexroll_object_mesh"
 
 
 def _a(x: Any) -> FloatArray:
@@ -62,11 +65,26 @@ class ObjectSpec:
     mass: float = DEFAULT_MASS
     shape: str = ""
     dimensions: tuple[float, ...] = ()
+    #: a mesh geom's vertices (x, y, z flattened) [m]: MuJoCo collides their convex hull
+    geom_vertices: tuple[float, ...] = ()
 
     def geom_attributes(self) -> dict[str, str]:
-        """The geom element's ``type`` and ``size``, at full precision."""
+        """The geom element's ``type`` and ``size`` (a mesh's name), at full precision."""
+        if self.geom_type == "mesh":
+            return {"type": "mesh", "mesh": OBJECT_MESH}
         return {"type": self.geom_type,
                 "size": " ".join(f"{float(x):.17g}" for x in self.geom_size)}
+
+    def add_asset(self, root: ET.Element) -> None:
+        """A mesh geom's ``<mesh>`` in the scene's ``<asset>`` (made when missing)."""
+        if self.geom_type != "mesh":
+            return
+        asset = root.find("asset")
+        if asset is None:
+            asset = ET.Element("asset")
+            root.insert(0, asset)
+        ET.SubElement(asset, "mesh", name=OBJECT_MESH,
+                      vertex=" ".join(f"{float(x):.17g}" for x in self.geom_vertices))
 
 
 @dataclass(frozen=True)
@@ -252,7 +270,9 @@ class ExecutionPlan:
         return {
             "t": self.t.tolist(),
             "object": {"geom_type": self.object.geom_type,
-                       "geom_size": list(self.object.geom_size), "mass": self.object.mass,
+                       "geom_size": list(self.object.geom_size),
+                       "geom_vertices": list(self.object.geom_vertices),
+                       "mass": self.object.mass,
                        "shape": self.object.shape, "dimensions": list(self.object.dimensions)},
             "object_position": self.object_position.tolist(),
             "object_wxyz": self.object_wxyz.tolist(),
@@ -296,7 +316,8 @@ class ExecutionPlan:
             _a(raw["t"]), ObjectSpec(str(o["geom_type"]),
                                      tuple(float(d) for d in o["geom_size"]),
                                      float(o.get("mass", DEFAULT_MASS)), str(o.get("shape", "")),
-                                     tuple(float(d) for d in o.get("dimensions", ()))),
+                                     tuple(float(d) for d in o.get("dimensions", ())),
+                                     tuple(float(d) for d in o.get("geom_vertices", ()))),
             _a(raw["object_position"]), _a(raw["object_wxyz"]), tuple(fingers), tuple(refs),
             tuple(ContactSpec(str(c["name"]), str(c["body"]), c.get("finger"), _a(c["point"]),
                               None if c.get("normal") is None else _a(c["normal"]),

@@ -104,6 +104,8 @@ def user_scene(plan: ExecutionPlan, model: UserModel, options: SimOptions
     torsion = options.torsional_friction if options.torsional_friction is not None else \
         plan.torsional_friction if plan.torsional_friction is not None else \
         options.DEFAULT_TORSIONAL
+    strip_files(root, inert=True)  # the default classes' mesh geoms: no mass, no contacts
+    plan.object.add_asset(root)  # the object's own mesh, if it is one (vertices inline)
     obj = ET.SubElement(world, "body", name=OBJECT, pos=_v(plan.object_position[0]),
                         quat=_v(plan.object_wxyz[0] / np.linalg.norm(plan.object_wxyz[0])))
     ET.SubElement(obj, "freejoint", name=OBJECT)
@@ -117,7 +119,6 @@ def user_scene(plan: ExecutionPlan, model: UserModel, options: SimOptions
                "bodies_without_inertial_that_lost_mesh_geoms": sorted(massless),
                "keyframes_dropped": len(keyframes),
                "file_timestep": file_step, "file_gravity": list(file_gravity)}
-    strip_files(root, inert=True)  # the default classes' mesh geoms: no mass, no contacts
     return ET.tostring(root, encoding="unicode"), changes
 
 

@@ -113,7 +113,8 @@ def test_models_lists_objects_and_planners(live_server: Server) -> None:
     assert r.status_code == 200
     body = r.json()
     assert "ball_on_palm" in body["planners"]
-    assert {o["shape"] for o in body["objects"]} == {"sphere", "ellipsoid", "capsule"}
+    assert {o["shape"] for o in body["objects"]} == {"sphere", "ellipsoid", "capsule",
+                                                      "superellipsoid"}
     capsule = next(o for o in body["objects"] if o["shape"] == "capsule")
     assert capsule["parameters"] == ["radius", "half_length"]
 

@@ -205,18 +205,21 @@ def test_round_fingertips_draw_without_errors(browser: Any, tmp_path: Path) -> N
     assert seen.failure is None and seen.errors == []
 
 
-def test_a_capsule_object_draws_without_errors(browser: Any, tmp_path: Path) -> None:
+@pytest.mark.parametrize(("shape", "dims"), [("capsule", (0.012, 0.028)),
+                                             ("superellipsoid", (0.025, 0.02, 0.03, 0.005))])
+def test_other_objects_draw_without_errors(browser: Any, tmp_path: Path, shape: str,
+                                           dims: tuple[float, ...]) -> None:
     """The object drawn as its shape's record says: a capsule (three's capsule turned onto
-    the object's z axis), shaded, without errors."""
+    the object's z axis), a superellipsoid (a sphere's mesh pushed out to its surface),
+    shaded, without errors."""
     from test_view import allegro_plan
 
     from ocp import shape_of
     from planner_service.view.page import page_html
 
     _, scene = allegro_plan()
-    scene["object"]["shape"] = {**shape_of("capsule").viewer((0.012, 0.028)),
-                                "object": "capsule"}
-    file = tmp_path / "capsule.html"
+    scene["object"]["shape"] = {**shape_of(shape).viewer(dims), "object": shape}
+    file = tmp_path / f"{shape}.html"
     file.write_text(page_html(scene), encoding="utf-8")
     seen = visit(browser, file.as_uri(), {"start": 0.0})
     assert seen.failure is None and seen.errors == []

@@ -92,7 +92,7 @@ def contact_coordinates(obj: ObjectSpec, position_xy: ArrayLike, rotation: Array
     its coordinates in the object's chart, psi the angle between the two contact frames.
     """
     R = np.asarray(rotation, dtype=float).reshape(3, 3)
-    surf, params = obj.surface, obj.dimensions
+    surf, params = obj.surface, obj.params
     chart = rotation_from_vector(obj.chart_rotation)
     p_b = surf.support_point(R.T @ np.array([0.0, 0.0, -1.0]), params)
     u, v = surf.inverse(chart.T @ p_b, params)
@@ -108,5 +108,5 @@ def object_pose(obj: ObjectSpec, eta: ArrayLike) -> tuple[FloatArray, FloatArray
     model = model_for(obj.surface.name)
     chart = rotation_from_vector(obj.chart_rotation)
     R, p, _, _, _ = model.kinematics(np.asarray(eta, dtype=float), [0.0, 0.0],
-                                     list(obj.dimensions), chart)
+                                     list(obj.params), chart)
     return np.asarray(R), np.asarray(p).ravel()

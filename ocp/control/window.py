@@ -245,7 +245,7 @@ class WindowController:
                                 phases=None)
         self.model = m = planner.model(self.template)
         #: the grasp model's parameters (the object's shape, the contacts' charts)
-        self.params = m.params(np.asarray(problem.object.dimensions, dtype=float),
+        self.params = m.params(np.asarray(problem.object.params, dtype=float),
                                contact_charts(problem))
         #: each state's tracking weight: the object's pose 1 (a free object's block; on a
         #: palm the contact's point (x, y): the ball's chart coordinates and contact angle

@@ -446,7 +446,7 @@ def greedy_plan(
     palm_plan_time = time.perf_counter() - t_palm
 
     kin = _kinematics(base.object.surface)
-    shape = np.asarray(base.object.dimensions, dtype=float)
+    shape = np.asarray(base.object.params, dtype=float)
     Rcp = rotation_from_vector(base.object.chart_rotation)
     Rcf = rotation_from_vector(problem.contact.chart_rotation)
     T = base.duration

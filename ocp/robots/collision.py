@@ -170,8 +170,16 @@ class HandCollision:
         assert world is not None
         obj = ET.SubElement(world, "body", name=OBJECT)
         ET.SubElement(obj, "freejoint", name=OBJECT)
-        ET.SubElement(obj, "geom", shape_of(shape).mujoco_geom(dims).attributes(),
-                      name=OBJECT, contype="1", conaffinity="1")
+        geom = shape_of(shape).mujoco_geom(dims)
+        mesh = geom.asset()
+        if mesh is not None:  # the object's own mesh, its vertices inline
+            asset = root.find("asset")
+            if asset is None:
+                asset = ET.Element("asset")
+                root.insert(0, asset)
+            ET.SubElement(asset, "mesh", mesh)
+        ET.SubElement(obj, "geom", geom.attributes(), name=OBJECT, contype="1",
+                      conaffinity="1")
         mj = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
         mj.geom_margin[:] = WINDOW
         mj.geom_gap[:] = 0.0

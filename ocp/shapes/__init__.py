@@ -17,11 +17,12 @@ from ocp.shapes.base import MujocoGeom, Shape
 from ocp.shapes.capsule import CAPSULE
 from ocp.shapes.ellipsoid import ELLIPSOID
 from ocp.shapes.sphere import SPHERE
+from ocp.shapes.superellipsoid import SUPERELLIPSOID
 
 __all__ = ["SHAPES", "MujocoGeom", "Shape", "object_surface", "shape_of"]
 
 #: Every shape, by its wire name.
-SHAPES: dict[str, Shape] = {s.name: s for s in (SPHERE, ELLIPSOID, CAPSULE)}
+SHAPES: dict[str, Shape] = {s.name: s for s in (SPHERE, ELLIPSOID, CAPSULE, SUPERELLIPSOID)}
 
 
 def shape_of(name: str) -> Shape:

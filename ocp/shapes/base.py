@@ -2,8 +2,9 @@
 checks, its mass properties, its MuJoCo geom and its viewer record. One subclass per
 shape, each in its own module of :mod:`ocp.shapes`, registered there by its wire name.
 
-A shape's ``dimensions`` are the request's ``object.dimensions`` [m], and the surface's
-parameters are the same numbers in the same order: the NLPs receive them as they are."""
+A shape's ``dimensions`` are the request's ``object.dimensions`` [m]; the surface's
+parameters (:meth:`Shape.surface_params`, what the charts and the NLPs take) are the same
+numbers unless the shape says otherwise."""
 
 from __future__ import annotations
 
@@ -18,22 +19,42 @@ from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.surfaces import Surface
 
-__all__ = ["MujocoGeom", "Shape"]
+__all__ = ["MESH_NAME", "MujocoGeom", "Shape"]
 
 FloatArray = NDArray[np.float64]
+
+
+#: The name of the object's mesh asset in a scene, when its geom is a mesh.
+MESH_NAME = "dexroll_object_mesh"
+
+
+def _numbers(values: Sequence[float]) -> str:
+    return " ".join(f"{float(x):.17g}" for x in values)
 
 
 @dataclass(frozen=True)
 class MujocoGeom:
     """A MuJoCo geom of the object, in the object's frame (its centre, its axes): ``type``
-    as MJCF names it and ``size`` as MJCF reads it for that type [m]."""
+    as MJCF names it, ``size`` as MJCF reads it for that type [m], and for a ``mesh`` its
+    vertices (x, y, z flattened [m]), written in the scene's ``<asset>`` (MuJoCo collides
+    and weighs their convex hull)."""
 
     type: str
     size: tuple[float, ...]
+    vertices: tuple[float, ...] = ()
 
     def attributes(self) -> dict[str, str]:
-        """The geom element's ``type`` and ``size`` attributes, at full precision."""
-        return {"type": self.type, "size": " ".join(f"{x:.17g}" for x in self.size)}
+        """The geom element's ``type`` and ``size`` (or ``mesh``) attributes, at full
+        precision."""
+        if self.type == "mesh":
+            return {"type": "mesh", "mesh": MESH_NAME}
+        return {"type": self.type, "size": _numbers(self.size)}
+
+    def asset(self) -> dict[str, str] | None:
+        """The ``<mesh>`` element's attributes in ``<asset>``, None for a primitive."""
+        if self.type != "mesh":
+            return None
+        return {"name": MESH_NAME, "vertex": _numbers(self.vertices)}
 
 
 class Shape(ABC):
@@ -50,6 +71,11 @@ class Shape(ABC):
     @abstractmethod
     def surface(self, dimensions: Sequence[float]) -> Surface:
         """The surface whose chart the contact coordinates are measured in."""
+
+    def surface_params(self, dimensions: Sequence[float]) -> tuple[float, ...]:
+        """The parameters the surface's chart takes: the dimensions themselves unless a
+        shape says otherwise."""
+        return tuple(float(d) for d in dimensions)
 
     @abstractmethod
     def surfaces(self) -> tuple[Surface, ...]:
@@ -98,7 +124,8 @@ class Shape(ABC):
 
     def support_heights(self, normals: ArrayLike, dimensions: Sequence[float]) -> FloatArray:
         """h(n) = max over the surface of n . p for unit directions (k, 3) [m]."""
-        return self.surface(dimensions).support_heights(normals, dimensions)
+        return self.surface(dimensions).support_heights(normals,
+                                                        self.surface_params(dimensions))
 
     def sample_points(self, dimensions: Sequence[float], n: int = 400) -> FloatArray:
         """About ``n`` points spread over the surface (k, 3) [m], in the object's frame:
@@ -108,5 +135,5 @@ class Shape(ABC):
         phi = math.pi * (1.0 + math.sqrt(5.0)) * k
         r = np.sqrt(1.0 - z * z)
         d = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-        surface = self.surface(dimensions)
-        return np.array([surface.support_point(di, dimensions) for di in d])
+        surface, params = self.surface(dimensions), self.surface_params(dimensions)
+        return np.array([surface.support_point(di, params) for di in d])

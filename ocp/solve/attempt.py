@@ -130,7 +130,7 @@ def setup(planner: ManipulationPlanner, problem: ManipulationProblem,
     x_scale, u_scale = scales(problem, m)
     segments, tb = problem.segments()
     t_nodes = node_times(segments, tb)
-    prm = m.params(np.asarray(problem.object.dimensions, dtype=float), contact_charts(problem))
+    prm = m.params(np.asarray(problem.object.params, dtype=float), contact_charts(problem))
     p = nlp_parameters(problem, nlp, (x_scale, u_scale))
     lbx, ubx = bounds(problem, nlp, m, x0, x_scale, u_scale)
     strategy = strategy_for(problem)
@@ -275,7 +275,7 @@ def _closure_errors(problem: ManipulationProblem, m: GraspModel, x0: FloatArray
     through."""
     if not m.fingertips:
         return []
-    prm = m.params(np.asarray(problem.object.dimensions, dtype=float), contact_charts(problem))
+    prm = m.params(np.asarray(problem.object.params, dtype=float), contact_charts(problem))
     closure = np.asarray(m.path(x0, prm)[0]).ravel().reshape(-1, 6)
     pol, errs = problem.tolerances, []
     for i, row in enumerate(closure):

@@ -304,7 +304,7 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
         R_pf=np.asarray(cart[2]).T.reshape(n, nf, 3, 3).transpose(0, 1, 3, 2)
         if nf else np.zeros((n, 0, 3, 3)),
         p_pf=np.asarray(cart[3]).T.reshape(n, nf, 3), states=sx,
-        shape=np.asarray(problem.object.dimensions, dtype=float), L=L, speed=speed,
+        shape=np.asarray(problem.object.params, dtype=float), L=L, speed=speed,
         rate=rate, policy=policy)
     for k, c in enumerate(m.contacts):
         checks += contact_checks(c, problem, k, ctx)

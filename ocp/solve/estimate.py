@@ -199,7 +199,7 @@ def estimate_state(problem: ManipulationProblem, m: GraspModel, measured: Measur
     keep closure at the velocity level."""
     o = options or EstimateOptions()
     f = _functions(m)
-    prm = m.params(np.asarray(problem.object.dimensions, dtype=float), contact_charts(problem))
+    prm = m.params(np.asarray(problem.object.params, dtype=float), contact_charts(problem))
     x = np.asarray(guess, dtype=float).copy()
     if len(measured.q) != len(m.fingertips):
         raise ValueError(f"the measurement has {len(measured.q)} fingers, the grasp "

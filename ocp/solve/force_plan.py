@@ -49,7 +49,7 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
     stage.prepare(2 * len(col.t_nodes) - 1)
     t_build = time.perf_counter() - t_build
     t0 = time.perf_counter()
-    prm = m.params(np.asarray(pf.object.dimensions, dtype=float), contact_charts(pf))
+    prm = m.params(np.asarray(pf.object.params, dtype=float), contact_charts(pf))
     Xall = np.vstack([col.X, col.Xm])
     load = load_parameters(pf)
     guess = planned_force_guess(m, Xall, prm, load)

@@ -229,7 +229,7 @@ def grasp_guess(planner: SubPlanner, problem: ManipulationProblem, m: GraspModel
     joint rates by finite differences (each kind's part: :mod:`ocp.solve.contact_guesses`;
     ``planner`` plans the support's palm sub-plan, :func:`~.contact_guesses.palm_subplan`)."""
     charts = contact_charts(problem)
-    shape = np.asarray(problem.object.dimensions, dtype=float)
+    shape = np.asarray(problem.object.params, dtype=float)
     prm = m.params(shape, charts)
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
     ts = np.sort(np.concatenate([t_nodes, tm]))  # node, mid, node, ...
@@ -322,7 +322,7 @@ def simulate_guess(problem: BallOnPalmProblem, t_nodes: FloatArray,
     W = w_of_t(times)  # nu x (n * (2 substeps + 1))
     u_lim = problem.object.u_limit(problem.pole_margin)
     Xn, Xm = guess_simulator(problem.object.surface.name, n)(
-        np.asarray(problem.initial, dtype=float), W, h, list(problem.object.dimensions), u_lim)
+        np.asarray(problem.initial, dtype=float), W, h, list(problem.object.params), u_lim)
     X = np.vstack([np.asarray(problem.initial, dtype=float), np.asarray(Xn).T])
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
     # node inputs per segment: evaluated just inside the interval they belong to

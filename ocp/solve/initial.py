@@ -34,7 +34,7 @@ def initial_state(m: GraspModel, problem: ManipulationProblem) -> FloatArray:
     x[m.object.xs] = m.object.initial(problem)
     for tip in m.fingertips:
         x[tip.eta_cols] = tip.spec(problem).initial
-    prm = m.params(np.asarray(problem.object.dimensions, dtype=float), contact_charts(problem))
+    prm = m.params(np.asarray(problem.object.params, dtype=float), contact_charts(problem))
     out = m.cartesian(x, prm)
     R_pf, p_pf = np.asarray(out[2]), np.asarray(out[3])
     errs: list[tuple[str, str]] = []

@@ -136,7 +136,7 @@ class Replanner:
         self.problem, self.planner = problem, planner
         self.model = planner.model(problem)
         #: the grasp model's parameters (the object's shape, the contacts' charts)
-        self.params = self.model.params(np.asarray(problem.object.dimensions, dtype=float),
+        self.params = self.model.params(np.asarray(problem.object.params, dtype=float),
                                         contact_charts(problem))
         self.plan, self.start = first, 0.0
         #: the first plan (:meth:`reset` goes back to it)

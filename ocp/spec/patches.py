@@ -106,7 +106,7 @@ def recharted(problem: ManipulationProblem, rotvec: tuple[float, float, float]
     cannot be (:func:`recharted_coordinates`)."""
     if problem.palm is None:
         return None
-    surface, shape = problem.object.surface, problem.object.dimensions
+    surface, shape = problem.object.surface, problem.object.params
     old = Chart.of(surface, shape, problem.object.chart_rotation)
     new = Chart.of(surface, shape, rotvec)
     pm = problem.palm

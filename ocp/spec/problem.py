@@ -115,6 +115,12 @@ class ObjectSpec:
         return self.kind.surface(self.dimensions)
 
     @property
+    def params(self) -> tuple[float, ...]:
+        """The surface's parameters, as its charts and the NLPs take them (the dimensions,
+        but for a shape whose chart wants them otherwise: :meth:`Shape.surface_params`)."""
+        return self.kind.surface_params(self.dimensions)
+
+    @property
     def length_scale(self) -> float:
         """Characteristic length [m] used to scale the NLP (the largest half extent)."""
         return self.kind.length_scale(self.dimensions)
@@ -122,7 +128,7 @@ class ObjectSpec:
     def u_limit(self, pole_margin: float) -> float:
         """The bound on a contact's |u| on the object's chart (its poles less
         ``pole_margin`` [rad], or a seam)."""
-        return self.surface.u_limit(self.dimensions, pole_margin)
+        return self.surface.u_limit(self.params, pole_margin)
 
     def errors(self) -> list[tuple[str, str]]:
         """Why the shape and dimensions describe no object, as (field, reason)."""
@@ -248,7 +254,8 @@ class BallOnPalmProblem:
             errs.append(("object.chart_rotation",
                          "must be 3 finite numbers (rotation vector, rad)"))
         elif not shape_errors:
-            why = obj.surface.chart_rotation_error(rotation_from_vector(obj.chart_rotation))
+            why = obj.surface.chart_rotation_error(rotation_from_vector(obj.chart_rotation),
+                                                   obj.params)
             if why is not None:
                 errs.append(("object.chart_rotation", why))
         if not shape_errors and obj.surface.developable:

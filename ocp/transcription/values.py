@@ -85,7 +85,7 @@ def parameters(problem: ManipulationProblem, nlp: BlockNLP,
     t_nodes = node_times(segments, tb)
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
     charts = contact_charts(problem)
-    shape = np.asarray(problem.object.dimensions, dtype=float)
+    shape = np.asarray(problem.object.params, dtype=float)
     L = problem.object.length_scale
     goal = np.zeros(5)
     vias = np.zeros((5, 0))

@@ -94,7 +94,7 @@ def object_spec(shape: str, dimensions: tuple[float, ...], mass: float) -> Any:
     from sim import ObjectSpec
 
     geom = shape_of(shape).mujoco_geom(dimensions)
-    return ObjectSpec(geom.type, geom.size, mass, shape, tuple(dimensions))
+    return ObjectSpec(geom.type, geom.size, mass, shape, tuple(dimensions), geom.vertices)
 
 
 def _tip_shape(model: Any, tip_shape: Any) -> Any:

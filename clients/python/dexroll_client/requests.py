@@ -115,15 +115,16 @@ class ContactCoordinates(_Request):
 class ObjectModel(_Request):
     """The rolled object and the chart its contact coordinates are measured in."""
 
-    shape: Literal["sphere", "ellipsoid", "capsule"] = Field(
+    shape: Literal["sphere", "ellipsoid", "capsule", "superellipsoid"] = Field(
         default="sphere",
-        description="'sphere', 'ellipsoid' or 'capsule' (the service's catalog describes "
-                    "each)")
+        description="'sphere', 'ellipsoid', 'capsule' or 'superellipsoid' (a box with "
+                    "rounded edges; the service's catalog describes each)")
     dimensions: list[Annotated[Real, Field(ge=MIN_SIZE, le=1.0)]] = Field(
-        default_factory=lambda: [0.025], min_length=1, max_length=3,
+        default_factory=lambda: [0.025], min_length=1, max_length=4,
         description="sphere: [radius]; ellipsoid: [a, c], semi-axes a, a, c of revolution "
                     "about its z axis, or [a, b, c] along its x, y, z axes; capsule: "
-                    "[radius, half_length], its axis the object's z [m]")
+                    "[radius, half_length], its axis the object's z; superellipsoid: "
+                    "[a, b, c, edge_radius], half sides and the rounding of its edges [m]")
     chart_rotation: list[Annotated[Real, Field(ge=-2 * math.pi, le=2 * math.pi)]] = Field(
         default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
         description="rotation vector [rad] of the object's chart patch in the object frame")

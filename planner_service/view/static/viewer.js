@@ -141,15 +141,26 @@
     t.colorSpace = T.SRGBColorSpace;
     return t;
   })();
-  const shape = data.object.shape;  // an ellipsoid (a ball: equal semi-axes) or a capsule
+  // the object: an ellipsoid (a ball: equal semi-axes), a capsule or a superellipsoid
+  const shape = data.object.shape;
   const capsule = shape.kind === "capsule";
   const ax = capsule ? [shape.radius, shape.radius, shape.length / 2 + shape.radius]
     : shape.semi_axes;
   const ballGeom = capsule ? new T.CapsuleGeometry(shape.radius, shape.length, 16, 48)
-    : new T.SphereGeometry(1, 48, 32);
+    : new T.SphereGeometry(1, 64, 48);
   ballGeom.rotateX(Math.PI / 2);  // three's poles are on y; the object's axis is its z
+  if (shape.kind === "superellipsoid") {  // each unit direction d to rho(d) d
+    const pos = ballGeom.attributes.position, n = shape.exponent;
+    for (let i = 0; i < pos.count; i++) {
+      const d = [pos.getX(i), pos.getY(i), pos.getZ(i)];
+      const s = d.reduce((acc, x, k) => acc + Math.pow(Math.abs(x / ax[k]), n), 0);
+      const rho = Math.pow(s, -1 / n);
+      pos.setXYZ(i, rho * d[0], rho * d[1], rho * d[2]);
+    }
+    ballGeom.computeVertexNormals();
+  }
   const ball = new T.Mesh(ballGeom, new T.MeshStandardMaterial({ map: tex, roughness: 0.5 }));
-  if (!capsule) ball.scale.set(ax[0], ax[1], ax[2]);
+  if (!capsule && shape.kind !== "superellipsoid") ball.scale.set(ax[0], ax[1], ax[2]);
   object.add(ball);
   const axes = new T.Group();  // the object's x, y, z: red, green, blue rods
   const rod = 1.45 * Math.max(ax[0], ax[1], ax[2]);
