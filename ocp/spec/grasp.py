@@ -8,7 +8,7 @@ the ball in the air) and three or more fingers are the same type with different 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -41,7 +41,7 @@ from ocp.spec.reference import Reference
 
 __all__ = ["Fingertip", "ManipulationProblem", "Palm", "contact_chart_for_pad",
            "contact_charts", "contact_from_joints", "fingertip_errors", "fingertips_from_joints",
-           "hand_fingertips", "support_goal_errors"]
+           "hand_fingertips", "nearest_surface_point", "support_goal_errors"]
 
 FloatArray = NDArray[np.float64]
 
@@ -432,65 +432,196 @@ def support_goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[
     return {f"palm.{k}": v for k, v in out.items()}
 
 
-def contact_from_joints(finger: Any, q: ArrayLike, obj: Any, pose: Any
-                        ) -> tuple[tuple[float, ...], tuple[float, float, float], float]:
-    """The contact coordinates of a round fingertip on a ball where the joints ``q`` put
-    it: (initial (a, b, 0, 0, 0), the object chart patch's rotation vector that puts the
-    contact at (u, v) = (0, 0) with psi = 0, the gap [m]: the tip's distance from the
-    ball at ``q``, negative when they overlap). The contact is where the line of centres
-    meets the tip (:func:`~ocp.spec.grasp.contact_chart_for_pad` gives the patch). A gap
-    within 2 mm is closed first by the least joint motion, so that the coordinates are
-    where joints near ``q`` put the tip exactly (the inverse kinematics of the initial
-    grasp, a 6-D pose, then has a solution for a finger of fewer than 6 joints)."""
-    tip = finger.tip_surface
-    if tip.kind not in ("sphere", "capsule") or obj.shape != "sphere":
-        raise ValueError("contacts from joint angles need a sphere or capsule tip on a ball")
-    r, rho = tip.params[0], float(obj.dimensions[0])
-    c_obj = np.asarray(pose.position, dtype=float)
-    qa = np.asarray(q, dtype=float)
-
-    def centre_of(qq: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        R_l, p_l = finger.fingertip_pose_pin(qq)
-        return R_l, p_l, p_l + R_l @ tip.p
-
-    R_l, _, centre = centre_of(qa)
-    gap0 = float(np.linalg.norm(c_obj - centre)) - r - rho
-    # a small gap is closed by the least joint motion (Gauss-Newton on the distance of
-    # the tip's centre from the ball's): the coordinates then hold with these joints
-    # exactly, which a finger of fewer than 6 joints needs (closure is a 6-D pose)
-    if abs(gap0) <= 2e-3:
-        for _ in range(20):
-            d = c_obj - centre
-            gap = float(np.linalg.norm(d)) - r - rho
-            if abs(gap) <= 1e-13:
-                break
-            J = finger.frame_jacobian_pin(qa)
-            Jc = J[:3] - np.cross(R_l @ tip.p, J[3:].T).T  # the centre's velocity
-            g = -(d / np.linalg.norm(d)) @ Jc  # d gap / dq
-            qa = coupled_step(finger, qa, -gap * g / max(float(g @ g), 1e-18))
-            R_l, _, centre = centre_of(qa)
-    R_t = R_l @ tip.R
-    d = c_obj - centre
-    dist = float(np.linalg.norm(d))
-    ab = tip.surface.inverse(R_t.T @ (d / dist), (1.0,))
-    _, G, _, _, _ = tip.surface.geometry(ab, (r,))
-    chart = contact_chart_for_pad(obj, pose, R_t @ np.asarray(G))
-    return (float(ab[0]), float(ab[1]), 0.0, 0.0, 0.0), chart, gap0
-
-
 #: A fingertip this far from the object at the given joint angles is refused [m]; nearer,
 #: the joints are moved the least to close the gap.
 MAX_INITIAL_GAP = 2e-3
 
 
+#: Unit directions (a cube's faces, edges and corners) whose support points seed
+#: :func:`nearest_surface_point`.
+_SEED_DIRECTIONS = np.array([d for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)],
+                            dtype=float) - 1.0
+_SEED_DIRECTIONS /= np.linalg.norm(_SEED_DIRECTIONS, axis=1, keepdims=True)
+
+
+def nearest_surface_point(surface: Any, params: ArrayLike, point: ArrayLike,
+                          alpha: ArrayLike | None = None) -> tuple[FloatArray, float]:
+    """The point of a closed convex ``surface`` nearest to ``point`` (body frame of the
+    chart [m]): (its chart coordinates (u, v), the signed distance [m] along its outward
+    normal, negative inside). Damped Newton's method on the chart coordinates (the
+    tangential part ``[x y]^T (point - f)`` vanishes, its Jacobian ``-(I + t K) M``, t the
+    distance), from ``alpha`` or the support point of the direction n, of the point's own
+    and :data:`_SEED_DIRECTIONS`, of the largest ``n . point - h(n)`` (h the support
+    function: the signed distance is the largest over all n)."""
+    c = np.asarray(point, dtype=float)
+    prm = np.asarray(params, dtype=float)
+    if alpha is None:
+        norm = float(np.linalg.norm(c))
+        dirs = _SEED_DIRECTIONS if norm == 0.0 else np.vstack([c / norm, _SEED_DIRECTIONS])
+        best = dirs[int(np.argmax(dirs @ c - surface.support_heights(dirs, prm)))]
+        alpha = surface.inverse(surface.support_point(best, prm), prm)
+    a = np.asarray(alpha, dtype=float).reshape(2)
+    scale = float(np.max(prm))
+
+    def at(aa: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        p, G, M, K, _ = surface.geometry(aa, prm)
+        return (np.asarray(p, dtype=float).ravel(), np.asarray(G, dtype=float),
+                np.asarray(M, dtype=float), np.asarray(K, dtype=float))
+
+    p, G, M, K = at(a)
+    for _ in range(60):
+        e = c - p
+        r = G[:, :2].T @ e
+        t = float(G[:, 2] @ e)
+        if float(np.linalg.norm(r)) <= 1e-14 * scale:
+            break
+        H = np.eye(2) + t * K
+        if np.linalg.eigvalsh(0.5 * (H + H.T))[0] <= 1e-6:  # deep inside: Gauss-Newton
+            H = np.eye(2)
+        step = np.linalg.lstsq(H @ M, r, rcond=1e-12)[0]  # lstsq: M is singular at a pole
+        size = float(np.linalg.norm(M @ step))
+        if size > 0.5 * scale:
+            step *= 0.5 * scale / size
+        d2 = float(e @ e)
+        for _ in range(30):
+            got = at(a + step)
+            if float((c - got[0]) @ (c - got[0])) <= d2 * (1.0 + 1e-12) + 1e-30:
+                break
+            step *= 0.5
+        a = a + step
+        p, G, M, K = got
+    return a, float(G[:, 2] @ (c - p))
+
+
+def _gap_closed(finger: Any, q: FloatArray,
+                distance: Callable[[FloatArray], tuple[float, FloatArray]]
+                ) -> tuple[FloatArray, float]:
+    """(joints, gap [m] at ``q``): a gap within :data:`MAX_INITIAL_GAP` closed by the
+    least joint motion (Gauss-Newton on ``distance(tip centre) -> (gap [m], outward
+    normal at the nearest object point)``, palm frame); ``q`` as it is beyond."""
+    tip = finger.tip_surface
+    R_l, p_l = finger.fingertip_pose_pin(q)
+    centre = p_l + R_l @ tip.p
+    gap0, _ = distance(centre)
+    if abs(gap0) <= MAX_INITIAL_GAP:
+        for _ in range(20):
+            gap, n = distance(centre)
+            if abs(gap) <= 1e-13:
+                break
+            J = finger.frame_jacobian_pin(q)
+            Jc = J[:3] - np.cross(R_l @ tip.p, J[3:].T).T  # the centre's velocity
+            g = n @ Jc  # d gap / dq
+            q = coupled_step(finger, q, -gap * g / max(float(g @ g), 1e-18))
+            R_l, p_l = finger.fingertip_pose_pin(q)
+            centre = p_l + R_l @ tip.p
+    return q, gap0
+
+
+def contact_from_joints(finger: Any, q: ArrayLike, obj: Any, pose: Any,
+                        pole_margin: float = ManipulationProblem.pole_margin
+                        ) -> tuple[tuple[float, ...], tuple[float, float, float], float]:
+    """The contact coordinates of a round fingertip (a sphere or a capsule's cap) on a
+    closed convex object where the joints ``q`` put it: (initial (a, b, u, v, psi), the
+    rotation vector of the object chart patch they are in, the gap [m]: the tip's distance
+    from the object at ``q``, negative when they overlap). A gap within
+    :data:`MAX_INITIAL_GAP` is closed first by the least joint motion, so that the
+    coordinates are where joints near ``q`` put the tip exactly (the inverse kinematics of
+    the initial grasp, a 6-D pose, then has a solution for a finger of fewer than 6
+    joints); beyond it they are those of the nearest points, for the caller to refuse.
+
+    On a ball the contact is where the line of centres meets the tip, in the patch that
+    puts it at (u, v, psi) = (0, 0, 0) (:func:`contact_chart_for_pad`). On any other
+    object it is the object's point nearest to the tip's centre
+    (:func:`nearest_surface_point`), in the object's own patch (``obj.chart_rotation``:
+    such a patch cannot be turned at will), psi between the two contact frames;
+    ValueError when it lies beyond the chart's bound ``obj.u_limit(pole_margin)``."""
+    tip = finger.tip_surface
+    if tip.kind not in ("sphere", "capsule"):
+        raise ValueError("contacts from joint angles need a sphere or capsule tip")
+    r = tip.params[0]
+    c_obj = np.asarray(pose.position, dtype=float)
+    qa = np.asarray(q, dtype=float)
+    if obj.shape == "sphere":
+        rho = float(obj.dimensions[0])
+
+        def on_ball(centre: FloatArray) -> tuple[float, FloatArray]:
+            d = c_obj - centre
+            return float(np.linalg.norm(d)) - r - rho, -(d / np.linalg.norm(d))
+
+        qa, gap0 = _gap_closed(finger, qa, on_ball)
+        R_l, p_l = finger.fingertip_pose_pin(qa)
+        R_t = R_l @ tip.R
+        d = c_obj - (p_l + R_l @ tip.p)
+        dist = float(np.linalg.norm(d))
+        ab = tip.surface.inverse(R_t.T @ (d / dist), (1.0,))
+        _, G, _, _, _ = tip.surface.geometry(ab, (r,))
+        chart = contact_chart_for_pad(obj, pose, R_t @ np.asarray(G))
+        return (float(ab[0]), float(ab[1]), 0.0, 0.0, 0.0), chart, gap0
+    return _contact_on_surface(finger, qa, obj, pose, pole_margin)
+
+
+def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_margin: float
+                        ) -> tuple[tuple[float, ...], tuple[float, float, float], float]:
+    """:func:`contact_from_joints` on an object other than a ball."""
+    if obj.errors():
+        raise ValueError("contacts from joint angles need a valid object: "
+                         + "; ".join(f"{f}: {why}" for f, why in obj.errors()))
+    surface, dims = obj.surface, tuple(float(x) for x in obj.dimensions)
+    rotvec = tuple(float(x) for x in obj.chart_rotation)
+    R_c = rotation_from_vector(rotvec)
+    bad = surface.chart_rotation_error(R_c, dims)
+    if bad is not None:
+        raise ValueError(f"object.chart_rotation, the patch of contacts from joint "
+                         f"angles: {bad}")
+    tip = finger.tip_surface
+    r = tip.params[0]
+    R_o, c_obj = pose.rotation, np.asarray(pose.position, dtype=float)
+    R_pc = R_o @ R_c  # the patch in the palm frame
+    alpha: FloatArray | None = None
+
+    def on_object(centre: FloatArray) -> tuple[float, FloatArray]:
+        nonlocal alpha
+        alpha, t = nearest_surface_point(surface, dims, R_pc.T @ (centre - c_obj), alpha)
+        _, G, _, _, _ = surface.geometry(alpha, dims)
+        return t - r, R_pc @ np.asarray(G, dtype=float)[:, 2]
+
+    try:
+        q, gap0 = _gap_closed(finger, q, on_object)
+    except NotImplementedError as exc:
+        raise ValueError(f"contacts from joint angles need a closed convex object: {exc}"
+                         ) from None
+    R_l, p_l = finger.fingertip_pose_pin(q)
+    on_object(p_l + R_l @ tip.p)
+    u, v = (float(x) for x in np.asarray(alpha))
+    limit = obj.u_limit(pole_margin)
+    if abs(u) > limit:
+        raise ValueError(
+            f"its contact on the {obj.shape} is at u = {u:.4f}, beyond the bound {limit:.4f} "
+            f"of the object's chart ({surface.u_limit_name}), which cannot be turned away "
+            f"on a {obj.shape}: touch it farther from the ends of its z axis, or turn the "
+            "object (initial_pose.orientation)")
+    _, G_o, _, _, _ = surface.geometry([u, v], dims)
+    R_oc = R_pc @ np.asarray(G_o, dtype=float)  # the object's contact frame, palm frame
+    R_t = R_l @ tip.R
+    ab = tip.surface.inverse(-(R_t.T @ R_oc[:, 2]), (1.0,))
+    _, G_t, _, _, _ = tip.surface.geometry(ab, (r,))
+    Rx = R_oc.T @ R_t @ np.asarray(G_t, dtype=float)  # R_contact(psi)
+    psi = math.atan2(-Rx[0, 1], Rx[0, 0])
+    return (float(ab[0]), float(ab[1]), u, v, psi), rotvec, gap0  # type: ignore[return-value]
+
+
 def fingertips_from_joints(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
                            pose: ObjectPose, names: tuple[str, ...],
-                           where: tuple[str, ...]) -> tuple[Fingertip, ...]:
-    """Round fingertips on a ball at the joint angles ``qs`` of ``fingers``: their contact
-    coordinates where the joints put them (:func:`contact_from_joints`); ProblemError
-    naming ``where[i]`` (the field of finger i's joints) with the reason: joints outside
-    their limits (which, by how much), a tip too far from the ball or inside it (which
-    finger, how far), a contact off a capsule's cap, two tips overlapping."""
+                           where: tuple[str, ...],
+                           pole_margin: float = ManipulationProblem.pole_margin
+                           ) -> tuple[Fingertip, ...]:
+    """Round fingertips on a closed convex object at the joint angles ``qs`` of
+    ``fingers``: their contact coordinates where the joints put them
+    (:func:`contact_from_joints`); ProblemError naming ``where[i]`` (the field of finger
+    i's joints) with the reason: joints outside their limits (which, by how much), a tip
+    too far from the object or inside it (which finger, how far), a contact off a
+    capsule's cap or beyond the object chart's bound (``pole_margin`` [rad] from its
+    poles), two tips overlapping."""
     errs: list[tuple[str, str]] = []
     tips: list[Fingertip] = []
     centres: list[tuple[int, FloatArray, float]] = []
@@ -517,9 +648,9 @@ def fingertips_from_joints(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: O
                 continue
             f, q = held
         try:
-            init, chart, gap = contact_from_joints(f, q, obj, pose)
+            init, chart, gap = contact_from_joints(f, q, obj, pose, pole_margin)
         except ValueError as exc:
-            errs.append((where[i], str(exc)))
+            errs.append((where[i], f"finger {name!r}: {exc}"))
             continue
         if abs(gap) > MAX_INITIAL_GAP:
             what = "from" if gap > 0 else "inside"

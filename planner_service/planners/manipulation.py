@@ -422,7 +422,7 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
                     tuple(q for _, _, q, _, _ in from_joints if q is not None), obj,
                     motion_start,
                     tuple(n for _, _, _, n, _ in from_joints),
-                    tuple(w for _, _, _, _, w in from_joints))
+                    tuple(w for _, _, _, _, w in from_joints), request.pole_margin)
             except ProblemError as exc:
                 errors += exc.errors
             else:
