@@ -34,6 +34,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -108,6 +109,14 @@ class Surface:
     #: Whether one of the surface's principal curvatures is zero everywhere (the plane, a
     #: cylinder): two such surfaces touch along a line, not at a point.
     developable: bool = False
+
+    def length_scale(self, params: Any) -> Any:
+        """The length [m] the NLPs scale lengths by, of these parameters, as CasADi
+        symbols (inside an NLP) or numbers (its values) alike: the largest parameter (a
+        radius, the semi-axes)."""
+        if isinstance(params, ca.SX | ca.MX):
+            return ca.mmax(params)
+        return float(np.max(np.asarray(params, dtype=float)))
 
     #: What :meth:`u_limit` is, for the errors that name it.
     u_limit_name = "chart pole limit pi/2 - pole_margin"

@@ -97,8 +97,9 @@ class Shape(ABC):
         """Half the extent of the object's bounding box along its own axes [m]."""
 
     def length_scale(self, dimensions: Sequence[float]) -> float:
-        """The characteristic length the NLPs are scaled by: the largest half extent [m]."""
-        return float(max(self.semi_axes(dimensions)))
+        """The characteristic length the NLPs are scaled by [m]: the surface's, of its
+        parameters (the NLPs compute the same from their parameter symbols)."""
+        return float(self.surface(dimensions).length_scale(self.surface_params(dimensions)))
 
     @abstractmethod
     def volume(self, dimensions: Sequence[float]) -> float:

@@ -59,6 +59,12 @@ class CapsuleSurface(Surface):
         T = ca.horzcat(0, 0)
         return p, R, M, K, T
 
+    def length_scale(self, params: Any) -> Any:
+        """The capsule's half length, radius + half_length [m]."""
+        if isinstance(params, ca.SX | ca.MX):
+            return params[0] + params[1]
+        return float(params[0]) + float(params[1])
+
     def u_limit(self, params: Sequence[float], pole_margin: float) -> float:
         """The seams: |u| <= half_length [m] (the margin is an angle of a pole chart)."""
         return float(params[1])

@@ -96,6 +96,12 @@ class SuperellipsoidSurface(Surface):
                         "symmetries: a quarter turn would swap unequal half sides")
         return None
 
+    def length_scale(self, params: Any) -> Any:
+        """The largest half side [m] (not the exponent, its fourth parameter)."""
+        if isinstance(params, ca.SX | ca.MX):
+            return ca.mmax(params[0:3])
+        return float(np.max(np.asarray(params, dtype=float)[:3]))
+
     def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
         p = np.asarray(point, dtype=float)
         r = np.sqrt(np.sum(p * p, axis=-1))
@@ -178,9 +184,6 @@ class SuperellipsoidShape(Shape):
     def semi_axes(self, dimensions: Sequence[float]) -> tuple[float, float, float]:
         a, b, c = (float(x) for x in dimensions[:3])
         return (a, b, c)
-
-    def length_scale(self, dimensions: Sequence[float]) -> float:
-        return float(max(self.semi_axes(dimensions)))
 
     def _gammas(self, dimensions: Sequence[float]) -> tuple[float, float]:
         """(the unit superball's volume over 8, its <x^2>) of the exponent."""

@@ -153,7 +153,7 @@ class ShootingWindow:
                         prm["load"])
         wts, accel_p = weights[0:4], prm["accel"]
         Qx, wu = prm["Qx"], prm["wu"]
-        L = ca.mmax(shape_q)
+        L = m.surface.length_scale(shape_q)
         x_scale = ca.vertcat(*m.x_scale(L))
         u_scale = ca.vertcat(*m.u_scale(L, T))
         mp = ca.vertcat(shape_q, charts_q)

@@ -89,7 +89,8 @@ def fingertip_errors(name: str, tip: Fingertip, obj: ObjectSpec, pad_margin: flo
         errs.append((f"{name}.chart_rotation", "must be 3 finite numbers "
                                                "(rotation vector, rad)"))
     elif not obj.errors():
-        bad = obj.surface.chart_rotation_error(rotation_from_vector(tip.chart_rotation))
+        bad = obj.surface.chart_rotation_error(rotation_from_vector(tip.chart_rotation),
+                                               obj.params)
         if bad is not None:
             errs.append((f"{name}.chart_rotation", bad))
         elif tip.finger.tip_surface.surface.developable and obj.surface.developable:
@@ -390,7 +391,7 @@ def contact_chart_for_pad(obj: ObjectSpec, pose: ObjectPose, pad_rotation: Array
     """
     from ocp.geometry.contact import R_contact
 
-    shape = np.asarray(obj.dimensions, dtype=float)
+    shape = np.asarray(obj.params, dtype=float)
     _, Rg, _, _, _ = obj.surface.geometry([0.0, 0.0], shape)
     R_of = pose.rotation.T @ np.asarray(pad_rotation, dtype=float)
     Rc = R_of @ np.asarray(R_contact(0.0)).T @ np.asarray(Rg).T
@@ -566,7 +567,7 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
     if obj.errors():
         raise ValueError("contacts from joint angles need a valid object: "
                          + "; ".join(f"{f}: {why}" for f, why in obj.errors()))
-    surface, dims = obj.surface, tuple(float(x) for x in obj.dimensions)
+    surface, dims = obj.surface, obj.params  # the chart's parameters
     rotvec = tuple(float(x) for x in obj.chart_rotation)
     R_c = rotation_from_vector(rotvec)
     bad = surface.chart_rotation_error(R_c, dims)

@@ -151,7 +151,7 @@ def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
     ``wr``."""
     m = pm.grasp
     q, shape_q, charts_q, ccone_q, tol_q, (wtr_q, load_q) = point_params(m)
-    L = ca.mmax(shape_q)
+    L = m.surface.length_scale(shape_q)
     prm = ca.vertcat(shape_q, charts_q)
     x_scale = ca.vertcat(*m.x_scale(L))
     nc = pm.n_contacts
@@ -236,7 +236,7 @@ def interval_block(pm: Any, n_s: int, smooth: bool, reference: bool = False) -> 
     nx, nu = m.nx, m.nu
     shape_q = ca.SX.sym("shape", m.surface.n_params)
     charts_q = ca.SX.sym("charts", 9 * m.n_contacts)
-    L = ca.mmax(shape_q)
+    L = m.surface.length_scale(shape_q)
     prm = ca.vertcat(shape_q, charts_q)
     x_scale = ca.vertcat(*m.x_scale(L))
     xk, xm, xk1 = (ca.SX.sym(name, nx) for name in ("xk", "xm", "xk1"))
@@ -284,7 +284,7 @@ def rate_block(pm: Any) -> Block:
     shape_q = ca.SX.sym("shape", m.surface.n_params)
     charts_q = ca.SX.sym("charts", 9 * m.n_contacts)
     Tq = ca.SX.sym("T")
-    L = ca.mmax(shape_q)
+    L = m.surface.length_scale(shape_q)
     prm = ca.vertcat(shape_q, charts_q)
     x_scale = ca.vertcat(*m.x_scale(L))
     u_scale = ca.vertcat(*m.u_scale(L, Tq))
@@ -312,7 +312,7 @@ def accel_block(m: Any, smooth: bool) -> Block:
     za = ca.vertcat(ua0, uam, ua1)
     shape_q = ca.SX.sym("shape", m.surface.n_params)
     hq, Tq, amax_q = ca.SX.sym("h"), ca.SX.sym("T"), ca.SX.sym("amax")
-    L = ca.mmax(shape_q)
+    L = m.surface.length_scale(shape_q)
     u_scale = ca.vertcat(*m.u_scale(L, Tq))
     if jcols:
         sj = u_scale[jcols] / (hq * amax_q)
@@ -334,7 +334,7 @@ def touchdown_block(pm: Any, landing: tuple[int, ...]) -> Block:
     m = pm.grasp
     shape_q = ca.SX.sym("shape", m.surface.n_params)
     charts_q = ca.SX.sym("charts", 9 * m.n_contacts)
-    L = ca.mmax(shape_q)
+    L = m.surface.length_scale(shape_q)
     prm = ca.vertcat(shape_q, charts_q)
     x_scale = ca.vertcat(*m.x_scale(L))
     xs = ca.SX.sym("xt", m.nx)

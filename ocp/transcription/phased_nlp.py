@@ -217,7 +217,7 @@ class PhasedNLP:
         m, hs = self.m, self.hs
         nx, nseg, nv = m.nx, len(hs.segments), len(self.via_masks)
         shape_q = ca.SX.sym("shape", m.surface.n_params)
-        x_scale = ca.vertcat(*m.x_scale(ca.mmax(shape_q)))
+        x_scale = ca.vertcat(*m.x_scale(m.surface.length_scale(shape_q)))
         xe = ca.SX.sym("xe", nx, nseg)
         goal_q = ca.SX.sym("goal", 5)
         vias_q = ca.SX.sym("vias", 5, nv)

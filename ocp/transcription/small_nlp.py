@@ -31,7 +31,7 @@ def small_grasp_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[bool, ..
     p = ca.SX.sym("p", decl.size)
     prm = decl.unpack(p)
     shape_p, seg_T, goal, vias = prm["shape"], prm["seg_T"], prm["goal"], prm["vias"]
-    L, T = ca.mmax(shape_p), ca.sum1(prm["seg_T"])
+    L, T = m.surface.length_scale(shape_p), ca.sum1(prm["seg_T"])
     x_scale = ca.vertcat(*m.x_scale(L))
     u_scale = ca.vertcat(*m.u_scale(L, T))
     params = ca.vertcat(shape_p, prm["charts"])
