@@ -40,9 +40,16 @@ MAX_EXPONENT = 20.0
 MESH_SAG = 5e-5
 
 
+#: |x|^n is written (x^2 + EPS^2)^(n/2) in the chart: its derivatives of every order the
+#: NLPs take (to the fourth) stay finite where a direction's component is zero (there
+#: (x^2)^(n/2 - 4) x^4 is inf * 0); the surface moves by less than EPS^n (nothing).
+_EPS = 1e-6
+
+
 def _rho(d: Any, a: Any, b: Any, c: Any, n: Any) -> Any:
-    return ((d[0] ** 2 / a**2) ** (n / 2) + (d[1] ** 2 / b**2) ** (n / 2)
-            + (d[2] ** 2 / c**2) ** (n / 2)) ** (-1 / n)
+    e2 = _EPS**2
+    return ((d[0] ** 2 / a**2 + e2) ** (n / 2) + (d[1] ** 2 / b**2 + e2) ** (n / 2)
+            + (d[2] ** 2 / c**2 + e2) ** (n / 2)) ** (-1 / n)
 
 
 def _chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
