@@ -247,5 +247,9 @@ def test_the_bodies_the_server_accepts_are_schema_valid(fuzzed: Server) -> None:
                                 f"({text[:200]})")
 
     run()
-    assert taken[0] >= CONTRACT_CASES // 3, taken
+    # a quarter at least: thinned, the examples whose round tips start from joint angles
+    # on another shape than a ball (a capsule, a rounded cube, an egg lying down) lose
+    # ``initial_q`` as often as not, and the hand's nominal grasp misses those objects by
+    # more than the 2 mm the planner closes: a 422, rightly
+    assert taken[0] >= CONTRACT_CASES // 4, taken
     assert failures == [], "\n".join(failures[:10])
