@@ -109,6 +109,9 @@ class Surface:
     #: Whether one of the surface's principal curvatures is zero everywhere (the plane, a
     #: cylinder): two such surfaces touch along a line, not at a point.
     developable: bool = False
+    #: The direction (chart patch frame) along which a curved developable surface is
+    #: straight, every normal across it (a cylinder's axis); None for the others.
+    ruling: tuple[float, float, float] | None = None
 
     def length_scale(self, params: Any) -> Any:
         """The length [m] the NLPs scale lengths by, of these parameters, as CasADi

@@ -1,6 +1,7 @@
-"""A first grasp of a ball for any hand: joint angles that put every chosen round fingertip
-on the ball, the contacts opposing each other (force closure), and, where the ball's
-motion is given, the grasp whose rolled reach toward that motion is largest.
+"""A first grasp of a ball, or of any closed convex object of :mod:`ocp.shapes`, for any
+hand: joint angles that put every chosen round fingertip on the object, the contacts
+opposing each other (force closure), and, where a ball's motion is given, the grasp whose
+rolled reach toward that motion is largest.
 
 No nominal grasp is needed. Per finger (:func:`finger_contacts`): joint vectors are drawn
 uniformly within the limits (the finger's known grasps first), each whose tip's centre
@@ -23,6 +24,16 @@ The result (:class:`FirstGrasp`) gives the joints (``fingers[i].initial_q``) and
 capsule tip's ``side`` (the contact's direction across the cap's axis, link frame: the
 contact then starts on its chart's equator). Nothing found is :class:`GraspNotFoundError`,
 naming the finger or the combination and why. docs/hands.md, "A first grasp".
+
+Any other object (:class:`ObjectGeometry`, from an ``ObjectSpec`` and its orientation) is
+searched the same way through its signed distance and outward normal at the nearest point
+(:func:`~ocp.spec.grasp.nearest_surface_point`): a tip's centre is near when its distance
+from the surface is within the ball's band about ``r``; it is pulled onto the surface
+(distance ``r``) by a Gauss-Newton on the joints along the normal (:func:`onto_surface`);
+a contact beyond the chart's bound (``u_limit``: an egg's poles, a capsule's caps) or on a
+cap's seam is dropped, every joint origin kept outside the object; the closure is that of
+the object's normals at the contacts. The rolled reach is the ball's alone: any other
+object's grasps are ranked by closure only (``turns`` ignored, no ``reach``). docs/shapes.md.
 """
 
 from __future__ import annotations
@@ -37,18 +48,28 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import segments_distance, tip_body
-from ocp.robots.couplings import project_couplings
-from ocp.robots.grasp_reach import _tip, at_tendon_bounds, grasp_on_ball, roll, tip_state
+from ocp.robots.couplings import coupled_step, coupling_violation, project_couplings
+from ocp.robots.grasp_reach import (
+    _equalities,
+    _skew,
+    _tip,
+    at_tendon_bounds,
+    grasp_on_ball,
+    roll,
+    tip_state,
+)
 
 __all__ = [
     "GOOD_CLOSURE",
     "FingerContact",
     "FirstGrasp",
     "GraspNotFoundError",
+    "ObjectGeometry",
     "closure",
     "desired_turns",
     "finger_contacts",
     "first_grasp",
+    "onto_surface",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -101,6 +122,7 @@ class FingerContact:
     link_direction: FloatArray
     reach: float | None = None
     stop: str = ""
+    point: FloatArray | None = None  # the contact point [m] on an object not a ball
 
 
 @dataclass(frozen=True)
@@ -139,20 +161,25 @@ def _fibonacci(n: int) -> FloatArray:
 _DIRECTIONS = _fibonacci(200)
 
 
-def closure(normals: ArrayLike) -> FloatArray:
+def closure(normals: ArrayLike, points: ArrayLike | None = None,
+            directions: ArrayLike | None = None) -> FloatArray:
     """The closure of contact normals (..., n, 3) (outward, unit): three or more, the
-    least over directions u (200 on the sphere) of ``max_i n_i . u``, > 0 iff the origin
-    is inside their hull (the inward pushes alone balance any force on a ball); two, minus
-    the sine of the larger grasp angle (0: antipodal)."""
+    least over ``directions`` u (default 200 on the sphere) of ``max_i n_i . u``, > 0 iff
+    the origin is inside their hull (the inward pushes alone balance any force on a ball);
+    two, minus the sine of the larger grasp angle (0: antipodal) between the normals and
+    the line through the contact ``points`` (..., 2, 3) [m] (None: a ball's, along
+    n_1 - n_0)."""
     N = np.asarray(normals, dtype=float)
     if N.shape[-2] == 2:
-        d = N[..., 1, :] - N[..., 0, :]  # ball contacts: p_i = c + rho n_i
+        P = N if points is None else np.asarray(points, dtype=float)
+        d = P[..., 1, :] - P[..., 0, :]
         d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
         c1 = np.clip(-np.sum(N[..., 0, :] * d, axis=-1), -1.0, 1.0)
         c2 = np.clip(np.sum(N[..., 1, :] * d, axis=-1), -1.0, 1.0)
         ang = np.maximum(np.arccos(c1), np.arccos(c2))
         return np.asarray(-np.sin(ang))
-    return np.asarray((N @ _DIRECTIONS.T).max(axis=-2).min(axis=-1))
+    U = _DIRECTIONS if directions is None else np.asarray(directions, dtype=float)
+    return np.asarray((N @ U.T).max(axis=-2).min(axis=-1))
 
 
 @dataclass(frozen=True)
@@ -193,6 +220,157 @@ def _outside(f: Any, q: FloatArray, centre: FloatArray, radius: float) -> bool:
     return True
 
 
+@dataclass(frozen=True)
+class ObjectGeometry:
+    """A closed convex object for the search, about its centre (given apart): its chart's
+    surface and parameters, the chart's axes in the palm frame (``rotation``: the pose's
+    times the chart patch's), the bound ``u_limit`` on a contact's |u| on the chart, its
+    support heights' least and largest (``inner``, ``outer`` [m]), the length its band
+    is scaled by [m] and the shape's name."""
+
+    surface: Any
+    params: tuple[float, ...]
+    rotation: FloatArray
+    u_limit: float
+    inner: float
+    outer: float
+    length: float
+    shape: str
+
+    @classmethod
+    def of(cls, obj: Any, rotation: ArrayLike, pole_margin: float) -> ObjectGeometry:
+        """The geometry of ``obj`` (an ``ObjectSpec``) turned by ``rotation`` (palm frame)
+        with contacts ``pole_margin`` [rad] from its chart's poles."""
+        from ocp.geometry.surfaces import rotation_from_vector
+
+        R = np.asarray(rotation, dtype=float) @ rotation_from_vector(obj.chart_rotation)
+        h = np.asarray(obj.surface.support_heights(_DIRECTIONS, obj.params), dtype=float)
+        return cls(obj.surface, tuple(float(x) for x in obj.params), R,
+                   float(obj.u_limit(pole_margin)), float(h.min()), float(h.max()),
+                   float(obj.length_scale), obj.shape)
+
+    def closure_directions(self) -> FloatArray | None:
+        """The directions the normals' closure is taken over: every direction (None), but
+        on a surface straight along a ``ruling`` (a capsule's cylinder, its normals all
+        across its axis) the 64 across it, palm frame: along the axis the normals push
+        nothing (their closure over every direction is 0, positive only by the sampling),
+        friction holds the object there, which the chosen grasp's force-closure test with
+        friction checks."""
+        if self.surface.ruling is None:
+            return None
+        axis = self.rotation @ np.asarray(self.surface.ruling, dtype=float)
+        e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(axis, e1)
+        a = np.linspace(0.0, 2.0 * math.pi, 64, endpoint=False)
+        return np.asarray(np.outer(np.cos(a), e1) + np.outer(np.sin(a), e2))
+
+    def nearest(self, d: ArrayLike, alpha: ArrayLike | None = None
+                ) -> tuple[FloatArray, float, FloatArray]:
+        """Of the surface's point nearest to the point ``d`` [m] from the centre (palm
+        axes): (its chart coordinates, the signed distance [m], negative inside, and the
+        outward normal there, palm axes)."""
+        from ocp.spec.grasp import nearest_surface_point
+
+        a, t = nearest_surface_point(self.surface, self.params,
+                                     self.rotation.T @ np.asarray(d, dtype=float), alpha)
+        _, G, _, _, _ = self.surface.geometry(a, self.params)
+        return np.asarray(a, dtype=float), t, self.rotation @ np.asarray(G, dtype=float)[:, 2]
+
+    def distance_bounds(self, d: ArrayLike) -> FloatArray:
+        """A lower bound [m] on the signed distance of each point (rows of ``d``, from the
+        centre, palm axes): the largest ``n . d - h(n)`` over 200 directions n."""
+        D = np.atleast_2d(np.asarray(d, dtype=float)) @ self.rotation
+        h = np.asarray(self.surface.support_heights(_DIRECTIONS, self.params), dtype=float)
+        return np.asarray((D @ _DIRECTIONS.T - h).max(axis=1))
+
+
+def _outside_object(f: Any, q: FloatArray, centre: FloatArray, geo: ObjectGeometry) -> bool:
+    """Whether every joint origin of the finger is outside the object."""
+    import pinocchio as pin
+
+    pin.forwardKinematics(f.model, f.data, q)
+    for k in range(1, f.model.njoints):
+        d = f.base_rotation @ np.asarray(f.data.oMi[k].translation) + f.base_position - centre
+        if float(np.linalg.norm(d)) <= geo.outer and geo.nearest(d)[1] < 0.0:
+            return False
+    return True
+
+
+def onto_surface(f: Any, q: ArrayLike, centre: ArrayLike, geo: ObjectGeometry,
+                 alpha: ArrayLike | None = None, tol: float = 1e-12
+                 ) -> tuple[FloatArray, FloatArray, float, FloatArray] | None:
+    """Joints near ``q`` (within the limits and couplings) that put finger ``f``'s round
+    tip on the object at ``centre`` (its centre at distance r from the surface, within
+    ``tol`` [m]): Gauss-Newton on the joints along the nearest point's normal, a step at
+    most 0.3 rad; (joints, the contact's chart coordinates, the tip centre's distance
+    from the surface [m], the outward normal, palm axes), or None when it does not
+    converge."""
+    c = np.asarray(centre, dtype=float)
+    pc, _, r = _tip(f)
+    x = project_couplings(f, np.asarray(q, dtype=float))
+    a = None if alpha is None else np.asarray(alpha, dtype=float)
+    for _ in range(40):
+        R_l, p_l = f.fingertip_pose_pin(x)
+        a, t, n = geo.nearest(p_l + R_l @ pc - c, a)
+        gap = t - r
+        if abs(gap) <= tol:
+            if coupling_violation(f, x)[0] > 0.0:
+                return None
+            return x, a, t, n
+        J = f.frame_jacobian_pin(x)
+        g = n @ (J[:3] - _skew(R_l @ pc) @ J[3:])  # d gap / dq
+        Ae, be = _equalities(f, x)
+        dq = np.linalg.lstsq(np.vstack([g[None], Ae]), np.concatenate([[-gap], be]),
+                             rcond=None)[0]
+        x = coupled_step(f, x, dq / max(1.0, float(np.abs(dq).max()) / 0.3))
+    return None
+
+
+def _surface_contacts(f: Any, c: FloatArray, geo: ObjectGeometry, Q: list[FloatArray],
+                      margin: float) -> tuple[list[FingerContact], float]:
+    """:func:`finger_contacts` on an object not a ball, from the joint vectors ``Q``."""
+    pc, ax, r = _tip(f)
+    band = max(0.01, 0.3 * (geo.length + r))
+    seam = math.pi / 2 - margin / r
+    X = np.array([p + R @ pc for R, p in (f.fingertip_pose_pin(q) for q in Q)]) - c
+    low = geo.distance_bounds(X) - r  # at most the distances from touching
+    closest = float(np.min(low[low > band], initial=math.inf))
+    near: list[tuple[float, FloatArray, FloatArray, FloatArray]] = []
+    for k in np.flatnonzero(low <= band):
+        a, t, n = geo.nearest(X[k])
+        off = abs(t - r)
+        closest = min(closest, off)
+        if off > band:
+            continue
+        R_l, _ = f.fingertip_pose_pin(Q[k])
+        if ax is not None and math.acos(max(-1.0, min(1.0, float(-n @ (R_l @ ax))))) > seam:
+            continue  # the cap faces away from the object
+        near.append((off, Q[k], n, a))
+    near.sort(key=lambda x: x[0])
+    kept: list[FingerContact] = []
+    tried: list[FloatArray] = []
+    for _, q, n, a in near:
+        if len(kept) >= MAX_CANDIDATES or len(tried) >= 3 * MAX_CANDIDATES:
+            break
+        if any(float(n @ m) > math.cos(DISTINCT) for m in tried):
+            continue
+        tried.append(n)
+        got = onto_surface(f, q, c, geo, a)
+        if got is None:
+            continue
+        q1, a1, _, n1 = got
+        if abs(float(a1[0])) > geo.u_limit or not _outside_object(f, q1, c, geo):
+            continue
+        R_l, p_l = f.fingertip_pose_pin(q1)
+        m = R_l.T @ (-n1)
+        if ax is not None and math.acos(max(-1.0, min(1.0, float(m @ ax)))) > seam:
+            continue
+        centre = p_l + R_l @ pc
+        kept.append(FingerContact(q1, n1, centre, m, None, "", centre - r * n1))
+    return kept, closest
+
+
 def _capped(turns: Sequence[Any], cap: float) -> list[Any]:
     """The turns, one after the other, up to ``cap`` [rad] in all."""
     out, left = [], cap
@@ -219,17 +397,19 @@ def _roll_through(f: Any, q: FloatArray, centre: FloatArray, radius: float,
     return done, ""
 
 
-def finger_contacts(f: Any, centre: ArrayLike, radius: float, seeds: Sequence[ArrayLike] = (),
-                    samples: int = 1500, turns: Sequence[Any] = (), margin: float = 0.002,
+def finger_contacts(f: Any, centre: ArrayLike, radius: float | ObjectGeometry,
+                    seeds: Sequence[ArrayLike] = (), samples: int = 1500,
+                    turns: Sequence[Any] = (), margin: float = 0.002,
                     rng: np.random.Generator | None = None
                     ) -> tuple[list[FingerContact], float]:
-    """Finger ``f``'s candidate contacts on the ball (module docstring), at most
-    :data:`MAX_CANDIDATES`, and the least distance [m] of its tip's centre from the
-    sphere of contact over the samples (why none, when none)."""
+    """Finger ``f``'s candidate contacts on the ball of ``radius`` [m], or on the object
+    ``radius`` (an :class:`ObjectGeometry`: ``turns`` ignored), at ``centre`` (module
+    docstring), at most :data:`MAX_CANDIDATES`, and the least distance [m] of its tip's
+    centre from where it would touch over the samples (why none, when none)."""
     rng = rng if rng is not None else np.random.default_rng(0)
     c = np.asarray(centre, dtype=float)
     pc, ax, r = _tip(f)
-    shell = radius + r
+    shell = (radius.length if isinstance(radius, ObjectGeometry) else radius) + r
     band = max(0.01, 0.3 * shell)
     seam = math.pi / 2 - margin / r
     lo, hi = _limits(f)
@@ -237,6 +417,8 @@ def finger_contacts(f: Any, centre: ArrayLike, radius: float, seeds: Sequence[Ar
     Q += [(lo + hi) / 2, *(lo + (hi - lo) * rng.random((samples, f.nq)))]
     if getattr(f, "couplings", ()):  # drawn within the couplings too
         Q = [project_couplings(f, q) for q in Q]
+    if isinstance(radius, ObjectGeometry):
+        return _surface_contacts(f, c, radius, Q, margin)
     near: list[tuple[float, FloatArray, FloatArray]] = []
     closest = math.inf
     for q in Q:
@@ -298,7 +480,7 @@ def _pick(per: list[list[FingerContact]], keep: int, ranked: bool) -> list[list[
     return out
 
 
-def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
+def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | ObjectGeometry,
                 turns: Sequence[Any] = (), mu: float = 0.5,
                 fixed: Sequence[ArrayLike | None] | None = None,
                 seeds: Sequence[Sequence[ArrayLike]] | None = None, samples: int = 1500,
@@ -307,11 +489,13 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
                 prefer: Callable[[tuple[FingerContact, ...]], bool] | None = None,
                 clear: Callable[[FloatArray], Any] | None = None
                 ) -> FirstGrasp:
-    """A first grasp of the ball of ``radius`` at ``centre`` by the round tips of
-    ``fingers`` (module docstring): per finger its joints ``fixed[i]`` when given, else
-    searched (``samples`` joint vectors, ``seeds[i]`` first); the combination with the
-    largest least reach through ``turns`` (:func:`desired_turns`; none: the most closed
-    grasp), tips ``min_gap`` [m] apart, contacts ``margin`` [m] from the caps' seams.
+    """A first grasp of the ball of ``radius`` [m] at ``centre``, or of the object
+    ``radius`` (an :class:`ObjectGeometry`: ``turns`` only reported as requested, the
+    grasps ranked by closure), by the round tips of ``fingers`` (module docstring): per
+    finger its joints ``fixed[i]`` when given, else searched (``samples`` joint vectors,
+    ``seeds[i]`` first); the combination with the largest least reach through ``turns``
+    (:func:`desired_turns`; none: the most closed grasp), tips ``min_gap`` [m] apart,
+    contacts ``margin`` [m] from the caps' seams.
     ``prefer``: of the grasps passing the planner's grasp-angle test, in that order, the
     first it accepts (a gait's: every fingertip liftable); the first of all when it
     accepts none. ``clear``: the least clearance of the hand's other links (an
@@ -325,29 +509,44 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
     rng = np.random.default_rng(seed)
     names = list(names) if names is not None else [f"finger{i}" for i in range(len(fingers))]
     requested = float(sum(t.angle for t in turns))
-    turns = _capped(turns, MAX_SEARCH_TURN)
+    geo = radius if isinstance(radius, ObjectGeometry) else None
+    rho = 0.0 if isinstance(radius, ObjectGeometry) else float(radius)
+    what = "the ball" if geo is None else f"the {geo.shape}"
+    turns = [] if geo is not None else _capped(turns, MAX_SEARCH_TURN)
     per: list[list[FingerContact]] = []
     errors: list[tuple[str, str]] = []
     for i, f in enumerate(fingers):
         q_fixed = None if fixed is None else fixed[i]
         if q_fixed is not None:
             q = np.asarray(q_fixed, dtype=float)
-            s = tip_state(f, q, c, radius)
-            reach, stop = (None, "") if not turns else _roll_through(f, q, c, radius, turns,
+            if geo is not None:
+                R_l, p_l = f.fingertip_pose_pin(q)
+                tc = p_l + R_l @ _tip(f)[0]
+                _, t, nrm = geo.nearest(tc - c)
+                per.append([FingerContact(q, nrm, tc, R_l.T @ (-nrm), None, "",
+                                          tc - t * nrm)])
+                continue
+            s = tip_state(f, q, c, rho)
+            reach, stop = (None, "") if not turns else _roll_through(f, q, c, rho, turns,
                                                                       margin)
             per.append([FingerContact(q, s.n, s.centre, s.m, reach, stop)])
             continue
         got, closest = finger_contacts(f, c, radius, [] if seeds is None else seeds[i],
                                        samples, turns, margin, rng)
         if not got:
-            errors.append((f"fingers[{i}]", f"finger {names[i]!r} cannot touch the ball "
-                                            f"(radius {radius * 1e3:.3g} mm at "
+            size = f"radius {rho * 1e3:.3g} mm" if geo is None else \
+                f"chart parameters {', '.join(f'{x:.3g}' for x in geo.params)}"
+            errors.append((f"fingers[{i}]", f"finger {names[i]!r} cannot touch {what} "
+                                            f"({size} at "
                                             f"{_mm(c)} mm) with its round tip: over "
                                             f"{samples} joint vectors within its limits its "
                                             "tip's centre came no closer than "
                                             f"{closest * 1e3:.3g} mm to where it would "
                                             "touch, or its cap faced away, or a link "
-                                            "entered the ball; move the ball (initial_pose) "
+                                            f"entered {what[4:]}"
+                                            + ("" if geo is None else ", or its contact "
+                                               "was beyond the chart's bound") +
+                                            f"; move {what} (initial_pose) "
                                             "within the fingers' reach"))
         per.append(got)
     if errors:
@@ -363,7 +562,11 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
         (a0, b0, r0), (a1, b1, r1) = ends[a], ends[b]
         ka, kb = combos[:, a], combos[:, b]
         gap = np.minimum(gap, segments_distance(a0[ka], b0[ka], a1[kb], b1[kb]) - r0 - r1)
-    clo = np.concatenate([closure(N[k:k + 4096]) for k in range(0, len(combos), 4096)]) \
+    P = None if geo is None or n != 2 else np.stack([np.array(
+        [per[i][k].point for k in range(len(per[i]))])[combos[:, i]] for i in range(n)], axis=1)
+    across = None if geo is None else geo.closure_directions()
+    clo = np.concatenate([closure(N[k:k + 4096], None if P is None else P[k:k + 4096],
+                                  across) for k in range(0, len(combos), 4096)]) \
         if n >= 2 else np.zeros(len(combos))
     least = np.zeros(len(combos))
     if turns:
@@ -377,10 +580,10 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
         best_gap = float(gap.max())
         raise GraspNotFoundError([("grasp", (
             f"no combination of the fingers' contacts ({', '.join(str(len(p)) for p in per)} "
-            f"candidates per finger, {len(combos)} combinations) holds the ball in force "
+            f"candidates per finger, {len(combos)} combinations) holds {what} in force "
             f"closure with the tips at least {min_gap * 1e3:.3g} mm apart: the most closed "
             f"reaches {float(clo.max()):.3g} (> 0 needed), the widest gap "
-            f"{best_gap * 1e3:.3g} mm; give more fingers, or move the ball "
+            f"{best_gap * 1e3:.3g} mm; give more fingers, or move {what} "
             "(initial_pose)"))])
     good = ok & (clo >= (GOOD_CLOSURE if n >= 3 else -0.5 * cone))
     pool = good if good.any() else ok
@@ -399,7 +602,7 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
             got = [q]
             for t in turns:
                 for _ in range(2):
-                    r = roll(fingers[i], got[-1], c, radius, t.axis, t.angle / 2, margin,
+                    r = roll(fingers[i], got[-1], c, rho, t.axis, t.angle / 2, margin,
                              COARSE_STEP)
                     got.append(np.asarray(r.q, dtype=float))
             paths[(i, k)] = got
@@ -407,7 +610,8 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
 
     for k in chosen[:budget if clear is None else LINK_TRIES]:
         contacts = tuple(per[i][combos[k, i]] for i in range(n))
-        pts = np.array([c + radius * ct.normal for ct in contacts])[None]
+        pts = np.array([c + rho * ct.normal if ct.point is None else ct.point
+                        for ct in contacts])[None]
         nrm = np.array([ct.normal for ct in contacts])[None]
         phi, _, onto = force_angles(pts, nrm) if n >= 2 else (np.zeros(1), None,
                                                                np.ones(1, dtype=bool))
@@ -433,15 +637,15 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float,
     if first is not None:
         k, contacts, angle = first
         if turns:  # the chosen grasp's reach at the planner's check's step
-            contacts = tuple(_fine(f, ct, c, radius, turns, margin)
+            contacts = tuple(_fine(f, ct, c, rho, turns, margin)
                              for f, ct in zip(fingers, contacts, strict=True))
         return FirstGrasp(contacts, float(clo[k]), float(gap[k]), angle, requested,
                           tuple(len(p) for p in per), len(combos))
     if worst is not None:
         raise GraspNotFoundError([("grasp", (
-            f"of the {tried} grasps that hold the ball, none keeps the hand's other links "
-            f"{GRASP_LINK_CLEARANCE * 1e3:g} mm clear of the ball and of each other: at "
-            f"best {worst.describe()}; move the ball (initial_pose) or give "
+            f"of the {tried} grasps that hold {what}, none keeps the hand's other links "
+            f"{GRASP_LINK_CLEARANCE * 1e3:g} mm clear of {what} and of each other: at "
+            f"best {worst.describe()}; move {what} (initial_pose) or give "
             "fewer fingers"))])
     raise GraspNotFoundError([("grasp", f"no combination's grasp angle is below atan(mu) = "
                                    f"{math.degrees(math.atan(mu)):.3g} deg (mu {mu}) with a "

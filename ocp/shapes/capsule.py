@@ -42,6 +42,7 @@ class CapsuleSurface(Surface):
 
     chart_symmetry = "axis"
     developable = True
+    ruling = (0.0, 0.0, 1.0)
     u_limit_name = "end of the capsule's cylinder (its seam with a cap) half_length [m]"
 
     def __init__(self) -> None:

@@ -145,15 +145,20 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
     import json
     import time
 
-    from ocp.robots.first_grasp import GraspNotFoundError, desired_turns, first_grasp
+    from ocp.robots.first_grasp import (
+        GraspNotFoundError,
+        ObjectGeometry,
+        desired_turns,
+        first_grasp,
+    )
     from ocp.robots.grasp_reach import _tip
 
     if palm is not None:
         return [("grasp", "a grasp search places fingertips on a ball held by the fingers "
                           "alone: not with a palm")]
-    if obj.shape != "sphere":
-        return [("grasp", f"a grasp search is for a ball (object.shape 'sphere'), not "
-                          f"{obj.shape!r}")]
+    if obj.shape != "sphere" and request.gait is not None:
+        return [("grasp", f"a grasp search for a gait is for a ball (object.shape "
+                          f"'sphere'), not {obj.shape!r}")]
     if start is None:
         return [("initial_pose", "required by `grasp`: where the ball is held")]
     if len(from_joints) != len(request.fingers):
@@ -164,8 +169,10 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
     opts = request.grasp if not isinstance(request.grasp, str) else None
     search = opts.search if opts is not None else GraspSearchModel()
     turns = desired_turns(motion) if motion is not None and search.maximise_reach else []
-    radius = float(obj.dimensions[0])
     centre = np.asarray(start.position, dtype=float)
+    radius = float(obj.dimensions[0])
+    body: float | ObjectGeometry = radius if obj.shape == "sphere" else \
+        ObjectGeometry.of(obj, start.rotation, request.pole_margin)
     models = [m for _, m, _, _, _ in from_joints]
     names = [n for _, _, _, n, _ in from_joints]
     key = json.dumps([request.hand.model_dump_json() if request.hand else None,
@@ -176,7 +183,9 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                       [(t.axis.tolist(), t.angle) for t in turns], request.mu,
                       request.pad_margin, search.model_dump_json(),
                       request.gait is not None,
-                      request.forces.model_dump_json() if request.forces else None])
+                      request.forces.model_dump_json() if request.forces else None]
+                     + ([list(start.orientation), request.pole_margin]
+                        if obj.shape != "sphere" else []))
 
     prefer = None
     if request.gait is not None:  # a gait re-places fingertips: each one liftable
@@ -203,7 +212,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
 
     def run() -> Any:
         t0 = time.perf_counter()
-        got = first_grasp(models, centre, radius, turns, request.mu,
+        got = first_grasp(models, centre, body, turns, request.mu,
                           fixed=[q for _, _, q, _, _ in from_joints],
                           seeds=[s for _, s in info], samples=search.samples,
                           keep=search.candidates, min_gap=search.min_gap,
@@ -251,7 +260,8 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                                                          strict=True)]
     fingers = [GraspFingerModel(
         name=name, searched=q is None, q=[float(x) for x in ct.q],
-        contact_point=[float(x) for x in centre + radius * ct.normal],
+        contact_point=[float(x) for x in (centre + radius * ct.normal if ct.point is None
+                                          else ct.point)],
         contact_normal=[float(x) for x in ct.normal],
         tip_side=None if side is None else list(side),
         reach=ct.reach, stop=(ct.stop or None) if ct.reach is not None else None)
