@@ -185,20 +185,24 @@ class Surface:
         )
 
     @staticmethod
-    def _orthogonal_frame(f: ca.SX, u: ca.SX, v: ca.SX) -> tuple[ca.SX, ...]:
-        """(R, M, K, T) of an orthogonal chart f(u, v): M = diag(|f_u|, |f_v|) [m]."""
+    def _tangents(f: ca.SX, u: ca.SX, v: ca.SX) -> tuple[ca.SX, ...]:
+        """(f_v, |f_u|, x = f_u/|f_u|, the outward normal z = f_u x f_v normalised, z_u,
+        z_v, x_u, x_v) of a chart f(u, v): what both forms of the frame start from."""
         f_u = ca.jacobian(f, u)
         f_v = ca.jacobian(f, v)
         m_u = safe_norm(f_u)
-        m_v = safe_norm(f_v)
         x = f_u / m_u
-        y = f_v / m_v
         n = ca.cross(f_u, f_v)
         z = n / safe_norm(n)
-        z_u = ca.jacobian(z, u)
-        z_v = ca.jacobian(z, v)
-        x_u = ca.jacobian(x, u)
-        x_v = ca.jacobian(x, v)
+        return (f_v, m_u, x, z, ca.jacobian(z, u), ca.jacobian(z, v),
+                ca.jacobian(x, u), ca.jacobian(x, v))
+
+    @staticmethod
+    def _orthogonal_frame(f: ca.SX, u: ca.SX, v: ca.SX) -> tuple[ca.SX, ...]:
+        """(R, M, K, T) of an orthogonal chart f(u, v): M = diag(|f_u|, |f_v|) [m]."""
+        f_v, m_u, x, z, z_u, z_v, x_u, x_v = Surface._tangents(f, u, v)
+        m_v = safe_norm(f_v)
+        y = f_v / m_v
         R = ca.horzcat(x, y, z)
         M = ca.diag(ca.vertcat(m_u, m_v))
         K = ca.vertcat(
@@ -213,19 +217,10 @@ class Surface:
         """(R, M, K, T) of any regular chart f(u, v): x = f_u/|f_u|, z = f_u x f_v
         normalised, y = z x x; M = [[|f_u|, x.f_v], [0, y.f_v]] [m] (structurally upper
         triangular), K = [x y]^T [z_u z_v] M^-1 and T = y^T [x_u x_v] M^-1 [1/m]."""
-        f_u = ca.jacobian(f, u)
-        f_v = ca.jacobian(f, v)
-        m_u = safe_norm(f_u)
-        x = f_u / m_u
-        n = ca.cross(f_u, f_v)
-        z = n / safe_norm(n)
+        f_v, m_u, x, z, z_u, z_v, x_u, x_v = Surface._tangents(f, u, v)
         y = ca.cross(z, x)
         m_uv = ca.dot(x, f_v)
         m_v = ca.dot(y, f_v)
-        z_u = ca.jacobian(z, u)
-        z_v = ca.jacobian(z, v)
-        x_u = ca.jacobian(x, u)
-        x_v = ca.jacobian(x, v)
         # [w_u w_v] M^-1 = [w_u / m_u, (w_v - (m_uv / m_u) w_u) / m_v]
         shear = m_uv / m_u
         dz_x, dz_y = z_u / m_u, (z_v - shear * z_u) / m_v
