@@ -139,22 +139,28 @@ def test_each_surfaces_closed_form_is_its_derivation(shape: str, dims: tuple[flo
 
 
 @pytest.mark.parametrize("drive", ["a", "b", "eq3"])
-def test_a_ball_tip_rolls_on_the_capsules_cylinder_without_slip_or_spin(drive: str) -> None:
-    """Montana's equations on the capsule's cylinder chart (A) under a 12 mm ball tip
-    (B): along a motion driven each way, the pose the contact coordinates give has its
-    contact point at rest and no spin about the normal (the laws of
-    tests/test_general_charts.py)."""
+@pytest.mark.parametrize(("shape", "dims", "eta0", "amp"), [
+    ("capsule", (0.012, 0.03), (0.005, 0.3), 0.02),
+    ("superellipsoid", (0.025, 0.025, 0.025, 0.005), (0.1, 0.5), 0.2),
+    ("superellipsoid", (0.025, 0.025, 0.025, 0.005), (0.02, 0.78), 0.2)])
+def test_a_ball_tip_rolls_on_each_shape_without_slip_or_spin(
+        drive: str, shape: str, dims: tuple[float, ...], eta0: tuple[float, float],
+        amp: float) -> None:
+    """Montana's equations on a shape's chart (A: the capsule's cylinder; a rounded
+    cube's radial chart on a face and across an edge) under a 12 mm ball tip (B): along a
+    motion driven each way, the pose the contact coordinates give has its contact point
+    at rest and no spin about the normal (the laws of tests/test_general_charts.py)."""
     from test_general_charts import Motion, rolling_defects
 
     from ocp.geometry.contact import ContactPair
     from ocp.geometry.surfaces import Sphere
-    from ocp.shapes.capsule import CapsuleSide
 
-    motion = Motion(ContactPair(CapsuleSide, Sphere), drive, [0.012, 0.03], [0.012],
+    obj = ObjectSpec(shape, dims)
+    motion = Motion(ContactPair(obj.surface, Sphere), drive, list(obj.params), [0.012],
                     np.eye(3), np.eye(3), np.array([[0.3, -0.5], [0.4, 0.2], [-0.1, 0.3]]),
-                    0.05 if drive == "eq3" else 0.02)
-    for t, eta in motion.integrate(np.array([0.005, 0.3, 0.2, -0.4, 0.7])):
-        assert abs(eta[0]) < 0.03  # on the cylinder
+                    (2.5 if drive == "eq3" else 1.0) * amp)
+    for t, eta in motion.integrate(np.array([*eta0, 0.2, -0.4, 0.7])):
+        assert abs(eta[0]) < obj.u_limit(0.0)  # on the chart
         d = rolling_defects(motion, t, eta)
         assert d.slip < 1e-6 and d.spin < 1e-6, (t, d)
 
