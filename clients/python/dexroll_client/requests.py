@@ -705,12 +705,13 @@ class FingertipModel(_Request):
                     "tip: its chart's latitude and longitude [rad]), (u_f, v_f) on the "
                     "object in this contact's chart patch [rad], psi_f [rad]; give it with "
                     "`chart_rotation`, or neither: the contact where `initial_q` (default "
-                    "the hand's nominal grasp) puts a round tip on a ball")
+                    "the hand's nominal grasp) puts a round tip on the object")
     initial_q: list[Angle] | None = Field(
         default=None, min_length=1, max_length=MAX_FINGER_JOINTS,
-        description="a round tip on a ball, without `initial`: the finger's joint angles at "
-                    "t = 0 [rad]; its contact is where they put the tip (a gap up to 2 mm is "
-                    "closed by the least joint motion); default: the hand's nominal grasp")
+        description="a round tip, without `initial`: the finger's joint angles at t = 0 "
+                    "[rad]; its contact is where they put the tip on the object (its nearest "
+                    "point; a gap up to 2 mm is closed by the least joint motion); default: "
+                    "the hand's nominal grasp")
     chart_rotation: RotationVector | None = Field(
         default=None, min_length=3, max_length=3,
         description="rotation vector [rad] of this contact's chart patch in the object "
