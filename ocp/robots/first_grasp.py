@@ -33,7 +33,11 @@ from the surface is within the ball's band about ``r``; it is pulled onto the su
 a contact beyond the chart's bound (``u_limit``: an egg's poles, a capsule's caps) or on a
 cap's seam is dropped, every joint origin kept outside the object; the closure is that of
 the object's normals at the contacts. The rolled reach is the ball's alone: any other
-object's grasps are ranked by closure only (``turns`` ignored, no ``reach``). docs/shapes.md.
+object's grasps well closed are ranked by the room their joints leave to roll (the least,
+over the fingers and their joints, distance to a joint limit as a share of the joint's
+range: :func:`joint_room`), then by closure (``turns`` ignored, no ``reach``): the most
+closed grasps of an egg put joints at their limits, and did not plan a 10 deg turn.
+docs/shapes.md.
 """
 
 from __future__ import annotations
@@ -69,6 +73,7 @@ __all__ = [
     "desired_turns",
     "finger_contacts",
     "first_grasp",
+    "joint_room",
     "onto_surface",
 ]
 
@@ -491,7 +496,8 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
                 ) -> FirstGrasp:
     """A first grasp of the ball of ``radius`` [m] at ``centre``, or of the object
     ``radius`` (an :class:`ObjectGeometry`: ``turns`` only reported as requested, the
-    grasps ranked by closure), by the round tips of ``fingers`` (module docstring): per
+    grasps ranked by their joints' room, :func:`joint_room`, then closure), by the round
+    tips of ``fingers`` (module docstring): per
     finger its joints ``fixed[i]`` when given, else searched (``samples`` joint vectors,
     ``seeds[i]`` first); the combination with the largest least reach through ``turns``
     (:func:`desired_turns`; none: the most closed grasp), tips ``min_gap`` [m] apart,
@@ -574,6 +580,11 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
                                 for k in range(len(per[i]))])[combos[:, i]]
                       for i in range(n)], axis=1)
         least = np.round(R.min(axis=1), 3)  # ~0.06 deg: equal reaches tie
+    elif geo is not None:  # another shape than a ball: the room the joints leave to roll
+        room = np.stack([np.array([joint_room(fingers[i], per[i][k].q)
+                                   for k in range(len(per[i]))])[combos[:, i]]
+                         for i in range(n)], axis=1)
+        least = np.round(room.min(axis=1), 2)  # 1 % of a joint's range: equal rooms tie
     cone = math.sin(math.atan(mu))
     ok = (gap >= min_gap) & ((clo > 0.0) if n >= 3 else (clo > -cone))
     if not ok.any():
@@ -668,6 +679,14 @@ def _fine(f: Any, ct: FingerContact, centre: FloatArray, radius: float,
 
     reach, stop = _roll_through(f, ct.q, centre, radius, turns, margin, STEP)
     return replace(ct, reach=reach, stop=stop)
+
+
+def joint_room(f: Any, q: ArrayLike) -> float:
+    """The least distance of the finger's joints ``q`` from their limits, as a share of
+    each joint's range (0 at a limit, 0.5 mid-range)."""
+    lo, hi = np.asarray(f.lower, dtype=float), np.asarray(f.upper, dtype=float)
+    qa = np.asarray(q, dtype=float)
+    return float(np.min(np.minimum(qa - lo, hi - qa) / np.maximum(hi - lo, 1e-12)))
 
 
 def _mm(p: FloatArray) -> str:
