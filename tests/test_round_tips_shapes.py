@@ -25,10 +25,11 @@ import pytest
 from helpers import assert_close
 
 from ocp.geometry.contact import ContactPair
+from ocp.geometry.nearest import nearest_surface_point
 from ocp.geometry.rotations import log_rotation, quaternion_wxyz
 from ocp.geometry.surfaces import rotation_from_vector
 from ocp.robots.allegro import NOMINAL_Q, load_allegro
-from ocp.spec.grasp import contact_from_joints, fingertips_from_joints, nearest_surface_point
+from ocp.spec.grasp import contact_from_joints, fingertips_from_joints
 from ocp.spec.motion import ObjectPose
 from ocp.spec.problem import ObjectSpec, ProblemError
 

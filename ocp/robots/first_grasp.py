@@ -27,7 +27,7 @@ naming the finger or the combination and why. docs/hands.md, "A first grasp".
 
 Any other object (:class:`ObjectGeometry`, from an ``ObjectSpec`` and its orientation) is
 searched the same way through its signed distance and outward normal at the nearest point
-(:func:`~ocp.spec.grasp.nearest_surface_point`): a tip's centre is near when its distance
+(:func:`~ocp.geometry.nearest.nearest_surface_point`): a tip's centre is near when its distance
 from the surface is within the ball's band about ``r``; it is pulled onto the surface
 (distance ``r``) by a Gauss-Newton on the joints along the normal (:func:`onto_surface`);
 a contact beyond the chart's bound (``u_limit``: an egg's poles, a capsule's caps) or on a
@@ -275,7 +275,7 @@ class ObjectGeometry:
         """Of the surface's point nearest to the point ``d`` [m] from the centre (palm
         axes): (its chart coordinates, the signed distance [m], negative inside, and the
         outward normal there, palm axes)."""
-        from ocp.spec.grasp import nearest_surface_point
+        from ocp.geometry.nearest import nearest_surface_point
 
         a, t = nearest_surface_point(self.surface, self.params,
                                      self.rotation.T @ np.asarray(d, dtype=float), alpha)
