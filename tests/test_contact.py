@@ -93,8 +93,10 @@ velocity = st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0)).map(
     lambda w: np.round(np.array(w), 9))
 
 
-def geometry(surface: Surface, alpha, params) -> dict[str, np.ndarray]:
-    out = surface.geometry(np.asarray(alpha, dtype=float), np.asarray(params, dtype=float))
+def geometry(surface: Surface, alpha, params, derived: bool = False) -> dict[str, np.ndarray]:
+    """Surface.geometry (or derived_geometry) evaluated, as numpy arrays keyed p, R, M, K, T."""
+    fun = surface.derived_geometry if derived else surface.geometry
+    out = fun(np.asarray(alpha, dtype=float), np.asarray(params, dtype=float))
     return {k: np.array(v, dtype=float) for k, v in zip("pRMKT", out, strict=True)}
 
 
@@ -237,14 +239,20 @@ def _functions(pair: ContactPair) -> dict[str, ca.Function]:
 
 
 @cache
-def _stepper(pair: ContactPair, driven: str) -> dict[str, ca.Function]:
-    """The rates of a driven motion and one classical Runge-Kutta step of them, as CasADi
-    functions of x = (eta, t), dt, the input coefficients, amplitude, shape parameters and
-    the negative-control errors err = (psi_dot_error, slip_error); and N_STEPS steps.
+def _stepper(pair: ContactPair, drive: str) -> dict[str, ca.Function]:
+    """The rates of a driven motion, the rolling velocity it is driven with, one classical
+    Runge-Kutta step of the rates and N_STEPS steps, as CasADi functions of x = (eta, t),
+    dt, the input coefficients, amplitude, shape parameters and the negative-control errors
+    err = (psi_dot_error, slip_error). (Also used by tests/test_general_charts.py and
+    tests/test_shapes.py.)
 
-    input(t) = amp (coef[0] + coef[1] sin 3t + coef[2] cos 5t) is alpha_a_dot (driven "a")
-    or alpha_b_dot (driven "b"). err[0] adds err[0] |omega| to psi_dot (a spin about the
-    normal); err[1] adds err[1] * rolling speed / |f_u| of B to alpha_b_dot[0] (slip)."""
+    input(t) = amp (coef[0] + coef[1] sin 3t + coef[2] cos 5t) is alpha_a_dot for drive
+    "a" (rates_driven_by_a) and "diagonal" (the orthogonal charts' division by M_b's
+    diagonal: a negative control), alpha_b_dot for "b" (rates_driven_by_b), and the
+    rolling velocity (omega_x, omega_y) [rad/s] for "eq3" (montana_eq3). "omega" is the
+    rolling velocity the motion is driven with. err[0] adds err[0] |omega| to psi_dot (a
+    spin about the normal); err[1] adds err[1] * rolling speed / |f_u| of B to
+    alpha_b_dot[0] (slip)."""
     eta = ca.SX.sym("eta", 5)
     t = ca.SX.sym("t")
     dt = ca.SX.sym("dt")
@@ -253,11 +261,27 @@ def _stepper(pair: ContactPair, driven: str) -> dict[str, ca.Function]:
     pa = ca.SX.sym("pa", pair.a.n_params)
     pb = ca.SX.sym("pb", pair.b.n_params)
     err = ca.SX.sym("err", 2)
-    rates_of = pair.rates_driven_by_a if driven == "a" else pair.rates_driven_by_b
+
+    def drive_input(time: ca.SX) -> ca.SX:
+        return amp * (coef[0, :] + coef[1, :] * ca.sin(3 * time)
+                      + coef[2, :] * ca.cos(5 * time)).T
+
+    def driven_rates(e: ca.SX, d: ca.SX) -> ca.SX:
+        if drive == "a":
+            return pair.rates_driven_by_a(e, d, pa, pb)
+        if drive == "b":
+            return pair.rates_driven_by_b(e, d, pa, pb)
+        _, _, M_a, K_a, T_a = pair.a.geometry(e[0:2], pa)
+        _, _, M_b, K_b, T_b = pair.b.geometry(e[2:4], pb)
+        if drive == "eq3":
+            return ca.vertcat(*montana_eq3(M_a, K_a, T_a, M_b, K_b, T_b, e[4], d))
+        assert drive == "diagonal", drive
+        v_b = R_psi(e[4]) @ (M_a @ d)
+        return ca.vertcat(d, v_b[0] / M_b[0, 0], v_b[1] / M_b[1, 1],
+                          T_a @ M_a @ d + T_b @ v_b)
 
     def rates(e: ca.SX, time: ca.SX) -> ca.SX:
-        d = amp * (coef[0, :] + coef[1, :] * ca.sin(3 * time) + coef[2, :] * ca.cos(5 * time)).T
-        e_dot = rates_of(e, d, pa, pb)
+        e_dot = driven_rates(e, drive_input(time))
         a_dot = e_dot[0:2]
         omega = pair.rolling_velocity(e, a_dot, pa, pb)
         _, _, M_a, _, _ = pair.a.geometry(e[0:2], pa)
@@ -267,6 +291,7 @@ def _stepper(pair: ContactPair, driven: str) -> dict[str, ca.Function]:
                           e_dot[4] + err[0] * ca.norm_2(omega))
 
     k1 = rates(eta, t)
+    omega = drive_input(t) if drive == "eq3" else pair.rolling_velocity(eta, k1[0:2], pa, pb)
     k2 = rates(eta + dt / 2 * k1, t + dt / 2)
     k3 = rates(eta + dt / 2 * k2, t + dt / 2)
     k4 = rates(eta + dt * k3, t + dt)
@@ -275,7 +300,8 @@ def _stepper(pair: ContactPair, driven: str) -> dict[str, ca.Function]:
     args = [coef, amp, pa, pb, err]
     step = ca.Function("step", [x, dt, *args], [x_next])
     return {
-        "rates": ca.Function("rates", [x, *args], [rates(eta, t)]),
+        "rates": ca.Function("rates", [x, *args], [k1]),
+        "omega": ca.Function("omega", [x, *args], [omega]),
         "step": step,
         "trajectory": step.mapaccum("trajectory", N_STEPS),
     }
@@ -283,14 +309,15 @@ def _stepper(pair: ContactPair, driven: str) -> dict[str, ca.Function]:
 
 @dataclass(frozen=True)
 class Motion:
-    """A rolling motion: pair, parameters, charts, the driven side and its smooth input."""
+    """A rolling motion: pair, the drive (see _stepper), parameters, charts and its smooth
+    input."""
 
     pair: ContactPair
+    drive: str  # "a", "b", "eq3" or "diagonal" (see _stepper)
     params_a: list[float]
     params_b: list[float]
     chart_a: np.ndarray
     chart_b: np.ndarray
-    driven: str  # "a": input alpha_a_dot, "b": input alpha_b_dot
     coef: np.ndarray  # 3x2: input(t) = amp (coef0 + coef1 sin 3t + coef2 cos 5t)
     amp: float
     #: Added to psi_dot (negative control), as a multiple of the rolling angular speed.
@@ -303,24 +330,34 @@ class Motion:
         return [self.coef, self.amp, self.params_a, self.params_b,
                 [self.psi_dot_error, self.slip_error]]
 
+    def _f(self, key: str) -> ca.Function:
+        return _stepper(self.pair, self.drive)[key]
+
     def rates(self, t: float, eta: np.ndarray) -> np.ndarray:
-        return vec(_stepper(self.pair, self.driven)["rates"]([*eta, t], *self._args()))
+        return vec(self._f("rates")([*eta, t], *self._args()))
+
+    def omega(self, t: float, eta: np.ndarray) -> np.ndarray:
+        """The rolling velocity the motion is driven with at (t, eta)."""
+        return vec(self._f("omega")([*eta, t], *self._args()))
 
     def step(self, t: float, eta: np.ndarray, dt: float) -> np.ndarray:
         """eta(t + dt) by one classical Runge-Kutta step (dt may be negative)."""
-        x = _stepper(self.pair, self.driven)["step"]([*eta, t], dt, *self._args())
-        return vec(x)[0:5]
+        return vec(self._f("step")([*eta, t], dt, *self._args()))[0:5]
 
     def pose(self, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         R, p = _functions(self.pair)["pose"](eta, self.params_a, self.params_b, self.chart_a,
                                              self.chart_b)
         return np.array(R, dtype=float), vec(p)
 
+    def integrate(self, eta0: np.ndarray) -> list[tuple[float, np.ndarray]]:
+        """(t, eta(t)) at the CHECK_FRACTIONS of T_FINAL, by RK4 with N_STEPS steps."""
+        return integrate(self, eta0)
+
 
 def integrate(motion: Motion, eta0: np.ndarray) -> list[tuple[float, np.ndarray]]:
     """(t, eta(t)) at the CHECK_FRACTIONS of T_FINAL, by RK4 with N_STEPS steps."""
-    xs = np.array(_stepper(motion.pair, motion.driven)["trajectory"](
-        [*eta0, 0.0], T_FINAL / N_STEPS, *motion._args()), dtype=float)
+    xs = np.array(motion._f("trajectory")([*eta0, 0.0], T_FINAL / N_STEPS, *motion._args()),
+                  dtype=float)
     xs = np.column_stack([[*eta0, 0.0], xs])  # x_0 ... x_N
     return [(float(xs[5, k]), xs[0:5, k].copy())
             for k in sorted({round(f * N_STEPS) for f in CHECK_FRACTIONS})]
@@ -332,11 +369,12 @@ class Defects:
     spin: float  # |relative angular velocity . A's normal| / |relative angular velocity|
     omega_rel: np.ndarray  # angular velocity of B relative to A, in A [rad/s]
     speed: float  # rolling speed [m/s]
+    omega: np.ndarray  # (omega_x, omega_y) of A relative to B in A's contact frame [rad/s]
 
 
 def rolling_defects(motion: Motion, t: float, eta: np.ndarray) -> Defects:
-    """Slip and spin of the motion at (t, eta), from central differences of the pose in time
-    (4th-order stencil over t - 2h ... t + 2h).
+    """Slip, spin and rolling velocity of the motion at (t, eta), from central differences
+    of the pose in time (4th-order stencil over t - 2h ... t + 2h).
 
     eta(t + k h) comes from one RK4 step of k h (error O(h^5), negligible)."""
     pair, h = motion.pair, H_TIME
@@ -351,14 +389,13 @@ def rolling_defects(motion: Motion, t: float, eta: np.ndarray) -> Defects:
     # B's material point at the contact at time t, in B's body frame (held fixed).
     p_b = motion.chart_b @ geometry(pair.b, eta[2:4], motion.params_b)["p"].ravel()
     v_contact = R_dot @ p_b + p_dot
-    omega = vee(R_dot @ R_0.T)
-    n_a = motion.chart_a @ geometry(pair.a, eta[0:2], motion.params_a)["R"][:, 2]
-    eta_dot = motion.rates(t, eta)
-    speed = float(np.linalg.norm(geometry(pair.a, eta[0:2], motion.params_a)["M"]
-                                 @ eta_dot[0:2]))
+    omega_rel = vee(R_dot @ R_0.T)  # of B relative to A, in A
+    ga = geometry(pair.a, eta[0:2], motion.params_a)
+    frame_a = motion.chart_a @ ga["R"]
+    speed = float(np.linalg.norm(ga["M"] @ motion.rates(t, eta)[0:2]))
     return Defects(slip=float(np.linalg.norm(v_contact)) / speed,
-                   spin=abs(float(omega @ n_a)) / float(np.linalg.norm(omega)),
-                   omega_rel=omega, speed=speed)
+                   spin=abs(float(omega_rel @ frame_a[:, 2])) / float(np.linalg.norm(omega_rel)),
+                   omega_rel=omega_rel, speed=speed, omega=-(frame_a.T @ omega_rel)[0:2])
 
 
 def latitudes(pair: ContactPair, eta: np.ndarray) -> list[float]:
@@ -405,10 +442,9 @@ def motions(draw, name: str, driven: str, psi_dot_error: float = 0.0,
     coef12 = 0.15 * np.array([[draw(unit_coef), draw(unit_coef)] for _ in range(2)])
     surf_d, surf_o = (pair.a, pair.b) if driven == "a" else (pair.b, pair.a)
     par_d, par_o = (params_a, params_b) if driven == "a" else (params_b, params_a)
-    motion = Motion(pair, params_a, params_b, rotation_from_vector(draw(rotvec)),
-                    rotation_from_vector(draw(rotvec)), driven,
-                    np.vstack([coef0, coef12]), _amplitude(surf_d, surf_o, par_d, par_o),
-                    psi_dot_error, slip_error)
+    motion = Motion(pair, driven, params_a, params_b, rotation_from_vector(draw(rotvec)),
+                    rotation_from_vector(draw(rotvec)), np.vstack([coef0, coef12]),
+                    _amplitude(surf_d, surf_o, par_d, par_o), psi_dot_error, slip_error)
     return motion, eta0
 
 

@@ -12,17 +12,25 @@ docs/conventions.md.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import cache
-
 import casadi as ca
 import numpy as np
 import pytest
 from helpers import assert_close
 from hypothesis import Phase, given, settings
 from hypothesis import strategies as st
+from test_contact import (
+    RTOL_OMEGA,
+    RTOL_SLIP,
+    RTOL_SPIN,
+    T_FINAL,
+    Motion,
+    _functions,
+    geometry,
+    rolling_defects,
+    vec,
+)
 
-from ocp.geometry.contact import ContactPair, R_contact, R_psi, montana_eq3
+from ocp.geometry.contact import ContactPair, R_contact
 from ocp.geometry.surfaces import Chart, Ellipsoid, Plane, Sphere, Surface, rotation_from_vector
 from ocp.shapes.ellipsoid import TriaxialEllipsoid, TriaxialEllipsoidSurface
 
@@ -39,19 +47,8 @@ ATOL_ANGLE = 1e-12
 #: round-off ~ eps / step <= 2e-11 relative to the derivatives; 1e-7 leaves a large margin.
 H_FRAME = 1e-3  # [rad]
 RTOL_FD = 1e-7
-#: Time step of the 4th-order central differences of the pose [s] (as tests/test_contact.py:
-#: truncation ~ (h w)^4 < 1e-10, round-off ~ 1e-13 m/s against speeds >= 1e-5 m/s).
-H_TIME = 1e-4
-#: Slip speed of B's material contact point relative to the rolling speed; spin rate about
-#: the normal relative to the rolling angular speed; the measured rolling velocity against
-#: the one the equations were driven with, relative to its size.
-RTOL_SLIP = 1e-6
-RTOL_SPIN = 1e-6
-RTOL_OMEGA = 1e-6
-#: Duration of the integrated motions [s], RK4 steps over it, times of the checks.
-T_FINAL = 0.5
-N_STEPS = 50
-CHECK_FRACTIONS = (0.0, 0.37, 1.0)
+#: The rolling laws' tolerances (H_TIME, RTOL_SLIP, RTOL_SPIN, RTOL_OMEGA) and the
+#: integrated motions' T_FINAL, N_STEPS and CHECK_FRACTIONS are tests/test_contact.py's.
 #: Contact distance travelled over T_FINAL, as a fraction of the smallest semi-axis or
 #: radius of the curved surfaces: moves a latitude by at most that many rad.
 TRAVEL = 0.3
@@ -68,22 +65,6 @@ axes3 = st.tuples(semi_axis, semi_axis, semi_axis).map(np.array)
 angle = st.floats(-np.pi, np.pi)
 rotvec = st.tuples(*(st.floats(-4.0, 4.0),) * 3).map(np.array)
 unit_coef = st.floats(-1.0, 1.0)
-
-
-def geometry(surface: Surface, alpha, params, derived: bool = False) -> dict[str, np.ndarray]:
-    """Surface.geometry (or derived_geometry) evaluated, as numpy arrays keyed p, R, M, K, T."""
-    fun = surface.derived_geometry if derived else surface.geometry
-    out = fun(np.asarray(alpha, dtype=float), np.asarray(params, dtype=float))
-    return {k: np.array(v, dtype=float) for k, v in zip("pRMKT", out, strict=True)}
-
-
-def vec(x) -> np.ndarray:
-    return np.array(x, dtype=float).ravel()
-
-
-def vee(W: np.ndarray) -> np.ndarray:
-    """w from a 3x3 matrix whose skew part is [w]x."""
-    return 0.5 * np.array([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
 
 
 # ---------------------------------------------------------------------------------------
@@ -392,30 +373,6 @@ velocity = st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0)).map(
     lambda w: np.round(np.array(w), 9))
 
 
-@cache
-def _functions(pair: ContactPair) -> dict[str, ca.Function]:
-    """Numeric CasADi functions of the pair: rates driven by A and by B, eq. 3 fed with
-    the rolling velocity of alpha_a_dot, the pose and the contact point."""
-    eta = ca.SX.sym("eta", 5)
-    d = ca.SX.sym("d", 2)
-    pa = ca.SX.sym("pa", pair.a.n_params)
-    pb = ca.SX.sym("pb", pair.b.n_params)
-    Ca = ca.SX.sym("Ca", 3, 3)
-    Cb = ca.SX.sym("Cb", 3, 3)
-    _, _, M_a, K_a, T_a = pair.a.geometry(eta[0:2], pa)
-    _, _, M_b, K_b, T_b = pair.b.geometry(eta[2:4], pb)
-    eq3 = montana_eq3(M_a, K_a, T_a, M_b, K_b, T_b, eta[4],
-                      pair.rolling_velocity(eta, d, pa, pb))
-    R_ab, p_ab = pair.pose(eta, pa, pb, Ca, Cb)
-    return {
-        "a": ca.Function("a", [eta, d, pa, pb], [pair.rates_driven_by_a(eta, d, pa, pb)]),
-        "b": ca.Function("b", [eta, d, pa, pb], [pair.rates_driven_by_b(eta, d, pa, pb)]),
-        "eq3": ca.Function("eq3", [eta, d, pa, pb], [ca.vertcat(*eq3)]),
-        "pose": ca.Function("pose", [eta, pa, pb, Ca, Cb], [R_ab, p_ab]),
-        "contact": ca.Function("contact", [eta, pa, Ca], list(pair.contact_point(eta, pa, Ca))),
-    }
-
-
 def _rates_scale(pair: ContactPair, eta, rates, params_a, params_b) -> np.ndarray:
     """Per-component size of the rates' terms, for relative comparisons."""
     ga, gb = geometry(pair.a, eta[0:2], params_a), geometry(pair.b, eta[2:4], params_b)
@@ -449,59 +406,6 @@ def test_eq3_rates_and_their_inverse_agree(data: st.DataObject, name: str, w: np
     assert_close(numeric, rates, atol=RTOL_EXACT * scale, err_msg="DM vs SX")
 
 
-@cache
-def _stepper(pair: ContactPair, drive: str) -> dict[str, ca.Function]:
-    """Rates of a driven motion, their RK4 step and N_STEPS steps, as CasADi functions of
-    x = (eta, t), dt, the input's coefficients and amplitude and the shape parameters.
-
-    input(t) = amp (coef[0] + coef[1] sin 3t + coef[2] cos 5t) is alpha_a_dot for drive
-    "a" (rates_driven_by_a) and "diagonal" (the orthogonal charts' division by M_b's
-    diagonal: a negative control), alpha_b_dot for "b" (rates_driven_by_b), and the
-    rolling velocity (omega_x, omega_y) [rad/s] for "eq3" (montana_eq3). "omega" is the
-    rolling velocity the motion is driven with."""
-    eta = ca.SX.sym("eta", 5)
-    t = ca.SX.sym("t")
-    dt = ca.SX.sym("dt")
-    coef = ca.SX.sym("coef", 3, 2)
-    amp = ca.SX.sym("amp")
-    pa = ca.SX.sym("pa", pair.a.n_params)
-    pb = ca.SX.sym("pb", pair.b.n_params)
-
-    def drive_input(time: ca.SX) -> ca.SX:
-        return amp * (coef[0, :] + coef[1, :] * ca.sin(3 * time)
-                      + coef[2, :] * ca.cos(5 * time)).T
-
-    def rates(e: ca.SX, time: ca.SX) -> ca.SX:
-        d = drive_input(time)
-        if drive == "a":
-            return pair.rates_driven_by_a(e, d, pa, pb)
-        if drive == "b":
-            return pair.rates_driven_by_b(e, d, pa, pb)
-        _, _, M_a, K_a, T_a = pair.a.geometry(e[0:2], pa)
-        _, _, M_b, K_b, T_b = pair.b.geometry(e[2:4], pb)
-        if drive == "eq3":
-            return ca.vertcat(*montana_eq3(M_a, K_a, T_a, M_b, K_b, T_b, e[4], d))
-        v_b = R_psi(e[4]) @ (M_a @ d)
-        return ca.vertcat(d, v_b[0] / M_b[0, 0], v_b[1] / M_b[1, 1],
-                          T_a @ M_a @ d + T_b @ v_b)
-
-    k1 = rates(eta, t)
-    omega = drive_input(t) if drive == "eq3" else pair.rolling_velocity(eta, k1[0:2], pa, pb)
-    k2 = rates(eta + dt / 2 * k1, t + dt / 2)
-    k3 = rates(eta + dt / 2 * k2, t + dt / 2)
-    k4 = rates(eta + dt * k3, t + dt)
-    x = ca.vertcat(eta, t)
-    args = [coef, amp, pa, pb]
-    step = ca.Function("step", [x, dt, *args],
-                       [ca.vertcat(eta + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), t + dt)])
-    return {
-        "rates": ca.Function("rates", [x, *args], [k1]),
-        "omega": ca.Function("omega", [x, *args], [omega]),
-        "step": step,
-        "trajectory": step.mapaccum("trajectory", N_STEPS),
-    }
-
-
 def _min_curvature(surface: Surface, params: list[float]) -> float:
     """A lower bound of the principal curvatures [1/m]: 0 for the plane, a_min / a_max^2
     for an ellipsoid (1/rho for a sphere)."""
@@ -521,76 +425,6 @@ def _amplitude(pair: ContactPair, drive: str, params_a: list[float], params_b: l
         driven = params_b if drive == "b" else params_a
         gain = np.sqrt(2.0) * max(driven) if driven else 1.0
     return reach / (1.43 * T_FINAL * gain)
-
-
-@dataclass(frozen=True)
-class Motion:
-    pair: ContactPair
-    drive: str
-    params_a: list[float]
-    params_b: list[float]
-    chart_a: np.ndarray
-    chart_b: np.ndarray
-    coef: np.ndarray
-    amp: float
-
-    def _args(self) -> list:
-        return [self.coef, self.amp, self.params_a, self.params_b]
-
-    def _f(self, key: str) -> ca.Function:
-        return _stepper(self.pair, self.drive)[key]
-
-    def rates(self, t: float, eta: np.ndarray) -> np.ndarray:
-        return vec(self._f("rates")([*eta, t], *self._args()))
-
-    def omega(self, t: float, eta: np.ndarray) -> np.ndarray:
-        return vec(self._f("omega")([*eta, t], *self._args()))
-
-    def step(self, t: float, eta: np.ndarray, dt: float) -> np.ndarray:
-        return vec(self._f("step")([*eta, t], dt, *self._args()))[0:5]
-
-    def pose(self, eta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        R, p = _functions(self.pair)["pose"](eta, self.params_a, self.params_b, self.chart_a,
-                                             self.chart_b)
-        return np.array(R, dtype=float), vec(p)
-
-    def integrate(self, eta0: np.ndarray) -> list[tuple[float, np.ndarray]]:
-        """(t, eta(t)) at the CHECK_FRACTIONS of T_FINAL (RK4, N_STEPS steps)."""
-        xs = np.array(self._f("trajectory")([*eta0, 0.0], T_FINAL / N_STEPS, *self._args()),
-                      dtype=float)
-        xs = np.column_stack([[*eta0, 0.0], xs])
-        return [(float(xs[5, k]), xs[0:5, k].copy())
-                for k in sorted({round(f * N_STEPS) for f in CHECK_FRACTIONS})]
-
-
-@dataclass(frozen=True)
-class Defects:
-    slip: float  # |velocity of B's material contact point in A| / rolling speed
-    spin: float  # |relative angular velocity . A's normal| / |relative angular velocity|
-    omega: np.ndarray  # (omega_x, omega_y) of A relative to B in A's contact frame [rad/s]
-
-
-def rolling_defects(motion: Motion, t: float, eta: np.ndarray) -> Defects:
-    """Slip, spin and rolling velocity at (t, eta), from 4th-order central differences of
-    the pose in time; eta(t + k h) by one RK4 step of k h."""
-    pair, h = motion.pair, H_TIME
-    poses = {k: motion.pose(motion.step(t, eta, k * h)) for k in (-2, -1, 1, 2)}
-    R_0, _ = motion.pose(eta)
-
-    def d_dt(i: int) -> np.ndarray:
-        g = {k: poses[k][i] for k in poses}
-        return (-g[2] + 8 * g[1] - 8 * g[-1] + g[-2]) / (12 * h)
-
-    R_dot, p_dot = d_dt(0), d_dt(1)
-    p_b = motion.chart_b @ geometry(pair.b, eta[2:4], motion.params_b)["p"].ravel()
-    v_contact = R_dot @ p_b + p_dot
-    omega_rel = vee(R_dot @ R_0.T)  # of B relative to A, in A
-    ga = geometry(pair.a, eta[0:2], motion.params_a)
-    frame_a = motion.chart_a @ ga["R"]
-    speed = float(np.linalg.norm(ga["M"] @ motion.rates(t, eta)[0:2]))
-    return Defects(slip=float(np.linalg.norm(v_contact)) / speed,
-                   spin=abs(float(omega_rel @ frame_a[:, 2])) / float(np.linalg.norm(omega_rel)),
-                   omega=-(frame_a.T @ omega_rel)[0:2])
 
 
 @st.composite

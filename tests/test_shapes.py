@@ -149,8 +149,8 @@ def test_a_ball_tip_rolls_on_each_shape_without_slip_or_spin(
     """Montana's equations on a shape's chart (A: the capsule's cylinder; a rounded
     cube's radial chart on a face and across an edge) under a 12 mm ball tip (B): along a
     motion driven each way, the pose the contact coordinates give has its contact point
-    at rest and no spin about the normal (the laws of tests/test_general_charts.py)."""
-    from test_general_charts import Motion, rolling_defects
+    at rest and no spin about the normal (the laws of tests/test_contact.py)."""
+    from test_contact import Motion, rolling_defects
 
     from ocp.geometry.contact import ContactPair
     from ocp.geometry.surfaces import Sphere
