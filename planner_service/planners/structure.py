@@ -37,6 +37,8 @@ def structure_key(planner: str, request: Mapping[str, Any], method: str = "") ->
     vias = len(request.get("via_points") or [])
     obj = request.get("object") or {}
     shape = obj.get("shape", "sphere") if isinstance(obj, Mapping) else "sphere"
+    if shape != "sphere" and isinstance(obj, Mapping) and isinstance(obj.get("dimensions"), list):
+        shape = f"{shape}/{len(obj['dimensions'])}"  # an ellipsoid's 2 or 3: two surfaces
     n = request.get("n_intervals", 50)
     parts: list[Any]
     if planner == "manipulation":
