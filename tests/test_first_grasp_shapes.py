@@ -96,16 +96,6 @@ def test_a_searched_grasp_turns_the_object_in_mujoco(obj: dict[str, Any],
     joints' room: the egg's most closed grasp put joints at their limits and did not
     plan), its 60 g carried: solved, certified and executed in MuJoCo within 2 mm / 3 deg,
     no contact lost."""
-    from dexroll_client.models import PlanStatus
-    from planner_service.cli import plan_request
-    from planner_service.execution import simulate_result
-    from planner_service.planners import REQUEST
+    from helpers import planned_and_executed
 
-    raw = request(obj, orientation)
-    result, summary = plan_request(raw)
-    assert result.status is PlanStatus.SOLVED, summary
-    assert result.certificate is not None and result.certificate.passed
-    report = simulate_result(result, REQUEST.validate_python(raw))
-    assert report.passed, report.failures
-    assert report.position_error.max <= 2e-3 and math.degrees(report.angle_error.max) <= 3.0
-    assert all(c.lost_time == 0.0 for c in report.contacts)
+    planned_and_executed(request(obj, orientation))

@@ -258,3 +258,27 @@ def test_a_gait_whose_rolls_are_cut_too_short_is_refused_at_once_saying_why() ->
                       "found")
     assert "cut to 1.8 deg (halved 2 time(s) after gait step 1: the swing of finger 'mf'" \
         in halved
+
+
+def test_every_shapes_geom_is_collided_as_mujoco_reads_it(hand):
+    """The clearance model gets each object shape's own geom (tests/test_shapes.py):
+    an ellipsoid of revolution and a three-axis one with equal semi-axes are the ball
+    (the model once wrote the first's size as 'a c', which MuJoCo refuses; MuJoCo
+    collides an ellipsoid by its general convex algorithm, a sphere in closed form: the
+    same within 50 um here), and a superellipsoid's mesh and a capsule compile and are
+    measured."""
+    q = _random_q(hand, 20, seed=3)
+    n, names = len(q), _names(hand)
+    R = np.tile(np.eye(3), (n, 1, 1))
+    p = np.tile(np.asarray(NOMINAL_OBJECT_POSITION, dtype=float), (n, 1))
+    hc = hand.collision([0, 1, 2, 3])
+    rho = NOMINAL_RADIUS
+    ball = hc.least("sphere", (rho,), names, q, R, p)
+    for shape, dims in (("ellipsoid", (rho, rho)), ("ellipsoid", (rho, rho, rho))):
+        got = hc.least(shape, dims, names, q, R, p)
+        assert got.value == pytest.approx(ball.value, abs=5e-5)
+        assert set(got.pair) == set(ball.pair) and got.sample == ball.sample
+    for shape, dims in (("capsule", (0.012, 0.028)),
+                        ("superellipsoid", (0.025, 0.025, 0.025, 0.005))):
+        got = hc.least(shape, dims, names, q, R, p)
+        assert np.isfinite(got.value) and got.value <= WINDOW

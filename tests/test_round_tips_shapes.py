@@ -343,17 +343,6 @@ def test_the_allegro_hand_turns_an_egg_solved_certified_and_executed(
     ellipsoid upright; the upright egg from the hand's nominal grasp, its caps up to
     0.7 mm off, closed by the planner): solved and certified, then executed in MuJoCo on
     the ellipsoid geom within 2 mm and 3 deg with no contact lost."""
-    from dexroll_client.models import PlanStatus
-    from planner_service.cli import plan_request
-    from planner_service.execution import simulate_result
-    from planner_service.planners import REQUEST
+    from helpers import planned_and_executed
 
-    raw = turn_request(obj, orientation, CENTRE, qs)
-    result, summary = plan_request(raw)
-    assert result.status is PlanStatus.SOLVED, summary
-    assert result.certificate is not None and result.certificate.passed, summary
-    report = simulate_result(result, REQUEST.validate_python(raw))
-    assert report.passed, report.failures
-    assert report.position_error.max <= 2e-3
-    assert math.degrees(report.angle_error.max) <= 3.0
-    assert all(c.lost_time == 0.0 for c in report.contacts)
+    planned_and_executed(turn_request(obj, orientation, CENTRE, qs))

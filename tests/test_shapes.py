@@ -23,16 +23,18 @@ DENSITY = 1100.0
 
 
 def _mujoco(shape: str, dims: tuple[float, ...]) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    import xml.etree.ElementTree as ET
+
     geom = shape_of(shape).mujoco_geom(dims)
-    attrs = " ".join(f'{k}="{v}"' for k, v in geom.attributes().items())
-    mesh = geom.asset()
-    asset = "" if mesh is None else \
-        f'<asset><mesh name="{mesh["name"]}" vertex="{mesh["vertex"]}"/></asset>'
-    xml = (f'<mujoco>{asset}<worldbody><body name="o"><freejoint/><geom name="o" {attrs}'
-           f' density="{DENSITY}"/></body>'
-           '<body name="probe" mocap="true"><geom name="probe" type="sphere" size="1e-4" '
-           'contype="0" conaffinity="0"/></body></worldbody></mujoco>')
-    model = mujoco.MjModel.from_xml_string(xml)
+    root = ET.fromstring(
+        '<mujoco><worldbody><body name="o"><freejoint/></body>'
+        '<body name="probe" mocap="true"><geom name="probe" type="sphere" size="1e-4" '
+        'contype="0" conaffinity="0"/></body></worldbody></mujoco>')
+    geom.add_asset(root)
+    body = root.find("worldbody/body")
+    assert body is not None
+    ET.SubElement(body, "geom", geom.attributes(), name="o", density=f"{DENSITY}")
+    model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     return model, data
@@ -102,25 +104,18 @@ def test_a_triaxial_ellipsoid_turned_between_two_pads_is_certified_and_executed(
     import json
     from pathlib import Path
 
-    from dexroll_client.models import PlanStatus
-    from planner_service.cli import plan_request
-    from planner_service.execution import execution_plan, simulate_result
+    from helpers import planned_and_executed
+
+    from planner_service.execution import execution_plan
     from planner_service.planners import REQUEST
 
     raw = json.loads((Path(__file__).parents[1] / "examples" /
                       "experiment2_two_fingers.json").read_text())
     raw["object"] = {"shape": "ellipsoid", "dimensions": [0.025, 0.03, 0.035]}
     raw["forces"] = {"mass": 0.05}
-    result, _ = plan_request(raw)
-    assert result.status is PlanStatus.SOLVED, result.message
-    assert result.certificate is not None and result.certificate.passed
-    request = REQUEST.validate_python(raw)
-    obj = execution_plan(result, request).object
+    result, _ = planned_and_executed(raw, 1e-3, 1.0)
+    obj = execution_plan(result, REQUEST.validate_python(raw)).object
     assert (obj.geom_type, obj.geom_size) == ("ellipsoid", (0.025, 0.03, 0.035))
-    report = simulate_result(result, request)
-    assert report.passed, report.failures
-    assert report.position_error.max <= 1e-3 and math.degrees(report.angle_error.max) <= 1.0
-    assert all(c.lost_time == 0.0 for c in report.contacts)
 
 
 @pytest.mark.parametrize(("shape", "dims"), CASES)
@@ -205,10 +200,7 @@ def test_the_allegro_hand_rolls_a_capsule_about_its_axis() -> None:
     capsule geom within 2 mm / 3 degrees with no contact lost. (The NLP's length scale is
     the capsule's radius + half length, as its values': with the largest parameter, as
     every NLP took it, even a motion of zero was infeasible.)"""
-    from dexroll_client.models import PlanStatus
-    from planner_service.cli import plan_request
-    from planner_service.execution import simulate_result
-    from planner_service.planners import REQUEST
+    from helpers import planned_and_executed
 
     raw = {"planner": "manipulation",
            "object": {"shape": "capsule", "dimensions": [0.012, 0.028]},
@@ -219,13 +211,7 @@ def test_the_allegro_hand_rolls_a_capsule_about_its_axis() -> None:
                                                   "angle": math.radians(-15.0)}]},
            "tracking": {"position_tolerance": 0.001, "orientation_tolerance": 0.01745},
            "forces": {"mass": 0.06}, "mu": 0.9, "duration": 2.0, "n_intervals": 20}
-    result, summary = plan_request(raw)
-    assert result.status is PlanStatus.SOLVED, summary
-    assert result.certificate is not None and result.certificate.passed
-    report = simulate_result(result, REQUEST.validate_python(raw))
-    assert report.passed, report.failures
-    assert report.position_error.max <= 2e-3 and math.degrees(report.angle_error.max) <= 3.0
-    assert all(c.lost_time == 0.0 for c in report.contacts)
+    planned_and_executed(raw)
 
 
 def test_the_nlps_length_scale_is_the_values() -> None:

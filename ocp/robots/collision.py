@@ -171,13 +171,7 @@ class HandCollision:
         obj = ET.SubElement(world, "body", name=OBJECT)
         ET.SubElement(obj, "freejoint", name=OBJECT)
         geom = shape_of(shape).mujoco_geom(dims)
-        mesh = geom.asset()
-        if mesh is not None:  # the object's own mesh, its vertices inline
-            asset = root.find("asset")
-            if asset is None:
-                asset = ET.Element("asset")
-                root.insert(0, asset)
-            ET.SubElement(asset, "mesh", mesh)
+        geom.add_asset(root)  # a mesh's vertices, inline
         ET.SubElement(obj, "geom", geom.attributes(), name=OBJECT, contype="1",
                       conaffinity="1")
         mj = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))

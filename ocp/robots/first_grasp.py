@@ -52,6 +52,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import segments_distance, tip_body
+from ocp.geometry.nearest import nearest_surface_point
+from ocp.geometry.surfaces import rotation_from_vector
 from ocp.robots.couplings import coupled_step, coupling_violation, project_couplings
 from ocp.robots.grasp_reach import (
     _equalities,
@@ -230,15 +232,14 @@ class ObjectGeometry:
     """A closed convex object for the search, about its centre (given apart): its chart's
     surface and parameters, the chart's axes in the palm frame (``rotation``: the pose's
     times the chart patch's), the bound ``u_limit`` on a contact's |u| on the chart, its
-    support heights' least and largest (``inner``, ``outer`` [m]), the length its band
+    support heights along the 200 search directions (chart axes [m]), the length its band
     is scaled by [m] and the shape's name."""
 
     surface: Any
     params: tuple[float, ...]
     rotation: FloatArray
     u_limit: float
-    inner: float
-    outer: float
+    heights: FloatArray
     length: float
     shape: str
 
@@ -246,13 +247,15 @@ class ObjectGeometry:
     def of(cls, obj: Any, rotation: ArrayLike, pole_margin: float) -> ObjectGeometry:
         """The geometry of ``obj`` (an ``ObjectSpec``) turned by ``rotation`` (palm frame)
         with contacts ``pole_margin`` [rad] from its chart's poles."""
-        from ocp.geometry.surfaces import rotation_from_vector
-
         R = np.asarray(rotation, dtype=float) @ rotation_from_vector(obj.chart_rotation)
         h = np.asarray(obj.surface.support_heights(_DIRECTIONS, obj.params), dtype=float)
         return cls(obj.surface, tuple(float(x) for x in obj.params), R,
-                   float(obj.u_limit(pole_margin)), float(h.min()), float(h.max()),
-                   float(obj.length_scale), obj.shape)
+                   float(obj.u_limit(pole_margin)), h, float(obj.length_scale), obj.shape)
+
+    @property
+    def outer(self) -> float:
+        """The largest support height [m]: no point of the object is farther."""
+        return float(self.heights.max())
 
     def closure_directions(self) -> FloatArray | None:
         """The directions the normals' closure is taken over: every direction (None), but
@@ -275,8 +278,6 @@ class ObjectGeometry:
         """Of the surface's point nearest to the point ``d`` [m] from the centre (palm
         axes): (its chart coordinates, the signed distance [m], negative inside, and the
         outward normal there, palm axes)."""
-        from ocp.geometry.nearest import nearest_surface_point
-
         a, t = nearest_surface_point(self.surface, self.params,
                                      self.rotation.T @ np.asarray(d, dtype=float), alpha)
         _, G, _, _, _ = self.surface.geometry(a, self.params)
@@ -286,8 +287,7 @@ class ObjectGeometry:
         """A lower bound [m] on the signed distance of each point (rows of ``d``, from the
         centre, palm axes): the largest ``n . d - h(n)`` over 200 directions n."""
         D = np.atleast_2d(np.asarray(d, dtype=float)) @ self.rotation
-        h = np.asarray(self.surface.support_heights(_DIRECTIONS, self.params), dtype=float)
-        return np.asarray((D @ _DIRECTIONS.T - h).max(axis=1))
+        return np.asarray((D @ _DIRECTIONS.T - self.heights).max(axis=1))
 
 
 def _outside_object(f: Any, q: FloatArray, centre: FloatArray, geo: ObjectGeometry) -> bool:

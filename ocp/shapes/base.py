@@ -9,13 +9,14 @@ numbers unless the shape says otherwise."""
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from ocp.geometry.surfaces import Surface
 
@@ -50,11 +51,16 @@ class MujocoGeom:
             return {"type": "mesh", "mesh": MESH_NAME}
         return {"type": self.type, "size": _numbers(self.size)}
 
-    def asset(self) -> dict[str, str] | None:
-        """The ``<mesh>`` element's attributes in ``<asset>``, None for a primitive."""
+    def add_asset(self, root: ET.Element) -> None:
+        """A mesh's ``<mesh>`` element (its vertices inline) in the scene ``root``'s
+        ``<asset>``, made when missing; nothing for a primitive."""
         if self.type != "mesh":
-            return None
-        return {"name": MESH_NAME, "vertex": _numbers(self.vertices)}
+            return
+        asset = root.find("asset")
+        if asset is None:
+            asset = ET.Element("asset")
+            root.insert(0, asset)
+        ET.SubElement(asset, "mesh", name=MESH_NAME, vertex=_numbers(self.vertices))
 
 
 class Shape(ABC):
@@ -122,11 +128,6 @@ class Shape(ABC):
     @abstractmethod
     def viewer(self, dimensions: Sequence[float]) -> dict[str, Any]:
         """The viewer's tagged record of the shape (``kind`` and its sizes [m])."""
-
-    def support_heights(self, normals: ArrayLike, dimensions: Sequence[float]) -> FloatArray:
-        """h(n) = max over the surface of n . p for unit directions (k, 3) [m]."""
-        return self.surface(dimensions).support_heights(normals,
-                                                        self.surface_params(dimensions))
 
     def sample_points(self, dimensions: Sequence[float], n: int = 400) -> FloatArray:
         """About ``n`` points spread over the surface (k, 3) [m], in the object's frame:

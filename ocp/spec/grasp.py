@@ -16,10 +16,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.certify.certificate import GRASP_TOLERANCES, PALM_TOLERANCES, TolerancePolicy
-from ocp.geometry.nearest import nearest_surface_point
 from ocp.geometry.rotations import log_rotation
 from ocp.geometry.surfaces import rotation_from_vector
 from ocp.robots.couplings import coupled_step
+from ocp.robots.first_grasp import ObjectGeometry
 from ocp.robots.grasp_reach import at_tendon_bounds
 from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
 from ocp.spec.phases import ContactPhase, phase_errors, phase_intervals
@@ -28,13 +28,13 @@ from ocp.spec.problem import (
     DEFAULT_MAX_JOINT_ACCELERATION,
     DEFAULT_RAMP_FRACTION,
     MAX_POSITION,
-    PALM_LINE_CONTACT,
     BallOnPalmProblem,
     ForceSpec,
     ObjectSpec,
     ProblemError,
     SolverOptions,
     ViaPoint,
+    beyond_u_limit,
     goal_errors,
     joint_acceleration_errors,
 )
@@ -123,11 +123,13 @@ def fingertip_errors(name: str, tip: Fingertip, obj: ObjectSpec, pad_margin: flo
                              f"{coord} = {tip.initial[k]:.4f} rad (the {surface.kind} tip's "
                              f"chart coordinate) is outside [{lo:.4f}, {hi:.4f}]: "
                              f"{why[surface.kind]}"))
-    u_lim = obj.u_limit(pole_margin) if not obj.errors() else math.pi / 2
+    valid = not obj.errors()
+    u_lim = obj.u_limit(pole_margin) if valid else math.pi / 2
     if abs(tip.initial[2]) > u_lim:
         errs.append((f"{name}.initial.u_f",
-                     f"|u_f| = {abs(tip.initial[2]):.4f} rad is beyond the chart pole "
-                     f"limit {u_lim:.4f} rad; rotate {name}.chart_rotation"))
+                     beyond_u_limit(obj, tip.initial[2], u_lim, f"{name}.chart_rotation")
+                     if valid else f"|u_f| = {abs(tip.initial[2]):.4f} rad is beyond the "
+                                   f"chart's poles {u_lim:.4f} rad"))
     return errs
 
 
@@ -308,12 +310,12 @@ class ManipulationProblem:
                 errs.append((f"palm.{name}" if head in palm_fields else name, why))
         else:
             # the object, grid and solver fields, checked by the palm problem's own rules
-            errs += [e for e in BallOnPalmProblem(
-                self.object, (0.0, 0.0, 0.0, 0.0, 0.0), {"x": 0.0}, self.duration,
-                n_intervals=self.n_intervals, pole_margin=self.pole_margin,
-                max_refinements=self.max_refinements, options=self.options,
-                timing=self.timing, ramp_time=self.ramp_time).errors()
-                if PALM_LINE_CONTACT not in e[1]]  # no palm here
+            errs += BallOnPalmProblem(self.object, (0.0, 0.0, 0.0, 0.0, 0.0), {"x": 0.0},
+                                      self.duration, n_intervals=self.n_intervals,
+                                      pole_margin=self.pole_margin,
+                                      max_refinements=self.max_refinements,
+                                      options=self.options, timing=self.timing,
+                                      ramp_time=self.ramp_time).setting_errors()
             if self.initial_pose is None:
                 errs.append(("initial_pose", "required when no palm carries the object"))
             else:
@@ -521,15 +523,14 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
                          f"angles: {bad}")
     tip = finger.tip_surface
     r = tip.params[0]
-    R_o, c_obj = pose.rotation, np.asarray(pose.position, dtype=float)
-    R_pc = R_o @ R_c  # the patch in the palm frame
+    c_obj = np.asarray(pose.position, dtype=float)
+    geo = ObjectGeometry.of(obj, pose.rotation, pole_margin)
     alpha: FloatArray | None = None
 
     def on_object(centre: FloatArray) -> tuple[float, FloatArray]:
         nonlocal alpha
-        alpha, t = nearest_surface_point(surface, dims, R_pc.T @ (centre - c_obj), alpha)
-        _, G, _, _, _ = surface.geometry(alpha, dims)
-        return t - r, R_pc @ np.asarray(G, dtype=float)[:, 2]
+        alpha, t, n = geo.nearest(centre - c_obj, alpha)
+        return t - r, n
 
     try:
         q, gap0 = _gap_closed(finger, q, on_object)
@@ -539,7 +540,7 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
     R_l, p_l = finger.fingertip_pose_pin(q)
     on_object(p_l + R_l @ tip.p)
     u, v = (float(x) for x in np.asarray(alpha))
-    limit = obj.u_limit(pole_margin)
+    limit = geo.u_limit
     if abs(u) > limit:
         raise ValueError(
             f"its contact on the {obj.shape} is at u = {u:.4f}, beyond the bound {limit:.4f} "
@@ -547,7 +548,7 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
             f"on a {obj.shape}: touch it farther from the ends of its z axis, or turn the "
             "object (initial_pose.orientation)")
     _, G_o, _, _, _ = surface.geometry([u, v], dims)
-    R_oc = R_pc @ np.asarray(G_o, dtype=float)  # the object's contact frame, palm frame
+    R_oc = geo.rotation @ np.asarray(G_o, dtype=float)  # the object's contact frame, palm
     R_t = R_l @ tip.R
     ab = tip.surface.inverse(-(R_t.T @ R_oc[:, 2]), (1.0,))
     _, G_t, _, _, _ = tip.surface.geometry(ab, (r,))

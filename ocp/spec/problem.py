@@ -85,10 +85,6 @@ class ProblemError(ValueError):
         super().__init__("; ".join(f"{f}: {r}" for f, r in self.errors))
 
 
-#: Why an object whose surface has a straight direction cannot lie on the palm.
-PALM_LINE_CONTACT = "touches the flat palm along a line"
-
-
 @dataclass(frozen=True)
 class ObjectSpec:
     """The rolled object: a closed surface with its chart.
@@ -245,7 +241,46 @@ class BallOnPalmProblem:
 
     # -- validation -----------------------------------------------------------------------
     def errors(self) -> list[tuple[str, str]]:
-        """Every reason this problem is invalid, as (field, reason); empty when valid."""
+        """Every reason this problem is invalid, as (field, reason); empty when valid: its
+        settings' (:meth:`setting_errors`), then its palm contact's (an object that would
+        touch the flat palm along a line; the coordinates of its start, goal and
+        via-points)."""
+        errs = self.setting_errors()
+        obj = self.object
+        if not obj.errors() and obj.surface.developable:
+            errs.append(("object.shape", f"a {obj.shape} touches the flat palm along a "
+                                         "line, not at a point as the planner's contacts do"))
+        margin_ok = math.isfinite(self.pole_margin) and 0.0 < self.pole_margin < math.pi / 2
+        u_max = obj.u_limit(self.pole_margin if margin_ok else 0.0) \
+            if not obj.errors() else math.pi / 2
+        if len(self.initial) != 5:
+            errs.append(("initial", f"must have 5 coordinates {CONTACT_COORDS}, "
+                                    f"got {len(self.initial)}"))
+        else:
+            errs += self._coord_errors("initial", dict(zip(CONTACT_COORDS, self.initial,
+                                                           strict=True)), u_max)
+        if not self.goal and not self.via_points:
+            errs.append(("goal", "empty goal and no via-points: nothing to plan"))
+        errs += self._coord_errors("goal", self.goal, u_max)
+
+        last = 0.0
+        for i, vp in enumerate(self.via_points):
+            name = f"via_points[{i}]"
+            if not (math.isfinite(vp.time) and last < vp.time < self.duration):
+                errs.append((f"{name}.time",
+                             f"must be strictly increasing and inside (0, duration = "
+                             f"{self.duration} s), got {vp.time}"))
+            else:
+                last = vp.time
+            if not vp.coords:
+                errs.append((f"{name}.coords", "empty: give at least one coordinate"))
+            errs += self._coord_errors(f"{name}.coords", vp.coords, u_max)
+        return errs
+
+    def setting_errors(self) -> list[tuple[str, str]]:
+        """Why the object, the horizon and grid, the timing and the solver options are
+        invalid, as (field, reason): what a grasp held without a palm checks by these
+        same rules."""
         errs: list[tuple[str, str]] = []
         obj = self.object
         shape_errors = obj.errors()
@@ -258,9 +293,6 @@ class BallOnPalmProblem:
                                                    obj.params)
             if why is not None:
                 errs.append(("object.chart_rotation", why))
-        if not shape_errors and obj.surface.developable:
-            errs.append(("object.shape", f"a {obj.shape} {PALM_LINE_CONTACT}, not at a point "
-                                         "as the planner's contacts do"))
 
         margin_ok = math.isfinite(self.pole_margin) and 0.0 < self.pole_margin < math.pi / 2
         if not margin_ok:
@@ -295,31 +327,6 @@ class BallOnPalmProblem:
             errs.append(("options.time_limit", f"must be > 0 s, got {o.time_limit}"))
         if not (math.isfinite(o.tol) and 0 < o.tol < 1):
             errs.append(("options.tol", f"must be in (0, 1), got {o.tol}"))
-
-        u_max = self.object.u_limit(self.pole_margin if margin_ok else 0.0) \
-            if not self.object.errors() else math.pi / 2
-        if len(self.initial) != 5:
-            errs.append(("initial", f"must have 5 coordinates {CONTACT_COORDS}, "
-                                    f"got {len(self.initial)}"))
-        else:
-            errs += self._coord_errors("initial", dict(zip(CONTACT_COORDS, self.initial,
-                                                           strict=True)), u_max)
-        if not self.goal and not self.via_points:
-            errs.append(("goal", "empty goal and no via-points: nothing to plan"))
-        errs += self._coord_errors("goal", self.goal, u_max)
-
-        last = 0.0
-        for i, vp in enumerate(self.via_points):
-            name = f"via_points[{i}]"
-            if not (math.isfinite(vp.time) and last < vp.time < self.duration):
-                errs.append((f"{name}.time",
-                             f"must be strictly increasing and inside (0, duration = "
-                             f"{self.duration} s), got {vp.time}"))
-            else:
-                last = vp.time
-            if not vp.coords:
-                errs.append((f"{name}.coords", "empty: give at least one coordinate"))
-            errs += self._coord_errors(f"{name}.coords", vp.coords, u_max)
         return errs
 
     def _coord_errors(self, name: str, coords: Mapping[str, float], u_max: float
@@ -336,16 +343,8 @@ class BallOnPalmProblem:
                 errs.append((where, f"|{key}| = {abs(value):.4g} m is outside the palm "
                                     f"(palm_half_extent = {self.palm_half_extent} m)"))
             elif key == "u" and abs(value) > u_max:
-                surface = self.object.surface
-                remedy = ("rotate the object chart (object.chart_rotation) so the contact "
-                          "is away from its poles") if surface.chart_symmetry == "any" else \
-                    ("the poles are the ends of the object's z axis: keep the "
-                     "contact away from them or lower pole_margin") \
-                    if surface.singular_u is not None else \
-                    "keep the contact within the chart"
-                errs.append((where,
-                             f"|u| = {abs(value):.4f} is at or beyond the "
-                             f"{surface.u_limit_name} = {u_max:.4f}; {remedy}"))
+                errs.append((where, beyond_u_limit(self.object, value, u_max,
+                                                   "object.chart_rotation")))
         return errs
 
     def validate(self) -> None:
@@ -388,6 +387,20 @@ def coordinate_error(coord: str, value: float, target: float) -> float:
     i = CONTACT_COORDS.index(coord)
     d = float(wrap_difference(value, target)) if PERIODIC[i] else value - target
     return abs(d)
+
+
+def beyond_u_limit(obj: ObjectSpec, value: float, limit: float, patch: str) -> str:
+    """Why a contact at latitude ``value`` is refused: at or beyond its chart's bound
+    ``limit``, and what to do (``patch``: the field of the chart patch, which a ball's
+    contact may turn)."""
+    surface = obj.surface
+    remedy = (f"rotate the object chart ({patch}) so the contact is away from its poles"
+              if surface.chart_symmetry == "any" else
+              "the poles are the ends of the object's z axis: keep the contact away from "
+              "them or lower pole_margin" if surface.singular_u is not None else
+              "keep the contact within the chart")
+    return (f"|u| = {abs(value):.4f} is at or beyond the {surface.u_limit_name} = "
+            f"{limit:.4f}; {remedy}")
 
 
 @dataclass(frozen=True)
