@@ -8,7 +8,7 @@ the ball in the air) and three or more fingers are the same type with different 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -19,7 +19,7 @@ from ocp.certify.certificate import GRASP_TOLERANCES, PALM_TOLERANCES, Tolerance
 from ocp.geometry.rotations import log_rotation
 from ocp.geometry.surfaces import rotation_from_vector
 from ocp.robots.couplings import coupled_step
-from ocp.robots.first_grasp import ObjectGeometry
+from ocp.robots.first_grasp import ObjectGeometry, onto_surface
 from ocp.robots.grasp_reach import at_tendon_bounds
 from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
 from ocp.spec.phases import ContactPhase, phase_errors, phase_intervals
@@ -441,13 +441,19 @@ def support_goal_errors(problem: ManipulationProblem, X: FloatArray, ends: list[
 MAX_INITIAL_GAP = 2e-3
 
 
-def _gap_closed(finger: Any, q: FloatArray,
-                distance: Callable[[FloatArray], tuple[float, FloatArray]]
-                ) -> tuple[FloatArray, float]:
-    """(joints, gap [m] at ``q``): a gap within :data:`MAX_INITIAL_GAP` closed by the
-    least joint motion (Gauss-Newton on ``distance(tip centre) -> (gap [m], outward
-    normal at the nearest object point)``, palm frame); ``q`` as it is beyond."""
+def _onto_ball(finger: Any, q: FloatArray, c_obj: FloatArray, rho: float
+               ) -> tuple[FloatArray, float]:
+    """(joints, gap [m] at ``q``) of a round tip and the ball of radius ``rho`` [m] centred
+    at ``c_obj``: a gap within :data:`MAX_INITIAL_GAP` closed by the least joint motion
+    (Gauss-Newton along the line of centres; another shape's:
+    :func:`~ocp.robots.first_grasp.onto_surface`); ``q`` as it is beyond."""
     tip = finger.tip_surface
+    r = tip.params[0]
+
+    def distance(centre: FloatArray) -> tuple[float, FloatArray]:
+        d = c_obj - centre
+        return float(np.linalg.norm(d)) - r - rho, -(d / np.linalg.norm(d))
+
     R_l, p_l = finger.fingertip_pose_pin(q)
     centre = p_l + R_l @ tip.p
     gap0, _ = distance(centre)
@@ -490,13 +496,7 @@ def contact_from_joints(finger: Any, q: ArrayLike, obj: Any, pose: Any,
     c_obj = np.asarray(pose.position, dtype=float)
     qa = np.asarray(q, dtype=float)
     if obj.shape == "sphere":
-        rho = float(obj.dimensions[0])
-
-        def on_ball(centre: FloatArray) -> tuple[float, FloatArray]:
-            d = c_obj - centre
-            return float(np.linalg.norm(d)) - r - rho, -(d / np.linalg.norm(d))
-
-        qa, gap0 = _gap_closed(finger, qa, on_ball)
+        qa, gap0 = _onto_ball(finger, qa, c_obj, float(obj.dimensions[0]))
         R_l, p_l = finger.fingertip_pose_pin(qa)
         R_t = R_l @ tip.R
         d = c_obj - (p_l + R_l @ tip.p)
@@ -525,20 +525,19 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
     r = tip.params[0]
     c_obj = np.asarray(pose.position, dtype=float)
     geo = ObjectGeometry.of(obj, pose.rotation, pole_margin)
-    alpha: FloatArray | None = None
-
-    def on_object(centre: FloatArray) -> tuple[float, FloatArray]:
-        nonlocal alpha
-        alpha, t, n = geo.nearest(centre - c_obj, alpha)
-        return t - r, n
-
+    R_l, p_l = finger.fingertip_pose_pin(q)
     try:
-        q, gap0 = _gap_closed(finger, q, on_object)
+        alpha, t, _ = geo.nearest(p_l + R_l @ tip.p - c_obj)
+        gap0 = t - r
+        # a small gap closed by the least joint motion, as the first-grasp search does
+        got = onto_surface(finger, q, c_obj, geo, alpha, tol=1e-13) \
+            if abs(gap0) <= MAX_INITIAL_GAP else None
     except NotImplementedError as exc:
         raise ValueError(f"contacts from joint angles need a closed convex object: {exc}"
                          ) from None
-    R_l, p_l = finger.fingertip_pose_pin(q)
-    on_object(p_l + R_l @ tip.p)
+    if got is not None:
+        q, alpha = got[0], got[1]
+        R_l, _ = finger.fingertip_pose_pin(q)
     u, v = (float(x) for x in np.asarray(alpha))
     limit = geo.u_limit
     if abs(u) > limit:
