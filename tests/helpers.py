@@ -125,12 +125,13 @@ def wrist_wrapped(own: str) -> str:
     <position name="A_WRJ0" joint="WRJ0" kp="10" ctrlrange="-40 28"/>""", 1)
 
 
-def planned_and_executed(raw: dict[str, Any], position: float = 2e-3, degrees: float = 3.0
-                         ) -> tuple[Any, Any]:
+def planned_and_executed(raw: dict[str, Any], position: float = 2e-3, degrees: float = 3.0,
+                         model: str | None = None) -> tuple[Any, Any]:
     """Plan the request ``raw`` (a dict as a client sends it) through the service's own
-    door and execute it in MuJoCo in dexroll's scene, asserting the laws of a good plan:
-    solved, its certificate passed, executed within ``position`` [m] and ``degrees`` with
-    no planned contact lost. (result, execution report)."""
+    door and execute it in MuJoCo (in dexroll's scene; ``model`` "request": on the
+    request's own MJCF hand, driven by its own actuators), asserting the laws of a good
+    plan: solved, its certificate passed, executed within ``position`` [m] and ``degrees``
+    with no planned contact lost. (result, execution report)."""
     from dexroll_client.models import PlanStatus
     from planner_service.cli import plan_request
     from planner_service.execution import simulate_result
@@ -139,7 +140,7 @@ def planned_and_executed(raw: dict[str, Any], position: float = 2e-3, degrees: f
     result, summary = plan_request(raw)
     assert result.status is PlanStatus.SOLVED, summary
     assert result.certificate is not None and result.certificate.passed, summary
-    report = simulate_result(result, REQUEST.validate_python(raw))
+    report = simulate_result(result, REQUEST.validate_python(raw), model=model)
     assert report.passed, report.failures
     assert report.position_error.max <= position
     assert math.degrees(report.angle_error.max) <= degrees
