@@ -491,7 +491,7 @@ def test_a_holds_forces_keep_the_joints_torques_within_the_actuators() -> None:
     joint's torque (J^T f and the links' weight) within the cap, and still hold the
     ball (ocp.gait.step.hold_fits, TorqueLimits)."""
     from ocp.gait.hold import hold_residuals
-    from ocp.gait.step import TorqueLimits, _deep, grasp_hold, hold_fits
+    from ocp.gait.step import TorqueLimits, deep_forces, grasp_hold, hold_fits
     from ocp.solution import joint_torques
 
     qs = tuple(np.asarray(q, dtype=float) for q in NOMINAL_Q)
@@ -504,12 +504,12 @@ def test_a_holds_forces_keep_the_joints_torques_within_the_actuators() -> None:
             FINGERS[i], qs[i][None], hold.points[r][None], hold.normals[r][None],
             F[r][None], np.zeros(1), g)).max()) for r, i in enumerate(which))
 
-    free = _deep(FINGERS, qs, which, hold, LOAD, RHO, None)
+    free = deep_forces(FINGERS, qs, which, hold, LOAD, RHO, None)
     assert free is not None
     cap = 0.8 * peak(free)
     limits = TorqueLimits(tuple(np.full(4, -cap) for _ in which),
                           tuple(np.full(4, cap) for _ in which), g)
-    F = _deep(FINGERS, qs, which, hold, LOAD, RHO, limits)
+    F = deep_forces(FINGERS, qs, which, hold, LOAD, RHO, limits)
     assert F is not None and peak(F) <= cap + 1e-12
     assert hold_fits(FINGERS, qs, which, hold, limits)(F)
     res = hold_residuals(hold, F, LOAD, np.full(len(F), float(LOAD[3])))

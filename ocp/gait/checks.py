@@ -85,10 +85,9 @@ def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
                       LANDING_TOL, CheckKind.PHYSICS, ts[-1], t0))
     rest = max(float(np.abs(v[[0, -1]]).max()), float(np.abs(a[[0, -1]]).max()))
     out.append(_check(f"swing_rest_{label}", rest, 1e-9, CheckKind.PHYSICS, None, t0))
-    for j, ((a1, b1, r1), need) in enumerate(zip(sp.others, sp.required_gaps(),
+    for j, ((a1, b1, r1), need) in enumerate(zip(sp.others_at(ts), sp.required_gaps(),
                                                  strict=True)):
-        gap = segments_distance(caps_a, ends_a, np.broadcast_to(a1, caps_a.shape),
-                                np.broadcast_to(b1, caps_a.shape)) - body.r - r1
+        gap = segments_distance(caps_a, ends_a, a1, b1) - body.r - r1
         k = int(np.argmin(gap))
         out.append(_check(f"swing_tip_gap_{label}_{j}", gap[k], need - DISTANCE_TOL,
                           CheckKind.PHYSICS, ts[k], t0, lower=True))

@@ -85,6 +85,11 @@ class GaitPlan:
     #: each roll's ball orientation at its start (palm frame): a roll is planned in the
     #: ball's frame there (:func:`_roll_problem`), its rotations R(t) are relative to it
     frames: list[FloatArray] = field(default_factory=list)
+    #: the rolls made while a fingertip is re-placed (:mod:`ocp.gait.overlap`): roll index
+    #: -> the gait step whose swing it carries (that roll's plan is of the others)
+    carried: dict[int, int] = field(default_factory=dict)
+    #: why a re-placement during a roll was not made (then made at rest), in order
+    overlap_misses: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -134,13 +139,34 @@ class GaitPlan:
         clock = self.clock(r)
         s, v, a = clock(tau)
         jt = self.rolls[r].joint_trajectory(s, efforts=False)
-        return clock.joints(jt.positions, jt.velocities, jt.accelerations, v, a)
+        out = clock.joints(jt.positions, jt.velocities, jt.accelerations, v, a)
+        if r not in self.carried:
+            return out
+        # the others roll; the re-placed fingertip swings meanwhile (its own clock: the
+        # swing starts and ends with the roll's)
+        step = self.steps[self.carried[r]]
+        assert step.swing is not None
+        at = int(np.cumsum((0, *self.nq))[step.finger])
+        swung = step.swing.sample(np.asarray(tau, dtype=float))
+        return tuple(np.concatenate([x[:, :at], y, x[:, at:]], axis=1)  # type: ignore
+                     for x, y in zip(out, swung, strict=True))
+
+    def fingers_of(self, r: int) -> list[int]:
+        """The fingers (indices) roll ``r``'s plan is of: every one, but the one re-placed
+        during it (:attr:`carried`)."""
+        every = list(range(len(self.nq)))
+        if r not in self.carried:
+            return every
+        return [i for i in every if i != self.steps[self.carried[r]].finger]
 
     def _before(self, i: int) -> FloatArray:
         """Every finger's joints before gait step ``i`` (concatenated): those after it,
-        but the re-placed finger's where its swing began."""
+        but the re-placed finger's where its swing began (or the step's own
+        ``q_before``: the others rolled meanwhile)."""
         step = self.steps[i]
         assert step.swing is not None
+        if step.q_before is not None:
+            return np.concatenate(step.q_before)
         return np.concatenate([step.swing.spec.q_start if k == step.finger else q
                                for k, q in enumerate(step.q_after)])
 
@@ -375,11 +401,11 @@ def _clock_torques(plan: GaitPlan, r: int, template: ManipulationProblem, t0: fl
     static = plan.rolls[r].joint_torques(s)
     cut = np.cumsum((0, *plan.nq))
     worst, at = 0.0, 0
-    for i in range(len(plan.nq)):
+    for c_i, i in enumerate(plan.fingers_of(r)):  # (a swinging fingertip's: its swing's)
         c = np.asarray(limits.damping[i], dtype=float)
         for k in range(len(tau)):
             over = limits.overrun(i, q[k, cut[i]:cut[i + 1]],
-                                  static[i][k] + c * v[k, cut[i]:cut[i + 1]])
+                                  static[c_i][k] + c * v[k, cut[i]:cut[i + 1]])
             if over > worst:
                 worst, at = over, k
     return [Check(f"roll{r}_clock_torque", worst, 1.0 + 1e-9, CheckKind.LIMITS,
@@ -470,6 +496,8 @@ def _undo(plan: GaitPlan, checks: list[Check], never_lifted: set[str], before: t
     never lifted): what came after dropped, the status solved again; (t, done, pose,
     q_now) then."""
     n_r, n_p, n_s, n_k, t, done, pose, q_now, lifted = before
+    for r in [r for r in plan.carried if r >= n_r]:
+        del plan.carried[r]
     del plan.rolls[n_r:], plan.clocks[n_r:], plan.frames[n_r:], plan.phases[n_p:]
     del plan.steps[n_s:], checks[n_k:]
     never_lifted.clear()
@@ -717,11 +745,86 @@ def _replace_spent(plan: GaitPlan, checks: list[Check], template: ManipulationPr
     return None
 
 
+def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
+                  planner: Any, k: int, q_now: tuple[FloatArray, ...], q_land: FloatArray,
+                  pose: ObjectPose, R0: FloatArray, ax: FloatArray, done: float, step: float,
+                  seconds_per_radian: float, t: float, load: FloatArray,
+                  swing: dict[str, Any] | None, hold_time: float, fastest_rolls: bool
+                  ) -> tuple[tuple[FloatArray, ...], float, float, ObjectPose] | str:
+    """Fingertip ``k`` re-placed at the joints ``q_land`` while the others roll the ball by
+    up to ``step`` [rad] about ``ax`` (:mod:`ocp.gait.overlap`): the roll's length cut to
+    the others' rolled reach and gaps as every roll's, its plan, the swing on its clock,
+    the holds around; its phases (unload, the roll with ``k`` lifted, load), plan, step
+    and checks added to ``plan`` and ``checks``. (the joints after, the time, the turn
+    made, the pose) or why not (``plan`` and ``checks`` as they were)."""
+    from ocp.gait.overlap import plan_overlap, without
+
+    centre = np.asarray(pose.position, dtype=float)
+    rho = float(template.object.dimensions[0])
+    sub = without(template, k)
+    q_sub = tuple(q for i, q in enumerate(q_now) if i != k)
+    ahead = _roll_ahead(sub, q_sub, centre, rho, ax, step)
+    if ahead.why and ahead.reach < step - 1e-6:
+        step = ahead.reach - max(REACH_MARGIN, REACH_SHARE * ahead.reach)
+    step = min(step, ahead.apart)
+    if step < MIN_ROLL:
+        return "the others' reach"
+    target = axis_angle_rotation(ax, done + step) @ R0
+    dur = max(1.0, seconds_per_radian * step)
+    prob = _roll_problem(sub, q_sub, pose, target, centre, dur)
+    # the last roll made without this fingertip, when the others start where it did
+    warm = None
+    for r in sorted(plan.carried, reverse=True):
+        if plan.steps[plan.carried[r]].finger == k:
+            last = plan.rolls[r]
+            start = tuple(q for i, q in enumerate(plan.steps[plan.carried[r]].q_before or ())
+                          if i != k)
+            if last.ok and start and max(float(np.abs(a - b).max()) for a, b in
+                                         zip(start, q_sub, strict=True)) <= RECUR_TOL:
+                warm = last
+                if last.stats is not None and last.stats.n_intervals > prob.n_intervals:
+                    prob = prob.with_intervals(last.stats.n_intervals)
+            break
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
+    nq_sub = tuple(int(f.finger.nq) for f in sub.fingers)
+    last_swing = next((st.swing for st in reversed(plan.steps) if st.finger == k), None)
+    got, why = plan_overlap(
+        template, planner, k, q_now, q_land, prob, warm,
+        lambda sol: roll_speed(sol, sub, nq_sub) if fastest_rolls else 1.0, centre, rho,
+        pose.rotation, load, swing, hold_time, torque_limits(template), names, last_swing)
+    if got is None:
+        return why
+    r, i = len(plan.rolls), len(plan.steps)
+    sol, clock = got.sol, got.clock
+    step_ = replace(got.step, during_roll=r)
+    plan.rolls.append(sol)
+    plan.frames.append(pose.rotation)
+    plan.clocks.append(clock)
+    plan.steps.append(step_)
+    plan.carried[r] = i
+    nf = len(template.fingers)
+    t1 = t + hold_time
+    t2 = t1 + clock.length
+    plan.phases += [GaitPhase("unload", t, t1, (True,) * nf, k, i),
+                    GaitPhase("roll", t1, t2, tuple(j != k for j in range(nf)), k, r),
+                    GaitPhase("load", t2, t2 + hold_time, (True,) * nf, k, i)]
+    assert template.forces is not None
+    checks += step_.checks(f"step{i}", t, load, template.forces.min_normal_force)
+    checks += [replace(c, name=f"roll{r}_{c.name}",
+                       time=None if c.time is None else t1 + clock.tau_of(c.time))
+               for c in sol.certificate.checks]
+    checks += _clock_checks(plan, r, template, t1, q_now)
+    end = plan.rotation(r, sol.object_rotation[-1])
+    pose = ObjectPose(tuple(quaternion_wxyz(end)), tuple(sol.object_position[-1]))
+    return got.q_after, t2 + hold_time, done + step, pose
+
+
 def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, angle: float,
               roll_step: float = math.radians(10.0), seconds_per_radian: float = 8.0,
               planner: Any = None, swing: dict[str, Any] | None = None,
               hold_time: float = 0.2, max_rolls: int = 40, replace_all: bool = True,
-              fastest_rolls: bool = False, landing: str = "home") -> GaitPlan:
+              fastest_rolls: bool = False, landing: str = "home",
+              overlap: bool = False) -> GaitPlan:
     """Turn the ball of ``template`` (a grasp of round fingertips on a ball, with
     ``forces``: the holds need the object's weight) by ``angle`` [rad] about ``axis``
     (palm frame) from the joints ``qs`` (one array per finger), rolling by at most
@@ -742,7 +845,11 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     certified on its clock. ``landing`` (with the spent fingertips re-placed): "home",
     where each touched when the gait began, or "farthest", of that contact rolled back
     about the axis by up to ``roll_step``, the one from which it rolls forward the farthest
-    (:func:`farthest_landings`)."""
+    (:func:`farthest_landings`). ``overlap`` (with the spent fingertips re-placed): each
+    spent fingertip re-placed while the others roll the ball by the next step
+    (:mod:`ocp.gait.overlap`), one per roll, the least-reaching first; where that is not
+    found, at rest as without."""
+    from ocp.gait.overlap import lift_next
     from ocp.solve.planner import ManipulationPlanner
 
     t_wall = time.perf_counter()
@@ -856,6 +963,32 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             if q_land is None:
                 q_land = q_home if landing == "home" else farthest_landings(
                     template, q_home, centre, rho, ax, roll_step)
+            if overlap:  # the spent fingertips re-placed one at a time during the rolls
+                c = np.asarray(pose.position, dtype=float)
+                k = lift_next(spent_fingers(template, q_now, c, rho, ax,
+                                            min(cap, angle - done), never_lifted),
+                              template, q_now, c, rho, ax, min(cap, angle - done))
+                while k is not None and done < angle - 1e-12 \
+                        and len(plan.rolls) < max_rolls:
+                    res = _overlap_roll(plan, checks, template, planner, k, q_now, q_land[k],
+                                        pose, R0, ax, done, min(cap, angle - done),
+                                        seconds_per_radian, t, load, swing, hold_time,
+                                        fastest_rolls)
+                    if isinstance(res, str):
+                        plan.overlap_misses.append(res)
+                        break
+                    q_start = q_now
+                    q_now, t, done, pose = res
+                    if done >= angle - 1e-12:
+                        break
+                    c = np.asarray(pose.position, dtype=float)
+                    k = lift_next(spent_fingers(template, q_now, c, rho, ax,
+                                                min(cap, angle - done), never_lifted),
+                                  template, q_now, c, rho, ax, min(cap, angle - done))
+                if done >= angle - 1e-12:
+                    break
+                if k is None or len(plan.rolls) >= max_rolls:
+                    continue  # none spent: the next roll with every fingertip
             got = _replace_spent(plan, checks, template, q_land, q_start, q_now, pose, t,
                                  load, swing, hold_time, never_lifted, ax,
                                  min(cap, angle - done))

@@ -117,7 +117,15 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
                 omega[rows, j3] = ds * np.interp(s, sol.t, sol.object_angular_velocity[:, j3])
             pos[rows] = smp.object_position
             wxyz[rows] = quaternion_wxyz(gait.rotation(ph.index, smp.object_rotation))
-            force[rows], torsion[rows] = sol.forces(s)
+            F, M = sol.forces(s)
+            if ph.lifted is not None:  # a fingertip swings during this roll: no force
+                F, M = np.insert(F, ph.lifted, 0.0, axis=1), np.insert(M, ph.lifted, 0.0,
+                                                                       axis=1)
+                swung = gait.steps[gait.carried[ph.index]].swing
+                assert swung is not None
+                active[rows, ph.lifted] = [0.0 if swung.segment(float(x)) == "clear"
+                                           else TRANSITION for x in tl]
+            force[rows], torsion[rows] = F, M
             last = end
             continue
         for r, t in zip(rows, ts[rows], strict=True):
@@ -138,7 +146,7 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
     # phase): a swing's lift-off instant is the swing's, its landing the load's
     for i, t in enumerate(ts):
         ph = next((p for p in gait.phases if p.start <= t < p.end), gait.phases[-1])
-        if ph.kind == "swing" and ph.lifted is not None:
+        if ph.kind in ("swing", "roll") and ph.lifted is not None:
             touching[i, ph.lifted] = False
     points, normals = np.zeros((n, nf, 3)), np.zeros((n, nf, 3))
     tip_p, tip_q = np.zeros((n, nf, 3)), np.zeros((n, nf, 4))

@@ -82,6 +82,13 @@ class GaitStep:
     unload: float = 0.2
     load_time: float = 0.2
     q_after: tuple[FloatArray, ...] = field(default_factory=tuple)
+    #: the roll the swing is made during (:mod:`ocp.gait.overlap`: the other fingertips
+    #: roll the object meanwhile, and that roll's plan holds it); None: the object is
+    #: still and held by the others' hold (``holds[1]``, ``forces[1]``)
+    during_roll: int | None = None
+    #: every finger's joints before the step (None: those after it but the re-placed
+    #: finger's, where its swing began: the others did not move)
+    q_before: tuple[FloatArray, ...] | None = None
 
     @property
     def ok(self) -> bool:
@@ -93,10 +100,13 @@ class GaitStep:
 
     def ramp_forces(self, which: str, s: float) -> FloatArray:
         """The forces of every contact of the grasp (a row each, zeros for the lifted one)
-        at the fraction ``s`` of the ``"unload"`` or ``"load"`` ramp."""
-        full_before, lifted, full_after = self.forces
+        at the fraction ``s`` of the ``"unload"`` or ``"load"`` ramp (a step during a roll
+        has the others' forces at the roll's start and at its end: ``forces[1]`` and
+        ``forces[2]``)."""
+        full_before, full_after = self.forces[0], self.forces[-1]
         n = len(self.which[0])
         k = self.which[0].index(self.finger)
+        lifted = self.forces[1] if which == "unload" else self.forces[-2]
         mid = np.insert(lifted, k, 0.0, axis=0)
         assert len(mid) == n
         if which == "unload":
@@ -118,7 +128,7 @@ class GaitStep:
         ts_swing = t0 + self.unload
         t_load = ts_swing + self.swing.duration
         for name, hold, start, dur in (("unload", self.holds[0], t0, self.unload),
-                                       ("load", self.holds[2], t_load, self.load_time)):
+                                       ("load", self.holds[-1], t_load, self.load_time)):
             for s in np.linspace(0.0, 1.0, RAMP_SAMPLES):
                 F = self.ramp_forces(name, float(s))
                 share = (1 - s) if name == "unload" else s
@@ -131,8 +141,9 @@ class GaitStep:
                              f"{label}", float(np.linalg.norm(edge)), 1e-12,
                              CheckKind.PHYSICS, time=float(start + (dur if name == "unload"
                                                                     else 0.0))))
-        out += hold_checks(self.holds[1], self.forces[1], load,
-                           np.full(n - 1, min_normal), f"swing_{label}", ts_swing)
+        if self.during_roll is None:  # (else the roll's own certificate holds it)
+            out += hold_checks(self.holds[1], self.forces[1], load,
+                               np.full(n - 1, min_normal), f"swing_{label}", ts_swing)
         out += swing_checks(self.swing, label, ts_swing)
         return out
 
@@ -282,7 +293,7 @@ def hold_torque_refusal(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...],
             f"{lo:.3g}..{hi:.3g} N m")
 
 
-def _deep(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
+def deep_forces(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
           hold: Hold, load: FloatArray, L: float, limits: TorqueLimits | None
           ) -> FloatArray | None:
     """The hold's deep forces (:func:`~ocp.gait.hold.deep_hold_forces`) within the
@@ -293,7 +304,7 @@ def _deep(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int]
     if F is not None and limits is not None and limits.share < 1.0:
         full = limits.full()  # none fits the share: the whole range, if any does
         if not hold_fits(fingers, qs, which, hold, full)(F):
-            G = _deep(fingers, qs, which, hold, load, L, full)
+            G = deep_forces(fingers, qs, which, hold, load, L, full)
             if G is not None and hold_fits(fingers, qs, which, hold, full)(G):
                 F = G
     return F
@@ -329,8 +340,8 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         names = tuple(f.joint_names[0].rsplit("_", 1)[0] if f.joint_names else str(i)
                       for i, f in enumerate(fingers))
     name = names[k]
-    F_before = _deep(fingers, qs, allf, before, load, L, limits)
-    F_during = _deep(fingers, qs, rest, during, load, L, limits)
+    F_before = deep_forces(fingers, qs, allf, before, load, L, limits)
+    F_during = deep_forces(fingers, qs, rest, during, load, L, limits)
     if F_before is None or F_during is None:
         why = ("the grasp cannot hold the object" if F_before is None else
                f"the other fingertips cannot hold the object with {name} lifted (no forces "
@@ -399,7 +410,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         return GaitStep(k, plan.status, plan.message, plan)
     q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)
     after = grasp_hold(fingers, q_after, allf, centre, radius, rotation)
-    F_after = _deep(fingers, q_after, allf, after, load, L, limits)
+    F_after = deep_forces(fingers, q_after, allf, after, load, L, limits)
     if F_after is None:
         return GaitStep(k, "infeasible", f"the grasp with {name} landed cannot hold the "
                                          "object", plan)

@@ -113,6 +113,11 @@ class SwingSpec:
     #: velocity and acceleration limits (and the actuators' damping) allow, not below
     #: :data:`MIN_SWING` (:meth:`SwingPlan.scaled`)
     fastest: bool = False
+    #: the other bodies moving (a swing while the other fingertips roll the object:
+    #: :mod:`ocp.gait.overlap`): ``moving(t)`` gives, at the times ``t`` [s from the
+    #: swing's start], each of ``others``' segment ends (a (len(t), 3), b (len(t), 3)),
+    #: their radii ``others``'; None: they are still where ``others`` puts them
+    moving: Any = field(default=None, compare=False, repr=False)
 
     @property
     def body(self) -> TipBody:
@@ -129,14 +134,26 @@ class SwingSpec:
         n = np.asarray(self.landing_normal, dtype=float)
         return self.centre + (self.radius + self.body.r) * n / np.linalg.norm(n)
 
+    def others_at(self, t: Any) -> list[tuple[FloatArray, FloatArray, float]]:
+        """Each other body at the times ``t`` [s from the swing's start] (rows): its
+        segment's ends (a, b) and radius; still ones repeated."""
+        tt = np.atleast_1d(np.asarray(t, dtype=float))
+        if self.moving is None:
+            return [(np.tile(a1, (tt.size, 1)), np.tile(b1, (tt.size, 1)), r1)
+                    for a1, b1, r1 in self.others]
+        return [(np.asarray(a, dtype=float), np.asarray(b, dtype=float), r1)
+                for (a, b), (_, _, r1) in zip(self.moving(tt), self.others, strict=True)]
+
     def required_gaps(self) -> tuple[float, ...]:
         """The least distance kept from each other tip: ``tip_gap`` (None: ``clearance``),
-        or ``neighbour_share`` of the gap at the start or at the landing if smaller."""
+        or ``neighbour_share`` of the gap at the start or at the landing if smaller (the
+        others where they are at the start and at the landing)."""
         out = []
         want = self.clearance if self.tip_gap is None else self.tip_gap
-        for a1, b1, r1 in self.others:
-            gaps = [_body_gap(self.finger, self.body, q, a1, b1, r1)
-                    for q in (self.q_start, self.q_target)]
+        start, end = self.others_at([0.0]), self.others_at([self.duration])
+        for (a0, b0, r1), (a1, b1, _) in zip(start, end, strict=True):
+            gaps = [_body_gap(self.finger, self.body, self.q_start, a0[0], b0[0], r1),
+                    _body_gap(self.finger, self.body, self.q_target, a1[0], b1[0], r1)]
             out.append(min(want, self.neighbour_share * min(gaps)))
         return tuple(out)
 
@@ -197,6 +214,8 @@ class SwingPlan:
         clearance, gaps, limits, landing -- holds as it did; its IPOPT point, in the
         NLP's duration-scaled variables, is the same)."""
         f = float(factor)
+        if self.spec.moving is not None:
+            raise ValueError("a swing among moving bodies keeps their times: not scaled")
         return replace(self, spec=replace(self.spec, duration=self.spec.duration * f),
                        t=self.t * f, V=self.V / f, A=self.A / f**2, J=self.J / f**3)
 
@@ -308,13 +327,14 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
         _SOLVERS.move_to_end(key)
         return _SOLVERS[key]
     nq = int(f.nq)
-    P = ca.SX.sym("p", 2 * nq + 31 + 8 * n_others)
+    P = ca.SX.sym("p", 2 * nq + 31 + 8 * n_others * n)
     q_start, q_target = P[0:nq], P[nq:2 * nq]
     o = 2 * nq
     T, clearance, cap_sin, rho = P[o], P[o + 1], P[o + 2], P[o + 3]
     centre, a_start, n0, t0a, t0b = (P[o + 4 + 3 * i:o + 7 + 3 * i] for i in range(5))
     a_land, n1, t1a, t1b = (P[o + 19 + 3 * i:o + 22 + 3 * i] for i in range(4))
-    oth = ca.reshape(P[o + 31:], 8, n_others) if n_others else None
+    # the other bodies at each node 1..n (8 numbers each: a, b, radius, the gap kept)
+    oth = ca.reshape(P[o + 31:], 8, n_others * n) if n_others else None
     h = T / n
     Q, V, A = (ca.SX.sym(s, nq, n + 1) for s in ("Q", "V", "A"))
     Jn = ca.SX.sym("J", nq, n)
@@ -391,7 +411,8 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
             add((dist - clearance) / L, 0.0, np.inf)
         for j in range(n_others):
             assert oth is not None
-            a1, b1, r1, need = oth[0:3, j], oth[3:6, j], oth[6, j], oth[7, j]
+            c = (k - 1) * n_others + j
+            a1, b1, r1, need = oth[0:3, c], oth[3:6, c], oth[6, c], oth[7, c]
             kind = f"the gap to the other fingertip {j + 1}"
             for s in np.linspace(0.0, 1.0, SEGMENT_SAMPLES if capsule else 1):
                 x = a + float(s) * (b - a)
@@ -443,8 +464,11 @@ def _swing_params(spec: SwingSpec) -> FloatArray:
     n1 = n1 / np.linalg.norm(n1)
     R0, p0 = spec.finger.fingertip_pose_pin(spec.q_start)
     cap_sin = float(np.sin(spec.cap_margin / body.r))
-    others = [np.concatenate([a1, b1, [r1, need]]) for (a1, b1, r1), need
-              in zip(spec.others, spec.required_gaps(), strict=True)]
+    n = spec.n_intervals
+    at = spec.others_at(np.linspace(0.0, spec.duration, n + 1)[1:])
+    needs = spec.required_gaps()
+    others = [np.concatenate([a1[k], b1[k], [r1, need]])
+              for k in range(n) for (a1, b1, r1), need in zip(at, needs, strict=True)]
     return np.concatenate([spec.q_start, spec.q_target,
                            [spec.duration, spec.clearance, cap_sin, spec.radius],
                            spec.centre, p0 + R0 @ body.a, n0, *_tangents(n0),

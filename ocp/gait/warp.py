@@ -48,6 +48,15 @@ class RollClock:
     def of(duration: float, speed: float = 1.0) -> RollClock:
         return RollClock(duration, min(ROLL_RAMP, duration / speed / 2.0), speed)
 
+    @staticmethod
+    def lasting(duration: float, length: float) -> RollClock:
+        """The clock of a roll of ``duration`` [s] that lasts ``length`` [s] on the gait's
+        clock (slower or faster than planned; its ramps as :meth:`of`'s)."""
+        if length - ROLL_RAMP >= 2.0 * ROLL_RAMP:  # the full ramps: D / k + ramp
+            return RollClock(duration, ROLL_RAMP, duration / (length - ROLL_RAMP))
+        speed = 1.5 * duration / length  # ramps of half the plateau: 1.5 D / k
+        return RollClock(duration, duration / speed / 2.0, speed)
+
     @property
     def length(self) -> float:
         """The roll's duration on the gait's clock [s]."""

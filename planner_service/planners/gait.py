@@ -111,7 +111,8 @@ def solve_gait(request: ManipulationRequest, problem: ManipulationProblem, plann
                             "clearance": float(g.clearance),
                             "fastest": bool(g.fastest_swings)},
                      hold_time=float(g.hold_time), replace_all=g.replace == "all",
-                     fastest_rolls=bool(g.fastest_rolls), landing=str(g.landing))
+                     fastest_rolls=bool(g.fastest_rolls), landing=str(g.landing),
+                     overlap=bool(g.overlap))
     rate = float(getattr(request, "sample_rate", None) or DEFAULT_GAIT_RATE)
     # the result's samples serve the links' check when they are at least as dense
     smp = gait_samples(gait, problem, gait_times(gait, rate)) if gait.phases else None

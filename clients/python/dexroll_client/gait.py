@@ -66,6 +66,23 @@ class GaitModel(_Request):
                     "1/2, 3/4 and all of roll_step), the one from which it rolls forward "
                     "the farthest: fewer, longer rolls (docs/gait.md)")
 
+    overlap: bool = Field(
+        default=False,
+        description="(with replace 'spent') each spent fingertip re-placed while the "
+                    "others roll the ball by the next step: it is unloaded, swings clear "
+                    "and lands during that roll (the others' bodies and the hand's links "
+                    "moving obstacles of its swing), and is loaded when the ball stops; "
+                    "one per roll, the least-reaching first, at rest as without where no "
+                    "such swing is found (docs/gait.md)")
+
+    @field_validator("overlap")
+    @classmethod
+    def _overlap_needs_spent(cls, value: bool, info: ValidationInfo) -> bool:
+        if value and info.data.get("replace") != "spent":
+            raise ValueError("overlap re-places the spent fingertips during the rolls: it "
+                             "needs replace 'spent'")
+        return value
+
     @field_validator("landing")
     @classmethod
     def _landing_needs_spent(cls, value: str, info: ValidationInfo) -> str:

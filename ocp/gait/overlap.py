@@ -1,0 +1,270 @@
+"""A fingertip re-placed while the others roll the ball (docs/gait.md, "Re-placing while
+the others roll"; issue 40, item 2).
+
+The gait's other re-placements stop the ball: unload, swing, load, with the others
+holding it still. Here the swing is made **during a roll**: the fingertip is unloaded
+(the ball still), the others roll the ball by the next step while it lifts off, swings
+clear and lands, and it is loaded again (the ball still). The pieces:
+
+* **the roll** is the rolling planner's plan of the grasp without the lifted fingertip
+  (:func:`without`: the same problem, its fingers less that one), on its own clock
+  (:class:`~ocp.gait.warp.RollClock`), which starts and ends at rest;
+* **the swing** (:mod:`ocp.gait.swing`) is planned on the same clock, from the roll's
+  start to its end, with the rolling fingertips' bodies and the hand's nearest links as
+  **moving** obstacles (their segments at every node of the swing's grid:
+  :attr:`~ocp.gait.swing.SwingSpec.moving`); it lands when the roll ends, so the ball is
+  at rest at the touch-down;
+* **the holds** around it: the unloading at the roll's start (every fingertip's forces
+  to the others' with this one's zero), the loading at its end (back), as a gait step's
+  (:class:`~ocp.gait.step.GaitStep` with ``during_roll``).
+
+The ball's centre is fixed in a gait's turn (each roll's goal is the centre it started
+at), and a ball turned about its centre fills the same space: the swing's clearance
+from the ball does not depend on how far the roll has turned it. The ball's centre does
+move within the roll's tracking tolerance; the swing keeps its clearance from the ball's
+centre at its landing plus that motion (:data:`CENTRE_DRIFT_TOL`: the roll is refused
+for an overlap when its centre moves farther), and the landing is at the ball's end
+position.
+
+What the certificate checks: the roll's own certificate (its fingertips, forces, cones,
+no slip), the roll's clock (the switches at rest, every joint's rate and acceleration,
+the swinging tip among the others: ``roll<r>_tip_gap``), the swing's own laws with the
+others where they are at each dense sample (``swing_tip_gap_step<i>_<j>``), the ramps'
+holds; the gait's links' clearance covers the swinging finger's links (the whole gait at
+100 Hz: :func:`~ocp.gait.samples.with_link_clearance`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ocp.gait.step import (
+    SWING_OBSTACLES,
+    GaitStep,
+    TorqueLimits,
+    contact_of,
+    deep_forces,
+    grasp_hold,
+)
+from ocp.gait.swing import SwingPlan, SwingSpec, plan_swing
+from ocp.gait.warp import RollClock
+from ocp.geometry.bodies import point_segment_distance, tip_body
+from ocp.spec.grasp import ManipulationProblem
+
+__all__ = ["OVERLAP_SWING", "OverlapRoll", "lift_next", "plan_overlap", "without"]
+
+FloatArray = NDArray[np.float64]
+
+#: The shortest a swing during a roll is tried at first [s] (the swings of the built-in
+#: hand's fingers find no path faster than 0.4-0.56 s within 20 rad/s^2): the roll's clock
+#: is slowed to it when the roll alone is shorter.
+OVERLAP_SWING = 0.45
+#: How many times a swing during a roll is tried, each 1.4 times longer (the roll's clock
+#: slowed with it) when the last was not found.
+OVERLAP_TRIES = 3
+#: How far [m] the ball's centre may move during a roll that carries a swing: the swing
+#: keeps this much more clearance from the ball's centre at the landing.
+CENTRE_DRIFT_TOL = 2e-4
+
+
+def without(template: ManipulationProblem, k: int) -> ManipulationProblem:
+    """The grasp of ``template`` without fingertip ``k``: the roll the others make while it
+    swings. Its links are left to the gait's own check (the roll's would stand the lifted
+    finger at its joints' defaults)."""
+    return replace(template, fingers=tuple(f for i, f in enumerate(template.fingers)
+                                           if i != k), collision=None)
+
+
+def lift_next(spent: list[int], template: ManipulationProblem,
+              q_now: tuple[FloatArray, ...], centre: FloatArray, rho: float,
+              axis: FloatArray, upto: float) -> int | None:
+    """Of the ``spent`` fingertips, the one to re-place during the next roll: the one whose
+    rolled reach about ``axis`` is the least (None when none is spent)."""
+    from ocp.robots.grasp_reach import roll
+    from ocp.robots.turn_reach import rolls
+
+    if not spent:
+        return None
+
+    def reach(k: int) -> float:
+        f = template.fingers[k].finger
+        if not rolls(f):
+            return -math.inf
+        return float(roll(f, q_now[k], centre, rho, axis, 2.0 * upto,
+                          template.pad_margin).reach)
+
+    return min(spent, key=reach)
+
+
+class OverlapRoll:
+    """The roll and the swing made together, once planned (:func:`plan_overlap`): the
+    roll's plan and clock, the gait step (its swing, the holds), the joints after."""
+
+    def __init__(self, sol: Any, clock: RollClock, step: GaitStep,
+                 q_after: tuple[FloatArray, ...]) -> None:
+        self.sol, self.clock, self.step, self.q_after = sol, clock, step, q_after
+
+
+def _moving(template: ManipulationProblem, k: int, sol: Any, clock: RollClock,
+            q_now: tuple[FloatArray, ...], centre: FloatArray, links: list[int] | None,
+            obstacles_at: Any) -> Any:
+    """``moving(t)`` of the swing of fingertip ``k`` during the roll ``sol`` on ``clock``:
+    the rolling fingertips' bodies and the hand's links ``links`` (indices into
+    ``obstacles_at``'s list) at the times ``t``."""
+    keep = [i for i in range(len(template.fingers)) if i != k]
+    nq = [int(template.fingers[i].finger.nq) for i in keep]
+    cut = np.cumsum((0, *nq))
+
+    def joints(t: FloatArray) -> FloatArray:
+        s = clock(np.asarray(t, dtype=float))[0]
+        return np.asarray(sol.joint_trajectory(s, efforts=False).positions, dtype=float)
+
+    def moving(t: Any) -> list[tuple[FloatArray, FloatArray]]:
+        Q = joints(np.atleast_1d(np.asarray(t, dtype=float)))
+        out = []
+        for c, i in enumerate(keep):
+            f = template.fingers[i].finger
+            body = tip_body(f)
+            ends = [body.placed(*f.fingertip_pose_pin(row[cut[c]:cut[c + 1]])) for row in Q]
+            out.append((np.array([e[0] for e in ends]), np.array([e[1] for e in ends])))
+        if links:
+            segs = []
+            for row in Q:
+                qs = list(q_now)
+                for c, i in enumerate(keep):
+                    qs[i] = row[cut[c]:cut[c + 1]]
+                every = obstacles_at(tuple(qs))
+                segs.append([every[j][1] for j in links])
+            for m in range(len(links)):
+                out.append((np.array([sg[m][0] for sg in segs]),
+                            np.array([sg[m][1] for sg in segs])))
+        return out
+
+    return moving
+
+
+def _link_choice(template: ManipulationProblem, k: int, moving_tips: Any, T: float,
+                 centre: FloatArray) -> tuple[list[int], Any, list[str], list[float]]:
+    """The hand's links the swing keeps clear of: the :data:`~ocp.gait.step.
+    SWING_OBSTACLES` nearest the ball over the roll (at its start, middle and end), as
+    (their indices in the obstacles' list, ``obstacles_at(qs)``, names, radii); none
+    without a collision model."""
+    coll = template.collision
+    if coll is None:
+        return [], None, [], []
+    names = [n for f in template.fingers for n in f.finger.joint_names]
+    shape, dims = template.object.shape, template.object.dimensions
+
+    def obstacles_at(qs: tuple[FloatArray, ...]) -> list[Any]:
+        return coll.obstacles(shape, dims, names, np.concatenate(qs), k)
+
+    near: dict[int, float] = {}
+    for qs in moving_tips:
+        for j, (_, (a, b, r)) in enumerate(obstacles_at(qs)):
+            d = float(point_segment_distance(centre, a, b)) - r
+            near[j] = min(near.get(j, math.inf), d)
+    chosen = sorted(near, key=lambda j: near[j])[:SWING_OBSTACLES]
+    first = obstacles_at(moving_tips[0])
+    return chosen, obstacles_at, [first[j][0] for j in chosen], [first[j][1][2] for j in chosen]
+
+
+def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
+                 q_now: tuple[FloatArray, ...], q_land: FloatArray, roll_problem: Any,
+                 warm: Any, speed_of: Any, centre: FloatArray, rho: float,
+                 rotation: FloatArray, load: FloatArray, swing: dict[str, Any] | None,
+                 hold_time: float, limits: TorqueLimits | None, names: tuple[str, ...],
+                 last_swing: SwingPlan | None) -> tuple[OverlapRoll | None, str]:
+    """Plan fingertip ``k``'s re-placement at the joints ``q_land`` during the roll
+    ``roll_problem`` of the others (its problem, :func:`without` ``k``, from the joints
+    ``q_now`` less ``k``'s; ``warm`` its warm start; ``speed_of(sol)`` its clock's speed).
+    (the plan, "") or (None, why not): the others cannot hold the ball, the roll is not
+    certified, its centre moves, or no swing is found on its clock."""
+    fingers = tuple(f.finger for f in template.fingers)
+    nf = len(fingers)
+    allf, rest = list(range(nf)), [i for i in range(nf) if i != k]
+    before = grasp_hold(fingers, q_now, allf, centre, rho, rotation)
+    rest_start = grasp_hold(fingers, q_now, rest, centre, rho, rotation)
+    F_before = deep_forces(fingers, q_now, allf, before, load, rho, limits)
+    F_rest_start = deep_forces(fingers, q_now, rest, rest_start, load, rho, limits)
+    if F_before is None or F_rest_start is None:
+        return None, f"the others cannot hold the ball with {names[k]} lifted"
+    sol = planner.solve(roll_problem, warm, reach_checked=True)
+    if not (sol.ok and sol.certificate.passed):
+        return None, f"the roll without {names[k]} was not certified: {sol.status}"
+    drift = float(np.linalg.norm(np.asarray(sol.object_position)
+                                 - np.asarray(sol.object_position)[-1], axis=1).max())
+    if drift > CENTRE_DRIFT_TOL:
+        return None, (f"the ball's centre moves {drift * 1e3:.2f} mm in the roll without "
+                      f"{names[k]}")
+    end = np.asarray(sol.object_position[-1], dtype=float)
+    clock = RollClock.of(float(sol.duration), speed_of(sol))
+    spec_args = dict(swing or {})
+    spec_args.pop("fastest", None)  # timed by the roll's clock
+    base = float(spec_args.pop("duration", SwingSpec.duration))
+    clearance = float(spec_args.pop("clearance", SwingSpec.clearance)) + drift
+    length = max(clock.length, OVERLAP_SWING if last_swing is None else
+                 min(last_swing.duration, base))
+    _, n_land = contact_of(fingers[k], q_land, end, rho)
+    why = "no swing"
+    for _ in range(OVERLAP_TRIES):
+        clock = RollClock.lasting(float(sol.duration), length)
+        samples = [tuple(_full_rows(sol, clock, t, q_now, k))
+                   for t in (0.0, 0.5 * length, length)]
+        links, obstacles_at, link_names, link_r = _link_choice(template, k, samples,
+                                                               length, end)
+        moving = _moving(template, k, sol, clock, q_now, end, links, obstacles_at)
+        at0 = moving(np.zeros(1))
+        radii = [tip_body(fingers[i]).r for i in rest] + link_r
+        others = tuple((a[0], b[0], r) for (a, b), r in zip(at0, radii, strict=True))
+        spec = SwingSpec(fingers[k], np.asarray(q_now[k], dtype=float),
+                         np.asarray(q_land, dtype=float), n_land, end, rho, others,
+                         duration=length, clearance=clearance, name=names[k],
+                         other_names=tuple([names[i] for i in rest] + link_names),
+                         moving=moving, **spec_args)
+        plan = plan_swing(spec, last_swing if last_swing is not None and len(
+            last_swing.spec.others) == len(others) else None)
+        if plan.ok and limits is not None and limits.rate:
+            over = limits.damping_overrun(k, plan.Q, plan.V)
+            if over > 1.0:  # too fast for the joints' damping: slower, the roll with it
+                length *= over * 1.05
+                why = f"{names[k]}'s swing is faster than its actuators' damping allows"
+                continue
+        if plan.ok:
+            break
+        why = plan.message
+        length *= 1.4
+    else:
+        return None, why
+    q_after = tuple(plan.Q[-1] if i == k else row for i, row in
+                    zip(allf, _full_rows(sol, clock, clock.length, q_now, k), strict=True))
+    rest_end = grasp_hold(fingers, q_after, rest, end, rho, rotation)
+    after = grasp_hold(fingers, q_after, allf, end, rho, rotation)
+    F_rest_end = deep_forces(fingers, q_after, rest, rest_end, load, rho, limits)
+    F_after = deep_forces(fingers, q_after, allf, after, load, rho, limits)
+    if F_rest_end is None or F_after is None:
+        return None, f"the grasp with {names[k]} landed cannot hold the ball"
+    step = GaitStep(k, "solved", "", plan, (before, rest_start, rest_end, after),
+                    (F_before, F_rest_start, F_rest_end, F_after),
+                    (tuple(allf), tuple(rest), tuple(rest), tuple(allf)), hold_time,
+                    hold_time, q_after, during_roll=-1, q_before=tuple(q_now))
+    return OverlapRoll(sol, clock, step, q_after), ""
+
+
+def _full_rows(sol: Any, clock: RollClock, t: float, q_now: tuple[FloatArray, ...],
+               k: int) -> list[FloatArray]:
+    """Every finger's joints at time ``t`` of the roll (the rolling ones' from the plan on
+    ``clock``; fingertip ``k``'s where it was)."""
+    s = clock(np.array([float(t)]))[0]
+    row = np.asarray(sol.joint_trajectory(s, efforts=False).positions, dtype=float)[0]
+    out, at = [], 0
+    for i, q in enumerate(q_now):
+        if i == k:
+            out.append(np.asarray(q, dtype=float))
+            continue
+        out.append(row[at:at + len(q)])
+        at += len(q)
+    return out
