@@ -32,7 +32,8 @@ by side instead (robot time and re-placements are the plans', the same every run
 ``--fast`` with the requests' own gait options and with :data:`FAST`'s (spent
 re-placements, fastest swings and rolls); ``--farthest`` :data:`FAST`'s against
 :data:`FARTHEST`'s (spent fingertips landing where they roll farthest, rolls of up to
-30 deg).
+30 deg); ``--overlap`` :data:`FARTHEST`'s against :data:`OVERLAP`'s (the spent fingertips
+re-placed while the others roll).
 """
 
 from __future__ import annotations
@@ -76,6 +77,8 @@ FAST = {"replace": "spent", "fastest_swings": True, "fastest_rolls": True}
 #: ``--farthest``: FAST with the spent fingertips landing where they roll farthest, and
 #: rolls of up to 30 deg.
 FARTHEST = {**FAST, "landing": "farthest", "roll_step": 0.5236}
+#: ``--overlap``: FARTHEST with the spent fingertips re-placed while the others roll.
+OVERLAP = {**FARTHEST, "overlap": True}
 
 
 def _worker(names: list[str], options: dict[str, Any] | None = None) -> None:
@@ -105,6 +108,7 @@ def _worker(names: list[str], options: dict[str, Any] | None = None) -> None:
             "name": name, "status": res.status.value,
             "certified": bool(res.certificate is not None and res.certificate.passed),
             "rolls": len(gait.rolls), "replacements": len(gait.steps),
+            "during_rolls": len(gait.carried),
             "robot": gait.duration if gait.phases else None,
             "wall": t3 - t0, "grasp": t1 - t0, "swing_build": swings,
             "roll_build": res.stats.build_time, "solve": res.stats.solve_time,
@@ -145,9 +149,11 @@ def _table(sides: dict[str, list[list[dict[str, Any]]]]) -> str:
         for side, runs in sides.items():
             rows = [r for run in runs for r in run if r["name"] == name]
             other = [r["gait"] - r["solve"] - r["roll_build"] for r in rows]
+            during = rows[0].get("during_rolls") or 0
+            carried = f" ({during} during rolls)" if during else ""
             lines.append(
                 f"| {name} | {side} | {rows[0]['status']}, {rows[0]['certified']} | "
-                f"{rows[0]['rolls']}, {rows[0]['replacements']} | "
+                f"{rows[0]['rolls']}, {rows[0]['replacements']}{carried} | "
                 f"{rows[0].get('robot') or float('nan'):.1f} | "
                 f"{_median(rows, 'wall'):.1f} | {_median(rows, 'grasp'):.1f} | "
                 f"{_median(rows, 'swing_build'):.1f} | {_median(rows, 'roll_build'):.1f} | "
@@ -178,6 +184,9 @@ def main() -> None:
                          "side by side (this tree)")
     ap.add_argument("--farthest", action="store_true",
                     help="time FAST's and FARTHEST's gait options side by side (this tree)")
+    ap.add_argument("--overlap", action="store_true",
+                    help="time FARTHEST's and OVERLAP's gait options side by side (this "
+                         "tree)")
     ap.add_argument("--worker", nargs="*", help=argparse.SUPPRESS)
     ap.add_argument("--worker-gait", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -191,6 +200,7 @@ def main() -> None:
         {"all": (ROOT, {"replace": "all"}), "spent": (ROOT, {"replace": "spent"})} \
         if args.replace else {"default": (ROOT, None), "fast": (ROOT, FAST)} if args.fast \
         else {"fast": (ROOT, FAST), "farthest": (ROOT, FARTHEST)} if args.farthest \
+        else {"farthest": (ROOT, FARTHEST), "overlap": (ROOT, OVERLAP)} if args.overlap \
         else {"new": (ROOT, None)} if args.ref is None else \
         {"old": (_worktree(args.ref), None), "new": (ROOT, None)}
     sides: dict[str, list[list[dict[str, Any]]]] = {side: [] for side in runs}

@@ -186,3 +186,10 @@ def _grasp(mu: float, mass: float = 0.05) -> tuple[Any, tuple[Any, ...]]:
                                   tuple(f"fingers[{i}].initial_q" for i in range(4)))
     return ManipulationProblem(object=ball, fingers=tips, duration=1.0, initial_pose=pose,
                                n_intervals=16, forces=ForceSpec(mass=mass), mu=mu), qs
+
+
+def test_overlap_without_spent_re_placements_is_422(live_server: Server) -> None:
+    body = copy.deepcopy(EXAMPLE)
+    body["gait"]["overlap"] = True
+    reason = _fields(_post(live_server, body))["gait.overlap"]
+    assert "needs replace 'spent'" in reason

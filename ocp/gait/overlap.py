@@ -50,12 +50,13 @@ from ocp.gait.step import (
     deep_forces,
     grasp_hold,
 )
-from ocp.gait.swing import SwingPlan, SwingSpec, plan_swing
+from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, SwingPlan, SwingSpec, plan_swing
 from ocp.gait.warp import RollClock
 from ocp.geometry.bodies import point_segment_distance, tip_body
 from ocp.spec.grasp import ManipulationProblem
 
-__all__ = ["OVERLAP_SWING", "OverlapRoll", "lift_next", "plan_overlap", "without"]
+__all__ = ["OVERLAP_HOLD_DEPTH", "OVERLAP_SWING", "OverlapRoll", "hold_depth", "landing_gap",
+           "lift_next", "plan_overlap", "stranded_fingers", "without"]
 
 FloatArray = NDArray[np.float64]
 
@@ -66,17 +67,48 @@ OVERLAP_SWING = 0.45
 #: How many times a swing during a roll is tried, each 1.4 times longer (the roll's clock
 #: slowed with it) when the last was not found.
 OVERLAP_TRIES = 3
+#: The swing's clearance and gaps kept this much more [m] at its NLP's nodes: the others
+#: move between them (2.98 mm against 2.99 mm, 2.69 against 2.70, measured without).
+NODE_MARGIN = 5e-5
 #: How far [m] the ball's centre may move during a roll that carries a swing: the swing
 #: keeps this much more clearance from the ball's centre at the landing.
 CENTRE_DRIFT_TOL = 2e-4
 
 
-def without(template: ManipulationProblem, k: int) -> ManipulationProblem:
+#: The extra cone margin [rad] a roll made while a fingertip swings is planned with, where
+#: the others' hold of the still ball allows it (:func:`hold_depth`; none where it does
+#: not): a roll by fewer fingertips whose forces rode 0.05 rad inside their cones lost the
+#: ball in MuJoCo on a user's hand driven by its own servos (examples/own_hand.xml, its
+#: thumb lifted: docs/gait.md).
+OVERLAP_HOLD_DEPTH = 0.1
+
+
+def without(template: ManipulationProblem, k: int, extra_margin: float = 0.0
+            ) -> ManipulationProblem:
     """The grasp of ``template`` without fingertip ``k``: the roll the others make while it
-    swings. Its links are left to the gait's own check (the roll's would stand the lifted
-    finger at its joints' defaults)."""
+    swings, its forces ``extra_margin`` [rad] deeper inside the cones. Its links are left to
+    the gait's own check (the roll's would stand the lifted finger at its joints'
+    defaults)."""
+    forces = template.forces
+    if forces is not None and extra_margin > 0.0:
+        forces = replace(forces, cone_margin=forces.cone_margin + extra_margin)
     return replace(template, fingers=tuple(f for i, f in enumerate(template.fingers)
-                                           if i != k), collision=None)
+                                           if i != k), collision=None, forces=forces)
+
+
+def hold_depth(template: ManipulationProblem, qs: tuple[FloatArray, ...], k: int,
+               centre: FloatArray, rho: float, rotation: FloatArray, load: FloatArray
+               ) -> float:
+    """How much [rad] the friction cones can be narrowed with the others still holding the
+    still ball without fingertip ``k`` (:func:`~ocp.gait.hold.deep_hold_forces`; -1 when
+    they cannot hold it)."""
+    from ocp.gait.hold import deep_hold_forces
+
+    fingers = tuple(f.finger for f in template.fingers)
+    rest = [i for i in range(len(fingers)) if i != k]
+    F, depth = deep_hold_forces(grasp_hold(fingers, qs, rest, centre, rho, rotation), load,
+                                rho)
+    return -1.0 if F is None else float(depth)
 
 
 def lift_next(spent: list[int], template: ManipulationProblem,
@@ -224,9 +256,15 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                          np.asarray(q_land, dtype=float), n_land, end, rho, others,
                          duration=length, clearance=clearance, name=names[k],
                          other_names=tuple([names[i] for i in rest] + link_names),
-                         moving=moving, **spec_args)
+                         moving=moving, node_margin=NODE_MARGIN, **spec_args)
         plan = plan_swing(spec, last_swing if last_swing is not None and len(
             last_swing.spec.others) == len(others) else None)
+        # the neighbours' gap narrowed as a swing at rest narrows it (replace_finger)
+        for narrow in ({"tip_gap": MIN_TIP_GAP},
+                       {"tip_gap": MIN_TIP_GAP, "neighbour_share": NARROW_SHARE}):
+            if plan.status != "infeasible":
+                break
+            plan = plan_swing(replace(spec, **narrow))  # type: ignore[arg-type]
         if plan.ok and limits is not None and limits.rate:
             over = limits.damping_overrun(k, plan.Q, plan.V)
             if over > 1.0:  # too fast for the joints' damping: slower, the roll with it
@@ -268,3 +306,52 @@ def _full_rows(sol: Any, clock: RollClock, t: float, q_now: tuple[FloatArray, ..
         out.append(row[at:at + len(q)])
         at += len(q)
     return out
+
+
+def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, ...],
+                     lands: tuple[FloatArray, ...], centre: FloatArray, rho: float,
+                     which: list[int], plan: Any, load: FloatArray,
+                     limits: TorqueLimits | None, obstacles: Any,
+                     swing: dict[str, Any] | None) -> list[int]:
+    """Of the fingertips ``which``, those that, with every finger at the joints ``q_after``
+    and the ball still, would find no swing to their landing joints ``lands`` (the
+    re-placement at rest a gait falls back to: :func:`~ocp.gait.step.replace_finger`,
+    with the hand's links; each warm-started from its last swing in ``plan``). A fingertip
+    rolled too far from its landing finds none, and a gait that leaves one there cannot
+    go on (measured about -x and +y: docs/gait.md). ``load``, ``limits``, ``obstacles``,
+    ``swing``: the gait's (:func:`~ocp.gait.step.replace_finger`'s arguments)."""
+    from ocp.gait.step import replace_finger
+
+    fingers = tuple(f.finger for f in template.fingers)
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
+    out = []
+    for j in which:
+        if np.abs(np.asarray(q_after[j]) - np.asarray(lands[j])).max() < 1e-9:
+            continue  # where it lands
+        last = next((st.swing for st in reversed(plan.steps) if st.finger == j
+                     and st.swing is not None and st.swing.spec.moving is None), None)
+        _, n_land = contact_of(fingers[j], lands[j], centre, rho)
+        gs = replace_finger(fingers, q_after, j, n_land, lands[j], centre, rho, np.eye(3),
+                            load, swing, 0.2, last, names, limits, obstacles)
+        if gs.swing is not None and not gs.ok:
+            out.append(j)
+    return out
+
+
+def landing_gap(template: ManipulationProblem, q_after: tuple[FloatArray, ...], k: int
+                ) -> tuple[float, int]:
+    """(the least distance [m] from fingertip ``k``'s body to the others', the nearest)
+    with every finger at the joints ``q_after`` (``k`` landed): the others rolled
+    meanwhile, and may have come into where it lands."""
+    from ocp.geometry.bodies import segments_distance
+
+    fingers = [f.finger for f in template.fingers]
+    placed = []
+    for f, q in zip(fingers, q_after, strict=True):
+        body = tip_body(f)
+        a, b = body.placed(*f.fingertip_pose_pin(np.asarray(q, dtype=float)))
+        placed.append((a, b, body.r))
+    a0, b0, r0 = placed[k]
+    return min(((float(segments_distance(a0[None], b0[None], a[None], b[None])[0]) - r0 - r,
+                 i) for i, (a, b, r) in enumerate(placed) if i != k),
+               default=(math.inf, -1))

@@ -415,9 +415,12 @@ def _clock_torques(plan: GaitPlan, r: int, template: ManipulationProblem, t0: fl
 #: How far [rad or m] a roll's first joints may be from the joints the phase before it
 #: ended at: the contact coordinates a roll starts from close the tips' nanometre gaps
 #: first (``ocp.spec.grasp.contact_from_joints``), moving the joints by nanoradians
-#: (4e-9 measured). The first roll has no phase before it: it starts where the
-#: request's grasp is once its gaps (up to 2 mm) are closed.
-SWITCH_POSITION_TOL = 1e-7
+#: (4e-9 measured between rolls separated by re-placements; a roll that starts where the
+#: last one ended, its tips inside the ball by up to 13 nm, the rolling plan's contact rows'
+#: accuracy, moves them by up to 1.02e-7 rad: 90 deg about -x with ``overlap``). The first
+#: roll has no phase before it: it starts where the request's grasp is once its gaps (up
+#: to 2 mm) are closed.
+SWITCH_POSITION_TOL = 1e-6
 #: Every how many of a roll's clock samples its fingertips' gaps are measured (40 a
 #: second), and how far two tips' bodies may overlap [m] before the check fails.
 TIP_GAP_STRIDE = 5
@@ -746,22 +749,44 @@ def _replace_spent(plan: GaitPlan, checks: list[Check], template: ManipulationPr
 
 
 def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
-                  planner: Any, k: int, q_now: tuple[FloatArray, ...], q_land: FloatArray,
+                  planner: Any, k: int, q_now: tuple[FloatArray, ...],
                   pose: ObjectPose, R0: FloatArray, ax: FloatArray, done: float, step: float,
                   seconds_per_radian: float, t: float, load: FloatArray,
-                  swing: dict[str, Any] | None, hold_time: float, fastest_rolls: bool
-                  ) -> tuple[tuple[FloatArray, ...], float, float, ObjectPose] | str:
-    """Fingertip ``k`` re-placed at the joints ``q_land`` while the others roll the ball by
+                  swing: dict[str, Any] | None, hold_time: float, fastest_rolls: bool,
+                  handover: int | None, lands: tuple[FloatArray, ...], never_lifted: set[str],
+                  switch: bool = True
+                  ) -> tuple[tuple[FloatArray, ...], float, float, ObjectPose] | str \
+        | tuple[str, int]:
+    """Fingertip ``k`` re-placed at its landing joints (``lands[k]``) while the others roll
+    the ball by
     up to ``step`` [rad] about ``ax`` (:mod:`ocp.gait.overlap`): the roll's length cut to
     the others' rolled reach and gaps as every roll's, its plan, the swing on its clock,
     the holds around; its phases (unload, the roll with ``k`` lifted, load), plan, step
-    and checks added to ``plan`` and ``checks``. (the joints after, the time, the turn
-    made, the pose) or why not (``plan`` and ``checks`` as they were)."""
-    from ocp.gait.overlap import plan_overlap, without
+    and checks added to ``plan`` and ``checks`` (but the step's own: :func:`_step_checks`,
+    once its loading is known). ``handover``: the step before, re-placed during the roll
+    before and not yet loaded (the plan's last phase its loading): its loading and this
+    step's unloading become one ramp (:attr:`~ocp.gait.step.GaitStep.landing`). (the
+    joints after, the time, the turn made, the pose) or why not (``plan`` and ``checks``
+    as they were). A roll after which another fingertip that can be lifted
+    (not in ``never_lifted``) would find no swing to its landing (:func:`~ocp.gait.overlap.
+    stranded_fingers`) is halved, up to :data:`MAX_ROLL_RETRIES` times; with ``switch``,
+    (why, that fingertip) is returned at once instead: it is to be re-placed first."""
+    from ocp.gait.overlap import (
+        OVERLAP_HOLD_DEPTH,
+        hold_depth,
+        landing_gap,
+        plan_overlap,
+        stranded_fingers,
+        without,
+    )
 
     centre = np.asarray(pose.position, dtype=float)
     rho = float(template.object.dimensions[0])
-    sub = without(template, k)
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
+    depth = hold_depth(template, q_now, k, centre, rho, pose.rotation, load)
+    if depth < 0.0:
+        return f"the others cannot hold the ball with {names[k]!r} lifted"
+    sub = without(template, k, min(depth, OVERLAP_HOLD_DEPTH))
     q_sub = tuple(q for i, q in enumerate(q_now) if i != k)
     ahead = _roll_ahead(sub, q_sub, centre, rho, ax, step)
     if ahead.why and ahead.reach < step - 1e-6:
@@ -785,18 +810,56 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
                 if last.stats is not None and last.stats.n_intervals > prob.n_intervals:
                     prob = prob.with_intervals(last.stats.n_intervals)
             break
-    names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
     nq_sub = tuple(int(f.finger.nq) for f in sub.fingers)
     last_swing = next((st.swing for st in reversed(plan.steps) if st.finger == k), None)
-    got, why = plan_overlap(
-        template, planner, k, q_now, q_land, prob, warm,
-        lambda sol: roll_speed(sol, sub, nq_sub) if fastest_rolls else 1.0, centre, rho,
-        pose.rotation, load, swing, hold_time, torque_limits(template), names, last_swing)
-    if got is None:
+    for _ in range(MAX_ROLL_RETRIES + 1):
+        got, why = plan_overlap(
+            template, planner, k, q_now, lands[k], prob, warm,
+            lambda sol: roll_speed(sol, sub, nq_sub) if fastest_rolls else 1.0, centre, rho,
+            pose.rotation, load, swing, hold_time, torque_limits(template), names,
+            last_swing)
+        if got is None:
+            return why
+        # the landing clear of the others where they rolled to
+        apart, near = landing_gap(template, got.q_after, k)
+        if apart < ROLL_TIP_GAP:
+            why = (f"finger {names[k]!r}'s landing is {apart * 1e3:.2f} mm from fingertip "
+                   f"{names[near]!r} after {math.degrees(step):.1f} deg")
+            if switch and names[near] not in never_lifted:  # that one is re-placed first
+                return why, near
+        else:
+            # every other fingertip that can be lifted must still find a swing to its
+            # landing after this roll (one rolled too far from it finds none)
+            stranded = stranded_fingers(
+                template, got.q_after, lands, centre, rho,
+                [j for j in range(len(q_now)) if j != k and names[j] not in never_lifted],
+                plan, load, torque_limits(template), swing_obstacles(template), swing)
+            if not stranded:
+                break
+            why = (f"finger {names[stranded[0]]!r} would find no swing to its landing "
+                   f"after {math.degrees(step):.1f} deg")
+            if switch:  # that one is re-placed first
+                return why, stranded[0]
+        step /= 2.0
+        if step < MIN_ROLL:
+            return why
+        target = axis_angle_rotation(ax, done + step) @ R0
+        dur = max(1.0, seconds_per_radian * step)
+        prob = _roll_problem(sub, q_sub, pose, target, centre, dur)
+        warm = None
+    else:
         return why
+    assert got is not None
     r, i = len(plan.rolls), len(plan.steps)
     sol, clock = got.sol, got.clock
     step_ = replace(got.step, during_roll=r)
+    if handover is not None:  # one ramp: the step before's loading, this one's unloading
+        prev = plan.steps[handover]
+        assert plan.phases[-1].kind == "load" and plan.phases[-1].index == handover
+        t = plan.phases.pop().start
+        plan.steps[handover] = replace(prev, load_time=0.0)
+        F0 = np.insert(prev.forces[-2], prev.finger, 0.0, axis=0)
+        step_ = replace(step_, landing=prev.finger, forces=(F0, *step_.forces[1:]))
     plan.rolls.append(sol)
     plan.frames.append(pose.rotation)
     plan.clocks.append(clock)
@@ -808,8 +871,6 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
     plan.phases += [GaitPhase("unload", t, t1, (True,) * nf, k, i),
                     GaitPhase("roll", t1, t2, tuple(j != k for j in range(nf)), k, r),
                     GaitPhase("load", t2, t2 + hold_time, (True,) * nf, k, i)]
-    assert template.forces is not None
-    checks += step_.checks(f"step{i}", t, load, template.forces.min_normal_force)
     checks += [replace(c, name=f"roll{r}_{c.name}",
                        time=None if c.time is None else t1 + clock.tau_of(c.time))
                for c in sol.certificate.checks]
@@ -817,6 +878,15 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
     end = plan.rotation(r, sol.object_rotation[-1])
     pose = ObjectPose(tuple(quaternion_wxyz(end)), tuple(sol.object_position[-1]))
     return got.q_after, t2 + hold_time, done + step, pose
+
+
+def _step_checks(plan: GaitPlan, i: int, load: FloatArray, template: ManipulationProblem
+                 ) -> list[Check]:
+    """Gait step ``i``'s checks (:meth:`~ocp.gait.step.GaitStep.checks`) from its
+    unloading's start."""
+    assert template.forces is not None
+    t0 = next(p.start for p in plan.phases if p.kind == "unload" and p.index == i)
+    return plan.steps[i].checks(f"step{i}", t0, load, template.forces.min_normal_force)
 
 
 def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, angle: float,
@@ -914,7 +984,16 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         prob = _roll_problem(template, q_now, pose, target, centre, dur)
         # the last roll, in its own start frame, is this one's warm start, primal-dual
         # point included: the grasp recurs, so it is (nearly) this very problem's optimum
-        warm = plan.rolls[-1] if plan.rolls and plan.rolls[-1].ok else None
+        # (the last roll of every fingertip: one made while a fingertip swung is another
+        # grasp's, :mod:`ocp.gait.overlap`)
+        last_all = next((r for r in range(len(plan.rolls) - 1, -1, -1)
+                         if r not in plan.carried), None)
+        warm = plan.rolls[last_all] if last_all is not None and plan.rolls[last_all].ok \
+            else None
+        if warm is not None and last_all != len(plan.rolls) - 1 and float(np.abs(
+                warm.joint_trajectory(np.zeros(1), efforts=False).positions[0]
+                - np.concatenate(q_now)).max()) > RECUR_TOL:
+            warm = None
         if warm is not None and not replace_all and roll_starts and max(
                 float(np.abs(a - b).max()) for a, b in zip(roll_starts[-1], q_now,
                                                            strict=True)) > RECUR_TOL:
@@ -968,15 +1047,26 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 k = lift_next(spent_fingers(template, q_now, c, rho, ax,
                                             min(cap, angle - done), never_lifted),
                               template, q_now, c, rho, ax, min(cap, angle - done))
+                waiting = None  # the last step, its checks waiting for its loading
+                switched = False  # whether k is a fingertip another's roll would strand
                 while k is not None and done < angle - 1e-12 \
                         and len(plan.rolls) < max_rolls:
-                    res = _overlap_roll(plan, checks, template, planner, k, q_now, q_land[k],
-                                        pose, R0, ax, done, min(cap, angle - done),
+                    res = _overlap_roll(plan, checks, template, planner, k, q_now, pose, R0,
+                                        ax, done, min(cap, angle - done),
                                         seconds_per_radian, t, load, swing, hold_time,
-                                        fastest_rolls)
+                                        fastest_rolls, waiting, q_land, never_lifted,
+                                        not switched)
+                    if isinstance(res, tuple) and isinstance(res[0], str):
+                        plan.overlap_misses.append(res[0])
+                        k, switched = int(res[1]), True  # the stranded one first
+                        continue
                     if isinstance(res, str):
                         plan.overlap_misses.append(res)
                         break
+                    switched = False
+                    if waiting is not None:  # loaded while the next one is unloaded
+                        checks += _step_checks(plan, waiting, load, template)
+                    waiting = len(plan.steps) - 1
                     q_start = q_now
                     q_now, t, done, pose = res
                     if done >= angle - 1e-12:
@@ -985,6 +1075,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                     k = lift_next(spent_fingers(template, q_now, c, rho, ax,
                                                 min(cap, angle - done), never_lifted),
                                   template, q_now, c, rho, ax, min(cap, angle - done))
+                if waiting is not None:  # loaded by itself
+                    checks += _step_checks(plan, waiting, load, template)
                 if done >= angle - 1e-12:
                     break
                 if k is None or len(plan.rolls) >= max_rolls:

@@ -142,6 +142,8 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
         else:
             force[rows] = np.array([step.ramp_forces(ph.kind, float(x)) for x in s])
             active[rows, k] = np.maximum(1.0 - s if ph.kind == "unload" else s, TRANSITION)
+            if ph.kind == "unload" and step.landing is not None:  # loaded meanwhile
+                active[rows, step.landing] = np.maximum(s, TRANSITION)
     # touching: a switch's time belongs to the phase it starts (the last time to the last
     # phase): a swing's lift-off instant is the swing's, its landing the load's
     for i, t in enumerate(ts):

@@ -89,6 +89,11 @@ class GaitStep:
     #: every finger's joints before the step (None: those after it but the re-placed
     #: finger's, where its swing began: the others did not move)
     q_before: tuple[FloatArray, ...] | None = None
+    #: the fingertip re-placed by the step before, loaded during this one's unloading (a
+    #: hand-over: one ramp from the forces with that one lifted to those with this one
+    #: lifted, the ball still; the step before then has no loading of its own,
+    #: ``load_time`` 0); None: every fingertip is loaded when this one's unloading starts
+    landing: int | None = None
 
     @property
     def ok(self) -> bool:
@@ -129,11 +134,13 @@ class GaitStep:
         t_load = ts_swing + self.swing.duration
         for name, hold, start, dur in (("unload", self.holds[0], t0, self.unload),
                                        ("load", self.holds[-1], t_load, self.load_time)):
-            for s in np.linspace(0.0, 1.0, RAMP_SAMPLES):
+            for s in (np.linspace(0.0, 1.0, RAMP_SAMPLES) if dur > 0.0 else ()):
                 F = self.ramp_forces(name, float(s))
                 share = (1 - s) if name == "unload" else s
                 fmin = np.full(n, min_normal)
                 fmin[k] = share * min_normal
+                if name == "unload" and self.landing is not None:  # handed over
+                    fmin[self.which[0].index(self.landing)] = s * min_normal
                 out += hold_checks(hold, F, load, fmin, f"{name}_{label}",
                                    float(start + s * dur))
             edge = self.ramp_forces(name, 1.0 if name == "unload" else 0.0)[k]
