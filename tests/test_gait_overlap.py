@@ -40,41 +40,41 @@ def test_a_swing_among_still_bodies_given_as_moving_is_the_same_swing() -> None:
 
 
 def test_a_body_that_moves_into_a_still_swings_path_is_avoided_when_known() -> None:
-    """A neighbour's tip that moves, during the swing, to where the swing planned among
-    still bodies passes: that swing fails its gap check against the moving one (the
-    certificate samples the others where they are at each time); the swing planned
-    knowing the motion keeps the gap."""
+    """A neighbour's tip that is, in the middle sixth of the swing (between two of its
+    nodes), where the swing planned among still bodies passes then (and far away before
+    and after): that swing fails its
+    gap check among the moving bodies (the certificate samples the others where they are
+    at each time); the swing planned knowing the motion keeps the gap (it passes there at
+    another time), and every other check too."""
     _, spec = stored_swing("gait_narrow_swing.json")
     spec = replace(spec, tip_gap=MIN_TIP_GAP)  # (its neighbour is 1.8 mm away)
     still = plan_swing(spec)
     assert still.ok, still.message
-    # the first other tip carried to the swing's own path at its middle, and back
-    f = spec.finger
     T = still.duration
-    body = spec.body
-    R, p = f.fingertip_pose_pin(still.sample(0.5 * T)[0][0])
-    mid = p + R @ body.a
-    a0, b0, r0 = spec.others[0]
-    up = (mid - spec.centre) / np.linalg.norm(mid - spec.centre) * 0.012  # 12 mm outward
-    target = mid + up
+    R, p = spec.finger.fingertip_pose_pin(still.sample(0.5 * T)[0][0])
+    there = p + R @ spec.body.a  # the still swing's cap centre at T / 2
+    far = spec.centre + np.array([0.0, 0.0, 0.5])
 
     def moving(t: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        w = np.sin(np.pi * np.clip(t / T, 0.0, 1.0))[:, None] ** 2  # there at T/2
-        out = [(a0 + w * (target - a0), b0 + w * (target - a0))]
-        return out + [(np.tile(a, (t.size, 1)), np.tile(b, (t.size, 1)))
-                      for a, b, _ in spec.others[1:]]
+        on = (np.abs(t - 0.5 * T) <= T / 12 + 1e-12)[:, None]  # nodes 10-14 of 24
+        at = np.where(on, there, far)
+        return [(at, at)] + [(np.tile(a, (t.size, 1)), np.tile(b, (t.size, 1)))
+                             for a, b, _ in spec.others[1:]]
 
-    aware = replace(spec, moving=moving)
+    aware = replace(spec, moving=moving, node_margin=5e-5)  # (as ocp.gait.overlap's)
     blind = replace(still, spec=aware)  # the still swing, checked among the moving bodies
     gaps = {c.name: c for c in swing_checks(blind, "s")}
-    assert not gaps["swing_tip_gap_s_0"].passed
+    assert not gaps["swing_tip_gap_s_0"].passed and gaps["swing_tip_gap_s_0"].value < 0
     found = plan_swing(aware)
-    if found.ok:  # it goes around (or waits): every check passes among the moving bodies
-        bad = [c.failure for c in swing_checks(found, "s") if not c.passed]
-        assert not bad, bad
-    else:  # or it names the moving neighbour
-        assert "gap to the other fingertip 1" in found.message or "gap" in found.message
+    assert found.ok, found.message
+    checks = {c.name: c for c in swing_checks(found, "s")}
+    bad = [c.failure for n, c in checks.items() if not c.passed and n != "swing_tip_gap_s_0"]
+    assert not bad, bad
+    # the gap is kept at the NLP's nodes, and at the points of the capsule's segment the
+    # rows sample (5): a neighbour that appears beside it at once comes 0.03 mm nearer
+    # than the rows see (measured); far from the blind swing's overlap
+    assert checks["swing_tip_gap_s_0"].value > MIN_TIP_GAP - 1e-4
 
 
 @pytest.mark.slow
@@ -85,12 +85,12 @@ def test_a_gait_re_placing_during_rolls_is_certified_shorter_and_executes() -> N
     (15.3-24.5 s over the eight turns, docs/gait.md); in the samples the lifted fingertip
     touches nothing and carries no force during its roll, every joint is continuous at
     every switch; executed in MuJoCo."""
+    from ocp.gait.samples import gait_samples, gait_times
     from planner_service.execution import simulate_result
     from planner_service.planners import REQUEST
     from planner_service.planners.cache import FingerCache
     from planner_service.planners.gait import solve_gait
     from planner_service.planners.manipulation import manipulation_problem
-    from ocp.gait.samples import gait_samples, gait_times
 
     body = json.loads((ROOT / "examples" / "allegro_turn_90.json").read_text())
     body["gait"].update(replace="spent", fastest_swings=True, fastest_rolls=True,

@@ -714,7 +714,8 @@ def manipulation_summary(result: ManipulationResult) -> str:
                      + ("" if certified else " (the last iterate's, not a plan's)"))
     gt = result.gait
     if gt is not None:
-        moves = ", ".join(p.lifted_finger or "" for p in gt.phases if p.kind == "swing")
+        moves = ", ".join(p.lifted_finger or "" for p in gt.phases  # (at rest, or while
+                          if p.kind in ("swing", "roll") and p.lifted_finger)  # rolling)
         lines.append(f"gait         {mark}turned {math.degrees(gt.turned):.1f} deg in {gt.rolls} "
                      f"roll(s) and {gt.replacements} re-placement(s) ({moves or 'none'}); "
                      f"{gt.phases[-1].end if gt.phases else 0.0:.2f} s, planned in "

@@ -104,14 +104,20 @@ class GaitPhaseModel(_Response):
     """One phase of a gait."""
 
     kind: Literal["roll", "unload", "swing", "load"] = Field(
-        description="roll: every fingertip rolls the ball; unload: the forces move off the "
-                    "fingertip about to lift; swing: it moves clear and lands; load: back")
+        description="roll: every fingertip rolls the ball (with overlap, all but "
+                    "lifted_finger, which swings meanwhile); unload: the forces move off the "
+                    "fingertip about to lift (and onto the one re-placed before, when it "
+                    "follows a roll with a swing); swing: it moves clear and lands; load: "
+                    "back")
     start: float = Field(description="[s] from the plan's start")
     end: float = Field(description="[s]")
     touching: list[bool] = Field(description="per finger (the request's order), whether "
                                              "its tip touches the ball")
     lifted_finger: str | None = Field(default=None, description="the finger re-placed "
-                                                                "(null in a roll)")
+                                                                "(in a roll: the one that "
+                                                                "swings while the others "
+                                                                "roll, with overlap; else "
+                                                                "null)")
 
 
 Rows = list[list[float]]

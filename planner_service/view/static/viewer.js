@@ -277,7 +277,8 @@
       g.fillStyle = PHASE_FILL[p.kind] || "#f1f3f5";
       g.fillRect(a, 0, b - a, HEAD - 2);
       g.fillStyle = "#1d232f";
-      const name = p.kind === "roll" ? "roll" : p.kind === "swing" ? p.lifted + " lifted" : "";
+      const name = p.kind === "roll" ? (p.lifted ? "roll, " + p.lifted + " swings" : "roll")
+        : p.kind === "swing" ? p.lifted + " lifted" : "";
       if (name && g.measureText(name).width < b - a - 4) g.fillText(name, a + 2, HEAD / 2);
     }
     data.contacts.forEach((c, i) => {
@@ -362,7 +363,8 @@
     el("lifted").textContent = lifted.length ? "lifted: " + lifted.join(", ") : "";
     const ph = phaseAt(now);
     el("phase").textContent = !ph ? "" : ph.lifted ?
-      ph.kind + " (" + ph.lifted + (ph.kind === "swing" ? " lifted clear)" : ")") : ph.kind;
+      ph.kind + " (" + ph.lifted + (ph.kind === "swing" ? " lifted clear)" :
+        ph.kind === "roll" ? " swinging)" : ")") : ph.kind;
     drawSchedule();
     for (const tr of traces) tr.geometry.setDrawRange(0, k + 1);
     for (const tip of tips) place(tip.group, tip.pose, k, a);
