@@ -218,10 +218,8 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
     fingers = tuple(f.finger for f in template.fingers)
     nf = len(fingers)
     allf, rest = list(range(nf)), [i for i in range(nf) if i != k]
-    before = grasp_hold(fingers, q_now, allf, centre, rho, rotation)
-    rest_start = grasp_hold(fingers, q_now, rest, centre, rho, rotation)
-    F_before = deep_forces(fingers, q_now, allf, before, load, rho, limits)
-    F_rest_start = deep_forces(fingers, q_now, rest, rest_start, load, rho, limits)
+    before, rest_start, F_before, F_rest_start = _holds(fingers, q_now, k, centre, rho,
+                                                         rotation, load, limits)
     if F_before is None or F_rest_start is None:
         return None, f"the others cannot hold the ball with {names[k]} lifted"
     sol = planner.solve(roll_problem, warm, reach_checked=True)
@@ -279,10 +277,8 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
         return None, why
     q_after = tuple(plan.Q[-1] if i == k else row for i, row in
                     zip(allf, _full_rows(sol, clock, clock.length, q_now, k), strict=True))
-    rest_end = grasp_hold(fingers, q_after, rest, end, rho, rotation)
-    after = grasp_hold(fingers, q_after, allf, end, rho, rotation)
-    F_rest_end = deep_forces(fingers, q_after, rest, rest_end, load, rho, limits)
-    F_after = deep_forces(fingers, q_after, allf, after, load, rho, limits)
+    after, rest_end, F_after, F_rest_end = _holds(fingers, q_after, k, end, rho, rotation,
+                                                   load, limits)
     if F_rest_end is None or F_after is None:
         return None, f"the grasp with {names[k]} landed cannot hold the ball"
     step = GaitStep(k, "solved", "", plan, (before, rest_start, rest_end, after),
@@ -290,6 +286,20 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                     (tuple(allf), tuple(rest), tuple(rest), tuple(allf)), hold_time,
                     hold_time, q_after, during_roll=-1, q_before=tuple(q_now))
     return OverlapRoll(sol, clock, step, q_after), ""
+
+
+def _holds(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
+           centre: FloatArray, rho: float, rotation: FloatArray, load: FloatArray,
+           limits: TorqueLimits | None) -> tuple[Any, Any, Any, Any]:
+    """The still ball held by every fingertip and by all but ``k`` at the joints ``qs``:
+    (both holds, their deep forces within the actuators, :func:`~ocp.gait.step.
+    deep_forces`; None where they cannot hold it)."""
+    every = list(range(len(fingers)))
+    rest = [i for i in every if i != k]
+    holds = [grasp_hold(fingers, qs, w, centre, rho, rotation) for w in (every, rest)]
+    forces = [deep_forces(fingers, qs, w, h, load, rho, limits)
+              for w, h in zip((every, rest), holds, strict=True)]
+    return holds[0], holds[1], forces[0], forces[1]
 
 
 def _full_rows(sol: Any, clock: RollClock, t: float, q_now: tuple[FloatArray, ...],
