@@ -209,27 +209,29 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                  warm: Any, speed_of: Any, centre: FloatArray, rho: float,
                  rotation: FloatArray, load: FloatArray, swing: dict[str, Any] | None,
                  hold_time: float, limits: TorqueLimits | None, names: tuple[str, ...],
-                 last_swing: SwingPlan | None) -> tuple[OverlapRoll | None, str]:
+                 last_swing: SwingPlan | None
+                 ) -> tuple[OverlapRoll | None, str, int | None]:
     """Plan fingertip ``k``'s re-placement at the joints ``q_land`` during the roll
     ``roll_problem`` of the others (its problem, :func:`without` ``k``, from the joints
     ``q_now`` less ``k``'s; ``warm`` its warm start; ``speed_of(sol)`` its clock's speed).
-    (the plan, "") or (None, why not): the others cannot hold the ball, the roll is not
-    certified, its centre moves, or no swing is found on its clock."""
+    (the plan, "", None) or (None, why not, the rolling fingertip in the swing's way when
+    that is why): the others cannot hold the ball, the roll is not certified, its centre
+    moves, or no swing is found on its clock."""
     fingers = tuple(f.finger for f in template.fingers)
     nf = len(fingers)
     allf, rest = list(range(nf)), [i for i in range(nf) if i != k]
     before, rest_start, F_before, F_rest_start = _holds(fingers, q_now, k, centre, rho,
                                                          rotation, load, limits)
     if F_before is None or F_rest_start is None:
-        return None, f"the others cannot hold the ball with {names[k]} lifted"
+        return None, f"the others cannot hold the ball with {names[k]} lifted", None
     sol = planner.solve(roll_problem, warm, reach_checked=True)
     if not (sol.ok and sol.certificate.passed):
-        return None, f"the roll without {names[k]} was not certified: {sol.status}"
+        return None, f"the roll without {names[k]} was not certified: {sol.status}", None
     drift = float(np.linalg.norm(np.asarray(sol.object_position)
                                  - np.asarray(sol.object_position)[-1], axis=1).max())
     if drift > CENTRE_DRIFT_TOL:
         return None, (f"the ball's centre moves {drift * 1e3:.2f} mm in the roll without "
-                      f"{names[k]}")
+                      f"{names[k]}"), None
     end = np.asarray(sol.object_position[-1], dtype=float)
     clock = RollClock.of(float(sol.duration), speed_of(sol))
     spec_args = dict(swing or {})
@@ -240,6 +242,7 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                  min(last_swing.duration, base))
     _, n_land = contact_of(fingers[k], q_land, end, rho)
     why = "no swing"
+    blocker = None
     for _ in range(OVERLAP_TRIES):
         clock = RollClock.lasting(float(sol.duration), length)
         samples = [tuple(_full_rows(sol, clock, t, q_now, k))
@@ -272,20 +275,23 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
         if plan.ok:
             break
         why = plan.message
+        if plan.blocked_by is not None and plan.blocked_by < len(rest):
+            # a rolling fingertip in its way: named, for it to be re-placed first
+            blocker = rest[plan.blocked_by]
         length *= 1.4
     else:
-        return None, why
+        return None, why, blocker
     q_after = tuple(plan.Q[-1] if i == k else row for i, row in
                     zip(allf, _full_rows(sol, clock, clock.length, q_now, k), strict=True))
     after, rest_end, F_after, F_rest_end = _holds(fingers, q_after, k, end, rho, rotation,
                                                    load, limits)
     if F_rest_end is None or F_after is None:
-        return None, f"the grasp with {names[k]} landed cannot hold the ball"
+        return None, f"the grasp with {names[k]} landed cannot hold the ball", None
     step = GaitStep(k, "solved", "", plan, (before, rest_start, rest_end, after),
                     (F_before, F_rest_start, F_rest_end, F_after),
                     (tuple(allf), tuple(rest), tuple(rest), tuple(allf)), hold_time,
                     hold_time, q_after, during_roll=-1, q_before=tuple(q_now))
-    return OverlapRoll(sol, clock, step, q_after), ""
+    return OverlapRoll(sol, clock, step, q_after), "", None
 
 
 def _holds(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,

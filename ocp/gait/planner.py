@@ -813,12 +813,14 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
     nq_sub = tuple(int(f.finger.nq) for f in sub.fingers)
     last_swing = next((st.swing for st in reversed(plan.steps) if st.finger == k), None)
     for _ in range(MAX_ROLL_RETRIES + 1):
-        got, why = plan_overlap(
+        got, why, blocker = plan_overlap(
             template, planner, k, q_now, lands[k], prob, warm,
             lambda sol: roll_speed(sol, sub, nq_sub) if fastest_rolls else 1.0, centre, rho,
             pose.rotation, load, swing, hold_time, torque_limits(template), names,
             last_swing)
         if got is None:
+            if switch and blocker is not None and names[blocker] not in never_lifted:
+                return why, blocker  # the fingertip in its way is re-placed first
             return why
         # the landing clear of the others where they rolled to
         apart, near = landing_gap(template, got.q_after, k)

@@ -193,6 +193,9 @@ class SwingPlan:
     #: the warm start of the next swing of this finger (:func:`plan_swing`)
     point: tuple[FloatArray, FloatArray, FloatArray] | None = field(default=None,
                                                                      repr=False)
+    #: a swing not found because of another body: its index in ``spec.others`` (the
+    #: gap the last iterate breaks most is that body's), else None
+    blocked_by: int | None = None
 
     @property
     def ok(self) -> bool:
@@ -417,7 +420,7 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
             assert oth is not None
             c = (k - 1) * n_others + j
             a1, b1, r1, need = oth[0:3, c], oth[3:6, c], oth[6, c], oth[7, c]
-            kind = f"the gap to the other fingertip {j + 1}"
+            kind = f"{GAP_KIND}{j + 1}"
             for s in np.linspace(0.0, 1.0, SEGMENT_SAMPLES if capsule else 1):
                 x = a + float(s) * (b - a)
                 add((point_segment_distance(x, a1, b1) - r - r1 - need) / L, 0.0, np.inf)
@@ -554,13 +557,16 @@ def _solve_swing(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArra
     ok = bool(st["success"])
     status = "solved" if ok else "infeasible" if "Infeasible" in st["return_status"] \
         else "failed"
-    message = "" if ok else (f"the swing of {_name(spec)} was not found (IPOPT "
-                             f"{st['return_status']}): " + _cause(
-                                 np.asarray(rows_of(x, _swing_params(spec))).ravel(), lbg,
-                                 ubg, kinds, spec))
+    message, blocker = "", None
+    if not ok:
+        rows = np.asarray(rows_of(x, _swing_params(spec))).ravel()
+        message = (f"the swing of {_name(spec)} was not found (IPOPT "
+                   f"{st['return_status']}): " + _cause(rows, lbg, ubg, kinds, spec))
+        blocker = _blocker(rows, lbg, ubg, kinds)
     return SwingPlan(spec, status, message, np.linspace(0.0, T, n + 1), Qs, Vs, As, Js,
                      int(st["iter_count"]), elapsed,
-                     (x, np.asarray(res["lam_x"]).ravel(), np.asarray(res["lam_g"]).ravel()))
+                     (x, np.asarray(res["lam_x"]).ravel(), np.asarray(res["lam_g"]).ravel()),
+                     blocker)
 
 
 def _name(spec: SwingSpec) -> str:
@@ -570,23 +576,46 @@ def _name(spec: SwingSpec) -> str:
     return f"the finger of joints {', '.join(names)}" if names else "the finger"
 
 
-def _cause(g: FloatArray, lbg: FloatArray, ubg: FloatArray, kinds: tuple[str, ...],
-           spec: SwingSpec) -> str:
-    """The physical cause of a failed swing, in words: the kind of row the last iterate
-    breaks most (scaled as the NLP's rows are), and the others it breaks."""
+def _broken(g: FloatArray, lbg: FloatArray, ubg: FloatArray, kinds: tuple[str, ...]
+            ) -> dict[str, float]:
+    """Per kind of row, how much the last iterate ``g`` breaks its rows at worst (those
+    broken by more than 1e-6, scaled as the NLP's rows are)."""
     over = np.maximum(lbg - g, g - ubg)
     over = np.where(np.isfinite(over), over, 0.0)
     worst: dict[str, float] = {}
     for k, v in zip(kinds, over, strict=True):
         if v > 1e-6:
             worst[k] = max(worst.get(k, 0.0), float(v))
+    return worst
+
+
+#: The row kind of the gap kept from another body, numbered from 1 in ``others``' order.
+GAP_KIND = "the gap to the other fingertip "
+
+
+def _blocker(g: FloatArray, lbg: FloatArray, ubg: FloatArray, kinds: tuple[str, ...]
+             ) -> int | None:
+    """The index in ``others`` of the body whose gap the last iterate breaks most, when
+    that is the row kind it breaks most; else None."""
+    worst = _broken(g, lbg, ubg, kinds)
+    if not worst:
+        return None
+    top = max(worst, key=lambda k: worst[k])
+    return int(top.rsplit(" ", 1)[1]) - 1 if top.startswith(GAP_KIND) else None
+
+
+def _cause(g: FloatArray, lbg: FloatArray, ubg: FloatArray, kinds: tuple[str, ...],
+           spec: SwingSpec) -> str:
+    """The physical cause of a failed swing, in words: the kind of row the last iterate
+    breaks most (scaled as the NLP's rows are), and the others it breaks."""
+    worst = _broken(g, lbg, ubg, kinds)
     if not worst:
         return "every row is met at the last iterate; IPOPT stopped without converging"
     names = list(spec.other_names)
     ranked = sorted(worst.items(), key=lambda kv: -kv[1])
 
     def words(k: str) -> str:
-        if k.startswith("the gap to the other fingertip ") and names:
+        if k.startswith(GAP_KIND) and names:
             j = int(k.rsplit(" ", 1)[1]) - 1
             if 0 <= j < len(names) and names[j]:  # a fingertip's name, or a link's words
                 return f"the gap to {names[j]}" if names[j].startswith("body ") else \
