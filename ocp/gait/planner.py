@@ -793,7 +793,12 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
         step = ahead.reach - max(REACH_MARGIN, REACH_SHARE * ahead.reach)
     step = min(step, ahead.apart)
     if step < MIN_ROLL:
-        return "the others' reach"
+        why = (f"without {names[k]!r} the others roll {math.degrees(max(step, 0.0)):.1f} "
+               f"deg: " + (f"finger {ahead.who!r} stops ({ahead.why})" if ahead.why and
+                           ahead.reach <= ahead.apart else "two come too close"))
+        if switch and ahead.why and ahead.who in names and ahead.who not in never_lifted:
+            return why, names.index(ahead.who)  # the one whose reach is spent first
+        return why
     target = axis_angle_rotation(ax, done + step) @ R0
     dur = max(1.0, seconds_per_radian * step)
     prob = _roll_problem(sub, q_sub, pose, target, centre, dur)
