@@ -121,3 +121,15 @@ def test_a_gait_re_placing_during_rolls_is_certified_shorter_and_executes() -> N
         assert np.abs(q1 - q0).max() < 1e-6, ph
     report = simulate_result(result, request)
     assert report.passed, report.failures
+
+
+def test_a_swing_not_found_for_a_neighbour_names_it() -> None:
+    """The middle fingertip 1.8 mm from the index with the full clearance kept from its
+    neighbours has no swing (tests/test_gait.py), and the body it names as in its way
+    (``blocked_by``: an index into ``others``, which a gait re-places first when it
+    rolls) is the index; a swing found names none."""
+    _, spec = stored_swing("gait_narrow_swing.json")
+    failed = plan_swing(replace(spec, other_names=("index", "ring", "thumb")))
+    assert failed.status == "infeasible"
+    assert failed.blocked_by == 0 and "fingertip 'index'" in failed.message
+    assert plan_swing(replace(spec, tip_gap=MIN_TIP_GAP)).blocked_by is None
