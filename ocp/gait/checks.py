@@ -51,13 +51,14 @@ def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
     ts = np.linspace(0.0, plan.duration, n * DENSE_SAMPLES + 1)
     q, v, a = plan.sample(ts)
     L = sp.radius + body.r
+    centres = sp.centre_at(ts)  # where the object is at each sample (it may be rolling)
     caps, ends, dist = [], [], []
-    for qi in q:
+    for qi, ci in zip(q, centres, strict=True):
         R, p = f.fingertip_pose_pin(qi)
         ai, bi = body.placed(R, p)
         caps.append(ai)
         ends.append(bi)
-        dist.append(point_segment_distance(sp.centre, ai, bi) - L)
+        dist.append(point_segment_distance(ci, ai, bi) - L)
     caps_a, ends_a, dist_a = np.array(caps), np.array(ends), np.array(dist)
     seg = np.array([plan.segment(float(t)) for t in ts])
     out: list[Check] = []

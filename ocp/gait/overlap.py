@@ -257,7 +257,8 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                          np.asarray(q_land, dtype=float), n_land, end, rho, others,
                          duration=length, clearance=clearance, name=names[k],
                          other_names=tuple([names[i] for i in rest] + link_names),
-                         moving=moving, node_margin=NODE_MARGIN, **spec_args)
+                         moving=moving, node_margin=NODE_MARGIN,
+                         centre_path=_centre_path(sol, clock), **spec_args)
         plan = plan_swing(spec, last_swing if last_swing is not None and len(
             last_swing.spec.others) == len(others) else None)
         # the neighbours' gap narrowed as a swing at rest narrows it (replace_finger)
@@ -292,6 +293,19 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                     (tuple(allf), tuple(rest), tuple(rest), tuple(allf)), hold_time,
                     hold_time, q_after, during_roll=-1, q_before=tuple(q_now))
     return OverlapRoll(sol, clock, step, q_after), "", None
+
+
+def _centre_path(sol: Any, clock: RollClock) -> Any:
+    """The ball's centre during the roll ``sol`` on ``clock``, at times from its start
+    (its plan's positions at the clock's plan times, interpolated)."""
+    t_plan = np.asarray(sol.t, dtype=float)
+    P = np.asarray(sol.object_position, dtype=float)
+
+    def path(t: Any) -> FloatArray:
+        s = clock(np.atleast_1d(np.asarray(t, dtype=float)))[0]
+        return np.stack([np.interp(s, t_plan, P[:, j]) for j in range(3)], axis=1)
+
+    return path
 
 
 def _holds(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,

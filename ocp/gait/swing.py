@@ -118,6 +118,11 @@ class SwingSpec:
     #: swing's start], each of ``others``' segment ends (a (len(t), 3), b (len(t), 3)),
     #: their radii ``others``'; None: they are still where ``others`` puts them
     moving: Any = field(default=None, compare=False, repr=False)
+    #: the object's centre moving during the swing (a roll's: it moves within its
+    #: tracking): ``centre_path(t)`` its positions (len(t), 3) at the times ``t`` [s from
+    #: the swing's start], which the certificate measures the swing against; None: still
+    #: at ``centre`` (the NLP keeps its clearance from ``centre``, the landing's)
+    centre_path: Any = field(default=None, compare=False, repr=False)
     #: kept [m] beyond the clearance and the gaps at the NLP's nodes (the certificate
     #: checks them without it, between the nodes too: bodies that move between the nodes
     #: bring the least distance there, 10 um measured)
@@ -128,15 +133,24 @@ class SwingSpec:
         return tip_body(self.finger)
 
     def start_normal(self) -> FloatArray:
-        """The object's outward normal where the tip leaves it (through the cap's centre)."""
+        """The object's outward normal where the tip leaves it (through the cap's centre;
+        the object where it is at the swing's start)."""
         R, p = self.finger.fingertip_pose_pin(self.q_start)
         a = p + R @ self.body.a
-        return (a - self.centre) / np.linalg.norm(a - self.centre)
+        c = self.centre_at([0.0])[0]
+        return (a - c) / np.linalg.norm(a - c)
 
     def landing_point(self) -> FloatArray:
         """Where the cap's centre is at touch-down (palm frame)."""
         n = np.asarray(self.landing_normal, dtype=float)
         return self.centre + (self.radius + self.body.r) * n / np.linalg.norm(n)
+
+    def centre_at(self, t: Any) -> FloatArray:
+        """The object's centre at the times ``t`` [s from the swing's start] (rows)."""
+        tt = np.atleast_1d(np.asarray(t, dtype=float))
+        if self.centre_path is None:
+            return np.tile(np.asarray(self.centre, dtype=float), (tt.size, 1))
+        return np.asarray(self.centre_path(tt), dtype=float).reshape(tt.size, 3)
 
     def others_at(self, t: Any) -> list[tuple[FloatArray, FloatArray, float]]:
         """Each other body at the times ``t`` [s from the swing's start] (rows): its
