@@ -133,3 +133,20 @@ def test_a_swing_not_found_for_a_neighbour_names_it() -> None:
     assert failed.status == "infeasible"
     assert failed.blocked_by == 0 and "fingertip 'index'" in failed.message
     assert plan_swing(replace(spec, tip_gap=MIN_TIP_GAP)).blocked_by is None
+
+
+def test_a_landing_inside_a_neighbour_keeps_no_negative_gap() -> None:
+    """A neighbour's tip put where the swing lands: the gap the swing keeps from it is
+    zero, not 0.9 times the negative gap (which a certified swing once landed into), and
+    the swing's own gap check fails such a landing."""
+    _, spec = stored_swing("gait_narrow_swing.json")
+    f, body = spec.finger, spec.body
+    R, p = f.fingertip_pose_pin(spec.q_target)
+    a = p + R @ body.a
+    r = spec.others[1][2]
+    inside = replace(spec, others=(spec.others[0], (a, a, r), spec.others[2]))
+    gaps = inside.required_gaps()
+    assert gaps[1] == 0.0 and min(gaps) >= 0.0
+    found = plan_swing(replace(inside, tip_gap=MIN_TIP_GAP))
+    checks = {c.name: c for c in swing_checks(found, "s")} if found.ok else {}
+    assert not found.ok or not checks["swing_tip_gap_s_1"].passed
