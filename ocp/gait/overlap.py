@@ -36,7 +36,7 @@ holds; the gait's links' clearance covers the swinging finger's links (the whole
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -55,8 +55,8 @@ from ocp.gait.warp import RollClock
 from ocp.geometry.bodies import point_segment_distance, tip_body
 from ocp.spec.grasp import ManipulationProblem
 
-__all__ = ["OVERLAP_HOLD_DEPTH", "OVERLAP_SWING", "OverlapRoll", "hold_depth", "landing_gap",
-           "lift_next", "plan_overlap", "stranded_fingers", "without"]
+__all__ = ["OVERLAP_HOLD_DEPTH", "OVERLAP_SWING", "OverlapRoll", "hold_depth", "lift_next",
+           "plan_overlap", "stranded_fingers", "without"]
 
 FloatArray = NDArray[np.float64]
 
@@ -111,34 +111,24 @@ def hold_depth(template: ManipulationProblem, qs: tuple[FloatArray, ...], k: int
     return -1.0 if F is None else float(depth)
 
 
-def lift_next(spent: list[int], template: ManipulationProblem,
-              q_now: tuple[FloatArray, ...], centre: FloatArray, rho: float,
-              axis: FloatArray, upto: float) -> int | None:
+def lift_next(spent: list[int], reach: dict[int, float]) -> int | None:
     """Of the ``spent`` fingertips, the one to re-place during the next roll: the one whose
-    rolled reach about ``axis`` is the least (None when none is spent)."""
-    from ocp.robots.grasp_reach import roll
-    from ocp.robots.turn_reach import rolls
-
+    rolled ``reach`` is the least, one whose reach is not known (infinite:
+    :func:`~ocp.gait.planner.spent_reach`) first; None when none is spent."""
     if not spent:
         return None
-
-    def reach(k: int) -> float:
-        f = template.fingers[k].finger
-        if not rolls(f):
-            return -math.inf
-        return float(roll(f, q_now[k], centre, rho, axis, 2.0 * upto,
-                          template.pad_margin).reach)
-
-    return min(spent, key=reach)
+    return min(spent, key=lambda k: -math.inf if math.isinf(reach[k]) else reach[k])
 
 
+@dataclass(frozen=True)
 class OverlapRoll:
     """The roll and the swing made together, once planned (:func:`plan_overlap`): the
     roll's plan and clock, the gait step (its swing, the holds), the joints after."""
 
-    def __init__(self, sol: Any, clock: RollClock, step: GaitStep,
-                 q_after: tuple[FloatArray, ...]) -> None:
-        self.sol, self.clock, self.step, self.q_after = sol, clock, step, q_after
+    sol: Any
+    clock: RollClock
+    step: GaitStep
+    q_after: tuple[FloatArray, ...]
 
 
 def _moving(template: ManipulationProblem, k: int, sol: Any, clock: RollClock,
@@ -179,10 +169,11 @@ def _moving(template: ManipulationProblem, k: int, sol: Any, clock: RollClock,
     return moving
 
 
-def _link_choice(template: ManipulationProblem, k: int, moving_tips: Any, T: float,
+def _link_choice(template: ManipulationProblem, k: int, samples: list[Any],
                  centre: FloatArray) -> tuple[list[int], Any, list[str], list[float]]:
     """The hand's links the swing keeps clear of: the :data:`~ocp.gait.step.
-    SWING_OBSTACLES` nearest the ball over the roll (at its start, middle and end), as
+    SWING_OBSTACLES` nearest the ball over the roll (at every finger's joints
+    ``samples``: its start, middle and end), as
     (their indices in the obstacles' list, ``obstacles_at(qs)``, names, radii); none
     without a collision model."""
     coll = template.collision
@@ -195,12 +186,12 @@ def _link_choice(template: ManipulationProblem, k: int, moving_tips: Any, T: flo
         return coll.obstacles(shape, dims, names, np.concatenate(qs), k)
 
     near: dict[int, float] = {}
-    for qs in moving_tips:
+    for qs in samples:
         for j, (_, (a, b, r)) in enumerate(obstacles_at(qs)):
             d = float(point_segment_distance(centre, a, b)) - r
             near[j] = min(near.get(j, math.inf), d)
     chosen = sorted(near, key=lambda j: near[j])[:SWING_OBSTACLES]
-    first = obstacles_at(moving_tips[0])
+    first = obstacles_at(samples[0])
     return chosen, obstacles_at, [first[j][0] for j in chosen], [first[j][1][2] for j in chosen]
 
 
@@ -247,8 +238,7 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
         clock = RollClock.lasting(float(sol.duration), length)
         samples = [tuple(_full_rows(sol, clock, t, q_now, k))
                    for t in (0.0, 0.5 * length, length)]
-        links, obstacles_at, link_names, link_r = _link_choice(template, k, samples,
-                                                               length, end)
+        links, obstacles_at, link_names, link_r = _link_choice(template, k, samples, end)
         moving = _moving(template, k, sol, clock, q_now, end, links, obstacles_at)
         at0 = moving(np.zeros(1))
         radii = [tip_body(fingers[i]).r for i in rest] + link_r
@@ -367,21 +357,3 @@ def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, .
             out.append(j)
     return out
 
-
-def landing_gap(template: ManipulationProblem, q_after: tuple[FloatArray, ...], k: int
-                ) -> tuple[float, int]:
-    """(the least distance [m] from fingertip ``k``'s body to the others', the nearest)
-    with every finger at the joints ``q_after`` (``k`` landed): the others rolled
-    meanwhile, and may have come into where it lands."""
-    from ocp.geometry.bodies import segments_distance
-
-    fingers = [f.finger for f in template.fingers]
-    placed = []
-    for f, q in zip(fingers, q_after, strict=True):
-        body = tip_body(f)
-        a, b = body.placed(*f.fingertip_pose_pin(np.asarray(q, dtype=float)))
-        placed.append((a, b, body.r))
-    a0, b0, r0 = placed[k]
-    return min(((float(segments_distance(a0[None], b0[None], a[None], b[None])[0]) - r0 - r,
-                 i) for i, (a, b, r) in enumerate(placed) if i != k),
-               default=(math.inf, -1))

@@ -443,6 +443,16 @@ def pair_gaps(fingers: tuple[Any, ...], q: FloatArray, nq: tuple[int, ...]
             for j, (a1, b1, r1) in enumerate(segs) if j > i}
 
 
+def landing_gap(fingers: tuple[Any, ...], q_after: tuple[FloatArray, ...], k: int
+                ) -> tuple[float, int]:
+    """(the least distance [m] from fingertip ``k``'s body to the others', the nearest)
+    with every finger at the joints ``q_after`` (``k`` landed: the others rolled meanwhile,
+    and may have come into where it lands)."""
+    gaps = pair_gaps(fingers, np.concatenate(q_after)[None], tuple(len(q) for q in q_after))
+    return min(((float(g[0]), j if i == k else i) for (i, j), g in gaps.items()
+                if k in (i, j)), default=(math.inf, -1))
+
+
 def tips_gaps(fingers: tuple[Any, ...], q: FloatArray, nq: tuple[int, ...]
               ) -> tuple[float, int]:
     """(the least distance [m] between two fingertips' bodies over the joint rows ``q``
@@ -580,7 +590,17 @@ def torque_limits(template: ManipulationProblem, share: float = HOLD_TORQUE_SHAR
 def spent_fingers(template: ManipulationProblem, q_now: tuple[FloatArray, ...],
                   centre: FloatArray, rho: float, axis: FloatArray, upto: float,
                   never_lifted: set[str]) -> list[int]:
-    """The fingertips to re-place before the next roll of ``upto`` [rad] about ``axis``:
+    """:func:`spent_reach`'s fingertips."""
+    return spent_reach(template, q_now, centre, rho, axis, upto, never_lifted)[0]
+
+
+def spent_reach(template: ManipulationProblem, q_now: tuple[FloatArray, ...],
+                centre: FloatArray, rho: float, axis: FloatArray, upto: float,
+                never_lifted: set[str]) -> tuple[list[int], dict[int, float]]:
+    """(the fingertips to re-place before the next roll, each liftable fingertip's rolled
+    reach [rad] up to ``(1 + SPENT_MARGIN) upto``, infinite where its motion is not fixed
+    by the ball's). The fingertips to re-place before the next roll of ``upto`` [rad]
+    about ``axis``:
     those whose rolled reach from the joints ``q_now`` (:func:`~ocp.robots.grasp_reach.
     roll`, the seams kept ``pad_margin`` away) falls short of ``(1 + SPENT_MARGIN) upto``,
     those whose motion the ball's does not fix (their reach is not known), and of two
@@ -612,7 +632,7 @@ def spent_fingers(template: ManipulationProblem, q_now: tuple[FloatArray, ...],
         liftable_ = [k for k in pair if k in reach]
         if liftable_ and not set(pair) & set(out):
             out.append(min(liftable_, key=lambda k: reach[k]))
-    return sorted(out)
+    return sorted(out), reach
 
 
 #: A fingertip is re-placed when its rolled reach is below the next roll's length and
@@ -774,7 +794,6 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
     from ocp.gait.overlap import (
         OVERLAP_HOLD_DEPTH,
         hold_depth,
-        landing_gap,
         plan_overlap,
         stranded_fingers,
         without,
@@ -799,9 +818,12 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
         if switch and ahead.why and ahead.who in names and ahead.who not in never_lifted:
             return why, names.index(ahead.who)  # the one whose reach is spent first
         return why
-    target = axis_angle_rotation(ax, done + step) @ R0
-    dur = max(1.0, seconds_per_radian * step)
-    prob = _roll_problem(sub, q_sub, pose, target, centre, dur)
+
+    def problem(step: float) -> ManipulationProblem:  # the others' roll by ``step``
+        return _roll_problem(sub, q_sub, pose, axis_angle_rotation(ax, done + step) @ R0,
+                             centre, max(1.0, seconds_per_radian * step))
+
+    prob = problem(step)
     # the last roll made without this fingertip, when the others start where it did
     warm = None
     for r in sorted(plan.carried, reverse=True):
@@ -817,18 +839,19 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
             break
     nq_sub = tuple(int(f.finger.nq) for f in sub.fingers)
     last_swing = next((st.swing for st in reversed(plan.steps) if st.finger == k), None)
+    limits, obstacles = torque_limits(template), swing_obstacles(template)
     for _ in range(MAX_ROLL_RETRIES + 1):
         got, why, blocker = plan_overlap(
             template, planner, k, q_now, lands[k], prob, warm,
             lambda sol: roll_speed(sol, sub, nq_sub) if fastest_rolls else 1.0, centre, rho,
-            pose.rotation, load, swing, hold_time, torque_limits(template), names,
-            last_swing)
+            pose.rotation, load, swing, hold_time, limits, names, last_swing)
         if got is None:
             if switch and blocker is not None and names[blocker] not in never_lifted:
                 return why, blocker  # the fingertip in its way is re-placed first
             return why
         # the landing clear of the others where they rolled to
-        apart, near = landing_gap(template, got.q_after, k)
+        apart, near = landing_gap(tuple(f.finger for f in template.fingers), got.q_after,
+                                  k)
         if apart < ROLL_TIP_GAP:
             why = (f"finger {names[k]!r}'s landing is {apart * 1e3:.2f} mm from fingertip "
                    f"{names[near]!r} after {math.degrees(step):.1f} deg")
@@ -840,7 +863,7 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
             stranded = stranded_fingers(
                 template, got.q_after, lands, centre, rho,
                 [j for j in range(len(q_now)) if j != k and names[j] not in never_lifted],
-                plan, load, torque_limits(template), swing_obstacles(template), swing)
+                plan, load, limits, obstacles, swing)
             if not stranded:
                 break
             why = (f"finger {names[stranded[0]]!r} would find no swing to its landing "
@@ -850,10 +873,7 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
         step /= 2.0
         if step < MIN_ROLL:
             return why
-        target = axis_angle_rotation(ax, done + step) @ R0
-        dur = max(1.0, seconds_per_radian * step)
-        prob = _roll_problem(sub, q_sub, pose, target, centre, dur)
-        warm = None
+        prob, warm = problem(step), None
     else:
         return why
     assert got is not None
@@ -992,15 +1012,12 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         # the last roll, in its own start frame, is this one's warm start, primal-dual
         # point included: the grasp recurs, so it is (nearly) this very problem's optimum
         # (the last roll of every fingertip: one made while a fingertip swung is another
-        # grasp's, :mod:`ocp.gait.overlap`)
+        # grasp's, :mod:`ocp.gait.overlap`; only rolls of every fingertip are in
+        # ``roll_starts``, which the recurrence below is measured against)
         last_all = next((r for r in range(len(plan.rolls) - 1, -1, -1)
                          if r not in plan.carried), None)
         warm = plan.rolls[last_all] if last_all is not None and plan.rolls[last_all].ok \
             else None
-        if warm is not None and last_all != len(plan.rolls) - 1 and float(np.abs(
-                warm.joint_trajectory(np.zeros(1), efforts=False).positions[0]
-                - np.concatenate(q_now)).max()) > RECUR_TOL:
-            warm = None
         if warm is not None and not replace_all and roll_starts and max(
                 float(np.abs(a - b).max()) for a, b in zip(roll_starts[-1], q_now,
                                                            strict=True)) > RECUR_TOL:
@@ -1050,14 +1067,17 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 q_land = q_home if landing == "home" else farthest_landings(
                     template, q_home, centre, rho, ax, roll_step)
             if overlap:  # the spent fingertips re-placed one at a time during the rolls
-                c = np.asarray(pose.position, dtype=float)
-                k = lift_next(spent_fingers(template, q_now, c, rho, ax,
-                                            min(cap, angle - done), never_lifted),
-                              template, q_now, c, rho, ax, min(cap, angle - done))
                 waiting = None  # the last step, its checks waiting for its loading
                 switched = False  # whether k is a fingertip another's roll would strand
-                while k is not None and done < angle - 1e-12 \
-                        and len(plan.rolls) < max_rolls:
+                k: int | None = None
+                while done < angle - 1e-12 and len(plan.rolls) < max_rolls:
+                    if not switched:  # the spent one that reaches least
+                        k = lift_next(*spent_reach(
+                            template, q_now, np.asarray(pose.position, dtype=float), rho,
+                            ax, min(cap, angle - done), never_lifted))
+                        if k is None:
+                            break
+                    assert k is not None
                     res = _overlap_roll(plan, checks, template, planner, k, q_now, pose, R0,
                                         ax, done, min(cap, angle - done),
                                         seconds_per_radian, t, load, swing, hold_time,
@@ -1076,12 +1096,6 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                     waiting = len(plan.steps) - 1
                     q_start = q_now
                     q_now, t, done, pose = res
-                    if done >= angle - 1e-12:
-                        break
-                    c = np.asarray(pose.position, dtype=float)
-                    k = lift_next(spent_fingers(template, q_now, c, rho, ax,
-                                                min(cap, angle - done), never_lifted),
-                                  template, q_now, c, rho, ax, min(cap, angle - done))
                 if waiting is not None:  # loaded by itself
                     checks += _step_checks(plan, waiting, load, template)
                 if done >= angle - 1e-12:

@@ -495,7 +495,7 @@ def _swing_params(spec: SwingSpec) -> FloatArray:
     # a quarter of the room that share leaves, so that the lift-off can still go along
     # the normal (the whole margin sent one sideways, 0.10 rad off it, measured)
     room = 0.25 * (1.0 - spec.neighbour_share) / max(spec.neighbour_share, 1e-9)
-    others = [np.concatenate([a1[k], b1[k], [r1, need + min(m, room * max(need, 0.0))]])
+    others = [np.concatenate([a1[k], b1[k], [r1, need + min(m, room * need)]])
               for k in range(n) for (a1, b1, r1), need in zip(at, needs, strict=True)]
     return np.concatenate([spec.q_start, spec.q_target,
                            [spec.duration, spec.clearance + m, cap_sin, spec.radius],
@@ -576,9 +576,10 @@ def _solve_swing(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArra
     message, blocker = "", None
     if not ok:
         rows = np.asarray(rows_of(x, _swing_params(spec))).ravel()
+        broken = _broken(rows, lbg, ubg, kinds)
         message = (f"the swing of {_name(spec)} was not found (IPOPT "
-                   f"{st['return_status']}): " + _cause(rows, lbg, ubg, kinds, spec))
-        blocker = _blocker(rows, lbg, ubg, kinds)
+                   f"{st['return_status']}): " + _cause(broken, spec))
+        blocker = _blocker(broken)
     return SwingPlan(spec, status, message, np.linspace(0.0, T, n + 1), Qs, Vs, As, Js,
                      int(st["iter_count"]), elapsed,
                      (x, np.asarray(res["lam_x"]).ravel(), np.asarray(res["lam_g"]).ravel()),
@@ -609,32 +610,30 @@ def _broken(g: FloatArray, lbg: FloatArray, ubg: FloatArray, kinds: tuple[str, .
 GAP_KIND = "the gap to the other fingertip "
 
 
-def _blocker(g: FloatArray, lbg: FloatArray, ubg: FloatArray, kinds: tuple[str, ...]
-             ) -> int | None:
+def _gap_index(kind: str) -> int | None:
+    """The index in ``others`` of a gap row's body (its kind :data:`GAP_KIND` and a number
+    from 1); None for another kind."""
+    return int(kind.rsplit(" ", 1)[1]) - 1 if kind.startswith(GAP_KIND) else None
+
+
+def _blocker(worst: dict[str, float]) -> int | None:
     """The index in ``others`` of the body whose gap the last iterate breaks most, when
-    that is the row kind it breaks most; else None."""
-    worst = _broken(g, lbg, ubg, kinds)
-    if not worst:
-        return None
-    top = max(worst, key=lambda k: worst[k])
-    return int(top.rsplit(" ", 1)[1]) - 1 if top.startswith(GAP_KIND) else None
+    that is the row kind it breaks most (``worst``: :func:`_broken`); else None."""
+    return _gap_index(max(worst, key=lambda k: worst[k])) if worst else None
 
 
-def _cause(g: FloatArray, lbg: FloatArray, ubg: FloatArray, kinds: tuple[str, ...],
-           spec: SwingSpec) -> str:
+def _cause(worst: dict[str, float], spec: SwingSpec) -> str:
     """The physical cause of a failed swing, in words: the kind of row the last iterate
-    breaks most (scaled as the NLP's rows are), and the others it breaks."""
-    worst = _broken(g, lbg, ubg, kinds)
+    breaks most (``worst``: :func:`_broken`), and the others it breaks."""
     if not worst:
         return "every row is met at the last iterate; IPOPT stopped without converging"
     names = list(spec.other_names)
     ranked = sorted(worst.items(), key=lambda kv: -kv[1])
 
     def words(k: str) -> str:
-        if k.startswith(GAP_KIND) and names:
-            j = int(k.rsplit(" ", 1)[1]) - 1
-            if 0 <= j < len(names) and names[j]:  # a fingertip's name, or a link's words
-                return f"the gap to {names[j]}" if names[j].startswith("body ") else \
+        j = _gap_index(k)
+        if j is not None and 0 <= j < len(names) and names[j]:  # a tip's name, a link's words
+            return f"the gap to {names[j]}" if names[j].startswith("body ") else \
                     f"the gap to fingertip {names[j]!r}"
         return k
 
