@@ -25,6 +25,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate, Check, CheckKind
+from ocp.gait.overlap import (
+    OVERLAP_HOLD_DEPTH,
+    hold_depth,
+    lift_next,
+    plan_overlap,
+    stranded_fingers,
+    without,
+)
 from ocp.gait.step import (
     HOLD_TORQUE_SHARE,
     GaitStep,
@@ -791,14 +799,6 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
     (not in ``never_lifted``) would find no swing to its landing (:func:`~ocp.gait.overlap.
     stranded_fingers`) is halved, up to :data:`MAX_ROLL_RETRIES` times; with ``switch``,
     (why, that fingertip) is returned at once instead: it is to be re-placed first."""
-    from ocp.gait.overlap import (
-        OVERLAP_HOLD_DEPTH,
-        hold_depth,
-        plan_overlap,
-        stranded_fingers,
-        without,
-    )
-
     centre = np.asarray(pose.position, dtype=float)
     rho = float(template.object.dimensions[0])
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
@@ -946,7 +946,6 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     spent fingertip re-placed while the others roll the ball by the next step
     (:mod:`ocp.gait.overlap`), one per roll, the least-reaching first; where that is not
     found, at rest as without."""
-    from ocp.gait.overlap import lift_next
     from ocp.solve.planner import ManipulationPlanner
 
     t_wall = time.perf_counter()
