@@ -20,8 +20,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SAME_AS_ALLEGRO_TURN = {"hand_from_mjcf", "hand_from_urdf"}
 #: The gait examples (the smallest: two rolls and three re-placements, 15 s here; 90 and
 #: 180 deg: 4 min each, docs/gait.md): tests/test_gait_service.py
-#: plans a smaller gait of the same request through the same adapter and executes it.
-GAITS = {"allegro_gait", "allegro_turn_90", "allegro_turn_180_z"}
+#: plans a smaller gait of the same request through the same adapter and executes it
+#: (egg_gait: tests/test_gait_shapes.py).
+GAITS = {"allegro_gait", "allegro_turn_90", "allegro_turn_180_z", "egg_gait"}
 EXAMPLES = [p for p in sorted((ROOT / "examples").glob("*.json"))
             if p.stem not in SAME_AS_ALLEGRO_TURN | GAITS]
 

@@ -149,6 +149,7 @@ def test_a_gait_searches_a_grasp_in_which_every_fingertip_can_be_lifted() -> Non
     """With `gait` the search prefers a grasp whose every fingertip the others hold the
     ball without (a gait re-places each): 180 deg about the palm's z at mu = 1, where the
     grasp of the largest reach alone keeps the thumb (docs/gait.md)."""
+    from ocp.gait.held import Held
     from ocp.gait.step import liftable
     from ocp.transcription.values import load_parameters
 
@@ -164,10 +165,10 @@ def test_a_gait_searches_a_grasp_in_which_every_fingertip_can_be_lifted() -> Non
     centre = np.asarray(request.initial_pose.position)  # type: ignore[union-attr]
     _assert_a_grasp(fingers, qs, centre, NOMINAL_RADIUS, request.mu)
     load = load_parameters(problem)
-    assert all(liftable(fingers, qs, centre, NOMINAL_RADIUS, np.eye(3), load))
+    assert all(liftable(fingers, qs, Held(centre, np.eye(3), NOMINAL_RADIUS), load))
     # the same search without the gait's preference: the largest reach, the thumb held
     body.pop("gait")
     _, plain_grasp = problem_and_grasp(ManipulationRequest.model_validate(body), CACHE)
     assert plain_grasp is not None and plain_grasp.reach >= grasp.reach  # type: ignore[operator]
     plain_qs = [np.array(f.q) for f in plain_grasp.fingers]
-    assert not all(liftable(fingers, plain_qs, centre, NOMINAL_RADIUS, np.eye(3), load))
+    assert not all(liftable(fingers, plain_qs, Held(centre, np.eye(3), NOMINAL_RADIUS), load))

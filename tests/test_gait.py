@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from ocp.gait.checks import swing_checks
+from ocp.gait.held import Held
 from ocp.gait.step import contact_of, replace_finger
 from ocp.gait.swing import SwingPlan, SwingSpec
 from ocp.geometry.bodies import tip_body
@@ -47,7 +48,7 @@ def landing(k: int, degrees: float) -> np.ndarray:
 @pytest.fixture(scope="module")
 def step() -> object:
     """The middle fingertip re-placed 10 deg around the ball, the others holding."""
-    return replace_finger(FINGERS, QS, 1, landing(1, 10.0), QS[1], CENTRE, RHO, np.eye(3),
+    return replace_finger(FINGERS, QS, 1, landing(1, 10.0), QS[1], Held(CENTRE, np.eye(3), RHO),
                           LOAD)
 
 
@@ -162,7 +163,7 @@ def test_a_swing_through_the_object_fails_the_certificate_naming_phase_and_time(
 
 
 def test_a_fingertip_the_others_cannot_hold_without_is_refused_at_once() -> None:
-    st = replace_finger(FINGERS, QS, 3, landing(3, 10.0), QS[3], CENTRE, RHO, np.eye(3),
+    st = replace_finger(FINGERS, QS, 3, landing(3, 10.0), QS[3], Held(CENTRE, np.eye(3), RHO),
                         LOAD)
     assert st.status == "infeasible" and st.swing is None
     assert "thumb" in st.message and "friction cones" in st.message
@@ -201,7 +202,7 @@ def test_a_swing_warm_started_from_the_last_is_the_same_swing(step: object) -> N
     (the grasp recurs): the same motion as the cold solve, certified, from exactly the
     finger's joints."""
     st = step
-    again = replace_finger(FINGERS, QS, 1, landing(1, 10.0), QS[1], CENTRE, RHO, np.eye(3),
+    again = replace_finger(FINGERS, QS, 1, landing(1, 10.0), QS[1], Held(CENTRE, np.eye(3), RHO),
                            LOAD, warm=st.swing)
     assert again.ok, again.message
     assert np.array_equal(again.swing.Q[0], QS[1])  # the switch is exact
@@ -268,7 +269,7 @@ def test_a_swing_between_close_neighbours_keeps_the_least_tip_gap() -> None:
         failed.message
     assert "it cannot keep the gap to fingertip 'index'" in failed.message, failed.message
     step = replace_finger(FINGERS, spec_joints(d), d["finger"], spec.landing_normal,
-                          spec.q_target, spec.centre, spec.radius, np.eye(3), LOAD)
+                          spec.q_target, Held(spec.centre, np.eye(3), spec.radius), LOAD)
     assert step.ok, step.message
     assert step.swing.spec.tip_gap == MIN_TIP_GAP
     assert step.swing.spec.clearance == spec.clearance
@@ -473,8 +474,8 @@ def test_a_swing_beside_a_close_neighbour_keeps_half_its_gap() -> None:
     assert plan_swing(spec).status == "infeasible"
     assert plan_swing(dataclasses.replace(spec, tip_gap=MIN_TIP_GAP)).status == "infeasible"
     step = replace_finger(FINGERS, spec_joints(d), d["finger"], spec.landing_normal,
-                          spec.q_target, spec.centre, spec.radius, np.array(d["rotation"]),
-                          LOAD)
+                          spec.q_target,
+                          Held(spec.centre, np.array(d["rotation"]), spec.radius), LOAD)
     assert step.ok, step.message
     assert step.swing.spec.neighbour_share == NARROW_SHARE
     need = step.swing.spec.required_gaps()
@@ -496,7 +497,7 @@ def test_a_holds_forces_keep_the_joints_torques_within_the_actuators() -> None:
 
     qs = tuple(np.asarray(q, dtype=float) for q in NOMINAL_Q)
     which = [0, 1, 2, 3]
-    hold = grasp_hold(FINGERS, qs, which, CENTRE, RHO, np.eye(3))
+    hold = grasp_hold(FINGERS, qs, which, Held(CENTRE, np.eye(3), RHO))
     g = np.array([0.0, 0.0, -9.81])
 
     def peak(F: np.ndarray) -> float:
@@ -523,8 +524,8 @@ def test_a_swing_is_slowed_to_what_the_joints_damping_lets_the_actuators_drive()
 
     d, spec = stored_swing("gait_narrow_swing.json")
     k = d["finger"]
-    args = (FINGERS, spec_joints(d), k, spec.landing_normal, spec.q_target, spec.centre,
-            spec.radius, np.eye(3), LOAD)
+    args = (FINGERS, spec_joints(d), k, spec.landing_normal, spec.q_target,
+            Held(spec.centre, np.eye(3), spec.radius), LOAD)
     free = replace_finger(*args)
     assert free.ok, free.message
     fast = float(np.abs(free.swing.V).max())
@@ -545,7 +546,7 @@ def test_a_hold_no_forces_of_which_fit_the_actuators_is_named() -> None:
 
     qs = tuple(np.asarray(q, dtype=float) for q in NOMINAL_Q)
     which = [0, 1, 2, 3]
-    hold = grasp_hold(FINGERS, qs, which, CENTRE, RHO, np.eye(3))
+    hold = grasp_hold(FINGERS, qs, which, Held(CENTRE, np.eye(3), RHO))
     g = np.array([0.0, 0.0, -9.81])
     names = ("index", "middle", "ring", "thumb")
 

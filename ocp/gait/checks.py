@@ -60,6 +60,8 @@ def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
         ends.append(bi)
         dist.append(point_segment_distance(ci, ai, bi) - L)
     caps_a, ends_a, dist_a = np.array(caps), np.array(ends), np.array(dist)
+    if sp.held is not None:  # not a ball: the body's distance from the object's surface
+        dist_a = sp.held.segment_distance(caps_a, ends_a) - body.r
     seg = np.array([plan.segment(float(t)) for t in ts])
     out: list[Check] = []
     clear = np.flatnonzero(seg == "clear")

@@ -37,8 +37,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ocp.gait.held import held_object
 from ocp.gait.hold import hold_forces
-from ocp.gait.planner import MIN_ROLL, REACH_MARGIN, REACH_SHARE, plan_gait
+from ocp.gait.planner import MIN_ROLL, REACH_MARGIN, REACH_SHARE, is_ball, plan_gait
 from ocp.gait.step import grasp_hold
 from ocp.spec.grasp import ManipulationProblem
 from ocp.spec.motion import ObjectPose
@@ -88,6 +89,8 @@ def _reach(template: ManipulationProblem, qs: tuple[FloatArray, ...], which: lis
     from ocp.robots.turn_reach import rolls
 
     best = (upto, "", "")
+    if not is_ball(template):  # a ball's rolled reach: none predicted for other shapes
+        return best
     for i in which:
         tip = template.fingers[i]
         if not rolls(tip.finger):
@@ -123,8 +126,10 @@ def gait_outlook(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any,
              f"{LOAD_BOUND * float(load[5]):.3g} N, balance its weight of {weight:.3g} N with "
              f"every normal force at least {fs.min_normal_force:g} N")
 
+    obj = held_object(template.object, centre, R0)
+
     def holds(which: list[int]) -> bool:
-        return hold_forces(grasp_hold(fingers, q, which, centre, rho, R0), load, rho) \
+        return hold_forces(grasp_hold(fingers, q, which, obj), load, obj.radius) \
             is not None
 
     held = [k for k in range(nf) if not holds([i for i in range(nf) if i != k])]

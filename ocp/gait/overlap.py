@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ocp.gait.held import Held
 from ocp.gait.step import (
     SWING_OBSTACLES,
     GaitStep,
@@ -106,8 +107,8 @@ def hold_depth(template: ManipulationProblem, qs: tuple[FloatArray, ...], k: int
 
     fingers = tuple(f.finger for f in template.fingers)
     rest = [i for i in range(len(fingers)) if i != k]
-    F, depth = deep_hold_forces(grasp_hold(fingers, qs, rest, centre, rho, rotation), load,
-                                rho)
+    F, depth = deep_hold_forces(grasp_hold(fingers, qs, rest, Held(centre, rotation, rho)),
+                                load, rho)
     return -1.0 if F is None else float(depth)
 
 
@@ -231,7 +232,7 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
     clearance = float(spec_args.pop("clearance", SwingSpec.clearance)) + drift
     length = max(clock.length, OVERLAP_SWING if last_swing is None else
                  min(last_swing.duration, base))
-    _, n_land = contact_of(fingers[k], q_land, end, rho)
+    _, n_land = contact_of(fingers[k], q_land, end, rho)  # (a ball's: overlap is for one)
     why = "no swing"
     blocker = None
     for _ in range(OVERLAP_TRIES):
@@ -306,7 +307,7 @@ def _holds(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     deep_forces`; None where they cannot hold it)."""
     every = list(range(len(fingers)))
     rest = [i for i in every if i != k]
-    holds = [grasp_hold(fingers, qs, w, centre, rho, rotation) for w in (every, rest)]
+    holds = [grasp_hold(fingers, qs, w, Held(centre, rotation, rho)) for w in (every, rest)]
     forces = [deep_forces(fingers, qs, w, h, load, rho, limits)
               for w, h in zip((every, rest), holds, strict=True)]
     return holds[0], holds[1], forces[0], forces[1]
@@ -351,8 +352,9 @@ def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, .
         last = next((st.swing for st in reversed(plan.steps) if st.finger == j
                      and st.swing is not None and st.swing.spec.moving is None), None)
         _, n_land = contact_of(fingers[j], lands[j], centre, rho)
-        gs = replace_finger(fingers, q_after, j, n_land, lands[j], centre, rho, np.eye(3),
-                            load, swing, 0.2, last, names, limits, obstacles)
+        gs = replace_finger(fingers, q_after, j, n_land, lands[j],
+                            Held(centre, np.eye(3), rho), load, swing, 0.2, last, names,
+                            limits, obstacles)
         if gs.swing is not None and not gs.ok:
             out.append(j)
     return out

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate, Check, CheckKind
+from ocp.gait.held import Held, held_object
 from ocp.gait.overlap import (
     OVERLAP_HOLD_DEPTH,
     hold_depth,
@@ -37,7 +38,6 @@ from ocp.gait.step import (
     HOLD_TORQUE_SHARE,
     GaitStep,
     TorqueLimits,
-    contact_of,
     grasp_hold,
     hold_torque_refusal,
     liftable,
@@ -179,6 +179,36 @@ class GaitPlan:
                                for k, q in enumerate(step.q_after)])
 
 
+def is_ball(template: ManipulationProblem) -> bool:
+    """Whether the gait's object is a ball (:meth:`ocp.shapes.Shape.ball_radius`)."""
+    return template.object.kind.ball_radius(template.object.dimensions) is not None
+
+
+def roll_frame(template: ManipulationProblem, pose: ObjectPose) -> FloatArray:
+    """The frame a roll from ``pose`` is planned in (:func:`_roll_problem`): a ball's at
+    the roll's start, the palm's for any other object."""
+    return pose.rotation if is_ball(template) else np.eye(3)
+
+
+def held_at(template: ManipulationProblem, pose: ObjectPose) -> Held:
+    """The gait's object at ``pose`` (:func:`~ocp.gait.held.held_object`)."""
+    return held_object(template.object, pose.position, pose.rotation)
+
+
+def landing_on(template: ManipulationProblem, pose: ObjectPose, finger: Any,
+               q: FloatArray) -> FloatArray:
+    """Joints near ``q`` (within the limits and couplings) that put ``finger``'s round tip
+    on the object at ``pose`` (:func:`~ocp.robots.first_grasp.onto_surface`: along the
+    nearest point's normal), or ``q`` when none is found: where a fingertip of an object
+    that is not a ball lands (the turned object no longer fills the space it did, so the
+    joints it touched with do not touch it again)."""
+    from ocp.robots.first_grasp import ObjectGeometry, onto_surface
+
+    geo = ObjectGeometry.of(template.object, pose.rotation, template.pole_margin)
+    got = onto_surface(finger, q, np.asarray(pose.position, dtype=float), geo)
+    return q if got is None else np.asarray(got[0], dtype=float)
+
+
 def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
                   pose: ObjectPose, target: FloatArray, centre: FloatArray,
                   duration: float) -> ManipulationProblem:
@@ -188,15 +218,23 @@ def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
     pose.rotation^T``): a uniform ball's motion does not depend on the frame fixed in it,
     and so a gait whose grasp recurs asks the same roll again, which the last roll's
     primal-dual point starts (:func:`plan_gait`). The plan's rotations R(t) are the
-    ball's from the start: R(t) ``pose.rotation`` in the palm frame."""
+    ball's from the start: R(t) ``pose.rotation`` in the palm frame. An object that is
+    not a ball is planned in the palm frame, from ``pose`` itself (its form turns with
+    it): its R(t) are the palm frame's (:func:`roll_frame`)."""
     fingers = tuple(f.finger for f in template.fingers)
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
-    start = ObjectPose((1.0, 0.0, 0.0, 0.0), pose.position)
+    ball = is_ball(template)
+    # (an object that is not a ball is planned where it is: its frame is its own)
+    start = ObjectPose((1.0, 0.0, 0.0, 0.0), pose.position) if ball else pose
     tips = fingertips_from_joints(fingers, qs, template.object, start, names,
                                   tuple(f"fingers[{i}].initial_q" for i in range(len(qs))))
-    q1 = np.ravel(quaternion_wxyz(np.asarray(target, dtype=float) @ pose.rotation.T))
+    q1 = np.ravel(quaternion_wxyz(np.asarray(target, dtype=float) @ pose.rotation.T
+                                  if ball else np.asarray(target, dtype=float)))
+    w0, x0, y0, z0 = start.orientation
+    if not ball and float(np.dot(q1, start.orientation)) < 0.0:  # the short way
+        q1 = -q1
     motion = DesiredMotion((0.0, duration),
-                           ((1.0, 0.0, 0.0, 0.0),
+                           ((float(w0), float(x0), float(y0), float(z0)),
                             (float(q1[0]), float(q1[1]), float(q1[2]), float(q1[3]))),
                            (pose.position, (float(centre[0]), float(centre[1]),
                                             float(centre[2]))))
@@ -241,6 +279,8 @@ def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
     from ocp.robots.grasp_reach import roll
     from ocp.robots.turn_reach import rolls
 
+    if not is_ball(template):  # a ball's rolled motion: none predicted (the roll's
+        return RollAhead(upto, "", "", upto, ROLL_TIP_GAP)  # certificate measures it)
     fingers = tuple(f.finger for f in template.fingers)
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
     nq = tuple(len(q) for q in qs)
@@ -551,8 +591,8 @@ def swing_obstacles(template: ManipulationProblem) -> Any:
 
 
 def _holds_beyond_actuators(template: ManipulationProblem, fingers: tuple[Any, ...],
-                            qs: tuple[FloatArray, ...], centre: FloatArray, rho: float,
-                            R0: FloatArray, load: FloatArray, names: tuple[str, ...]) -> str:
+                            qs: tuple[FloatArray, ...], held: Held, load: FloatArray,
+                            names: tuple[str, ...]) -> str:
     """Why the grasp held by every fingertip needs more torque than the actuators give at
     their full range, naming the joint, the torque and the limit; "" when it fits. (Each
     re-placement starts and ends with that hold; a hold with one fingertip lifted that
@@ -562,8 +602,8 @@ def _holds_beyond_actuators(template: ManipulationProblem, fingers: tuple[Any, .
     if limits is None:
         return ""
     allf = list(range(len(fingers)))
-    hold = grasp_hold(fingers, qs, allf, centre, rho, R0)
-    why = hold_torque_refusal(fingers, qs, allf, hold, load, rho, limits, names)
+    hold = grasp_hold(fingers, qs, allf, held)
+    why = hold_torque_refusal(fingers, qs, allf, hold, load, held.radius, limits, names)
     return f"the grasp's hold: {why}" if why else ""
 
 
@@ -713,17 +753,18 @@ def _replace_fingers(plan: GaitPlan, checks: list[Check], template: Manipulation
     that fails sets the plan's status and ends the loop."""
     fingers = tuple(f.finger for f in template.fingers)
     nf = len(fingers)
-    rho = float(template.object.dimensions[0])
-    centre = np.asarray(pose.position, dtype=float)
+    held = held_at(template, pose)
     assert template.forces is not None
     limits = torque_limits(template)
     obstacles = swing_obstacles(template)
     for k in (range(nf) if which is None else which):
         last = next((st.swing for st in reversed(plan.steps) if st.finger == k), None)
         for q_land in (q_start[k], *(() if nearer is None else (nearer[k],))):
-            _, n_back = contact_of(fingers[k], q_land, centre, rho)
-            gs = replace_finger(fingers, q_now, k, n_back, q_land, centre, rho,
-                                pose.rotation, load, swing, hold_time, last,
+            if not held.ball:  # where it touched, on the turned object (not on it now)
+                q_land = landing_on(template, pose, fingers[k], q_land)
+            _, n_back = held.contact(fingers[k], q_land)
+            gs = replace_finger(fingers, q_now, k, n_back, q_land, held, load, swing,
+                                hold_time, last,
                                 tuple(f.name or f"finger{i}"
                                       for i, f in enumerate(template.fingers)), limits,
                                 obstacles)
@@ -888,7 +929,7 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
         F0 = np.insert(prev.forces[-2], prev.finger, 0.0, axis=0)
         step_ = replace(step_, landing=prev.finger, forces=(F0, *step_.forces[1:]))
     plan.rolls.append(sol)
-    plan.frames.append(pose.rotation)
+    plan.frames.append(roll_frame(template, pose))
     plan.clocks.append(clock)
     plan.steps.append(step_)
     plan.carried[r] = i
@@ -961,6 +1002,11 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     nf = len(fingers)
     load = load_parameters(template)
     rho = float(template.object.dimensions[0])
+    held0 = held_object(template.object, centre, R0)
+    if not held0.ball and (not replace_all or overlap):
+        return GaitPlan("infeasible", "an object that is not a ball has no rolled reach to "
+                                      "tell the spent fingertips: every one is re-placed "
+                                      "after each roll (replace 'all')")
     q_now = tuple(np.asarray(q, dtype=float) for q in qs)
     q_home = q_now  # where each fingertip touched when the gait began
     q_land: tuple[FloatArray, ...] | None = None  # where the spent ones land (made once)
@@ -969,9 +1015,9 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     plan = GaitPlan("solved", "", nq=tuple(int(f.nq) for f in fingers))
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
     # the fingers the others cannot hold the ball without (they roll throughout)
-    never_lifted = {names[k] for k, ok in enumerate(liftable(fingers, q_now, centre, rho, R0,
-                                                             load)) if not ok}
-    refusal = _holds_beyond_actuators(template, fingers, q_now, centre, rho, R0, load, names)
+    never_lifted = {names[k] for k, ok in enumerate(liftable(fingers, q_now, held0, load))
+                    if not ok}
+    refusal = _holds_beyond_actuators(template, fingers, q_now, held0, load, names)
     if refusal:
         return GaitPlan("infeasible", refusal, never_lifted=tuple(sorted(never_lifted)),
                         nq=plan.nq, wall_time=time.perf_counter() - t_wall)
@@ -1036,7 +1082,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         r = len(plan.rolls)
         plan.rolls.append(sol)
         roll_starts.append(q_now)
-        plan.frames.append(pose.rotation)
+        plan.frames.append(roll_frame(template, pose))
         clock = RollClock.of(dur, roll_speed(sol, template, plan.nq) if fastest_rolls
                              and sol.ok else 1.0)
         plan.clocks.append(clock)

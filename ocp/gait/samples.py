@@ -10,9 +10,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ocp.gait.held import held_object
 from ocp.gait.planner import GaitPlan
 from ocp.geometry.bodies import tip_body
-from ocp.geometry.rotations import quaternion_wxyz
+from ocp.geometry.rotations import quaternion_matrix, quaternion_wxyz
 from ocp.solution import joint_torques
 
 __all__ = ["LINK_CHECK_RATE", "TRANSITION", "GaitSamples", "gait_samples", "gait_times",
@@ -152,11 +153,18 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
             touching[i, ph.lifted] = False
     points, normals = np.zeros((n, nf, 3)), np.zeros((n, nf, 3))
     tip_p, tip_q = np.zeros((n, nf, 3)), np.zeros((n, nf, 4))
-    for c, f in enumerate(fingers):  # contact_of's line of centres, every sample at once
+    held = held_object(problem.object, pos[0], np.eye(3))
+    axes = None if held.ball else np.array([quaternion_matrix(w) for w in wxyz])
+    for c, f in enumerate(fingers):  # the caps' nearest points, every sample at once
         Rs, tip_p[:, c] = f.tip_poses(Q[:, cut[c]:cut[c + 1]])
         d = tip_p[:, c] + Rs @ tip_body(f).a - pos
-        normals[:, c] = d / np.linalg.norm(d, axis=1)[:, None]
-        points[:, c] = pos + rho * normals[:, c]
+        if axes is None:  # a ball's: the line of centres (Held.contact)
+            normals[:, c] = d / np.linalg.norm(d, axis=1)[:, None]
+            points[:, c] = pos + rho * normals[:, c]
+        else:  # on the object's surface where it is at each sample
+            x, nrm, _ = held.shape.nearest(held.dimensions, np.einsum("kji,kj->ki", axes, d))
+            points[:, c] = pos + np.einsum("kij,kj->ki", axes, x)
+            normals[:, c] = np.einsum("kij,kj->ki", axes, nrm)
         tip_q[:, c] = quaternion_wxyz(Rs)
     gravity = problem.forces.gravity if problem.forces is not None else (0.0, 0.0, 0.0)
     effort = np.hstack([joint_torques(f, Q[:, cut[c]:cut[c + 1]], points[:, c],
@@ -181,7 +189,6 @@ def with_link_clearance(gait: GaitPlan, problem: Any, samples: GaitSamples | Non
     :func:`~ocp.gait.planner.plan_gait` returns. ``samples``: the gait's samples already
     made at :func:`gait_times` of at least that rate (else made here)."""
     from ocp.certify.certificate import Certificate
-    from ocp.geometry.rotations import quaternion_matrix
     from ocp.solve.certify import link_clearance_check
 
     if getattr(problem, "collision", None) is None or not gait.phases:

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from ocp.certify.certificate import Check, CheckKind
 from ocp.gait.checks import hold_checks, swing_checks
+from ocp.gait.held import Held
 from ocp.gait.hold import Hold, deep_hold_forces, hold_forces
 from ocp.gait.swing import (
     MIN_SWING,
@@ -44,24 +45,23 @@ def contact_of(finger: Any, q: FloatArray, centre: FloatArray, radius: float
 
 
 def grasp_hold(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
-          centre: FloatArray, radius: float, rotation: FloatArray) -> Hold:
-    """The still ball held by the fingertips ``which`` of a grasp at joints ``qs``."""
-    pn = [contact_of(fingers[i], qs[i], centre, radius) for i in which]
-    return Hold(np.array([p for p, _ in pn]), np.array([n for _, n in pn]), centre,
-                rotation)
+               held: Held) -> Hold:
+    """The still object ``held`` held by the fingertips ``which`` of a grasp at joints
+    ``qs``."""
+    pn = [held.contact(fingers[i], qs[i]) for i in which]
+    return Hold(np.array([p for p, _ in pn]), np.array([n for _, n in pn]), held.centre,
+                held.rotation)
 
 
-def liftable(fingers: Any, qs: Any, centre: FloatArray, radius: float, rotation: FloatArray,
-             load: FloatArray) -> tuple[bool, ...]:
-    """Per fingertip of a grasp of a still ball (``fingers`` at the joints ``qs``, every
-    tip touching the ball of ``radius`` at ``centre``): whether the others hold it
-    without that one (:func:`hold_forces` with the load parameters ``load``), so that it
-    can be re-placed."""
+def liftable(fingers: Any, qs: Any, held: Held, load: FloatArray) -> tuple[bool, ...]:
+    """Per fingertip of a grasp of the still object ``held`` (``fingers`` at the joints
+    ``qs``, every tip touching it): whether the others hold it without that one
+    (:func:`hold_forces` with the load parameters ``load``), so that it can be
+    re-placed."""
     n = len(fingers)
     qs = tuple(np.asarray(q, dtype=float) for q in qs)
-    centre = np.asarray(centre, dtype=float)
     return tuple(hold_forces(grasp_hold(tuple(fingers), qs, [i for i in range(n) if i != k],
-                                        centre, radius, rotation), load, radius) is not None
+                                        held), load, held.radius) is not None
                  for k in range(n))
 
 
@@ -318,17 +318,17 @@ def deep_forces(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: lis
 
 
 def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
-                   landing_normal: FloatArray, q_target: FloatArray, centre: FloatArray,
-                   radius: float, rotation: FloatArray, load: FloatArray,
+                   landing_normal: FloatArray, q_target: FloatArray, held: Held,
+                   load: FloatArray,
                    swing: dict[str, Any] | None = None, hold_time: float = 0.2,
                    warm: SwingPlan | None = None,
                    names: tuple[str, ...] | None = None,
                    limits: TorqueLimits | None = None,
                    obstacles: Any = None) -> GaitStep:
-    """Re-place fingertip ``k`` of a grasp of a still ball (``fingers`` at the joints
-    ``qs``, every tip touching) at the contact whose outward normal is ``landing_normal``
-    (palm frame), its joints seeded by ``q_target``. ``load``: the load parameters
-    (:func:`~ocp.transcription.values.load_parameters`); ``swing``: fields of the
+    """Re-place fingertip ``k`` of a grasp of the still object ``held`` (``fingers`` at
+    the joints ``qs``, every tip touching) at the contact whose outward normal is
+    ``landing_normal`` (palm frame), its joints seeded by ``q_target``. ``load``: the
+    load parameters (:func:`~ocp.transcription.values.load_parameters`); ``swing``: fields of the
     :class:`~ocp.gait.swing.SwingSpec` (duration, clearance, ...); ``hold_time``: the
     unloading's and the loading's duration [s]; ``warm``: this finger's previous swing
     (:func:`~ocp.gait.swing.plan_swing`'s warm start); ``names``: the fingers' names (for
@@ -338,11 +338,12 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     the nearest :data:`SWING_OBSTACLES` to the ball kept, padded with far-away ones.
     A grasp whose other fingertips cannot hold the object is ``infeasible`` at once,
     naming the finger."""
-    L = radius
+    L = held.radius
+    centre = held.centre
     allf = list(range(len(fingers)))
     rest = [i for i in allf if i != k]
-    before = grasp_hold(fingers, qs, allf, centre, radius, rotation)
-    during = grasp_hold(fingers, qs, rest, centre, radius, rotation)
+    before = grasp_hold(fingers, qs, allf, held)
+    during = grasp_hold(fingers, qs, rest, held)
     if names is None:
         names = tuple(f.joint_names[0].rsplit("_", 1)[0] if f.joint_names else str(i)
                       for i, f in enumerate(fingers))
@@ -379,8 +380,9 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         other_names += [n for n, _ in links]
     spec = SwingSpec(fingers[k], np.asarray(qs[k], dtype=float),
                      np.asarray(q_target, dtype=float), np.asarray(landing_normal, float),
-                     np.asarray(centre, dtype=float), float(radius), tuple(others),
-                     name=name, other_names=tuple(other_names), **(swing or {}))
+                     np.asarray(centre, dtype=float), float(held.radius), tuple(others),
+                     name=name, other_names=tuple(other_names),
+                     held=None if held.ball else held, **(swing or {}))
     if warm is not None and warm.spec.tip_gap is not None:
         # its last swing needed it
         spec = replace(spec, tip_gap=warm.spec.tip_gap,
@@ -416,7 +418,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     if not plan.ok:
         return GaitStep(k, plan.status, plan.message, plan)
     q_after = tuple(plan.Q[-1] if i == k else np.asarray(qs[i], dtype=float) for i in allf)
-    after = grasp_hold(fingers, q_after, allf, centre, radius, rotation)
+    after = grasp_hold(fingers, q_after, allf, held)
     F_after = deep_forces(fingers, q_after, allf, after, load, L, limits)
     if F_after is None:
         return GaitStep(k, "infeasible", f"the grasp with {name} landed cannot hold the "

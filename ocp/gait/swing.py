@@ -13,9 +13,14 @@ The rows (at the nodes; the certificate samples the returned cubic densely):
 
 * **lift-off** (the first ``lift`` intervals): the cap's centre moves along the object's
   normal at the contact it leaves (two tangential rows zero, the normal one >= 0), the
-  tip's body never inside the object;
+  tip's body never inside the object (a ball's distance; on an object that is not a
+  ball, whose distance the NLP has only a lower bound of, which is below the cap's own
+  at the surface, the cap's centre going out along the normal keeps it out of a convex
+  object, and the certificate measures the body's true distance);
 * **clear** (between lift-off and approach): the tip's body (sphere or capsule,
-  :mod:`ocp.geometry.bodies`) at least ``clearance`` from the object;
+  :mod:`ocp.geometry.bodies`) at least ``clearance`` from the object (an object that is
+  not a ball: by the shape's lower bound on the distance,
+  :meth:`~ocp.shapes.Shape.distance_bound`);
 * **approach** (the last ``lift`` intervals): along the landing normal to the landing
   point, never inside the object;
 * **touch-down**: the cap's centre exactly over the landing point at the tip's radius
@@ -127,6 +132,10 @@ class SwingSpec:
     #: checks them without it, between the nodes too: bodies that move between the nodes
     #: bring the least distance there, 10 um measured)
     node_margin: float = 0.0
+    #: the object when it is not a ball (:class:`~ocp.gait.held.Held`, still: its centre
+    #: ``centre``): the contacts and distances are its surface's, the NLP keeps its
+    #: clearance by the shape's distance bound; None: a ball of ``radius``
+    held: Any = field(default=None, compare=False, repr=False)
 
     @property
     def body(self) -> TipBody:
@@ -137,12 +146,16 @@ class SwingSpec:
         the object where it is at the swing's start)."""
         R, p = self.finger.fingertip_pose_pin(self.q_start)
         a = p + R @ self.body.a
+        if self.held is not None:
+            return np.asarray(self.held.nearest(a[None])[1][0], dtype=float)
         c = self.centre_at([0.0])[0]
         return (a - c) / np.linalg.norm(a - c)
 
     def landing_point(self) -> FloatArray:
         """Where the cap's centre is at touch-down (palm frame)."""
         n = np.asarray(self.landing_normal, dtype=float)
+        if self.held is not None:
+            return np.asarray(self.held.landing_point(n, self.body.r), dtype=float)
         return self.centre + (self.radius + self.body.r) * n / np.linalg.norm(n)
 
     def centre_at(self, t: Any) -> FloatArray:
@@ -269,21 +282,26 @@ def _tangents(n: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 
 def _lifted(finger: Any, body: TipBody, q: FloatArray, centre: FloatArray, rho: float,
-            height: float) -> FloatArray:
+            height: float, held: Any = None) -> FloatArray:
     """``q`` moved (a few Gauss-Newton steps, least joint motion) so that the cap's centre
-    is ``height`` farther from the object along the line of centres: the guess's lift."""
+    is ``height`` farther from the object along the line of centres (``held``, an object
+    that is not a ball: along the normal at its nearest point): the guess's lift."""
     q = np.array(q, dtype=float)
     for _ in range(5):
         R, p = finger.fingertip_pose_pin(q)
         a = p + R @ body.a
-        d = a - centre
-        dist = float(np.linalg.norm(d))
-        want = rho + body.r + height
+        if held is None:
+            d = a - centre
+            dist = float(np.linalg.norm(d))
+            want = rho + body.r + height
+        else:
+            _, nrm, gap = held.nearest(a[None])
+            d, dist, want = nrm[0], float(gap[0]), body.r + height
         if abs(dist - want) < 1e-6:
             break
         J = finger.frame_jacobian_pin(q)
         Jc = J[:3] - np.cross(R @ body.a, J[3:].T).T
-        target = d / dist * (want - dist)
+        target = d / np.linalg.norm(d) * (want - dist)
         q = np.clip(q + np.linalg.lstsq(Jc, target, rcond=None)[0], finger.lower,
                     finger.upper)
     return q
@@ -301,7 +319,7 @@ def _guess(spec: SwingSpec) -> FloatArray:
     Q = q0 + ease[:, None] * (q1 - q0)
     for k in range(1, n):
         h = up * min(1.0, k / K, (n - k) / K)
-        Q[k] = _lifted(f, body, Q[k], spec.centre, spec.radius, h)
+        Q[k] = _lifted(f, body, Q[k], spec.centre, spec.radius, h, spec.held)
     return Q
 
 
@@ -310,16 +328,18 @@ def _guess(spec: SwingSpec) -> FloatArray:
 #: content, not identity: a searched grasp's hand is a new model of the same fingers (its
 #: tips' chart sides differ), and a swing NLP takes seconds to build. The least recently
 #: used beyond :data:`MAX_SWING_NLPS` are dropped.
-_SOLVERS: OrderedDict[tuple[str, int, int, int],
+_SOLVERS: OrderedDict[tuple[str, int, int, int, bool],
                       tuple[Any, FloatArray, FloatArray, Any, Any, tuple[str, ...]]
                       ] = OrderedDict()
 MAX_SWING_NLPS = 32
 
 
-def swing_key(f: Any, n: int, K: int, n_others: int) -> tuple[str, int, int, int]:
+def swing_key(f: Any, n: int, K: int, n_others: int, bound: bool = False
+              ) -> tuple[str, int, int, int, bool]:
     """The key of finger ``f``'s swing NLP on this grid: a hash of everything the NLP is
     built from (the chain's placements, axes and kinds, the base and tip placements, the
-    joint and rate limits, the tip's body), so that equal fingers share it."""
+    joint and rate limits, the tip's body), so that equal fingers share it; ``bound``:
+    the NLP of an object that is not a ball (its clearance by a distance bound)."""
     body = tip_body(f)
     arrays = [f.base_rotation, f.base_position, f.tip_rotation, f.tip_translation, f.lower,
               f.upper, f.velocity_limit, body.a, body.b, [body.r]]
@@ -332,7 +352,7 @@ def swing_key(f: Any, n: int, K: int, n_others: int) -> tuple[str, int, int, int
     digest = hashlib.sha256("/".join(kinds).encode())
     for a in arrays:
         digest.update(np.ascontiguousarray(a, dtype=float).tobytes())
-    return digest.hexdigest(), n, K, n_others
+    return digest.hexdigest(), n, K, n_others, bound
 
 
 def _built(f: Any, n: int, K: int, n_others: int) -> bool:
@@ -340,24 +360,35 @@ def _built(f: Any, n: int, K: int, n_others: int) -> bool:
     return swing_key(f, n, K, n_others) in _SOLVERS
 
 
-def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
+#: The parameters an object that is not a ball adds to a swing NLP's: its axes (palm
+#: frame, 9), the distance bound's scales (3) and factor (1).
+BOUND_PARAMS = 13
+
+
+def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int, bound: bool = False
                ) -> tuple[Any, FloatArray, FloatArray, Any, Any, tuple[str, ...]]:
     """(solver, lbg, ubg, the warm-start solver, the rows' function ``g(x, p)``, each
     row's kind in words) of the swing NLP of finger ``f`` (see the module's doc), built
-    once; the parameters in :func:`_swing_params`' order."""
-    key = swing_key(f, n, K, n_others)
+    once; the parameters in :func:`_swing_params`' order. ``bound``: an object that is not
+    a ball, its distance the shape's lower bound ``k (|diag(s) R^T (x - centre)| - 1)``
+    (:meth:`~ocp.gait.held.Held.bound`), the last :data:`BOUND_PARAMS` parameters."""
+    key = swing_key(f, n, K, n_others, bound)
     if key in _SOLVERS:
         _SOLVERS.move_to_end(key)
         return _SOLVERS[key]
     nq = int(f.nq)
-    P = ca.SX.sym("p", 2 * nq + 31 + 8 * n_others * n)
+    n_p = 2 * nq + 31 + 8 * n_others * n
+    P = ca.SX.sym("p", n_p + (BOUND_PARAMS if bound else 0))
     q_start, q_target = P[0:nq], P[nq:2 * nq]
     o = 2 * nq
     T, clearance, cap_sin, rho = P[o], P[o + 1], P[o + 2], P[o + 3]
     centre, a_start, n0, t0a, t0b = (P[o + 4 + 3 * i:o + 7 + 3 * i] for i in range(5))
     a_land, n1, t1a, t1b = (P[o + 19 + 3 * i:o + 22 + 3 * i] for i in range(4))
     # the other bodies at each node 1..n (8 numbers each: a, b, radius, the gap kept)
-    oth = ca.reshape(P[o + 31:], 8, n_others * n) if n_others else None
+    oth = ca.reshape(P[o + 31:n_p], 8, n_others * n) if n_others else None
+    if bound:  # the object's axes, the bound's scales and factor
+        R_obj = ca.reshape(P[n_p:n_p + 9], 3, 3)
+        scale, factor = P[n_p + 9:n_p + 12], P[n_p + 12]
     h = T / n
     Q, V, A = (ca.SX.sym(s, nq, n + 1) for s in ("Q", "V", "A"))
     Jn = ca.SX.sym("J", nq, n)
@@ -404,14 +435,21 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
     for k in range(1, n + 1):
         R, p = f.fk(Q[:, k])
         a, b = p + R @ a_loc, p + R @ b_loc
-        dist = point_segment_distance(centre, a, b) - L
+        if bound:  # the segment in the object's axes, scaled: its least scaled norm
+            sa, sb = scale * (R_obj.T @ (a - centre)), scale * (R_obj.T @ (b - centre))
+            dist = factor * (point_segment_distance(ca.DM.zeros(3), sa, sb) - 1.0) - r
+        else:
+            dist = point_segment_distance(centre, a, b) - L
         if k == n:  # touch-down: the cap's centre over the landing point, on the cap
             kind = "the landing point (the tip's reach)"
             add((a - a_land) / L, 0.0, 0.0)
             if capsule:
                 kind = "the landing on the cap"
                 u = (b - a) / float(np.linalg.norm(body.b - body.a))
-                add(ca.dot(centre - a, u) / L + cap_sin, -np.inf, 0.0)
+                if bound:  # (the landing normal: where the cap touches)
+                    add(ca.dot(-n1, u) + cap_sin, -np.inf, 0.0)
+                else:
+                    add(ca.dot(centre - a, u) / L + cap_sin, -np.inf, 0.0)
             continue
         kind = "the clearance from the ball"
         if k in (K, n - K):  # the clear part's ends
@@ -421,15 +459,17 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
             kind = "the lift-off along the normal"
             add(ca.vertcat(ca.dot(d, t0a), ca.dot(d, t0b)) / L, 0.0, 0.0)
             add(ca.dot(d, n0) / L, 0.0, np.inf)
-            kind = "the clearance from the ball"
-            add(dist / L, 0.0, np.inf)
+            if not bound:  # (an object's bound is below the distance: the cap's centre
+                kind = "the clearance from the ball"  # along the normal keeps it out)
+                add(dist / L, 0.0, np.inf)
         elif k >= n - K:  # approach along the landing normal
             d = a - a_land
             kind = "the approach along the landing normal"
             add(ca.vertcat(ca.dot(d, t1a), ca.dot(d, t1b)) / L, 0.0, 0.0)
             add(ca.dot(d, n1) / L, 0.0, np.inf)
-            kind = "the clearance from the ball"
-            add(dist / L, 0.0, np.inf)
+            if not bound:
+                kind = "the clearance from the ball"
+                add(dist / L, 0.0, np.inf)
         else:
             add((dist - clearance) / L, 0.0, np.inf)
         for j in range(n_others):
@@ -446,7 +486,8 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int
     g = ca.vertcat(*[e for e, _, _, _ in rows])
     lbg = np.concatenate([np.full(int(e.numel()), lo) for e, lo, _, _ in rows])
     ubg = np.concatenate([np.full(int(e.numel()), hi) for e, _, hi, _ in rows])
-    kinds = tuple(k for e, _, _, k in rows for _ in range(int(e.numel())))
+    kinds = tuple(k.replace("the ball", "the object") if bound else k
+                  for e, _, _, k in rows for _ in range(int(e.numel())))
     nlp = {"x": w, "p": P, "f": cost, "g": g}
     solver = ca.nlpsol("swing", "ipopt", nlp, _IPOPT)
     warm = ca.nlpsol("swing_warm", "ipopt", nlp, {**_IPOPT, **_IPOPT_WARM})
@@ -497,11 +538,15 @@ def _swing_params(spec: SwingSpec) -> FloatArray:
     room = 0.25 * (1.0 - spec.neighbour_share) / max(spec.neighbour_share, 1e-9)
     others = [np.concatenate([a1[k], b1[k], [r1, need + min(m, room * need)]])
               for k in range(n) for (a1, b1, r1), need in zip(at, needs, strict=True)]
+    extra: list[Any] = []
+    if spec.held is not None:  # the object's axes (column-major), the bound
+        s, k = spec.held.bound()
+        extra = [np.asarray(spec.held.rotation, dtype=float).ravel(order="F"), s, [k]]
     return np.concatenate([spec.q_start, spec.q_target,
                            [spec.duration, spec.clearance + m, cap_sin, spec.radius],
                            spec.centre, p0 + R0 @ body.a, n0, *_tangents(n0),
                            spec.landing_point(), n1, *_tangents(n1),
-                           np.concatenate(others, axis=None) if others else []])
+                           np.concatenate(others, axis=None) if others else [], *extra])
 
 
 def plan_swing(spec: SwingSpec, warm: SwingPlan | None = None) -> SwingPlan:
@@ -512,7 +557,8 @@ def plan_swing(spec: SwingSpec, warm: SwingPlan | None = None) -> SwingPlan:
     if warm is not None and warm.point is not None and warm.spec.finger is spec.finger \
             and warm.spec.n_intervals == spec.n_intervals \
             and warm.spec.lift_intervals == spec.lift_intervals \
-            and len(warm.spec.others) == len(spec.others):
+            and len(warm.spec.others) == len(spec.others) \
+            and (warm.spec.held is None) == (spec.held is None):
         out = _solve_swing(spec, warm.point)
         if out.ok:
             return out
@@ -529,7 +575,8 @@ def _solve_swing(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArra
     T = float(spec.duration)
     h = T / n
     solver, lbg, ubg, warm_solver, rows_of, kinds = _swing_nlp(f, body, n, K,
-                                                                len(spec.others))
+                                                                len(spec.others),
+                                                                spec.held is not None)
     vs, as_, js = 1.0 / T, 1.0 / T**2, 1.0 / T**3
     lo_q, hi_q = backed_off_joint_limits(f)
     vmax = np.asarray(f.velocity_limit, dtype=float)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.surfaces import Surface
 
@@ -128,6 +128,27 @@ class Shape(ABC):
     @abstractmethod
     def viewer(self, dimensions: Sequence[float]) -> dict[str, Any]:
         """The viewer's tagged record of the shape (``kind`` and its sizes [m])."""
+
+    def ball_radius(self, dimensions: Sequence[float]) -> float | None:
+        """The radius of a ball (every direction alike: a finger gait measures its
+        contacts and clearances from its centre), None for any other object."""
+        return None
+
+    def nearest(self, dimensions: Sequence[float], points: ArrayLike
+                ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """Of each point (rows of ``points`` [m], the object's frame), the surface's point
+        nearest it, the outward normal there and the signed distance [m] (negative
+        inside): what a finger gait measures its contacts and clearances with, every row
+        at once. None where the shape has no such closed form (no gait on it yet)."""
+        return None
+
+    def distance_bound(self, dimensions: Sequence[float]
+                       ) -> tuple[tuple[float, float, float], float] | None:
+        """``(s, k)``: a lower bound on the distance of a point ``x`` outside the object
+        (the object's frame [m]) from its surface, ``k (|diag(s) x| - 1)`` (positive only
+        outside), as a swing's NLP keeps its clearance with (smooth, and a segment's least
+        is a point's distance from a segment); None where the shape has none."""
+        return None
 
     def sample_points(self, dimensions: Sequence[float], n: int = 400) -> FloatArray:
         """About ``n`` points spread over the surface (k, 3) [m], in the object's frame:

@@ -7,10 +7,15 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
 from ocp.geometry.surfaces import Sphere, Surface
 from ocp.shapes.base import MujocoGeom, Shape
 
 __all__ = ["SPHERE", "SphereShape"]
+
+FloatArray = NDArray[np.float64]
 
 
 class SphereShape(Shape):
@@ -44,6 +49,22 @@ class SphereShape(Shape):
 
     def mujoco_geom(self, dimensions: Sequence[float]) -> MujocoGeom:
         return MujocoGeom("sphere", (float(dimensions[0]),))
+
+    def ball_radius(self, dimensions: Sequence[float]) -> float:
+        return float(dimensions[0])
+
+    def nearest(self, dimensions: Sequence[float], points: ArrayLike
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        r = float(dimensions[0])
+        x = np.atleast_2d(np.asarray(points, dtype=float))
+        d = np.linalg.norm(x, axis=1)
+        n = x / d[:, None]
+        return r * n, n, d - r
+
+    def distance_bound(self, dimensions: Sequence[float]
+                       ) -> tuple[tuple[float, float, float], float]:
+        r = float(dimensions[0])
+        return (1.0 / r, 1.0 / r, 1.0 / r), r
 
     def viewer(self, dimensions: Sequence[float]) -> dict[str, Any]:
         return {"kind": "ellipsoid", "semi_axes": list(self.semi_axes(dimensions))}

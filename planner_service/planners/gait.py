@@ -25,6 +25,7 @@ from dexroll_client.models import (
     PlanStatus,
 )
 from ocp.gait.feasibility import MAX_ROLLS, gait_outlook
+from ocp.gait.held import gait_shape_error
 from ocp.gait.planner import GaitPlan, plan_gait
 from ocp.gait.samples import (
     LINK_CHECK_RATE,
@@ -63,8 +64,15 @@ def gait_errors(request: ManipulationRequest, problem: ManipulationProblem) -> F
     if request.forces is None:
         errs.append(("forces", "a gait needs the ball's load: the other fingertips hold it "
                                "while one is lifted"))
-    if problem.object.shape != "sphere":
-        errs.append(("object.shape", "a gait re-places fingertips on a ball ('sphere')"))
+    why = gait_shape_error(problem.object)
+    if why is not None:
+        errs.append(("object.shape", why))
+    elif problem.object.kind.ball_radius(problem.object.dimensions) is None and \
+            request.gait.replace != "all":
+        errs.append(("gait.replace", f"a gait re-places the spent fingertips by a ball's "
+                                     f"rolled reach; on a {problem.object.shape} every "
+                                     "liftable fingertip is re-placed after each roll: "
+                                     "replace 'all'"))
     if request.palm is not None:
         errs.append(("palm", "a gait is planned for a ball held by fingertips alone"))
     if len(problem.fingers) < 3:

@@ -189,6 +189,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
 
     prefer = None
     if request.gait is not None:  # a gait re-places fingertips: each one liftable
+        from ocp.gait.held import Held
         from ocp.gait.step import liftable
         from ocp.transcription.values import load_vector
 
@@ -196,8 +197,8 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
         rotation = np.asarray(start.rotation, dtype=float)
 
         def prefer(contacts: tuple[Any, ...]) -> bool:
-            return all(liftable(models, [ct.q for ct in contacts], centre, radius, rotation,
-                                load))
+            return all(liftable(models, [ct.q for ct in contacts],
+                                Held(centre, rotation, radius), load))
 
     collision = _hand_collision(request, hand)
     clear = None
