@@ -5,8 +5,8 @@ A ball (:attr:`Held.shape` None) is measured as a gait always measured it: a tip
 is where the line of centres meets it, a body's distance is its segment's from the centre
 less the radius. Any other shape is measured on its own surface, every row at once, with
 the shape's closed-form nearest point (:meth:`ocp.shapes.Shape.nearest`; a shape without
-one has no gait yet), and a swing's NLP keeps its clearance with the shape's smooth lower
-bound on the distance (:meth:`ocp.shapes.Shape.distance_bound`).
+one has no gait yet), and a swing's NLP keeps its clearance with the shape's lower bound
+on a segment's distance (:meth:`ocp.shapes.Shape.segment_clearance`).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import point_segment_distance, tip_body
+from ocp.shapes.base import CLEARANCE_PARAMS
 
 __all__ = ["Held", "held_object"]
 
@@ -76,17 +77,6 @@ class Held:
         point, n, _ = self.nearest(a[None])
         return point[0], n[0]
 
-    def landing_point(self, normal: ArrayLike, r: float) -> FloatArray:
-        """Where a cap of radius ``r`` [m] is centred when it touches the object at the
-        point of outward ``normal`` (palm frame)."""
-        n = np.asarray(normal, dtype=float)
-        n = n / np.linalg.norm(n)
-        if self.shape is None:
-            return self.centre + (self.radius + r) * n
-        surf = self.shape.surface(self.dimensions)
-        x = surf.support_point(self.rotation.T @ n, self.shape.surface_params(self.dimensions))
-        return self.centre + self.rotation @ np.asarray(x, dtype=float) + r * n
-
     def segment_distance(self, a: ArrayLike, b: ArrayLike) -> FloatArray:
         """The distance [m] of each segment a-b (rows, palm frame) from the object's
         surface (negative: its nearest point inside): a ball's from its centre; another
@@ -117,15 +107,16 @@ class Held:
         ends = np.minimum(at(np.zeros(len(A))), at(np.ones(len(A))))
         return np.asarray(np.minimum(np.minimum(fc, fd), ends))
 
-    def bound(self) -> tuple[FloatArray, float]:
-        """(s, k): the swing NLP's lower bound on a point's distance outside the object,
-        ``k (|diag(s) R^T (x - centre)| - 1)`` (:meth:`ocp.shapes.Shape.distance_bound`;
-        a ball's is its distance)."""
-        if self.shape is None:
-            return np.full(3, 1.0 / self.radius), self.radius
-        got = self.shape.distance_bound(self.dimensions)
-        assert got is not None, "a shape without a distance bound has no gait"
-        return np.asarray(got[0], dtype=float), float(got[1])
+    def clearance_params(self) -> FloatArray:
+        """The shape's numbers of its clearance in a swing's NLP
+        (:meth:`ocp.shapes.Shape.clearance_params`), padded with zeros to
+        :data:`~ocp.shapes.base.CLEARANCE_PARAMS`; a ball has none (its NLP is its own)."""
+        out = np.zeros(CLEARANCE_PARAMS)
+        if self.shape is not None:
+            got = self.shape.clearance_params(self.dimensions)
+            assert got is not None, "a shape without a clearance has no gait"
+            out[:len(got)] = got
+        return out
 
 
 def held_object(obj: Any, centre: ArrayLike, rotation: ArrayLike) -> Held:
@@ -146,7 +137,7 @@ def gait_shape_error(obj: Any) -> str | None:
     distance bound (None when it can)."""
     shape = obj.kind
     if shape.nearest(obj.dimensions, np.ones((1, 3))) is None or \
-            shape.distance_bound(obj.dimensions) is None:
+            shape.clearance_params(obj.dimensions) is None:
         return (f"a gait measures its fingertips' contacts and clearances on the object's "
                 f"surface: not yet on a {obj.shape} (a sphere or an ellipsoid)")
     return None

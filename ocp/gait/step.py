@@ -324,7 +324,8 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                    warm: SwingPlan | None = None,
                    names: tuple[str, ...] | None = None,
                    limits: TorqueLimits | None = None,
-                   obstacles: Any = None) -> GaitStep:
+                   obstacles: Any = None,
+                   landing_point: FloatArray | None = None) -> GaitStep:
     """Re-place fingertip ``k`` of a grasp of the still object ``held`` (``fingers`` at
     the joints ``qs``, every tip touching) at the contact whose outward normal is
     ``landing_normal`` (palm frame), its joints seeded by ``q_target``. ``load``: the
@@ -336,10 +337,13 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     holds' forces keep to where the cones allow; ``obstacles(qs, k, centre)``: the hand's
     links the swing keeps clear of as it does of the other tips (name, (a, b, r)),
     the nearest :data:`SWING_OBSTACLES` to the ball kept, padded with far-away ones.
-    A grasp whose other fingertips cannot hold the object is ``infeasible`` at once,
-    naming the finger."""
+    ``landing_point``: where it lands on an object that is not a ball (palm frame;
+    default the object's point nearest its cap at ``q_target``). A grasp whose other
+    fingertips cannot hold the object is ``infeasible`` at once, naming the finger."""
     L = held.radius
     centre = held.centre
+    if not held.ball and landing_point is None:
+        landing_point = held.contact(fingers[k], np.asarray(q_target, dtype=float))[0]
     allf = list(range(len(fingers)))
     rest = [i for i in allf if i != k]
     before = grasp_hold(fingers, qs, allf, held)
@@ -382,7 +386,9 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                      np.asarray(q_target, dtype=float), np.asarray(landing_normal, float),
                      np.asarray(centre, dtype=float), float(held.radius), tuple(others),
                      name=name, other_names=tuple(other_names),
-                     held=None if held.ball else held, **(swing or {}))
+                     held=None if held.ball else held,
+                     landing_contact=None if held.ball else landing_point,
+                     **(swing or {}))
     if warm is not None and warm.spec.tip_gap is not None:
         # its last swing needed it
         spec = replace(spec, tip_gap=warm.spec.tip_gap,

@@ -19,8 +19,8 @@ The rows (at the nodes; the certificate samples the returned cubic densely):
   object, and the certificate measures the body's true distance);
 * **clear** (between lift-off and approach): the tip's body (sphere or capsule,
   :mod:`ocp.geometry.bodies`) at least ``clearance`` from the object (an object that is
-  not a ball: by the shape's lower bound on the distance,
-  :meth:`~ocp.shapes.Shape.distance_bound`);
+  not a ball: by the shape's lower bound on the body's distance,
+  :meth:`~ocp.shapes.Shape.segment_clearance`);
 * **approach** (the last ``lift`` intervals): along the landing normal to the landing
   point, never inside the object;
 * **touch-down**: the cap's centre exactly over the landing point at the tip's radius
@@ -55,6 +55,7 @@ from numpy.typing import NDArray
 
 from ocp.contacts.base import backed_off_joint_limits
 from ocp.geometry.bodies import TipBody, point_segment_distance, segment_distance, tip_body
+from ocp.shapes.base import CLEARANCE_PARAMS
 
 __all__ = ["SwingPlan", "SwingSpec", "plan_swing", "prepare_swings", "swing_key"]
 
@@ -136,6 +137,9 @@ class SwingSpec:
     #: ``centre``): the contacts and distances are its surface's, the NLP keeps its
     #: clearance by the shape's distance bound; None: a ball of ``radius``
     held: Any = field(default=None, compare=False, repr=False)
+    #: where the cap touches down on an object that is not a ball (palm frame; a ball's
+    #: is where the landing normal meets it)
+    landing_contact: Any = field(default=None, compare=False, repr=False)
 
     @property
     def body(self) -> TipBody:
@@ -155,7 +159,8 @@ class SwingSpec:
         """Where the cap's centre is at touch-down (palm frame)."""
         n = np.asarray(self.landing_normal, dtype=float)
         if self.held is not None:
-            return np.asarray(self.held.landing_point(n, self.body.r), dtype=float)
+            return np.asarray(self.landing_contact, dtype=float) + \
+                self.body.r * n / np.linalg.norm(n)
         return self.centre + (self.radius + self.body.r) * n / np.linalg.norm(n)
 
     def centre_at(self, t: Any) -> FloatArray:
@@ -328,18 +333,18 @@ def _guess(spec: SwingSpec) -> FloatArray:
 #: content, not identity: a searched grasp's hand is a new model of the same fingers (its
 #: tips' chart sides differ), and a swing NLP takes seconds to build. The least recently
 #: used beyond :data:`MAX_SWING_NLPS` are dropped.
-_SOLVERS: OrderedDict[tuple[str, int, int, int, bool],
+_SOLVERS: OrderedDict[tuple[str, int, int, int, str],
                       tuple[Any, FloatArray, FloatArray, Any, Any, tuple[str, ...]]
                       ] = OrderedDict()
 MAX_SWING_NLPS = 32
 
 
-def swing_key(f: Any, n: int, K: int, n_others: int, bound: bool = False
-              ) -> tuple[str, int, int, int, bool]:
+def swing_key(f: Any, n: int, K: int, n_others: int, shape: str = ""
+              ) -> tuple[str, int, int, int, str]:
     """The key of finger ``f``'s swing NLP on this grid: a hash of everything the NLP is
     built from (the chain's placements, axes and kinds, the base and tip placements, the
-    joint and rate limits, the tip's body), so that equal fingers share it; ``bound``:
-    the NLP of an object that is not a ball (its clearance by a distance bound)."""
+    joint and rate limits, the tip's body), so that equal fingers share it; ``shape``:
+    the name of an object that is not a ball ("" a ball's)."""
     body = tip_body(f)
     arrays = [f.base_rotation, f.base_position, f.tip_rotation, f.tip_translation, f.lower,
               f.upper, f.velocity_limit, body.a, body.b, [body.r]]
@@ -352,7 +357,7 @@ def swing_key(f: Any, n: int, K: int, n_others: int, bound: bool = False
     digest = hashlib.sha256("/".join(kinds).encode())
     for a in arrays:
         digest.update(np.ascontiguousarray(a, dtype=float).tobytes())
-    return digest.hexdigest(), n, K, n_others, bound
+    return digest.hexdigest(), n, K, n_others, shape
 
 
 def _built(f: Any, n: int, K: int, n_others: int) -> bool:
@@ -361,18 +366,21 @@ def _built(f: Any, n: int, K: int, n_others: int) -> bool:
 
 
 #: The parameters an object that is not a ball adds to a swing NLP's: its axes (palm
-#: frame, 9), the distance bound's scales (3) and factor (1).
-BOUND_PARAMS = 13
+#: frame, 9) and its shape's clearance numbers (:meth:`~ocp.shapes.Shape.
+#: clearance_params`, padded).
+BOUND_PARAMS = 9 + CLEARANCE_PARAMS
 
 
-def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int, bound: bool = False
+def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int, shape: Any = None
                ) -> tuple[Any, FloatArray, FloatArray, Any, Any, tuple[str, ...]]:
     """(solver, lbg, ubg, the warm-start solver, the rows' function ``g(x, p)``, each
     row's kind in words) of the swing NLP of finger ``f`` (see the module's doc), built
-    once; the parameters in :func:`_swing_params`' order. ``bound``: an object that is not
-    a ball, its distance the shape's lower bound ``k (|diag(s) R^T (x - centre)| - 1)``
-    (:meth:`~ocp.gait.held.Held.bound`), the last :data:`BOUND_PARAMS` parameters."""
-    key = swing_key(f, n, K, n_others, bound)
+    once; the parameters in :func:`_swing_params`' order. ``shape``: an object that is not
+    a ball (:class:`~ocp.shapes.Shape`), its distance the shape's lower bound
+    (:meth:`~ocp.shapes.Shape.segment_clearance` of the body's segment in its axes), the
+    last :data:`BOUND_PARAMS` parameters; None: a ball's."""
+    bound = shape is not None
+    key = swing_key(f, n, K, n_others, shape.name if bound else "")
     if key in _SOLVERS:
         _SOLVERS.move_to_end(key)
         return _SOLVERS[key]
@@ -386,9 +394,9 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int, bound: bool
     a_land, n1, t1a, t1b = (P[o + 19 + 3 * i:o + 22 + 3 * i] for i in range(4))
     # the other bodies at each node 1..n (8 numbers each: a, b, radius, the gap kept)
     oth = ca.reshape(P[o + 31:n_p], 8, n_others * n) if n_others else None
-    if bound:  # the object's axes, the bound's scales and factor
+    if bound:  # the object's axes, its shape's clearance numbers
         R_obj = ca.reshape(P[n_p:n_p + 9], 3, 3)
-        scale, factor = P[n_p + 9:n_p + 12], P[n_p + 12]
+        dims = P[n_p + 9:n_p + BOUND_PARAMS]
     h = T / n
     Q, V, A = (ca.SX.sym(s, nq, n + 1) for s in ("Q", "V", "A"))
     Jn = ca.SX.sym("J", nq, n)
@@ -435,9 +443,9 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int, bound: bool
     for k in range(1, n + 1):
         R, p = f.fk(Q[:, k])
         a, b = p + R @ a_loc, p + R @ b_loc
-        if bound:  # the segment in the object's axes, scaled: its least scaled norm
-            sa, sb = scale * (R_obj.T @ (a - centre)), scale * (R_obj.T @ (b - centre))
-            dist = factor * (point_segment_distance(ca.DM.zeros(3), sa, sb) - 1.0) - r
+        if bound:  # the body's segment in the object's axes
+            dist = shape.segment_clearance(dims, R_obj.T @ (a - centre),
+                                           R_obj.T @ (b - centre)) - r
         else:
             dist = point_segment_distance(centre, a, b) - L
         if k == n:  # touch-down: the cap's centre over the landing point, on the cap
@@ -539,9 +547,9 @@ def _swing_params(spec: SwingSpec) -> FloatArray:
     others = [np.concatenate([a1[k], b1[k], [r1, need + min(m, room * need)]])
               for k in range(n) for (a1, b1, r1), need in zip(at, needs, strict=True)]
     extra: list[Any] = []
-    if spec.held is not None:  # the object's axes (column-major), the bound
-        s, k = spec.held.bound()
-        extra = [np.asarray(spec.held.rotation, dtype=float).ravel(order="F"), s, [k]]
+    if spec.held is not None:  # the object's axes (column-major), its clearance numbers
+        extra = [np.asarray(spec.held.rotation, dtype=float).ravel(order="F"),
+                 spec.held.clearance_params()]
     return np.concatenate([spec.q_start, spec.q_target,
                            [spec.duration, spec.clearance + m, cap_sin, spec.radius],
                            spec.centre, p0 + R0 @ body.a, n0, *_tangents(n0),
@@ -558,7 +566,8 @@ def plan_swing(spec: SwingSpec, warm: SwingPlan | None = None) -> SwingPlan:
             and warm.spec.n_intervals == spec.n_intervals \
             and warm.spec.lift_intervals == spec.lift_intervals \
             and len(warm.spec.others) == len(spec.others) \
-            and (warm.spec.held is None) == (spec.held is None):
+            and (warm.spec.held is None) == (spec.held is None) \
+            and (spec.held is None or warm.spec.held.shape is spec.held.shape):
         out = _solve_swing(spec, warm.point)
         if out.ok:
             return out
@@ -576,7 +585,8 @@ def _solve_swing(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArra
     h = T / n
     solver, lbg, ubg, warm_solver, rows_of, kinds = _swing_nlp(f, body, n, K,
                                                                 len(spec.others),
-                                                                spec.held is not None)
+                                                                None if spec.held is None
+                                                                else spec.held.shape)
     vs, as_, js = 1.0 / T, 1.0 / T**2, 1.0 / T**3
     lo_q, hi_q = backed_off_joint_limits(f)
     vmax = np.asarray(f.velocity_limit, dtype=float)

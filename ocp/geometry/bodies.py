@@ -100,6 +100,34 @@ def segments_distance(a0: FloatArray, b0: FloatArray, a1: FloatArray, b1: FloatA
     return np.linalg.norm(gap, axis=1)
 
 
+def segments_distance_sx(a0: Any, b0: Any, a1: Any, b1: Any) -> Any:
+    """The distance between the segments a0-b0 and a1-b1 as a CasADi expression: the
+    closest points of :func:`segments_distance` (the same clamped closed form), the first
+    segment possibly a point, the second not."""
+    d1, d2, r = b0 - a0, b1 - a1, a0 - a1
+    a = ca.dot(d1, d1)
+    e = ca.dot(d2, d2)
+    f = ca.dot(d2, r)
+    c = ca.dot(d1, r)
+    b = ca.dot(d1, d2)
+    eps = 1e-18
+    safe_a = ca.fmax(a, eps)
+    denom = a * e - b * b
+
+    def clip(x: Any) -> Any:
+        return ca.fmin(ca.fmax(x, 0.0), 1.0)
+
+    s = ca.if_else(denom > eps * ca.fmax(a * e, eps), clip((b * f - c * e) /
+                                                           ca.fmax(denom, eps)), 0.0)
+    s = ca.if_else(a <= eps, 0.0, s)
+    t = (b * s + f) / e
+    s = ca.if_else(a <= eps, s, ca.if_else(t < 0.0, clip(-c / safe_a),
+                                           ca.if_else(t > 1.0, clip((b - c) / safe_a), s)))
+    t = clip(t)
+    gap = a0 + s * d1 - a1 - t * d2
+    return ca.sqrt(ca.dot(gap, gap) + 1e-18)
+
+
 def points_segment_distance(x: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
     """Distances from the points x (rows) to the segment a-b (numpy)."""
     d = b - a

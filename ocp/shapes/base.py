@@ -20,10 +20,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.surfaces import Surface
 
-__all__ = ["MESH_NAME", "MujocoGeom", "Shape"]
+__all__ = ["CLEARANCE_PARAMS", "MESH_NAME", "MujocoGeom", "Shape"]
 
 FloatArray = NDArray[np.float64]
 
+
+#: The most numbers a shape's clearance for a swing's NLP takes
+#: (:meth:`Shape.clearance_params`).
+CLEARANCE_PARAMS = 4
 
 #: The name of the object's mesh asset in a scene, when its geom is a mesh.
 MESH_NAME = "dexroll_object_mesh"
@@ -142,13 +146,17 @@ class Shape(ABC):
         at once. None where the shape has no such closed form (no gait on it yet)."""
         return None
 
-    def distance_bound(self, dimensions: Sequence[float]
-                       ) -> tuple[tuple[float, float, float], float] | None:
-        """``(s, k)``: a lower bound on the distance of a point ``x`` outside the object
-        (the object's frame [m]) from its surface, ``k (|diag(s) x| - 1)`` (positive only
-        outside), as a swing's NLP keeps its clearance with (smooth, and a segment's least
-        is a point's distance from a segment); None where the shape has none."""
+    def clearance_params(self, dimensions: Sequence[float]) -> tuple[float, ...] | None:
+        """The numbers :meth:`segment_clearance` takes (at most :data:`CLEARANCE_PARAMS`),
+        or None where the shape has no clearance for a swing's NLP (no gait on it yet)."""
         return None
+
+    def segment_clearance(self, params: Any, a: Any, b: Any) -> Any:
+        """A lower bound on the distance of the segment a-b (the object's frame [m],
+        CasADi) from the surface, positive only outside, with the shape's
+        :meth:`clearance_params` as ``params`` (CasADi symbols): what a swing's NLP keeps
+        a fingertip's body clear of the object with."""
+        raise NotImplementedError(f"a {self.name} has no clearance for a swing")
 
     def sample_points(self, dimensions: Sequence[float], n: int = 400) -> FloatArray:
         """About ``n`` points spread over the surface (k, 3) [m], in the object's frame:

@@ -23,6 +23,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ocp.geometry.bodies import segments_distance_sx
 from ocp.geometry.surfaces import Surface
 from ocp.shapes.base import MujocoGeom, Shape
 
@@ -142,6 +143,28 @@ class CapsuleShape(Shape):
     def viewer(self, dimensions: Sequence[float]) -> dict[str, Any]:
         r, h = (float(x) for x in dimensions[:2])
         return {"kind": "capsule", "radius": r, "length": 2.0 * h}
+
+    def nearest(self, dimensions: Sequence[float], points: ArrayLike
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The axis's nearest point s (|z| clamped to h), the normal along the point's
+        offset from it, the distance that offset's length less r."""
+        r, h = (float(x) for x in dimensions[:2])
+        P = np.atleast_2d(np.asarray(points, dtype=float))
+        S = np.zeros_like(P)
+        S[:, 2] = np.clip(P[:, 2], -h, h)
+        d = P - S
+        dist = np.linalg.norm(d, axis=1)
+        n = d / dist[:, None]
+        return S + r * n, n, dist - r
+
+    def clearance_params(self, dimensions: Sequence[float]) -> tuple[float, ...]:
+        return (float(dimensions[0]), float(dimensions[1]))
+
+    def segment_clearance(self, params: Any, a: Any, b: Any) -> Any:
+        """The segment's distance from the axis less r: exact."""
+        h = params[1]
+        return segments_distance_sx(a, b, ca.vertcat(0, 0, -h), ca.vertcat(0, 0, h)) \
+            - params[0]
 
 
 CAPSULE = CapsuleShape()

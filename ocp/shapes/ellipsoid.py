@@ -19,6 +19,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ocp.geometry.bodies import point_segment_distance
 from ocp.geometry.surfaces import Ellipsoid, Surface
 from ocp.shapes.base import MujocoGeom, Shape
 
@@ -205,12 +206,17 @@ class EllipsoidShape(Shape):
         dist = np.linalg.norm(P - X, axis=1) * np.where(outside, 1.0, -1.0)
         return X * a_min, n, dist * a_min
 
-    def distance_bound(self, dimensions: Sequence[float]
-                       ) -> tuple[tuple[float, float, float], float]:
-        """The map diag(1/a_i) shrinks lengths by at most 1/a_min: a point at |diag(1/a) x|
-        = s > 1 is at least a_min (s - 1) from the surface (exact for a ball)."""
-        ax = self.semi_axes(dimensions)
-        return (1.0 / ax[0], 1.0 / ax[1], 1.0 / ax[2]), float(min(ax))
+    def clearance_params(self, dimensions: Sequence[float]) -> tuple[float, ...]:
+        return self.semi_axes(dimensions)
+
+    def segment_clearance(self, params: Any, a: Any, b: Any) -> Any:
+        """a_min (|diag(1/a_i) x| - 1) at the segment's point least in that norm (a
+        point-segment distance in the scaled space): diag(1/a_i) shrinks lengths by at
+        most 1/a_min, so a point at |diag(1/a) x| = s > 1 is at least a_min (s - 1) from
+        the surface (exact for a ball; 0.75 of the distance at an egg's poles)."""
+        inv = 1.0 / params[0:3]
+        least = ca.fmin(params[0], ca.fmin(params[1], params[2]))
+        return least * (point_segment_distance(ca.DM.zeros(3), inv * a, inv * b) - 1.0)
 
 
 ELLIPSOID = EllipsoidShape()

@@ -7,9 +7,11 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ocp.geometry.bodies import point_segment_distance
 from ocp.geometry.surfaces import Sphere, Surface
 from ocp.shapes.base import MujocoGeom, Shape
 
@@ -61,10 +63,11 @@ class SphereShape(Shape):
         n = x / d[:, None]
         return r * n, n, d - r
 
-    def distance_bound(self, dimensions: Sequence[float]
-                       ) -> tuple[tuple[float, float, float], float]:
-        r = float(dimensions[0])
-        return (1.0 / r, 1.0 / r, 1.0 / r), r
+    def clearance_params(self, dimensions: Sequence[float]) -> tuple[float, ...]:
+        return (float(dimensions[0]),)
+
+    def segment_clearance(self, params: Any, a: Any, b: Any) -> Any:
+        return point_segment_distance(ca.DM.zeros(3), a, b) - params[0]
 
     def viewer(self, dimensions: Sequence[float]) -> dict[str, Any]:
         return {"kind": "ellipsoid", "semi_axes": list(self.semi_axes(dimensions))}
