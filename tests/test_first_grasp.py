@@ -126,8 +126,9 @@ def test_the_builtin_hand_takes_the_searched_tip_sides() -> None:
      "greater than or equal to 50"),
     (lambda b: b.update(initial_pose={"position": [0.5, 0, 0.5]}), "fingers[2]",
      "cannot touch the ball"),
-    (lambda b: (b["object"].update(shape="ellipsoid", dimensions=[0.03, 0.02]),
-                b.update(gait={})), "grasp", "for a ball"),  # a gait's grasp: a ball's
+    (lambda b: (b["object"].update(shape="superellipsoid",
+                                   dimensions=[0.03, 0.03, 0.03, 0.008]),
+                b.update(gait={})), "object.shape", "not yet on a superellipsoid"),
     (lambda b: b["fingers"][1].update(initial={"x_f": 0, "y_f": 0, "u_f": 0, "v_f": 0,
                                                 "psi_f": 0}, chart_rotation=[0, 0, 0]),
      "fingers[1].initial", "with `grasp`"),

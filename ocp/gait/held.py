@@ -134,10 +134,16 @@ def held_object(obj: Any, centre: ArrayLike, rotation: ArrayLike) -> Held:
 
 def gait_shape_error(obj: Any) -> str | None:
     """Why a gait cannot hold ``obj``: its shape has no closed-form nearest point or no
-    distance bound (None when it can)."""
-    shape = obj.kind
-    if shape.nearest(obj.dimensions, np.ones((1, 3))) is None or \
-            shape.clearance_params(obj.dimensions) is None:
-        return (f"a gait measures its fingertips' contacts and clearances on the object's "
-                f"surface: not yet on a {obj.shape} (a sphere or an ellipsoid)")
-    return None
+    clearance for a swing's NLP (None when it can)."""
+    from ocp.shapes import SHAPES
+    from ocp.shapes.base import Shape
+
+    def held(shape: Shape) -> bool:
+        return type(shape).nearest is not Shape.nearest and \
+            type(shape).clearance_params is not Shape.clearance_params
+
+    if held(obj.kind):
+        return None
+    can = ", ".join(s.name for s in SHAPES.values() if held(s))
+    return (f"a gait measures its fingertips' contacts and clearances on the object's "
+            f"surface: not yet on a {obj.shape} (only on: {can})")

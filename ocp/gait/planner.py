@@ -1095,6 +1095,12 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             plan.message = (f"roll {r} ({math.degrees(done):.1f} to "
                             f"{math.degrees(done + step):.1f} deg) was not certified: "
                             f"{sol.status}; " + "; ".join(sol.certificate.failures[:3]))
+            if not held0.ball and retries < MAX_ROLL_RETRIES and step / 2 >= MIN_ROLL:
+                # no rolled reach told this roll's length (a ball's): half as far
+                halved = plan.message
+                t, done, pose, q_now = _undo(plan, checks, never_lifted, before)
+                cap, retries = step / 2, retries + 1
+                continue
             break
         checks += _clock_checks(plan, r, template, t, q_now if r else None)
         q_end = np.split(plan.roll_joints(r, np.array([clock.length]))[0][0],

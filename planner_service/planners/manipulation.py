@@ -145,6 +145,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
     import json
     import time
 
+    from ocp.gait.held import gait_shape_error
     from ocp.robots.first_grasp import (
         GraspNotFoundError,
         ObjectGeometry,
@@ -156,9 +157,6 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
     if palm is not None:
         return [("grasp", "a grasp search places fingertips on a ball held by the fingers "
                           "alone: not with a palm")]
-    if obj.shape != "sphere" and request.gait is not None:
-        return [("grasp", f"a grasp search for a gait is for a ball (object.shape "
-                          f"'sphere'), not {obj.shape!r}")]
     if start is None:
         return [("initial_pose", "required by `grasp`: where the ball is held")]
     if len(from_joints) != len(request.fingers):
@@ -188,17 +186,18 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                         if obj.shape != "sphere" else []))
 
     prefer = None
-    if request.gait is not None:  # a gait re-places fingertips: each one liftable
-        from ocp.gait.held import Held
+    if request.gait is not None and gait_shape_error(obj) is None:
+        # a gait re-places fingertips: each one liftable (on a shape a gait can hold:
+        # others are refused naming object.shape)
+        from ocp.gait.held import held_object
         from ocp.gait.step import liftable
         from ocp.transcription.values import load_vector
 
         load = load_vector(force_spec(request.forces), request.mu, len(models))
-        rotation = np.asarray(start.rotation, dtype=float)
+        held = held_object(obj, centre, np.asarray(start.rotation, dtype=float))
 
         def prefer(contacts: tuple[Any, ...]) -> bool:
-            return all(liftable(models, [ct.q for ct in contacts],
-                                Held(centre, rotation, radius), load))
+            return all(liftable(models, [ct.q for ct in contacts], held, load))
 
     collision = _hand_collision(request, hand)
     clear = None
