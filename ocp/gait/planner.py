@@ -1067,6 +1067,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 float(np.abs(a - b).max()) for a, b in zip(roll_starts[-1], q_now,
                                                            strict=True)) > RECUR_TOL:
             warm = None  # a grasp of other contacts: the last roll's point is no start
+        if not held0.ball:  # its turned form: no roll recurs (the egg's 90 deg gait took
+            warm = None  # 38 s warm-started from the last roll, 21 s started cold)
         if warm is not None and warm.stats is not None \
                 and warm.stats.n_intervals > prob.n_intervals:
             # the last roll's certificate refined its grid: this one starts there, where
