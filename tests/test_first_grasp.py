@@ -150,8 +150,8 @@ def test_a_gait_searches_a_grasp_in_which_every_fingertip_can_be_lifted() -> Non
     """With `gait` the search prefers a grasp whose every fingertip the others hold the
     ball without (a gait re-places each): 180 deg about the palm's z at mu = 1, where the
     grasp of the largest reach alone keeps the thumb (docs/gait.md)."""
-    from ocp.gait.held import Held
     from ocp.gait.step import liftable
+    from ocp.shapes.held import Held
     from ocp.transcription.values import load_parameters
 
     body = json.loads((ROOT / "examples" / "allegro_gait.json").read_text())

@@ -84,8 +84,8 @@ def test_a_gaits_search_on_an_egg_finds_a_grasp_every_fingertip_of_which_can_be_
         ) -> None:
     """With `gait` the search prefers a grasp whose every fingertip the others hold the
     egg without (a gait re-places each), measured on the egg's surface."""
-    from ocp.gait.held import held_object
     from ocp.gait.step import liftable
+    from ocp.shapes.held import held_object
     from ocp.transcription.values import load_parameters
 
     body = request(EGG, UPRIGHT)

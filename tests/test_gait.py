@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from ocp.gait.checks import swing_checks
-from ocp.gait.held import Held
 from ocp.gait.step import contact_of, replace_finger
 from ocp.gait.swing import SwingPlan, SwingSpec
 from ocp.geometry.bodies import tip_body
 from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
 from ocp.robots.allegro import NOMINAL_Q, load_allegro
+from ocp.shapes.held import Held
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
 from ocp.spec.motion import ObjectPose, Tracking
 from ocp.spec.problem import ForceSpec, ObjectSpec

@@ -37,10 +37,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ocp.gait.held import held_object
 from ocp.gait.hold import hold_forces
-from ocp.gait.planner import MIN_ROLL, REACH_MARGIN, REACH_SHARE, is_ball, plan_gait
+from ocp.gait.planner import MIN_ROLL, REACH_MARGIN, REACH_SHARE, plan_gait
 from ocp.gait.step import grasp_hold
+from ocp.shapes.held import held_object
 from ocp.spec.grasp import ManipulationProblem
 from ocp.spec.motion import ObjectPose
 from ocp.transcription.values import LOAD_BOUND, load_parameters
@@ -89,13 +89,14 @@ def _reach(template: ManipulationProblem, qs: tuple[FloatArray, ...], which: lis
     from ocp.robots.turn_reach import rolls
 
     best = (upto, "", "")
-    if not is_ball(template):  # a ball's rolled reach: none predicted for other shapes
-        return best
+    pose = template.initial_pose or ObjectPose()
+    held = held_object(template.object, centre, pose.rotation)
     for i in which:
         tip = template.fingers[i]
         if not rolls(tip.finger):
             continue
-        r = roll(tip.finger, qs[i], centre, rho, axis, upto, template.pad_margin)
+        r = roll(tip.finger, qs[i], centre, rho, axis, upto, template.pad_margin,
+                 held=None if held.ball else held)
         if r.why and r.reach < best[0]:
             best = (r.reach, tip.name or f"finger{i}", r.why)
     return best

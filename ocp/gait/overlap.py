@@ -42,7 +42,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ocp.gait.held import Held
 from ocp.gait.step import (
     SWING_OBSTACLES,
     GaitStep,
@@ -54,6 +53,7 @@ from ocp.gait.step import (
 from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, SwingPlan, SwingSpec, plan_swing
 from ocp.gait.warp import RollClock
 from ocp.geometry.bodies import point_segment_distance, tip_body
+from ocp.shapes.held import Held
 from ocp.spec.grasp import ManipulationProblem
 
 __all__ = ["OVERLAP_HOLD_DEPTH", "OVERLAP_SWING", "OverlapRoll", "hold_depth", "lift_next",

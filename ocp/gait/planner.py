@@ -25,7 +25,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.certify.certificate import Certificate, Check, CheckKind
-from ocp.gait.held import Held, held_object
 from ocp.gait.overlap import (
     OVERLAP_HOLD_DEPTH,
     hold_depth,
@@ -46,6 +45,7 @@ from ocp.gait.step import (
 from ocp.gait.warp import RollClock, fastest_speed
 from ocp.geometry.bodies import segments_distance, tip_body
 from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
+from ocp.shapes.held import Held, held_object
 from ocp.solution import ManipulationSolution
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
 from ocp.spec.motion import DesiredMotion, ObjectPose
@@ -191,7 +191,7 @@ def roll_frame(template: ManipulationProblem, pose: ObjectPose) -> FloatArray:
 
 
 def held_at(template: ManipulationProblem, pose: ObjectPose) -> Held:
-    """The gait's object at ``pose`` (:func:`~ocp.gait.held.held_object`)."""
+    """The gait's object at ``pose`` (:func:`~ocp.shapes.held.held_object`)."""
     return held_object(template.object, pose.position, pose.rotation)
 
 
@@ -270,17 +270,22 @@ class RollAhead:
 
 
 def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
-                centre: FloatArray, rho: float, axis: FloatArray, upto: float) -> RollAhead:
+                centre: FloatArray, rho: float, axis: FloatArray, upto: float,
+                rotation: FloatArray | None = None) -> RollAhead:
     """:class:`RollAhead` of the grasp at joints ``qs`` turned about ``axis``: one pass of
     the fingers' rolled motion in :data:`GAP_REACH_SAMPLES` equal parts of ``upto`` (the
     seams kept ``pad_margin`` away), the tips' gaps measured at the end of each part and
     the crossing of ``need`` (ROLL_TIP_GAP, or 90 % of the grasp's own gap) interpolated
-    linearly; the pass ends at the first finger's stop."""
+    linearly; the pass ends at the first finger's stop. An object that is not a ball
+    turns with its form from ``rotation`` (its axes at the turn's start, palm frame): the
+    rolled motion on its surface (:func:`~ocp.robots.grasp_reach.roll` with ``held``)."""
     from ocp.robots.grasp_reach import roll
     from ocp.robots.turn_reach import rolls
 
-    if not is_ball(template):  # a ball's rolled motion: none predicted (the roll's
-        return RollAhead(upto, "", "", upto, ROLL_TIP_GAP)  # certificate measures it)
+    R0 = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
+    held = held_object(template.object, centre, R0)
+    if held.ball:  # (a ball's turn does not depend on its axes)
+        R0 = np.eye(3)
     fingers = tuple(f.finger for f in template.fingers)
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
     nq = tuple(len(q) for q in qs)
@@ -291,7 +296,7 @@ def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
     q = [np.asarray(v, dtype=float) for v in qs]
     reach, who, why, apart = upto, "", "", upto
     g_prev, th = g0, 0.0
-    links = _link_gap(template, fingers, centre) if gaps else None
+    links = _link_gap(template, fingers, centre, R0) if gaps else None
     l_prev = links(q).value if links is not None else math.inf
     l_need = max(min(ROLL_LINK_CLEARANCE, 0.9 * l_prev), MIN_ROLL_LINK_CLEARANCE)
     close = ""
@@ -301,7 +306,9 @@ def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
         for i, f in enumerate(fingers):
             if not rolls(f):
                 continue
-            m = roll(f, q[i], centre, rho, axis, h, template.pad_margin)
+            m = roll(f, q[i], centre, rho, axis, h, template.pad_margin,
+                     held=None if held.ball else
+                     held.at(centre, axis_angle_rotation(axis, th) @ R0))
             if m.why and th + m.reach < reach:  # a stop (a joint limit, the seam, a fold)
                 reach, who, why = th + m.reach, names[i], m.why
             q[i] = m.q
@@ -313,7 +320,7 @@ def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
                 apart = th + h * (g_prev - need) / max(g_prev - g, 1e-12)
             g_prev = g
         if links is not None and apart >= upto:
-            c = links(q)
+            c = links(q, None if held.ball else axis_angle_rotation(axis, th + h) @ R0)
             if c.value < l_need:
                 apart = th + h * (l_prev - l_need) / max(l_prev - c.value, 1e-12)
                 need, close = l_need, c.describe()
@@ -331,17 +338,22 @@ MIN_ROLL_LINK_CLEARANCE = 6e-4
 
 
 def _link_gap(template: ManipulationProblem, fingers: tuple[Any, ...],
-              centre: FloatArray) -> Any:
-    """The least clearance of the hand's links at joints (per finger) with the ball at
-    ``centre`` (``template.collision``), as a function; None without a collision model."""
+              centre: FloatArray, rotation: FloatArray | None = None) -> Any:
+    """The least clearance of the hand's links at joints (per finger) with the object at
+    ``centre`` (``template.collision``), its axes ``rotation`` (palm frame; default the
+    palm's) or as given to the function, as a function; None without a collision
+    model."""
     coll = template.collision
     if coll is None:
         return None
     names = [n for f in fingers for n in f.joint_names]
     shape, dims = template.object.shape, template.object.dimensions
 
-    def gap(q: list[FloatArray]) -> Any:
-        return coll.least(shape, dims, names, np.concatenate(q)[None], np.eye(3)[None],
+    R0 = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
+
+    def gap(q: list[FloatArray], R: FloatArray | None = None) -> Any:
+        return coll.least(shape, dims, names, np.concatenate(q)[None],
+                          (R0 if R is None else R)[None],
                           np.asarray(centre, dtype=float)[None])
 
     return gap
@@ -637,14 +649,15 @@ def torque_limits(template: ManipulationProblem, share: float = HOLD_TORQUE_SHAR
 
 def spent_fingers(template: ManipulationProblem, q_now: tuple[FloatArray, ...],
                   centre: FloatArray, rho: float, axis: FloatArray, upto: float,
-                  never_lifted: set[str]) -> list[int]:
+                  never_lifted: set[str], rotation: FloatArray | None = None) -> list[int]:
     """:func:`spent_reach`'s fingertips."""
-    return spent_reach(template, q_now, centre, rho, axis, upto, never_lifted)[0]
+    return spent_reach(template, q_now, centre, rho, axis, upto, never_lifted, rotation)[0]
 
 
 def spent_reach(template: ManipulationProblem, q_now: tuple[FloatArray, ...],
                 centre: FloatArray, rho: float, axis: FloatArray, upto: float,
-                never_lifted: set[str]) -> tuple[list[int], dict[int, float]]:
+                never_lifted: set[str], rotation: FloatArray | None = None
+                ) -> tuple[list[int], dict[int, float]]:
     """(the fingertips to re-place before the next roll, each liftable fingertip's rolled
     reach [rad] up to ``(1 + SPENT_MARGIN) upto``, infinite where its motion is not fixed
     by the ball's). The fingertips to re-place before the next roll of ``upto`` [rad]
@@ -661,9 +674,11 @@ def spent_reach(template: ManipulationProblem, q_now: tuple[FloatArray, ...],
     out = []
     reach: dict[int, float] = {}
     rolled: list[FloatArray] = []
+    held = held_object(template.object, centre, np.eye(3) if rotation is None else rotation)
     for k, f in enumerate(template.fingers):
         r = roll(f.finger, q_now[k], centre, rho, axis, upto * (1.0 + SPENT_MARGIN),
-                 template.pad_margin) if rolls(f.finger) else None
+                 template.pad_margin, held=None if held.ball else held) \
+            if rolls(f.finger) else None
         rolled.append(np.asarray(q_now[k] if r is None else r.q, dtype=float))
         if (f.name or f"finger{k}") in never_lifted:
             continue
@@ -671,7 +686,7 @@ def spent_reach(template: ManipulationProblem, q_now: tuple[FloatArray, ...],
         if r is None or r.why:
             out.append(k)
     # two fingertips the roll brings together: the one of the pair that reaches less
-    ahead = _roll_ahead(template, q_now, centre, rho, axis, upto)
+    ahead = _roll_ahead(template, q_now, centre, rho, axis, upto, rotation)
     if ahead.apart < upto and not ahead.close:
         fingers = tuple(f.finger for f in template.fingers)
         at = [q if k in out else rolled[k] for k, q in enumerate(q_now)]
@@ -805,7 +820,8 @@ def _replace_spent(plan: GaitPlan, checks: list[Check], template: ManipulationPr
     ``never_lifted`` as they were, when one of them cannot be lifted or a step fails."""
     marks = (len(plan.phases), len(plan.steps), len(checks), set(never_lifted))
     which = spent_fingers(template, q_now, np.asarray(pose.position, float),
-                          float(template.object.dimensions[0]), axis, upto, never_lifted)
+                          float(template.object.dimensions[0]), axis, upto, never_lifted,
+                          pose.rotation)
     q_after, t_after = _replace_fingers(plan, checks, template, q_home, q_now, pose, t,
                                         load, swing, hold_time, never_lifted, which, q_start)
     if plan.status == "solved" and never_lifted == marks[3]:
@@ -1003,10 +1019,9 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     load = load_parameters(template)
     rho = float(template.object.dimensions[0])
     held0 = held_object(template.object, centre, R0)
-    if not held0.ball and (not replace_all or overlap):
-        return GaitPlan("infeasible", "an object that is not a ball has no rolled reach to "
-                                      "tell the spent fingertips: every one is re-placed "
-                                      "after each roll (replace 'all')")
+    if not held0.ball and (landing != "home" or overlap):
+        return GaitPlan("infeasible", "farthest landings and overlap are planned on a "
+                                      "ball's rolled reach alone")
     q_now = tuple(np.asarray(q, dtype=float) for q in qs)
     q_home = q_now  # where each fingertip touched when the gait began
     q_land: tuple[FloatArray, ...] | None = None  # where the spent ones land (made once)
@@ -1027,7 +1042,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     halved = ""  # why it was last halved
     while done < angle - 1e-12 and len(plan.rolls) < max_rolls:
         step = min(cap, angle - done)
-        ahead = _roll_ahead(template, q_now, np.asarray(pose.position, float), rho, ax, step)
+        ahead = _roll_ahead(template, q_now, np.asarray(pose.position, float), rho, ax, step,
+                            pose.rotation)
         if ahead.why and ahead.reach < step - 1e-6:  # a finger stops short: roll to just
             step = ahead.reach - max(REACH_MARGIN, REACH_SHARE * ahead.reach)  # before it
             if step < MIN_ROLL:

@@ -10,10 +10,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ocp.gait.held import held_object
 from ocp.gait.planner import GaitPlan
 from ocp.geometry.bodies import tip_body
 from ocp.geometry.rotations import quaternion_matrix, quaternion_wxyz
+from ocp.shapes.held import held_object
 from ocp.solution import joint_torques
 
 __all__ = ["LINK_CHECK_RATE", "TRANSITION", "GaitSamples", "gait_samples", "gait_times",

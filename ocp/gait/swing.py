@@ -133,7 +133,7 @@ class SwingSpec:
     #: checks them without it, between the nodes too: bodies that move between the nodes
     #: bring the least distance there, 10 um measured)
     node_margin: float = 0.0
-    #: the object when it is not a ball (:class:`~ocp.gait.held.Held`, still: its centre
+    #: the object when it is not a ball (:class:`~ocp.shapes.held.Held`, still: its centre
     #: ``centre``): the contacts and distances are its surface's, the NLP keeps its
     #: clearance by the shape's distance bound; None: a ball of ``radius``
     held: Any = field(default=None, compare=False, repr=False)

@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import segment_distance, tip_body
 from ocp.robots.couplings import coupled_step, coupling_violation, project_couplings
+from ocp.shapes.held import Held
 
 __all__ = ["GraspSearch", "Rolled", "TipState", "at_tendon_bounds", "cap_bound",
            "contact_sides", "grasp_on_ball", "roll", "search_grasp", "tip_state", "tips_gap"]
@@ -87,13 +88,22 @@ class TipState:
     m: FloatArray        # the contact's direction from the tip's centre, link frame
 
 
-def tip_state(f: Any, q: ArrayLike, centre: ArrayLike, radius: float) -> TipState:
+def tip_state(f: Any, q: ArrayLike, centre: ArrayLike, radius: float,
+              held: Held | None = None) -> TipState:
     """Finger ``f``'s round tip at joints ``q`` against the ball of ``radius`` at
-    ``centre``: the contact where the line of centres meets the surfaces."""
+    ``centre``: the contact where the line of centres meets the surfaces; against
+    ``held`` (an object that is not a ball, where it is) the object's point nearest the
+    tip's centre."""
     c = np.asarray(centre, dtype=float)
     R_l, p_l = f.fingertip_pose_pin(np.asarray(q, dtype=float))
     pc, ax, r = _tip(f)
     tc = p_l + R_l @ pc
+    if held is not None and not held.ball:
+        point, nrm, dist_s = held.nearest(tc[None])
+        n = nrm[0]
+        m = R_l.T @ (-n)
+        polar = 0.0 if ax is None else math.acos(max(-1.0, min(1.0, float(m @ ax))))
+        return TipState(R_l, p_l, tc, n, point[0], float(dist_s[0]) - r, polar, m)
     d = tc - c
     dist = float(np.linalg.norm(d))
     n = d / dist
@@ -102,12 +112,13 @@ def tip_state(f: Any, q: ArrayLike, centre: ArrayLike, radius: float) -> TipStat
     return TipState(R_l, p_l, tc, n, c + radius * n, dist - r - radius, polar, m)
 
 
-def joint_rates(f: Any, q: FloatArray, centre: FloatArray, radius: float, omega: FloatArray
-                ) -> tuple[FloatArray, float]:
-    """The joint rates that roll the tip on the ball turning at ``omega`` about its centre
-    without slip or spin (least squares for a finger of more than 4 joints), with a
-    feedback holding the tip on the ball; and the system's condition number."""
-    s = tip_state(f, q, centre, radius)
+def joint_rates(f: Any, q: FloatArray, centre: FloatArray, radius: float, omega: FloatArray,
+                held: Held | None = None) -> tuple[FloatArray, float]:
+    """The joint rates that roll the tip on the ball (or ``held``, where it is) turning at
+    ``omega`` about its centre without slip or spin (least squares for a finger of more
+    than 4 joints), with a feedback holding the tip on the object; and the system's
+    condition number."""
+    s = tip_state(f, q, centre, radius, held)
     J = f.frame_jacobian_pin(q)  # (v of the link's origin; omega), palm axes
     Jp = J[:3] - _skew(s.contact - s.p_l) @ J[3:]  # the tip's material point at the contact
     A = np.vstack([Jp, s.n @ J[3:]])
@@ -133,7 +144,8 @@ class Rolled:
 
 
 def roll(f: Any, q0: ArrayLike, centre: ArrayLike, radius: float, axis: ArrayLike,
-         max_turn: float = math.pi, margin: float = 0.0, step: float = STEP) -> Rolled:
+         max_turn: float = math.pi, margin: float = 0.0, step: float = STEP,
+         held: Held | None = None) -> Rolled:
     """Finger ``f``'s motion, fixed by rolling without slip or spin, from joints ``q0``
     while the ball of ``radius`` at ``centre`` turns about ``axis`` (through its centre)
     by up to ``max_turn`` [rad]: midpoint steps of at most :data:`STEP`, until a joint
@@ -141,14 +153,24 @@ def roll(f: Any, q0: ArrayLike, centre: ArrayLike, radius: float, axis: ArrayLik
     (the planner keeps ``pad_margin``, 2 mm) or the system turns singular (a fold of the
     finger's motion: a joint rate without bound). A larger ``step`` (a search's coarse
     roll) allows each joint ``0.01 step / STEP`` rad per step and the tip's distance from
-    the ball to drift by ``1 um (step / STEP)^2``."""
+    the ball to drift by ``1 um (step / STEP)^2``. ``held``: an object that is not a ball
+    (:class:`~ocp.shapes.held.Held`, at the turn's start, its centre ``centre``): the
+    same laws on its surface, turned with it (the contact the tip's centre's nearest
+    point; ``ball_arc`` is then the contact's path measured as on a ball of
+    ``radius``)."""
     c = np.asarray(centre, dtype=float)
     a = np.asarray(axis, dtype=float)
     a = a / np.linalg.norm(a)
     q = np.array(q0, dtype=float)
     r = _tip(f)[2]
     seam = math.pi / 2 - margin / r
-    s0 = prev = tip_state(f, q, c, radius)
+    if held is not None and held.ball:
+        held = None
+
+    def at(angle: float) -> Held | None:  # the object turned by ``angle``
+        return None if held is None else held.at(c, _rotation(a, angle) @ held.rotation)
+
+    s0 = prev = tip_state(f, q, c, radius, held)
     theta = ball_arc = tip_arc = 0.0
     n_ball = s0.n.copy()  # the contact's direction in the ball's frame
     h = min(step, max_turn)
@@ -158,24 +180,24 @@ def roll(f: Any, q0: ArrayLike, centre: ArrayLike, radius: float, axis: ArrayLik
         return Rolled(theta, why, ball_arc, tip_arc, _angle(s0.n, prev.n), q)
 
     while theta < max_turn - 1e-9:  # (a last step below 1e-9 rad is no step)
-        qd1, cond = joint_rates(f, q, c, radius, a)
+        qd1, cond = joint_rates(f, q, c, radius, a, at(theta))
         if cond > 1e6 or (h < 1e-6 and max_turn - theta > 2e-6):
             return stop("singular")
         if h < 1e-6:  # within 2e-6 rad of the whole turn: done
             break
-        qd2, _ = joint_rates(f, q + h / 2 * qd1, c, radius, a)
+        qd2, _ = joint_rates(f, q + h / 2 * qd1, c, radius, a, at(theta + h / 2))
         q_new = q + h * qd2
-        s = tip_state(f, q_new, c, radius)
+        s = tip_state(f, q_new, c, radius, at(theta + h))
         if float(np.abs(q_new - q).max()) > dq_max or abs(s.gap) > abs(s0.gap) + gap_tol:
             h /= 2  # a fast joint (near a fold of the finger's motion): smaller steps
             continue
         out = np.flatnonzero((q_new < f.lower) | (q_new > f.upper))
         if out.size:
             return stop(f"joint limit ({f.joint_names[int(out[0])]})")
-        held = [c for c in getattr(f, "couplings", ()) if not
-                c.backed_off()[0] <= float(c.row(f.joint_names) @ q_new) <= c.backed_off()[1]]
-        if held:
-            return stop(f"coupling limit ({held[0].name})")
+        bound = [c for c in getattr(f, "couplings", ()) if not
+                 c.backed_off()[0] <= float(c.row(f.joint_names) @ q_new) <= c.backed_off()[1]]
+        if bound:
+            return stop(f"coupling limit ({bound[0].name})")
         if s.polar > seam:
             return stop("cap's seam")
         theta += h

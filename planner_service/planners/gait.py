@@ -25,7 +25,6 @@ from dexroll_client.models import (
     PlanStatus,
 )
 from ocp.gait.feasibility import MAX_ROLLS, gait_outlook
-from ocp.gait.held import gait_shape_error
 from ocp.gait.planner import GaitPlan, plan_gait
 from ocp.gait.samples import (
     LINK_CHECK_RATE,
@@ -35,6 +34,7 @@ from ocp.gait.samples import (
     with_link_clearance,
 )
 from ocp.geometry.bodies import tip_body
+from ocp.shapes.held import gait_shape_error
 from ocp.solution import JointTrajectory, trajectory_joint_names
 from ocp.spec.grasp import ManipulationProblem
 
@@ -67,12 +67,12 @@ def gait_errors(request: ManipulationRequest, problem: ManipulationProblem) -> F
     why = gait_shape_error(problem.object)
     if why is not None:
         errs.append(("object.shape", why))
-    elif problem.object.kind.ball_radius(problem.object.dimensions) is None and \
-            request.gait.replace != "all":
-        errs.append(("gait.replace", f"a gait re-places the spent fingertips by a ball's "
-                                     f"rolled reach; on a {problem.object.shape} every "
-                                     "liftable fingertip is re-placed after each roll: "
-                                     "replace 'all'"))
+    elif problem.object.kind.ball_radius(problem.object.dimensions) is None:
+        for field, on in (("gait.landing", request.gait.landing != "home"),
+                          ("gait.overlap", bool(request.gait.overlap))):
+            if on:
+                errs.append((field, f"planned on a ball's rolled reach and landings alone, "
+                                    f"not yet on a {problem.object.shape}"))
     if request.palm is not None:
         errs.append(("palm", "a gait is planned for a ball held by fingertips alone"))
     if len(problem.fingers) < 3:

@@ -145,7 +145,6 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
     import json
     import time
 
-    from ocp.gait.held import gait_shape_error
     from ocp.robots.first_grasp import (
         GraspNotFoundError,
         ObjectGeometry,
@@ -153,6 +152,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
         first_grasp,
     )
     from ocp.robots.grasp_reach import _tip
+    from ocp.shapes.held import gait_shape_error
 
     if palm is not None:
         return [("grasp", "a grasp search places fingertips on a ball held by the fingers "
@@ -189,8 +189,8 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
     if request.gait is not None and gait_shape_error(obj) is None:
         # a gait re-places fingertips: each one liftable (on a shape a gait can hold:
         # others are refused naming object.shape)
-        from ocp.gait.held import held_object
         from ocp.gait.step import liftable
+        from ocp.shapes.held import held_object
         from ocp.transcription.values import load_vector
 
         load = load_vector(force_spec(request.forces), request.mu, len(models))
