@@ -32,12 +32,14 @@ from the surface is within the ball's band about ``r``; it is pulled onto the su
 (distance ``r``) by a Gauss-Newton on the joints along the normal (:func:`onto_surface`);
 a contact beyond the chart's bound (``u_limit``: an egg's poles, a capsule's caps) or on a
 cap's seam is dropped, every joint origin kept outside the object; the closure is that of
-the object's normals at the contacts. The rolled reach is the ball's alone: any other
-object's grasps well closed are ranked by the room their joints leave to roll (the least,
-over the fingers and their joints, distance to a joint limit as a share of the joint's
-range: :func:`joint_room`), then by closure (``turns`` ignored, no ``reach``): the most
-closed grasps of an egg put joints at their limits, and did not plan a 10 deg turn.
-docs/shapes.md.
+the object's normals at the contacts. An object with a closed-form nearest point (an
+ellipsoid, a capsule: the search's ``held``) has its candidates rolled through the turns on
+its surface (:func:`~ocp.robots.grasp_reach.roll` with ``held``) and ranked by that reach
+as a ball's are; any other object's grasps well closed are ranked by the room their
+joints leave to roll (the least, over the fingers and their joints, distance to a joint
+limit as a share of the joint's range: :func:`joint_room`), then by closure (``turns``
+ignored, no ``reach``): the most closed grasps of an egg put joints at their limits, and
+did not plan a 10 deg turn, nor did those of the most room. docs/shapes.md.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -64,6 +66,7 @@ from ocp.robots.grasp_reach import (
     roll,
     tip_state,
 )
+from ocp.shapes.held import Held
 
 __all__ = [
     "GOOD_CLOSURE",
@@ -388,18 +391,31 @@ def _capped(turns: Sequence[Any], cap: float) -> list[Any]:
 
 
 def _roll_through(f: Any, q: FloatArray, centre: FloatArray, radius: float,
-                  turns: Sequence[Any], margin: float, step: float = COARSE_STEP
-                  ) -> tuple[float, str]:
+                  turns: Sequence[Any], margin: float, step: float = COARSE_STEP,
+                  held: Held | None = None) -> tuple[float, str]:
     """How far [rad] the finger rolls through the turns (one after the other) before its
-    first stop, and the stop ("" none)."""
+    first stop, and the stop ("" none); on ``held`` (an object that is not a ball, at the
+    first turn's start) its surface turned by each turn in turn."""
     done = 0.0
     for turn in turns:
-        r = roll(f, q, centre, radius, turn.axis, turn.angle, margin, step)
+        r = roll(f, q, centre, radius, turn.axis, turn.angle, margin, step, held=held)
         done += r.reach
         if r.why or r.reach < turn.angle - 1e-9:
             return done, r.why
         q = r.q
+        held = _turned(held, centre, turn.axis, turn.angle)
     return done, ""
+
+
+def _turned(held: Held | None, centre: FloatArray, axis: ArrayLike, angle: float
+            ) -> Held | None:
+    """``held`` turned by ``angle`` about ``axis`` through ``centre`` (None stays None)."""
+    if held is None:
+        return None
+    from ocp.geometry.rotations import axis_angle_rotation
+
+    a = np.asarray(axis, dtype=float)
+    return held.at(centre, axis_angle_rotation(a / np.linalg.norm(a), angle) @ held.rotation)
 
 
 def finger_contacts(f: Any, centre: ArrayLike, radius: float | ObjectGeometry,
@@ -492,11 +508,12 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
                 keep: int = 8, min_gap: float = 1e-3, margin: float = 0.002,
                 seed: int = 0, names: Sequence[str] | None = None,
                 prefer: Callable[[tuple[FingerContact, ...]], bool] | None = None,
-                clear: Callable[[FloatArray], Any] | None = None
-                ) -> FirstGrasp:
+                clear: Callable[[FloatArray], Any] | None = None,
+                held: Held | None = None) -> FirstGrasp:
     """A first grasp of the ball of ``radius`` [m] at ``centre``, or of the object
-    ``radius`` (an :class:`ObjectGeometry`: ``turns`` only reported as requested, the
-    grasps ranked by their joints' room, :func:`joint_room`, then closure), by the round
+    ``radius`` (an :class:`ObjectGeometry`: without ``held``, ``turns`` only reported as
+    requested, the grasps ranked by their joints' room, :func:`joint_room`, then
+    closure), by the round
     tips of ``fingers`` (module docstring): per
     finger its joints ``fixed[i]`` when given, else searched (``samples`` joint vectors,
     ``seeds[i]`` first); the combination with the largest least reach through ``turns``
@@ -507,8 +524,12 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
     accepts none. ``clear``: the least clearance of the hand's other links (an
     :class:`ocp.robots.collision.Clearance`) over rows of all fingers' joints (the grasp,
     and each finger's rolled motion halfway through each of ``turns`` and at its end); a
-    grasp below :data:`GRASP_LINK_CLEARANCE` is never taken. :class:`GraspNotFoundError`
-    naming ``fingers[i]`` or ``grasp`` when there is none."""
+    grasp below :data:`GRASP_LINK_CLEARANCE` is never taken. ``held``: the object
+    (:class:`~ocp.shapes.held.Held`) of an :class:`ObjectGeometry` search with a closed-form
+    nearest point: its candidates are then rolled through ``turns`` on its surface
+    (:func:`~ocp.robots.grasp_reach.roll` with ``held``) and ranked by that reach, as a
+    ball's. :class:`GraspNotFoundError` naming ``fingers[i]`` or ``grasp`` when there is
+    none."""
     from ocp.geometry.grasp import force_angles
 
     c = np.asarray(centre, dtype=float)
@@ -518,7 +539,9 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
     geo = radius if isinstance(radius, ObjectGeometry) else None
     rho = 0.0 if isinstance(radius, ObjectGeometry) else float(radius)
     what = "the ball" if geo is None else f"the {geo.shape}"
-    turns = [] if geo is not None else _capped(turns, MAX_SEARCH_TURN)
+    if held is not None and held.ball:
+        held = None
+    turns = [] if geo is not None and held is None else _capped(turns, MAX_SEARCH_TURN)
     per: list[list[FingerContact]] = []
     errors: list[tuple[str, str]] = []
     for i, f in enumerate(fingers):
@@ -529,7 +552,9 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
                 R_l, p_l = f.fingertip_pose_pin(q)
                 tc = p_l + R_l @ _tip(f)[0]
                 _, t, nrm = geo.nearest(tc - c)
-                per.append([FingerContact(q, nrm, tc, R_l.T @ (-nrm), None, "",
+                reach, stop = (None, "") if not turns else _roll_through(
+                    f, q, c, rho, turns, margin, held=held)
+                per.append([FingerContact(q, nrm, tc, R_l.T @ (-nrm), reach, stop,
                                           tc - t * nrm)])
                 continue
             s = tip_state(f, q, c, rho)
@@ -539,6 +564,10 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
             continue
         got, closest = finger_contacts(f, c, radius, [] if seeds is None else seeds[i],
                                        samples, turns, margin, rng)
+        if turns and geo is not None:  # rolled on the object's surface
+            rolled_ = [_roll_through(f, ct.q, c, rho, turns, margin, held=held) for ct in got]
+            got = [replace(ct, reach=rs[0], stop=rs[1])
+                   for ct, rs in zip(got, rolled_, strict=True)]
         if not got:
             size = f"radius {rho * 1e3:.3g} mm" if geo is None else \
                 f"chart parameters {', '.join(f'{x:.3g}' for x in geo.params)}"
@@ -611,11 +640,13 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
         if got is None:
             q = np.asarray(per[i][k].q, dtype=float)
             got = [q]
+            on = held
             for t in turns:
                 for _ in range(2):
                     r = roll(fingers[i], got[-1], c, rho, t.axis, t.angle / 2, margin,
-                             COARSE_STEP)
+                             COARSE_STEP, held=on)
                     got.append(np.asarray(r.q, dtype=float))
+                    on = _turned(on, c, t.axis, t.angle / 2)
             paths[(i, k)] = got
         return got
 
@@ -648,7 +679,7 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
     if first is not None:
         k, contacts, angle = first
         if turns:  # the chosen grasp's reach at the planner's check's step
-            contacts = tuple(_fine(f, ct, c, rho, turns, margin)
+            contacts = tuple(_fine(f, ct, c, rho, turns, margin, held)
                              for f, ct in zip(fingers, contacts, strict=True))
         return FirstGrasp(contacts, float(clo[k]), float(gap[k]), angle, requested,
                           tuple(len(p) for p in per), len(combos))
@@ -672,12 +703,10 @@ def _body_ends(f: Any, cands: Sequence[FingerContact]) -> tuple[FloatArray, Floa
 
 
 def _fine(f: Any, ct: FingerContact, centre: FloatArray, radius: float,
-          turns: Sequence[Any], margin: float) -> FingerContact:
-    from dataclasses import replace
-
+          turns: Sequence[Any], margin: float, held: Held | None = None) -> FingerContact:
     from ocp.robots.grasp_reach import STEP
 
-    reach, stop = _roll_through(f, ct.q, centre, radius, turns, margin, STEP)
+    reach, stop = _roll_through(f, ct.q, centre, radius, turns, margin, STEP, held)
     return replace(ct, reach=reach, stop=stop)
 
 

@@ -152,7 +152,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
         first_grasp,
     )
     from ocp.robots.grasp_reach import _tip
-    from ocp.shapes.held import gait_shape_error
+    from ocp.shapes.held import gait_shape_error, held_object
 
     if palm is not None:
         return [("grasp", "a grasp search places fingertips on a ball held by the fingers "
@@ -185,19 +185,20 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                      + ([list(start.orientation), request.pole_margin]
                         if obj.shape != "sphere" else []))
 
+    # an object with a closed-form nearest point: its grasps rolled on its surface
+    surface = held_object(obj, centre, np.asarray(start.rotation, dtype=float)) \
+        if gait_shape_error(obj) is None else None
     prefer = None
-    if request.gait is not None and gait_shape_error(obj) is None:
+    if request.gait is not None and surface is not None:
         # a gait re-places fingertips: each one liftable (on a shape a gait can hold:
         # others are refused naming object.shape)
         from ocp.gait.step import liftable
-        from ocp.shapes.held import held_object
         from ocp.transcription.values import load_vector
 
         load = load_vector(force_spec(request.forces), request.mu, len(models))
-        held = held_object(obj, centre, np.asarray(start.rotation, dtype=float))
 
         def prefer(contacts: tuple[Any, ...]) -> bool:
-            return all(liftable(models, [ct.q for ct in contacts], held, load))
+            return all(liftable(models, [ct.q for ct in contacts], surface, load))
 
     collision = _hand_collision(request, hand)
     clear = None
@@ -217,7 +218,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                           seeds=[s for _, s in info], samples=search.samples,
                           keep=search.candidates, min_gap=search.min_gap,
                           margin=request.pad_margin, seed=search.seed, names=names,
-                          prefer=prefer, clear=clear)
+                          prefer=prefer, clear=clear, held=surface)
         return got, time.perf_counter() - t0
 
     try:
