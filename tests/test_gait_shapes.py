@@ -132,9 +132,12 @@ def test_the_rolled_reach_on_an_egg_is_the_rolling_planners_motion() -> None:
     from planner_service.planners.cache import FingerCache
     from planner_service.planners.manipulation import manipulation_problem
 
-    body = _egg_request(8.0)
-    body.pop("gait")
-    body["motion"]["steps"][0]["duration"] = body["duration"] = 1.0
+    body = _egg_request(8.0)  # upright, in the hand's nominal grasp, about +y
+    for key in ("gait", "grasp"):
+        body.pop(key)
+    body["initial_pose"]["orientation_wxyz"] = [1.0, 0.0, 0.0, 0.0]
+    body["motion"]["steps"][0].update(axis=[0, 1, 0], duration=1.0)
+    body["duration"] = 1.0
     cache = FingerCache()
     problem = manipulation_problem(REQUEST.validate_python(body), cache)
     pose = problem.initial_pose
@@ -165,9 +168,10 @@ def _egg_request(angle_deg: float) -> dict:
 
 
 def test_an_egg_turned_by_a_gait_is_certified_on_its_surface_and_executes() -> None:
-    """examples/egg_gait.json cut to 30 deg (three rolls, each liftable fingertip
-    re-placed after each): certified; every sample's contact of a touching fingertip is
-    on the egg where it is then, its cap's centre off it by the tip's radius; every
+    """examples/egg_gait.json (the egg lying across the fingers, its grasp searched for
+    the rolled reach on its surface) cut to 20 deg about +x (each liftable fingertip
+    re-placed after each roll): certified; every sample's contact of a touching fingertip
+    is on the egg where it is then, its cap's centre off it by the tip's radius; every
     swing clear of the egg's own surface; executed in MuJoCo on the ellipsoid geom within
     the tracking tolerances, no planned contact lost."""
     from ocp.gait.samples import gait_samples, gait_times
@@ -178,14 +182,14 @@ def test_an_egg_turned_by_a_gait_is_certified_on_its_surface_and_executes() -> N
     from planner_service.planners.gait import solve_gait
     from planner_service.planners.manipulation import manipulation_problem
 
-    request = REQUEST.validate_python(_egg_request(30.0))
+    request = REQUEST.validate_python(_egg_request(20.0))
     cache = FingerCache()
     problem = manipulation_problem(request, cache)
     result, gait = solve_gait(request, problem, cache.manipulation)
     assert gait.ok and result.certificate is not None and result.certificate.passed, \
         result.message
-    assert math.degrees(gait.turned) == pytest.approx(30.0, abs=1e-3)
-    assert len(gait.rolls) >= 3 and len(gait.steps) >= 3
+    assert math.degrees(gait.turned) == pytest.approx(20.0, abs=1e-3)
+    assert len(gait.rolls) >= 2 and len(gait.steps) >= 3
     names = [c.name for c in gait.certificate.checks]
     assert sum(n.startswith("swing_clearance_") for n in names) == len(gait.steps)
     smp = gait_samples(gait, problem, gait_times(gait, 100.0))
