@@ -146,3 +146,20 @@ def planned_and_executed(raw: dict[str, Any], position: float = 2e-3, degrees: f
     assert math.degrees(report.angle_error.max) <= degrees
     assert all(c.lost_time == 0.0 for c in report.contacts)
     return result, report
+
+
+def planned_gait(raw: dict[str, Any]) -> tuple[Any, Any, Any, Any]:
+    """Plan the gait request ``raw`` through the service's adapter on a fresh finger
+    cache, asserting that it is certified: (request, problem, result, gait plan)."""
+    from planner_service.planners import REQUEST
+    from planner_service.planners.cache import FingerCache
+    from planner_service.planners.gait import solve_gait
+    from planner_service.planners.manipulation import manipulation_problem
+
+    request = REQUEST.validate_python(raw)
+    cache = FingerCache()
+    problem = manipulation_problem(request, cache)
+    result, gait = solve_gait(request, problem, cache.manipulation)
+    assert gait.ok and result.certificate is not None and result.certificate.passed, \
+        result.message
+    return request, problem, result, gait

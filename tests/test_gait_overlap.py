@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import planned_gait
 
 from ocp.gait.checks import swing_checks
 from ocp.gait.swing import MIN_TIP_GAP, plan_swing
@@ -87,20 +88,11 @@ def test_a_gait_re_placing_during_rolls_is_certified_shorter_and_executes() -> N
     every switch; executed in MuJoCo."""
     from ocp.gait.samples import gait_samples, gait_times
     from planner_service.execution import simulate_result
-    from planner_service.planners import REQUEST
-    from planner_service.planners.cache import FingerCache
-    from planner_service.planners.gait import solve_gait
-    from planner_service.planners.manipulation import manipulation_problem
 
     body = json.loads((ROOT / "examples" / "allegro_turn_90.json").read_text())
     body["gait"].update(replace="spent", fastest_swings=True, fastest_rolls=True,
                         landing="farthest", roll_step=math.radians(30.0), overlap=True)
-    request = REQUEST.validate_python(body)
-    cache = FingerCache()
-    problem = manipulation_problem(request, cache)
-    result, gait = solve_gait(request, problem, cache.manipulation)
-    assert gait.ok and result.certificate is not None and result.certificate.passed, \
-        result.message
+    request, problem, result, gait = planned_gait(body)
     assert math.degrees(gait.turned) == pytest.approx(90.0, abs=1e-3)
     assert len(gait.carried) >= len(gait.steps) // 2 and len(gait.carried) >= 4
     assert gait.duration < 15.0  # measured: 9.5 s

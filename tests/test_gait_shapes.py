@@ -12,6 +12,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+from helpers import planned_gait
 
 from ocp.geometry.bodies import point_segment_distance
 from ocp.geometry.nearest import nearest_surface_point
@@ -177,17 +178,8 @@ def test_an_egg_turned_by_a_gait_is_certified_on_its_surface_and_executes() -> N
     from ocp.gait.samples import gait_samples, gait_times
     from ocp.geometry.bodies import tip_body
     from planner_service.execution import simulate_result
-    from planner_service.planners import REQUEST
-    from planner_service.planners.cache import FingerCache
-    from planner_service.planners.gait import solve_gait
-    from planner_service.planners.manipulation import manipulation_problem
 
-    request = REQUEST.validate_python(_egg_request(20.0))
-    cache = FingerCache()
-    problem = manipulation_problem(request, cache)
-    result, gait = solve_gait(request, problem, cache.manipulation)
-    assert gait.ok and result.certificate is not None and result.certificate.passed, \
-        result.message
+    request, problem, result, gait = planned_gait(_egg_request(20.0))
     assert math.degrees(gait.turned) == pytest.approx(20.0, abs=1e-3)
     assert len(gait.rolls) >= 2 and len(gait.steps) >= 3
     names = [c.name for c in gait.certificate.checks]
@@ -219,20 +211,11 @@ def test_a_capsule_turned_about_its_axis_by_a_gait_is_certified_and_executes() -
     from ocp.gait.samples import gait_samples, gait_times
     from ocp.geometry.bodies import points_segment_distance
     from planner_service.execution import simulate_result
-    from planner_service.planners import REQUEST
-    from planner_service.planners.cache import FingerCache
-    from planner_service.planners.gait import solve_gait
-    from planner_service.planners.manipulation import manipulation_problem
 
     body = json.loads((ROOT / "examples" / "capsule_roll.json").read_text())
     body["motion"]["steps"][0].update(axis=[0, 0, -1], angle=math.radians(10.0))
     body["gait"] = {"roll_step": math.radians(5.0)}
-    request = REQUEST.validate_python(body)
-    cache = FingerCache()
-    problem = manipulation_problem(request, cache)
-    result, gait = solve_gait(request, problem, cache.manipulation)
-    assert gait.ok and result.certificate is not None and result.certificate.passed, \
-        result.message
+    request, problem, result, gait = planned_gait(body)
     assert len(gait.rolls) == 2 and len(gait.steps) == 4
     smp = gait_samples(gait, problem, gait_times(gait, 100.0))
     r, h = problem.object.dimensions
