@@ -128,6 +128,7 @@ def gait_outlook(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any,
              f"every normal force at least {fs.min_normal_force:g} N")
 
     obj = held_object(template.object, centre, R0)
+    what = "the ball" if obj.ball else f"the {template.object.shape}"
 
     def holds(which: list[int]) -> bool:
         return hold_forces(grasp_hold(fingers, q, which, obj), load, obj.radius) \
@@ -140,7 +141,7 @@ def gait_outlook(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any,
     # solver's failure on the whole grasp where three of its fingertips hold it is not a law)
     if fs.torsional_friction == 0.0 and not free and not holds(list(range(nf))):
         return GaitOutlook(names, 0.0, 0.0, 0,
-                           f"the fingertips ({', '.join(names)}) cannot hold the ball in "
+                           f"the fingertips ({', '.join(names)}) cannot hold {what} in "
                            f"their grasp: {cones}")
     reach, who, why = _reach(template, q, held, centre, rho, ax, angle)
     if not free:
@@ -149,20 +150,20 @@ def gait_outlook(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any,
                  f"rolling alone (without `gait`) may make the turn of {_deg(angle)}")
         return GaitOutlook(never, reach, 0.0, 0,
                            f"no fingertip can be lifted: without any one of "
-                           f"{', '.join(names)} the others cannot hold the ball ({cones}); "
+                           f"{', '.join(names)} the others cannot hold {what} ({cones}); "
                            f"{alone}")
     if why and reach < angle - 1e-6:
         return GaitOutlook(never, reach, 0.0, 0,
                            f"finger {who!r} ({why}) stops the turn after {_deg(reach)} of "
                            f"{_deg(angle)} about {_axis(ax)} and cannot be re-placed (without "
-                           f"it the other fingertips cannot hold the ball: {cones}): at most "
+                           f"it the other fingertips cannot hold {what}: {cones}): at most "
                            f"{_deg(reach)} can be turned from this grasp")
     step, who, why = _reach(template, q, free, centre, rho, ax, min(roll_step, angle))
     if why:  # the planner's shortened roll
         step = step - max(REACH_MARGIN, REACH_SHARE * step)
     need = math.ceil(angle / step - 1e-9) if step >= MIN_ROLL else 0
     if step < MIN_ROLL or need > max_rolls:
-        head = (f"finger {who!r} ({why}) rolls the ball {_deg(max(step, 0.0))} at most "
+        head = (f"finger {who!r} ({why}) rolls {what} {_deg(max(step, 0.0))} at most "
                 f"about {_axis(ax)} from its grasp, where it is re-placed after every roll")
         tail = (f"{_deg(angle)} take at least {need} rolls, more than a gait's {max_rolls}"
                 if need else f"less than a gait's least roll of {_deg(MIN_ROLL)}")
