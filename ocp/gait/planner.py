@@ -525,11 +525,12 @@ def tips_gaps(fingers: tuple[Any, ...], q: FloatArray, nq: tuple[int, ...]
 
 
 def _stopped(who: str, why: str, at: float, angle: float, ax: FloatArray,
-             held: bool) -> str:
-    """Why a gait stops short: which finger, what stops it, after how much of the turn."""
+             held: bool, what: str = "the ball") -> str:
+    """Why a gait stops short: which finger, what stops it, after how much of the turn
+    (``what``: the object, in words)."""
     head = (f"finger {who!r} ({why}) stops the turn after {math.degrees(at):.1f} deg of "
             f"{math.degrees(angle):.1f} deg about ({', '.join(f'{c:.3g}' for c in ax)})")
-    return head + (" and cannot be re-placed (the others cannot hold the ball without it)"
+    return head + (f" and cannot be re-placed (the others cannot hold {what} without it)"
                    if held else " even from its re-placed contact")
 
 
@@ -1021,7 +1022,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     held0 = held_object(template.object, centre, R0)
     if not held0.ball and (landing != "home" or overlap):
         return GaitPlan("infeasible", "farthest landings and overlap are planned on a "
-                                      "ball's rolled reach alone")
+                                      "ball alone")
     q_now = tuple(np.asarray(q, dtype=float) for q in qs)
     q_home = q_now  # where each fingertip touched when the gait began
     q_land: tuple[FloatArray, ...] | None = None  # where the spent ones land (made once)
@@ -1049,7 +1050,9 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             if step < MIN_ROLL:
                 plan.status = "infeasible"
                 plan.message = _stopped(ahead.who, ahead.why, done + max(ahead.reach, 0.0),
-                                        angle, ax, ahead.who in never_lifted)
+                                        angle, ax, ahead.who in never_lifted,
+                                        "the ball" if held0.ball else
+                                        f"the {template.object.shape}")
                 break
         # the tips' gaps: a turn that would bring two together stops before
         if ahead.apart < step and ahead.apart < MIN_ROLL:  # (a last roll may be shorter)

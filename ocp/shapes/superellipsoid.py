@@ -38,6 +38,9 @@ FloatArray = NDArray[np.float64]
 MAX_EXPONENT = 20.0
 #: The MuJoCo mesh's chords sag at most about this from the surface [m].
 MESH_SAG = 5e-5
+#: Points of a fingertip body's segment at which a swing's NLP keeps it clear of the box
+#: around the superellipsoid (:meth:`SuperellipsoidShape.segment_clearance`).
+CLEARANCE_SAMPLES = 5
 
 
 #: |x|^n is written (x^2 + EPS^2)^(n/2) in the chart: its derivatives of every order the
@@ -234,6 +237,78 @@ class SuperellipsoidShape(Shape):
 
     def mujoco_geom(self, dimensions: Sequence[float]) -> MujocoGeom:
         return MujocoGeom("mesh", (), tuple(float(x) for x in self.mesh(dimensions).ravel()))
+
+    def nearest(self, dimensions: Sequence[float], points: ArrayLike
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Newton on the nearest point's conditions x - p + lam grad F(x) = 0, F(x) = 1
+        (F = sum (x_i^2 / a_i^2 + eps^2)^(n/2), the chart's own smoothing), every point at
+        once, from the point on the surface along its ray (a step at most a tenth of the
+        smallest half side), to 1e-13 of it."""
+        a, b, c, n = self.surface_params(dimensions)
+        A = np.array([a, b, c])
+        L = float(A.min())
+        An = A / L  # in units of the smallest half side
+        P = np.atleast_2d(np.asarray(points, dtype=float)) / L
+        e2 = _EPS**2
+
+        def parts(X: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+            w = X * X / (An * An) + e2
+            F = np.sum(w ** (n / 2), axis=1)
+            g = n * w ** (n / 2 - 1) * X / (An * An)
+            h = n * ((n - 2) * w ** (n / 2 - 2) * X * X / An**4 + w ** (n / 2 - 1) / An**2)
+            return F, g, h
+
+        F0, _, _ = parts(P)
+        X = P / F0[:, None] ** (1.0 / n)
+        _, g, _ = parts(X)
+        lam = np.einsum("ij,ij->i", P - X, g) / np.einsum("ij,ij->i", g, g)
+        for _ in range(100):
+            F, g, h = parts(X)
+            r = np.concatenate([X - P + lam[:, None] * g, (F - 1.0)[:, None]], axis=1)
+            J = np.zeros((len(X), 4, 4))
+            J[:, [0, 1, 2], [0, 1, 2]] = 1.0 + lam[:, None] * h
+            J[:, :3, 3] = g
+            J[:, 3, :3] = g
+            step = np.linalg.solve(J, -r[:, :, None])[:, :, 0]
+            big = np.linalg.norm(step[:, :3], axis=1)
+            scale = np.minimum(1.0, 0.1 / np.maximum(big, 1e-300))
+            X = X + scale[:, None] * step[:, :3]
+            lam = lam + scale * step[:, 3]
+            if float(np.max(np.abs(r))) < 1e-13 and float(big.max()) < 1e-13:
+                break
+        F, g, _ = parts(X)
+        nrm = g / np.linalg.norm(g, axis=1)[:, None]
+        outside = F0 > 1.0
+        dist = np.linalg.norm(P - X, axis=1) * np.where(outside, 1.0, -1.0)
+        X, dist = X * L, dist * L
+        for k in np.flatnonzero(np.abs(F - 1.0) > 1e-10):  # (a point deep inside near a
+            # corner, where the conditions hold at several points): the chart's search
+            from ocp.geometry.nearest import nearest_surface_point
+
+            surf, params = self.surface(dimensions), self.surface_params(dimensions)
+            alpha, t = nearest_surface_point(surf, params, P[k] * L)
+            _, G, _, _, _ = surf.geometry(alpha, params)
+            nrm[k] = np.asarray(G, dtype=float)[:, 2]
+            dist[k] = float(t)
+            X[k] = P[k] * L - t * nrm[k]
+        return X, nrm, dist
+
+    def clearance_params(self, dimensions: Sequence[float]) -> tuple[float, ...]:
+        return self.semi_axes(dimensions)
+
+    def segment_clearance(self, params: Any, a: Any, b: Any) -> Any:
+        """The least distance from the box of half sides (a, b, c), which holds the
+        superellipsoid, over :data:`CLEARANCE_SAMPLES` points of the segment: below the
+        distance from the surface at those points (exact on a face's middle, the rounded
+        edges' corners farther in), not between them (the certificate measures the body's
+        true distance)."""
+        out = None
+        for s in np.linspace(0.0, 1.0, CLEARANCE_SAMPLES):
+            x = a + float(s) * (b - a)
+            over = ca.fmax(ca.fabs(x) - params[0:3], 0.0)
+            d = ca.sqrt(ca.dot(over, over) + 1e-18)
+            out = d if out is None else ca.fmin(out, d)
+        return out
 
     def viewer(self, dimensions: Sequence[float]) -> dict[str, Any]:
         a, b, c, n = self.surface_params(dimensions)

@@ -71,8 +71,9 @@ def gait_errors(request: ManipulationRequest, problem: ManipulationProblem) -> F
         for field, on in (("gait.landing", request.gait.landing != "home"),
                           ("gait.overlap", bool(request.gait.overlap))):
             if on:
-                errs.append((field, f"planned on a ball's rolled reach and landings alone, "
-                                    f"not yet on a {problem.object.shape}"))
+                errs.append((field, f"planned on a ball alone (its landings found on the "
+                                    f"ball, a turned ball filling the same space), not "
+                                    f"yet on a {problem.object.shape}"))
     if request.palm is not None:
         errs.append(("palm", "a gait is planned for a ball held by fingertips alone"))
     if len(problem.fingers) < 3:
