@@ -91,7 +91,7 @@ def test_the_swings_clearance_is_below_a_segments_distance_outside(
         name: str, dims: tuple[float, ...], exact: bool) -> None:
     """The swing NLP's clearance of a segment (the CasADi expression itself) is never
     above the segment's distance from the surface where it is outside (the
-    superellipsoid's box bound: of points, its samples); a ball's and a capsule's are that
+    superellipsoid's gauge bound: of points, its samples); a ball's and a capsule's are that
     distance."""
     import casadi as ca
 

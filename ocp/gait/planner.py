@@ -1072,7 +1072,14 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                   pose, q_now, set(never_lifted))
         target = axis_angle_rotation(ax, done + step) @ R0
         dur = max(1.0, seconds_per_radian * step)
-        prob = _roll_problem(template, q_now, pose, target, centre, dur)
+        try:
+            prob = _roll_problem(template, q_now, pose, target, centre, dur)
+        except ProblemError as exc:  # its contacts on the turned object (not a ball's:
+            # a contact rolled to where its chart cannot follow, an egg's end)
+            plan.status = "failed" if plan.rolls else "infeasible"
+            plan.message = (f"roll {len(plan.rolls)} ({math.degrees(done):.1f} deg on) could "
+                            "not start: " + "; ".join(f"{f}: {r}" for f, r in exc.errors))
+            break
         # the last roll, in its own start frame, is this one's warm start, primal-dual
         # point included: the grasp recurs, so it is (nearly) this very problem's optimum
         # (the last roll of every fingertip: one made while a fingertip swung is another

@@ -38,8 +38,8 @@ FloatArray = NDArray[np.float64]
 MAX_EXPONENT = 20.0
 #: The MuJoCo mesh's chords sag at most about this from the surface [m].
 MESH_SAG = 5e-5
-#: Points of a fingertip body's segment at which a swing's NLP keeps it clear of the box
-#: around the superellipsoid (:meth:`SuperellipsoidShape.segment_clearance`).
+#: Points of a fingertip body's segment at which a swing's NLP keeps it clear of the
+#: superellipsoid (:meth:`SuperellipsoidShape.segment_clearance`).
 CLEARANCE_SAMPLES = 5
 
 
@@ -294,19 +294,24 @@ class SuperellipsoidShape(Shape):
         return X, nrm, dist
 
     def clearance_params(self, dimensions: Sequence[float]) -> tuple[float, ...]:
-        return self.semi_axes(dimensions)
+        return self.surface_params(dimensions)
 
     def segment_clearance(self, params: Any, a: Any, b: Any) -> Any:
-        """The least distance from the box of half sides (a, b, c), which holds the
-        superellipsoid, over :data:`CLEARANCE_SAMPLES` points of the segment: below the
-        distance from the surface at those points (exact on a face's middle, the rounded
-        edges' corners farther in), not between them (the certificate measures the body's
-        true distance)."""
+        """s_min (g(x) - 1), g the gauge (sum |x_i / a_i|^n)^(1/n) (the chart's smoothing),
+        s_min the smallest half side, least over :data:`CLEARANCE_SAMPLES` points of the
+        segment: the solid holds the ball of radius s_min, so the solid grown by
+        s_min (g - 1) lies in g times the solid, and a point of gauge g is at least that
+        far from it (exact on a face's middle; a box around it, the first version, left
+        no lift-off along the normal at a rounded edge). Below the distance at those
+        points, not between them (the certificate measures the body's true distance)."""
+        e2 = _EPS**2
+        least = ca.fmin(params[0], ca.fmin(params[1], params[2]))
         out = None
         for s in np.linspace(0.0, 1.0, CLEARANCE_SAMPLES):
             x = a + float(s) * (b - a)
-            over = ca.fmax(ca.fabs(x) - params[0:3], 0.0)
-            d = ca.sqrt(ca.dot(over, over) + 1e-18)
+            g = sum((x[i] ** 2 / params[i] ** 2 + e2) ** (params[3] / 2)
+                    for i in range(3)) ** (1 / params[3])
+            d = least * (g - 1.0)
             out = d if out is None else ca.fmin(out, d)
         return out
 
