@@ -51,17 +51,13 @@ def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
     ts = np.linspace(0.0, plan.duration, n * DENSE_SAMPLES + 1)
     q, v, a = plan.sample(ts)
     L = sp.radius + body.r
-    centres = sp.centre_at(ts)  # where the object is at each sample (it may be rolling)
-    caps, ends, dist = [], [], []
-    for qi, ci in zip(q, centres, strict=True):
-        R, p = f.fingertip_pose_pin(qi)
-        ai, bi = body.placed(R, p)
-        caps.append(ai)
-        ends.append(bi)
-        dist.append(point_segment_distance(ci, ai, bi) - L)
-    caps_a, ends_a, dist_a = np.array(caps), np.array(ends), np.array(dist)
+    placed = [body.placed(*f.fingertip_pose_pin(qi)) for qi in q]
+    caps_a, ends_a = np.array([a for a, _ in placed]), np.array([b for _, b in placed])
     if sp.held is not None:  # not a ball: the body's distance from the object's surface
         dist_a = sp.held.segment_distance(caps_a, ends_a) - body.r
+    else:  # from the ball's centre where it is at each sample (it may be rolling)
+        dist_a = np.array([point_segment_distance(ci, ai, bi) - L for ci, ai, bi
+                           in zip(sp.centre_at(ts), caps_a, ends_a, strict=True)])
     seg = np.array([plan.segment(float(t)) for t in ts])
     out: list[Check] = []
     clear = np.flatnonzero(seg == "clear")

@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from ocp.gait.hold import hold_forces
 from ocp.gait.planner import MIN_ROLL, REACH_MARGIN, REACH_SHARE, plan_gait
 from ocp.gait.step import grasp_hold
-from ocp.shapes.held import held_object
+from ocp.shapes.held import Held, held_object
 from ocp.spec.grasp import ManipulationProblem
 from ocp.spec.motion import ObjectPose
 from ocp.transcription.values import LOAD_BOUND, load_parameters
@@ -81,22 +81,19 @@ def _axis(a: FloatArray) -> str:
 
 
 def _reach(template: ManipulationProblem, qs: tuple[FloatArray, ...], which: list[int],
-           centre: FloatArray, rho: float, axis: FloatArray, upto: float
-           ) -> tuple[float, str, str]:
+           obj: Held, rho: float, axis: FloatArray, upto: float) -> tuple[float, str, str]:
     """(the turn [rad] fingers ``which`` roll about ``axis`` from joints ``qs`` before the
     first stops, at most ``upto``; its name, why): the planner's rolled reach."""
     from ocp.robots.grasp_reach import roll
     from ocp.robots.turn_reach import rolls
 
     best = (upto, "", "")
-    pose = template.initial_pose or ObjectPose()
-    held = held_object(template.object, centre, pose.rotation)
     for i in which:
         tip = template.fingers[i]
         if not rolls(tip.finger):
             continue
-        r = roll(tip.finger, qs[i], centre, rho, axis, upto, template.pad_margin,
-                 held=None if held.ball else held)
+        r = roll(tip.finger, qs[i], obj.centre, rho, axis, upto, template.pad_margin,
+                 held=None if obj.ball else obj)
         if r.why and r.reach < best[0]:
             best = (r.reach, tip.name or f"finger{i}", r.why)
     return best
@@ -128,7 +125,7 @@ def gait_outlook(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any,
              f"every normal force at least {fs.min_normal_force:g} N")
 
     obj = held_object(template.object, centre, R0)
-    what = "the ball" if obj.ball else f"the {template.object.shape}"
+    what = obj.what
 
     def holds(which: list[int]) -> bool:
         return hold_forces(grasp_hold(fingers, q, which, obj), load, obj.radius) \
@@ -143,7 +140,7 @@ def gait_outlook(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any,
         return GaitOutlook(names, 0.0, 0.0, 0,
                            f"the fingertips ({', '.join(names)}) cannot hold {what} in "
                            f"their grasp: {cones}")
-    reach, who, why = _reach(template, q, held, centre, rho, ax, angle)
+    reach, who, why = _reach(template, q, held, obj, rho, ax, angle)
     if not free:
         alone = (f"rolling alone, finger {who!r} ({why}) stops the turn after "
                  f"{_deg(reach)} of {_deg(angle)} about {_axis(ax)}" if why else
@@ -158,7 +155,7 @@ def gait_outlook(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any,
                            f"{_deg(angle)} about {_axis(ax)} and cannot be re-placed (without "
                            f"it the other fingertips cannot hold {what}: {cones}): at most "
                            f"{_deg(reach)} can be turned from this grasp")
-    step, who, why = _reach(template, q, free, centre, rho, ax, min(roll_step, angle))
+    step, who, why = _reach(template, q, free, obj, rho, ax, min(roll_step, angle))
     if why:  # the planner's shortened roll
         step = step - max(REACH_MARGIN, REACH_SHARE * step)
     need = math.ceil(angle / step - 1e-9) if step >= MIN_ROLL else 0

@@ -307,8 +307,7 @@ def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
             if not rolls(f):
                 continue
             m = roll(f, q[i], centre, rho, axis, h, template.pad_margin,
-                     held=None if held.ball else
-                     held.at(centre, axis_angle_rotation(axis, th) @ R0))
+                     held=None if held.ball else held.turned(axis, th))
             if m.why and th + m.reach < reach:  # a stop (a joint limit, the seam, a fold)
                 reach, who, why = th + m.reach, names[i], m.why
             q[i] = m.q
@@ -320,7 +319,7 @@ def _roll_ahead(template: ManipulationProblem, qs: tuple[FloatArray, ...],
                 apart = th + h * (g_prev - need) / max(g_prev - g, 1e-12)
             g_prev = g
         if links is not None and apart >= upto:
-            c = links(q, None if held.ball else axis_angle_rotation(axis, th + h) @ R0)
+            c = links(q, None if held.ball else held.turned(axis, th + h).rotation)
             if c.value < l_need:
                 apart = th + h * (l_prev - l_need) / max(l_prev - c.value, 1e-12)
                 need, close = l_need, c.describe()
@@ -1050,9 +1049,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             if step < MIN_ROLL:
                 plan.status = "infeasible"
                 plan.message = _stopped(ahead.who, ahead.why, done + max(ahead.reach, 0.0),
-                                        angle, ax, ahead.who in never_lifted,
-                                        "the ball" if held0.ball else
-                                        f"the {template.object.shape}")
+                                        angle, ax, ahead.who in never_lifted, held0.what)
                 break
         # the tips' gaps: a turn that would bring two together stops before
         if ahead.apart < step and ahead.apart < MIN_ROLL:  # (a last roll may be shorter)

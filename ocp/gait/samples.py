@@ -13,7 +13,6 @@ from numpy.typing import NDArray
 from ocp.gait.planner import GaitPlan
 from ocp.geometry.bodies import tip_body
 from ocp.geometry.rotations import quaternion_matrix, quaternion_wxyz
-from ocp.shapes.held import held_object
 from ocp.solution import joint_torques
 
 __all__ = ["LINK_CHECK_RATE", "TRANSITION", "GaitSamples", "gait_samples", "gait_times",
@@ -153,8 +152,9 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
             touching[i, ph.lifted] = False
     points, normals = np.zeros((n, nf, 3)), np.zeros((n, nf, 3))
     tip_p, tip_q = np.zeros((n, nf, 3)), np.zeros((n, nf, 4))
-    held = held_object(problem.object, pos[0], np.eye(3))
-    axes = None if held.ball else np.array([quaternion_matrix(w) for w in wxyz])
+    shape, dims = problem.object.kind, problem.object.dimensions
+    axes = None if shape.ball_radius(dims) is not None else \
+        np.array([quaternion_matrix(w) for w in wxyz])
     for c, f in enumerate(fingers):  # the caps' nearest points, every sample at once
         Rs, tip_p[:, c] = f.tip_poses(Q[:, cut[c]:cut[c + 1]])
         d = tip_p[:, c] + Rs @ tip_body(f).a - pos
@@ -162,7 +162,7 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
             normals[:, c] = d / np.linalg.norm(d, axis=1)[:, None]
             points[:, c] = pos + rho * normals[:, c]
         else:  # on the object's surface where it is at each sample
-            x, nrm, _ = held.shape.nearest(held.dimensions, np.einsum("kji,kj->ki", axes, d))
+            x, nrm, _ = shape.nearest(dims, np.einsum("kji,kj->ki", axes, d))
             points[:, c] = pos + np.einsum("kij,kj->ki", axes, x)
             normals[:, c] = np.einsum("kij,kj->ki", axes, nrm)
         tip_q[:, c] = quaternion_wxyz(Rs)

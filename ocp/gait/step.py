@@ -37,11 +37,8 @@ RAMP_SAMPLES = 11
 def contact_of(finger: Any, q: FloatArray, centre: FloatArray, radius: float
                ) -> tuple[FloatArray, FloatArray]:
     """(point, outward normal) of a round fingertip's contact on a ball, palm frame: where
-    the line of centres meets the ball."""
-    R, p = finger.fingertip_pose_pin(q)
-    a = p + R @ tip_body(finger).a
-    n = (a - centre) / np.linalg.norm(a - centre)
-    return centre + radius * n, n
+    the line of centres meets the ball (:meth:`~ocp.shapes.held.Held.contact`)."""
+    return Held(centre, np.eye(3), radius).contact(finger, q)
 
 
 def grasp_hold(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: list[int],
@@ -324,8 +321,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                    warm: SwingPlan | None = None,
                    names: tuple[str, ...] | None = None,
                    limits: TorqueLimits | None = None,
-                   obstacles: Any = None,
-                   landing_point: FloatArray | None = None) -> GaitStep:
+                   obstacles: Any = None) -> GaitStep:
     """Re-place fingertip ``k`` of a grasp of the still object ``held`` (``fingers`` at
     the joints ``qs``, every tip touching) at the contact whose outward normal is
     ``landing_normal`` (palm frame), its joints seeded by ``q_target``. ``load``: the
@@ -337,13 +333,13 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     holds' forces keep to where the cones allow; ``obstacles(qs, k, centre)``: the hand's
     links the swing keeps clear of as it does of the other tips (name, (a, b, r)),
     the nearest :data:`SWING_OBSTACLES` to the ball kept, padded with far-away ones.
-    ``landing_point``: where it lands on an object that is not a ball (palm frame;
-    default the object's point nearest its cap at ``q_target``). A grasp whose other
-    fingertips cannot hold the object is ``infeasible`` at once, naming the finger."""
+    On an object that is not a ball it lands on the object's point nearest its cap at
+    ``q_target``. A grasp whose other fingertips cannot hold the object is
+    ``infeasible`` at once, naming the finger."""
     L = held.radius
     centre = held.centre
-    if not held.ball and landing_point is None:
-        landing_point = held.contact(fingers[k], np.asarray(q_target, dtype=float))[0]
+    landing_point = None if held.ball else \
+        held.contact(fingers[k], np.asarray(q_target, dtype=float))[0]
     allf = list(range(len(fingers)))
     rest = [i for i in allf if i != k]
     before = grasp_hold(fingers, qs, allf, held)

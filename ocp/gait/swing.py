@@ -298,15 +298,15 @@ def _lifted(finger: Any, body: TipBody, q: FloatArray, centre: FloatArray, rho: 
         if held is None:
             d = a - centre
             dist = float(np.linalg.norm(d))
-            want = rho + body.r + height
+            u, want = d / dist, rho + body.r + height
         else:
             _, nrm, gap = held.nearest(a[None])
-            d, dist, want = nrm[0], float(gap[0]), body.r + height
+            u, dist, want = nrm[0], float(gap[0]), body.r + height
         if abs(dist - want) < 1e-6:
             break
         J = finger.frame_jacobian_pin(q)
         Jc = J[:3] - np.cross(R @ body.a, J[3:].T).T
-        target = d / np.linalg.norm(d) * (want - dist)
+        target = u * (want - dist)
         q = np.clip(q + np.linalg.lstsq(Jc, target, rcond=None)[0], finger.lower,
                     finger.upper)
     return q

@@ -418,19 +418,8 @@ def _roll_through(f: Any, q: FloatArray, centre: FloatArray, radius: float,
         if r.why or r.reach < turn.angle - 1e-9:
             return done, r.why
         q = r.q
-        held = _turned(held, centre, turn.axis, turn.angle)
+        held = None if held is None else held.turned(turn.axis, turn.angle)
     return done, ""
-
-
-def _turned(held: Held | None, centre: FloatArray, axis: ArrayLike, angle: float
-            ) -> Held | None:
-    """``held`` turned by ``angle`` about ``axis`` through ``centre`` (None stays None)."""
-    if held is None:
-        return None
-    from ocp.geometry.rotations import axis_angle_rotation
-
-    a = np.asarray(axis, dtype=float)
-    return held.at(centre, axis_angle_rotation(a / np.linalg.norm(a), angle) @ held.rotation)
 
 
 def finger_contacts(f: Any, centre: ArrayLike, radius: float | ObjectGeometry,
@@ -661,7 +650,7 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
                     r = roll(fingers[i], got[-1], c, rho, t.axis, t.angle / 2, margin,
                              COARSE_STEP, held=on)
                     got.append(np.asarray(r.q, dtype=float))
-                    on = _turned(on, c, t.axis, t.angle / 2)
+                    on = None if on is None else on.turned(t.axis, t.angle / 2)
             paths[(i, k)] = got
         return got
 

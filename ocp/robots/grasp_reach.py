@@ -168,7 +168,7 @@ def roll(f: Any, q0: ArrayLike, centre: ArrayLike, radius: float, axis: ArrayLik
         held = None
 
     def at(angle: float) -> Held | None:  # the object turned by ``angle``
-        return None if held is None else held.at(c, _rotation(a, angle) @ held.rotation)
+        return None if held is None else held.turned(a, angle)
 
     s0 = prev = tip_state(f, q, c, radius, held)
     theta = ball_arc = tip_arc = 0.0

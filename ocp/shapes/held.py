@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import point_segment_distance, tip_body
+from ocp.geometry.rotations import axis_angle_rotation
 from ocp.shapes.base import CLEARANCE_PARAMS
 
 __all__ = ["Held", "held_object"]
@@ -45,11 +46,21 @@ class Held:
     def ball(self) -> bool:
         return self.shape is None
 
+    @property
+    def what(self) -> str:
+        """The object in words, for messages: "the ball", "the ellipsoid", ..."""
+        return "the ball" if self.shape is None else f"the {self.shape.name}"
+
     def at(self, centre: ArrayLike, rotation: ArrayLike | None = None) -> Held:
         """The same object at ``centre`` (and ``rotation`` when given)."""
         return replace(self, centre=np.asarray(centre, dtype=float),
                        rotation=self.rotation if rotation is None
                        else np.asarray(rotation, dtype=float))
+
+    def turned(self, axis: ArrayLike, angle: float) -> Held:
+        """The same object turned by ``angle`` [rad] about ``axis`` (palm frame, any
+        length) through its centre."""
+        return self.at(self.centre, axis_angle_rotation(axis, angle) @ self.rotation)
 
     def nearest(self, points: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Of each point (rows, palm frame [m]): the object's nearest point, the outward
@@ -87,7 +98,7 @@ class Held:
         if self.shape is None:
             return np.array([point_segment_distance(self.centre, ai, bi)
                              for ai, bi in zip(A, B, strict=True)]) - self.radius
-        if np.allclose(A, B, rtol=0.0, atol=0.0):
+        if np.array_equal(A, B):
             return self.nearest(A)[2]
         g = (np.sqrt(5.0) - 1.0) / 2.0
         lo, hi = np.zeros(len(A)), np.ones(len(A))

@@ -25,7 +25,7 @@ from dexroll_client.models import (
     PlanStatus,
 )
 from ocp.gait.feasibility import MAX_ROLLS, gait_outlook
-from ocp.gait.planner import GaitPlan, plan_gait
+from ocp.gait.planner import GaitPlan, is_ball, plan_gait
 from ocp.gait.samples import (
     LINK_CHECK_RATE,
     GaitSamples,
@@ -67,7 +67,7 @@ def gait_errors(request: ManipulationRequest, problem: ManipulationProblem) -> F
     why = gait_shape_error(problem.object)
     if why is not None:
         errs.append(("object.shape", why))
-    elif problem.object.kind.ball_radius(problem.object.dimensions) is None:
+    elif not is_ball(problem):
         for field, on in (("gait.landing", request.gait.landing != "home"),
                           ("gait.overlap", bool(request.gait.overlap))):
             if on:
