@@ -23,6 +23,7 @@ import pytest
 from dexroll_client import ManipulationResult, PlanStatus
 from ocp.robots.mjcf_frames import mujoco_text
 from planner_service.cli import plan_request
+from tests.test_first_grasp import own_hand_request
 
 ROOT = Path(__file__).resolve().parents[1]
 TIPS = ("ff_tip", "mf_tip", "rf_tip", "th_tip")
@@ -166,4 +167,34 @@ def test_the_90_degree_gait_executes_on_the_files_own_actuators() -> None:
     assert report.passed, report.failures
     assert report.position_error.max <= 2e-3
     assert report.angle_error.max <= math.radians(3.0)
+    assert all(c.loss_events == 0 for c in report.contacts), report.contacts
+
+
+def test_an_egg_gait_on_the_files_damped_joints_and_own_actuators() -> None:
+    """An egg (30, 30, 40 mm, 60 g, mu 0.9) turned 20 deg about +y by a gait on own_hand.xml,
+    its grasp searched: the file's joints are damped (1 N m s/rad) against 0.7 N m
+    actuators, so a roll at the request's pace would ask 0.89 N m of the middle finger's
+    joint for its damping alone (the plan was refused by the actuators' check). The rolls
+    are slowed until their forces and damping fit (``ocp.gait.planner.damping_speed``),
+    certified on their clock, and the plan executes on the file's own actuators, nothing
+    of ours added, with no planned contact lost."""
+    from planner_service.execution import simulate_result
+    from planner_service.planners import REQUEST, solve
+
+    body = own_hand_request()
+    body["object"] = {"shape": "ellipsoid", "dimensions": [0.03, 0.04]}
+    body["motion"]["steps"][0].update(axis=[0, 1, 0], angle=math.radians(20), duration=2.0)
+    body.update(duration=2.0, forces={"mass": 0.06}, mu=0.9,
+                gait={"roll_step": math.radians(10)})
+    req = REQUEST.validate_python(body)
+    result, _ = solve(req)
+    assert result.status.value == "solved", result.message
+    assert result.certificate is not None and result.certificate.passed
+    assert result.actuator_trajectory is not None
+    assert result.actuator_trajectory.max_load <= 1.0
+    rolls = [p for p in result.gait.phases if p.kind == "roll"]
+    assert len(rolls) == 2
+    assert all(p.end - p.start > 1.2 for p in rolls)  # slower than the request's 1 s a roll
+    report = simulate_result(result, req, model="request")
+    assert report.passed, report.failures
     assert all(c.loss_events == 0 for c in report.contacts), report.contacts

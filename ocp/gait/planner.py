@@ -412,33 +412,78 @@ def _clock_checks(plan: GaitPlan, r: int, template: ManipulationProblem, t0: flo
     gap, at = tips_gaps(tuple(f.finger for f in template.fingers), q, plan.nq)
     out.append(Check(f"roll{r}_tip_gap", gap, -TIP_GAP_TOL, CheckKind.PHYSICS,
                      lower_bound=True, time=t0 + float(tau[::TIP_GAP_STRIDE][at])))
-    if clock.speed > 1.0:  # run faster than planned: the damping's share certified
-        out += _clock_torques(plan, r, template, t0, tau[::TIP_GAP_STRIDE])
+    # the forces plus the joints' damping at the clock's rates (run faster than planned,
+    # or slowed for the damping: :func:`roll_speed`)
+    out += _clock_torques(plan, r, template, t0, tau[::TIP_GAP_STRIDE],
+                          damped_only=clock.speed <= 1.0)
     return out
 
 
 def roll_speed(sol: ManipulationSolution, template: ManipulationProblem,
-               nq: tuple[int, ...]) -> float:
-    """The speed (at least 1) a roll's path can be run at (:func:`~ocp.gait.warp.
-    fastest_speed`): within the joints' velocity limits, the acceleration bound, and the
-    share of the actuators' range its forces leave to the damping (1 - the force stage's
-    :data:`~ocp.solve.force_plan.ROLL_TORQUE_SHARE`)."""
+               nq: tuple[int, ...], fastest: bool = True) -> float:
+    """The speed a roll's path is run at. ``fastest``: the highest (at least 1) within the
+    joints' velocity limits, the acceleration bound, and the share of the actuators' range
+    its forces leave to the damping (1 - the force stage's
+    :data:`~ocp.solve.force_plan.ROLL_TORQUE_SHARE`; :func:`~ocp.gait.warp.fastest_speed`);
+    else 1 (the plan's own timing). Either is lowered, below 1 if need be, to where the
+    roll's forces plus its joints' damping at the clock's rates stay within the actuators'
+    whole range (:func:`damping_speed`, times :data:`DAMPING_SPEED_MARGIN`): a hand file
+    whose joints are damped (``damping`` 1 N m s/rad against 0.7 N m actuators) cannot
+    roll at the request's pace, so the roll is made slower, not refused."""
     from ocp.solve.force_plan import ROLL_TORQUE_SHARE
 
     dur = float(sol.duration)
     s = np.linspace(0.0, dur, max(int(dur * CLOCK_SAMPLES), 2) + 1)
     jt = sol.joint_trajectory(s, efforts=False)
-    vmax = np.concatenate([np.asarray(f.finger.velocity_limit, dtype=float)
-                           for f in template.fingers])
-    overrun = 0.0
-    limits = torque_limits(template, 1.0 - ROLL_TORQUE_SHARE)
-    if limits is not None:
-        cut = np.cumsum((0, *nq))
-        overrun = max(limits.damping_overrun(i, jt.positions[:, cut[i]:cut[i + 1]],
-                                             jt.velocities[:, cut[i]:cut[i + 1]])
-                      for i in range(len(nq)))
-    return fastest_speed(dur, jt.velocities, jt.accelerations, vmax,
-                         SPEED_MARGIN * float(template.max_joint_acceleration), overrun)
+    speed = 1.0
+    if fastest:
+        vmax = np.concatenate([np.asarray(f.finger.velocity_limit, dtype=float)
+                               for f in template.fingers])
+        overrun = 0.0
+        limits = torque_limits(template, 1.0 - ROLL_TORQUE_SHARE)
+        if limits is not None:
+            cut = np.cumsum((0, *nq))
+            overrun = max(limits.damping_overrun(i, jt.positions[:, cut[i]:cut[i + 1]],
+                                                 jt.velocities[:, cut[i]:cut[i + 1]])
+                          for i in range(len(nq)))
+        speed = fastest_speed(dur, jt.velocities, jt.accelerations, vmax,
+                              SPEED_MARGIN * float(template.max_joint_acceleration), overrun)
+    bound = damping_speed(sol, template, nq, s, jt.positions, jt.velocities)
+    return speed if speed <= bound else DAMPING_SPEED_MARGIN * bound
+
+
+#: A roll slowed for its joints' damping is run at this share of the speed at which its
+#: forces and damping would take an actuator's whole range (the rest for the links'
+#: inertia and the Coriolis terms, which the hand's actuator check adds).
+DAMPING_SPEED_MARGIN = 0.9
+
+
+def damping_speed(sol: ManipulationSolution, template: ManipulationProblem,
+                  nq: tuple[int, ...], s: FloatArray, Q: FloatArray, V: FloatArray
+                  ) -> float:
+    """The highest speed at which roll ``sol``'s joint torques, its forces' at the plan's
+    times ``s`` plus its joints' damping at the rates ``V`` (rows: those times; the
+    plan's rates, speed 1) times the speed, stay within the actuators' whole range at the
+    joints ``Q`` (inf without damped, limited joints; 0 where the forces alone leave
+    none: the roll's own certificate refuses that)."""
+    limits = torque_limits(template, 1.0)
+    if limits is None or not any(np.any(c > 0) for c in limits.damping):
+        return math.inf
+    static = sol.joint_torques(s)
+    cut = np.cumsum((0, *nq))
+    top = math.inf
+    for i in range(len(nq)):
+        c = np.asarray(limits.damping[i], dtype=float)
+        if not np.any(c > 0):
+            continue
+        for k in range(len(s)):
+            lo, hi = limits.at(i, Q[k, cut[i]:cut[i + 1]])
+            tau, rate = np.asarray(static[i][k], dtype=float), c * V[k, cut[i]:cut[i + 1]]
+            room = np.where(rate > 0, hi - tau, np.where(rate < 0, lo - tau, np.inf))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                each = np.where(rate != 0, room / rate, np.inf)
+            top = min(top, max(float(each.min(initial=math.inf)), 0.0))
+    return top
 
 
 #: The share of the acceleration bound a fastest roll is timed to: its speed is found on
@@ -447,12 +492,15 @@ SPEED_MARGIN = 0.98
 
 
 def _clock_torques(plan: GaitPlan, r: int, template: ManipulationProblem, t0: float,
-                   tau: FloatArray) -> list[Check]:
+                   tau: FloatArray, damped_only: bool = False) -> list[Check]:
     """Roll ``r``'s joint torques on its clock within the actuators' whole range: its
     forces' (at the plan's times) plus its joints' damping at the clock's rates (a roll
-    run faster than planned asks more of the damping)."""
+    run faster than planned asks more of the damping). ``damped_only``: none for a hand
+    whose joints have no damping (a roll at its plan's pace or slower then asks only its
+    forces' torques, which its own certificate checks)."""
     limits = torque_limits(template, 1.0)
-    if limits is None or not limits.damping:
+    if limits is None or not limits.damping or (
+            damped_only and not any(np.any(c > 0) for c in limits.damping)):
         return []
     clock = plan.clock(r)
     s = clock(tau)[0]
@@ -900,7 +948,7 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
     for _ in range(MAX_ROLL_RETRIES + 1):
         got, why, blocker = plan_overlap(
             template, planner, k, q_now, lands[k], prob, warm,
-            lambda sol: roll_speed(sol, sub, nq_sub) if fastest_rolls else 1.0, centre, rho,
+            lambda sol: roll_speed(sol, sub, nq_sub, fastest_rolls), centre, rho,
             pose.rotation, load, swing, hold_time, limits, names, last_swing)
         if got is None:
             if switch and blocker is not None and names[blocker] not in never_lifted:
@@ -1108,8 +1156,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         plan.rolls.append(sol)
         roll_starts.append(q_now)
         plan.frames.append(roll_frame(template, pose))
-        clock = RollClock.of(dur, roll_speed(sol, template, plan.nq) if fastest_rolls
-                             and sol.ok else 1.0)
+        clock = RollClock.of(dur, roll_speed(sol, template, plan.nq, fastest_rolls)
+                             if sol.ok else 1.0)
         plan.clocks.append(clock)
         plan.phases.append(GaitPhase("roll", t, t + clock.length, (True,) * nf, None, r))
         checks += [replace(c, name=f"roll{r}_{c.name}",
