@@ -285,3 +285,48 @@ def test_a_gait_with_farthest_landings_or_overlap_on_an_egg_is_422(
     assert "planned on a ball alone" in _fields(live_server, body)["gait.landing"]
     body["gait"].update(landing="home", overlap=True)
     assert "planned on a ball alone" in _fields(live_server, body)["gait.overlap"]
+
+
+def test_a_contact_toward_a_pole_is_put_in_the_cubes_patch_that_clears_it() -> None:
+    """A rounded cube turned 90 deg about y (examples/rounded_cube_turn.json's grasp): the
+    index's contact is 44 deg up its own patch, beyond half the chart's bound (37.5 deg),
+    so it is put in the patch of the cube's symmetries that keeps it nearest the equator
+    (a turn of 120 deg about (1, 1, 1)), at most asin(1/sqrt(3)) up: the same point of
+    the cube, the same contact frame's normal, under the tip where its joints put it. The
+    short roll from there is planned and certified (a gait's next roll is made so, which
+    is how the rounded_cube_gait family's contacts no longer stop at the pole bound after
+    34 deg)."""
+    from ocp.geometry.surfaces import rotation_from_vector
+    from ocp.spec.grasp import RECHART_SHARE, contact_from_joints
+    from ocp.spec.motion import ObjectPose
+    from ocp.spec.problem import ObjectSpec
+    from planner_service.planners import REQUEST, solve
+    from planner_service.planners.cache import FINGERS
+    from planner_service.planners.manipulation import problem_and_grasp
+
+    raw = json.loads((ROOT / "examples" / "rounded_cube_turn.json").read_text())
+    c = math.cos(math.pi / 4)
+    raw["initial_pose"]["orientation_wxyz"] = [c, 0.0, c, 0.0]
+    problem, _ = problem_and_grasp(REQUEST.validate_python(raw), FINGERS)
+    obj: ObjectSpec = problem.object
+    pose = ObjectPose(orientation=(c, 0.0, c, 0.0),
+                      position=tuple(raw["initial_pose"]["position"]))
+    finger, q = problem.fingers[0].finger, raw["fingers"][0]["initial_q"]
+    (_, _, u, v, _), rotvec, gap = contact_from_joints(finger, q, obj, pose)
+    R_c = rotation_from_vector(rotvec)
+    assert np.allclose(np.abs(R_c), np.round(np.abs(R_c)), atol=1e-9)
+    assert obj.surface.chart_rotation_error(R_c, obj.params) is None
+    p, G, _, _, _ = obj.surface.geometry([u, v], obj.params)
+    point = R_c @ np.asarray(p, dtype=float).reshape(3)  # the object frame
+    own_u = float(obj.surface.inverse(point, obj.params)[0])
+    assert abs(own_u) > RECHART_SHARE * obj.u_limit(problem.pole_margin)
+    assert abs(u) <= math.asin(1.0 / math.sqrt(3.0)) + 1e-9
+    R_l, p_l = finger.fingertip_pose_pin(np.asarray(q, dtype=float))
+    centre = p_l + R_l @ finger.tip_surface.p
+    normal = pose.rotation @ R_c @ np.asarray(G, dtype=float)[:, 2]
+    touch = np.asarray(pose.position) + pose.rotation @ point
+    r = finger.tip_surface.params[0]
+    assert np.linalg.norm(touch + (r + gap) * normal - centre) < 1e-6
+    result, _ = solve(REQUEST.validate_python(raw))
+    assert result.status.value == "solved", result.message
+    assert result.certificate is not None and result.certificate.passed

@@ -540,6 +540,12 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
         R_l, _ = finger.fingertip_pose_pin(q)
     u, v = (float(x) for x in np.asarray(alpha))
     limit = geo.u_limit
+    if abs(u) > RECHART_SHARE * limit:
+        turned = _pole_clear_symmetry(surface, dims, R_c, (u, v))
+        if turned is not None:
+            R_c, (u, v) = turned
+            rotvec = tuple(float(x) for x in log_rotation(R_c))
+            geo = replace(geo, rotation=np.asarray(pose.rotation, dtype=float) @ R_c)
     if abs(u) > limit:
         raise ValueError(
             f"its contact on the {obj.shape} is at u = {u:.4f}, beyond the bound {limit:.4f} "
@@ -554,6 +560,42 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
     Rx = R_oc.T @ R_t @ np.asarray(G_t, dtype=float)  # R_contact(psi)
     psi = math.atan2(-Rx[0, 1], Rx[0, 0])
     return (float(ab[0]), float(ab[1]), u, v, psi), rotvec, gap0  # type: ignore[return-value]
+
+
+#: A contact beyond this share of its chart's bound on |u| is put in the patch of the
+#: object's symmetries that keeps it farthest from the poles, where one does better
+#: (:func:`_pole_clear_symmetry`); nearer, it stays in the object's own patch.
+RECHART_SHARE = 0.5
+
+#: The 24 proper rotations that permute the axes with signs: a box's symmetries (the
+#: candidate patches of :func:`_pole_clear_symmetry`).
+_AXIS_ROTATIONS = tuple(
+    R for R in (np.diag(signs)[list(perm)]
+                for perm in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))
+                for signs in ((1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1), (-1, 1, 1),
+                              (-1, 1, -1), (-1, -1, 1), (-1, -1, -1)))
+    if np.linalg.det(R) > 0)
+
+
+def _pole_clear_symmetry(surface: Any, params: Any, R_c: FloatArray, alpha: Any
+                         ) -> tuple[FloatArray, tuple[float, float]] | None:
+    """A chart patch for the contact at ``alpha`` of patch ``R_c`` (object frame) that
+    puts it nearest the chart's equator among the patches the surface allows
+    (``chart_rotation_error``: its symmetries, a rounded cube's 24 quarter and half
+    turns), as (its rotation, the contact's coordinates there); None when none does
+    better by a microradian (an egg's or a capsule's poles are its ends: no symmetry
+    moves them). This is how a gait's contact that has rolled toward a pole goes on in
+    another chart at its next roll (docs/shapes.md, "Charts")."""
+    p = R_c @ np.asarray(surface.geometry(alpha, params)[0], dtype=float).reshape(3)
+    best, best_u = None, abs(float(alpha[0])) - 1e-6
+    for R in _AXIS_ROTATIONS:
+        if surface.chart_rotation_error(R, params) is not None:
+            continue
+        a = np.asarray(surface.inverse(R.T @ p, params), dtype=float)
+        if abs(float(a[0])) < best_u:
+            best, best_u = (np.asarray(R, dtype=float), (float(a[0]), float(a[1]))), \
+                abs(float(a[0]))
+    return best
 
 
 def fingertips_from_joints(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
