@@ -26,6 +26,11 @@ printed side by side.
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --ref 1d51bdd --repeats 2
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --replace --repeats 1
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --fast --repeats 1
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --shapes --warm --ref HEAD~1
+
+``--shapes`` times the gaits of an egg, a capsule and a rounded cube (:func:`shape_targets`)
+instead; with ``--ref`` old and new side by side as for the ball's. ``--warm`` times each
+turn the second time its process plans it (a warm worker's request).
 
 ``--replace`` plans every turn with the request's ``gait.replace`` "all" and "spent" side
 by side instead (robot time and re-placements are the plans', the same every run);
@@ -70,6 +75,23 @@ def targets(root: Path = ROOT) -> dict[str, dict[str, Any]]:
     return out
 
 
+def shape_targets(root: Path = ROOT) -> dict[str, dict[str, Any]]:
+    """``--shapes``: gaits of objects that are not balls (issue 38's bound: a 90 deg gait
+    of a non-sphere planned within 30 s on a warm worker), by name: the egg lying across
+    the fingers turned 90 deg about +x from a searched grasp (``examples/egg_gait.json``),
+    the upright capsule of ``examples/capsule_roll.json`` turned 90 deg about its axis in
+    rolls of 5 deg, and the rounded cube of ``examples/rounded_cube_turn.json`` turned 30
+    deg about +z in rolls of 10 deg."""
+    egg = json.loads((root / "examples" / "egg_gait.json").read_text())
+    capsule = json.loads((root / "examples" / "capsule_roll.json").read_text())
+    capsule["motion"]["steps"][0].update(axis=[0, 0, -1], angle=1.570796, duration=9.0)
+    capsule.update(duration=9.0, gait={"roll_step": 0.0872665})
+    cube = json.loads((root / "examples" / "rounded_cube_turn.json").read_text())
+    cube["motion"]["steps"][0].update(axis=[0, 0, 1], angle=0.523599, duration=3.0)
+    cube.update(duration=3.0, gait={"roll_step": 0.174533})
+    return {"egg 90 +x": egg, "capsule 90 -z": capsule, "cube 30 +z": cube}
+
+
 #: The gait options of ``--fast``: only spent fingertips re-placed, swings and rolls as fast
 #: as the hand allows (the holds' force ramps as the request's: with 0.1 s instead of 0.2 s,
 #: 3 of the 8 turns lost a contact for 1.5-4.5 ms at a load in MuJoCo; docs/gait.md).
@@ -81,9 +103,11 @@ FARTHEST = {**FAST, "landing": "farthest", "roll_step": 0.5236}
 OVERLAP = {**FARTHEST, "overlap": True}
 
 
-def _worker(names: list[str], options: dict[str, Any] | None = None) -> None:
+def _worker(names: list[str], options: dict[str, Any] | None = None,
+            warm: bool = False) -> None:
     """One run: every named turn planned in this process, one JSON line each
-    (``options``: fields set in the requests' ``gait``, default theirs)."""
+    (``options``: fields set in the requests' ``gait``, default theirs; ``warm``: each
+    turn planned once untimed before, as a worker that has planned it)."""
     from dexroll_client import ManipulationRequest
     from ocp.gait.swing import prepare_swings
     from planner_service.planners import REQUEST
@@ -91,9 +115,13 @@ def _worker(names: list[str], options: dict[str, Any] | None = None) -> None:
     from planner_service.planners.gait import solve_gait
     from planner_service.planners.manipulation import problem_and_grasp
 
-    reqs = targets(Path.cwd())
+    reqs = {**targets(Path.cwd()), **shape_targets(Path.cwd())}
     for name in names:
         reqs[name]["gait"].update(options or {})
+        if warm:  # (its swing NLPs as below, then the gait's own)
+            req, problem = _problem(reqs[name])
+            prepare_swings(tuple(tip.finger for tip in problem.fingers))
+            solve_gait(req, problem, FINGERS.manipulation)
         t0 = time.perf_counter()
         req = REQUEST.validate_python(reqs[name])
         assert isinstance(req, ManipulationRequest)
@@ -115,12 +143,26 @@ def _worker(names: list[str], options: dict[str, Any] | None = None) -> None:
             "gait": t3 - t2}), flush=True)
 
 
-def _run(tree: Path, names: list[str], gait: dict[str, Any] | None = None
-         ) -> list[dict[str, Any]]:
+def _problem(raw: dict[str, Any]) -> tuple[Any, Any]:
+    """A request's (validated request, problem with its grasp)."""
+    from dexroll_client import ManipulationRequest
+    from planner_service.planners import REQUEST
+    from planner_service.planners.cache import FINGERS
+    from planner_service.planners.manipulation import problem_and_grasp
+
+    req = REQUEST.validate_python(raw)
+    assert isinstance(req, ManipulationRequest)
+    return req, problem_and_grasp(req, FINGERS)[0]
+
+
+def _run(tree: Path, names: list[str], gait: dict[str, Any] | None = None,
+         warm: bool = False) -> list[dict[str, Any]]:
     """One run in a fresh process whose ``ocp`` and ``planner_service`` are ``tree``'s
-    (``gait``: fields set in the requests' ``gait``)."""
+    (``gait``: fields set in the requests' ``gait``; ``warm``: each turn timed the
+    second time it is planned)."""
     env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1"}
-    extra = [] if not gait else ["--worker-gait", json.dumps(gait)]
+    extra = ([] if not gait else ["--worker-gait", json.dumps(gait)]) + \
+        (["--worker-warm"] if warm else [])
     out = subprocess.run([sys.executable, str(Path(__file__).resolve()), *extra,
                           "--worker", *names], cwd=tree, env=env, capture_output=True,
                          text=True, check=True)
@@ -187,13 +229,20 @@ def main() -> None:
     ap.add_argument("--overlap", action="store_true",
                     help="time FARTHEST's and OVERLAP's gait options side by side (this "
                          "tree)")
+    ap.add_argument("--shapes", action="store_true",
+                    help="the gaits of other shapes (shape_targets) instead of the ball's")
+    ap.add_argument("--warm", action="store_true",
+                    help="time each turn the second time its process plans it (a warm "
+                         "worker's; default: the first)")
     ap.add_argument("--worker", nargs="*", help=argparse.SUPPRESS)
+    ap.add_argument("--worker-warm", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--worker-gait", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker is not None:
-        _worker(args.worker, json.loads(args.worker_gait) if args.worker_gait else None)
+        _worker(args.worker, json.loads(args.worker_gait) if args.worker_gait else None,
+                args.worker_warm)
         return
-    names = list(targets())
+    names = list(shape_targets() if args.shapes else targets())
     if args.turns:
         names = [n for n in names if n in args.turns.split(",")]
     runs: dict[str, tuple[Path, dict[str, Any] | None]] = \
@@ -207,7 +256,7 @@ def main() -> None:
     for k in range(args.repeats):
         for side, (tree, gait) in runs.items():
             print(f"run {k + 1}/{args.repeats}, {side}", file=sys.stderr, flush=True)
-            sides[side].append(_run(tree, names, gait))
+            sides[side].append(_run(tree, names, gait, args.warm))
     if args.out:
         Path(args.out).write_text(json.dumps(sides, indent=1))
     print(_table(sides))

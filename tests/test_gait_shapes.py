@@ -16,7 +16,12 @@ from helpers import planned_gait
 
 from ocp.geometry.bodies import point_segment_distance
 from ocp.geometry.nearest import nearest_surface_point
-from ocp.geometry.rotations import axis_angle_rotation, quaternion_matrix
+from ocp.geometry.rotations import (
+    axis_angle_rotation,
+    log_rotation,
+    quaternion_matrix,
+    quaternion_wxyz,
+)
 from ocp.shapes import SHAPES, shape_of
 from ocp.shapes.held import Held
 from tests.conftest import Server
@@ -330,3 +335,35 @@ def test_a_contact_toward_a_pole_is_put_in_the_cubes_patch_that_clears_it() -> N
     result, _ = solve(REQUEST.validate_python(raw))
     assert result.status.value == "solved", result.message
     assert result.certificate is not None and result.certificate.passed
+
+
+def test_a_symmetric_turn_is_planned_from_the_first_orientation() -> None:
+    """An upright capsule turned 30 deg about its axis and tilted 0.01 rad: the same solid
+    as the first orientation tilted, so its roll starts there (``plan_start``: the first
+    orientation tilted, at most RECUR_TILT from it) and its plan's rotations map onto the
+    palm's by a symmetry of the capsule (``roll_frame``): the roll recurs and the last
+    one's point starts it. Turned about a short axis instead it is another solid,
+    planned from where it is."""
+    from ocp.gait.planner import RECUR_TILT, plan_start, roll_frame
+    from ocp.spec.motion import ObjectPose
+    from planner_service.planners import REQUEST
+    from planner_service.planners.cache import FINGERS
+    from planner_service.planners.manipulation import problem_and_grasp
+
+    raw = json.loads((ROOT / "examples" / "capsule_roll.json").read_text())
+    problem, _ = problem_and_grasp(REQUEST.validate_python(raw), FINGERS)
+    first = problem.initial_pose.rotation
+    obj = problem.object
+    for axis, turn, recurs in (((0, 0, 1), 30.0, True), ((1, 0, 0), 30.0, False)):
+        R = axis_angle_rotation([1, 1, 0], 0.01) @ axis_angle_rotation(
+            axis, math.radians(turn)) @ first
+        pose = ObjectPose(tuple(quaternion_wxyz(R)), problem.initial_pose.position)
+        start, frame = plan_start(problem, pose), roll_frame(problem, pose)
+        if not recurs:
+            assert start is None and np.array_equal(frame, np.eye(3))
+            continue
+        assert start is not None
+        assert obj.surface.chart_rotation_error(frame, obj.params) is None  # a symmetry
+        assert np.abs(start @ frame - pose.rotation).max() < 1e-12
+        tilt = np.linalg.norm(log_rotation(first.T @ start))
+        assert tilt == pytest.approx(0.01, abs=1e-9) and tilt <= RECUR_TILT

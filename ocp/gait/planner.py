@@ -44,7 +44,8 @@ from ocp.gait.step import (
 )
 from ocp.gait.warp import RollClock, fastest_speed
 from ocp.geometry.bodies import segments_distance, tip_body
-from ocp.geometry.rotations import axis_angle_rotation, quaternion_wxyz
+from ocp.geometry.rotations import axis_angle_rotation, log_rotation, quaternion_wxyz
+from ocp.geometry.surfaces import rotation_from_vector
 from ocp.shapes.held import Held, held_object
 from ocp.solution import ManipulationSolution
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
@@ -184,10 +185,62 @@ def is_ball(template: ManipulationProblem) -> bool:
     return template.object.kind.ball_radius(template.object.dimensions) is not None
 
 
+#: How far [rad] an object may be tilted from a symmetry of the gait's first orientation
+#: for its roll to be planned as a recurrence of the last (:func:`plan_start`).
+RECUR_TILT = 0.05
+
+
+def _symmetry(template: ManipulationProblem, F: FloatArray) -> FloatArray | None:
+    """The symmetry S of the object's shape (object frame: S maps the solid onto itself)
+    with F = T S for the least tilt T: a shape of revolution's rotation about its axis
+    (T the least rotation taking the axis to F's), another's nearest quarter or half turn
+    (a rounded cube's); None when F is nowhere near one."""
+    obj = template.object
+    if obj.surface.chart_symmetry in ("axis", "axis+"):
+        z = F[:, 2]
+        if z[2] <= 0.0:
+            return None
+        tilt = np.cross([0.0, 0.0, 1.0], z)
+        size = float(np.linalg.norm(tilt))
+        T = np.eye(3) if size == 0.0 else \
+            rotation_from_vector(tilt / size * math.atan2(size, float(z[2])))
+        S = T.T @ F
+    else:
+        S = np.round(F)
+    return S if obj.surface.chart_rotation_error(S, obj.params) is None else None
+
+
+def plan_start(template: ManipulationProblem, pose: ObjectPose) -> FloatArray | None:
+    """The orientation a roll from ``pose`` starts at in its plan (:func:`_roll_problem`):
+    a ball's the identity (any frame fixed in a uniform ball describes it). Another
+    object's, when ``pose`` is the gait's first orientation turned by a symmetry S of its
+    shape and tilted by less than :data:`RECUR_TILT` (an upright capsule or egg turned
+    about its axis, a rounded cube by quarter turns): ``pose.rotation S^T``, the same
+    solid at nearly the first orientation, so that the last roll's point starts a roll
+    that nearly recurs. None otherwise (planned from ``pose`` itself, in the palm frame;
+    the first roll too)."""
+    if is_ball(template):
+        return np.eye(3)
+    F = (template.initial_pose or ObjectPose()).rotation.T @ pose.rotation
+    if np.allclose(F, np.eye(3), rtol=0.0, atol=1e-12):  # (the first orientation itself)
+        return None
+    S = _symmetry(template, F)
+    if S is None or float(np.linalg.norm(log_rotation(F @ S.T))) > RECUR_TILT:
+        return None
+    return np.asarray(pose.rotation @ S.T)
+
+
 def roll_frame(template: ManipulationProblem, pose: ObjectPose) -> FloatArray:
-    """The frame a roll from ``pose`` is planned in (:func:`_roll_problem`): a ball's at
-    the roll's start, the palm's for any other object."""
-    return pose.rotation if is_ball(template) else np.eye(3)
+    """The frame a roll from ``pose`` is planned in (:func:`_roll_problem`): its plan's
+    rotations R(t) are R(t) times this one in the palm frame: a ball's orientation at the
+    roll's start; the symmetry S of :func:`plan_start`; the identity for any other
+    object."""
+    start = plan_start(template, pose)
+    if start is None:
+        return np.eye(3)
+    if is_ball(template):
+        return pose.rotation
+    return start.T @ pose.rotation
 
 
 def held_at(template: ManipulationProblem, pose: ObjectPose) -> Held:
@@ -224,12 +277,17 @@ def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
     fingers = tuple(f.finger for f in template.fingers)
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
     ball = is_ball(template)
-    # (an object that is not a ball is planned where it is: its frame is its own)
-    start = ObjectPose((1.0, 0.0, 0.0, 0.0), pose.position) if ball else pose
+    # (an object that is not a ball is planned where it is, its frame its own, unless its
+    # shape maps onto the gait's first: :func:`plan_start`)
+    R_start = plan_start(template, pose)
+    start = ObjectPose((1.0, 0.0, 0.0, 0.0), pose.position) if ball else pose \
+        if R_start is None else ObjectPose(tuple(quaternion_wxyz(R_start)), pose.position)
     tips = fingertips_from_joints(fingers, qs, template.object, start, names,
-                                  tuple(f"fingers[{i}].initial_q" for i in range(len(qs))))
-    q1 = np.ravel(quaternion_wxyz(np.asarray(target, dtype=float) @ pose.rotation.T
-                                  if ball else np.asarray(target, dtype=float)))
+                                  tuple(f"{n}'s joints at the roll's start" for n in names),
+                                  advise=False)
+    goal = np.asarray(target, dtype=float)
+    q1 = np.ravel(quaternion_wxyz(goal @ pose.rotation.T if ball else goal
+                                  if R_start is None else goal @ pose.rotation.T @ R_start))
     w0, x0, y0, z0 = start.orientation
     if not ball and float(np.dot(q1, start.orientation)) < 0.0:  # the short way
         q1 = -q1
@@ -1138,8 +1196,10 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 float(np.abs(a - b).max()) for a, b in zip(roll_starts[-1], q_now,
                                                            strict=True)) > RECUR_TOL:
             warm = None  # a grasp of other contacts: the last roll's point is no start
-        if not held0.ball:  # its turned form: no roll recurs (the egg's 90 deg gait took
-            warm = None  # 38 s warm-started from the last roll, 21 s started cold)
+        if plan_start(template, pose) is None:  # its turned form is another solid: no
+            # roll recurs (the egg's 90 deg gait about a short axis took 38 s warm-started
+            # from the last roll, 21 s started cold)
+            warm = None
         if warm is not None and warm.stats is not None \
                 and warm.stats.n_intervals > prob.n_intervals:
             # the last roll's certificate refined its grid: this one starts there, where

@@ -189,6 +189,8 @@ class EllipsoidShape(Shape):
         a_min = float(ax.min())
         A = (ax / a_min)[None, :]  # in units of a_min
         P = np.atleast_2d(np.asarray(points, dtype=float)) / a_min
+        if len(P) == 1:  # one point (a gait's fingertip at a time): the same steps in floats
+            return _nearest_one(A[0].tolist(), P[0].tolist(), int(np.argmin(ax)), a_min)
         outside = np.sum((P / A) ** 2, axis=1) > 1.0
         k = int(np.argmin(ax))
         t = np.where(outside, 0.0, -1.0 + np.maximum(np.abs(P[:, k]), 1e-12))
@@ -217,6 +219,35 @@ class EllipsoidShape(Shape):
         inv = 1.0 / params[0:3]
         least = ca.fmin(params[0], ca.fmin(params[1], params[2]))
         return least * (point_segment_distance(ca.DM.zeros(3), inv * a, inv * b) - 1.0)
+
+
+def _nearest_one(A: list[float], P: list[float], k: int, a_min: float
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:meth:`EllipsoidShape.nearest` of one point ``P`` (semi-axes ``A``, both in units
+    of ``a_min``; ``k`` the least semi-axis): its operations in the same order on Python
+    floats (the same bits; numpy's per-call cost was most of a gait's nearest points)."""
+    a0, a1, a2 = A
+    p0, p1, p2 = P
+    q0, q1, q2 = p0 / a0, p1 / a1, p2 / a2
+    outside = q0 * q0 + q1 * q1 + q2 * q2 > 1.0
+    t = 0.0 if outside else -1.0 + max(abs(P[k]), 1e-12)
+    s0, s1, s2 = a0 * a0, a1 * a1, a2 * a2
+    for _ in range(100):
+        d0, d1, d2 = s0 + t, s1 + t, s2 + t
+        w0, w1, w2 = a0 * p0 / d0, a1 * p1 / d1, a2 * p2 / d2
+        f = w0 * w0 + w1 * w1 + w2 * w2 - 1.0
+        df = -2.0 * (w0 * w0 / d0 + w1 * w1 / d1 + w2 * w2 / d2)
+        step = f / df
+        t = t - step
+        if abs(step) < 1e-15:
+            break
+    x0, x1, x2 = s0 * p0 / (s0 + t), s1 * p1 / (s1 + t), s2 * p2 / (s2 + t)
+    g0, g1, g2 = x0 / s0, x1 / s1, x2 / s2
+    gn = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+    e0, e1, e2 = p0 - x0, p1 - x1, p2 - x2
+    dist = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) * (1.0 if outside else -1.0)
+    return (np.array([[x0 * a_min, x1 * a_min, x2 * a_min]]),
+            np.array([[g0 / gn, g1 / gn, g2 / gn]]), np.array([dist * a_min]))
 
 
 ELLIPSOID = EllipsoidShape()

@@ -472,7 +472,8 @@ def _onto_ball(finger: Any, q: FloatArray, c_obj: FloatArray, rho: float
 
 
 def contact_from_joints(finger: Any, q: ArrayLike, obj: Any, pose: Any,
-                        pole_margin: float = ManipulationProblem.pole_margin
+                        pole_margin: float = ManipulationProblem.pole_margin,
+                        advise: bool = True
                         ) -> tuple[tuple[float, ...], tuple[float, float, float], float]:
     """The contact coordinates of a round fingertip (a sphere or a capsule's cap) on a
     closed convex object where the joints ``q`` put it: (initial (a, b, u, v, psi), the
@@ -486,9 +487,12 @@ def contact_from_joints(finger: Any, q: ArrayLike, obj: Any, pose: Any,
     On a ball the contact is where the line of centres meets the tip, in the patch that
     puts it at (u, v, psi) = (0, 0, 0) (:func:`contact_chart_for_pad`). On any other
     object it is the object's point nearest to the tip's centre
-    (:func:`nearest_surface_point`), in the object's own patch (``obj.chart_rotation``:
-    such a patch cannot be turned at will), psi between the two contact frames;
-    ValueError when it lies beyond the chart's bound ``obj.u_limit(pole_margin)``."""
+    (:func:`nearest_surface_point`), in the object's own patch (``obj.chart_rotation``),
+    or, beyond half its bound, in the patch of the shape's symmetries that keeps it
+    farthest from the poles (:func:`_pole_clear_symmetry`), psi between the two contact
+    frames; ValueError when it lies beyond the chart's bound ``obj.u_limit(pole_margin)``
+    (saying how a request's grasp could avoid it, unless ``advise`` is false: a gait's
+    roll, whose joints no request gave)."""
     tip = finger.tip_surface
     if tip.kind not in ("sphere", "capsule"):
         raise ValueError("contacts from joint angles need a sphere or capsule tip")
@@ -505,10 +509,11 @@ def contact_from_joints(finger: Any, q: ArrayLike, obj: Any, pose: Any,
         _, G, _, _, _ = tip.surface.geometry(ab, (r,))
         chart = contact_chart_for_pad(obj, pose, R_t @ np.asarray(G))
         return (float(ab[0]), float(ab[1]), 0.0, 0.0, 0.0), chart, gap0
-    return _contact_on_surface(finger, qa, obj, pose, pole_margin)
+    return _contact_on_surface(finger, qa, obj, pose, pole_margin, advise)
 
 
-def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_margin: float
+def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_margin: float,
+                        advise: bool = True
                         ) -> tuple[tuple[float, ...], tuple[float, float, float], float]:
     """:func:`contact_from_joints` on an object other than a ball."""
     if obj.errors():
@@ -550,8 +555,8 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
         raise ValueError(
             f"its contact on the {obj.shape} is at u = {u:.4f}, beyond the bound {limit:.4f} "
             f"of the object's chart ({surface.u_limit_name}), which cannot be turned away "
-            f"on a {obj.shape}: touch it farther from the ends of its z axis, or turn the "
-            "object (initial_pose.orientation)")
+            f"on a {obj.shape}" + (": touch it farther from the ends of its z axis, or turn "
+                                   "the object (initial_pose.orientation)" if advise else ""))
     _, G_o, _, _, _ = surface.geometry([u, v], dims)
     R_oc = geo.rotation @ np.asarray(G_o, dtype=float)  # the object's contact frame, palm
     R_t = R_l @ tip.R
@@ -601,15 +606,15 @@ def _pole_clear_symmetry(surface: Any, params: Any, R_c: FloatArray, alpha: Any
 def fingertips_from_joints(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
                            pose: ObjectPose, names: tuple[str, ...],
                            where: tuple[str, ...],
-                           pole_margin: float = ManipulationProblem.pole_margin
-                           ) -> tuple[Fingertip, ...]:
+                           pole_margin: float = ManipulationProblem.pole_margin,
+                           advise: bool = True) -> tuple[Fingertip, ...]:
     """Round fingertips on a closed convex object at the joint angles ``qs`` of
     ``fingers``: their contact coordinates where the joints put them
     (:func:`contact_from_joints`); ProblemError naming ``where[i]`` (the field of finger
     i's joints) with the reason: joints outside their limits (which, by how much), a tip
     too far from the object or inside it (which finger, how far), a contact off a
     capsule's cap or beyond the object chart's bound (``pole_margin`` [rad] from its
-    poles), two tips overlapping."""
+    poles; ``advise``: :func:`contact_from_joints`'), two tips overlapping."""
     errs: list[tuple[str, str]] = []
     tips: list[Fingertip] = []
     centres: list[tuple[int, FloatArray, float]] = []
@@ -636,7 +641,7 @@ def fingertips_from_joints(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: O
                 continue
             f, q = held
         try:
-            init, chart, gap = contact_from_joints(f, q, obj, pose, pole_margin)
+            init, chart, gap = contact_from_joints(f, q, obj, pose, pole_margin, advise)
         except ValueError as exc:
             errs.append((where[i], f"finger {name!r}: {exc}"))
             continue

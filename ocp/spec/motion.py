@@ -7,6 +7,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -119,20 +120,28 @@ class DesiredMotion:
             errs += ObjectPose(q, self.positions[i]).errors(f"{name}[{i}]")
         return errs
 
+    @cached_property
+    def _knots(self) -> tuple[FloatArray, list[FloatArray], FloatArray, list[FloatArray]]:
+        """The knots' times, rotations, positions, and the rotation vector from each
+        knot's orientation to the next's (object frame), made once: a guess asks
+        :meth:`at` thousands of times."""
+        Rk = [quaternion_matrix(q) for q in self.orientations]
+        return (np.asarray(self.times, dtype=float), Rk,
+                np.asarray(self.positions, dtype=float),
+                [log_rotation(Rk[j].T @ Rk[j + 1]) for j in range(len(Rk) - 1)])
+
     def at(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """(R (k, 3, 3), p (k, 3)) at the plan's times t (the motion's t + t0, clipped to
         the knots' span)."""
-        ts = np.asarray(self.times, dtype=float)
+        ts, Rk, Pk, logs = self._knots
         tq = np.clip(np.atleast_1d(np.asarray(t, dtype=float)) + self.t0, ts[0], ts[-1])
-        Rk = [quaternion_matrix(q) for q in self.orientations]
-        Pk = np.asarray(self.positions, dtype=float)
         j = np.clip(np.searchsorted(ts, tq, side="right") - 1, 0, len(ts) - 2)
         s = (tq - ts[j]) / (ts[j + 1] - ts[j])
         if self.smooth:
             s = s * s * (3 - 2 * s)
         R = np.empty((len(tq), 3, 3))
         for i, (jj, ss) in enumerate(zip(j, s, strict=True)):
-            R[i] = Rk[jj] @ rotation_from_vector(ss * log_rotation(Rk[jj].T @ Rk[jj + 1]))
+            R[i] = Rk[jj] @ rotation_from_vector(ss * logs[jj])
         p = Pk[j] + s[:, None] * (Pk[j + 1] - Pk[j])
         return R, p
 
