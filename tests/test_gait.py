@@ -580,3 +580,31 @@ def test_a_swing_timed_faster_keeps_its_path_within_the_joints_limits(step: obje
     a_use = float(np.max(np.abs(fast.A))) / sw.spec.max_joint_acceleration
     assert max(v_use, a_use) == pytest.approx(1.0, rel=1e-9)  # at a limit, within both
     assert fast.fastest_factor() == pytest.approx(1.0, rel=1e-9)
+
+
+def test_a_swing_short_of_a_gap_between_its_nodes_says_by_how_much() -> None:
+    """``between_nodes``, by which a gait plans a swing again kept wider at its nodes
+    (a rounded cube's swing kept 1 mm from the index at its nodes and 0.983 mm between
+    them): 0 for a swing that keeps every gap and its clearance densely; for the same
+    path asked 0.2 mm more than it keeps from its nearest neighbour, 0.2 mm. The dense
+    samples the gait measures a swing by are made once: its certificate's checks are the
+    same as a fresh plan's."""
+    from ocp.gait.checks import DISTANCE_TOL
+    from ocp.gait.step import between_nodes
+    from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, plan_swing
+
+    _, spec = stored_swing("gait_narrow_swing.json")
+    plan = plan_swing(dataclasses.replace(spec, tip_gap=MIN_TIP_GAP,
+                                          neighbour_share=NARROW_SHARE))
+    assert plan.ok and between_nodes(plan) == 0.0
+    fresh = dataclasses.replace(plan)  # (no dense samples kept yet)
+    assert [(c.name, c.value) for c in swing_checks(plan, "x")] == \
+        [(c.name, c.value) for c in swing_checks(fresh, "x")]
+    gaps = {c.name: c.value for c in swing_checks(plan, "x")
+            if c.name.startswith("swing_tip_gap_")}
+    least = min(gaps.values())
+    kept = dataclasses.replace(plan.spec, tip_gap=least + 2e-4 + DISTANCE_TOL,
+                               neighbour_share=10.0)  # (the share of the ends' gap: none)
+    assert min(kept.required_gaps()) == pytest.approx(least + 2e-4 + DISTANCE_TOL)
+    assert between_nodes(dataclasses.replace(plan, spec=kept)) == pytest.approx(2e-4,
+                                                                              abs=1e-12)

@@ -42,9 +42,14 @@ def _check(name: str, value: float, tol: float, kind: CheckKind, t: float | None
                  time=None if t is None else float(t0 + t))
 
 
-def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
-    """The laws of a swing (named ``<check>_<label>``, ``label`` the phase's name; times
-    from the plan's start, the swing starting at ``t0``)."""
+def _dense(plan: SwingPlan) -> tuple[FloatArray, ...]:
+    """A swing's dense samples (times, joints, rates, accelerations), its cap's centre, its
+    body's distance from the object and its gap to each other body at each, and the
+    segment each is in: made once per plan (kept on it), as the gait measures a swing
+    before it keeps it and again in its certificate."""
+    got = plan.__dict__.get("_dense")
+    if got is not None:
+        return got
     sp = plan.spec
     f, body = sp.finger, sp.body
     n = len(plan.t) - 1
@@ -59,6 +64,19 @@ def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
         dist_a = np.array([point_segment_distance(ci, ai, bi) - L for ci, ai, bi
                            in zip(sp.centre_at(ts), caps_a, ends_a, strict=True)])
     seg = np.array([plan.segment(float(t)) for t in ts])
+    gaps = np.array([segments_distance(caps_a, ends_a, a1, b1) - body.r - r1
+                     for a1, b1, r1 in sp.others_at(ts)]).reshape(-1, len(ts))
+    got = (ts, q, v, a, caps_a, dist_a, seg, gaps)
+    object.__setattr__(plan, "_dense", got)  # (a frozen plan: its own samples, unchanged)
+    return got
+
+
+def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
+    """The laws of a swing (named ``<check>_<label>``, ``label`` the phase's name; times
+    from the plan's start, the swing starting at ``t0``)."""
+    sp = plan.spec
+    f = sp.finger
+    ts, q, v, a, caps_a, dist_a, seg, gaps = _dense(plan)
     out: list[Check] = []
     clear = np.flatnonzero(seg == "clear")
     k = int(clear[np.argmin(dist_a[clear])])
@@ -84,9 +102,7 @@ def swing_checks(plan: SwingPlan, label: str, t0: float = 0.0) -> list[Check]:
                       LANDING_TOL, CheckKind.PHYSICS, ts[-1], t0))
     rest = max(float(np.abs(v[[0, -1]]).max()), float(np.abs(a[[0, -1]]).max()))
     out.append(_check(f"swing_rest_{label}", rest, 1e-9, CheckKind.PHYSICS, None, t0))
-    for j, ((a1, b1, r1), need) in enumerate(zip(sp.others_at(ts), sp.required_gaps(),
-                                                 strict=True)):
-        gap = segments_distance(caps_a, ends_a, a1, b1) - body.r - r1
+    for j, (gap, need) in enumerate(zip(gaps, sp.required_gaps(), strict=True)):
         k = int(np.argmin(gap))
         out.append(_check(f"swing_tip_gap_{label}_{j}", gap[k], need - DISTANCE_TOL,
                           CheckKind.PHYSICS, ts[k], t0, lower=True))

@@ -227,6 +227,25 @@ class TorqueLimits:
                        upper=tuple(a / self.share for a in self.upper), share=1.0)
 
 
+#: What a swing that kept its gaps and clearance only at its NLP's nodes keeps more [m]
+#: when planned again, beyond what it lacked between them (:func:`between_nodes`).
+WIDER_AT_NODES = 5e-5
+
+
+def between_nodes(plan: SwingPlan) -> float:
+    """How much [m] a swing lacks, at worst, of its clearance from the object and its gaps
+    from the others' bodies between its NLP's nodes (the certificate's dense checks,
+    :func:`~ocp.gait.checks.swing_checks`); 0 when it keeps them. The NLP keeps them at
+    the nodes; a tip moving on a curve between them can dip: 0.985 mm against 1 mm, 2.97
+    against 2.99 mm, measured."""
+    worst = 0.0
+    for c in swing_checks(plan, "between"):
+        if c.lower_bound and not c.passed and (
+                c.name.startswith("swing_tip_gap_") or c.name.startswith("swing_clearance_")):
+            worst = max(worst, float(c.tolerance - c.value))
+    return worst
+
+
 #: A swing is slowed for its joints' damping at most this many times (a joint driven
 #: against an actuator that gives nothing that way is left to the actuators' check).
 MAX_SLOWDOWN = 10.0
@@ -405,6 +424,18 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
         closer = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP, neighbour_share=NARROW_SHARE))
         if closer.ok:
             plan = closer
+    short = between_nodes(plan) if plan.ok else 0.0
+    if short > 0.0:
+        # its gaps or clearance kept at the NLP's nodes but not between them (the
+        # certificate's dense check would fail it): kept wider at the nodes, or, where a
+        # neighbour leaves no room for that, the least gap kept from it, wider
+        for alt in (plan.spec, replace(plan.spec, tip_gap=MIN_TIP_GAP,
+                                       neighbour_share=min(plan.spec.neighbour_share,
+                                                           NARROW_SHARE))):
+            wider = plan_swing(replace(alt, dip=alt.dip + short + WIDER_AT_NODES))
+            if wider.ok and between_nodes(wider) <= 0.0:
+                plan = wider
+                break
     if plan.ok and limits is not None and limits.rate:
         # a swing faster than the joints' damping lets the actuators drive (at each
         # sample's joints: a servo near the end of its control range gives less): slower

@@ -133,6 +133,10 @@ class SwingSpec:
     #: checks them without it, between the nodes too: bodies that move between the nodes
     #: bring the least distance there, 10 um measured)
     node_margin: float = 0.0
+    #: kept [m] beyond the clearance and every gap at the NLP's nodes, whatever room a
+    #: close neighbour leaves: what an earlier plan of this swing lacked between its nodes
+    #: (:func:`~ocp.gait.step.between_nodes`), and a little more
+    dip: float = 0.0
     #: the object when it is not a ball (:class:`~ocp.shapes.held.Held`, still: its centre
     #: ``centre``): the contacts and distances are its surface's, the NLP keeps its
     #: clearance by the shape's distance bound; None: a ball of ``radius``
@@ -544,14 +548,15 @@ def _swing_params(spec: SwingSpec) -> FloatArray:
     # a quarter of the room that share leaves, so that the lift-off can still go along
     # the normal (the whole margin sent one sideways, 0.10 rad off it, measured)
     room = 0.25 * (1.0 - spec.neighbour_share) / max(spec.neighbour_share, 1e-9)
-    others = [np.concatenate([a1[k], b1[k], [r1, need + min(m, room * need)]])
+    others = [np.concatenate([a1[k], b1[k], [r1, need + min(m, room * need) + spec.dip]])
               for k in range(n) for (a1, b1, r1), need in zip(at, needs, strict=True)]
     extra: list[Any] = []
     if spec.held is not None:  # the object's axes (column-major), its clearance numbers
         extra = [np.asarray(spec.held.rotation, dtype=float).ravel(order="F"),
                  spec.held.clearance_params()]
     return np.concatenate([spec.q_start, spec.q_target,
-                           [spec.duration, spec.clearance + m, cap_sin, spec.radius],
+                           [spec.duration, spec.clearance + m + spec.dip, cap_sin,
+                            spec.radius],
                            spec.centre, p0 + R0 @ body.a, n0, *_tangents(n0),
                            spec.landing_point(), n1, *_tangents(n1),
                            np.concatenate(others, axis=None) if others else [], *extra])
