@@ -490,6 +490,10 @@ def roll_speed(sol: ManipulationSolution, template: ManipulationProblem,
     roll at the request's pace, so the roll is made slower, not refused."""
     from ocp.solve.force_plan import ROLL_TORQUE_SHARE
 
+    whole = torque_limits(template, 1.0)
+    damped = whole is not None and any(np.any(c > 0) for c in whole.damping)
+    if not fastest and not damped:
+        return 1.0
     dur = float(sol.duration)
     s = np.linspace(0.0, dur, max(int(dur * CLOCK_SAMPLES), 2) + 1)
     jt = sol.joint_trajectory(s, efforts=False)
@@ -506,7 +510,9 @@ def roll_speed(sol: ManipulationSolution, template: ManipulationProblem,
                           for i in range(len(nq)))
         speed = fastest_speed(dur, jt.velocities, jt.accelerations, vmax,
                               SPEED_MARGIN * float(template.max_joint_acceleration), overrun)
-    bound = damping_speed(sol, template, nq, s, jt.positions, jt.velocities)
+    if whole is None or not damped:
+        return speed
+    bound = damping_speed(sol, whole, nq, s, jt.positions, jt.velocities)
     return speed if speed <= bound else DAMPING_SPEED_MARGIN * bound
 
 
@@ -516,16 +522,14 @@ def roll_speed(sol: ManipulationSolution, template: ManipulationProblem,
 DAMPING_SPEED_MARGIN = 0.9
 
 
-def damping_speed(sol: ManipulationSolution, template: ManipulationProblem,
-                  nq: tuple[int, ...], s: FloatArray, Q: FloatArray, V: FloatArray
-                  ) -> float:
+def damping_speed(sol: ManipulationSolution, limits: TorqueLimits, nq: tuple[int, ...],
+                  s: FloatArray, Q: FloatArray, V: FloatArray) -> float:
     """The highest speed at which roll ``sol``'s joint torques, its forces' at the plan's
     times ``s`` plus its joints' damping at the rates ``V`` (rows: those times; the
-    plan's rates, speed 1) times the speed, stay within the actuators' whole range at the
-    joints ``Q`` (inf without damped, limited joints; 0 where the forces alone leave
-    none: the roll's own certificate refuses that)."""
-    limits = torque_limits(template, 1.0)
-    if limits is None or not any(np.any(c > 0) for c in limits.damping):
+    plan's rates, speed 1) times the speed, stay within the actuators' whole range
+    (``limits``, share 1) at the joints ``Q`` (inf without damped joints; 0 where the
+    forces alone leave none: the roll's own certificate refuses that)."""
+    if not any(np.any(c > 0) for c in limits.damping):
         return math.inf
     static = sol.joint_torques(s)
     cut = np.cumsum((0, *nq))
