@@ -367,3 +367,27 @@ def test_a_symmetric_turn_is_planned_from_the_first_orientation() -> None:
         assert np.abs(start @ frame - pose.rotation).max() < 1e-12
         tilt = np.linalg.norm(log_rotation(first.T @ start))
         assert tilt == pytest.approx(0.01, abs=1e-9) and tilt <= RECUR_TILT
+
+
+def test_each_shapes_symmetry_nearest_a_turn() -> None:
+    """``Surface.symmetry_near``: a rounded cube turned a quarter turn about x and tilted
+    0.02 rad has that quarter turn for its symmetry (one of its 24); an egg turned 40 deg
+    about its axis and tilted, that turn about its axis; an egg turned upside down and
+    more, none of its turns about +z (it is turned to the lower half)."""
+    from ocp.shapes import shape_of
+
+    tilt = axis_angle_rotation([0.3, -1.0, 0.2], 0.02)
+    cube = shape_of("superellipsoid")
+    dims = (0.025, 0.025, 0.025, 0.012)
+    surface, params = cube.surface(dims), cube.surface_params(dims)
+    assert len(surface.symmetries(params)) == 24
+    quarter = axis_angle_rotation([1, 0, 0], math.pi / 2)
+    assert np.abs(surface.symmetry_near(tilt @ quarter, params) - quarter).max() < 1e-12
+    egg = shape_of("ellipsoid")
+    surface, params = egg.surface((0.03, 0.04)), egg.surface_params((0.03, 0.04))
+    spin = axis_angle_rotation([0, 0, 1], math.radians(40))
+    level = axis_angle_rotation([0.3, -1.0, 0.0], 0.02)  # (a tilt about a level axis)
+    S = surface.symmetry_near(level @ spin, params)
+    assert S is not None and np.abs(S @ [0, 0, 1] - [0, 0, 1]).max() < 1e-12
+    assert np.abs(S - spin).max() < 1e-12
+    assert surface.symmetry_near(axis_angle_rotation([1, 0, 0], 2.0), params) is None

@@ -45,7 +45,6 @@ from ocp.gait.step import (
 from ocp.gait.warp import RollClock, fastest_speed
 from ocp.geometry.bodies import segments_distance, tip_body
 from ocp.geometry.rotations import axis_angle_rotation, log_rotation, quaternion_wxyz
-from ocp.geometry.surfaces import rotation_from_vector
 from ocp.shapes.held import Held, held_object
 from ocp.solution import ManipulationSolution
 from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
@@ -190,26 +189,6 @@ def is_ball(template: ManipulationProblem) -> bool:
 RECUR_TILT = 0.05
 
 
-def _symmetry(template: ManipulationProblem, F: FloatArray) -> FloatArray | None:
-    """The symmetry S of the object's shape (object frame: S maps the solid onto itself)
-    with F = T S for the least tilt T: a shape of revolution's rotation about its axis
-    (T the least rotation taking the axis to F's), another's nearest quarter or half turn
-    (a rounded cube's); None when F is nowhere near one."""
-    obj = template.object
-    if obj.surface.chart_symmetry in ("axis", "axis+"):
-        z = F[:, 2]
-        if z[2] <= 0.0:
-            return None
-        tilt = np.cross([0.0, 0.0, 1.0], z)
-        size = float(np.linalg.norm(tilt))
-        T = np.eye(3) if size == 0.0 else \
-            rotation_from_vector(tilt / size * math.atan2(size, float(z[2])))
-        S = T.T @ F
-    else:
-        S = np.round(F)
-    return S if obj.surface.chart_rotation_error(S, obj.params) is None else None
-
-
 def plan_start(template: ManipulationProblem, pose: ObjectPose) -> FloatArray | None:
     """The orientation a roll from ``pose`` starts at in its plan (:func:`_roll_problem`):
     a ball's the identity (any frame fixed in a uniform ball describes it). Another
@@ -224,7 +203,8 @@ def plan_start(template: ManipulationProblem, pose: ObjectPose) -> FloatArray | 
     F = (template.initial_pose or ObjectPose()).rotation.T @ pose.rotation
     if np.allclose(F, np.eye(3), rtol=0.0, atol=1e-12):  # (the first orientation itself)
         return None
-    S = _symmetry(template, F)
+    obj = template.object
+    S = obj.surface.symmetry_near(F, obj.params)
     if S is None or float(np.linalg.norm(log_rotation(F @ S.T))) > RECUR_TILT:
         return None
     return np.asarray(pose.rotation @ S.T)

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "AXIS_TURNS",
     "Chart",
     "Ellipsoid",
     "Plane",
@@ -50,6 +51,18 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+#: The 24 proper rotations that permute the body axes with signs: a box's symmetries, the
+#: candidates of :meth:`Surface.symmetries`.
+AXIS_TURNS: tuple[FloatArray, ...] = tuple(
+    R for R in (np.diag(signs)[list(perm)]
+                for perm in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))
+                for signs in ((1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1), (-1, 1, 1),
+                              (-1, 1, -1), (-1, -1, 1), (-1, -1, -1)))
+    if np.linalg.det(R) > 0)
+#: A turn about body z by 1 rad: a surface whose patch may take it is one of revolution.
+_TURN_ABOUT_Z = np.array([[math.cos(1.0), -math.sin(1.0), 0.0],
+                          [math.sin(1.0), math.cos(1.0), 0.0], [0.0, 0.0, 1.0]])
 
 #: Length below which a vector is treated as zero when normalised [m]. Far below any
 #: physical length in a hand (mm), far above round-off of squared lengths.
@@ -295,6 +308,36 @@ class Surface:
             "its normal (body z)"
         return (f"a {self.name}'s chart patch can only be turned about {which}: any other "
                 f"rotation would describe a different, rotated {self.name}")
+
+    def symmetries(self, params: Sequence[float] | None = None) -> tuple[FloatArray, ...]:
+        """The quarter and half turns about the body axes (of :data:`AXIS_TURNS`, in its
+        order) that map this surface's solid onto itself (:meth:`chart_rotation_error`):
+        all 24 for a cube, the 8 that keep body z on its axis for a shape of revolution."""
+        return tuple(R for R in AXIS_TURNS if self.chart_rotation_error(R, params) is None)
+
+    def symmetry_near(self, F: ArrayLike, params: Sequence[float] | None = None
+                      ) -> FloatArray | None:
+        """The symmetry S of this surface's solid (body frame: S maps it onto itself)
+        nearest the rotation ``F``, F = T S with T the least tilt: ``F`` itself for a
+        sphere; for a shape of revolution about body z, S the turn about z that T (the
+        least rotation taking z to F z) leaves; another's nearest of :meth:`symmetries`.
+        None when there is none (F turns body z to the lower half, for a shape of
+        revolution)."""
+        F = np.asarray(F, dtype=float).reshape(3, 3)
+        if self.chart_symmetry == "any":
+            return F
+        if self.chart_rotation_error(_TURN_ABOUT_Z, params) is None:  # of revolution
+            z = F[:, 2]
+            if z[2] <= 0.0:
+                return None
+            tilt = np.cross([0.0, 0.0, 1.0], z)
+            size = float(np.linalg.norm(tilt))
+            T = np.eye(3) if size == 0.0 else \
+                rotation_from_vector(tilt / size * math.atan2(size, float(z[2])))
+            S = T.T @ F
+            return S if self.chart_rotation_error(S, params) is None else None
+        turns = self.symmetries(params)
+        return max(turns, key=lambda S: float(np.trace(F @ S.T))) if turns else None
 
     def validate_params(self, params: Sequence[float]) -> list[str]:
         """Reasons why ``params`` do not describe this surface (empty when they do)."""

@@ -572,30 +572,18 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
 #: (:func:`_pole_clear_symmetry`); nearer, it stays in the object's own patch.
 RECHART_SHARE = 0.5
 
-#: The 24 proper rotations that permute the axes with signs: a box's symmetries (the
-#: candidate patches of :func:`_pole_clear_symmetry`).
-_AXIS_ROTATIONS = tuple(
-    R for R in (np.diag(signs)[list(perm)]
-                for perm in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))
-                for signs in ((1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1), (-1, 1, 1),
-                              (-1, 1, -1), (-1, -1, 1), (-1, -1, -1)))
-    if np.linalg.det(R) > 0)
-
-
 def _pole_clear_symmetry(surface: Any, params: Any, R_c: FloatArray, alpha: Any
                          ) -> tuple[FloatArray, tuple[float, float]] | None:
     """A chart patch for the contact at ``alpha`` of patch ``R_c`` (object frame) that
     puts it nearest the chart's equator among the patches the surface allows
-    (``chart_rotation_error``: its symmetries, a rounded cube's 24 quarter and half
-    turns), as (its rotation, the contact's coordinates there); None when none does
-    better by a microradian (an egg's or a capsule's poles are its ends: no symmetry
-    moves them). This is how a gait's contact that has rolled toward a pole goes on in
-    another chart at its next roll (docs/shapes.md, "Charts")."""
+    (``Surface.symmetries``: a rounded cube's 24 quarter and half turns), as (its
+    rotation, the contact's coordinates there); None when none does better by a
+    microradian (an egg's or a capsule's poles are its ends: no symmetry moves them).
+    This is how a gait's contact that has rolled toward a pole goes on in another chart
+    at its next roll (docs/shapes.md, "Charts")."""
     p = R_c @ np.asarray(surface.geometry(alpha, params)[0], dtype=float).reshape(3)
     best, best_u = None, abs(float(alpha[0])) - 1e-6
-    for R in _AXIS_ROTATIONS:
-        if surface.chart_rotation_error(R, params) is not None:
-            continue
+    for R in surface.symmetries(params):
         a = np.asarray(surface.inverse(R.T @ p, params), dtype=float)
         if abs(float(a[0])) < best_u:
             best, best_u = (np.asarray(R, dtype=float), (float(a[0]), float(a[1]))), \
