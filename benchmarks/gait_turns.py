@@ -108,12 +108,9 @@ def _worker(names: list[str], options: dict[str, Any] | None = None,
     """One run: every named turn planned in this process, one JSON line each
     (``options``: fields set in the requests' ``gait``, default theirs; ``warm``: each
     turn planned once untimed before, as a worker that has planned it)."""
-    from dexroll_client import ManipulationRequest
     from ocp.gait.swing import prepare_swings
-    from planner_service.planners import REQUEST
     from planner_service.planners.cache import FINGERS
     from planner_service.planners.gait import solve_gait
-    from planner_service.planners.manipulation import problem_and_grasp
 
     reqs = {**targets(Path.cwd()), **shape_targets(Path.cwd())}
     for name in names:
@@ -123,9 +120,7 @@ def _worker(names: list[str], options: dict[str, Any] | None = None,
             prepare_swings(tuple(tip.finger for tip in problem.fingers))
             solve_gait(req, problem, FINGERS.manipulation)
         t0 = time.perf_counter()
-        req = REQUEST.validate_python(reqs[name])
-        assert isinstance(req, ManipulationRequest)
-        problem, _ = problem_and_grasp(req, FINGERS)
+        req, problem = _problem(reqs[name])
         t1 = time.perf_counter()
         swings = prepare_swings(tuple(tip.finger for tip in problem.fingers))
         t2 = time.perf_counter()

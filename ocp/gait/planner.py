@@ -471,7 +471,7 @@ def roll_speed(sol: ManipulationSolution, template: ManipulationProblem,
     from ocp.solve.force_plan import ROLL_TORQUE_SHARE
 
     whole = torque_limits(template, 1.0)
-    damped = whole is not None and any(np.any(c > 0) for c in whole.damping)
+    damped = whole is not None and whole.damped
     if not fastest and not damped:
         return 1.0
     dur = float(sol.duration)
@@ -509,7 +509,7 @@ def damping_speed(sol: ManipulationSolution, limits: TorqueLimits, nq: tuple[int
     plan's rates, speed 1) times the speed, stay within the actuators' whole range
     (``limits``, share 1) at the joints ``Q`` (inf without damped joints; 0 where the
     forces alone leave none: the roll's own certificate refuses that)."""
-    if not any(np.any(c > 0) for c in limits.damping):
+    if not limits.damped:
         return math.inf
     static = sol.joint_torques(s)
     cut = np.cumsum((0, *nq))
@@ -541,8 +541,7 @@ def _clock_torques(plan: GaitPlan, r: int, template: ManipulationProblem, t0: fl
     whose joints have no damping (a roll at its plan's pace or slower then asks only its
     forces' torques, which its own certificate checks)."""
     limits = torque_limits(template, 1.0)
-    if limits is None or not limits.damping or (
-            damped_only and not any(np.any(c > 0) for c in limits.damping)):
+    if limits is None or not limits.damping or (damped_only and not limits.damped):
         return []
     clock = plan.clock(r)
     s = clock(tau)[0]

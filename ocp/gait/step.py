@@ -186,6 +186,11 @@ class TorqueLimits:
                         for a in (*self.lower, *self.upper, self.gravity, [self.share])) \
             + repr(self.actuators).encode()
 
+    @property
+    def damped(self) -> bool:
+        """Whether any finger's joint has viscous damping."""
+        return any(np.any(np.asarray(c) > 0) for c in self.damping)
+
     def damping_overrun(self, i: int, Q: FloatArray, V: FloatArray) -> float:
         """How many times more torque than finger ``i``'s actuators give (at each sample's
         joints ``Q``, :meth:`at`) its joints' damping asks at the rates ``V``, at worst

@@ -572,6 +572,7 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
 #: (:func:`_pole_clear_symmetry`); nearer, it stays in the object's own patch.
 RECHART_SHARE = 0.5
 
+
 def _pole_clear_symmetry(surface: Any, params: Any, R_c: FloatArray, alpha: Any
                          ) -> tuple[FloatArray, tuple[float, float]] | None:
     """A chart patch for the contact at ``alpha`` of patch ``R_c`` (object frame) that
