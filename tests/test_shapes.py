@@ -136,15 +136,17 @@ def test_each_surfaces_closed_form_is_its_derivation(shape: str, dims: tuple[flo
 @pytest.mark.parametrize("drive", ["a", "b", "eq3"])
 @pytest.mark.parametrize(("shape", "dims", "eta0", "amp"), [
     ("capsule", (0.012, 0.03), (0.005, 0.3), 0.02),
+    ("capsule", (0.012, 0.03), (0.02996, 0.3), 0.02),
     ("superellipsoid", (0.025, 0.025, 0.025, 0.005), (0.1, 0.5), 0.2),
     ("superellipsoid", (0.025, 0.025, 0.025, 0.005), (0.02, 0.78), 0.2)])
 def test_a_ball_tip_rolls_on_each_shape_without_slip_or_spin(
         drive: str, shape: str, dims: tuple[float, ...], eta0: tuple[float, float],
         amp: float) -> None:
-    """Montana's equations on a shape's chart (A: the capsule's cylinder; a rounded
-    cube's radial chart on a face and across an edge) under a 12 mm ball tip (B): along a
-    motion driven each way, the pose the contact coordinates give has its contact point
-    at rest and no spin about the normal (the laws of tests/test_contact.py)."""
+    """Montana's equations on a shape's chart (A: the capsule's cylinder, and across its
+    seam onto a cap, where the curvature jumps; a rounded cube's radial chart on a face
+    and across an edge) under a 12 mm ball tip (B): along a motion driven each way, the
+    pose the contact coordinates give has its contact point at rest and no spin about the
+    normal (the laws of tests/test_contact.py)."""
     from test_contact import Motion, rolling_defects
 
     from ocp.geometry.contact import ContactPair
@@ -154,10 +156,14 @@ def test_a_ball_tip_rolls_on_each_shape_without_slip_or_spin(
     motion = Motion(ContactPair(obj.surface, Sphere), drive, list(obj.params), [0.012],
                     np.eye(3), np.eye(3), np.array([[0.3, -0.5], [0.4, 0.2], [-0.1, 0.3]]),
                     (2.5 if drive == "eq3" else 1.0) * amp)
+    us = []
     for t, eta in motion.integrate(np.array([*eta0, 0.2, -0.4, 0.7])):
         assert abs(eta[0]) < obj.u_limit(0.0)  # on the chart
         d = rolling_defects(motion, t, eta)
         assert d.slip < 1e-6 and d.spin < 1e-6, (t, d)
+        us.append(eta[0])
+    if eta0[0] == 0.02996:  # the seam case: the contact goes from the cylinder onto the cap
+        assert min(us) < dims[1] < max(us)
 
 
 def test_a_line_contact_is_refused_by_field() -> None:
@@ -212,6 +218,57 @@ def test_the_allegro_hand_rolls_a_capsule_about_its_axis() -> None:
            "tracking": {"position_tolerance": 0.001, "orientation_tolerance": 0.01745},
            "forces": {"mass": 0.06}, "mu": 0.9, "duration": 2.0, "n_intervals": 20}
     planned_and_executed(raw)
+
+
+def test_the_capsules_chart_crosses_its_seams_smoothly() -> None:
+    """One chart covers the capsule's cylinder and caps: exactly the capsule outside the
+    seams' blends (the cylinder's M, K, T; a cap's sphere), within 0.04 um inside it across
+    them, its curvature continuous (no jump between points 0.1 um apart) though the
+    capsule's own jumps from 0 to 1/r; the inverse finds u back on every part."""
+    from ocp.shapes.capsule import SEAM_BLEND
+
+    r, h = 0.012, 0.028
+    obj = ObjectSpec("capsule", (r, h))
+    surface, params = obj.surface, obj.params
+    w = SEAM_BLEND * r
+    geo = [surface.geometry([u, 0.4], params) for u in (0.01, h + 0.01)]
+    assert np.asarray(geo[0][3]) == pytest.approx(np.diag([0.0, 1 / r]), abs=1e-12)
+    assert np.asarray(geo[1][3]) == pytest.approx(np.diag([1 / r, 1 / r]), abs=1e-9)
+    assert np.asarray(geo[1][2]) == pytest.approx(np.diag([1.0, r * math.cos(0.01 / r)]))
+    us = np.concatenate([np.linspace(h - 2 * w, h + 2 * w, 801),
+                         -np.linspace(h - 2 * w, h + 2 * w, 801), [0.0, 0.02, 0.04]])
+    pts = np.array([np.asarray(surface.geometry([u, 0.4], params)[0]).ravel() for u in us])
+    _, _, dist = shape_of("capsule").nearest((r, h), pts)
+    assert np.all(dist <= 1e-15) and np.all(dist > -4e-8)
+    k = np.array([float(surface.geometry([u, 0.4], params)[3][0, 0])
+                  for u in np.arange(h - 1.2 * w, h + 1.2 * w, 1e-7)])
+    assert k[0] == 0.0 and k[-1] == pytest.approx(1 / r)
+    assert np.max(np.abs(np.diff(k))) < 0.01 / r
+    assert surface.inverse(pts, params)[:, 0] == pytest.approx(us, abs=1e-12)
+
+
+def test_a_fingertip_rolls_over_the_capsules_seam_onto_its_cap() -> None:
+    """examples/capsule_over_seam.json: the upright capsule held 16 mm higher in the
+    Allegro-class hand, tilted 12 degrees about the palm's y: the thumb's contact starts on
+    the cylinder 0.3 mm above the lower seam and rolls 0.6 mm past it onto the cap, in one
+    plan on one chart: solved and certified (with the capsule's jump in curvature at the
+    seam in the chart, IPOPT cycled on it to the time limit on 3-8 degree tilts). Its
+    execution in MuJoCo is tests/test_sim.py's."""
+    import json
+    from pathlib import Path
+
+    from dexroll_client.models import PlanStatus
+    from planner_service.cli import plan_request
+
+    raw = json.loads((Path(__file__).parents[1] / "examples" /
+                      "capsule_over_seam.json").read_text())
+    result, summary = plan_request(raw)
+    assert result.status is PlanStatus.SOLVED, summary
+    assert result.certificate is not None and result.certificate.passed
+    h = raw["object"]["dimensions"][1]
+    thumb = next(c for c in result.trajectory.contacts if c.name == "thumb")
+    u = np.asarray(thumb.eta)[:, 2]
+    assert u[0] > -h + 2e-4 and u.min() < -h - 5e-4
 
 
 def test_the_nlps_length_scale_is_the_values() -> None:

@@ -30,7 +30,7 @@ searched the same way through its signed distance and outward normal at the near
 (:func:`~ocp.geometry.nearest.nearest_surface_point`): a tip's centre is near when its distance
 from the surface is within the ball's band about ``r``; it is pulled onto the surface
 (distance ``r``) by a Gauss-Newton on the joints along the normal (:func:`onto_surface`);
-a contact beyond the chart's bound (``u_limit``: an egg's poles, a capsule's caps) or on a
+a contact beyond the chart's bound (``u_limit``: an egg's poles, a capsule's ends) or on a
 cap's seam is dropped, every joint origin kept outside the object; the closure is that of
 the object's normals at the contacts. An object with a closed-form nearest point (an
 ellipsoid, a capsule: the search's ``held``) has its candidates rolled through the turns on

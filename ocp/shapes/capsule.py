@@ -2,15 +2,28 @@
 from z = -h to z = h (``half_length`` h, as MuJoCo's capsule ``size="r h"``), closed by
 two hemispheres [m].
 
-Contacts roll on its cylinder, whose chart is f(u, v) = (r cos v, -r sin v, u): u the
-height along the axis [m], v the angle [rad] ((u, v) = (0, 0) is the object's +x point).
-It is orthogonal, with x = (0, 0, 1) along the axis, y = (-sin v, -cos v, 0), the normal
-z = (cos v, -sin v, 0), M = diag(1, r), K = diag(0, 1/r) and T = 0. The chart ends at the
-seams u = +-h, where the curvature jumps to the caps' 1/r: a contact keeps |u| <= h
-(:meth:`CapsuleSurface.u_limit`); the caps are not a chart of their own yet, so no
-contact rolls onto them. Everything that does not go through the chart (the support
-function a certificate measures the gap with, the MuJoCo geom, the mass) is the whole
-capsule's.
+One chart covers the cylinder and both caps, a surface of revolution about z: u runs
+along a meridian from the equator [m], v is the angle about the axis [rad] ((u, v) =
+(0, 0) is the object's +x point). With s(u) the point of the axis the meridian's circle
+is centred on and phi = (u - s) / r its latitude,
+
+    f(u, v) = (r cos(phi) cos v, -r cos(phi) sin v, s + r sin(phi)).
+
+On the cylinder s = u and phi = 0: f = (r cos v, -r sin v, u), M = diag(1, r), K =
+diag(0, 1/r), T = 0. On a cap s = +-h: a sphere's latitude/longitude chart, M = diag(1,
+r cos(phi)), K = diag(1/r, 1/r), T = (0, -tan(phi) / r). At a seam the capsule's meridian
+curvature jumps from 0 to 1/r, and so does K: any chart of it has a kink in its frame
+there, and an NLP whose contact crosses one cycles on that kink (the thumb of
+examples/capsule_over_seam.json's grasp rolled 0.2-0.8 mm over the seam by tilts of 3-8
+degrees: IPOPT ran to the 60 s limit, 550-1200 iterations; 42-48 with the blend). So s(u)
+blends the two over w = SEAM_BLEND r either side of each seam (:func:`_ramp`, C2): the
+meridian's curvature goes smoothly from 0 to 1/r there (overshooting to 1.16/r), and the
+surface lies within 0.04 um inside the capsule (r = 12 mm; tests/test_shapes.py), far
+below what the certificate's touching tolerance or MuJoCo's contacts resolve. Outside the
+blends the chart is the capsule's exactly. The chart's poles are the caps' ends,
+u = +-(h + r pi/2): a contact keeps |u| <= h + r (pi/2 - pole_margin)
+(:meth:`CapsuleSurface.u_limit`). The support function a certificate measures gaps with,
+the MuJoCo geom and the mass are the exact capsule's.
 """
 
 from __future__ import annotations
@@ -32,33 +45,95 @@ __all__ = ["CAPSULE", "CapsuleShape", "CapsuleSide", "CapsuleSurface"]
 FloatArray = NDArray[np.float64]
 
 
-def _cylinder_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
+#: The seams' blend [a share of the radius]: the meridian's straight line and its caps'
+#: arcs are joined over w = SEAM_BLEND r either side of each seam by a curvature that rises
+#: smoothly from 0 to 1/r (see the module): within 0.04 um of the capsule for r = 12 mm.
+SEAM_BLEND = 0.01
+
+
+def _ramp(x: Any) -> tuple[Any, Any, Any]:
+    """The seam's C2 ramp P(x) [-] and its first two derivatives: P = 0 for x <= -1, x for
+    x >= 1, 2 t^3 - t^4 between (t = (x + 1) / 2), so P' = 3 t^2 - 2 t^3 rises from 0 to
+    1 with P'' = 3 t (1 - t) zero at both ends."""
+    t = (x + 1) / 2
+    if isinstance(x, ca.SX | ca.MX):
+        inside = ca.logic_and(x > -1, x < 1)
+        past = x >= 1
+        return (ca.if_else(inside, 2 * t**3 - t**4, ca.if_else(past, x, 0)),
+                ca.if_else(inside, 3 * t**2 - 2 * t**3, ca.if_else(past, 1, 0)),
+                ca.if_else(inside, 3 * t * (1 - t), 0))
+    inside, past = (x > -1) & (x < 1), x >= 1
+    return (np.where(inside, 2 * t**3 - t**4, np.where(past, x, 0.0)),
+            np.where(inside, 3 * t**2 - 2 * t**3, np.where(past, 1.0, 0.0)),
+            np.where(inside, 3 * t * (1 - t), 0.0))
+
+
+def _meridian(u: Any, params: Any) -> tuple[Any, ...]:
+    """(s, s_u, s_uu) at arc parameter u: the axis's point the meridian's circle is
+    centred on [m] (s = u on the cylinder, +-h on the caps, blended over w either side of
+    a seam) and its rates; the circle's latitude is phi = (u - s) / r. Written for the
+    seam on u's side (the other's ramp is 0 there: the blends are 2 h - 2 w apart)."""
+    r, h = params[0], params[1]
+    w = SEAM_BLEND * r
+    sign = ca.sign(u) if isinstance(u, ca.SX | ca.MX) else np.sign(u)
+    P, dP, ddP = _ramp((sign * u - h) / w)
+    return u - sign * w * P, 1 - dP, -sign * ddP / w
+
+
+def _capsule_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
     r = params[0]
-    return ca.vertcat(r * ca.cos(v), -r * ca.sin(v), u)
+    s = _meridian(u, params)[0]
+    phi = (u - s) / r
+    return ca.vertcat(r * ca.cos(phi) * ca.cos(v), -r * ca.cos(phi) * ca.sin(v),
+                      s + r * ca.sin(phi))
+
+
+def _profile(u: FloatArray, params: Sequence[float]) -> tuple[FloatArray, ...]:
+    """The meridian (rho, z) [m] at u and its rates (rho_u, z_u) [-]."""
+    r = float(params[0])
+    s, s_u, _ = _meridian(u, params)
+    phi, phi_u = (u - s) / r, (1 - s_u) / r
+    return (r * np.cos(phi), s + r * np.sin(phi), -r * np.sin(phi) * phi_u,
+            s_u + r * np.cos(phi) * phi_u)
 
 
 class CapsuleSurface(Surface):
-    """The capsule's cylinder as a chart (see the module), parameters (radius,
-    half_length) [m]; its support function and support points the whole capsule's."""
+    """The capsule's chart over its cylinder and caps (see the module), parameters
+    (radius, half_length) [m]; its support function and support points the whole
+    capsule's."""
 
     chart_symmetry = "axis"
     developable = True
     ruling = (0.0, 0.0, 1.0)
-    u_limit_name = "end of the capsule's cylinder (its seam with a cap) half_length [m]"
+    u_limit_name = ("caps' pole limit half_length + radius (pi/2 - pole_margin), an arc "
+                    "along the capsule's meridian [m]")
 
     def __init__(self) -> None:
-        super().__init__("capsule", _cylinder_chart, ("radius", "half_length"),
+        super().__init__("capsule", _capsule_chart, ("radius", "half_length"),
                          (False, True), None, ("u", "v"))
 
     def closed_form_geometry(self, u: ca.SX, v: ca.SX, params: ca.SX
                              ) -> tuple[ca.SX, ...] | None:
+        """A surface of revolution's frame, metric, curvature and torsion from its
+        meridian (rho, z)(u) (the module's): x = (rho_u c, -rho_u s, z_u) / m, z = (z_u c,
+        -z_u s, -rho_u) / m (m = |(rho_u, z_u)|), M = diag(m, rho), K = diag((rho_u z_uu
+        - z_u rho_uu) / m^3, z_u / (m rho)), T = (0, rho_u / (m rho))."""
         r = params[0]
+        s, s_u, s_uu = _meridian(u, params)
+        phi, phi_u, phi_uu = (u - s) / r, (1 - s_u) / r, -s_uu / r
+        cp, sp = ca.cos(phi), ca.sin(phi)
+        rho, z = r * cp, s + r * sp
+        rho_u, z_u = -r * sp * phi_u, s_u + r * cp * phi_u
+        rho_uu = -r * (cp * phi_u**2 + sp * phi_uu)
+        z_uu = s_uu + r * (cp * phi_uu - sp * phi_u**2)
+        m = ca.sqrt(rho_u**2 + z_u**2)
         cv, sv = ca.cos(v), ca.sin(v)
-        p = ca.vertcat(r * cv, -r * sv, u)
-        R = ca.horzcat(ca.vertcat(0, 0, 1), ca.vertcat(-sv, -cv, 0), ca.vertcat(cv, -sv, 0))
-        M = ca.diag(ca.vertcat(1, r))
-        K = ca.diag(ca.vertcat(0, 1 / r))
-        T = ca.horzcat(0, 0)
+        p = ca.vertcat(rho * cv, -rho * sv, z)
+        R = ca.horzcat(ca.vertcat(rho_u * cv, -rho_u * sv, z_u) / m,
+                       ca.vertcat(-sv, -cv, 0), ca.vertcat(z_u * cv, -z_u * sv, -rho_u) / m)
+        M = ca.diag(ca.vertcat(m, rho))
+        K = ca.diag(ca.vertcat((rho_u * z_uu - z_u * rho_uu) / m**3, z_u / (m * rho)))
+        T = ca.horzcat(0, rho_u / (m * rho))
         return p, R, M, K, T
 
     def length_scale(self, params: Any) -> Any:
@@ -68,12 +143,22 @@ class CapsuleSurface(Surface):
         return float(params[0]) + float(params[1])
 
     def u_limit(self, params: Sequence[float], pole_margin: float) -> float:
-        """The seams: |u| <= half_length [m] (the margin is an angle of a pole chart)."""
-        return float(params[1])
+        """|u| <= half_length + radius (pi/2 - pole_margin) [m]: ``pole_margin`` [rad] of
+        latitude short of a cap's end, the chart's pole."""
+        return float(params[1]) + float(params[0]) * (math.pi / 2 - pole_margin)
 
     def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
+        """(u, v) of points on the surface: v their angle about the axis, u the capsule's
+        arc parameter, refined on the blended meridian by Gauss-Newton (5 steps)."""
+        r, h = (float(x) for x in np.asarray(params, dtype=float)[:2])
         p = np.asarray(point, dtype=float)
-        return np.stack([p[..., 2], np.arctan2(-p[..., 1], p[..., 0])], axis=-1)
+        rho_p, z_p = np.hypot(p[..., 0], p[..., 1]), p[..., 2]
+        s = np.clip(z_p, -h, h)
+        u = s + r * np.arctan2(z_p - s, rho_p)
+        for _ in range(5):
+            rho, z, rho_u, z_u = _profile(u, (r, h))
+            u = u - ((rho - rho_p) * rho_u + (z - z_p) * z_u) / (rho_u**2 + z_u**2)
+        return np.stack([u, np.arctan2(-p[..., 1], p[..., 0])], axis=-1)
 
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
         r, h = (float(x) for x in np.asarray(params, dtype=float)[:2])
@@ -92,7 +177,7 @@ class CapsuleSurface(Surface):
         return np.asarray(r * d + np.array([0.0, 0.0, h * float(np.sign(d[2]))]))
 
 
-#: The capsule's cylinder chart.
+#: The capsule's chart over its cylinder and caps.
 CapsuleSide: Surface = CapsuleSurface()
 
 
