@@ -608,3 +608,30 @@ def test_a_swing_short_of_a_gap_between_its_nodes_says_by_how_much() -> None:
     assert min(kept.required_gaps()) == pytest.approx(least + 2e-4 + DISTANCE_TOL)
     assert between_nodes(dataclasses.replace(plan, spec=kept)) == pytest.approx(2e-4,
                                                                               abs=1e-12)
+
+
+def test_a_swing_planned_again_on_a_finer_grid_keeps_its_path_and_its_laws() -> None:
+    """``dense_enough``: a swing that keeps its gaps densely is returned as it is; the same
+    swing on the grid FINER times finer (where ``dense_enough`` plans one that dips
+    between its coarse nodes) keeps every law of its certificate, lifts off where the
+    coarse one does and lands within 1e-3 rad of its joints (the landing's contact is
+    free along the surface), and comes no closer to its neighbours."""
+    from ocp.gait.step import FINER, between_nodes, dense_enough
+    from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, plan_swing
+
+    _, spec = stored_swing("gait_narrow_swing.json")
+    coarse = plan_swing(dataclasses.replace(spec, tip_gap=MIN_TIP_GAP,
+                                            neighbour_share=NARROW_SHARE))
+    assert dense_enough(coarse) is coarse
+    fine = plan_swing(dataclasses.replace(
+        coarse.spec, n_intervals=FINER * coarse.spec.n_intervals,
+        lift_intervals=FINER * coarse.spec.lift_intervals))
+    assert fine.ok and between_nodes(fine) == 0.0
+    assert all(c.passed for c in swing_checks(fine, "x")), \
+        [c.name for c in swing_checks(fine, "x") if not c.passed]
+    assert len(fine.Q) == FINER * (len(coarse.Q) - 1) + 1
+    assert np.abs(fine.Q[0] - coarse.Q[0]).max() < 1e-12
+    assert np.abs(fine.Q[-1] - coarse.Q[-1]).max() < 1e-3
+    gaps = [min(c.value for c in swing_checks(p, "x") if c.name.startswith("swing_tip_gap_"))
+            for p in (coarse, fine)]
+    assert gaps[1] >= gaps[0] - 1e-6
