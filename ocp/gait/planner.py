@@ -47,9 +47,9 @@ from ocp.geometry.bodies import segments_distance, tip_body
 from ocp.geometry.rotations import axis_angle_rotation, log_rotation, quaternion_wxyz
 from ocp.shapes.held import Held, held_object
 from ocp.solution import ManipulationSolution
-from ocp.spec.grasp import ManipulationProblem, fingertips_from_joints
+from ocp.spec.grasp import Fingertip, ManipulationProblem, fingertips_from_joints
 from ocp.spec.motion import DesiredMotion, ObjectPose
-from ocp.spec.problem import ProblemError
+from ocp.spec.problem import ObjectSpec, ProblemError
 from ocp.transcription.values import load_parameters
 
 __all__ = ["GaitPhase", "GaitPlan", "plan_gait"]
@@ -262,9 +262,7 @@ def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
     R_start = plan_start(template, pose)
     start = ObjectPose((1.0, 0.0, 0.0, 0.0), pose.position) if ball else pose \
         if R_start is None else ObjectPose(tuple(quaternion_wxyz(R_start)), pose.position)
-    tips = fingertips_from_joints(fingers, qs, template.object, start, names,
-                                  tuple(f"{n}'s joints at the roll's start" for n in names),
-                                  advise=False)
+    obj, tips = _roll_contacts(template, fingers, qs, start, names)
     goal = np.asarray(target, dtype=float)
     q1 = np.ravel(quaternion_wxyz(goal @ pose.rotation.T if ball else goal
                                   if R_start is None else goal @ pose.rotation.T @ R_start))
@@ -276,8 +274,51 @@ def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
                             (float(q1[0]), float(q1[1]), float(q1[2]), float(q1[3]))),
                            (pose.position, (float(centre[0]), float(centre[1]),
                                             float(centre[2]))))
-    return replace(template, fingers=tips, initial_pose=start, motion=motion,
+    return replace(template, object=obj, fingers=tips, initial_pose=start, motion=motion,
                    duration=duration)
+
+
+#: A roll of an object with a side chart (an egg) is planned on it when a contact lies
+#: beyond this share of its own chart's bound there (or beyond the bound): nearer the
+#: equator the roll keeps the object's own chart (and the plan it had before the side
+#: chart: examples/egg_gait.json's first rolls, 34-47 deg up, plan the same gait either
+#: way, to 6e-6 N and 4e-7 in the quaternion).
+SIDE_SHARE = 0.8
+
+
+def _roll_contacts(template: ManipulationProblem, fingers: tuple[Any, ...],
+                   qs: tuple[FloatArray, ...], start: ObjectPose, names: tuple[str, ...]
+                   ) -> tuple[ObjectSpec, tuple[Fingertip, ...]]:
+    """The object a roll's contacts are measured on and the fingertips where the joints
+    ``qs`` put them (:func:`~ocp.spec.grasp.fingertips_from_joints`): on the shape's own
+    chart, or, where a contact lies beyond :data:`SIDE_SHARE` of its bound there (or
+    beyond the bound) and the shape has a side chart (an egg's, whose poles are on its
+    equator), on that one, each contact on its patch's equator, when that puts the
+    contact farthest up its chart nearer its equator (``ObjectSpec.side_chart``)."""
+    where = tuple(f"{n}'s joints at the roll's start" for n in names)
+    obj = replace(template.object, side_chart=False)
+    error: ProblemError | None = None
+    tips: tuple[Fingertip, ...] | None = None
+    worst = math.inf
+    try:
+        tips = fingertips_from_joints(fingers, qs, obj, start, names, where, advise=False)
+        worst = max(abs(float(t.initial[2])) for t in tips)
+    except ProblemError as exc:
+        error = exc
+    side = replace(obj, side_chart=True)
+    if obj.kind.side_surface(obj.dimensions) is not None \
+            and worst > SIDE_SHARE * obj.u_limit(template.pole_margin):
+        try:
+            on_side = fingertips_from_joints(fingers, qs, side, start, names, where,
+                                             advise=False)
+        except ProblemError:
+            on_side = None
+        if on_side is not None and max(abs(float(t.initial[2])) for t in on_side) < worst:
+            return side, on_side
+    if tips is None:
+        assert error is not None
+        raise error
+    return obj, tips
 
 
 #: The least distance [m] a roll is planned to keep between two fingertips' bodies: the
@@ -1115,6 +1156,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
     q_home = q_now  # where each fingertip touched when the gait began
     q_land: tuple[FloatArray, ...] | None = None  # where the spent ones land (made once)
     roll_starts: list[tuple[FloatArray, ...]] = []  # each roll's joints at its start
+    roll_objects: dict[int, ObjectSpec] = {}  # each roll's object (its chart)
     pose = pose0
     plan = GaitPlan("solved", "", nq=tuple(int(f.nq) for f in fingers))
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
@@ -1179,6 +1221,9 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 float(np.abs(a - b).max()) for a, b in zip(roll_starts[-1], q_now,
                                                            strict=True)) > RECUR_TOL:
             warm = None  # a grasp of other contacts: the last roll's point is no start
+        if warm is not None and last_all is not None \
+                and roll_objects.get(last_all, prob.object) != prob.object:
+            warm = None  # its contacts on the other chart (an egg's side chart)
         if plan_start(template, pose) is None:  # its turned form is another solid: no
             # roll recurs (the egg's 90 deg gait about a short axis took 38 s warm-started
             # from the last roll, 21 s started cold)
@@ -1197,6 +1242,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             break
         r = len(plan.rolls)
         plan.rolls.append(sol)
+        roll_objects[r] = prob.object
         roll_starts.append(q_now)
         plan.frames.append(roll_frame(template, pose))
         clock = RollClock.of(dur, roll_speed(sol, template, plan.nq, fastest_rolls)

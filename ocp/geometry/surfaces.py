@@ -309,6 +309,12 @@ class Surface:
         return (f"a {self.name}'s chart patch can only be turned about {which}: any other "
                 f"rotation would describe a different, rotated {self.name}")
 
+    def axis_patch(self, point: ArrayLike) -> FloatArray | None:
+        """The patch (a rotation in the body frame) that puts the body point ``point`` on
+        this chart's equator, for a chart whose patch turns freely about an axis with its
+        poles off that axis (an egg's side chart); None (the default) for the others."""
+        return None
+
     def symmetries(self, params: Sequence[float] | None = None) -> tuple[FloatArray, ...]:
         """The quarter and half turns about the body axes (of :data:`AXIS_TURNS`, in its
         order) that map this surface's solid onto itself (:meth:`chart_rotation_error`):

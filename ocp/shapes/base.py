@@ -82,6 +82,13 @@ class Shape(ABC):
     def surface(self, dimensions: Sequence[float]) -> Surface:
         """The surface whose chart the contact coordinates are measured in."""
 
+    def side_surface(self, dimensions: Sequence[float]) -> Surface | None:
+        """A second chart of the same surface whose poles lie where :meth:`surface`'s
+        chart is regular and whose patch turns about an axis of the shape
+        (``axis_patch``), for contacts near the first chart's poles
+        (``ObjectSpec.side_chart``); None (the default) when the shape has none."""
+        return None
+
     def surface_params(self, dimensions: Sequence[float]) -> tuple[float, ...]:
         """The parameters the surface's chart takes: the dimensions themselves unless a
         shape says otherwise."""

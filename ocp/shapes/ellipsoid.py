@@ -23,7 +23,8 @@ from ocp.geometry.bodies import point_segment_distance
 from ocp.geometry.surfaces import Ellipsoid, Surface
 from ocp.shapes.base import MujocoGeom, Shape
 
-__all__ = ["ELLIPSOID", "EllipsoidShape", "TriaxialEllipsoid", "TriaxialEllipsoidSurface"]
+__all__ = ["ELLIPSOID", "EggSide", "EggSideSurface", "EllipsoidShape", "TriaxialEllipsoid",
+           "TriaxialEllipsoidSurface"]
 
 FloatArray = NDArray[np.float64]
 
@@ -134,6 +135,68 @@ class TriaxialEllipsoidSurface(Surface):
 TriaxialEllipsoid: Surface = TriaxialEllipsoidSurface()
 
 
+#: The side chart's frame in the body's (a rotation): its x (the chart's c axis) along
+#: the body's -z, the egg's axis; its y the body's y; its z, the poles, along the body's x.
+_SIDE = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+
+
+def _side_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
+    a, c = params[0], params[1]
+    return ca.mtimes(ca.DM(_SIDE), _triaxial_chart(u, v, ca.vertcat(c, a, a)))
+
+
+class EggSideSurface(Surface):
+    """An ellipsoid of revolution (a, a, c) charted from its side: the triaxial chart of
+    semi-axes (c, a, a) turned so that its poles lie on the body's x axis, on the
+    equator, and its own equator (u = 0) is the ellipse through the ends (0, 0, +-c) in
+    the body's y-z plane. Parameters (a, c), as :data:`~ocp.geometry.surfaces.Ellipsoid`.
+    Its patch turns about the body's z (the egg's axis), so a contact anywhere on the
+    egg, its ends included, is put on that patch's equator (``ObjectSpec.side_chart``;
+    docs/shapes.md, "Charts"): the chart a gait's roll takes when a contact has rolled
+    toward an end, where the egg's own chart has its poles."""
+
+    orthogonal = False
+    chart_symmetry = "axis"
+
+    def __init__(self) -> None:
+        super().__init__("ellipsoid_side", _side_chart,
+                         ("equatorial_semi_axis", "polar_semi_axis"), (False, True),
+                         np.pi / 2, ("u", "v"))
+
+    def closed_form_geometry(self, u: ca.SX, v: ca.SX, params: ca.SX
+                             ) -> tuple[ca.SX, ...] | None:
+        a, c = params[0], params[1]
+        p, R, M, K, T = _triaxial_geometry(u, v, c, a, a)
+        side = ca.DM(_SIDE)
+        return ca.mtimes(side, p), ca.mtimes(side, R), M, K, T
+
+    def inverse(self, point: ArrayLike, params: ArrayLike) -> FloatArray:
+        a, c = np.asarray(params, dtype=float)
+        g = np.asarray(point, dtype=float) @ _SIDE  # (the chart frame's coordinates)
+        return np.asarray(TriaxialEllipsoid.inverse(g, (c, a, a)))
+
+    def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
+        return Ellipsoid.support_height(normal, params)
+
+    def support_heights(self, normals: ArrayLike, params: ArrayLike) -> FloatArray:
+        return Ellipsoid.support_heights(normals, params)
+
+    def support_point(self, direction: ArrayLike, params: ArrayLike) -> FloatArray:
+        return Ellipsoid.support_point(direction, params)
+
+    def axis_patch(self, point: ArrayLike) -> FloatArray:
+        """The patch (a turn about the body's z) that puts the body point ``point`` on
+        this chart's equator: its poles across the point's azimuth."""
+        p = np.asarray(point, dtype=float).reshape(3)
+        b = math.atan2(p[1], p[0]) - math.pi / 2
+        return np.array([[math.cos(b), -math.sin(b), 0.0], [math.sin(b), math.cos(b), 0.0],
+                         [0.0, 0.0, 1.0]])
+
+
+#: The egg's side chart.
+EggSide: Surface = EggSideSurface()
+
+
 class EllipsoidShape(Shape):
     """An ellipsoid: ``dimensions`` (a, c), of revolution about its z axis (semi-axes
     a, a, c: the chart :data:`ocp.geometry.surfaces.Ellipsoid`), or (a, b, c) along its
@@ -148,7 +211,12 @@ class EllipsoidShape(Shape):
         return Ellipsoid if len(dimensions) == 2 else TriaxialEllipsoid
 
     def surfaces(self) -> tuple[Surface, ...]:
-        return (Ellipsoid, TriaxialEllipsoid)
+        return (Ellipsoid, TriaxialEllipsoid, EggSide)
+
+    def side_surface(self, dimensions: Sequence[float]) -> Surface | None:
+        """An ellipsoid of revolution's side chart (:data:`EggSide`); a triaxial one has
+        none (no patch of it turns freely about an axis)."""
+        return EggSide if len(dimensions) == 2 else None
 
     def count_error(self, dimensions: Sequence[float]) -> str | None:
         if len(dimensions) not in (2, 3):

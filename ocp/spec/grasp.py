@@ -545,6 +545,14 @@ def _contact_on_surface(finger: Any, q: FloatArray, obj: Any, pose: Any, pole_ma
         R_l, _ = finger.fingertip_pose_pin(q)
     u, v = (float(x) for x in np.asarray(alpha))
     limit = geo.u_limit
+    if getattr(obj, "side_chart", False):  # on its side chart's equator (an egg's)
+        p = R_c @ np.asarray(surface.geometry([u, v], dims)[0], dtype=float).reshape(3)
+        R_side = surface.axis_patch(p)
+        if R_side is not None:
+            R_c = np.asarray(R_side, dtype=float)
+            u, v = (float(x) for x in surface.inverse(R_c.T @ p, dims))
+            rotvec = tuple(float(x) for x in log_rotation(R_c))
+            geo = replace(geo, rotation=np.asarray(pose.rotation, dtype=float) @ R_c)
     if abs(u) > RECHART_SHARE * limit:
         turned = _pole_clear_symmetry(surface, dims, R_c, (u, v))
         if turned is not None:

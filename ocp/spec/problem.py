@@ -98,6 +98,11 @@ class ObjectSpec:
     shape: str = "sphere"
     dimensions: tuple[float, ...] = (0.03,)
     chart_rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: whether the contacts are measured on the shape's side chart
+    #: (:meth:`Shape.side_surface`: an egg's, whose poles are on its equator), each in the
+    #: patch that puts it on that chart's equator: a gait's roll whose contacts have
+    #: rolled toward the poles of the shape's own chart
+    side_chart: bool = False
 
     @property
     def kind(self) -> Shape:
@@ -108,7 +113,8 @@ class ObjectSpec:
     def surface(self) -> Surface:
         """The surface the contact coordinates are measured on; its ``name`` keys the
         NLPs built for it."""
-        return self.kind.surface(self.dimensions)
+        side = self.kind.side_surface(self.dimensions) if self.side_chart else None
+        return self.kind.surface(self.dimensions) if side is None else side
 
     @property
     def params(self) -> tuple[float, ...]:
