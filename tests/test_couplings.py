@@ -149,13 +149,6 @@ def test_joint_angles_that_break_a_coupling_are_refused_naming_the_tendon() -> N
     assert "tendon 'T_ffc'" in reason and "outside by 0.0044" in reason
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "on the 2026-12-06 machine (casadi 3.8.2, pin 4.1.0, mujoco 3.17.0, numpy 2.4.6) the "
-    "searched grasp's plan is refused by the actuator check, at the session's first commit "
-    "too: ffj3 needs -0.000975 N m at t = 1.938 s with its tendon held 2 mm off the bound "
-    "that could give it, and tha0 would be commanded 1.399 against its ctrlrange's 1.396; "
-    "the margins the force stage keeps (PASSIVE_MARGIN, ROLL_TORQUE_SHARE) hold at its "
-    "points, not at these samples"))
 @pytest.mark.parametrize("wrist", [False, True])
 def test_a_passive_joint_is_planned_at_its_tendons_bound_and_executed(wrist: bool) -> None:
     """The Shadow hand's J0: the coupled distal joints without actuators (and, the

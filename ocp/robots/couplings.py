@@ -259,8 +259,9 @@ def tendon_torque_bounds(finger: Any, lower: ArrayLike, upper: ArrayLike
     samples on any before it) with each passive joint whose tendon is held at a bound
     (:func:`ocp.robots.grasp_reach.at_tendon_bounds`) given the sign that bound's force
     can give: ``c_p tau_p >= 0`` at the lower bound (the limit's force ``lam = tau_p /
-    c_p >= 0``), ``<= 0`` at the upper, with :data:`PASSIVE_MARGIN` to spare for what the
-    forces' stage does not see (the joints' damping and inertia over the motion)."""
+    c_p >= 0``), ``<= 0`` at the upper, with :data:`PASSIVE_MARGIN` to spare (for what
+    happens between the forces' stage's points; the stage counts the hand's own torques
+    at them: ``ocp.solve.force_plan._model_torques``)."""
     lo, hi = np.array(lower, dtype=float), np.array(upper, dtype=float)
     names = list(finger.joint_names)
     for c in getattr(finger, "couplings", ()):

@@ -474,6 +474,8 @@ def finger_contacts(f: Any, centre: ArrayLike, radius: float | ObjectGeometry,
         if got is None or not _outside(f, got, c, radius):
             continue
         s = tip_state(f, got, c, radius)
+        if s.polar > seam:  # moved to hold a tendon at its bound: the contact off the cap
+            continue
         reach, stop = (None, "") if not turns else _roll_through(f, got, c, radius, turns,
                                                                   margin)
         kept.append(FingerContact(got, s.n, s.centre, s.m, reach, stop))

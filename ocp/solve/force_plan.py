@@ -7,6 +7,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -53,7 +54,7 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
     Xall = np.vstack([col.X, col.Xm])
     load = load_parameters(pf)
     guess = planned_force_guess(m, Xall, prm, load)
-    torques = _torque_rows(stage, pf, Xall, prm)
+    torques = _torque_rows(stage, pf, Xall, prm, _model_torques(stage, pf, kin, col))
     F, iterations = stage.solve(Xall, prm, load, pf.object.length_scale, guess, torques)
     if F is None and torques is not None:
         # no forces within the actuators: the plan's forces without them (the actuator
@@ -86,21 +87,49 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
 ROLL_TORQUE_SHARE = 0.9
 
 
+def _model_torques(stage: ForceStage, problem: ManipulationProblem,
+                   kin: ManipulationSolution, col: Any) -> list[np.ndarray] | None:
+    """Per fingertip of the force stage, what the hand's own model needs at each of its
+    points (nodes, then midpoints; rows) on top of the contact forces' torques: its links'
+    weight, the joints' damping and springs, the motion's inertia (MuJoCo's, the
+    actuation's ``model_torques``, which the actuator check adds too); None where the
+    actuation has no model (a URDF's)."""
+    act = problem.actuation
+    if act is None or not hasattr(act, "model_torques") or not stage.tips:
+        return None
+    t_nodes = np.asarray(col.t_nodes, dtype=float)
+    times = np.concatenate([t_nodes, (t_nodes[:-1] + t_nodes[1:]) / 2])
+    try:
+        smp = kin.sample(times)
+        return [np.asarray(act.model_torques(t.finger.joint_names, smp.x[:, t.q_cols],
+                                             smp.x_dot[:, t.q_cols],
+                                             smp.x_ddot[:, t.q_cols]), dtype=float)
+                for _, t in stage.tips]
+    except (ValueError, AssertionError):  # a joint the file does not name; no polynomials
+        return None
+
+
 def _torque_rows(stage: ForceStage, problem: ManipulationProblem, Xall: np.ndarray,
-                 prm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                 prm: np.ndarray, model: list[np.ndarray] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The force stage's torque rows for the problem's actuators (``problem.actuation``,
     :data:`ROLL_TORQUE_SHARE` of their ranges at each point's joints: a position servo's
-    control range bounds its torque near the range's ends): their parameters at ``Xall``
-    and bounds (joints x points); None without actuators or limits."""
+    control range bounds its torque near the range's ends), less what the hand's model
+    needs there (``model``, :func:`_model_torques`: the contact forces' torques plus that
+    are what the actuators give, and what a passive joint's tendon must): their
+    parameters at ``Xall`` and bounds (joints x points); None without actuators or
+    limits."""
     if problem.actuation is None or problem.forces is None or not stage.tips:
         return None
     from ocp.robots.actuation import torque_bounds_at
     from ocp.robots.couplings import tendon_torque_bounds
 
     los, his = [], []
-    for _, t in stage.tips:
+    for i, (_, t) in enumerate(stage.tips):
         lo, hi = tendon_torque_bounds(t.finger, *torque_bounds_at(
             problem.actuation, t.finger.joint_names, Xall[:, t.q_cols], ROLL_TORQUE_SHARE))
+        if model is not None:
+            lo, hi = lo - model[i], hi - model[i]
         los.append(lo.T)
         his.append(hi.T)
     lo, hi = np.vstack(los), np.vstack(his)
