@@ -16,6 +16,7 @@ and end at rest), and per re-placed fingertip unload, swing, load (:mod:`ocp.gai
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -296,29 +297,28 @@ def _roll_contacts(template: ManipulationProblem, fingers: tuple[Any, ...],
     equator), on that one, each contact on its patch's equator, when that puts the
     contact farthest up its chart nearer its equator (``ObjectSpec.side_chart``)."""
     where = tuple(f"{n}'s joints at the roll's start" for n in names)
-    obj = replace(template.object, side_chart=False)
-    error: ProblemError | None = None
-    tips: tuple[Fingertip, ...] | None = None
-    worst = math.inf
-    try:
+
+    def on(obj: ObjectSpec) -> tuple[tuple[Fingertip, ...], float]:
+        """The fingertips on ``obj``'s chart and their contact farthest up it [|u|]."""
         tips = fingertips_from_joints(fingers, qs, obj, start, names, where, advise=False)
-        worst = max(abs(float(t.initial[2])) for t in tips)
+        return tips, max(abs(float(t.initial[2])) for t in tips)
+
+    own = replace(template.object, side_chart=False)
+    try:
+        tips, worst = on(own)
+        error = None
     except ProblemError as exc:
-        error = exc
-    side = replace(obj, side_chart=True)
-    if obj.kind.side_surface(obj.dimensions) is not None \
-            and worst > SIDE_SHARE * obj.u_limit(template.pole_margin):
-        try:
-            on_side = fingertips_from_joints(fingers, qs, side, start, names, where,
-                                             advise=False)
-        except ProblemError:
-            on_side = None
-        if on_side is not None and max(abs(float(t.initial[2])) for t in on_side) < worst:
-            return side, on_side
-    if tips is None:
-        assert error is not None
+        tips, worst, error = (), math.inf, exc
+    if own.kind.side_surface(own.dimensions) is not None \
+            and worst > SIDE_SHARE * own.u_limit(template.pole_margin):
+        side = replace(own, side_chart=True)
+        with contextlib.suppress(ProblemError):
+            on_side, up = on(side)
+            if up < worst:
+                return side, on_side
+    if error is not None:
         raise error
-    return obj, tips
+    return own, tips
 
 
 #: The least distance [m] a roll is planned to keep between two fingertips' bodies: the

@@ -46,8 +46,9 @@ FloatArray = NDArray[np.float64]
 
 
 #: The seams' blend [a share of the radius]: the meridian's straight line and its caps'
-#: arcs are joined over w = SEAM_BLEND r either side of each seam by a curvature that rises
-#: smoothly from 0 to 1/r (see the module): within 0.04 um of the capsule for r = 12 mm.
+#: arcs are joined over w = SEAM_BLEND r either side of each seam by a curvature that goes
+#: smoothly from 0 to 1/r (overshooting to 1.16/r; see the module): within 0.04 um of the
+#: capsule for r = 12 mm.
 SEAM_BLEND = 0.01
 
 
@@ -80,21 +81,21 @@ def _meridian(u: Any, params: Any) -> tuple[Any, ...]:
     return u - sign * w * P, 1 - dP, -sign * ddP / w
 
 
-def _capsule_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
+def _profile(u: Any, params: Any) -> tuple[Any, ...]:
+    """The meridian at arc parameter u, CasADi symbols or numbers alike: (rho, z) [m], the
+    distance from the axis and the height, and their first and second rates in u."""
     r = params[0]
-    s = _meridian(u, params)[0]
-    phi = (u - s) / r
-    return ca.vertcat(r * ca.cos(phi) * ca.cos(v), -r * ca.cos(phi) * ca.sin(v),
-                      s + r * ca.sin(phi))
+    cos, sin = (ca.cos, ca.sin) if isinstance(u, ca.SX | ca.MX) else (np.cos, np.sin)
+    s, s_u, s_uu = _meridian(u, params)
+    phi, phi_u, phi_uu = (u - s) / r, (1 - s_u) / r, -s_uu / r
+    cp, sp = cos(phi), sin(phi)
+    return (r * cp, s + r * sp, -r * sp * phi_u, s_u + r * cp * phi_u,
+            -r * (cp * phi_u**2 + sp * phi_uu), s_uu + r * (cp * phi_uu - sp * phi_u**2))
 
 
-def _profile(u: FloatArray, params: Sequence[float]) -> tuple[FloatArray, ...]:
-    """The meridian (rho, z) [m] at u and its rates (rho_u, z_u) [-]."""
-    r = float(params[0])
-    s, s_u, _ = _meridian(u, params)
-    phi, phi_u = (u - s) / r, (1 - s_u) / r
-    return (r * np.cos(phi), s + r * np.sin(phi), -r * np.sin(phi) * phi_u,
-            s_u + r * np.cos(phi) * phi_u)
+def _capsule_chart(u: ca.SX, v: ca.SX, params: ca.SX) -> ca.SX:
+    rho, z = _profile(u, params)[:2]
+    return ca.vertcat(rho * ca.cos(v), -rho * ca.sin(v), z)
 
 
 class CapsuleSurface(Surface):
@@ -118,14 +119,7 @@ class CapsuleSurface(Surface):
         meridian (rho, z)(u) (the module's): x = (rho_u c, -rho_u s, z_u) / m, z = (z_u c,
         -z_u s, -rho_u) / m (m = |(rho_u, z_u)|), M = diag(m, rho), K = diag((rho_u z_uu
         - z_u rho_uu) / m^3, z_u / (m rho)), T = (0, rho_u / (m rho))."""
-        r = params[0]
-        s, s_u, s_uu = _meridian(u, params)
-        phi, phi_u, phi_uu = (u - s) / r, (1 - s_u) / r, -s_uu / r
-        cp, sp = ca.cos(phi), ca.sin(phi)
-        rho, z = r * cp, s + r * sp
-        rho_u, z_u = -r * sp * phi_u, s_u + r * cp * phi_u
-        rho_uu = -r * (cp * phi_u**2 + sp * phi_uu)
-        z_uu = s_uu + r * (cp * phi_uu - sp * phi_u**2)
+        rho, z, rho_u, z_u, rho_uu, z_uu = _profile(u, params)
         m = ca.sqrt(rho_u**2 + z_u**2)
         cv, sv = ca.cos(v), ca.sin(v)
         p = ca.vertcat(rho * cv, -rho * sv, z)
@@ -156,7 +150,7 @@ class CapsuleSurface(Surface):
         s = np.clip(z_p, -h, h)
         u = s + r * np.arctan2(z_p - s, rho_p)
         for _ in range(5):
-            rho, z, rho_u, z_u = _profile(u, (r, h))
+            rho, z, rho_u, z_u = _profile(u, (r, h))[:4]
             u = u - ((rho - rho_p) * rho_u + (z - z_p) * z_u) / (rho_u**2 + z_u**2)
         return np.stack([u, np.arctan2(-p[..., 1], p[..., 0])], axis=-1)
 

@@ -69,12 +69,12 @@ class LocalRayCluster:
     ``node1``, ``node2``, ...), started at once; :meth:`stop` ends them all."""
 
     def __init__(self, head_cpus: int = 1, node_cpus: tuple[int, ...] = (1,)) -> None:
-        self.temp = Path(tempfile.mkdtemp(prefix="dxr-", dir="/tmp"))  # short: sockets
-        self.port = _free_port()
-        self.address = f"127.0.0.1:{self.port}"
         self.env = {**os.environ, **RAY_ENV}
         self.nodes = [f"node{i + 1}" for i in range(len(node_cpus))]
         for attempt in range(START_ATTEMPTS):
+            self.temp = Path(tempfile.mkdtemp(prefix="dxr-", dir="/tmp"))  # short: sockets
+            self.port = _free_port()
+            self.address = f"127.0.0.1:{self.port}"
             try:
                 self._ray("start", "--head", f"--port={self.port}",
                           f"--num-cpus={head_cpus}", "--include-dashboard=false",
@@ -89,9 +89,6 @@ class LocalRayCluster:
                 self.stop()
                 if attempt + 1 == START_ATTEMPTS:
                     raise
-                self.temp = Path(tempfile.mkdtemp(prefix="dxr-", dir="/tmp"))
-                self.port = _free_port()
-                self.address = f"127.0.0.1:{self.port}"
             except BaseException:
                 self.stop()
                 raise
