@@ -8,7 +8,7 @@ DEPS := $(VENV)/.deps
 INSTALLED := $(VENV)/.installed
 DEV := $(VENV)/.dev
 
-.PHONY: deps install run demo openapi test lint bench bench-quick viewer-vendor clean
+.PHONY: deps install run demo openapi test test-slow lint bench bench-quick viewer-vendor clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -55,10 +55,15 @@ $(CHROMIUM):
 	         "they are skipped without it" >&2; \
 	fi
 
+# the default run leaves out the tests marked `slow` (long gaits planned and executed in
+# MuJoCo, 40-55 s each): `make test-slow` runs them
 test: $(DEV) | $(CHROMIUM)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile -m "not slow"
+
+test-slow: $(DEV)
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile -m slow
 
 lint: $(DEV)
 	$(BIN)/ruff check .
