@@ -426,6 +426,10 @@ class ManipulationSolution:
     #: plan rode the pole bound of the problem's (:mod:`ocp.spec.patches`); None without
     #: a palm.
     object_chart_rotation: tuple[float, ...] | None = None
+    #: Whether the fingertips' contact coordinates are on the object's side chart (an
+    #: egg's: the problem's, or the one the planner chose because a contact rode the own
+    #: chart's bound: :func:`ocp.spec.patches.side_charted`).
+    object_side_chart: bool = False
     _interpolant: _Interpolant | None = field(default=None, repr=False, compare=False)
 
     @property

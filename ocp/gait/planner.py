@@ -16,7 +16,6 @@ and end at rest), and per re-placed fingertip unload, swing, load (:mod:`ocp.gai
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -48,7 +47,7 @@ from ocp.geometry.bodies import segments_distance, tip_body
 from ocp.geometry.rotations import axis_angle_rotation, log_rotation, quaternion_wxyz
 from ocp.shapes.held import Held, held_object
 from ocp.solution import ManipulationSolution
-from ocp.spec.grasp import Fingertip, ManipulationProblem, fingertips_from_joints
+from ocp.spec.grasp import ManipulationProblem, fingertips_on_charts
 from ocp.spec.motion import DesiredMotion, ObjectPose
 from ocp.spec.problem import ObjectSpec, ProblemError
 from ocp.transcription.values import load_parameters
@@ -263,7 +262,10 @@ def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
     R_start = plan_start(template, pose)
     start = ObjectPose((1.0, 0.0, 0.0, 0.0), pose.position) if ball else pose \
         if R_start is None else ObjectPose(tuple(quaternion_wxyz(R_start)), pose.position)
-    obj, tips = _roll_contacts(template, fingers, qs, start, names)
+    obj, tips = fingertips_on_charts(
+        fingers, qs, replace(template.object, side_chart=False), start, names,
+        tuple(f"{n}'s joints at the roll's start" for n in names), template.pole_margin,
+        advise=False)
     goal = np.asarray(target, dtype=float)
     q1 = np.ravel(quaternion_wxyz(goal @ pose.rotation.T if ball else goal
                                   if R_start is None else goal @ pose.rotation.T @ R_start))
@@ -277,48 +279,6 @@ def _roll_problem(template: ManipulationProblem, qs: tuple[FloatArray, ...],
                                             float(centre[2]))))
     return replace(template, object=obj, fingers=tips, initial_pose=start, motion=motion,
                    duration=duration)
-
-
-#: A roll of an object with a side chart (an egg) is planned on it when a contact lies
-#: beyond this share of its own chart's bound there (or beyond the bound): nearer the
-#: equator the roll keeps the object's own chart (and the plan it had before the side
-#: chart: examples/egg_gait.json's first rolls, 34-47 deg up, plan the same gait either
-#: way, to 6e-6 N and 4e-7 in the quaternion).
-SIDE_SHARE = 0.8
-
-
-def _roll_contacts(template: ManipulationProblem, fingers: tuple[Any, ...],
-                   qs: tuple[FloatArray, ...], start: ObjectPose, names: tuple[str, ...]
-                   ) -> tuple[ObjectSpec, tuple[Fingertip, ...]]:
-    """The object a roll's contacts are measured on and the fingertips where the joints
-    ``qs`` put them (:func:`~ocp.spec.grasp.fingertips_from_joints`): on the shape's own
-    chart, or, where a contact lies beyond :data:`SIDE_SHARE` of its bound there (or
-    beyond the bound) and the shape has a side chart (an egg's, whose poles are on its
-    equator), on that one, each contact on its patch's equator, when that puts the
-    contact farthest up its chart nearer its equator (``ObjectSpec.side_chart``)."""
-    where = tuple(f"{n}'s joints at the roll's start" for n in names)
-
-    def on(obj: ObjectSpec) -> tuple[tuple[Fingertip, ...], float]:
-        """The fingertips on ``obj``'s chart and their contact farthest up it [|u|]."""
-        tips = fingertips_from_joints(fingers, qs, obj, start, names, where, advise=False)
-        return tips, max(abs(float(t.initial[2])) for t in tips)
-
-    own = replace(template.object, side_chart=False)
-    try:
-        tips, worst = on(own)
-        error = None
-    except ProblemError as exc:
-        tips, worst, error = (), math.inf, exc
-    if own.kind.side_surface(own.dimensions) is not None \
-            and worst > SIDE_SHARE * own.u_limit(template.pole_margin):
-        side = replace(own, side_chart=True)
-        with contextlib.suppress(ProblemError):
-            on_side, up = on(side)
-            if up < worst:
-                return side, on_side
-    if error is not None:
-        raise error
-    return own, tips
 
 
 #: The least distance [m] a roll is planned to keep between two fingertips' bodies: the

@@ -16,7 +16,7 @@ from ocp.solve.assemble import assemble_solution, planned_forces
 from ocp.solve.certify import with_force_checks
 from ocp.solve.guesses import planned_force_guess
 from ocp.spec.grasp import ManipulationProblem, contact_charts
-from ocp.spec.patches import recharted
+from ocp.spec.patches import planned_problem
 from ocp.transcription.force_stage import ForceStage
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.values import load_parameters
@@ -34,14 +34,11 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
     col = kin.collocation
     if col is None or kin.stats is None:
         return None
-    pf = problem.with_intervals(len(col.t_nodes) - 1)
-    if kin.object_chart_rotation is not None and not np.allclose(
-            kin.object_chart_rotation, problem.object.chart_rotation):
-        rv = kin.object_chart_rotation
-        alt = recharted(pf, (rv[0], rv[1], rv[2]))  # the plan's own patch
-        if alt is None:
-            return None
-        pf = alt
+    # on the plan's own charts (its palm patch, an egg's side chart)
+    pf = planned_problem(problem.with_intervals(len(col.t_nodes) - 1),
+                         kin.object_chart_rotation, kin.object_side_chart)
+    if pf is None:
+        return None
     m = model(pf)
     t_build = time.perf_counter()
     if m not in stages:
@@ -79,7 +76,8 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
                     ipopt_time=kin.stats.ipopt_time + t_stage,
                     certificate_time=kin.stats.certificate_time + t_cert)
     return replace(sol, stats=stats, nlp_point=kin.nlp_point,
-                   object_chart_rotation=kin.object_chart_rotation)
+                   object_chart_rotation=kin.object_chart_rotation,
+                   object_side_chart=kin.object_side_chart)
 
 
 #: The share of each actuator's torque range a roll's forces may ask of its joint (the rest

@@ -73,7 +73,15 @@ from ocp.spec.grasp import (
     hand_fingertips,
 )
 from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
-from ocp.spec.patches import pole_clear_patch, recharted, rides_pole
+from ocp.spec.patches import (
+    planned_problem,
+    pole_clear_patch,
+    recharted,
+    rides_bound,
+    rides_pole,
+    side_charted,
+    turns_off_chart,
+)
 from ocp.spec.problem import MAX_INTERVALS, ProblemError
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.force_stage import ForceStage
@@ -241,6 +249,9 @@ class ManipulationPlanner:
             refused = self.beyond_reach(problem)
             if refused is not None:
                 return refused
+        if certify and self.auto_patch and turns_off_chart(
+                problem, lambda: self._initial_joints(problem)):
+            problem = side_charted(problem) or problem  # (an egg's contact over its end)
         if problem.forces is None or not self.two_stage_forces or not certify:
             return self._plan(problem, warm_start, certify)
         t0 = time.perf_counter()
@@ -250,19 +261,23 @@ class ManipulationPlanner:
             if out is not None:
                 return out
         left = problem.options.time_limit - (time.perf_counter() - t0)
+        limited = replace(problem, options=replace(problem.options, time_limit=max(left, 1e-3)))
+        if kin.object_side_chart:  # from the kinematic plan on its chart (an egg's side)
+            limited = planned_problem(limited, None, True) or limited
         coupled = self._plan(
-            replace(problem, options=replace(problem.options, time_limit=max(left, 1e-3))),
-            kin if kin.status in (Status.SOLVED, Status.INACCURATE) else warm_start, certify)
+            limited, kin if kin.status in (Status.SOLVED, Status.INACCURATE) else warm_start,
+            certify)
         return with_earlier(coupled, kin)
 
     def beyond_reach(self, problem: ManipulationProblem) -> ManipulationSolution | None:
         """A turn the grasp cannot roll through, answered without an NLP
         (:func:`unplanned_turn`); None for any other problem."""
-        def joints() -> list[FloatArray]:
-            x0 = self.initial_state(problem)
-            return [x0[tip.q_cols] for tip in self.model(problem).fingertips]
+        return unplanned_turn(problem, lambda: self._initial_joints(problem))
 
-        return unplanned_turn(problem, joints)
+    def _initial_joints(self, problem: ManipulationProblem) -> list[FloatArray]:
+        """Each finger's joints at t = 0 (its initial state's)."""
+        x0 = self.initial_state(problem)
+        return [x0[tip.q_cols] for tip in self.model(problem).fingertips]
 
     def _plan(self, problem: ManipulationProblem,
               warm_start: WarmStart | ManipulationSolution | None, certify: bool
@@ -315,7 +330,8 @@ class ManipulationPlanner:
                         refinements=refinements)
         return replace(sol, stats=stats,
                        object_chart_rotation=tuple(problem.object.chart_rotation)
-                       if problem.palm is not None else None)
+                       if problem.palm is not None else None,
+                       object_side_chart=problem.object.side_chart)
 
     @staticmethod
     def parameters(problem: ManipulationProblem, nlp: _NLP) -> FloatArray:
@@ -373,17 +389,13 @@ def repatched(planner: ManipulationPlanner, problem: ManipulationProblem, strate
               x0: FloatArray, sol: ManipulationSolution, deadline: float, budget: int,
               totals: _Totals
               ) -> tuple[ManipulationProblem, Strategy, FloatArray, ManipulationSolution]:
-    """When the palm contact's path rides the pole bound of the object's patch (a
-    bound of the chart, not of the physics), the plan again in a patch whose poles
-    are far from that path (:mod:`ocp.spec.patches`; spheres only), kept when it is
-    solved and clear of the bound, or when the first plan was not solved."""
-    if problem.palm is None or sol.status not in (Status.SOLVED, Status.INACCURATE) \
-            or not sol.contacts or not rides_pole(problem, sol.contacts[0].eta[:, 2]):
-        return problem, strategy, x0, sol
-    palm = sol.contacts[0]
-    path = np.einsum("kji,kj->ki", sol.object_rotation, palm.point - sol.object_position)
-    rotvec = pole_clear_patch(problem, path)
-    alt = recharted(problem, rotvec) if rotvec is not None else None
+    """When a contact's path rides a bound of the object's chart (a bound of the chart,
+    not of the physics), the plan again on a chart far from it (:mod:`ocp.spec.patches`),
+    kept when it is solved and clear of the bound, or when the first plan was not solved:
+    the palm contact at its patch's pole bound, in a patch whose poles are far from its
+    path (spheres only); a fingertip's contact at its chart's bound (an egg's end), on the
+    object's side chart (:func:`~ocp.spec.patches.side_charted`)."""
+    alt = _clear_chart(problem, sol)
     if alt is None or time.perf_counter() >= deadline:
         return problem, strategy, x0, sol
     try:
@@ -394,11 +406,30 @@ def repatched(planner: ManipulationPlanner, problem: ManipulationProblem, strate
     left = budget - totals.iterations if alt_strategy.shared_budget else budget
     alt_sol = planner._solve_once(alt, alt_strategy, alt_x0, None, deadline, left, totals,
                                True)
-    clear = alt_sol.status in (Status.SOLVED, Status.INACCURATE) and not rides_pole(
-        alt, alt_sol.contacts[0].eta[:, 2])
+    clear = alt_sol.status in (Status.SOLVED, Status.INACCURATE) and \
+        _clear_chart(alt, alt_sol) is None
     if clear or (sol.status is not Status.SOLVED and alt_sol.status is Status.SOLVED):
         return alt, alt_strategy, alt_x0, alt_sol
     return problem, strategy, x0, sol
+
+
+def _clear_chart(problem: ManipulationProblem, sol: ManipulationSolution
+                 ) -> ManipulationProblem | None:
+    """The problem on a chart clear of the bound its plan ``sol`` rides (above); None
+    when it rides none, or there is no other chart."""
+    if not sol.contacts or not np.isfinite(sol.contacts[0].eta).all():
+        return None
+    if problem.palm is not None:
+        if sol.status not in (Status.SOLVED, Status.INACCURATE) \
+                or not rides_pole(problem, sol.contacts[0].eta[:, 2]):
+            return None
+        palm = sol.contacts[0]
+        path = np.einsum("kji,kj->ki", sol.object_rotation, palm.point - sol.object_position)
+        rotvec = pole_clear_patch(problem, path)
+        return recharted(problem, rotvec) if rotvec is not None else None
+    if not any(rides_bound(problem, c.eta[:, 2]) for c in sol.contacts):
+        return None
+    return side_charted(problem)
 
 
 def unplanned_turn(problem: ManipulationProblem,

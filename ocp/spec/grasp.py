@@ -42,6 +42,7 @@ from ocp.spec.reference import Reference
 
 __all__ = ["Fingertip", "ManipulationProblem", "Palm", "contact_chart_for_pad",
            "contact_charts", "contact_from_joints", "fingertip_errors", "fingertips_from_joints",
+           "fingertips_on_charts",
            "hand_fingertips", "support_goal_errors"]
 
 FloatArray = NDArray[np.float64]
@@ -671,3 +672,52 @@ def fingertips_from_joints(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: O
     if errs:
         raise ProblemError(errs)
     return tuple(tips)
+
+
+#: A gait's roll of an object with a side chart (an egg) puts its round fingertips on it
+#: when a contact lies beyond this share of its own chart's bound there (or beyond the
+#: bound): nearer the equator they keep the object's own chart (and the plans they had
+#: before the side chart: examples/egg_gait.json's first rolls, 34-47 deg up, plan the
+#: same gait either way, to 6e-6 N and 4e-7 in the quaternion). A request's one rolling
+#: plan takes the side chart only for a contact beyond the bound (``share`` 1: every
+#: request planned before plans as it did; examples/egg_turn.json's ring is at 0.8006).
+SIDE_SHARE = 0.8
+
+
+def fingertips_on_charts(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
+                         pose: ObjectPose, names: tuple[str, ...], where: tuple[str, ...],
+                         pole_margin: float = ManipulationProblem.pole_margin,
+                         advise: bool = True, share: float = SIDE_SHARE
+                         ) -> tuple[ObjectSpec, tuple[Fingertip, ...]]:
+    """:func:`fingertips_from_joints` on the chart that suits them: the object as it
+    is, or, where a contact lies beyond ``share`` of its bound on the object's own chart
+    (or beyond the bound: an egg touched at an end) and the shape has a side chart (an
+    egg's, whose poles are on its equator), on that one, each contact on its patch's
+    equator, when that puts the contact farthest up its chart nearer its equator: (the
+    object as measured, with ``side_chart`` set or not, the fingertips). An object asked
+    on its side chart stays there."""
+    def on(o: ObjectSpec) -> tuple[tuple[Fingertip, ...], float]:
+        tips = fingertips_from_joints(fingers, qs, o, pose, names, where, pole_margin,
+                                      advise)
+        return tips, max((abs(float(t.initial[2])) for t in tips), default=0.0)
+
+    if obj.side_chart or obj.kind.side_surface(obj.dimensions) is None:
+        return obj, fingertips_from_joints(fingers, qs, obj, pose, names, where,
+                                           pole_margin, advise)
+    try:
+        tips, worst = on(obj)
+        error = None
+    except ProblemError as exc:
+        tips, worst, error = (), math.inf, exc
+    if worst > share * obj.u_limit(pole_margin):
+        side = replace(obj, side_chart=True)
+        try:
+            on_side, up = on(side)
+        except ProblemError:
+            pass
+        else:
+            if up < worst:
+                return side, on_side
+    if error is not None:
+        raise error
+    return obj, tips

@@ -13,24 +13,29 @@ request in it (the same physical initial grasp, goals and via-points).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ocp.geometry.rotations import log_rotation
 from ocp.geometry.surfaces import Chart
 
 if TYPE_CHECKING:
     from ocp.spec.grasp import ManipulationProblem
 
-__all__ = ["pole_clear_patch", "recharted", "recharted_coordinates", "rides_pole"]
+__all__ = ["planned_problem", "pole_clear_patch", "recharted", "recharted_coordinates",
+           "rides_bound", "rides_pole", "side_charted"]
 
 FloatArray = NDArray[np.float64]
 
 #: A contact this close to the pole bound [rad] rides it.
 RIDING = 1e-6
+#: A plan whose fingertip contacts all start within this share of the object chart's bound
+#: is not predicted to carry one beyond it (:func:`turns_off_chart`).
+NEAR_BOUND = 0.5
 #: Candidate pole directions: a Fibonacci lattice on the sphere (about 4 deg apart).
 _N_CANDIDATES = 2000
 
@@ -124,3 +129,100 @@ def recharted(problem: ManipulationProblem, rotvec: tuple[float, float, float]
     x, y, u, v, psi = (initial[k] for k in keys)
     palm = replace(pm, initial=(x, y, u, v, psi), goal=goal, via_points=tuple(vias))
     return replace(problem, object=replace(problem.object, chart_rotation=rotvec), palm=palm)
+
+
+def rides_bound(problem: ManipulationProblem, u: FloatArray) -> bool:
+    """Whether a fingertip contact's coordinates ``u`` (its path) reach the bound of the
+    object's chart (``ObjectSpec.u_limit``: an egg's poles, its ends, less the pole
+    margin)."""
+    limit = problem.object.u_limit(problem.pole_margin)
+    return bool(np.max(np.abs(u)) >= limit - RIDING)
+
+
+def side_charted(problem: ManipulationProblem) -> ManipulationProblem | None:
+    """The same problem with its fingertips' contacts on the object's side chart (an
+    egg's, whose poles are on its equator: ``ObjectSpec.side_chart``), each restated in
+    the patch that puts it on that chart's equator (the same tip point, object point and
+    contact angle); None for a shape without one, an object already on it, a palm, a
+    moving start or a reference to track (their coordinates are the old chart's)."""
+    obj = problem.object
+    side = None if obj.side_chart else obj.kind.side_surface(obj.dimensions)
+    if side is None or problem.palm is not None or problem.initial_input is not None \
+            or problem.reference is not None:
+        return None
+    keys = ("x", "y", "u", "v", "psi")
+    tips = []
+    for tip in problem.fingers:
+        old = Chart.of(obj.surface, obj.params, tip.chart_rotation)
+        p, _ = old.frame(tip.initial[2:4])
+        R = side.axis_patch(p)
+        if R is None:
+            return None
+        new = Chart(side, tuple(obj.params), tuple(tuple(float(x) for x in row) for row in R))
+        coords = recharted_coordinates(old, new, dict(zip(keys, tip.initial, strict=True)))
+        if coords is None:
+            return None
+        rv = log_rotation(np.asarray(R, dtype=float))
+        x, y, u, v, psi = (coords[k] for k in keys)
+        tips.append(replace(tip, initial=(x, y, u, v, psi),
+                            chart_rotation=(float(rv[0]), float(rv[1]), float(rv[2]))))
+    return replace(problem, object=replace(obj, side_chart=True), fingers=tuple(tips))
+
+
+def planned_problem(problem: ManipulationProblem, chart_rotation: Any, side_chart: bool
+                    ) -> ManipulationProblem | None:
+    """``problem`` stated on the charts a plan of it was made on (a solution's
+    ``object_chart_rotation`` and ``object_side_chart``: the planner may have re-planned
+    it on others, above); None when it cannot be restated there."""
+    if chart_rotation is not None and not np.allclose(chart_rotation,
+                                                      problem.object.chart_rotation):
+        rv = chart_rotation
+        return recharted(problem, (float(rv[0]), float(rv[1]), float(rv[2])))
+    if side_chart and not problem.object.side_chart:
+        return side_charted(problem)
+    return problem
+
+
+def turns_off_chart(problem: ManipulationProblem, joints: Callable[[], Sequence[Any]]
+                    ) -> bool:
+    """Whether the desired motion's turns carry a round fingertip's contact beyond the
+    bound of the object's own chart (an egg's end), as the fingers' rolled motion
+    predicts it on the object's surface (:func:`~ocp.robots.grasp_reach.roll` with the
+    object held, turn after turn; the contact where each finger stops or the turns end):
+    such a plan is made on the object's side chart (:func:`side_charted`). False for an
+    object without one or already on it, a palm, contact phases, or a motion that turns
+    nothing, or whose contacts all start within :data:`NEAR_BOUND` of the bound (a plan's
+    contact moves a few degrees over the object); ``joints()`` (the fingers' joints at
+    t = 0) is asked only when it applies."""
+    from ocp.robots.first_grasp import desired_turns
+    from ocp.robots.grasp_reach import roll
+    from ocp.robots.turn_reach import rolls
+    from ocp.shapes.held import held_object
+
+    obj, pose, motion = problem.object, problem.initial_pose, problem.motion
+    if (obj.side_chart or obj.kind.side_surface(obj.dimensions) is None
+            or problem.palm is not None or problem.phases is not None or motion is None
+            or pose is None or not all(rolls(tip.finger) for tip in problem.fingers)):
+        return False
+    limit = obj.u_limit(problem.pole_margin)
+    if max(abs(float(tip.initial[2])) for tip in problem.fingers) <= NEAR_BOUND * limit:
+        return False
+    turns = desired_turns(motion)
+    if not turns:
+        return False
+    centre = np.asarray(pose.position, dtype=float)
+    start = held_object(obj, centre, pose.rotation)
+    for tip, q0 in zip(problem.fingers, joints(), strict=True):
+        q, held = np.asarray(q0, dtype=float), start
+        for turn in turns:
+            rolled = roll(tip.finger, q, centre, float(obj.length_scale), turn.axis,
+                          turn.angle, problem.pad_margin, held=held)
+            q, held = rolled.q, held.turned(turn.axis, rolled.reach)
+            if rolled.why:
+                break
+        point, _ = held.contact(tip.finger, q)
+        body = held.rotation.T @ (point - centre)
+        u = Chart.of(obj.surface, obj.params, tip.chart_rotation).inverse(body)[0]
+        if abs(float(u)) > limit:
+            return True
+    return False

@@ -36,7 +36,7 @@ from ocp.solve.planner import (
     Palm,
     Tracking,
 )
-from ocp.spec.grasp import fingertips_from_joints
+from ocp.spec.grasp import fingertips_from_joints, fingertips_on_charts
 from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
 
 from .actuation import hand_actuation, torque_limit_errors, with_actuation
@@ -427,8 +427,13 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
             errors.append(("initial_pose", "required to place the object among fingertips "
                                            "given by joint angles"))
         else:
+            # every fingertip from its joints and no palm: an egg touched at an end, beyond
+            # its own chart's bound, is measured on its side chart (no contact's
+            # coordinates were given on its own chart)
+            charts = _side_if_beyond if palm is None and \
+                len(from_joints) == len(request.fingers) else _own_chart
             try:
-                found = fingertips_from_joints(
+                obj, found = charts(
                     tuple(m for _, m, _, _, _ in from_joints),
                     tuple(q for _, _, q, _, _ in from_joints if q is not None), obj,
                     motion_start,
@@ -453,6 +458,23 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
     forces = force_spec(request.forces)
     return _problem(request, obj, tips, palm, start, motion, tr, forces,
                     collision, actuation), grasp_used
+
+
+def _side_if_beyond(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
+                    pose: ObjectPose, names: tuple[str, ...], where: tuple[str, ...],
+                    pole_margin: float) -> tuple[ObjectSpec, tuple[Fingertip, ...]]:
+    """The fingertips from their joints on the object's own chart, or on its side chart
+    when a contact is beyond the own one's bound (an egg's end)."""
+    return fingertips_on_charts(fingers, qs, obj, pose, names, where, pole_margin,
+                                share=1.0)
+
+
+def _own_chart(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
+               pose: ObjectPose, names: tuple[str, ...], where: tuple[str, ...],
+               pole_margin: float) -> tuple[ObjectSpec, tuple[Fingertip, ...]]:
+    """The fingertips from their joints on the object's own chart (where other contacts'
+    coordinates, or the palm's, are given)."""
+    return obj, fingertips_from_joints(fingers, qs, obj, pose, names, where, pole_margin)
 
 
 def _problem(request: ManipulationRequest, obj: ObjectSpec, tips: list[Fingertip | None],
