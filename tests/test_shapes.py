@@ -285,14 +285,17 @@ def test_the_nlps_length_scale_is_the_values() -> None:
 
 @pytest.mark.parametrize("obj", [{"shape": "ellipsoid", "dimensions": [0.03, 0.0305, 0.031]},
                                  {"shape": "superellipsoid",
-                                  "dimensions": [0.03, 0.03, 0.03, 0.024]}],
-                         ids=["triaxial", "superellipsoid"])
+                                  "dimensions": [0.03, 0.03, 0.03, 0.024]},
+                                 {"shape": "capsule", "dimensions": [0.03, 0.0128]}],
+                         ids=["triaxial", "superellipsoid", "capsule"])
 def test_a_users_own_hand_turns_other_shapes_on_its_own_actuators(obj: dict) -> None:
     """The Menagerie-style MJCF hand (examples/own_hand.xml) in the built-in hand's nominal
-    grasp turns a three-axis ellipsoid and a rounded cube (its mesh written inline in the
-    user's scene) 0.1 rad about the palm's normal: certified, then executed on the file's
-    own position servos with nothing of dexroll's added, within 2 mm / 3 deg, no contact
-    lost."""
+    grasp turns a three-axis ellipsoid, a rounded cube (its mesh written inline in the
+    user's scene) and an upright capsule 0.1 rad about the palm's normal: certified, then
+    executed on the file's own position servos with nothing of dexroll's added, within
+    2 mm / 3 deg, no contact lost. The capsule's middle fingertip touches its lower cap,
+    its ring the cylinder, and its thumb rolls over the upper seam onto the cap (12.63 to
+    12.85 mm up the meridian, the seam at 12.8 mm)."""
     from pathlib import Path
 
     from helpers import nominal_turn, planned_and_executed
@@ -301,4 +304,9 @@ def test_a_users_own_hand_turns_other_shapes_on_its_own_actuators(obj: dict) -> 
     raw = nominal_turn(text, ["ff_tip", "mf_tip", "rf_tip", "th_tip"], forces={"mass": 0.05},
                        mu=0.9)
     raw["object"] = obj
-    planned_and_executed(raw, model="request")
+    result, _ = planned_and_executed(raw, model="request")
+    if obj["shape"] == "capsule":
+        h = obj["dimensions"][1]
+        u = {c.name: np.asarray(c.eta)[:, 2] for c in result.trajectory.contacts}
+        assert u["mf"].max() < -h and abs(u["rf"]).max() < h
+        assert u["th"][0] < h < u["th"].max()
