@@ -1202,7 +1202,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             break
         r = len(plan.rolls)
         plan.rolls.append(sol)
-        roll_objects[r] = prob.object
+        # (its chart: the planner may have taken the side chart, ``turns_off_chart``)
+        roll_objects[r] = replace(prob.object, side_chart=sol.object_side_chart)
         roll_starts.append(q_now)
         plan.frames.append(roll_frame(template, pose))
         clock = RollClock.of(dur, roll_speed(sol, template, plan.nq, fastest_rolls)

@@ -30,7 +30,7 @@ searched the same way through its signed distance and outward normal at the near
 (:func:`~ocp.geometry.nearest.nearest_surface_point`): a tip's centre is near when its distance
 from the surface is within the ball's band about ``r``; it is pulled onto the surface
 (distance ``r``) by a Gauss-Newton on the joints along the normal (:func:`onto_surface`);
-a contact beyond the chart's bound (``u_limit``: an egg's poles, a capsule's ends) or on a
+a contact beyond the chart's bound (``u_limit``: a capsule's ends; an egg's ends only where it has no side chart) or on a
 cap's seam is dropped, every joint origin kept outside the object; the closure is that of
 the object's normals at the contacts. An object with a closed-form nearest point (an
 ellipsoid, a capsule: the search's ``held``) has its candidates rolled through the turns on
@@ -248,6 +248,9 @@ class ObjectGeometry:
     #: the object's dimensions, for its shape's closed-form nearest point
     #: (:meth:`ocp.shapes.Shape.nearest`), which seeds the chart's search
     dimensions: tuple[float, ...] = ()
+    #: whether a searched contact beyond ``u_limit`` is kept: another chart of the shape
+    #: carries it (an egg's side chart, its poles on the equator: ``ObjectSpec.side_chart``)
+    beyond_limit: bool = False
 
     @classmethod
     def of(cls, obj: Any, rotation: ArrayLike, pole_margin: float) -> ObjectGeometry:
@@ -257,7 +260,8 @@ class ObjectGeometry:
         h = np.asarray(obj.surface.support_heights(_DIRECTIONS, obj.params), dtype=float)
         return cls(obj.surface, tuple(float(x) for x in obj.params), R,
                    float(obj.u_limit(pole_margin)), h, float(obj.length_scale), obj.shape,
-                   tuple(float(x) for x in obj.dimensions))
+                   tuple(float(x) for x in obj.dimensions),
+                   not obj.side_chart and obj.kind.side_surface(obj.dimensions) is not None)
 
     @property
     def outer(self) -> float:
@@ -383,7 +387,8 @@ def _surface_contacts(f: Any, c: FloatArray, geo: ObjectGeometry, Q: list[FloatA
         if got is None:
             continue
         q1, a1, _, n1 = got
-        if abs(float(a1[0])) > geo.u_limit or not _outside_object(f, q1, c, geo):
+        if (abs(float(a1[0])) > geo.u_limit and not geo.beyond_limit) \
+                or not _outside_object(f, q1, c, geo):
             continue
         R_l, p_l = f.fingertip_pose_pin(q1)
         m = R_l.T @ (-n1)
