@@ -56,7 +56,7 @@ $(CHROMIUM):
 	fi
 
 # the default run leaves out the tests marked `slow` (long gaits planned and executed in
-# MuJoCo, 40-55 s each): `make test-slow` runs them
+# MuJoCo, 35-95 s each): `make test-slow` runs them
 test: $(DEV) | $(CHROMIUM)
 	$(BIN)/ruff check .
 	$(BIN)/mypy

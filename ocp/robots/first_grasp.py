@@ -30,12 +30,13 @@ searched the same way through its signed distance and outward normal at the near
 (:func:`~ocp.geometry.nearest.nearest_surface_point`): a tip's centre is near when its distance
 from the surface is within the ball's band about ``r``; it is pulled onto the surface
 (distance ``r``) by a Gauss-Newton on the joints along the normal (:func:`onto_surface`);
-a contact beyond the chart's bound (``u_limit``: a capsule's ends; an egg's ends only where it has no side chart) or on a
-cap's seam is dropped, every joint origin kept outside the object; the closure is that of
-the object's normals at the contacts. An object with a closed-form nearest point (an
-ellipsoid, a capsule: the search's ``held``) has its candidates rolled through the turns on
-its surface (:func:`~ocp.robots.grasp_reach.roll` with ``held``) and ranked by that reach
-as a ball's are; any other object's grasps well closed are ranked by the room their
+a contact beyond the chart's bound (``u_limit``: a capsule's ends; not an egg's, which
+its side chart carries) or on a cap's seam is dropped, every joint origin kept outside
+the object; the closure is that of the object's normals at the contacts. An object with
+a closed-form nearest point (an ellipsoid, a capsule: the search's ``held``) has its
+candidates rolled through the turns on its surface (:func:`~ocp.robots.grasp_reach.roll`
+with ``held``) and ranked by that reach as a ball's are; any other object's grasps well
+closed are ranked by the room their
 joints leave to roll (the least, over the fingers and their joints, distance to a joint
 limit as a share of the joint's range: :func:`joint_room`), then by closure (``turns``
 ignored, no ``reach``): the most closed grasps of an egg put joints at their limits, and
