@@ -170,3 +170,30 @@ def test_a_gait_searches_a_grasp_in_which_every_fingertip_can_be_lifted() -> Non
     assert plain_grasp is not None and plain_grasp.reach >= grasp.reach  # type: ignore[operator]
     plain_qs = [np.array(f.q) for f in plain_grasp.fingers]
     assert not all(liftable(fingers, plain_qs, Held(centre, np.eye(3), NOMINAL_RADIUS), load))
+
+
+def test_the_searchs_next_grasps_are_other_valid_grasps_in_its_order() -> None:
+    """``skip``: the search's grasp after the ``skip`` best (what a gait that does not plan
+    from the best tries next), each a grasp by the same laws, none the same, in the
+    search's order (no motion: the most closed first); beyond the grasps weighed, none."""
+    hand = load_allegro()
+    got = [first_grasp(hand.fingers, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, mu=0.5, skip=k)
+           for k in range(3)]
+    for g in got:
+        _assert_a_grasp(hand.fingers, g.q, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, 0.5)
+    keys = {tuple(np.round(np.concatenate(g.q), 9)) for g in got}
+    assert len(keys) == 3
+    assert got[0].closure >= got[1].closure >= got[2].closure
+    with pytest.raises(GraspNotFoundError, match="no grasp besides"):
+        first_grasp(hand.fingers, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, mu=0.5,
+                    skip=10_000)
+
+
+def test_the_wire_account_names_the_rank_of_the_grasp_used() -> None:
+    body = own_hand_request()
+    request = ManipulationRequest.model_validate(body)
+    _, best = problem_and_grasp(request, CACHE)
+    _, next_ = problem_and_grasp(request, CACHE, skip=1)
+    assert best is not None and next_ is not None
+    assert (best.rank, next_.rank) == (0, 1)
+    assert [f.q for f in best.fingers] != [f.q for f in next_.fingers]

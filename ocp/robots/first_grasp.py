@@ -521,7 +521,7 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
                 seed: int = 0, names: Sequence[str] | None = None,
                 prefer: Callable[[tuple[FingerContact, ...]], bool] | None = None,
                 clear: Callable[[FloatArray], Any] | None = None,
-                held: Held | None = None) -> FirstGrasp:
+                held: Held | None = None, skip: int = 0) -> FirstGrasp:
     """A first grasp of the ball of ``radius`` [m] at ``centre``, or of the object
     ``radius`` (an :class:`ObjectGeometry`: without ``held``, ``turns`` only reported as
     requested, the grasps ranked by their joints' room, :func:`joint_room`, then
@@ -540,8 +540,10 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
     (:class:`~ocp.shapes.held.Held`) of an :class:`ObjectGeometry` search with a closed-form
     nearest point: its candidates are then rolled through ``turns`` on its surface
     (:func:`~ocp.robots.grasp_reach.roll` with ``held``) and ranked by that reach, as a
-    ball's. :class:`GraspNotFoundError` naming ``fingers[i]`` or ``grasp`` when there is
-    none."""
+    ball's. ``skip``: the grasp after the ``skip`` best (those ``prefer`` accepts first,
+    then the others, each in the order above), for a caller whose plan from the best
+    failed (the service's gaits try the next ones). :class:`GraspNotFoundError`
+    naming ``fingers[i]`` or ``grasp`` when there is none (or no other)."""
     from ocp.geometry.grasp import force_angles
 
     c = np.asarray(centre, dtype=float)
@@ -641,7 +643,9 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
     pool = good if good.any() else ok
     order = np.lexsort((-clo, -least))  # by reach, then closure (last key first)
     chosen = [k for k in order if pool[k]]
-    first: tuple[int, tuple[FingerContact, ...], float] | None = None
+    #: the grasps that pass, in order: those ``prefer`` accepts, and the others
+    accepted: list[tuple[int, tuple[FingerContact, ...], float]] = []
+    others: list[tuple[int, tuple[FingerContact, ...], float]] = []
     worst: Any = None  # the nearest links of the grasps refused for them
     tried, budget = 0, 20 if prefer is None else 60
     paths: dict[tuple[int, int], list[FloatArray]] = {}
@@ -681,15 +685,19 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
                         worst = got
                     continue
                 budget -= 1  # of the clear grasps, as many weighed as without the links
-            if first is None:
-                first = (k, contacts, angle)
             if prefer is None or prefer(contacts):
-                first = (k, contacts, angle)
-                break
+                accepted.append((k, contacts, angle))
+                if len(accepted) > skip:
+                    break
+            else:
+                others.append((k, contacts, angle))
             if clear is not None and budget <= 0:
                 break
-    if first is not None:
-        k, contacts, angle = first
+    ranked = accepted + others
+    if skip and len(ranked) <= skip:
+        raise GraspNotFoundError([("grasp", f"no grasp besides the {len(ranked)} tried")])
+    if ranked:
+        k, contacts, angle = ranked[skip]
         if turns:  # the chosen grasp's reach at the planner's check's step
             contacts = tuple(_fine(f, ct, c, rho, turns, margin, held)
                              for f, ct in zip(fingers, contacts, strict=True))

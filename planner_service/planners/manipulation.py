@@ -136,12 +136,13 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                   obj: ObjectSpec, palm: Palm | None, start: ObjectPose | None,
                   motion: DesiredMotion | None,
                   from_joints: list[tuple[int, FingerModel, tuple[float, ...] | None, str, str]],
-                  info: list[tuple[int | None, list[tuple[float, ...]]]]
+                  info: list[tuple[int | None, list[tuple[float, ...]]]], skip: int = 0
                   ) -> list[tuple[str, str]] | tuple[list[Any], GraspUsedModel]:
     """The request's ``grasp`` search (:func:`ocp.robots.first_grasp.first_grasp`): the
     fingers' joints (``from_joints`` with every searched q filled in, the models those of
     the hand with the found tip sides) and the wire account of it; or the reasons, as
-    (field, reason), why there is none."""
+    (field, reason), why there is none. ``skip``: the grasp after the ``skip`` best
+    (:func:`~ocp.robots.first_grasp.first_grasp`'s)."""
     import json
     import time
 
@@ -181,7 +182,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                       [(t.axis.tolist(), t.angle) for t in turns], request.mu,
                       request.pad_margin, search.model_dump_json(),
                       request.gait is not None,
-                      request.forces.model_dump_json() if request.forces else None]
+                      request.forces.model_dump_json() if request.forces else None, skip]
                      + ([list(start.orientation), request.pole_margin]
                         if obj.shape != "sphere" else []))
 
@@ -218,7 +219,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                           seeds=[s for _, s in info], samples=search.samples,
                           keep=search.candidates, min_gap=search.min_gap,
                           margin=request.pad_margin, seed=search.seed, names=names,
-                          prefer=prefer, clear=clear, held=surface)
+                          prefer=prefer, clear=clear, held=surface, skip=skip)
         return got, time.perf_counter() - t0
 
     try:
@@ -272,7 +273,7 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
         fingers=fingers, reach=found.reach, requested_turn=found.requested,
         closure=found.closure, grasp_angle=found.grasp_angle, tip_gap=found.gap,
         candidates=list(found.candidates), combinations=found.combinations,
-        search_time=took)
+        search_time=took, rank=skip)
 
 
 def _hand_collision(request: ManipulationRequest, hand: Any) -> Any:
@@ -313,10 +314,10 @@ def manipulation_problem(request: ManipulationRequest, cache: FingerCache
     return problem_and_grasp(request, cache)[0]
 
 
-def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
+def problem_and_grasp(request: ManipulationRequest, cache: FingerCache, skip: int = 0
                       ) -> tuple[ManipulationProblem, GraspUsedModel | None]:
     """:func:`manipulation_problem` and the grasp its ``grasp`` search found (None: no
-    search)."""
+    search; ``skip``: the search's grasp after the ``skip`` best)."""
     errors: list[tuple[str, str]] = []
     hand: Any = None  # Hand (flat pads) or WholeHand
     if request.hand is not None:
@@ -417,7 +418,7 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache
     grasp_used: GraspUsedModel | None = None
     if request.grasp is not None and not errors:
         outcome = _search_grasp(request, cache, hand, obj, palm, motion_start, motion,
-                                from_joints, search_info)
+                                from_joints, search_info, skip)
         if isinstance(outcome, list):
             errors += outcome
         else:
@@ -467,6 +468,42 @@ def _side_if_beyond(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSp
     when a contact is beyond the own one's bound (an egg's end)."""
     return fingertips_on_charts(fingers, qs, obj, pose, names, where, pole_margin,
                                 share=1.0)
+
+
+#: A gait from a searched grasp that does not plan (a finger stops the turn, a swing is
+#: not found) is tried from the search's next grasps, up to this many more.
+GAIT_GRASP_RETRIES = 2
+
+
+def _next_grasps(request: ManipulationRequest, fingers: FingerCache, planner: Any,
+                 result: ManipulationResult, gait: Any, problem: ManipulationProblem,
+                 grasp: GraspUsedModel) -> tuple[ManipulationResult, Any,
+                                                 ManipulationProblem, GraspUsedModel]:
+    """The gait from the searched grasp after the best (:data:`GAIT_GRASP_RETRIES`), the
+    first that plans; when none does, the one that turned farthest, the best grasp's on a
+    tie; its message names the others tried. (result, gait, problem, grasp)."""
+    tried = [(result, gait, problem, grasp)]
+    for skip in range(1, GAIT_GRASP_RETRIES + 1):
+        try:
+            with fingers.lock:
+                alt_problem, alt_grasp = problem_and_grasp(request, fingers, skip)
+            if alt_problem.errors():
+                break
+            alt_res, alt_gait = solve_gait(request, alt_problem, planner)
+        except ProblemError:  # no other grasp, or one the gait cannot start from
+            break
+        assert alt_grasp is not None  # (a search's)
+        tried.append((alt_res, alt_gait, alt_problem, alt_grasp))
+        if alt_gait.ok:
+            break
+    best = max(tried, key=lambda x: (x[1].ok, x[1].turned))
+    if len(tried) > 1:
+        others = "; ".join(f"grasp {g.rank}: {r.status.value}, {math.degrees(gp.turned):.1f} "
+                           f"deg ({r.message[:120]})" for r, gp, _, g in tried if g is not best[3])
+        best = (best[0].model_copy(update={"message": f"{best[0].message} (from the search's "
+                                                      f"grasp {best[3].rank}; also tried: "
+                                                      f"{others})"}), *best[1:])
+    return best
 
 
 def _own_chart(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
@@ -559,6 +596,10 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
             if errors:
                 raise ProblemError(errors)
             gait_res, gait = solve_gait(request, problem, planner)
+            if grasp is not None and not gait.ok:
+                gait_res, gait, problem, grasp = _next_grasps(request, fingers, planner,
+                                                              gait_res, gait, problem, grasp)
+                actuation = problem.actuation
             return with_actuation(gait_res, actuation).model_copy(update={"grasp": grasp}), \
                 gait
         try:

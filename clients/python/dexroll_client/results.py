@@ -620,6 +620,9 @@ class GraspUsedModel(_Response):
     candidates: list[int] = Field(description="candidate contacts found per finger")
     combinations: int = Field(description="combinations weighed")
     search_time: float = Field(description="the search's wall time [s]")
+    rank: int = Field(default=0, description="which of the search's grasps, in its order of "
+                                             "preference (0: the best; a gait that does not "
+                                             "plan from it is tried from the next ones)")
 
 
 class ManipulationResult(PlanResultBase):
