@@ -133,4 +133,5 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
         fingers=tuple(fingers), grasp_angle=phi, cone_margin=margin, desired_position=Pd,
         desired_rotation=Rd, tracking_position_error=ep, tracking_angle_error=ea,
         goal_error=goal_error, certificate=cert, certificate_failures=failures, X=Xg, U=Ug,
-        collocation=col, _interpolant=_Interpolant(m, traj, prm) if finite else None)
+        collocation=col, object_side_chart=problem.object.side_chart,
+        _interpolant=_Interpolant(m, traj, prm) if finite else None)
