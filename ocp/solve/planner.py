@@ -406,29 +406,34 @@ def repatched(planner: ManipulationPlanner, problem: ManipulationProblem, strate
     left = budget - totals.iterations if alt_strategy.shared_budget else budget
     alt_sol = planner._solve_once(alt, alt_strategy, alt_x0, None, deadline, left, totals,
                                True)
-    clear = alt_sol.status in (Status.SOLVED, Status.INACCURATE) and \
-        _clear_chart(alt, alt_sol) is None
+    clear = alt_sol.status in (Status.SOLVED, Status.INACCURATE) and not _rides(alt, alt_sol)
     if clear or (sol.status is not Status.SOLVED and alt_sol.status is Status.SOLVED):
         return alt, alt_strategy, alt_x0, alt_sol
     return problem, strategy, x0, sol
+
+
+def _rides(problem: ManipulationProblem, sol: ManipulationSolution) -> bool:
+    """Whether the plan ``sol`` rides a bound of its chart: the palm contact its patch's
+    pole bound (a plan solved or inaccurate), or a fingertip's contact its chart's."""
+    if not sol.contacts or not np.isfinite(sol.contacts[0].eta).all():
+        return False
+    if problem.palm is not None:
+        return sol.status in (Status.SOLVED, Status.INACCURATE) \
+            and rides_pole(problem, sol.contacts[0].eta[:, 2])
+    return any(rides_bound(problem, c.eta[:, 2]) for c in sol.contacts)
 
 
 def _clear_chart(problem: ManipulationProblem, sol: ManipulationSolution
                  ) -> ManipulationProblem | None:
     """The problem on a chart clear of the bound its plan ``sol`` rides (above); None
     when it rides none, or there is no other chart."""
-    if not sol.contacts or not np.isfinite(sol.contacts[0].eta).all():
+    if not _rides(problem, sol):
         return None
     if problem.palm is not None:
-        if sol.status not in (Status.SOLVED, Status.INACCURATE) \
-                or not rides_pole(problem, sol.contacts[0].eta[:, 2]):
-            return None
         palm = sol.contacts[0]
         path = np.einsum("kji,kj->ki", sol.object_rotation, palm.point - sol.object_position)
         rotvec = pole_clear_patch(problem, path)
         return recharted(problem, rotvec) if rotvec is not None else None
-    if not any(rides_bound(problem, c.eta[:, 2]) for c in sol.contacts):
-        return None
     return side_charted(problem)
 
 
