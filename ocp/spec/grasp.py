@@ -695,7 +695,7 @@ def fingertips_on_charts(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: Obj
     egg's, whose poles are on its equator), on that one, each contact on its patch's
     equator, when that puts the contact farthest up its chart nearer its equator: (the
     object as measured, with ``side_chart`` set or not, the fingertips). An object asked
-    on its side chart stays there."""
+    on its side chart stays there; ``share`` infinite: the own chart always."""
     def on(o: ObjectSpec) -> tuple[tuple[Fingertip, ...], float]:
         tips = fingertips_from_joints(fingers, qs, o, pose, names, where, pole_margin,
                                       advise)

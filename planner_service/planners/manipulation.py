@@ -36,7 +36,7 @@ from ocp.solve.planner import (
     Palm,
     Tracking,
 )
-from ocp.spec.grasp import fingertips_from_joints, fingertips_on_charts
+from ocp.spec.grasp import fingertips_on_charts
 from ocp.spec.problem import ObjectSpec, ProblemError, ViaPoint
 
 from .actuation import hand_actuation, torque_limit_errors, with_actuation
@@ -429,17 +429,18 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache, skip: in
                                            "given by joint angles"))
         else:
             # every fingertip from its joints and no palm: an egg touched at an end, beyond
-            # its own chart's bound, is measured on its side chart (no contact's
-            # coordinates were given on its own chart)
-            charts = _side_if_beyond if palm is None and \
-                len(from_joints) == len(request.fingers) else _own_chart
+            # its own chart's bound, is measured on its side chart (share 1; no contact's
+            # coordinates were given on its own chart: else never, share inf)
+            share = 1.0 if palm is None and len(from_joints) == len(request.fingers) \
+                else math.inf
             try:
-                obj, found = charts(
+                obj, found = fingertips_on_charts(
                     tuple(m for _, m, _, _, _ in from_joints),
                     tuple(q for _, _, q, _, _ in from_joints if q is not None), obj,
                     motion_start,
                     tuple(n for _, _, _, n, _ in from_joints),
-                    tuple(w for _, _, _, _, w in from_joints), request.pole_margin)
+                    tuple(w for _, _, _, _, w in from_joints), request.pole_margin,
+                    share=share)
             except ProblemError as exc:
                 errors += exc.errors
             else:
@@ -459,15 +460,6 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache, skip: in
     forces = force_spec(request.forces)
     return _problem(request, obj, tips, palm, start, motion, tr, forces,
                     collision, actuation), grasp_used
-
-
-def _side_if_beyond(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
-                    pose: ObjectPose, names: tuple[str, ...], where: tuple[str, ...],
-                    pole_margin: float) -> tuple[ObjectSpec, tuple[Fingertip, ...]]:
-    """The fingertips from their joints on the object's own chart, or on its side chart
-    when a contact is beyond the own one's bound (an egg's end)."""
-    return fingertips_on_charts(fingers, qs, obj, pose, names, where, pole_margin,
-                                share=1.0)
 
 
 #: A gait from a searched grasp that does not plan (a finger stops the turn, a swing is
@@ -504,14 +496,6 @@ def _next_grasps(request: ManipulationRequest, fingers: FingerCache, planner: An
                                                       f"grasp {best[3].rank}; also tried: "
                                                       f"{others})"}), *best[1:])
     return best
-
-
-def _own_chart(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: ObjectSpec,
-               pose: ObjectPose, names: tuple[str, ...], where: tuple[str, ...],
-               pole_margin: float) -> tuple[ObjectSpec, tuple[Fingertip, ...]]:
-    """The fingertips from their joints on the object's own chart (where other contacts'
-    coordinates, or the palm's, are given)."""
-    return obj, fingertips_from_joints(fingers, qs, obj, pose, names, where, pole_margin)
 
 
 def _problem(request: ManipulationRequest, obj: ObjectSpec, tips: list[Fingertip | None],
