@@ -391,3 +391,20 @@ def test_each_shapes_symmetry_nearest_a_turn() -> None:
     assert S is not None and np.abs(S @ [0, 0, 1] - [0, 0, 1]).max() < 1e-12
     assert np.abs(S - spin).max() < 1e-12
     assert surface.symmetry_near(axis_angle_rotation([1, 0, 0], 2.0), params) is None
+
+
+@pytest.mark.slow
+def test_a_gait_that_does_not_plan_from_the_best_grasp_plans_from_the_next() -> None:
+    """The full bench's egg_gait-006 (the egg turned 46.6 deg): from the search's best
+    grasp a middle fingertip's swing is not found after 31.4 deg; the service tries the
+    search's next grasp, from which the gait is certified. The result says which grasp
+    (rank 1) and names the one tried first (about 50 s)."""
+    from planner_service.bench.suite import expand, load_suite
+    from planner_service.planners import REQUEST, solve
+
+    unit = next(u for u in expand(load_suite("full"), ["egg_gait"]) if u.id == "egg_gait-006")
+    result, gait = solve(REQUEST.validate_python(unit.request))
+    assert result.status.value == "solved", result.message
+    assert result.certificate is not None and result.certificate.passed
+    assert gait.ok and result.grasp is not None and result.grasp.rank >= 1
+    assert "also tried: grasp 0" in result.message
