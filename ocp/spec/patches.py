@@ -1,5 +1,5 @@
-"""Choosing the palm contact's chart patch on the object (docs/conventions.md, "Chart
-patches").
+"""Choosing the chart patch a plan's contacts are measured in (docs/conventions.md, "Chart
+patches"; docs/shapes.md, "Charts").
 
 The object's latitude/longitude chart is singular at its poles, so the planner keeps
 ``|u| <= pi/2 - pole_margin``. That bound is the chart's, not the physics': a plan whose
@@ -8,6 +8,12 @@ where the bound engages, which costs grid refinements). For a sphere any rotated
 describes the same body, so the planner may re-plan in a patch whose poles are far from
 the contact's path: :func:`pole_clear_patch` picks one, :func:`recharted` states the same
 request in it (the same physical initial grasp, goals and via-points).
+
+An egg's fingertip contacts have a second chart, its side chart (poles on its equator,
+``ObjectSpec.side_chart``; docs/shapes.md, "Charts"): :func:`turns_off_chart` predicts
+whether a motion carries a contact past the own chart's bound, :func:`rides_bound` tells
+a plan that rode it, :func:`side_charted` states the same problem on the side chart, and
+:func:`planned_problem` the problem on whichever charts a plan was made on.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ if TYPE_CHECKING:
     from ocp.spec.grasp import ManipulationProblem
 
 __all__ = ["planned_problem", "pole_clear_patch", "recharted", "recharted_coordinates",
-           "rides_bound", "rides_pole", "side_charted"]
+           "rides_bound", "rides_pole", "side_charted", "turns_off_chart"]
 
 FloatArray = NDArray[np.float64]
 
