@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import numpy as np
@@ -469,13 +470,21 @@ GAIT_GRASP_RETRIES = 2
 
 def _next_grasps(request: ManipulationRequest, fingers: FingerCache, planner: Any,
                  result: ManipulationResult, gait: Any, problem: ManipulationProblem,
-                 grasp: GraspUsedModel) -> tuple[ManipulationResult, Any,
-                                                 ManipulationProblem, GraspUsedModel]:
+                 grasp: GraspUsedModel, started: float
+                 ) -> tuple[ManipulationResult, Any, ManipulationProblem, GraspUsedModel]:
     """The gait from the searched grasp after the best (:data:`GAIT_GRASP_RETRIES`), the
     first that plans; when none does, the one that turned farthest, the best grasp's on a
-    tie; its message names the others tried. (result, gait, problem, grasp)."""
+    tie; its message names the others tried. A next grasp is tried only when the request's
+    time limit (``solver.time_limit``, the time its job has left in the service) leaves
+    room for another gait as long as the average so far (``started``: when the first
+    began, ``time.perf_counter``). (result, gait, problem, grasp)."""
     tried = [(result, gait, problem, grasp)]
+    out_of_time = False
     for skip in range(1, GAIT_GRASP_RETRIES + 1):
+        spent = time.perf_counter() - started
+        if spent * (len(tried) + 1) / len(tried) > float(request.solver.time_limit):
+            out_of_time = True
+            break
         try:
             with fingers.lock:
                 alt_problem, alt_grasp = problem_and_grasp(request, fingers, skip)
@@ -489,6 +498,12 @@ def _next_grasps(request: ManipulationRequest, fingers: FingerCache, planner: An
         if alt_gait.ok:
             break
     best = max(tried, key=lambda x: (x[1].ok, x[1].turned))
+    if out_of_time:
+        limit = float(request.solver.time_limit)
+        best = (best[0].model_copy(update={"message": f"{best[0].message} (the search's "
+                                                      "next grasps not tried within the "
+                                                      f"time limit of {limit:g} s)"}),
+                *best[1:])
     if len(tried) > 1:
         others = "; ".join(f"grasp {g.rank}: {r.status.value}, {math.degrees(gp.turned):.1f} "
                            f"deg ({r.message[:120]})" for r, gp, _, g in tried if g is not best[3])
@@ -579,10 +594,12 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
             errors = gait_errors(request, problem)
             if errors:
                 raise ProblemError(errors)
+            started = time.perf_counter()
             gait_res, gait = solve_gait(request, problem, planner)
             if grasp is not None and not gait.ok:
                 gait_res, gait, problem, grasp = _next_grasps(request, fingers, planner,
-                                                              gait_res, gait, problem, grasp)
+                                                              gait_res, gait, problem, grasp,
+                                                              started)
                 actuation = problem.actuation
             return with_actuation(gait_res, actuation).model_copy(update={"grasp": grasp}), \
                 gait
