@@ -74,7 +74,6 @@ from ocp.spec.grasp import (
 )
 from ocp.spec.motion import DesiredMotion, MotionStep, ObjectPose, Tracking
 from ocp.spec.patches import (
-    planned_problem,
     pole_clear_patch,
     recharted,
     rides_bound,
@@ -263,7 +262,7 @@ class ManipulationPlanner:
         left = problem.options.time_limit - (time.perf_counter() - t0)
         limited = replace(problem, options=replace(problem.options, time_limit=max(left, 1e-3)))
         if kin.object_side_chart:  # from the kinematic plan on its chart (an egg's side)
-            limited = planned_problem(limited, None, True) or limited
+            limited = side_charted(limited) or limited
         coupled = self._plan(
             limited, kin if kin.status in (Status.SOLVED, Status.INACCURATE) else warm_start,
             certify)

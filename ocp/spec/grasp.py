@@ -702,8 +702,7 @@ def fingertips_on_charts(fingers: tuple[Any, ...], qs: tuple[Any, ...], obj: Obj
         return tips, max((abs(float(t.initial[2])) for t in tips), default=0.0)
 
     if obj.side_chart or obj.kind.side_surface(obj.dimensions) is None:
-        return obj, fingertips_from_joints(fingers, qs, obj, pose, names, where,
-                                           pole_margin, advise)
+        return obj, on(obj)[0]
     try:
         tips, worst = on(obj)
         error = None
