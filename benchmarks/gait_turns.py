@@ -155,7 +155,11 @@ def _run(tree: Path, names: list[str], gait: dict[str, Any] | None = None,
     """One run in a fresh process whose ``ocp`` and ``planner_service`` are ``tree``'s
     (``gait``: fields set in the requests' ``gait``; ``warm``: each turn timed the
     second time it is planned)."""
-    env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1"}
+    # a service worker's threads (planner_service.executors.worker_env: one each; with
+    # OpenMP's default of one thread per core, MUMPS's BLAS contended with the planner's
+    # own process on this 2-core machine)
+    env = {**os.environ, "PYTHONPATH": str(tree),
+           **{k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}}
     extra = ([] if not gait else ["--worker-gait", json.dumps(gait)]) + \
         (["--worker-warm"] if warm else [])
     out = subprocess.run([sys.executable, str(Path(__file__).resolve()), *extra,

@@ -1184,9 +1184,13 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
         if warm is not None and last_all is not None \
                 and roll_objects.get(last_all, prob.object) != prob.object:
             warm = None  # its contacts on the other chart (an egg's side chart)
+        multipliers = None
         if plan_start(template, pose) is None:  # its turned form is another solid: no
             # roll recurs (the egg's 90 deg gait about a short axis took 38 s warm-started
-            # from the last roll, 21 s started cold)
+            # from the last roll, 21 s started cold), but the last roll's multipliers
+            # start this one's from its own guess (the egg's: 6-10 iterations instead of
+            # 23-37, ``MULTIPLIER_PUSH``)
+            multipliers = warm.nlp_point if warm is not None else None
             warm = None
         if warm is not None and warm.stats is not None \
                 and warm.stats.n_intervals > prob.n_intervals:
@@ -1194,7 +1198,8 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
             # the last one's primal-dual point is (its coarse grid would be refined again)
             prob = prob.with_intervals(warm.stats.n_intervals)
         try:
-            sol = planner.solve(prob, warm, reach_checked=True)  # (_roll_ahead)
+            sol = planner.solve(prob, warm, reach_checked=True,  # (_roll_ahead)
+                                multipliers=multipliers)
         except ProblemError as exc:  # the roll's own start (the gait's, not the request's)
             plan.status = "failed"
             plan.message = (f"roll {len(plan.rolls)} ({math.degrees(done):.1f} deg on) could "

@@ -100,6 +100,11 @@ class NlpPoint:
     lam_x: NDArray[np.float64]
     lam_g: NDArray[np.float64]
 
+    def fits(self, nlp: str, n_x: int, n_g: int) -> bool:
+        """Whether this point belongs to the NLP ``nlp`` with ``n_x`` variables and ``n_g``
+        constraints."""
+        return self.nlp == nlp and len(self.lam_x) == n_x and len(self.lam_g) == n_g
+
 
 @dataclass(frozen=True)
 class WarmStart:
@@ -154,9 +159,7 @@ class WarmStart:
         """The primal-dual point if it belongs to the NLP ``nlp`` with ``n_x`` variables and
         ``n_g`` constraints, else None."""
         m = self.nlp_point
-        if m is None or m.nlp != nlp or len(m.lam_x) != n_x or len(m.lam_g) != n_g:
-            return None
-        return m
+        return m if m is not None and m.fits(nlp, n_x, n_g) else None
 
     def on_grid(self, t_nodes: NDArray[np.float64], left_cols: list[int],
                 right_cols: list[int], n_u_cols: int) -> tuple[
