@@ -122,7 +122,9 @@ class _ForceLoop:
     contact's normal ``unit`` (steps x joints), the feedback's ``weight``, the
     ``target`` normal force [N] (the planned one, at least the floor) and ``extra``, the
     target less the planned force (fed forward); ``integral`` the PI law's integral
-    term [N], ``shift`` the admittance's set-point shift along the normal [m]."""
+    term [N], ``shift`` the admittance's set-point shift along the normal [m], at most
+    ``shift_limit`` [m], its rate ``shift_ki`` [m/(N s)] times the force's error
+    (:func:`admittance_range`)."""
 
     k: int
     j: int
@@ -130,8 +132,36 @@ class _ForceLoop:
     weight: FloatArray
     target: FloatArray
     extra: FloatArray
+    shift_limit: float
+    shift_ki: float
     integral: float = 0.0
     shift: float = 0.0
+
+
+#: A contact's lever [m] below which its object's surface does not move under it when the
+#: object turns about its centre: a ball's (its normals through its centre, to rounding).
+ROUND_LEVER = 1e-6
+
+
+def admittance_range(o: SimOptions, point: FloatArray, normal: FloatArray,
+                     centre: FloatArray, active: FloatArray | None) -> tuple[float, float]:
+    """A contact's admittance (``force_control`` 'admittance'): (the bound [m] of its
+    set point's shift, its rate [m/(N s)]). Turned by an error of ``a`` [rad] about its
+    centre, the object's surface moves under a contact at ``p`` with normal ``n`` by up
+    to ``a |(p - c) x n|`` along the normal: nothing for a ball, up to 0.7 mm for a
+    fingertip 20 mm off a 50 mm cube's face centre at 2 deg. The shift follows it as far
+    as the run's orientation tolerance: ``force_shift_limit`` plus that motion at the
+    contact's largest lever while touching, at a rate that crosses the range as fast as
+    ``force_shift_ki`` crosses ``force_shift_limit``. A ball's contacts keep the options'
+    own (their lever under :data:`ROUND_LEVER`)."""
+    lever = np.linalg.norm(np.cross(point - centre, normal), axis=1)
+    if active is not None:
+        lever = lever[np.asarray(active) > 0.0]
+    top = float(lever.max(initial=0.0))
+    if top < ROUND_LEVER:
+        return o.force_shift_limit, o.force_shift_ki
+    limit = o.force_shift_limit + o.tolerances.angle * top
+    return limit, o.force_shift_ki * limit / o.force_shift_limit
 
 
 @dataclass
@@ -289,8 +319,10 @@ class Simulation:
             floor = self.options.force_min * np.clip(
                 (share - SQUEEZE_FROM) / (ACTIVE_SHARE - SQUEEZE_FROM), 0.0, 1.0)
             target = np.maximum(planned[j], floor)
+            limit, ki = admittance_range(self.options, c.point, c.normal,
+                                         plan.object_position, c.active)
             loops.append(_ForceLoop(k, j, np.ascontiguousarray(_linear(plan.t, unit, ts)),
-                                    weight, target, target - planned[j]))
+                                    weight, target, target - planned[j], limit, ki))
         return loops
 
     # -- the run --------------------------------------------------------------------------
@@ -325,7 +357,12 @@ class Simulation:
                 (f"force control: admittance (the servo's set point shifted along the "
                  f"planned normal by {o.force_shift_ki:g} m/(N s) times the integral of "
                  f"the normal force's error, at most {o.force_shift_limit * 1e3:g} mm; "
-                 f"at least {o.force_min:g} N while touching) for {names}" if shifting
+                 f"at least {o.force_min:g} N while touching) for {names}"
+                 + "".join(f"; {plan.contacts[lp.j].name} at most "
+                           f"{lp.shift_limit * 1e3:.3g} mm at {lp.shift_ki:.3g} m/(N s) (the "
+                           "object's surface moves under it when the object turns)"
+                           for lp in loops if lp.shift_limit != o.force_shift_limit)
+                 if shifting
                  else f"force control: PI contact-force feedback (gains {o.force_kp:g} "
                       f"N/N, {o.force_ki:g} 1/s, at most {o.force_limit:g} N; at least "
                       f"{o.force_min:g} N while touching) along the planned normals of "
@@ -377,8 +414,8 @@ class Simulation:
                 # the measured normal force: the previous step's
                 error = lp.target[k] - (normal_force[k - 1, lp.j] if k > 0 else 0.0)
                 if shifting:
-                    lp.shift = min(max(lp.shift + o.force_shift_ki * error * dt, 0.0),
-                                   o.force_shift_limit)
+                    lp.shift = min(max(lp.shift + lp.shift_ki * error * dt, 0.0),
+                                   lp.shift_limit)
                     unit = lp.unit[k]
                     np.multiply(unit, w * lp.shift / max(float(unit @ unit), 1e-12),
                                 out=shift[lp.k])

@@ -10,7 +10,9 @@ import json
 import math
 from dataclasses import replace
 from pathlib import Path
+from typing import Any, cast
 
+import numpy as np
 import pytest
 from pydantic import ValidationError
 
@@ -110,3 +112,28 @@ def test_force_control_is_resolved_per_plan_and_checked_by_name(gait_plan: objec
     # with the joints set to the plan there is nothing to feed back into
     replayed = simulate(gait_plan, SimOptions(mode="replay", settle=0.0))  # type: ignore[arg-type]
     assert "force control: admittance asked, but off (replay mode)" in replayed.notes
+
+
+def test_the_admittance_follows_a_surface_that_moves_under_a_contact_as_the_object_turns(
+        gait_plan: object) -> None:
+    """Turned by an angle a about its centre, an object's surface moves under a contact at
+    p with normal n by a |(p - c) x n| along n: nothing on a ball, so a ball's contacts
+    keep the options' own shift bound and rate (the stored gait's, bit for bit); a
+    contact 20 mm off a cube's face centre gets the options' bound plus the run's
+    orientation tolerance times its 20 mm lever, at the rate that crosses it as fast."""
+    from sim.run import ROUND_LEVER, admittance_range
+
+    o, plan = SimOptions(), cast(Any, gait_plan)
+    for c in plan.contacts:
+        assert admittance_range(o, c.point, c.normal, plan.object_position, c.active) == \
+            (o.force_shift_limit, o.force_shift_ki)
+    centre = np.zeros((3, 3))
+    normal = np.tile([0.0, 0.0, 1.0], (3, 1))
+    face = np.array([[0.0, 0.0, 0.025], [0.02, 0.0, 0.025], [0.0, 0.03, 0.025]])
+    limit, ki = admittance_range(o, face, normal, centre, np.array([1.0, 1.0, 0.0]))
+    assert limit == pytest.approx(o.force_shift_limit + o.tolerances.angle * 0.02, rel=1e-12)
+    assert ki / o.force_shift_ki == pytest.approx(limit / o.force_shift_limit, rel=1e-12)
+    # at its middle the face does not move along its normal: the options' own
+    assert admittance_range(o, face[:1], normal[:1], centre[:1], None) == \
+        (o.force_shift_limit, o.force_shift_ki)
+    assert ROUND_LEVER <= 1e-6
