@@ -110,6 +110,9 @@ def user_scene(plan: ExecutionPlan, model: UserModel, options: SimOptions
                         quat=_v(plan.object_wxyz[0] / np.linalg.norm(plan.object_wxyz[0])))
     ET.SubElement(obj, "freejoint", name=OBJECT)
     mass = options.object_mass if options.object_mass is not None else plan.object.mass
+    # its inertia stated: a file's <compiler inertiafromgeom="false"> would leave the body
+    # MuJoCo's boundmass (1e-6 kg) and no inertia
+    obj.append(_object_inertial(plan, mass))
     ET.SubElement(obj, "geom", plan.object.geom_attributes(), name=OBJECT,
                   mass=f"{mass:.17g}", contype="1", conaffinity="1", condim=str(options.condim),
                   friction=_v([plan.mu, torsion, options.rolling_friction]),
@@ -120,6 +123,19 @@ def user_scene(plan: ExecutionPlan, model: UserModel, options: SimOptions
                "keyframes_dropped": len(keyframes),
                "file_timestep": file_step, "file_gravity": list(file_gravity)}
     return ET.tostring(root, encoding="unicode"), changes
+
+
+def _object_inertial(plan: ExecutionPlan, mass: float) -> ET.Element:
+    """The object body's ``<inertial>``: the uniform solid of its geom weighing ``mass``
+    [kg], as MuJoCo computes it from the geom alone (a model of the object by itself)."""
+    root = ET.Element("mujoco")
+    plan.object.add_asset(root)
+    body = ET.SubElement(ET.SubElement(root, "worldbody"), "body")
+    ET.SubElement(body, "freejoint")
+    ET.SubElement(body, "geom", plan.object.geom_attributes(), mass=f"{mass:.17g}")
+    m = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+    return ET.Element("inertial", pos=_v(m.body_ipos[1]), quat=_v(m.body_iquat[1]),
+                      mass=_v(m.body_mass[1]), diaginertia=_v(m.body_inertia[1]))
 
 
 #: A moving body lighter than this [kg] has no mass of its own (MuJoCo's ``boundmass``

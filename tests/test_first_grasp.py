@@ -129,6 +129,8 @@ def test_the_builtin_hand_takes_the_searched_tip_sides() -> None:
     (lambda b: b["fingers"][1].update(initial={"x_f": 0, "y_f": 0, "u_f": 0, "v_f": 0,
                                                 "psi_f": 0}, chart_rotation=[0, 0, 0]),
      "fingers[1].initial", "with `grasp`"),
+    # one finger alone holds nothing (was a 500: the search's tip gap of one tip, inf)
+    (lambda b: b.update(fingers=b["fingers"][:1]), "fingers", "at least two fingertips"),
 ])
 def test_bad_grasp_requests_are_422_naming_the_field(live_server: Server, change: Any,
                                                      field: str, words: str) -> None:

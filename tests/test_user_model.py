@@ -93,6 +93,22 @@ def test_the_scene_is_the_files_bodies_joints_and_actuators() -> None:
     assert all(d["kp"] == 10.0 for d in s["drive"])
 
 
+@pytest.mark.parametrize("inertia", ["auto", "false"])
+def test_the_object_weighs_the_plans_mass_whatever_the_files_compiler_says(
+        inertia: str) -> None:
+    """A file's ``<compiler inertiafromgeom="false">`` (bodies weigh only what their
+    ``<inertial>`` says) does not reach the object: it weighs the plan's mass with the
+    inertia of its uniform solid, as MuJoCo gives a geom of that mass (before, 1e-6 kg:
+    MuJoCo's boundmass, and the run blew up)."""
+    text = OWN.replace("<compiler ", f'<compiler inertiafromgeom="{inertia}" ', 1)
+    assert f'inertiafromgeom="{inertia}"' in text
+    m = UserModelSimulation(held_plan(), UserModel(text, TIPS)).model
+    obj = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, OBJECT)
+    assert m.body_mass[obj] == pytest.approx(0.05, rel=1e-12)
+    ball = 2.0 / 5.0 * 0.05 * NOMINAL_RADIUS ** 2  # a uniform ball's moments
+    assert np.allclose(m.body_inertia[obj], ball, rtol=1e-9)
+
+
 @pytest.mark.parametrize("condim", [3, 4])
 def test_the_contact_settings_reported_are_mujocos_mix(condim: int) -> None:
     sim = UserModelSimulation(held_plan(), UserModel(OWN, TIPS), SimOptions(condim=condim))

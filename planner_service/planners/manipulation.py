@@ -161,6 +161,9 @@ def _search_grasp(request: ManipulationRequest, cache: FingerCache, hand: Any,
                           "alone: not with a palm")]
     if start is None:
         return [("initial_pose", "required by `grasp`: where the ball is held")]
+    if len(request.fingers) < 2:
+        return [("fingers", f"a grasp search places at least two fingertips (the fingers "
+                            f"alone hold the object), got {len(request.fingers)}")]
     if len(from_joints) != len(request.fingers):
         return []  # some finger could not be placed: its own error says why
     if all(q is not None for _, _, q, _, _ in from_joints):
