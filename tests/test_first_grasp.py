@@ -76,6 +76,18 @@ def test_a_ball_out_of_reach_names_every_finger() -> None:
     assert "cannot touch the ball" in exc.value.errors[0][1]
 
 
+def test_a_grasp_not_found_says_which_condition_no_combination_meets() -> None:
+    """Tips that cannot be kept apart are named as that, not as a closure that fails
+    (the message gave the most closed grasp's closure, > 0, beside the real blocker)."""
+    hand = load_allegro()
+    with pytest.raises(GraspNotFoundError) as exc:
+        first_grasp(hand.fingers, NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, samples=200,
+                    min_gap=0.2)
+    (field, why), = exc.value.errors
+    assert field == "grasp" and "in none are the tips 200 mm apart" in why, why
+    assert "force closure" not in why
+
+
 def test_the_request_option_on_our_mjcf_reports_the_grasp_it_used() -> None:
     request = ManipulationRequest.model_validate(own_hand_request())
     assert request_errors(request, CACHE) == []

@@ -88,6 +88,39 @@ def test_a_sphere_tip_and_an_mjcf_default_class_are_read() -> None:
     assert_close(tip.p, [0, 0, 0.03], atol=0)
 
 
+@pytest.mark.parametrize("order", ["tip last", "tip first"])
+def test_the_fingertip_is_the_colliding_geom_at_the_fingers_end(order: str) -> None:
+    """A distal body in the Menagerie's style carries a visual sphere (contype and
+    conaffinity 0: MuJoCo never collides it), a link capsule and the fingertip sphere: the
+    tip is the colliding geom reaching farthest from the body's origin, whatever the
+    order (the first sphere or capsule was taken: the link, or the visual sphere, and the
+    plan rolled on it, certified, 5-9 mm from the real tip). Named by a site, the geom
+    nearest the site; a body with only visual geoms is refused, saying so."""
+    geoms = ['<geom class="link" fromto="0 0 0.006 0 0 0.016"/>',
+             '<geom class="tip" pos="0 0 0.03"/>']
+    if order == "tip first":
+        geoms.reverse()
+    mjcf = f"""<mujoco><default><default class="visual"><geom contype="0" conaffinity="0"
+    group="2"/></default><default class="link"><geom type="capsule" size="0.009"/>
+    </default><default class="tip"><geom type="sphere" size="0.012"/></default></default>
+    <worldbody><body name="b"><joint name="j" axis="0 1 0" range="-1 1"/><body name="t">
+    <geom class="visual" type="sphere" size="0.02"/>{"".join(geoms)}
+    <site name="s" pos="0 0 0.042"/><site name="mid" pos="0 0.009 0.011"/></body></body>
+    </worldbody></mujoco>"""
+    tip = tip_geometry(mjcf, "mjcf", "t")
+    assert not isinstance(tip, str)
+    assert tip.kind == "sphere" and tip.params == (0.012,)
+    assert_close(tip.p, [0, 0, 0.03], atol=0)
+    at_site = tip_geometry(mjcf, "mjcf", "s")  # the sphere, in the site's frame
+    assert not isinstance(at_site, str) and at_site.kind == "sphere"
+    assert_close(at_site.p, [0, 0, -0.012], atol=1e-15)
+    link = tip_geometry(mjcf, "mjcf", "mid")  # a site at the link capsule: it
+    assert not isinstance(link, str) and link.kind == "capsule"
+    only_visual = mjcf.replace("".join(geoms), "")
+    why = tip_geometry(only_visual, "mjcf", "t")
+    assert isinstance(why, str) and "not colliding with the object" in why
+
+
 def test_the_nominal_grasp_touches_the_ball_in_force_closure() -> None:
     tips = fingertips_from_joints(URDF.fingers, NOMINAL_Q, BALL, POSE, NAMES, WHERE)
     problem = ManipulationProblem(

@@ -629,16 +629,24 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
                          for i in range(n)], axis=1)
         least = np.round(room.min(axis=1), 2)  # 1 % of a joint's range: equal rooms tie
     cone = math.sin(math.atan(mu))
-    ok = (gap >= min_gap) & ((clo > 0.0) if n >= 3 else (clo > -cone))
+    apart, closed = gap >= min_gap, (clo > 0.0) if n >= 3 else (clo > -cone)
+    ok = apart & closed
     if not ok.any():
-        best_gap = float(gap.max())
+        need = "> 0" if n >= 3 else f"> {-cone:.3g}"
+        why = (f"in none are the tips {min_gap * 1e3:.3g} mm apart (the widest gap "
+               f"{float(gap.max()) * 1e3:.3g} mm: the fingertips overlap where they touch "
+               f"{what})" if not apart.any() else
+               f"none holds {what} in force closure (the most closed reaches "
+               f"{float(clo.max()):.3g}, {need} needed)" if not closed.any() else
+               f"those with the tips {min_gap * 1e3:.3g} mm apart ({int(apart.sum())}) are "
+               f"not in force closure (the most closed of them reaches "
+               f"{float(clo[apart].max()):.3g}, {need} needed) and those in force closure "
+               f"({int(closed.sum())}) have tips closer (their widest gap "
+               f"{float(gap[closed].max()) * 1e3:.3g} mm)")
         raise GraspNotFoundError([("grasp", (
             f"no combination of the fingers' contacts ({', '.join(str(len(p)) for p in per)} "
-            f"candidates per finger, {len(combos)} combinations) holds {what} in force "
-            f"closure with the tips at least {min_gap * 1e3:.3g} mm apart: the most closed "
-            f"reaches {float(clo.max()):.3g} (> 0 needed), the widest gap "
-            f"{best_gap * 1e3:.3g} mm; give more fingers, or move {what} "
-            "(initial_pose)"))])
+            f"candidates per finger, {len(combos)} combinations) holds {what}: {why}; give "
+            f"more fingers, or move {what} (initial_pose)"))])
     good = ok & (clo >= (GOOD_CLOSURE if n >= 3 else -0.5 * cone))
     pool = good if good.any() else ok
     order = np.lexsort((-clo, -least))  # by reach, then closure (last key first)

@@ -140,8 +140,10 @@ def _mjcf_defaults(root: ET.Element) -> dict[str, dict[str, str]]:
 def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
                  ) -> TipSurface | str:
     """The fingertip surface of link/body ``name`` from the model text's collision
-    geometry (the first sphere or capsule on it; URDF ``<collision>``, MJCF ``<geom>``;
-    for an MJCF site, its body's geom in the site's frame), or why there is none (a
+    geometry (a sphere or capsule on it: URDF ``<collision>``, MJCF ``<geom>`` that
+    collides with the object, :func:`touches_object`, not a visual one; of several, the
+    one reaching farthest from the link's or body's origin, the finger's end, or for an
+    MJCF site the one nearest the site, in the site's frame), or why there is none (a
     string). An MJCF's geoms are read by ``pos`` and ``quat`` or ``fromto``: give the
     text :func:`~ocp.robots.mjcf_frames.normalise_mjcf` wrote."""
     root = ET.fromstring(text)
@@ -149,7 +151,7 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
         link = next((ln for ln in root.iter("link") if ln.get("name") == name), None)
         if link is None:
             return f"no link {name!r} carries collision geometry in the URDF"
-        kinds = []
+        kinds, tips = [], []
         for col in link.iter("collision"):
             origin = col.find("origin")
             p = _floats(None if origin is None else origin.get("xyz"), 3, (0, 0, 0))
@@ -157,24 +159,27 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
             geo = col.find("geometry")
             for g in [] if geo is None else list(geo):
                 kinds.append(g.tag)
-                if g.tag == "sphere":
-                    return sphere_tip(float(g.get("radius", "nan")), p, R)
-                if g.tag == "capsule":
-                    r, length = float(g.get("radius", "nan")), float(g.get("length", "nan"))
-                    return _capsule(r, length / 2, p, R, side)
-        return (f"link {name!r} has no sphere or capsule collision geometry (it has "
-                f"{kinds or 'none'}): give the fingertip's surface in the request")
+                if g.tag in ("sphere", "capsule"):
+                    half = float(g.get("length", "nan")) / 2 if g.tag == "capsule" else 0.0
+                    tips.append((g.tag, p, R, half, float(g.get("radius", "nan"))))
+        if not tips:
+            return (f"link {name!r} has no sphere or capsule collision geometry (it has "
+                    f"{kinds or 'none'}): give the fingertip's surface in the request")
+        kind, p, R, half, r = max(tips, key=lambda t: _reach(t, None))
+        return sphere_tip(r, p, R) if kind == "sphere" else _capsule(r, half, p, R, side)
     defaults = _mjcf_defaults(root)
     parents = {c: p for p in root.iter() for c in p}
     body = next((b for b in root.iter("body") if b.get("name") == name), None)
     R_s, p_s = np.eye(3), np.zeros(3)  # the tip frame in the body's
+    site = None
     if body is None:
         site = next((s for s in root.iter("site") if s.get("name") == name), None)
         if site is None:
             return f"no body or site {name!r} in the MJCF"
         body = parents[site]
         R_s, p_s = site_pose(root, site)
-    kinds = []
+    kinds, skipped = [], []
+    poses: list[tuple[str, FloatArray, FloatArray, float, float] | str] = []
     for g in body.findall("geom"):
         cls = g.get("class")
         el: ET.Element | None = body
@@ -186,29 +191,72 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
         kinds.append(kind)
         if kind not in ("sphere", "capsule"):
             continue
-        if any(k in attrs for k in ("euler", "axisangle", "xyaxes", "zaxis")):
-            return (f"geom of {name!r}: its orientation is given by "
-                    f"{[k for k in ('euler', 'axisangle', 'xyaxes', 'zaxis') if k in attrs]}"
-                    "; only pos, quat or fromto are read: give the fingertip's surface in "
-                    "the request")
-        size = _floats(attrs.get("size"), len(attrs.get("size", "").split()) or 1, (0,))
-        if "fromto" in attrs:
-            ft = _floats(attrs["fromto"], 6, (0,) * 6)
-            a, b = ft[:3], ft[3:]
-            z = (b - a) / np.linalg.norm(b - a)
-            x = np.cross(z, [1.0, 0, 0] if abs(z[0]) < 0.9 else [0, 1.0, 0])
-            x /= np.linalg.norm(x)
-            R = np.column_stack([x, np.cross(z, x), z])
-            p, half = (a + b) / 2, float(np.linalg.norm(b - a)) / 2
-        else:
-            p = _floats(attrs.get("pos"), 3, (0, 0, 0))
-            R = _quat(_floats(attrs.get("quat"), 4, (1, 0, 0, 0)))
-            half = float(size[1]) if len(size) > 1 else 0.0
-        if kind == "sphere":
-            return sphere_tip(float(size[0]), R_s.T @ (p - p_s), R_s.T @ R)
-        return _capsule(float(size[0]), half, p, R, side, (R_s, p_s))
-    return (f"body {name!r} has no sphere or capsule geom (it has {kinds or 'none'}): give "
-            "the fingertip's surface in the request")
+        if not touches_object(attrs):
+            skipped.append(attrs.get("name") or kind)
+            continue
+        poses.append(_tip_pose(name, attrs, kind))
+    if not poses:
+        why = f"; not colliding with the object: {skipped}" if skipped else ""
+        return (f"body {name!r} has no sphere or capsule geom that collides with the object "
+                f"(it has {kinds or 'none'}{why}): give the fingertip's surface in the "
+                "request")
+
+    got = max(poses, key=lambda t: -math.inf if isinstance(t, str)
+              else _reach(t, None if site is None else p_s))
+    if isinstance(got, str):
+        return got
+    kind, p, R, half, r = got
+    if kind == "sphere":
+        return sphere_tip(r, R_s.T @ (p - p_s), R_s.T @ R)
+    return _capsule(r, half, p, R, side, (R_s, p_s))
+
+
+def _reach(tip: tuple[str, FloatArray, FloatArray, float, float],
+           site: FloatArray | None) -> float:
+    """How well a sphere or capsule (kind, centre, rotation, half length, radius) in its
+    body's frame is that body's fingertip: the distance its surface reaches from the
+    body's origin (the finger's end is the outermost), or minus its axis's distance from
+    the tip's ``site`` when one is named."""
+    _, p, R, half, r = tip
+    a, b = p - half * R[:, 2], p + half * R[:, 2]
+    if site is not None:
+        ab = b - a
+        s = float(np.clip((site - a) @ ab / (ab @ ab), 0.0, 1.0)) if ab @ ab > 0 else 0.0
+        return -float(np.linalg.norm(a + s * ab - site))
+    return max(float(np.linalg.norm(a)), float(np.linalg.norm(b))) + r
+
+
+def touches_object(attrs: dict[str, str]) -> bool:
+    """Whether an MJCF geom (its attributes, defaults resolved) collides with the object
+    of dexroll's scenes (``contype`` and ``conaffinity`` 1: MuJoCo's rule, either geom's
+    type against the other's affinity); a visual geom (both 0) does not."""
+    contype, affinity = int(attrs.get("contype", "1")), int(attrs.get("conaffinity", "1"))
+    return bool(contype & 1 or affinity & 1)
+
+
+def _tip_pose(name: str, attrs: dict[str, str], kind: str
+              ) -> tuple[str, FloatArray, FloatArray, float, float] | str:
+    """A sphere or capsule geom's (kind, centre, rotation, half length, radius) in its
+    body's frame, or why it cannot be read."""
+    size = _floats(attrs.get("size"), len(attrs.get("size", "").split()) or 1, (0,))
+    if any(k in attrs for k in ("euler", "axisangle", "xyaxes", "zaxis")):
+        return (f"geom of {name!r}: its orientation is given by "
+                f"{[k for k in ('euler', 'axisangle', 'xyaxes', 'zaxis') if k in attrs]}"
+                "; only pos, quat or fromto are read: give the fingertip's surface in "
+                "the request")
+    if "fromto" in attrs:
+        ft = _floats(attrs["fromto"], 6, (0,) * 6)
+        a, b = ft[:3], ft[3:]
+        z = (b - a) / np.linalg.norm(b - a)
+        x = np.cross(z, [1.0, 0, 0] if abs(z[0]) < 0.9 else [0, 1.0, 0])
+        x /= np.linalg.norm(x)
+        R = np.column_stack([x, np.cross(z, x), z])
+        p, half = (a + b) / 2, float(np.linalg.norm(b - a)) / 2
+    else:
+        p = _floats(attrs.get("pos"), 3, (0, 0, 0))
+        R = _quat(_floats(attrs.get("quat"), 4, (1, 0, 0, 0)))
+        half = float(size[1]) if len(size) > 1 and kind == "capsule" else 0.0
+    return kind, p, R, half, float(size[0])
 
 
 def model_problems(text: str, fmt: str) -> list[tuple[str, str]]:
