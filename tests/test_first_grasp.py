@@ -21,7 +21,7 @@ from conftest import Server
 from dexroll_client.models import ManipulationRequest
 from ocp.geometry.grasp import force_angles
 from ocp.robots.allegro import NOMINAL_OBJECT_POSITION, NOMINAL_RADIUS, load_allegro
-from ocp.robots.first_grasp import GraspNotFoundError, desired_turns, first_grasp
+from ocp.robots.first_grasp import GraspNotFoundError, Misses, desired_turns, first_grasp
 from ocp.robots.grasp_reach import roll, tip_state, tips_gap
 from planner_service.planners import request_errors
 from planner_service.planners.cache import FingerCache
@@ -74,6 +74,14 @@ def test_a_ball_out_of_reach_names_every_finger() -> None:
         first_grasp(hand.fingers, (0.5, 0.0, 0.5), NOMINAL_RADIUS, samples=200)
     assert [f for f, _ in exc.value.errors] == [f"fingers[{i}]" for i in range(4)]
     assert "cannot touch the ball" in exc.value.errors[0][1]
+    assert "its tip's centre came no closer than" in exc.value.errors[0][1]
+    # samples that came near, counted by what stopped them (the sweep's Shadow-style
+    # hand: 340 near, 323 facing away, 12 pulled on and no joints found touching)
+    misses = Misses(near=40, away=30, tried=10, unpulled=6, inside=4)
+    why = misses.why(1500, "the ball")
+    assert why.startswith("of 1500 joint vectors within its limits 40 brought its tip near")
+    assert "30 with the cap facing away" in why and "6 found no joints touching" in why
+    assert "4 put a link inside the ball" in why and "off the cap" not in why
 
 
 def test_a_grasp_not_found_says_which_condition_no_combination_meets() -> None:

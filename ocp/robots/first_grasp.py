@@ -74,6 +74,7 @@ __all__ = [
     "FingerContact",
     "FirstGrasp",
     "GraspNotFoundError",
+    "Misses",
     "ObjectGeometry",
     "closure",
     "desired_turns",
@@ -355,24 +356,58 @@ def onto_surface(f: Any, q: ArrayLike, centre: ArrayLike, geo: ObjectGeometry,
     return None
 
 
+@dataclass
+class Misses:
+    """Why a finger's sampled joint vectors gave no contact (:func:`finger_contacts`): the
+    least distance [m] of its tip's centre from where it would touch (``closest``), how
+    many samples brought it within the search's band (``near``), of those how many faced
+    the cap away (``away``), and of those pulled onto the object (``tried``) how many
+    found no joints touching it within the limits, couplings and tendons (``unpulled``),
+    put a link inside it (``inside``) or touched off the cap or past the object chart's
+    bound (``off``)."""
+
+    closest: float = math.inf
+    near: int = 0
+    away: int = 0
+    tried: int = 0
+    unpulled: int = 0
+    inside: int = 0
+    off: int = 0
+
+    def why(self, samples: int, what: str) -> str:
+        """The reason, in words (``what``: "the ball", "the object")."""
+        if not self.near:
+            return (f"over {samples} joint vectors within its limits its tip's centre came "
+                    f"no closer than {self.closest * 1e3:.3g} mm to where it would touch")
+        parts = [f"{n} {w}" for n, w in (
+            (self.unpulled, "found no joints touching it within their limits"),
+            (self.inside, f"put a link inside {what}"),
+            (self.off, "touched it off the cap or past the chart's bound")) if n]
+        return (f"of {samples} joint vectors within its limits {self.near} brought its tip "
+                f"near {what}: {self.away} with the cap facing away"
+                + (f"; of {self.tried} pulled onto it, " + ", ".join(parts) if parts else ""))
+
+
 def _surface_contacts(f: Any, c: FloatArray, geo: ObjectGeometry, Q: list[FloatArray],
-                      margin: float) -> tuple[list[FingerContact], float]:
+                      margin: float) -> tuple[list[FingerContact], Misses]:
     """:func:`finger_contacts` on an object not a ball, from the joint vectors ``Q``."""
     pc, ax, r = _tip(f)
     band = max(0.01, 0.3 * (geo.length + r))
     seam = math.pi / 2 - margin / r
     X = np.array([p + R @ pc for R, p in (f.fingertip_pose_pin(q) for q in Q)]) - c
     low = geo.distance_bounds(X) - r  # at most the distances from touching
-    closest = float(np.min(low[low > band], initial=math.inf))
+    miss = Misses(float(np.min(low[low > band], initial=math.inf)))
     near: list[tuple[float, FloatArray, FloatArray, FloatArray]] = []
     for k in np.flatnonzero(low <= band):
         a, t, n = geo.nearest(X[k])
         off = abs(t - r)
-        closest = min(closest, off)
+        miss.closest = min(miss.closest, off)
         if off > band:
             continue
+        miss.near += 1
         R_l, _ = f.fingertip_pose_pin(Q[k])
         if ax is not None and math.acos(max(-1.0, min(1.0, float(-n @ (R_l @ ax))))) > seam:
+            miss.away += 1
             continue  # the cap faces away from the object
         near.append((off, Q[k], n, a))
     near.sort(key=lambda x: x[0])
@@ -384,20 +419,26 @@ def _surface_contacts(f: Any, c: FloatArray, geo: ObjectGeometry, Q: list[FloatA
         if any(float(n @ m) > math.cos(DISTINCT) for m in tried):
             continue
         tried.append(n)
+        miss.tried += 1
         got = onto_surface(f, q, c, geo, a)
         if got is None:
+            miss.unpulled += 1
             continue
         q1, a1, _, n1 = got
-        if (abs(float(a1[0])) > geo.u_limit and not geo.beyond_limit) \
-                or not _outside_object(f, q1, c, geo):
+        if abs(float(a1[0])) > geo.u_limit and not geo.beyond_limit:
+            miss.off += 1
+            continue
+        if not _outside_object(f, q1, c, geo):
+            miss.inside += 1
             continue
         R_l, p_l = f.fingertip_pose_pin(q1)
         m = R_l.T @ (-n1)
         if ax is not None and math.acos(max(-1.0, min(1.0, float(m @ ax)))) > seam:
+            miss.off += 1
             continue
         centre = p_l + R_l @ pc
         kept.append(FingerContact(q1, n1, centre, m, None, "", centre - r * n1))
-    return kept, closest
+    return kept, miss
 
 
 def _capped(turns: Sequence[Any], cap: float) -> list[Any]:
@@ -432,11 +473,11 @@ def finger_contacts(f: Any, centre: ArrayLike, radius: float | ObjectGeometry,
                     seeds: Sequence[ArrayLike] = (), samples: int = 1500,
                     turns: Sequence[Any] = (), margin: float = 0.002,
                     rng: np.random.Generator | None = None
-                    ) -> tuple[list[FingerContact], float]:
+                    ) -> tuple[list[FingerContact], Misses]:
     """Finger ``f``'s candidate contacts on the ball of ``radius`` [m], or on the object
     ``radius`` (an :class:`ObjectGeometry`: ``turns`` ignored), at ``centre`` (module
-    docstring), at most :data:`MAX_CANDIDATES`, and the least distance [m] of its tip's
-    centre from where it would touch over the samples (why none, when none)."""
+    docstring), at most :data:`MAX_CANDIDATES`, and what the samples missed by
+    (:class:`Misses`: why none, when none)."""
     rng = rng if rng is not None else np.random.default_rng(0)
     c = np.asarray(centre, dtype=float)
     pc, ax, r = _tip(f)
@@ -451,17 +492,19 @@ def finger_contacts(f: Any, centre: ArrayLike, radius: float | ObjectGeometry,
     if isinstance(radius, ObjectGeometry):
         return _surface_contacts(f, c, radius, Q, margin)
     near: list[tuple[float, FloatArray, FloatArray]] = []
-    closest = math.inf
+    miss = Misses()
     for q in Q:
         R_l, p_l = f.fingertip_pose_pin(q)
         d = p_l + R_l @ pc - c
         dist = float(np.linalg.norm(d))
         off = abs(dist - shell)
-        closest = min(closest, off)
+        miss.closest = min(miss.closest, off)
         if off > band or dist < 1e-9:
             continue
+        miss.near += 1
         n = d / dist
         if ax is not None and math.acos(max(-1.0, min(1.0, float(-n @ (R_l @ ax))))) > seam:
+            miss.away += 1
             continue  # the cap faces away from the ball
         near.append((off, q, n))
     near.sort(key=lambda x: x[0])
@@ -473,19 +516,25 @@ def finger_contacts(f: Any, centre: ArrayLike, radius: float | ObjectGeometry,
         if any(float(n @ m) > math.cos(DISTINCT) for m in tried):
             continue
         tried.append(n)
+        miss.tried += 1
         got = grasp_on_ball(f, q, c, radius, n, margin=margin)
         if got is not None:  # a passive joint's tendon at the bound its load needs
             held = at_tendon_bounds(f, got, c, radius)
             got = None if isinstance(held, str) else held[1]
-        if got is None or not _outside(f, got, c, radius):
+        if got is None:
+            miss.unpulled += 1
+            continue
+        if not _outside(f, got, c, radius):
+            miss.inside += 1
             continue
         s = tip_state(f, got, c, radius)
         if s.polar > seam:  # moved to hold a tendon at its bound: the contact off the cap
+            miss.off += 1
             continue
         reach, stop = (None, "") if not turns else _roll_through(f, got, c, radius, turns,
                                                                   margin)
         kept.append(FingerContact(got, s.n, s.centre, s.m, reach, stop))
-    return kept, closest
+    return kept, miss
 
 
 def _pick(per: list[list[FingerContact]], keep: int, ranked: bool) -> list[list[int]]:
@@ -576,7 +625,7 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
                                                                       margin)
             per.append([FingerContact(q, s.n, s.centre, s.m, reach, stop)])
             continue
-        got, closest = finger_contacts(f, c, radius, [] if seeds is None else seeds[i],
+        got, miss = finger_contacts(f, c, radius, [] if seeds is None else seeds[i],
                                        samples, turns, margin, rng)
         if turns and geo is not None:  # rolled on the object's surface
             rolled_ = [_roll_through(f, ct.q, c, rho, turns, margin, held=held) for ct in got]
@@ -586,17 +635,9 @@ def first_grasp(fingers: Sequence[Any], centre: ArrayLike, radius: float | Objec
             size = f"radius {rho * 1e3:.3g} mm" if geo is None else \
                 f"chart parameters {', '.join(f'{x:.3g}' for x in geo.params)}"
             errors.append((f"fingers[{i}]", f"finger {names[i]!r} cannot touch {what} "
-                                            f"({size} at "
-                                            f"{_mm(c)} mm) with its round tip: over "
-                                            f"{samples} joint vectors within its limits its "
-                                            "tip's centre came no closer than "
-                                            f"{closest * 1e3:.3g} mm to where it would "
-                                            "touch, or its cap faced away, or a link "
-                                            f"entered {what[4:]}"
-                                            + ("" if geo is None else ", or its contact "
-                                               "was beyond the chart's bound") +
-                                            f"; move {what} (initial_pose) "
-                                            "within the fingers' reach"))
+                                            f"({size} at {_mm(c)} mm) with its round tip: "
+                                            f"{miss.why(samples, what)}; move {what} "
+                                            "(initial_pose) within the fingers' reach"))
         per.append(got)
     if errors:
         raise GraspNotFoundError(errors)
