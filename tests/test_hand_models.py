@@ -175,6 +175,11 @@ def test_a_tip_without_sphere_or_capsule_geometry_and_no_surface() -> None:
      "couplings across fingers are not planned"),
     ("<worldbody>", "<include file=\"other.xml\"/><worldbody>", "included files"),
     ('type="hinge" axis="0 0 1"', 'type="ball" axis="0 0 1"', "'ball' joint"),
+    # two hinges in one body (Pinocchio composes them into a joint dexroll does not model)
+    ('<joint name="index_j2" type="hinge" axis="0 1 0" range="-0.174 1.709"/>',
+     '<joint name="index_j2" type="hinge" axis="0 1 0" range="-0.174 1.709"/>'
+     '<joint name="index_j2b" type="hinge" axis="1 0 0" range="-0.1 0.1"/>',
+     "body 'index_medial' has 2 joints ['index_j2', 'index_j2b']"),
 ])
 def test_mjcf_couplings_it_cannot_plan_includes_and_unsupported_joints_are_refused(
         patch: str, words: str, why: str) -> None:

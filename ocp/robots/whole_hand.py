@@ -283,6 +283,14 @@ def model_problems(text: str, fmt: str) -> list[tuple[str, str]]:
                 if kind not in ("hinge", "slide"):
                     errs.append(("model", f"joint {j.get('name')!r} is a {kind!r} joint; "
                                           "only hinge and slide joints are supported"))
+            for body in world.iter("body"):
+                joints = [j.get("name") or "(unnamed)" for j in body.findall("joint")]
+                if len(joints) > 1:
+                    errs.append(("model", f"body {body.get('name')!r} has {len(joints)} "
+                                          f"joints {joints}: MuJoCo moves it by each in "
+                                          "turn, dexroll's kinematics take one joint a "
+                                          "body; give each joint a body of its own (at "
+                                          "the same place, no geoms)"))
     else:
         if root.tag != "robot":
             return [("model", f"a URDF's root element is <robot>, got <{root.tag}>")]
