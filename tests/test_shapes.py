@@ -96,11 +96,13 @@ def test_the_surfaces_key_the_nlps_apart() -> None:
         assert ObjectSpec(shape, dims).surface in SHAPES[shape].surfaces()
 
 
+@pytest.mark.slow
 def test_a_triaxial_ellipsoid_turned_between_two_pads_is_certified_and_executed() -> None:
     """The two-finger hand of the paper's experiment 2 turns an ellipsoid with three
     different semi-axes (a chart that is not orthogonal) by its four 20-degree steps, its
     forces planned: certified, and executed in MuJoCo on the ellipsoid geom within 1 mm /
-    1 degree with no contact lost."""
+    1 degree with no contact lost. (Slow: the default run plans and executes the same
+    request as examples/ellipsoid_two_fingers.json, tests/test_cli.py and test_sim.py.)"""
     import json
     from pathlib import Path
 
