@@ -151,6 +151,18 @@ def test_the_builtin_hand_takes_the_searched_tip_sides() -> None:
      "fingers[1].initial", "with `grasp`"),
     # one finger alone holds nothing (was a 500: the search's tip gap of one tip, inf)
     (lambda b: b.update(fingers=b["fingers"][:1]), "fingers", "at least two fingertips"),
+    # the object's own reasons on its own field, before its fingertips are measured on it
+    # (a sphere's second dimension was a 500 from CasADi; an ellipsoid's fourth a 500
+    # from the search; a capsule's third was put on each finger's initial_q)
+    (lambda b: b.update(object={"shape": "sphere", "dimensions": [0.03, 0.03]}),
+     "object.dimensions", "a sphere has 1 dimension"),
+    (lambda b: b.update(object={"shape": "ellipsoid", "dimensions": [0.03] * 4}),
+     "object.dimensions", "an ellipsoid has 2 dimensions"),
+    (lambda b: b.update(object={"shape": "capsule", "dimensions": [0.01, 0.02, 0.03]}),
+     "object.dimensions", "a capsule has 2 dimensions"),
+    # a zero quaternion (was a least-squares failure blamed on every finger)
+    (lambda b: b["initial_pose"].update(orientation_wxyz=[0, 0, 0, 0]),
+     "initial_pose.orientation_wxyz", "must not be zero"),
 ])
 def test_bad_grasp_requests_are_422_naming_the_field(live_server: Server, change: Any,
                                                      field: str, words: str) -> None:

@@ -230,6 +230,17 @@ def test_urdf_mimic_and_continuous_joints_are_refused() -> None:
                              '<child link="index_distal"/><mimic joint="index_j2"/>')
     errs = _errors(lambda: load_whole_hand(text, "urdf", [TipSpec("index_tip")]))
     assert errs[0][0] == "model" and "mimics 'index_j2'" in errs[0][1]
+    # an axis without a direction (NaN kinematics and a misleading reach error before),
+    # a revolute joint without its <limit> (urdfdom's reason went to stderr alone)
+    j3 = URDF.text[URDF.text.index('<joint name="index_j3"'):]
+    j3 = j3[:j3.index("</joint>")]
+    for patch, words in ((('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>'),
+                          "joint 'index_j3' has the axis '0 0 0'"),
+                         (('<limit lower="-0.227" upper="1.618" effort="1" velocity="6"/>',
+                           ""), "joint 'index_j3' (revolute) has no <limit>")):
+        bad = URDF.text.replace(j3, j3.replace(*patch))
+        errs = _errors(lambda bad=bad: load_whole_hand(bad, "urdf", [TipSpec("index_tip")]))
+        assert errs[0][0] == "model" and words in errs[0][1], errs
 
 
 def test_an_unreachable_initial_grasp_names_the_finger_the_distance_and_the_limit() -> None:

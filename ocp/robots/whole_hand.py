@@ -304,6 +304,17 @@ def model_problems(text: str, fmt: str) -> list[tuple[str, str]]:
             if kind_u not in ("revolute", "prismatic", "fixed"):
                 errs.append(("model", f"joint {j.get('name')!r} is a {kind_u!r} joint; only "
                                       "revolute, prismatic and fixed joints are supported"))
+            if kind_u in ("revolute", "prismatic"):
+                if j.find("limit") is None:  # (urdfdom's reason goes to stderr alone)
+                    errs.append(("model", f"joint {j.get('name')!r} ({kind_u}) has no "
+                                          "<limit>: the URDF format requires one (lower, "
+                                          "upper, effort, velocity)"))
+                axis = j.find("axis")
+                xyz = _floats(None if axis is None else axis.get("xyz"), 3, (1, 0, 0))
+                if not np.all(np.isfinite(xyz)) or float(np.linalg.norm(xyz)) < 1e-9:
+                    errs.append(("model", f"joint {j.get('name')!r} has the axis "
+                                          f"{axis.get('xyz') if axis is not None else ''!r}: "
+                                          "an axis must have a direction (a nonzero xyz)"))
     return errs
 
 

@@ -403,9 +403,16 @@ def problem_and_grasp(request: ManipulationRequest, cache: FingerCache, skip: in
                                     if f.initial_q is not None else f"{where}.initial"))
             tips.append(None)
     obj = object_spec(request.object)
+    # the object's own checks first: its fingertips are measured on it (a sphere given two
+    # dimensions reached CasADi's shape check: a 500), and they are its fields' reasons
+    errors += obj.errors()
     start = motion_start = None
     if request.initial_pose is not None:
         q, p = request.initial_pose.orientation_wxyz, request.initial_pose.position
+        if not any(q):
+            errors.append(("initial_pose.orientation_wxyz", "a quaternion must not be "
+                                                            "zero (the identity is 1, 0, 0, 0)"))
+            q = [1.0, 0.0, 0.0, 0.0]
         start = motion_start = ObjectPose((q[0], q[1], q[2], q[3]), (p[0], p[1], p[2]))
     palm = None
     if request.palm is not None:
