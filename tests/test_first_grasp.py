@@ -163,6 +163,8 @@ def test_the_builtin_hand_takes_the_searched_tip_sides() -> None:
     # a zero quaternion (was a least-squares failure blamed on every finger)
     (lambda b: b["initial_pose"].update(orientation_wxyz=[0, 0, 0, 0]),
      "initial_pose.orientation_wxyz", "must not be zero"),
+    # no planner: read as ball_on_palm, whose errors never said that planner was missing
+    (lambda b: b.pop("planner"), "planner", "'manipulation' takes them: name the planner"),
 ])
 def test_bad_grasp_requests_are_422_naming_the_field(live_server: Server, change: Any,
                                                      field: str, words: str) -> None:

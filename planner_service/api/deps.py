@@ -22,7 +22,7 @@ from dexroll_client.models import ErrorBody, FieldError, JobState
 from ..jobs.store import JobRow, Store
 from ..jobs.workers import Dispatcher
 from ..models_check import ModelChecker
-from ..planners.fields import wire_field
+from ..planners.fields import planner_hint, wire_field
 from ..settings import Settings
 
 __all__ = [
@@ -252,6 +252,8 @@ def add_error_handlers(app: FastAPI) -> None:
             if e.get("type") == "json_invalid":
                 field, reason = "body", f"not valid JSON: {e.get('ctx', {}).get('error', '')}"
             detail.append(FieldError(field=field, reason=reason))
+        detail = [FieldError(field=f, reason=r) for f, r in planner_hint(
+            getattr(exc, "body", None), [(d.field, d.reason) for d in detail])] + detail
         message = "; ".join(f"{d.field}: {d.reason}" for d in detail[:MAX_DETAIL])
         if len(detail) > MAX_DETAIL:  # the answer's size is bounded: the first are named
             message += f" …and {len(detail) - MAX_DETAIL:,} more"

@@ -18,7 +18,8 @@ from pydantic import ValidationError
 
 from dexroll_client.models import PLANNERS
 
-__all__ = ["FieldErrors", "FieldMap", "Rule", "validation_errors", "wire_field"]
+__all__ = ["FieldErrors", "FieldMap", "Rule", "planner_hint", "validation_errors",
+           "wire_field"]
 
 #: (field, reason) pairs: every check's answer, fields named by dotted paths.
 FieldErrors = list[tuple[str, str]]
@@ -120,3 +121,29 @@ def validation_errors(exc: ValidationError) -> FieldErrors:
             field = "planner"
         out.append((field, str(e["msg"])))
     return out
+
+
+def planner_hint(body: object, errors: FieldErrors) -> FieldErrors:
+    """A request without ``planner`` is read as the default, 'ball_on_palm': when its
+    errors include top-level fields that planner does not take and another planner
+    takes them all (``hand`` and ``fingers`` are the manipulation planner's), the reason
+    to give first, on ``planner``; [] otherwise."""
+    from dexroll_client.requests import BallOnPalmRequest, ManipulationRequest, OneFingerRequest
+
+    if not isinstance(body, dict) or "planner" in body:
+        return []
+    extra = sorted({f for f, why in errors if "." not in f and "[" not in f
+                    and f in body and "not permitted" in why})
+    if not extra:
+        return []
+    takers = [name for name, m in (("one_finger", OneFingerRequest),
+                                   ("manipulation", ManipulationRequest))
+              if set(extra) <= set(m.model_fields)]
+    if not takers or set(extra) <= set(BallOnPalmRequest.model_fields):
+        return []
+    fields = ", ".join(f"`{f}`" for f in extra)
+    return [("planner", f"not given, so the request is read as the default "
+                        f"'ball_on_palm', which has no {fields}; "
+                        + " or ".join(f"'{t}'" for t in takers)
+                        + f" takes {'it' if len(extra) == 1 else 'them'}: name the "
+                          "planner")]
