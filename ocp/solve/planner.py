@@ -353,45 +353,44 @@ class ManipulationPlanner:
 
     def _guesses(self, problem: ManipulationProblem, strategy: Strategy, m: GraspModel,
                  nlp: _NLP, x0: FloatArray, t_nodes: FloatArray,
-                 warm: WarmStart | ManipulationSolution | None
-                 ) -> Iterator[tuple[Guess, NlpPoint | None]]:
-        """The initial guesses in the order they are tried: the warm start (with IPOPT's
-        primal-dual point when it is this very NLP's and the strategy takes it), then the
-        strategy's own."""
+                 warm: WarmStart | ManipulationSolution | None,
+                 multipliers: NlpPoint | None = None
+                 ) -> Iterator[tuple[Guess, NlpPoint | None, float | None]]:
+        """The initial guesses in the order they are tried, each with the primal-dual
+        point IPOPT starts from and its push (:func:`~ocp.solve.attempt.run`'s
+        ``warm_push``): the warm start (with IPOPT's point when it is this very NLP's and
+        the strategy takes it), then the strategy's own, the first of them with
+        ``multipliers`` (:meth:`solve`'s, pushed :data:`MULTIPLIER_PUSH`) when there is no
+        warm start and they are this NLP's."""
+        sizes = (nlp.fingerprint, nlp.pack.nnz_out(0), len(nlp.lbg))
         if warm is not None:
             ws = warm if isinstance(warm, WarmStart) else warm.warm_start
-            mult = ws.nlp_point_for(nlp.fingerprint, nlp.pack.nnz_out(0), len(nlp.lbg)) \
-                if strategy.use_nlp_point else None
-            yield strategy.warm_guess(warm, problem, nlp, x0, t_nodes), mult
+            mult = ws.nlp_point_for(*sizes) if strategy.use_nlp_point else None
+            yield strategy.warm_guess(warm, problem, nlp, x0, t_nodes), mult, None
+        first = multipliers if warm is None and multipliers is not None \
+            and strategy.use_nlp_point and multipliers.fits(*sizes) else None
         for g in strategy.own_guesses(self, problem, m, nlp, x0, t_nodes):
-            yield g, None
+            yield g, first, None if first is None else MULTIPLIER_PUSH
+            first = None
 
     def _solve_once(self, problem: ManipulationProblem, strategy: Strategy, x0: FloatArray,
                     warm: WarmStart | ManipulationSolution | None, deadline: float,
                     budget: int, totals: _Totals, certify: bool,
                     multipliers: NlpPoint | None = None) -> ManipulationSolution:
-        """The initial guesses in turn (:meth:`_guesses`), each one IPOPT call
-        (:func:`~ocp.solve.attempt.run`) within what is left of the budget, until one
-        solves: the plan of the best (:func:`~ocp.solve.attempt.finish`). ``multipliers``
-        (:meth:`solve`'s) start the first guess when there is no warm start."""
+        """The initial guesses in turn (:meth:`_guesses`, ``multipliers`` its), each one
+        IPOPT call (:func:`~ocp.solve.attempt.run`) within what is left of the budget,
+        until one solves: the plan of the best (:func:`~ocp.solve.attempt.finish`)."""
         s = setup(self, problem, x0)
-        if warm is not None or multipliers is None or not multipliers.fits(
-                s.nlp.fingerprint, s.nlp.pack.nnz_out(0), len(s.nlp.lbg)):
-            multipliers = None
         s.strategy = strategy
         cap = self.max_iter_per_guess if strategy.caps_guesses else None
         runs: list[IpoptRun] = []
         t_loop = time.perf_counter()
-        for guess, mult in self._guesses(problem, strategy, s.model, s.nlp, x0, s.t_nodes,
-                                         warm):
+        for guess, point, push in self._guesses(problem, strategy, s.model, s.nlp, x0,
+                                                s.t_nodes, warm, multipliers):
             used = sum(r.iterations for r in runs) if strategy.shared_budget else 0
             remaining = budget - used
             limit = remaining if cap is None else max(1, min(remaining, cap))
-            if not runs and multipliers is not None:
-                runs.append(run(s, initial_point(s, guess), multipliers, deadline, limit,
-                                MULTIPLIER_PUSH))
-            else:
-                runs.append(run(s, initial_point(s, guess), mult, deadline, limit))
+            runs.append(run(s, initial_point(s, guess), point, deadline, limit, push))
             if runs[-1].status is Status.SOLVED or s.nlp.stop.reason is Status.TIME_LIMIT \
                     or (cap is not None and remaining <= cap) \
                     or time.perf_counter() >= deadline:
