@@ -24,6 +24,7 @@ from ocp.geometry.rotations import quaternion_wxyz
 from ocp.transcription.collocation import HermiteInterpolant, NlpPoint, PlannedForces, WarmStart
 
 if TYPE_CHECKING:
+    from ocp.transcription.chart_switch import PlanCharts
     from ocp.transcription.grasp_model import GraspModel
 
 __all__ = ["Collocation", "ContactTrajectory", "FingerTrajectory", "GraspSample",
@@ -430,6 +431,11 @@ class ManipulationSolution:
     #: egg's: the problem's, or the one the planner chose because a contact rode the own
     #: chart's bound: :func:`ocp.spec.patches.side_charted`).
     object_side_chart: bool = False
+    #: Where the fingertips' contacts change chart (the problem's
+    #: :class:`~ocp.spec.chart_switch.ChartSwitchSpec`, its time a node of the grid):
+    #: their coordinates are on the problem's charts before it and on the switch's from
+    #: it on (:mod:`ocp.transcription.chart_switch`); None: one chart throughout.
+    chart_switch: Any = None
     _interpolant: _Interpolant | None = field(default=None, repr=False, compare=False)
 
     @property
@@ -512,7 +518,7 @@ class ManipulationSolution:
         traj, ts = self.trajectory, self._times(t)
         assert self._interpolant is not None
         k, s = traj.locate(ts, side)
-        return self._interpolant.describe(ts, traj.on_intervals(k, s),
+        return self._interpolant.describe(ts, k, traj.on_intervals(k, s),
                                           traj.on_intervals(k, s, 1),
                                           traj.on_intervals(k, s, 2),
                                           traj.inputs_on_intervals(k, s))
@@ -538,9 +544,9 @@ class ManipulationSolution:
         f, tau = self.forces(t, side)
         smp = self.sample(t, side)
         assert self._interpolant is not None
-        m, prm = self._interpolant.m, self._interpolant.prm
+        m = self._interpolant.m
         k = len(smp.t)
-        cart = m.mapped("cartesian", k)(smp.x.T, prm)
+        cart = self._interpolant.cartesian(self.trajectory.locate(smp.t, side)[0], smp.x)
         pts = np.asarray(cart[4]).T.reshape(k, m.n_contacts, 3)
         nrm = np.asarray(cart[5]).T.reshape(k, m.n_contacts, 3)
         out = []
@@ -586,16 +592,30 @@ class ManipulationSolution:
 
 
 class _Interpolant:
-    """A plan's returned polynomials with its model (for the object's pose)."""
+    """A plan's returned polynomials with its charts' models (for the object's pose):
+    :class:`~ocp.transcription.chart_switch.PlanCharts`."""
 
-    def __init__(self, m: GraspModel, traj: HermiteInterpolant, prm: FloatArray) -> None:
-        self.m, self.traj, self.prm = m, traj, prm
+    def __init__(self, charts: PlanCharts, traj: HermiteInterpolant) -> None:
+        self.charts, self.traj = charts, traj
 
-    def describe(self, t: FloatArray, x: FloatArray, xd: FloatArray, xdd: FloatArray,
-                 u: FloatArray) -> GraspSample:
-        """States x, rates xd, accelerations xdd and inputs u at times t, with the
-        object's pose."""
-        k = len(t)
-        cart = self.m.mapped("cartesian", k)(x.T, self.prm)
-        R = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
+    @property
+    def m(self) -> GraspModel:
+        """The grasp's model (its first chart's: every chart's has the same layout)."""
+        return self.charts.first
+
+    @property
+    def prm(self) -> FloatArray:
+        return self.charts.prms[0]
+
+    def cartesian(self, k: NDArray[np.intp], x: FloatArray) -> list[FloatArray]:
+        """The model's ``cartesian`` at states x (rows) of intervals k."""
+        return self.charts.evaluate("cartesian", self.charts.interval_charts(k), x.T)
+
+    def describe(self, t: FloatArray, k: NDArray[np.intp], x: FloatArray, xd: FloatArray,
+                 xdd: FloatArray, u: FloatArray) -> GraspSample:
+        """States x, rates xd, accelerations xdd and inputs u at times t (of intervals k),
+        with the object's pose."""
+        k_ = len(t)
+        cart = self.cartesian(k, x)
+        R = np.asarray(cart[0]).T.reshape(k_, 3, 3).transpose(0, 2, 1)
         return GraspSample(t, x, u, xd, xdd, np.asarray(cart[1]).T, R)

@@ -220,6 +220,10 @@ class WindowController:
         if not problem.fingers:
             errs.append(("problem.fingers", "the window controller tracks grasps with "
                                             "fingers"))
+        if reference.chart_switch is not None:
+            errs.append(("reference", "the plan's contacts change chart at t = "
+                                      f"{reference.chart_switch.time:g} s; tracking a plan "
+                                      "across a chart switch is not built"))
         if errs:
             raise ProblemError(errs)
         #: the window's solver (:mod:`ocp.solve.backend`; "auto": IPOPT until

@@ -1182,8 +1182,9 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                                                            strict=True)) > RECUR_TOL:
             warm = None  # a grasp of other contacts: the last roll's point is no start
         if warm is not None and last_all is not None \
-                and roll_objects.get(last_all, prob.object) != prob.object:
-            warm = None  # its contacts on the other chart (an egg's side chart)
+                and (roll_objects.get(last_all, prob.object) != prob.object
+                     or warm.chart_switch is not None):
+            warm = None  # its contacts on the other chart (an egg's side chart, or two)
         multipliers = None
         if plan_start(template, pose) is None:  # its turned form is another solid: no
             # roll recurs (the egg's 90 deg gait about a short axis took 38 s warm-started

@@ -47,6 +47,7 @@ __all__ = [
     "Plane",
     "Sphere",
     "Surface",
+    "latitude_longitude",
     "safe_norm",
 ]
 
@@ -265,6 +266,12 @@ class Surface:
         every row for points (k, 3), as (k, 2)."""
         raise NotImplementedError(f"{self.name} has no inverse chart")
 
+    def inverse_expr(self, point: Any, params: Any) -> Any:
+        """:meth:`inverse` of one point (3 x 1) as a CasADi expression (2 x 1): what a
+        plan that changes chart at a node maps its contact coordinates with
+        (:mod:`ocp.transcription.chart_switch`). The longitude is atan2's, in (-pi, pi]."""
+        raise NotImplementedError(f"{self.name} has no symbolic inverse chart")
+
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
         """h(n) = max_{p on surface} n . p for a unit direction n in the body frame [m].
 
@@ -404,6 +411,14 @@ class _Plane(Surface):
         return np.stack([p[..., 0], p[..., 1]], axis=-1)
 
 
+def latitude_longitude(point: Any, a: Any, b: Any, c: Any) -> Any:
+    """(u, v) of the point (3 x 1, CasADi) of the chart (a cos u cos v, -b cos u sin v,
+    c sin u): u = atan2(z / c, |(x / a, y / b)|), v = atan2(-y / b, x / a)."""
+    x, y, z = point[0] / a, point[1] / b, point[2] / c
+    return ca.vertcat(ca.atan2(z, ca.sqrt(x * x + y * y)), ca.atan2(-y, x))
+
+
+
 class _Sphere(Surface):
     """Sphere of radius rho, f = rho (cos u cos v, -cos u sin v, sin u); poles at u = +-pi/2."""
 
@@ -422,6 +437,9 @@ class _Sphere(Surface):
         r = np.sqrt(np.sum(p * p, axis=-1))
         return np.stack([np.arcsin(np.clip(p[..., 2] / r, -1.0, 1.0)),
                          np.arctan2(-p[..., 1], p[..., 0])], axis=-1)
+
+    def inverse_expr(self, point: Any, params: Any) -> Any:
+        return latitude_longitude(point, 1.0, 1.0, 1.0)
 
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
         return float(np.asarray(params, dtype=float)[0])
@@ -457,6 +475,9 @@ class _Ellipsoid(Surface):
         a, c = np.asarray(params, dtype=float)
         return np.stack([np.arctan2(p[..., 2] / c, np.hypot(p[..., 0], p[..., 1]) / a),
                          np.arctan2(-p[..., 1], p[..., 0])], axis=-1)
+
+    def inverse_expr(self, point: Any, params: Any) -> Any:
+        return latitude_longitude(point, params[0], params[0], params[1])
 
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
         n = np.asarray(normal, dtype=float)

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ocp.geometry.bodies import point_segment_distance
-from ocp.geometry.surfaces import Ellipsoid, Surface
+from ocp.geometry.surfaces import Ellipsoid, Surface, latitude_longitude
 from ocp.shapes.base import MujocoGeom, Shape
 
 __all__ = ["ELLIPSOID", "EggSide", "EggSideSurface", "EllipsoidShape", "TriaxialEllipsoid",
@@ -116,6 +116,9 @@ class TriaxialEllipsoidSurface(Surface):
         x, y, z = p[..., 0] / a, p[..., 1] / b, p[..., 2] / c
         return np.stack([np.arctan2(z, np.hypot(x, y)), np.arctan2(-y, x)], axis=-1)
 
+    def inverse_expr(self, point: Any, params: Any) -> Any:
+        return latitude_longitude(point, params[0], params[1], params[2])
+
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
         n = np.asarray(normal, dtype=float)
         q = np.asarray(params, dtype=float) ** 2
@@ -174,6 +177,10 @@ class EggSideSurface(Surface):
         a, c = np.asarray(params, dtype=float)
         g = np.asarray(point, dtype=float) @ _SIDE  # (the chart frame's coordinates)
         return np.asarray(TriaxialEllipsoid.inverse(g, (c, a, a)))
+
+    def inverse_expr(self, point: Any, params: Any) -> Any:
+        g = ca.mtimes(ca.DM(_SIDE.T), point)
+        return latitude_longitude(g, params[1], params[0], params[0])
 
     def support_height(self, normal: ArrayLike, params: ArrayLike) -> float:
         return Ellipsoid.support_height(normal, params)

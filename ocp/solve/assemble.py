@@ -22,6 +22,7 @@ from ocp.solution import (
     joint_torques,
 )
 from ocp.spec.grasp import ManipulationProblem
+from ocp.transcription.chart_switch import PlanCharts
 from ocp.transcription.collocation import HermiteInterpolant, PlannedForces
 from ocp.transcription.grasp_model import GraspModel
 
@@ -31,11 +32,13 @@ FloatArray = NDArray[np.float64]
 
 
 def planned_forces(problem: ManipulationProblem, m: GraspModel, F: FloatArray,
-                   X: FloatArray, Xm: FloatArray, prm: FloatArray) -> PlannedForces:
+                   X: FloatArray, Xm: FloatArray, prm: FloatArray,
+                   charts: PlanCharts | None = None) -> PlannedForces:
     """The planned forces of an NLP solution: ``F`` its load-force rows at the points
     (nodes, then midpoints; :mod:`ocp.transcription.nlp_blocks`: per contact the force in
     the object frame over the force scale, then the torsion's share of its limit), the
-    states ``X`` at the nodes and ``Xm`` at the midpoints (rows), in palm-frame newtons."""
+    states ``X`` at the nodes and ``Xm`` at the midpoints (rows), in palm-frame newtons
+    (``charts``: each point on its chart)."""
     from ocp.transcription.nlp_blocks import LOAD_VARS
     from ocp.transcription.values import force_scale
 
@@ -43,7 +46,8 @@ def planned_forces(problem: ManipulationProblem, m: GraspModel, F: FloatArray,
     nc, n = m.n_contacts, len(Xm)
     Xa = np.vstack([X, Xm])
     k = len(Xa)
-    cart = m.mapped("cartesian", k)(Xa.T, prm)
+    charts = charts or PlanCharts.single(m, prm)
+    cart = charts.evaluate("cartesian", charts.point_charts(n), Xa.T)
     R_po = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
     nrm = np.asarray(cart[5]).T.reshape(k, nc, 3)  # palm frame
     Fl = np.asarray(F, dtype=float).reshape(LOAD_VARS, nc, k, order="F")
@@ -58,12 +62,13 @@ def planned_forces(problem: ManipulationProblem, m: GraspModel, F: FloatArray,
 
 def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Status, raw: str,
                       col: Collocation, traj: HermiteInterpolant, prm: FloatArray,
-                      cert: Certificate, goal_error: dict[str, float]
-                      ) -> ManipulationSolution:
+                      cert: Certificate, goal_error: dict[str, float],
+                      charts: PlanCharts | None = None) -> ManipulationSolution:
     """The returned trajectory ``traj`` on its collocation grid (nodes and midpoints in time
     order; at a via-point node the outgoing rates): every contact's and finger's
     trajectory, the object's motion, force closure, tracking; the status made
-    ``inaccurate`` when the certificate fails."""
+    ``inaccurate`` when the certificate fails. ``charts``: the plan's charts (one,
+    ``m`` and ``prm``, by default; two when its contacts change chart at a node)."""
     t_nodes, X, Xm, U0, Um, U1 = col.t_nodes, col.X, col.Xm, col.U0, col.Um, col.U1
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
     order = np.argsort(np.concatenate([t_nodes, tm]), kind="stable")
@@ -79,7 +84,9 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
         xdot = np.full_like(Xg, np.nan)
     Ug = np.vstack([np.vstack([U0, U1[-1:]]), Um])[order]
     k = len(t)
-    cart = m.mapped("cartesian", k)(Xg.T, prm)
+    charts = charts or PlanCharts.single(m, prm)
+    kc = charts.interval_charts(kk)
+    cart = charts.evaluate("cartesian", kc, Xg.T)
     nc, nf = m.n_contacts, len(m.fingertips)
     R_po = np.asarray(cart[0]).T.reshape(k, 3, 3).transpose(0, 2, 1)
     p_po = np.asarray(cart[1]).T
@@ -88,7 +95,7 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
     p_pf = np.asarray(cart[3]).T.reshape(k, nf, 3)
     pts = np.asarray(cart[4]).T.reshape(k, nc, 3)
     nrm = np.asarray(cart[5]).T.reshape(k, nc, 3)
-    laws = m.mapped("laws", k)(Xg.T, xdot.T, prm)
+    laws = charts.evaluate("laws", kc, Xg.T, xdot.T)
     v_obj, w_obj = np.asarray(laws[0]).T, np.asarray(laws[1]).T
     phi, angles, _ = force_angles(pts, nrm)
     margin = math.atan(problem.mu) - phi
@@ -134,4 +141,5 @@ def assemble_solution(problem: ManipulationProblem, m: GraspModel, status: Statu
         desired_rotation=Rd, tracking_position_error=ep, tracking_angle_error=ea,
         goal_error=goal_error, certificate=cert, certificate_failures=failures, X=Xg, U=Ug,
         collocation=col, object_side_chart=problem.object.side_chart,
-        _interpolant=_Interpolant(m, traj, prm) if finite else None)
+        chart_switch=problem.chart_switch,
+        _interpolant=_Interpolant(charts, traj) if finite else None)

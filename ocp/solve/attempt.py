@@ -45,8 +45,16 @@ from ocp.solve.certify import certify_grasp
 from ocp.solve.guesses import Guess, Strategy, epigraph_guess, strategy_for
 from ocp.solve.ipopt import NLP as _NLP
 from ocp.solve.ipopt import kkt_residuals, warm_solver
+from ocp.solve.switched import (
+    plan_charts,
+    restated,
+    sampled_guess,
+    switch_parameters,
+    with_refs,
+)
 from ocp.spec.grasp import ManipulationProblem, contact_charts, support_goal_errors
 from ocp.spec.problem import ProblemError
+from ocp.transcription.chart_switch import PlanCharts
 from ocp.transcription.collocation import NlpPoint, WarmStart, node_times
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.nlp_blocks import LOAD_VARS
@@ -99,6 +107,8 @@ class Setup:
     ubx: FloatArray
     build_time: float  # building the NLP (0 when cached) and any solver made for it
     cache_hit: bool
+    #: the charts the plan's points are on (one, or two with ``problem.chart_switch``)
+    charts: PlanCharts = field(default_factory=lambda: PlanCharts((), ()))
 
 
 @dataclass
@@ -131,12 +141,13 @@ def setup(planner: ManipulationPlanner, problem: ManipulationProblem,
     segments, tb = problem.segments()
     t_nodes = node_times(segments, tb)
     prm = m.params(np.asarray(problem.object.params, dtype=float), contact_charts(problem))
-    p = nlp_parameters(problem, nlp, (x_scale, u_scale))
+    charts = plan_charts(planner.model, problem, m, prm)
+    p = nlp_parameters(problem, nlp, (x_scale, u_scale), switch_parameters(charts))
     lbx, ubx = bounds(problem, nlp, m, x0, x_scale, u_scale)
     strategy = strategy_for(problem)
     strategy.adjust_bounds(problem, nlp, lbx, ubx)
     return Setup(problem, nlp, m, strategy, np.asarray(x0, dtype=float), x_scale, u_scale,
-                 t_nodes, prm, p, lbx, ubx, 0.0 if hit else nlp.build_time, hit)
+                 t_nodes, prm, p, lbx, ubx, 0.0 if hit else nlp.build_time, hit, charts)
 
 
 def initial_point(s: Setup, guess: Guess, aux: bool = True) -> FloatArray:
@@ -146,9 +157,11 @@ def initial_point(s: Setup, guess: Guess, aux: bool = True) -> FloatArray:
     bounds."""
     X, Xm, U, Um = guess
     nlp, n = s.nlp, len(s.t_nodes) - 1
+    with_refs(s, X)  # (a plan whose contacts change chart: the switch's angles)
     if aux:
         Sg, Fg = epigraph_guess(s.model, np.vstack([X, Xm]), s.prm,
-                                load_parameters(s.problem) if nlp.n_load else None)
+                                load_parameters(s.problem) if nlp.n_load else None,
+                                s.charts if s.charts.switched else None)
     else:
         n_f = 3 * nlp.n_force + LOAD_VARS * nlp.n_load
         Sg, Fg = np.zeros((nlp.n_epigraph, 2 * n + 1)), np.zeros((n_f, 2 * n + 1))
@@ -225,24 +238,29 @@ def finish(s: Setup, runs: list[IpoptRun], solve_time: float, deadline: float,
     best = next((r for r in runs if r.status is Status.SOLVED),
                 min(runs, key=lambda r: r.violation))
     col = collocation_of(s, best.w)
+    charts = s.charts
+    if charts.switched:  # each interval's end input on its own chart
+        with_refs(s, col.X)  # continued from the plan's own angles before the switch
+        col = replace(col, U1=charts.first_chart_inputs(col.X, col.U1))
     if nlp.n_load:  # the planned forces, after the internal forces' rows
         col = replace(col, forces=planned_forces(
             problem, m, np.asarray(nlp.unpack(best.w)[6])[3 * nlp.n_force:], col.X, col.Xm,
-            s.prm))
+            s.prm, charts))
     # one deadline over the whole plan: past it, no certificate either (seconds for a
     # multi-finger grasp); the plan is the last iterate, stopped by the time limit
     late = certify and time.perf_counter() >= deadline
     status = Status.TIME_LIMIT if late else best.status
     t_cert = time.perf_counter()
-    traj = m.interpolant(s.t_nodes, col.X, col.U0, col.Um, col.U1, s.prm)
-    cert = certify_grasp(problem, m, traj, s.prm, problem.tolerances, col.forces) \
+    traj = charts.interpolant(s.t_nodes, col.X, col.U0, col.Um, col.U1)
+    cert = certify_grasp(problem, m, traj, s.prm, problem.tolerances, col.forces, charts) \
         if certify and not late else \
         Certificate.failed("not certified: the time limit was reached first" if late
                            else "not certified (planned as an initial guess)")
     cert_time = time.perf_counter() - t_cert
     segments, _ = problem.segments()
     goal_error = support_goal_errors(problem, col.X, [0, *np.cumsum(segments).tolist()])
-    sol = assemble_solution(problem, m, status, best.raw, col, traj, s.prm, cert, goal_error)
+    sol = assemble_solution(problem, m, status, best.raw, col, traj, s.prm, cert, goal_error,
+                            charts)
     iterations = sum(r.iterations for r in runs)
     ipopt_time = sum(r.time for r in runs)
     primal = dual = None
@@ -340,11 +358,13 @@ def attempt(problem: ManipulationProblem, *, x0: Any = None, u0: Any = None,
     point = None
     if warm is not None:
         ws = warm.warm_start if isinstance(warm, ManipulationSolution) else warm
-        guess = s.strategy.warm_guess(warm, problem, s.nlp, s.x0, s.t_nodes)
+        sampled = sampled_guess(warm, s) if isinstance(warm, ManipulationSolution) else None
+        guess = sampled or restated(s, s.strategy.warm_guess(warm, problem, s.nlp, s.x0,
+                                                              s.t_nodes))
         point = ws.nlp_point_for(s.nlp.fingerprint, s.nlp.pack.nnz_out(0), len(s.nlp.lbg))
     else:
-        guess = next(iter(s.strategy.own_guesses(planner, problem, m, s.nlp, s.x0,
-                                                 s.t_nodes)))
+        guess = restated(s, next(iter(s.strategy.own_guesses(planner, problem, m, s.nlp,
+                                                             s.x0, s.t_nodes))))
     r = run(s, initial_point(s, guess), point, deadline, max_iter, opts.warm_push)
     return finish(s, [r], time.perf_counter() - t_loop, deadline, opts.certify)
 

@@ -32,7 +32,8 @@ from ocp.geometry.grasp import force_angles
 from ocp.geometry.rotations import rotation_angle_between
 from ocp.solve.contact_checks import CertificateContext, contact_checks
 from ocp.spec.grasp import ManipulationProblem, support_goal_errors
-from ocp.transcription.collocation import HermiteInterpolant, PlannedForces, reintegrate
+from ocp.transcription.chart_switch import PlanCharts
+from ocp.transcription.collocation import HermiteInterpolant, PlannedForces
 
 if TYPE_CHECKING:
     from ocp.transcription.grasp_model import GraspModel
@@ -141,13 +142,14 @@ def force_checks(problem: ManipulationProblem, forces: PlannedForces,
     return checks, reported
 
 
-def timing_checks(problem: ManipulationProblem, m: GraspModel, traj: HermiteInterpolant
-                  ) -> list[Check]:
+def timing_checks(problem: ManipulationProblem, m: GraspModel, traj: HermiteInterpolant,
+                  charts: PlanCharts | None = None) -> list[Check]:
     """The smooth timing's laws on the returned trajectory: every state at rest at both ends
     (its rate there), no state's rate jumps at any node (the rates from the interval before
     and after), every joint's acceleration within ``max_joint_acceleration`` (the cubic's
     second derivative is linear on an interval, so the values at both ends of every
-    interval bound it)."""
+    interval bound it). At a chart switch (``charts``) the rate after it is read on the
+    chart before (the map's Jacobian): the same motion's rate on both sides."""
     T = float(traj.t_nodes[-1] - traj.t_nodes[0])
     scale = np.full(m.nx, 1.0 / T)
     scale[m.length_columns()] = problem.object.length_scale / T
@@ -162,7 +164,12 @@ def timing_checks(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
         err = np.abs(traj.U0[0] - u0) / np.maximum(u_scale, 1e-300)
         checks.append(Check("max_initial_input_error", float(err.max(initial=0.0)),
                             TIMING_REL_TOL, CheckKind.PHYSICS, time=float(traj.t_nodes[0])))
-    jumps = np.abs(traj.F1[:-1] - traj.F0[1:]) / scale
+    after = np.array(traj.F0[1:], dtype=float)
+    if charts is not None and charts.switched:
+        ks = charts.node
+        assert ks is not None
+        after[ks - 1] = charts.rate_to_first(traj.X[ks], traj.F0[ks])
+    jumps = np.abs(traj.F1[:-1] - after) / scale
     k_jump = int(np.argmax(jumps.max(axis=1))) if len(jumps) else 0
     P = CheckKind.PHYSICS
     checks += [Check("max_rest_rate", float(rest.max()), TIMING_REL_TOL, P,
@@ -186,14 +193,17 @@ def timing_checks(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
 
 def with_force_checks(cert: Certificate, problem: ManipulationProblem, m: GraspModel,
                       traj: HermiteInterpolant, prm: FloatArray, policy: TolerancePolicy,
-                      forces: PlannedForces) -> Certificate:
+                      forces: PlannedForces, charts: PlanCharts | None = None
+                      ) -> Certificate:
     """The certificate ``cert`` of the plan ``traj`` (its kinematics, by
     :func:`certify_grasp`) with the checks of its planned ``forces`` added: the same
     samples, poses, points and normals as :func:`certify_grasp` gives
     :func:`force_checks`, without checking the kinematics again."""
     ts, sx, _, _ = check_samples(traj, policy.check_points)
     n = len(ts)
-    cart = m.mapped("cartesian", n)(sx.T, prm)
+    charts = charts or PlanCharts.single(m, prm)
+    cart = charts.evaluate("cartesian", charts.interval_charts(
+        sample_intervals(traj, policy.check_points)[0]), sx.T)
     nc = m.n_contacts
     R_po = np.asarray(cart[0]).T.reshape(n, 3, 3).transpose(0, 2, 1)
     p_po = np.asarray(cart[1]).T
@@ -241,18 +251,21 @@ def link_clearance_check(problem: ManipulationProblem, ts: FloatArray, q: FloatA
 
 def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInterpolant,
                   prm: FloatArray, policy: TolerancePolicy,
-                  forces: PlannedForces | None = None) -> Certificate:
+                  forces: PlannedForces | None = None, charts: PlanCharts | None = None
+                  ) -> Certificate:
     """The certificate of a plan as returned (``traj``, and its planned ``forces``): see
-    the module's doc."""
+    the module's doc. ``charts``: the plan's charts (default one: ``m``, ``prm``); with
+    a chart switch each sample is measured on its interval's chart, and the
+    re-integration goes on across the switch from the state it reached there."""
     arrays = (traj.X, traj.F0, traj.F1, traj.U0, traj.Um, traj.U1)
     if not all(np.all(np.isfinite(a)) for a in arrays):
         return Certificate.failed("the plan has non-finite states or inputs")
     t_nodes, o = traj.t_nodes, problem.options
     D = CheckKind.DISCRETISATION
     # the independent re-integration of the inputs: states at every node and midpoint
+    charts = charts or PlanCharts.single(m, prm)
     try:
-        Xr, sx, _ = reintegrate(m.reintegrator(2), traj.X[0], t_nodes, traj.U0, traj.Um,
-                                traj.U1, prm, 2)
+        Xr, sx = charts.reintegrate(traj.X[0], t_nodes, traj.U0, traj.Um, traj.U1, traj.X)
     except RuntimeError as exc:  # CVODES gave up: the plan is not a smooth motion
         return Certificate.failed(f"re-integration failed: {str(exc).splitlines()[-1]}")
     n_int = len(t_nodes) - 1
@@ -284,9 +297,11 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
     # the returned trajectory, densely
     ts, sx, sxd, wts = check_samples(traj, policy.check_points)
     n = len(ts)
+    kc = charts.interval_charts(sample_intervals(traj, policy.check_points)[0])
     laws = dict(zip(m.laws.name_out(), (np.asarray(a).T for a in
-                                        m.mapped("laws", n)(sx.T, sxd.T, prm)), strict=True))
-    cart = m.mapped("cartesian", n)(sx.T, prm)
+                                        charts.evaluate("laws", kc, sx.T, sxd.T)),
+                    strict=True))
+    cart = charts.evaluate("cartesian", kc, sx.T)
     nc, nf = m.n_contacts, len(m.fingertips)
     R_po = np.asarray(cart[0]).T.reshape(n, 3, 3).transpose(0, 2, 1)
     p_po = np.asarray(cart[1]).T
@@ -345,5 +360,5 @@ def certify_grasp(problem: ManipulationProblem, m: GraspModel, traj: HermiteInte
         checks.append(link_clearance_check(problem, ts, sx[:, m.joint_columns()], R_po,
                                            p_po))
     if problem.smooth:
-        checks += timing_checks(problem, m, traj)
+        checks += timing_checks(problem, m, traj, charts)
     return Certificate.of(checks, reported, n_samples=n)

@@ -17,6 +17,7 @@ from ocp.solve.certify import with_force_checks
 from ocp.solve.guesses import planned_force_guess
 from ocp.spec.grasp import ManipulationProblem, contact_charts
 from ocp.spec.patches import planned_problem
+from ocp.transcription.chart_switch import PlanCharts
 from ocp.transcription.force_stage import ForceStage
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.values import load_parameters
@@ -40,35 +41,44 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
     if pf is None:
         return None
     m = model(pf)
-    t_build = time.perf_counter()
-    if m not in stages:
-        stages[m] = ForceStage(m)
-    stage = stages[m]
-    stage.prepare(2 * len(col.t_nodes) - 1)
-    t_build = time.perf_counter() - t_build
-    t0 = time.perf_counter()
     prm = m.params(np.asarray(pf.object.params, dtype=float), contact_charts(pf))
+    # the kinematic plan's charts (two when its contacts change chart at a node)
+    charts = kin._interpolant.charts if kin._interpolant is not None \
+        and kin._interpolant.charts.switched else PlanCharts.single(m, prm)
     Xall = np.vstack([col.X, col.Xm])
+    pc = charts.point_charts(len(col.Xm))
     load = load_parameters(pf)
-    guess = planned_force_guess(m, Xall, prm, load)
-    torques = _torque_rows(stage, pf, Xall, prm, _model_torques(stage, pf, kin, col))
-    F, iterations = stage.solve(Xall, prm, load, pf.object.length_scale, guess, torques)
-    if F is None and torques is not None:
-        # no forces within the actuators: the plan's forces without them (the actuator
-        # check then refuses the plan, naming the joint), not the coupled NLP's
-        F, more = stage.solve(Xall, prm, load, pf.object.length_scale, guess)
-        iterations += more
-    t_stage = time.perf_counter() - t0
-    if F is None:
-        return None
-    forces = planned_forces(pf, m, F, col.X, col.Xm, prm)
+    model_rows = _model_torques(pf, kin, col)
+    F = None
+    iterations, t_build, t_stage = 0, 0.0, 0.0
+    for c in sorted(set(pc.tolist())):  # the points of each chart: one stage each
+        idx = np.flatnonzero(pc == c)
+        mc, prm_c = charts.models[c], charts.prms[c]
+        t0 = time.perf_counter()
+        if mc not in stages:
+            stages[mc] = ForceStage(mc)
+        stage = stages[mc]
+        stage.prepare(len(idx))
+        t_build += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        Fc, it = _stage_forces(stage, pf, Xall[idx], prm_c, load,
+                               None if model_rows is None else [r[idx] for r in model_rows])
+        iterations += it
+        t_stage += time.perf_counter() - t0
+        if Fc is None:
+            return None
+        if F is None:
+            F = np.zeros((Fc.shape[0], len(Xall)))
+        F[:, idx] = Fc
+    assert F is not None
+    forces = planned_forces(pf, m, F, col.X, col.Xm, prm, charts)
     t_cert = time.perf_counter()
     cert = with_force_checks(kin.certificate, pf, m, kin.trajectory, prm, pf.tolerances,
-                             forces)
+                             forces, charts)
     if not cert.passed:
         return None
     sol = assemble_solution(pf, m, Status.SOLVED, kin.raw_status, replace(col, forces=forces),
-                            kin.trajectory, prm, cert, kin.goal_error)
+                            kin.trajectory, prm, cert, kin.goal_error, charts)
     t_cert = time.perf_counter() - t_cert
     stats = replace(kin.stats, iterations=kin.stats.iterations + iterations,
                     build_time=kin.stats.build_time + t_build,
@@ -85,15 +95,32 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
 ROLL_TORQUE_SHARE = 0.9
 
 
-def _model_torques(stage: ForceStage, problem: ManipulationProblem,
-                   kin: ManipulationSolution, col: Any) -> list[np.ndarray] | None:
-    """Per fingertip of the force stage, what the hand's own model needs at each of its
-    points (nodes, then midpoints; rows) on top of the contact forces' torques: its links'
+def _stage_forces(stage: ForceStage, problem: ManipulationProblem, Xall: np.ndarray,
+                  prm: np.ndarray, load: np.ndarray, model_rows: list[np.ndarray] | None
+                  ) -> tuple[np.ndarray | None, int]:
+    """The force stage at the points ``Xall`` (rows, on the stage's chart ``prm``): the
+    forces (None: some point admits none) and its iterations."""
+    m = stage.m
+    guess = planned_force_guess(m, Xall, prm, load)
+    torques = _torque_rows(stage, problem, Xall, prm, model_rows)
+    F, iterations = stage.solve(Xall, prm, load, problem.object.length_scale, guess, torques)
+    if F is None and torques is not None:
+        # no forces within the actuators: the plan's forces without them (the actuator
+        # check then refuses the plan, naming the joint), not the coupled NLP's
+        F, more = stage.solve(Xall, prm, load, problem.object.length_scale, guess)
+        iterations += more
+    return F, iterations
+
+
+def _model_torques(problem: ManipulationProblem, kin: ManipulationSolution, col: Any
+                   ) -> list[np.ndarray] | None:
+    """Per fingertip, what the hand's own model needs at each of the plan's points
+    (nodes, then midpoints; rows) on top of the contact forces' torques: its links'
     weight, the joints' damping and springs, the motion's inertia (MuJoCo's, the
     actuation's ``model_torques``, which the actuator check adds too); None where the
     actuation has no model (a URDF's)."""
     act = problem.actuation
-    if act is None or not hasattr(act, "model_torques") or not stage.tips:
+    if act is None or not hasattr(act, "model_torques") or not problem.fingers:
         return None
     t_nodes = np.asarray(col.t_nodes, dtype=float)
     times = np.concatenate([t_nodes, (t_nodes[:-1] + t_nodes[1:]) / 2])
@@ -102,7 +129,7 @@ def _model_torques(stage: ForceStage, problem: ManipulationProblem,
         return [np.asarray(act.model_torques(t.finger.joint_names, smp.x[:, t.q_cols],
                                              smp.x_dot[:, t.q_cols],
                                              smp.x_ddot[:, t.q_cols]), dtype=float)
-                for _, t in stage.tips]
+                for t in kin._interpolant.m.fingertips]  # type: ignore[union-attr]
     except (ValueError, AssertionError):  # a joint the file does not name; no polynomials
         return None
 

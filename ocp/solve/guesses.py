@@ -193,17 +193,21 @@ def planned_force_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray,
 
 
 def epigraph_guess(m: GraspModel, Xall: FloatArray, prm: FloatArray,
-                   load: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+                   load: FloatArray | None = None, charts: Any = None
+                   ) -> tuple[FloatArray, FloatArray]:
     """Grasp epigraph values (1 x k; 0 x k for one contact) and force guesses at the
     given states: the internal forces of 3+ contacts, then (``load``: the NLP's load
-    parameters, when it plans forces) the planned forces (:func:`load_guess`)."""
+    parameters, when it plans forces) the planned forces (:func:`load_guess`).
+    ``charts`` (:class:`~ocp.transcription.chart_switch.PlanCharts`): the states are a
+    grid's points (nodes, then midpoints), each on its chart."""
     from ocp.geometry.grasp import force_angles
 
     k = len(Xall)
     nc = m.n_contacts
     if nc < 2 and load is None:  # no force closure to certify: neither
         return np.zeros((0, k)), np.zeros((0, k))
-    out = m.mapped("cartesian", k)(Xall.T, prm)
+    out = m.mapped("cartesian", k)(Xall.T, prm) if charts is None else \
+        charts.evaluate("cartesian", charts.point_charts((k - 1) // 2), Xall.T)
     pts = np.asarray(out[4]).T.reshape(k, nc, 3)
     nrm = np.asarray(out[5]).T.reshape(k, nc, 3)
     loads = np.zeros((0, k))

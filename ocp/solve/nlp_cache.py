@@ -25,8 +25,10 @@ import numpy as np
 
 from ocp.solve.compiled import BackgroundCompiler
 from ocp.solve.ipopt import NLP, ipopt_solver
+from ocp.spec.chart_switch import after_switch, switch_node
 from ocp.spec.grasp import ManipulationProblem
 from ocp.spec.problem import Structure
+from ocp.transcription.chart_switch import ChartSwitch
 from ocp.transcription.grasp_model import GraspModel
 from ocp.transcription.nlp_blocks import build_manipulation_nlp
 
@@ -63,6 +65,9 @@ class GraspStructure:
     schedule: tuple[tuple[int, tuple[bool, ...]], ...] | None = None
     #: a reference trajectory tracked (``problem.reference``): its objective terms
     reference: bool = False
+    #: the fingertips' contacts change chart (``problem.chart_switch``): the grid node and
+    #: the next chart's surface name
+    switch: tuple[int, str] | None = None
 
     @staticmethod
     def of(problem: ManipulationProblem) -> GraspStructure:
@@ -76,7 +81,9 @@ class GraspStructure:
                               goal_mask, via_masks, tuple(c.finger for c in problem.fingers),
                               problem.motion is not None, problem.forces is not None,
                               problem.smooth, problem.schedule(),
-                              problem.reference is not None)
+                              problem.reference is not None,
+                              None if problem.chart_switch is None else
+                              (switch_node(problem), after_switch(problem).object.surface.name))
 
     def fingerprint(self, m: GraspModel) -> str:
         """The structure as a string that another process computes alike: the fingers by
@@ -87,7 +94,8 @@ class GraspStructure:
                        self.tracking, m.nx, m.nu)) + (":forces" if self.forces else "")
                  + (":smooth" if self.smooth else "")
                  + (f":phases={self.schedule!r}" if self.schedule is not None else "")
-                 + (":reference" if self.reference else "")]
+                 + (":reference" if self.reference else "")
+                 + (f":switch={self.switch!r}" if self.switch is not None else "")]
         for f in self.fingers:
             parts += [hashlib.sha256(f.urdf_text.encode()).hexdigest(), f.tip_frame,
                       repr(np.asarray(f.base_rotation).round(12).tolist()),
@@ -159,7 +167,9 @@ class NlpCache:
                                        key.tracking, FORCE_REGULARISATION,
                                        forces=key.forces, smooth=key.smooth,
                                        schedule=key.schedule, stage_order=self.stage_order,
-                                       reference=key.reference)
+                                       reference=key.reference,
+                                       switch=None if key.switch is None else ChartSwitch(
+                                           key.switch[0], self.model(after_switch(problem))))
         fingerprint = key.fingerprint(m) + (":stages" if self.stage_order else "")
         nlp = ipopt_solver(block, fingerprint, None if self.compiler else self.compile_dir,
                            self.solver)

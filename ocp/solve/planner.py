@@ -53,7 +53,7 @@ from ocp.solution import (
     SolverStats,
     Status,
 )
-from ocp.solve.attempt import IpoptRun, finish, initial_point, run, setup
+from ocp.solve.attempt import IpoptRun, Setup, finish, initial_point, run, setup
 from ocp.solve.compiled import BackgroundCompiler
 from ocp.solve.force_plan import with_earlier, with_forces
 from ocp.solve.guesses import (
@@ -64,6 +64,8 @@ from ocp.solve.guesses import (
 from ocp.solve.initial import initial_state
 from ocp.solve.ipopt import NLP as _NLP
 from ocp.solve.nlp_cache import MAX_CACHED_NLPS, GraspStructure, NlpCache
+from ocp.solve.switched import restated, sampled_guess
+from ocp.spec.chart_switch import snapped
 from ocp.spec.grasp import (
     Fingertip,
     ManipulationProblem,
@@ -79,6 +81,7 @@ from ocp.spec.patches import (
     rides_bound,
     rides_pole,
     side_charted,
+    switching_chart,
     turns_off_chart,
 )
 from ocp.spec.problem import MAX_INTERVALS, ProblemError
@@ -262,9 +265,8 @@ class ManipulationPlanner:
             refused = self.beyond_reach(problem)
             if refused is not None:
                 return refused
-        if certify and self.auto_patch and turns_off_chart(
-                problem, lambda: self._initial_joints(problem)):
-            problem = side_charted(problem) or problem  # (an egg's contact over its end)
+        if certify and self.auto_patch and problem.chart_switch is None:
+            problem = self._charted(problem)
         if problem.forces is None or not self.two_stage_forces or not certify:
             return self._plan(problem, warm_start, certify, multipliers)
         t0 = time.perf_counter()
@@ -282,6 +284,26 @@ class ManipulationPlanner:
             certify)
         return with_earlier(coupled, kin)
 
+    def _charted(self, problem: ManipulationProblem) -> ManipulationProblem:
+        """The problem on the charts that carry its contacts' predicted paths (an egg's):
+        switching chart inside the plan where neither of the object's carries them
+        throughout (:func:`~ocp.spec.patches.switching_chart`), else on the side chart
+        where the motion carries a contact over an end
+        (:func:`~ocp.spec.patches.turns_off_chart`), else as it is."""
+        cached: list[list[FloatArray]] = []
+
+        def joints() -> list[FloatArray]:
+            if not cached:
+                cached.append(self._initial_joints(problem))
+            return cached[0]
+
+        spec = switching_chart(problem, joints)
+        if spec is not None:
+            return replace(problem, chart_switch=spec)
+        if turns_off_chart(problem, joints):
+            return side_charted(problem) or problem  # (an egg's contact over its end)
+        return problem
+
     def beyond_reach(self, problem: ManipulationProblem) -> ManipulationSolution | None:
         """A turn the grasp cannot roll through, answered without an NLP
         (:func:`unplanned_turn`); None for any other problem."""
@@ -297,6 +319,7 @@ class ManipulationPlanner:
               multipliers: NlpPoint | None = None) -> ManipulationSolution:
         """:meth:`solve`'s pipeline for one NLP kind (the coupled one when ``forces``)."""
         self.adopt_compiled()
+        problem = snapped(problem)  # (a chart switch at its node: refinements keep it)
         if warm_start is not None:
             m = self.model(problem)
             ws = warm_start.warm_start if isinstance(warm_start, ManipulationSolution) \
@@ -319,7 +342,7 @@ class ManipulationPlanner:
             refinements = 1
         sol = self._solve_once(problem, strategy, x0, warm_start, deadline, budget, totals,
                                certify, multipliers)
-        if self.auto_patch and certify:
+        if self.auto_patch and certify and problem.chart_switch is None:
             problem, strategy, x0, sol = repatched(self, problem, strategy, x0, sol, deadline,
                                                    budget, totals)
         # only failures that shrink with the grid (what happens between collocation
@@ -354,23 +377,30 @@ class ManipulationPlanner:
     def _guesses(self, problem: ManipulationProblem, strategy: Strategy, m: GraspModel,
                  nlp: _NLP, x0: FloatArray, t_nodes: FloatArray,
                  warm: WarmStart | ManipulationSolution | None,
-                 multipliers: NlpPoint | None = None
+                 multipliers: NlpPoint | None = None, s: Setup | None = None
                  ) -> Iterator[tuple[Guess, NlpPoint | None, float | None]]:
         """The initial guesses in the order they are tried, each with the primal-dual
         point IPOPT starts from and its push (:func:`~ocp.solve.attempt.run`'s
         ``warm_push``): the warm start (with IPOPT's point when it is this very NLP's and
         the strategy takes it), then the strategy's own, the first of them with
         ``multipliers`` (:meth:`solve`'s, pushed :data:`MULTIPLIER_PUSH`) when there is no
-        warm start and they are this NLP's."""
+        warm start and they are this NLP's. A plan whose contacts change chart (``s``'s
+        charts) takes each guess on the chart of each point (:mod:`ocp.solve.switched`)."""
+        def charted(g: Guess) -> Guess:
+            return g if s is None else restated(s, g)
+
         sizes = (nlp.fingerprint, nlp.pack.nnz_out(0), len(nlp.lbg))
         if warm is not None:
             ws = warm if isinstance(warm, WarmStart) else warm.warm_start
             mult = ws.nlp_point_for(*sizes) if strategy.use_nlp_point else None
-            yield strategy.warm_guess(warm, problem, nlp, x0, t_nodes), mult, None
+            sampled = sampled_guess(warm, s) if s is not None and \
+                isinstance(warm, ManipulationSolution) else None
+            yield sampled or charted(strategy.warm_guess(warm, problem, nlp, x0, t_nodes)), \
+                mult, None
         first = multipliers if warm is None and multipliers is not None \
             and strategy.use_nlp_point and multipliers.fits(*sizes) else None
         for g in strategy.own_guesses(self, problem, m, nlp, x0, t_nodes):
-            yield g, first, None if first is None else MULTIPLIER_PUSH
+            yield charted(g), first, None if first is None else MULTIPLIER_PUSH
             first = None
 
     def _solve_once(self, problem: ManipulationProblem, strategy: Strategy, x0: FloatArray,
@@ -386,7 +416,7 @@ class ManipulationPlanner:
         runs: list[IpoptRun] = []
         t_loop = time.perf_counter()
         for guess, point, push in self._guesses(problem, strategy, s.model, s.nlp, x0,
-                                                s.t_nodes, warm, multipliers):
+                                                s.t_nodes, warm, multipliers, s):
             used = sum(r.iterations for r in runs) if strategy.shared_budget else 0
             remaining = budget - used
             limit = remaining if cap is None else max(1, min(remaining, cap))

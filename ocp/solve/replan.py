@@ -115,6 +115,10 @@ class Replanner:
 
             planner = default_planner()
         self.options = options or ReplanOptions()
+        if first.chart_switch is not None:
+            raise ProblemError([("first", "the plan's contacts change chart at t = "
+                                          f"{first.chart_switch.time:g} s; re-planning a "
+                                          "plan across a chart switch is not built")])
         n = first.stats.n_intervals if first.stats is not None else problem.n_intervals
         problem = problem.with_intervals(n)
         #: the problem with its hard tracking tolerances (re-plans from within them)

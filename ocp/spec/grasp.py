@@ -21,6 +21,7 @@ from ocp.geometry.surfaces import rotation_from_vector
 from ocp.robots.couplings import coupled_step
 from ocp.robots.first_grasp import ObjectGeometry, onto_surface
 from ocp.robots.grasp_reach import at_tendon_bounds
+from ocp.spec.chart_switch import ChartSwitchSpec, switch_errors
 from ocp.spec.motion import DesiredMotion, ObjectPose, Tracking
 from ocp.spec.phases import ContactPhase, phase_errors, phase_intervals
 from ocp.spec.problem import (
@@ -204,6 +205,10 @@ class ManipulationProblem:
     #: names)``): a gait's holds keep their joints' torques within them where the cones
     #: allow. None: no limits known.
     actuation: Any = field(default=None, compare=False, repr=False)
+    #: The fingertips' contacts change chart at a time of the motion
+    #: (:class:`~ocp.spec.chart_switch.ChartSwitchSpec`: an egg's contact rolling from
+    #: around its equator up to an end); None: the problem's charts throughout.
+    chart_switch: ChartSwitchSpec | None = None
 
     @property
     def ramp_time_fraction(self) -> float:
@@ -374,6 +379,7 @@ class ManipulationProblem:
             errs += self.forces.errors("forces", self.mu)
             if not self.fingers:
                 errs.append(("forces", "planned forces need a fingertip contact"))
+        errs += switch_errors(self)
         return errs
 
     def validate(self) -> None:

@@ -27,13 +27,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.geometry.rotations import log_rotation
-from ocp.geometry.surfaces import Chart
+from ocp.geometry.surfaces import Chart, rotation_from_vector
 
 if TYPE_CHECKING:
     from ocp.spec.grasp import ManipulationProblem
 
 __all__ = ["planned_problem", "pole_clear_patch", "recharted", "recharted_coordinates",
-           "rides_bound", "rides_pole", "side_charted", "turns_off_chart"]
+           "rides_bound", "rides_pole", "side_charted", "switching_chart", "turns_off_chart"]
 
 FloatArray = NDArray[np.float64]
 
@@ -232,3 +232,150 @@ def turns_off_chart(problem: ManipulationProblem, joints: Callable[[], Sequence[
         if abs(float(u)) > limit:
             return True
     return False
+
+
+#: A predicted contact path's steps per desired turn (:func:`switching_chart`).
+PATH_STEPS = 8
+#: The share of a chart's bound within which a switched plan's predicted contact paths
+#: stay on each of its charts (:func:`switching_chart`).
+SWITCH_SHARE = 0.9
+
+
+def _contact_paths(problem: ManipulationProblem, joints: Sequence[Any]
+                   ) -> tuple[FloatArray, list[FloatArray]] | None:
+    """The fingers' rolled motion (:func:`~ocp.robots.grasp_reach.roll` with the object
+    held, :data:`PATH_STEPS` steps a turn): (the plan's time at each step, per fingertip
+    its contact's points in the object's frame at each step (rows)); a finger that stops
+    keeps its last point. None when the motion turns nothing."""
+    from ocp.robots.first_grasp import desired_turns
+    from ocp.robots.grasp_reach import roll
+    from ocp.shapes.held import held_object
+
+    obj, pose, motion = problem.object, problem.initial_pose, problem.motion
+    assert pose is not None and motion is not None
+    turns = desired_turns(motion)
+    total = sum(float(t.angle) for t in turns)
+    if not turns or total <= 0.0:
+        return None
+    centre = np.asarray(pose.position, dtype=float)
+    start = held_object(obj, centre, pose.rotation)
+    steps = [(t.axis, float(t.angle) / PATH_STEPS) for t in turns for _ in range(PATH_STEPS)]
+    paths = []
+    for tip, q0 in zip(problem.fingers, joints, strict=True):
+        q, held = np.asarray(q0, dtype=float), start
+        pts: list[FloatArray] = []
+        stopped = False
+        for j in range(len(steps) + 1):
+            if j and not stopped:
+                axis, angle = steps[j - 1]
+                rolled = roll(tip.finger, q, centre, float(obj.length_scale), axis, angle,
+                              problem.pad_margin, held=held)
+                q, held = rolled.q, held.turned(axis, rolled.reach)
+                stopped = bool(rolled.why)
+            if not stopped or not pts:
+                point, _ = held.contact(tip.finger, q)
+                pts.append(held.rotation.T @ (point - centre))
+            else:
+                pts.append(pts[-1])
+        paths.append(np.array(pts))
+    # the plan's time at each step: where the desired motion has turned that share
+    ts = np.linspace(0.0, problem.duration, 201)
+    R, _ = motion.at(ts)
+    turned = np.concatenate([[0.0], np.cumsum(
+        [float(np.linalg.norm(log_rotation(R[k].T @ R[k + 1]))) for k in range(200)])])
+    share = np.arange(len(steps) + 1) / len(steps) * turned[-1]
+    return np.interp(share, turned, ts), paths
+
+
+def _ratios(problem: ManipulationProblem, side: bool, patches: Sequence[FloatArray],
+            paths: list[FloatArray]) -> FloatArray:
+    """(steps, fingertips): each predicted contact point's |u| on a chart of the object
+    (its side chart or its own, fingertip i in ``patches[i]``) over that chart's bound."""
+    obj = problem.object
+    surface = obj.kind.side_surface(obj.dimensions) if side else obj.kind.surface(
+        obj.dimensions)
+    assert surface is not None
+    limit = surface.u_limit(obj.params, problem.pole_margin)
+    cols = [np.abs(surface.inverse(path @ R, obj.params)[:, 0]) / limit
+            for R, path in zip(patches, paths, strict=True)]
+    return np.stack(cols, axis=1)
+
+
+def _patches_at(problem: ManipulationProblem, side: bool, points: Sequence[FloatArray]
+                ) -> list[FloatArray]:
+    """Each fingertip's patch on a chart of the object for a contact at ``points[i]``:
+    the side chart's that puts it on that chart's equator, the own chart's unturned."""
+    obj = problem.object
+    if not side:
+        return [np.eye(3) for _ in points]
+    surface = obj.kind.side_surface(obj.dimensions)
+    assert surface is not None
+    return [np.asarray(surface.axis_patch(p), dtype=float) for p in points]
+
+
+def switching_chart(problem: ManipulationProblem, joints: Callable[[], Sequence[Any]]
+                    ) -> Any:
+    """A chart switch (:class:`~ocp.spec.chart_switch.ChartSwitchSpec`) for a motion
+    whose fingertip contacts no chart of the object carries throughout, as the fingers'
+    rolled motion predicts their paths (:func:`_contact_paths`). An egg's charts: its own
+    (poles at its ends) and its side chart, whose patches turn about its axis (poles on
+    its equator, across each contact's azimuth where its patch is chosen): a contact that
+    rolls up toward an end leaves the first, one that rolls around the equator by more
+    than the bound's complement leaves a side patch chosen before it. The switch is at
+    the predicted step where the paths before it stay on the problem's chart and those
+    after it on the next (the side chart with each patch centred on its contact there, or
+    from the side chart the own), each within :data:`SWITCH_SHARE` of its bound, with the
+    most room on both. None when the problem's chart carries the predicted paths, or
+    (from the own chart) the side chart with its patches at the start does
+    (:func:`turns_off_chart` then puts the plan there), when no switch does, or where
+    :func:`turns_off_chart`'s conditions do not hold (contacts all within
+    :data:`NEAR_BOUND` of the bound at the start: nothing is predicted)."""
+    from ocp.spec.chart_switch import ChartSwitchSpec
+
+    obj, pose, motion = problem.object, problem.initial_pose, problem.motion
+    if (obj.kind.side_surface(obj.dimensions) is None or problem.palm is not None
+            or problem.phases is not None or motion is None or pose is None
+            or problem.initial_input is not None or problem.reference is not None):
+        return None
+    from ocp.robots.turn_reach import rolls
+
+    if not all(rolls(tip.finger) for tip in problem.fingers):
+        return None
+    limit = obj.u_limit(problem.pole_margin)
+    if obj.side_chart:  # every contact starts on its patch's equator: only a long motion
+        from ocp.robots.first_grasp import desired_turns  # leaves it
+
+        if sum(float(t.angle) for t in desired_turns(motion)) <= NEAR_BOUND * limit:
+            return None
+    elif max(abs(float(tip.initial[2])) for tip in problem.fingers) <= NEAR_BOUND * limit:
+        return None
+    predicted = _contact_paths(problem, joints())
+    if predicted is None:
+        return None
+    times, paths = predicted
+    side = obj.side_chart
+    now = _ratios(problem, side, [rotation_from_vector(t.chart_rotation)
+                                  for t in problem.fingers], paths)
+    if now.max() <= 1.0:
+        return None  # the problem's chart carries it
+    if not side and _ratios(problem, True, _patches_at(problem, True, [p[0] for p in paths]),
+                            paths).max() <= 1.0:
+        return None  # the side chart carries it throughout (side_charted)
+    best, best_room = None, -np.inf
+    n = len(times) - 1
+    for s in range(1, n):
+        before = float(now[:s + 1].max())
+        if before > SWITCH_SHARE:
+            break
+        # the next chart: the side chart, each patch centred on its contact there (also
+        # from the side chart: a contact that rolled around the equator), or the own
+        for nxt in (True, False) if side else (True,):
+            patches = _patches_at(problem, nxt, [p[s] for p in paths])
+            after = float(_ratios(problem, nxt, patches, [p[s:] for p in paths]).max())
+            room = min(SWITCH_SHARE - before, SWITCH_SHARE - after)
+            if after <= SWITCH_SHARE and room > best_room:
+                best_room = room
+                rvs = [log_rotation(R) for R in patches]
+                best = ChartSwitchSpec(float(times[s]), nxt, tuple(
+                    (float(r[0]), float(r[1]), float(r[2])) for r in rvs))
+    return best

@@ -224,14 +224,19 @@ def point_block(pm: Any, layout: PointLayout, tracking: bool, forces: bool,
     return block
 
 
-def interval_block(pm: Any, n_s: int, smooth: bool, reference: bool = False) -> Block:
+def interval_block(pm: Any, n_s: int, smooth: bool, reference: bool = False,
+                   switch_map: ca.Function | None = None) -> Block:
     """One interval of phase ``pm``: z = (x_k, x_m, x_k+1, u_0, u_m, u_1, s_k, s_m,
     s_k+1); rows: the Hermite-Simpson defects of the states with dynamics in the phase
     (its ``dyn_cols``: a lifted fingertip's contact coordinates have none); cost: the
     grasp-angle epigraph and each effort group's inputs (Simpson's rule), with the smooth
     timing their ramps (:func:`ramp_penalty`); with a ``reference`` the scaled inputs'
     squared distance from the reference's ``ur`` (u_0, u_m, u_1) by Simpson's rule, times
-    the weight ``wu``."""
+    the weight ``wu``. With ``switch_map`` (:func:`~ocp.transcription.chart_switch.chart_map`
+    from the next chart to this phase's) the interval ends at a chart switch: its end
+    (x_k+1, u_1) is in the next chart, read in this one through the map (the next
+    chart's patches ``charts_b`` and the map's ``refs``, two more inputs); the block is
+    named ``switch``."""
     m = pm.grasp
     nx, nu = m.nx, m.nu
     shape_q = ca.SX.sym("shape", m.surface.n_params)
@@ -252,6 +257,13 @@ def interval_block(pm: Any, n_s: int, smooth: bool, reference: bool = False) -> 
     def fdyn(x_: Any, u_: Any) -> Any:
         return pm.dynamics(x_scale * x_, u_scale * u_, prm) / x_scale
 
+    extra: list[Any] = []
+    if switch_map is not None:  # the end in the next chart, read in this one
+        charts_b, refs = ca.SX.sym("charts_b", 9 * m.n_contacts), \
+            ca.SX.sym("refs", switch_map.size1_in(5))
+        x_a, u_a = switch_map(x_scale * xk1, u_scale * u1, shape_q, charts_b, charts_q, refs)
+        xk1, u1 = x_a / x_scale, u_a / u_scale
+        extra = [charts_b, refs]
     D = hermite_simpson_defects(xk, xm, xk1, fdyn(xk, u0), fdyn(xm, um), fdyn(xk1, u1), hq)
     if len(pm.dyn_cols) < nx:  # only the states with dynamics in this phase
         keep = list(pm.dyn_cols) + [nx + j for j in pm.dyn_cols]
@@ -270,7 +282,8 @@ def interval_block(pm: Any, n_s: int, smooth: bool, reference: bool = False) -> 
         cost_i += wu * hn / 6 * (ca.sumsqr(u0 - ur[:nu]) + 4 * ca.sumsqr(um - ur[nu:2 * nu])
                                  + ca.sumsqr(u1 - ur[2 * nu:])) / nu
     n_d = int(D.numel())
-    return _block("interval", zi, [hq, Tq, wq, shape_q, charts_q, ramp_q, ur, wu], D, cost_i,
+    return _block("interval" if switch_map is None else "switch", zi,
+                  [hq, Tq, wq, shape_q, charts_q, ramp_q, ur, wu, *extra], D, cost_i,
                   ca.SX.sym("lam", n_d), ca.SX.sym("sigma"), [0.0] * n_d, [0.0] * n_d)
 
 

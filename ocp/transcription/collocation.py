@@ -328,6 +328,15 @@ class HermiteInterpolant:
     U0: NDArray[np.float64]
     Um: NDArray[np.float64]
     U1: NDArray[np.float64]
+    #: Each interval's end state where it is not the next node's (a plan whose contacts
+    #: change chart at a node: the interval ending there ends in its own chart,
+    #: :class:`~ocp.transcription.chart_switch.PlanCharts`); None: ``X[1:]``.
+    X1: NDArray[np.float64] | None = None
+
+    @property
+    def X_end(self) -> NDArray[np.float64]:
+        """Each interval's end state (``X[1:]``, or :attr:`X1`)."""
+        return self.X[1:] if self.X1 is None else self.X1
 
     @property
     def duration(self) -> float:
@@ -352,7 +361,7 @@ class HermiteInterpolant:
         times s of intervals k, rows."""
         h = (self.t_nodes[k + 1] - self.t_nodes[k])[:, None]
         b = _basis(np.asarray(s, dtype=float)[:, None], h, order)
-        return b[0] * self.X[k] + b[1] * self.F0[k] + b[2] * self.X[k + 1] + b[3] * self.F1[k]
+        return b[0] * self.X[k] + b[1] * self.F0[k] + b[2] * self.X_end[k] + b[3] * self.F1[k]
 
     def inputs_on_intervals(self, k: NDArray[np.intp], s: NDArray[np.float64]
                             ) -> NDArray[np.float64]:

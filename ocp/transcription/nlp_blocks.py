@@ -151,8 +151,10 @@ class BlockAssembler:
 
 
 def _declaration(m: Any, nseg: int, nv: int, npts: int, tracking: bool,
-                 reference: bool = False) -> Parameters:
-    """The NLP's parameters, by name (every structure's, whatever it uses)."""
+                 reference: bool = False, switch: bool = False) -> Parameters:
+    """The NLP's parameters, by name (every structure's, whatever it uses; with a chart
+    ``switch`` the next chart's patches and the switch's reference angles,
+    :mod:`~ocp.transcription.chart_switch`)."""
     n_track = npts if tracking else 0
     n_ref = npts if reference else 0
     return Parameters.of(shape=(m.surface.n_params, 1), seg_T=(nseg, 1), goal=(5, 1),
@@ -161,7 +163,9 @@ def _declaration(m: Any, nseg: int, nv: int, npts: int, tracking: bool,
                          load=(LOAD_PARAMS, 1), accel=(2, 1), Xr=(m.nx, n_ref),
                          Wr=(1, n_ref), Qx=(m.nx if reference else 0, 1),
                          Ur=(3 * m.nu, (npts - 1) // 2 if reference else 0),
-                         wu=(1 if reference else 0, 1))
+                         wu=(1 if reference else 0, 1),
+                         charts_b=(9 * m.n_contacts if switch else 0, 1),
+                         switch_refs=(2 * len(m.fingertips) if switch else 0, 1))
 
 
 def _triplets(sp: ca.Sparsity) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -192,7 +196,8 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
                            force_regularisation: float, small: bool | None = None,
                            forces: bool = False, smooth: bool = False,
                            schedule: Schedule | None = None,
-                           stage_order: bool = False, reference: bool = False) -> BlockNLP:
+                           stage_order: bool = False, reference: bool = False,
+                           switch: Any = None) -> BlockNLP:
     """The NLP of one grasp structure (``m``: its
     :class:`~ocp.transcription.grasp_model.GraspModel`) with its contact phases
     (``schedule``: :data:`Schedule`; None, one phase with every fingertip touching):
@@ -240,7 +245,10 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     ``stage_order`` (issue 27): the same NLP laid out stage by stage for a
     structure-exploiting solver (:mod:`~ocp.transcription.stage_order`: each interval's
     end copied into its stage, the gap-closing rows first in each stage; ``copies`` and
-    ``stages`` say where); never the small SX form."""
+    ``stages`` say where); never the small SX form.
+    ``switch`` (:class:`~ocp.transcription.chart_switch.ChartSwitch`): the fingertips'
+    contacts change chart at a node (parameters ``charts_b``, ``switch_refs``); never the
+    small SX form."""
     t0 = time.perf_counter()
     nc = m.n_contacts
     hs = HermiteSimpson(m.nx, m.nu, segments, smooth)
@@ -248,9 +256,11 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     touching = interval_touching(len(m.fingertips), n, schedule)
     one_phase = len(set(touching)) == 1 and all(touching[0])
     if small is None:
-        small = nc < 2 and not tracking and one_phase and not stage_order and not reference
+        small = nc < 2 and not tracking and one_phase and not stage_order and not reference \
+            and switch is None
     if small:
-        if nc >= 2 or tracking or forces or not one_phase or stage_order or reference:
+        if nc >= 2 or tracking or forces or not one_phase or stage_order or reference \
+                or switch is not None:
             raise ValueError("only a grasp without path rows (one contact, no tracking, "
                              "one phase, kind order) has the small SX form")
         from ocp.transcription.small_nlp import small_grasp_nlp
@@ -259,4 +269,4 @@ def build_manipulation_nlp(m: Any, segments: tuple[int, ...], goal_mask: tuple[b
     from ocp.transcription.phased_nlp import PhasedNLP
 
     return PhasedNLP(m, hs, touching, goal_mask, via_masks, tracking, force_regularisation,
-                      forces, smooth, stage_order, reference).build(t0)
+                      forces, smooth, stage_order, reference, switch).build(t0)

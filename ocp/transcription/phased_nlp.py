@@ -25,6 +25,7 @@ from ocp.transcription.blocks import (
     rate_block,
     touchdown_block,
 )
+from ocp.transcription.chart_switch import ChartSwitch, chart_map
 from ocp.transcription.collocation import HermiteSimpson, target_residuals
 from ocp.transcription.grasp_conditions import grasp_condition
 from ocp.transcription.nlp_blocks import (
@@ -53,6 +54,15 @@ class _Placed:
     z_idx: NDArray[np.int64]
     row_maps: list[NDArray[np.int64]]
     cols: list[int]
+    #: the chart its instances are in (1: after a chart switch; "switch": the interval
+    #: that ends at it; 0 otherwise)
+    chart: Any = 0
+
+
+def _chart(kind: Any) -> Any:
+    """The chart of a block kind's key (its last item when it is a (mask, chart) pair)."""
+    return kind[1] if isinstance(kind, tuple) and len(kind) == 2 \
+        and not isinstance(kind[1], bool) and kind[1] in (0, 1, "switch") else 0
 
 
 class PhasedNLP:
@@ -61,8 +71,10 @@ class PhasedNLP:
     def __init__(self, m: Any, hs: HermiteSimpson, touching: list[tuple[bool, ...]],
                  goal_mask: tuple[bool, ...], via_masks: tuple[tuple[bool, ...], ...],
                  tracking: bool, force_regularisation: float, forces: bool,
-                 smooth: bool, stage_order: bool = False, reference: bool = False) -> None:
+                 smooth: bool, stage_order: bool = False, reference: bool = False,
+                 switch: ChartSwitch | None = None) -> None:
         self.m, self.hs, self.touching = m, hs, touching
+        self.switch = switch
         self.goal_mask, self.via_masks = goal_mask, via_masks
         self.tracking, self.forces, self.smooth = tracking, forces, smooth
         self.stage_order, self.reference = stage_order, reference
@@ -72,17 +84,35 @@ class PhasedNLP:
         nodes = [touching[0]] + [_union(touching[k - 1], touching[k])
                                  for k in range(1, n)] + [touching[-1]]
         self.point_masks = nodes + touching  # nodes, then midpoints: the NLP's order
-        self._points: dict[tuple[bool, ...], Block] = {}
-        conditions = [m.phase(mask) for mask in dict.fromkeys(self.point_masks)]
+        ks = n + 1 if switch is None else switch.node  # the first point in the next chart
+        if switch is not None and not 0 < ks < n:
+            raise ValueError(f"a chart switch is at an inner node (1..{n - 1}), got {ks}")
+        #: every point's (contacts, chart): nodes from the switch on, and the midpoints of
+        #: the intervals after it, in the next chart
+        self.point_kinds = [(mask, int(j >= ks)) for j, mask in enumerate(nodes)] + \
+            [(mask, int(k >= ks)) for k, mask in enumerate(touching)]
+        self._points: dict[tuple[Any, ...], Block] = {}
+        conditions = [self.model(c).phase(mask)
+                      for mask, c in dict.fromkeys(self.point_kinds)]
         conds = [grasp_condition(pm.n_contacts) for pm in conditions]
         self.layout = PointLayout(
             m.nx, max(c.n_epigraph for c in conds),
             m.n_contacts if any(c.internal_forces for c in conds) else 0,
             m.n_contacts if forces else 0)
-        for pm in conditions:
-            self._points[pm.touching] = point_block(pm, self.layout, tracking, forces,
-                                                    force_regularisation, self.npts,
-                                                    reference)
+        for (mask, c), pm in zip(dict.fromkeys(self.point_kinds), conditions, strict=True):
+            self._points[(mask, c)] = point_block(pm, self.layout, tracking, forces,
+                                                  force_regularisation, self.npts, reference)
+        #: each interval's chart (:class:`_Placed`'s ``chart``)
+        self.interval_charts: list[Any] = [0 if k < ks - 1 else "switch" if k == ks - 1
+                                           else 1 for k in range(n)]
+
+    def model(self, chart: Any) -> Any:
+        """The grasp model of a chart (1: the switch's next chart)."""
+        return self.switch.model if chart == 1 and self.switch is not None else self.m
+
+    def node_chart(self, j: int) -> int:
+        """The chart of node ``j``'s state (1 from the switch node on)."""
+        return int(self.switch is not None and j >= self.switch.node)
 
     def build(self, t0: float) -> BlockNLP:
         m, hs, n, npts, layout = self.m, self.hs, self.n, self.npts, self.layout
@@ -126,7 +156,8 @@ class PhasedNLP:
             for i, kind in enumerate(kinds):
                 if kind not in by_kind:
                     blk = make(kind)
-                    by_kind[kind] = _Placed(blk, np.zeros((0, 0), dtype=np.int64), [], [])
+                    by_kind[kind] = _Placed(blk, np.zeros((0, 0), dtype=np.int64), [], [],
+                                            _chart(kind))
                 pl = by_kind[kind]
                 keep = rows_of(i, pl.block)
                 rmap = np.full(pl.block.n_rows, -1, dtype=np.int64)
@@ -146,8 +177,14 @@ class PhasedNLP:
         # defects of every interval (in the stage order: with its end's copy)
         ex, eu, es = (stages.cx, stages.cu, stages.cs) if stages is not None else (
             Xi[:, 1:], Ui[:, rc], Si[:, 1:])
-        group(self.touching, lambda k: interval_block(m.phase(k), n_s, self.smooth,
-                                                         self.reference),
+        switch_map = None if self.switch is None else chart_map(self.switch.model, m)
+
+        def interval_of(kind: Any) -> Block:
+            mask, chart = kind
+            return interval_block(self.model(chart).phase(mask), n_s, self.smooth,
+                                  self.reference, switch_map if chart == "switch" else None)
+
+        group(list(zip(self.touching, self.interval_charts, strict=True)), interval_of,
               lambda k, _: np.concatenate([Xi[:, k], Xmi[:, k], ex[:, k], Ui[:, lc[k]],
                                            Umi[:, k], eu[:, k], Si[:, k], Smi[:, k],
                                            es[:, k]]), all_rows)
@@ -157,7 +194,7 @@ class PhasedNLP:
             group([None] * n, lambda _: copy_block(copies.shape[0]),
                   lambda k, _: np.concatenate([arriving[:, k], copies[:, k]]), all_rows)
         # every point's rows (node 0: the given initial grasp, without tracking bounds)
-        group(self.point_masks, lambda k: self._points[k],
+        group(self.point_kinds, lambda k: self._points[k],
               lambda c, blk: point_vars[c][blk.z_map],
               lambda c, blk: blk.keep0 if c == 0 else all_rows(c, blk))
         off_t = row
@@ -171,11 +208,14 @@ class PhasedNLP:
         # the intervals using that input touch), then the midpoints
         pairs = _node_input_pairs(hs, self.reference)
         users = {c: [k for k in range(n) if c in (lc[k], rc[k])] for _, c in pairs}
-        rate_kinds = [self._touching_of(users[c]) for _, c in pairs] + list(self.touching)
+        rate_kinds = [(self._touching_of(users[c]), self.node_chart(k)) for k, c in pairs] + \
+            [(mask, int(self.interval_charts[k] == 1))
+             for k, mask in enumerate(self.touching)]
         rate_z = [np.concatenate([Xi[:, k], Ui[:, c]]) for k, c in pairs] + \
             [np.concatenate([Xmi[:, k], Umi[:, k]]) for k in range(n)]
         if m.fingertips:
-            group(rate_kinds, lambda k: rate_block(m.phase(k)), lambda i, _: rate_z[i],
+            group(rate_kinds, lambda k: rate_block(self.model(k[1]).phase(k[0])),
+                  lambda i, _: rate_z[i],
                   all_rows)
         if self.smooth and m.effort_groups()[2]:
             group([None] * n, lambda _: accel_block(m, True),
@@ -188,8 +228,8 @@ class PhasedNLP:
                               if b and not a)) for k in range(1, n)]
         landings = [(k, tips) for k, tips in landings if tips]
         if landings:
-            group([(self.touching[k], tips) for k, tips in landings],
-                  lambda kt: touchdown_block(m.phase(kt[0]), kt[1]),
+            group([((self.touching[k], tips), self.node_chart(k)) for k, tips in landings],
+                  lambda kt: touchdown_block(self.model(kt[1]).phase(kt[0][0]), kt[0][1]),
                   lambda i, _: Xi[:, landings[i][0]], all_rows)
         ng = row
         parked = self._parked(point_vars, placed, Ui, Umi, Xi, Xmi)
@@ -244,8 +284,8 @@ class PhasedNLP:
         used only by lifted intervals."""
         m, hs, n = self.m, self.hs, self.n
         out: list[int] = []
-        for c, mask in enumerate(self.point_masks):
-            z_map = self._points[mask].z_map
+        for c, kind in enumerate(self.point_kinds):
+            z_map = self._points[kind].z_map
             assert z_map is not None
             used = set(z_map.tolist())
             out += [int(point_vars[c][j]) for j in range(self.layout.size) if j not in used]
@@ -322,7 +362,8 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
     tg_fn, tg_jac, tg_hess, Jt, Ht, ze_idx = targets
     segments = hs.segments
     w = ca.MX.sym("w", nw)
-    decl = _declaration(m, nseg, nv, npts, nlp.tracking, nlp.reference)
+    decl = _declaration(m, nseg, nv, npts, nlp.tracking, nlp.reference,
+                        nlp.switch is not None)
     p = ca.MX.sym("p", decl.size)
     prm_ = decl.unpack(p)
     shape_p, seg_T, goal, charts, weights, ccone, tol, Pd, Rd = (
@@ -335,7 +376,9 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
     hn_all = h / T
     # Simpson weight of every point (nodes, then midpoints), normalised time
     sw = ca.horzcat((ca.horzcat(0, hn_all) + ca.horzcat(hn_all, 0)) / 6, 4 * hn_all / 6)
+    charts_b, refs = prm_["charts_b"], prm_["switch_refs"]
     qv = ca.vertcat(shape_p, charts, ccone, tol, weights[4], weights[5], prm_["load"])
+    qv_b = ca.vertcat(shape_p, charts_b, ccone, tol, weights[4], weights[5], prm_["load"])
     wts = weights[0:4]
     accel = prm_["accel"]
     Xr, Wr, Qx, Ur, wu = (prm_[k] for k in ("Xr", "Wr", "Qx", "Ur", "wu"))
@@ -347,20 +390,22 @@ def _functions(nlp: PhasedNLP, t0: float, nw: int, ng: int, placed: list[_Placed
         """The mapped arguments of a kind's instances (its variables first)."""
         Z = ca.reshape(w[pl.z_idx.ravel().tolist()], pl.z_idx.shape[1], len(pl.cols))
         name = pl.block.fn.name()
+        ch = charts_b if pl.chart == 1 else charts  # the instances' chart's patches
         if name == "point":
             return [Z, cols(Pd, pl.cols, npts), cols(Rd, pl.cols, npts),
                     cols(sw, pl.cols, npts), cols(Xr, pl.cols, npts),
-                    cols(Wr, pl.cols, npts), Qx, qv]
-        if name == "interval":
-            return [Z, cols(h, pl.cols, n), T, wts, shape_p, charts, accel[1],
-                    cols(Ur, pl.cols, n), wu]
+                    cols(Wr, pl.cols, npts), Qx, qv_b if pl.chart == 1 else qv]
+        if name in ("interval", "switch"):
+            extra = [charts_b, refs] if name == "switch" else []
+            return [Z, cols(h, pl.cols, n), T, wts, shape_p, ch, accel[1],
+                    cols(Ur, pl.cols, n), wu, *extra]
         if name == "rates":
-            return [Z, T, shape_p, charts]
+            return [Z, T, shape_p, ch]
         if name == "accel":
             return [Z, cols(h, pl.cols, n), T, shape_p, accel[0]]
         if name == "copy":
             return [Z]
-        return [Z, shape_p, charts]  # touchdown
+        return [Z, shape_p, ch]  # touchdown
 
     t_args = (w[ze_idx.tolist()], goal, vias_v, shape_p)
     # g in its order: each kind's rows (vec: instance by instance), then re-ordered

@@ -76,11 +76,14 @@ def load_vector(fs: ForceSpec | None, mu: float, n_contacts: int) -> FloatArray:
 
 
 def parameters(problem: ManipulationProblem, nlp: BlockNLP,
-               scales_: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
+               scales_: tuple[FloatArray, FloatArray] | None = None,
+               switch: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
     """The NLP parameter vector of a problem (its structure's NLP ``nlp``): object,
     segment durations, palm goal and via-points, charts, weights, cone, tracking
     tolerances and the desired poses at every collocation point; with a reference, its
-    states and inputs scaled by ``scales_`` (:func:`scales`: the grasp's states', inputs')."""
+    states and inputs scaled by ``scales_`` (:func:`scales`: the grasp's states', inputs');
+    with a chart switch, ``switch``: the next chart's patches (9 per contact, column-major)
+    and the switch's reference angles (:mod:`~ocp.transcription.chart_switch`)."""
     segments, tb = problem.segments()
     t_nodes = node_times(segments, tb)
     tm = (t_nodes[:-1] + t_nodes[1:]) / 2
@@ -112,6 +115,8 @@ def parameters(problem: ManipulationProblem, nlp: BlockNLP,
         ccone=[cone_cosine(problem.mu)], tol=tol, Pd=Pd_, Rd=Rd_,
         load=load_parameters(problem),
         accel=[problem.max_joint_acceleration, problem.ramp_time_fraction],
+        charts_b=np.zeros(0) if switch is None else switch[0],
+        switch_refs=np.zeros(0) if switch is None else switch[1],
         **reference_parameters(problem, t_nodes, scales_))
 
 

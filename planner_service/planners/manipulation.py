@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from dexroll_client.models import (
+    ContactChartModel,
     ContactTrajectoryModel,
     FingerJointsModel,
     GraspFingerModel,
@@ -24,7 +25,7 @@ from dexroll_client.models import (
     PlanStatus,
 )
 from ocp.ball_on_palm import object_pose
-from ocp.geometry.rotations import quaternion_wxyz
+from ocp.geometry.rotations import log_rotation, quaternion_wxyz
 from ocp.robots.finger import FingerModel
 from ocp.robots.hands import Hand
 from ocp.solve.planner import (
@@ -729,7 +730,26 @@ def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = No
         if trajectory and sol.object_chart_rotation else None,
         samples=samples_block(sol, times) if trajectory else None,
         joint_trajectory=joint_trajectory_block(sol, times) if trajectory else None,
-        collocation=collocation)
+        collocation=collocation,
+        contact_charts=_contact_charts(sol) if trajectory else None)
+
+
+def _contact_charts(sol: ManipulationSolution) -> list[ContactChartModel] | None:
+    """The charts the fingertips' contact coordinates are on (an egg's side chart, or two
+    with a switch inside the plan); None: the request's own throughout."""
+    interp = sol._interpolant
+    if interp is None or not (sol.object_side_chart or sol.chart_switch is not None):
+        return None
+    charts = interp.charts
+    starts = [0.0] if sol.chart_switch is None else [0.0, float(sol.chart_switch.time)]
+    out = []
+    for t0, m, prm in zip(starts, charts.models, charts.prms, strict=False):
+        Rs = np.asarray(prm[m.surface.n_params:], dtype=float).reshape(-1, 3, 3)
+        Rs = Rs.transpose(0, 2, 1)  # (each chart's vec is column-major)
+        tips = [m.point_contacts.index(t) for t in m.fingertips]
+        out.append(ContactChartModel(t=t0, chart=str(m.surface.name), patches=[
+            [float(x) for x in log_rotation(Rs[k])] for k in tips]))
+    return out
 
 
 def _finite_or_none(value: float | None) -> float | None:

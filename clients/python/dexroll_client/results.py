@@ -21,6 +21,7 @@ __all__ = [
     "CertificateBase",
     "CertificateModel",
     "CollocationModel",
+    "ContactChartModel",
     "ContactSamplesModel",
     "ContactTrajectoryModel",
     "DurationModel",
@@ -625,6 +626,21 @@ class GraspUsedModel(_Response):
                                              "plan from it is tried from the next ones)")
 
 
+class ContactChartModel(_Response):
+    """The chart the fingertips' contact coordinates are on from time ``t``: the object
+    point (u, v) and the contact angle psi of each fingertip's ``eta`` (trajectory,
+    samples) are measured on it."""
+
+    t: float = Field(description="from this time on [s]")
+    chart: str = Field(description="the object's chart: its own latitude/longitude chart "
+                                   "(named as the shape's surface, e.g. 'ellipsoid') or an "
+                                   "egg's side chart ('ellipsoid_side': its poles on the "
+                                   "egg's equator, its equator through the egg's ends)")
+    patches: list[list[float]] = Field(description="each fingertip's patch of that chart, "
+                                                   "a rotation vector [rad] (as "
+                                                   "`fingers[i].chart_rotation`)")
+
+
 class ManipulationResult(PlanResultBase):
     """A manipulation plan, or why there is none. ``trajectory``: the collocation points
     (nodes and midpoints)."""
@@ -653,6 +669,12 @@ class ManipulationResult(PlanResultBase):
     gait: GaitResultModel | None = Field(
         default=None, description="the gait's phases (a request with `gait`; null: one "
                                   "rolling plan)")
+    contact_charts: list[ContactChartModel] | None = Field(
+        default=None, description="the charts the fingertips' contact coordinates are on, "
+                                  "in time order: an egg's side chart, or two when the "
+                                  "contacts change chart inside the plan (a contact "
+                                  "rolling where no one chart is regular); null: the "
+                                  "request's charts throughout")
 
 
 #: A plan of any planner, told apart by its ``planner`` field (results stored before it

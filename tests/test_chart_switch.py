@@ -1,0 +1,206 @@
+"""A plan whose fingertip contacts change chart at a node (docs/shapes.md, "Charts that
+switch inside a plan"): the switched NLP is the same problem on two charts, the planner
+plans and certifies it across the switch, the automatic choice picks a switch only where
+no chart carries the predicted contact paths, and what cannot follow a switch says so."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ocp import ProblemError
+from ocp.solve.attempt import setup
+from ocp.solve.nlp_cache import FORCE_REGULARISATION, GraspStructure
+from ocp.spec import patches
+from ocp.spec.chart_switch import ChartSwitchSpec, after_switch
+from ocp.spec.grasp import contact_charts
+from ocp.spec.patches import side_charted
+from ocp.transcription.chart_switch import ChartSwitch, PlanCharts, chart_map
+from ocp.transcription.nlp_blocks import build_manipulation_nlp
+from ocp.transcription.values import parameters
+from planner_service.planners import FINGERS, REQUEST, to_problem
+from planner_service.planners.manipulation import result_from_manipulation_solution
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _egg_turn() -> dict:
+    return json.loads((ROOT / "examples" / "egg_turn.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def egg() -> tuple:
+    """egg_turn.json's problem, its plan, and the same problem switched at mid-motion to
+    the egg's side chart (each fingertip's patch there: the side chart's equator through
+    it) with its plan."""
+    problem = to_problem(REQUEST.validate_python(_egg_turn()))
+    planner = FINGERS.manipulation
+    plain = planner.solve(problem)
+    side = side_charted(problem)
+    assert side is not None
+    spec = ChartSwitchSpec(problem.duration / 2, True,
+                           tuple(f.chart_rotation for f in side.fingers))
+    switched = replace(problem, chart_switch=spec)
+    return problem, plain, switched, planner.solve(switched)
+
+
+def test_the_switched_nlp_holds_at_the_one_chart_optimum_restated(egg: tuple) -> None:
+    """The egg's kinematic plan on its own chart, its points from the middle node on
+    restated on the side chart (chart_map: the same surface point, contact frame and
+    rates), satisfies every row of the switched NLP to IPOPT's tolerance: the switch
+    interval's defects read its end through the map, everything else is the next
+    chart's own blocks. (The planner solving it: the next test.)"""
+    problem, _, switched, _ = egg
+    problem = replace(problem, forces=None)
+    planner = FINGERS.manipulation
+    sol = planner.solve(problem)
+    assert sol.ok and sol.nlp_point is not None
+    problem = problem.with_intervals(sol.stats.n_intervals)
+    s = setup(planner, problem)
+    m, key = s.model, GraspStructure.of(problem)
+    pb = after_switch(replace(problem, chart_switch=switched.chart_switch))
+    mb = planner.model(pb)
+    assert (m.surface.name, mb.surface.name) == ("ellipsoid", "ellipsoid_side")
+    n = key.segments[0]
+    ks = n // 2
+    build = {"forces": key.forces, "smooth": key.smooth}
+    plain = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
+                                   key.tracking, FORCE_REGULARISATION, **build)
+    nlp = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
+                                 key.tracking, FORCE_REGULARISATION, **build,
+                                 switch=ChartSwitch(ks, mb))
+    w = np.asarray(sol.nlp_point.w, dtype=float)
+    X, Xm, U, Um, S, Sm, F = (np.array(a) for a in plain.unpack(w))
+    xs, us = s.x_scale, s.u_scale
+    cA = np.concatenate([R.ravel(order="F") for R in contact_charts(problem)])
+    cB = np.concatenate([R.ravel(order="F") for R in contact_charts(pb)])
+    shape = np.asarray(problem.object.params, dtype=float)
+    fwd = chart_map(m, mb)
+    nf = len(m.fingertips)
+    first = PlanCharts((m, mb), (np.r_[shape, cA], np.r_[shape, cB]), ks)
+    raw = np.asarray(fwd(X[:, ks] * xs, U[:, ks] * us, shape, cA, cB, np.zeros(2 * nf))[0])
+    refs_b = first.refs_of(raw.ravel())
+    lc = plain.hs.left_cols
+    for j in range(ks, n + 1):  # (smooth timing: one input column per node)
+        col = lc[j] if j < n else plain.hs.right_cols[-1]
+        a, b = fwd(X[:, j] * xs, U[:, col] * us, shape, cA, cB, refs_b)
+        X[:, j], U[:, col] = np.asarray(a).ravel() / xs, np.asarray(b).ravel() / us
+    for k in range(ks, n):
+        a, b = fwd(Xm[:, k] * xs, Um[:, k] * us, shape, cA, cB, refs_b)
+        Xm[:, k], Um[:, k] = np.asarray(a).ravel() / xs, np.asarray(b).ravel() / us
+    w2 = np.asarray(nlp.pack(X, Xm, U, Um, S, Sm, F)).ravel()
+    refs = first.refs_of(np.asarray(plain.unpack(w)[0])[:, ks - 1] * xs)
+    p2 = parameters(problem, nlp, (xs, us), (cB, refs))
+    f0, _ = plain.oracle(w, s.p)
+    f2, g2 = nlp.oracle(w2, p2)
+    g2 = np.asarray(g2).ravel()
+    violation = np.maximum(np.maximum(nlp.lbg - g2, g2 - nlp.ubg), 0.0).max()
+    assert len(g2) == len(plain.lbg)
+    assert violation < 1e-7
+    assert abs(float(f2) - float(f0)) < 1e-3 * abs(float(f0))  # (efforts: chart rates)
+
+
+def test_a_switched_plan_is_certified_across_its_switch(egg: tuple) -> None:
+    """egg_turn.json switched at mid-motion onto the side chart: planned (kinematics and
+    forces), certified (the re-integration goes on across the switch, the rates on both
+    sides of it read on one chart agree), and the same motion as on the one chart: the
+    object's pose and the joints within the solver's tolerance."""
+    problem, plain, _, sol = egg
+    assert plain.ok and sol.ok, sol.message
+    assert sol.chart_switch is not None
+    spec = sol.chart_switch
+    assert spec.time == pytest.approx(problem.duration / 2, abs=problem.duration / 20)
+    cert = sol.certificate
+    assert cert.check("max_velocity_jump").value < 1e-9
+    assert cert.check("max_angle_defect").passed
+    ts = np.linspace(0.0, problem.duration, 101)
+    a, b = plain.sample(ts), sol.sample(ts)
+    assert np.abs(a.object_position - b.object_position).max() < 1e-6
+    assert np.abs(a.object_rotation - b.object_rotation).max() < 1e-4
+    joints = np.hstack([f.q for f in sol.fingers]) - np.hstack([f.q for f in plain.fingers])
+    assert np.abs(joints).max() < 1e-3
+    # the contact coordinates: before the switch on the egg's own chart, from it on the
+    # side chart, the same points of the egg on both sides of it
+    charts = sol._interpolant.charts
+    assert [m.surface.name for m in charts.models] == ["ellipsoid", "ellipsoid_side"]
+    left = sol.sample([spec.time], side="left")
+    right = sol.sample([spec.time])
+    for tip, c in zip(charts.first.fingertips, range(len(problem.fingers)), strict=True):
+        pa = charts.models[0].cartesian(left.x[0], charts.prms[0])[4]
+        pb = charts.models[1].cartesian(right.x[0], charts.prms[1])[4]
+        assert np.abs(np.asarray(pa)[:, c] - np.asarray(pb)[:, c]).max() < 1e-9
+        assert abs(right.x[0, tip.eta_cols.start + 2]) < 0.8 * (math.pi / 2)
+    # planned forces on both charts, continuous (physical, palm frame)
+    f, _ = sol.forces([spec.time - 1e-9, spec.time + 1e-9])
+    assert np.abs(f[0] - f[1]).max() < 1e-6
+    # the wire names the charts the contact coordinates are on
+    result = result_from_manipulation_solution(sol)
+    assert result.contact_charts is not None
+    assert [c.chart for c in result.contact_charts] == ["ellipsoid", "ellipsoid_side"]
+    assert result.contact_charts[1].t == pytest.approx(spec.time)
+    assert len(result.contact_charts[1].patches) == len(problem.fingers)
+    assert result_from_manipulation_solution(plain).contact_charts is None
+
+
+def test_a_switched_plan_executes_in_mujoco(egg: tuple) -> None:
+    """The switched plan executed in dexroll's scene (the joints and forces: no chart
+    reaches the simulator) within 2 mm and 3 deg, no planned contact lost."""
+    from planner_service.execution import simulate_result
+
+    *_, sol = egg
+    report = simulate_result(result_from_manipulation_solution(sol),
+                             REQUEST.validate_python(_egg_turn()))
+    assert report.passed, report.failures
+    assert report.position_error.max < 2e-3
+
+
+def test_what_cannot_follow_a_switch_says_so(egg: tuple) -> None:
+    """Tracking or re-planning a switched plan is refused naming it; a switch with a palm
+    or outside the motion, named on its field."""
+    from ocp.control.window import WindowController
+    from ocp.solve.replan import Replanner
+
+    _, _, switched, sol = egg
+    with pytest.raises(ProblemError, match="chart switch") as exc:
+        WindowController(switched, sol)
+    assert exc.value.errors[0][0] == "reference"
+    with pytest.raises(ProblemError, match="chart switch") as exc:
+        Replanner(switched, sol)
+    assert exc.value.errors[0][0] == "first"
+    assert switched.chart_switch is not None
+    late = replace(switched, chart_switch=replace(switched.chart_switch, time=5.0))
+    assert ("chart_switch.time" in [f for f, _ in late.errors()])
+    few = replace(switched, chart_switch=replace(switched.chart_switch, patches=()))
+    assert ("chart_switch.patches" in [f for f, _ in few.errors()])
+
+
+def test_a_switch_is_chosen_only_where_no_chart_carries_the_predicted_paths() -> None:
+    """The automatic choice: egg_turn.json is carried by the egg's own chart (no switch);
+    an upright egg spun 35 deg about the palm's normal with every chart's bound at 9.6 deg
+    (a pole margin of 1.4 rad) leaves the side patches chosen at the start (its contacts
+    roll around the equator) and is switched to side patches centred where they are
+    then."""
+    planner = FINGERS.manipulation
+    problem = to_problem(REQUEST.validate_python(_egg_turn()))
+    assert patches.switching_chart(problem, lambda: planner._initial_joints(problem)) is None
+    raw = _egg_turn()
+    raw["initial_pose"]["orientation_wxyz"] = [1, 0, 0, 0]
+    raw["grasp"] = "auto"
+    for f in raw["fingers"]:
+        f.pop("initial_q", None)
+    raw["pole_margin"] = 1.4
+    raw["motion"]["steps"] = [{"duration": 2.0, "axis": [0, 0, -1],
+                               "angle": math.radians(35.0)}]
+    spun = to_problem(REQUEST.validate_python(raw))
+    assert spun.object.side_chart  # (its contacts beyond the own chart's 9.6 deg)
+    spec = patches.switching_chart(spun, lambda: planner._initial_joints(spun))
+    assert spec is not None and spec.side_chart
+    assert 0.0 < spec.time < spun.duration
+    assert len(spec.patches) == len(spun.fingers)
+    assert not np.allclose(np.array(spec.patches),
+                           np.array([f.chart_rotation for f in spun.fingers]))
