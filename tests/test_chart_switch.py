@@ -55,10 +55,9 @@ def test_the_switched_nlp_holds_at_the_one_chart_optimum_restated(egg: tuple) ->
     rates), satisfies every row of the switched NLP to IPOPT's tolerance: the switch
     interval's defects read its end through the map, everything else is the next
     chart's own blocks. (The planner solving it: the next test.)"""
-    problem, _, switched, _ = egg
-    problem = replace(problem, forces=None)
+    problem, sol, switched, _ = egg
+    problem = replace(problem, forces=None)  # (the plan's point: its kinematic NLP's)
     planner = FINGERS.manipulation
-    sol = planner.solve(problem)
     assert sol.ok and sol.nlp_point is not None
     problem = problem.with_intervals(sol.stats.n_intervals)
     s = setup(planner, problem)
@@ -157,6 +156,43 @@ def test_a_switched_plan_executes_in_mujoco(egg: tuple) -> None:
                              REQUEST.validate_python(_egg_turn()))
     assert report.passed, report.failures
     assert report.position_error.max < 2e-3
+
+
+@pytest.mark.slow
+def test_a_contact_rolls_past_its_charts_bound_on_the_next_chart() -> None:
+    """egg_turn.json's grasp turned 10 deg about -z with the own chart's bound at
+    60.2 deg (a pole margin of 0.52 rad): the ring's contact starts at -60.1 deg and rolls
+    to -62.7 deg. Switched onto the side chart at 0.3 s, the plan is certified and
+    executed in MuJoCo within 2 mm, no planned contact lost, with the ring past the own
+    chart's bound after the switch (48 s, 417 iterations; on the side chart alone, which
+    the planner chooses by itself, 156 iterations)."""
+    from planner_service.execution import simulate_result
+
+    raw = _egg_turn()
+    raw["pole_margin"] = 0.52
+    raw["motion"]["steps"][0].update(axis=[0, 0, -1], angle=math.radians(10.0))
+    raw["solver"] = {"time_limit": 120}
+    request = REQUEST.validate_python(raw)
+    problem = to_problem(request)
+    side = side_charted(problem)
+    assert side is not None
+    spec = ChartSwitchSpec(0.15 * problem.duration, True,
+                           tuple(f.chart_rotation for f in side.fingers))
+    sol = FINGERS.manipulation.solve(replace(problem, chart_switch=spec))
+    assert sol.ok, sol.message
+    charts = sol._interpolant.charts
+    own = problem.object.u_limit(problem.pole_margin)
+    end = sol.sample([problem.duration])
+    cart = charts.models[1].cartesian(end.x[0], charts.prms[1])
+    R, p, P = (np.asarray(cart[k]) for k in (0, 1, 4))
+    from ocp.geometry.surfaces import Chart
+
+    body = R.T @ (P - p)
+    lat = [abs(float(Chart.of(problem.object.surface, problem.object.params).inverse(
+        body[:, i])[0])) for i in range(P.shape[1])]
+    assert max(lat) > own  # past the own chart's bound, on the side chart
+    report = simulate_result(result_from_manipulation_solution(sol), request)
+    assert report.passed, report.failures
 
 
 def test_what_cannot_follow_a_switch_says_so(egg: tuple) -> None:

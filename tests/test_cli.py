@@ -26,6 +26,10 @@ GAITS = {"allegro_gait", "allegro_turn_90", "allegro_turn_180_z", "egg_gait",
          "rounded_cube_gait"}
 EXAMPLES = [p for p in sorted((ROOT / "examples").glob("*.json"))
             if p.stem not in SAME_AS_ALLEGRO_TURN | GAITS]
+#: Examples whose `dexroll plan` run tests/test_sim.py makes too (the same CLI process,
+#: its result certified and executed in MuJoCo) in another worker: their summaries here
+#: are slow-marked (16-19 s of planning each, the default run's longest duplicates).
+PLANNED_IN_TEST_SIM = {"capsule_roll", "ellipsoid_two_fingers", "egg_turn"}
 
 
 def _in_result_patch(request: dict[str, Any], result: dict[str, Any],
@@ -58,7 +62,9 @@ def test_examples_include_the_paper_triangle_and_a_pure_reorientation() -> None:
     assert any(n.startswith("reorient") for n in names)
 
 
-@pytest.mark.parametrize("request_file", EXAMPLES, ids=[p.stem for p in EXAMPLES])
+@pytest.mark.parametrize("request_file", [
+    pytest.param(p, marks=pytest.mark.slow) if p.stem in PLANNED_IN_TEST_SIM else p
+    for p in EXAMPLES], ids=[p.stem for p in EXAMPLES])
 def test_plan_writes_a_certified_result_and_a_summary(request_file: Path,
                                                       cli_plans: CliPlans) -> None:
     # `dexroll plan` as a real process (conftest: one run per example for the session;
