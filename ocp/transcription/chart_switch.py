@@ -33,7 +33,6 @@ across the switch from the state it reached, restated in the next chart.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -126,18 +125,6 @@ def _outputs(result: Any) -> list[FloatArray]:
     if isinstance(result, (list, tuple)):
         return [np.asarray(v) for v in result]
     return [np.asarray(result)]
-
-
-def _continue_angles(values: FloatArray, cols: Sequence[int], ref: FloatArray) -> FloatArray:
-    """``values`` (rows) with the angle columns ``cols`` moved by whole turns so that each
-    row is within pi of the row before (the first of ``ref``)."""
-    out = np.array(values, dtype=float)
-    prev = np.asarray(ref, dtype=float)[list(cols)]
-    for r in range(len(out)):
-        d = out[r, cols] - prev
-        out[r, cols] -= 2 * np.pi * np.round(d / (2 * np.pi))
-        prev = out[r, cols]
-    return out
 
 
 @dataclass
