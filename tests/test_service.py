@@ -86,6 +86,20 @@ def test_a_short_wait_answers_202_with_location_then_the_job_finishes(live_serve
     assert job["state"] == "succeeded"
 
 
+@pytest.mark.parametrize("wait", ["nan", "inf", "-1", "601"])
+def test_a_wait_that_is_no_number_of_seconds_is_refused_naming_it(live_server: Server,
+                                                                  wait: str) -> None:
+    """``?wait=`` must be a finite number of seconds in [0, 600]: NaN and infinity are
+    refused as not finite (they were "less than or equal to 600"), before any job."""
+    r = httpx.post(f"{live_server.url}/v1/plans", params={"wait": wait}, json=TRIANGLE,
+                   timeout=30)
+    assert r.status_code == 422, r.text
+    text = r.text.lower()
+    assert "wait" in text
+    if wait in ("nan", "inf"):
+        assert "finite" in text
+
+
 def test_idempotency_key_gives_one_job(live_server: Server) -> None:
     key = f"test-{time.monotonic_ns()}"
     first = post(live_server, TRIANGLE, **{"Idempotency-Key": key})

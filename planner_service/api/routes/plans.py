@@ -155,7 +155,7 @@ async def submit_plan(
     dispatcher: DispatcherDep,
     notifier: NotifierDep,
     checker: CheckerDep,
-    wait: Annotated[float | None, Query(ge=0.0, le=600.0, description=(
+    wait: Annotated[float | None, Query(ge=0.0, le=600.0, allow_inf_nan=False, description=(
         "seconds to wait for the plan before answering 202 (capped by the service)"))
     ] = None,
     idempotency_key: Annotated[str | None, Header(max_length=200, description=(
