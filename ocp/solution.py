@@ -560,11 +560,14 @@ class ManipulationSolution:
 
     def break_nodes(self) -> list[int]:
         """The nodes where the input jumps (the rates have two sides): via-point nodes
-        of the paper's piecewise timing."""
+        of the paper's piecewise timing. (A chart switch's node is none: its inputs are
+        each interval's own chart's, the same motion.)"""
         col = self.collocation
         if col is None:
             return []
-        return [k for k in range(1, len(col.U0)) if np.any(col.U1[k - 1] != col.U0[k])]
+        switch = None if self._interpolant is None else self._interpolant.charts.node
+        return [k for k in range(1, len(col.U0))
+                if k != switch and np.any(col.U1[k - 1] != col.U0[k])]
 
     def joint_trajectory(self, t: FloatArray | list[float], efforts: bool = True
                          ) -> JointTrajectory:

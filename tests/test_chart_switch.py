@@ -134,6 +134,9 @@ def test_a_switched_plan_is_certified_across_its_switch(egg: tuple) -> None:
         pb = charts.models[1].cartesian(right.x[0], charts.prms[1])[4]
         assert np.abs(np.asarray(pa)[:, c] - np.asarray(pb)[:, c]).max() < 1e-9
         assert abs(right.x[0, tip.eta_cols.start + 2]) < 0.8 * (math.pi / 2)
+    # the joint trajectory has no rate break at the switch (the same motion)
+    assert sol.break_nodes() == []
+    assert sol.joint_trajectory(ts).breaks == ()
     # planned forces on both charts, continuous (physical, palm frame)
     f, _ = sol.forces([spec.time - 1e-9, spec.time + 1e-9])
     assert np.abs(f[0] - f[1]).max() < 1e-6
