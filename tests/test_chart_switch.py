@@ -102,6 +102,15 @@ def test_the_switched_nlp_holds_at_the_one_chart_optimum_restated(egg: tuple) ->
     assert len(g2) == len(plain.lbg)
     assert violation < 1e-7
     assert abs(float(f2) - float(f0)) < 1e-3 * abs(float(f0))  # (efforts: chart rates)
+    # the stage-ordered layout (fatrop's) of the same switched NLP: the same rows hold
+    staged = build_manipulation_nlp(m, key.segments, key.goal_mask, key.via_masks,
+                                    key.tracking, FORCE_REGULARISATION, **build,
+                                    switch=ChartSwitch(ks, mb), stage_order=True)
+    w3 = np.asarray(staged.pack(X, Xm, U, Um, S, Sm, F)).ravel()
+    f3, g3 = staged.oracle(w3, p2)
+    g3 = np.asarray(g3).ravel()
+    assert np.maximum(np.maximum(staged.lbg - g3, g3 - staged.ubg), 0.0).max() < 1e-7
+    assert float(f3) == pytest.approx(float(f2), rel=1e-12)
 
 
 def test_a_switched_plan_is_certified_across_its_switch(egg: tuple) -> None:
