@@ -80,6 +80,11 @@ def test_an_egg_held_by_its_end_is_planned_on_its_side_chart() -> None:
     assert result.status.value == "solved", result.message
     assert sol.object_side_chart and result.certificate is not None
     assert result.certificate.passed
+    # the result says which chart its fingertips' coordinates are on, with their patches
+    assert result.contact_charts is not None and len(result.contact_charts) == 1
+    assert result.contact_charts[0].chart == "ellipsoid_side"
+    assert np.allclose(result.contact_charts[0].patches,
+                       [t.chart_rotation for t in problem.fingers])
     # the index's contact on the egg's end (semi-axis 40 mm) at the start and the end
     traj = result.trajectory
     assert traj is not None
