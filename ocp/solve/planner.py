@@ -267,6 +267,7 @@ class ManipulationPlanner:
                 return refused
         if certify and self.auto_patch and problem.chart_switch is None:
             problem = self._charted(problem)
+        problem = snapped(problem)  # (a chart switch at its node, for every stage)
         if problem.forces is None or not self.two_stage_forces or not certify:
             return self._plan(problem, warm_start, certify, multipliers)
         t0 = time.perf_counter()
