@@ -254,3 +254,62 @@ def test_a_switch_is_chosen_only_where_no_chart_carries_the_predicted_paths() ->
     assert len(spec.patches) == len(spun.fingers)
     assert not np.allclose(np.array(spec.patches),
                            np.array([f.chart_rotation for f in spun.fingers]))
+
+
+@pytest.mark.parametrize(("patched", "to_side"), [(False, True), (True, True), (True, False)],
+                         ids=["own-to-side", "side-to-side", "side-to-own"])
+def test_the_chart_map_restates_a_contact_as_the_numeric_rechart_does(patched: bool,
+                                                                      to_side: bool) -> None:
+    """chart_map (CasADi, in the NLP) against recharted_coordinates (numpy, the planner's
+    restatement of a request's contacts): the same object point, the same contact angle;
+    mapped there and back, the state and input come back; the rates mapped are the
+    chart's coordinates' rates of the same motion (a finite difference)."""
+    from ocp.geometry.rotations import log_rotation
+    from ocp.geometry.surfaces import Chart, rotation_from_vector
+    from ocp.shapes.ellipsoid import EggSide
+    from ocp.spec.patches import recharted_coordinates
+
+    planner = FINGERS.manipulation
+    problem = to_problem(REQUEST.validate_python(_egg_turn()))
+    side = side_charted(problem)
+    assert side is not None
+    first = side if patched else problem
+    turn = np.array([[math.cos(0.3), -math.sin(0.3), 0.0], [math.sin(0.3), math.cos(0.3), 0.0],
+                     [0.0, 0.0, 1.0]])  # the next side patches: turned 0.3 rad about the axis
+    patches = tuple(tuple(log_rotation(turn @ rotation_from_vector(f.chart_rotation)))
+                    for f in side.fingers) if to_side else ((0.0, 0.0, 0.0),) * 4
+    pb = after_switch(replace(first, chart_switch=ChartSwitchSpec(1.0, to_side, patches)))
+    ma, mb = planner.model(first), planner.model(pb)
+    shape = np.asarray(problem.object.params, dtype=float)
+    prm_a = ma.params(shape, contact_charts(first))
+    prm_b = mb.params(shape, contact_charts(pb))
+    charts = PlanCharts((ma, mb), (prm_a, prm_b), 10)
+    x0 = planner.initial_state(first)
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=ma.nu)
+    xb, ub = charts.to_second(x0, u, np.zeros(2 * len(ma.fingertips)))
+    for i, tip in enumerate(ma.fingertips):
+        e = tip.eta_cols.start
+        keys = ("u", "v", "psi")
+        old = Chart(first.object.surface, tuple(shape), tuple(map(tuple, rotation_from_vector(
+            first.fingers[i].chart_rotation))))
+        new = Chart(EggSide if to_side else problem.object.surface, tuple(shape),
+                    tuple(map(tuple, rotation_from_vector(patches[i]))))
+        want = recharted_coordinates(old, new, dict(zip(keys, x0[e + 2:e + 5], strict=True)))
+        assert want is not None
+        got = dict(zip(keys, xb[e + 2:e + 5], strict=True))
+        for k in keys:
+            d = (got[k] - want[k] + math.pi) % (2 * math.pi) - math.pi
+            assert abs(d) < 1e-9, (i, k, got[k], want[k])
+    charts.refs = charts.refs_of(x0)
+    xa, ua = charts.to_first(xb, ub)
+    assert np.abs(xa - x0).max() < 1e-9 and np.abs(ua - u).max() < 1e-9
+    # the rates: w' = d(u', v')/dt along the motion d(u, v)/dt = w
+    h = 1e-6
+    x1 = x0.copy()
+    for tip in ma.fingertips:
+        x1[tip.eta_cols.start + 2:tip.eta_cols.start + 4] += h * u[tip.w_cols]
+    xb1 = charts.to_second(x1, None, charts.refs_of(xb))[0]
+    for tip in ma.fingertips:
+        e, w = tip.eta_cols.start, tip.w_cols
+        assert np.allclose((xb1[e + 2:e + 4] - xb[e + 2:e + 4]) / h, ub[w], atol=1e-4)
