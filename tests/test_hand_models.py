@@ -121,6 +121,38 @@ def test_the_fingertip_is_the_colliding_geom_at_the_fingers_end(order: str) -> N
     assert isinstance(why, str) and "not colliding with the object" in why
 
 
+@pytest.mark.parametrize("fmt", ["urdf", "mjcf"])
+def test_a_geom_behind_the_tips_origin_is_not_its_fingertip(fmt: str) -> None:
+    """A tip link (body) whose frame sits at the finger's end, with the fingertip sphere
+    5 mm ahead of it and another 10 mm behind it, toward the palm: the fingertip is the
+    one reaching farthest along the finger (from its last joint out through the tip's
+    origin), not the one farthest from the origin (an independent sweep's URDF hand was
+    planned on the sphere behind). The finger here runs along the tip frame's +y (the
+    joint turns it a quarter turn about x): the direction is read from the chain, turned
+    into the tip's frame."""
+    ahead, behind = "0 0.005 0", "0 -0.010 0"
+    if fmt == "urdf":
+        text = f"""<robot name="r"><link name="palm"/><link name="l1"/><link name="tip">
+        <collision><origin xyz="{behind}"/><geometry><sphere radius="0.008"/></geometry>
+        </collision><collision><origin xyz="{ahead}"/><geometry><sphere radius="0.008"/>
+        </geometry></collision></link>
+        <joint name="j1" type="revolute"><parent link="palm"/><child link="l1"/>
+        <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+        <joint name="j2" type="revolute"><parent link="l1"/><child link="tip"/>
+        <origin xyz="0 0 0.05" rpy="1.5707963267948966 0 0"/><axis xyz="1 0 0"/>
+        <limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>"""
+    else:
+        text = f"""<mujoco><worldbody><body name="l1"><joint name="j1" axis="0 1 0"
+        range="-1 1"/><body name="tip" pos="0 0 0.05" quat="0.7071067811865476
+        0.7071067811865476 0 0"><joint name="j2" axis="1 0 0" range="-1 1"/>
+        <geom type="sphere" size="0.008" pos="{behind}"/>
+        <geom type="sphere" size="0.008" pos="{ahead}"/></body></body></worldbody>
+        </mujoco>"""
+    tip = tip_geometry(text, fmt, "tip")
+    assert not isinstance(tip, str)
+    assert_close(tip.p, [0, 0.005, 0], atol=1e-12)
+
+
 def test_the_nominal_grasp_touches_the_ball_in_force_closure() -> None:
     tips = fingertips_from_joints(URDF.fingers, NOMINAL_Q, BALL, POSE, NAMES, WHERE)
     problem = ManipulationProblem(

@@ -142,10 +142,11 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
     """The fingertip surface of link/body ``name`` from the model text's collision
     geometry (a sphere or capsule on it: URDF ``<collision>``, MJCF ``<geom>`` that
     collides with the object, :func:`touches_object`, not a visual one; of several, the
-    one reaching farthest from the link's or body's origin, the finger's end, or for an
-    MJCF site the one nearest the site, in the site's frame), or why there is none (a
-    string). An MJCF's geoms are read by ``pos`` and ``quat`` or ``fromto``: give the
-    text :func:`~ocp.robots.mjcf_frames.normalise_mjcf` wrote."""
+    one reaching farthest along the finger (from its last joint out through the link's
+    or body's origin, :func:`_outward`: the finger's end; from the origin where the chain
+    has no length), or for an MJCF site the one nearest the site, in the site's frame),
+    or why there is none (a string). An MJCF's geoms are read by ``pos`` and ``quat`` or
+    ``fromto``: give the text :func:`~ocp.robots.mjcf_frames.normalise_mjcf` wrote."""
     root = ET.fromstring(text)
     if fmt == "urdf":
         link = next((ln for ln in root.iter("link") if ln.get("name") == name), None)
@@ -165,7 +166,8 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
         if not tips:
             return (f"link {name!r} has no sphere or capsule collision geometry (it has "
                     f"{kinds or 'none'}): give the fingertip's surface in the request")
-        kind, p, R, half, r = max(tips, key=lambda t: _reach(t, None))
+        out = _outward(root, "urdf", name)
+        kind, p, R, half, r = max(tips, key=lambda t: _reach(t, None, out))
         return sphere_tip(r, p, R) if kind == "sphere" else _capsule(r, half, p, R, side)
     defaults = _mjcf_defaults(root)
     parents = {c: p for p in root.iter() for c in p}
@@ -201,8 +203,9 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
                 f"(it has {kinds or 'none'}{why}): give the fingertip's surface in the "
                 "request")
 
+    out = _outward(root, "mjcf", str(body.get("name") or ""), parents)
     got = max(poses, key=lambda t: -math.inf if isinstance(t, str)
-              else _reach(t, None if site is None else p_s))
+              else _reach(t, None if site is None else p_s, out))
     if isinstance(got, str):
         return got
     kind, p, R, half, r = got
@@ -212,18 +215,67 @@ def tip_geometry(text: str, fmt: str, name: str, side: ArrayLike | None = None
 
 
 def _reach(tip: tuple[str, FloatArray, FloatArray, float, float],
-           site: FloatArray | None) -> float:
+           site: FloatArray | None, outward: FloatArray | None = None) -> float:
     """How well a sphere or capsule (kind, centre, rotation, half length, radius) in its
-    body's frame is that body's fingertip: the distance its surface reaches from the
-    body's origin (the finger's end is the outermost), or minus its axis's distance from
-    the tip's ``site`` when one is named."""
+    body's frame is that body's fingertip: how far its surface reaches along the finger
+    (``outward``, :func:`_outward`: the finger's end is the outermost; a geom behind the
+    origin, toward the palm, reaches less), without a direction the distance it reaches
+    from the body's origin, or minus its axis's distance from the tip's ``site`` when one
+    is named."""
     _, p, R, half, r = tip
     a, b = p - half * R[:, 2], p + half * R[:, 2]
     if site is not None:
         ab = b - a
         s = float(np.clip((site - a) @ ab / (ab @ ab), 0.0, 1.0)) if ab @ ab > 0 else 0.0
         return -float(np.linalg.norm(a + s * ab - site))
+    if outward is not None:
+        return max(float(a @ outward), float(b @ outward)) + r
     return max(float(np.linalg.norm(a)), float(np.linalg.norm(b))) + r
+
+
+#: A link's or body's offset from its parent shorter than this [m] is no length of the
+#: finger (:func:`_outward` looks further up the chain).
+_NO_LENGTH = 1e-9
+
+
+def _outward(root: ET.Element, fmt: str, name: str,
+             parents: dict[ET.Element, ET.Element] | None = None) -> FloatArray | None:
+    """The direction the finger extends in at its tip link or body ``name``, in that
+    frame: from the nearest origin up the chain that is not the tip's own (a parent
+    link's or body's) to the tip's origin, the chain's rotations at its joints' zero
+    positions; None when no origin up the chain differs (a tip at the root)."""
+    M = np.eye(3)  # the current frame's vectors in the tip's frame
+    if fmt == "urdf":
+        by_child = {c.get("link"): j for j in root.iter("joint")
+                    for c in j.findall("child")}
+        link = name
+        for _ in range(64):
+            joint = by_child.get(link)
+            if joint is None:
+                return None
+            origin = joint.find("origin")
+            xyz = _floats(None if origin is None else origin.get("xyz"), 3, (0, 0, 0))
+            R = _rpy(_floats(None if origin is None else origin.get("rpy"), 3, (0, 0, 0)))
+            M = M @ R.T
+            if float(np.linalg.norm(xyz)) > _NO_LENGTH:
+                d = M @ xyz
+                return np.asarray(d / np.linalg.norm(d), dtype=float)
+            parent = joint.find("parent")
+            if parent is None:
+                return None
+            link = str(parent.get("link"))
+        return None
+    parents = parents if parents is not None else {c: p for p in root.iter() for c in p}
+    body = next((b for b in root.iter("body") if b.get("name") == name), None)
+    while body is not None and body.tag == "body":
+        pos = _floats(body.get("pos"), 3, (0, 0, 0))
+        R = _quat(_floats(body.get("quat"), 4, (1, 0, 0, 0)))
+        M = M @ R.T
+        if float(np.linalg.norm(pos)) > _NO_LENGTH:
+            d = M @ pos
+            return np.asarray(d / np.linalg.norm(d), dtype=float)
+        body = parents.get(body)
+    return None
 
 
 def touches_object(attrs: dict[str, str]) -> bool:
