@@ -66,7 +66,8 @@ def with_refs(s: Setup, X: FloatArray) -> None:
 
 def restated(s: Setup, guess: Guess) -> Guess:
     """A guess made on the first chart for the whole motion, its points from the switch
-    node on restated on the next chart (angles continued along the motion)."""
+    node on restated on the next chart (angles continued along the motion:
+    ``numpy.unwrap`` from the node before the switch)."""
     charts = s.charts
     if not charts.switched:
         return guess
@@ -76,43 +77,23 @@ def restated(s: Setup, guess: Guess) -> Guess:
     n = len(Xm)
     lc, rc = s.nlp.hs.left_cols, s.nlp.hs.right_cols
     zero = np.zeros(n_refs(charts.first))
-    # the points from the switch on, in time order: node ks, mid ks, node ks+1, ...
-    order: list[tuple[str, int]] = []
-    for j in range(ks, n + 1):
-        order.append(("node", j))
-        if j < n:
-            order.append(("mid", j))
-    rows = []
-    for kind, j in order:
-        if kind == "node":
-            col = lc[j] if j < n else rc[n - 1]
-            xb, ub = charts.to_second(X[j], U[col], zero)
-        else:
-            xb, ub = charts.to_second(Xm[j], Um[j], zero)
-        rows.append((xb, ub))
+    nodes, mids = range(ks, n + 1), range(ks, n)
+    at_nodes = [charts.to_second(X[j], U[lc[j] if j < n else rc[n - 1]], zero)
+                for j in nodes]
+    at_mids = [charts.to_second(Xm[j], Um[j], zero) for j in mids]
+    # the points in time order (node ks, mid ks, node ks+1, ...), their angles unwrapped
+    seq = np.empty((len(at_nodes) + len(at_mids), X.shape[1]))
+    seq[0::2] = [x for x, _ in at_nodes]
+    seq[1::2] = [x for x, _ in at_mids]
     cols = charts.angle_columns()
-    start = charts.to_second(X[ks - 1], None, zero)[0]  # continued from just before
-    xs = _continued(np.array([r[0] for r in rows]), cols, start)
-    for (kind, j), xb, (_, ub) in zip(order, xs, rows, strict=True):
-        if kind == "node":
-            X[j] = xb
-            for col in {lc[j] if j < n else rc[n - 1], rc[j - 1]}:
-                U[col] = ub
-        else:
-            Xm[j], Um[j] = xb, ub
+    start = charts.to_second(X[ks - 1], None, zero)[0][cols]  # continued from just before
+    seq[:, cols] = np.unwrap(np.vstack([start, seq[:, cols]]), axis=0)[1:]
+    X[ks:], Xm[ks:] = seq[0::2], seq[1::2]
+    for j, (_, ub) in zip(nodes, at_nodes, strict=True):
+        for col in {lc[j] if j < n else rc[n - 1], rc[j - 1]}:
+            U[col] = ub
+    Um[ks:] = [u for _, u in at_mids]
     return X, Xm, U, Um
-
-
-def _continued(values: FloatArray, cols: list[int], ref: FloatArray) -> FloatArray:
-    """``values`` (rows in time order) with the angle columns ``cols`` moved by whole
-    turns so that each row is within pi of the one before (the first of ``ref``)."""
-    out = np.array(values, dtype=float)
-    prev = np.asarray(ref, dtype=float)[cols]
-    for r in range(len(out)):
-        d = out[r, cols] - prev
-        out[r, cols] -= 2 * np.pi * np.round(d / (2 * np.pi))
-        prev = out[r, cols]
-    return out
 
 
 def sampled_guess(warm: ManipulationSolution, s: Setup) -> Guess | None:

@@ -189,6 +189,20 @@ def planned_problem(problem: ManipulationProblem, chart_rotation: Any, side_char
     return problem
 
 
+def _predictable(problem: ManipulationProblem) -> bool:
+    """Whether a problem's contacts' paths over the object's two charts can be predicted
+    before its NLP (:func:`turns_off_chart`, :func:`switching_chart`): an object with a
+    side chart held by round fingertips alone, one contact phase, a desired motion from
+    a given pose."""
+    from ocp.robots.turn_reach import rolls
+
+    obj = problem.object
+    return not (obj.kind.side_surface(obj.dimensions) is None or problem.palm is not None
+                or problem.phases is not None or problem.motion is None
+                or problem.initial_pose is None
+                or not all(rolls(tip.finger) for tip in problem.fingers))
+
+
 def turns_off_chart(problem: ManipulationProblem, joints: Callable[[], Sequence[Any]]
                     ) -> bool:
     """Whether the desired motion's turns carry a round fingertip's contact beyond the
@@ -202,14 +216,12 @@ def turns_off_chart(problem: ManipulationProblem, joints: Callable[[], Sequence[
     t = 0) is asked only when it applies."""
     from ocp.robots.first_grasp import desired_turns
     from ocp.robots.grasp_reach import roll
-    from ocp.robots.turn_reach import rolls
     from ocp.shapes.held import held_object
 
     obj, pose, motion = problem.object, problem.initial_pose, problem.motion
-    if (obj.side_chart or obj.kind.side_surface(obj.dimensions) is None
-            or problem.palm is not None or problem.phases is not None or motion is None
-            or pose is None or not all(rolls(tip.finger) for tip in problem.fingers)):
+    if obj.side_chart or not _predictable(problem):
         return False
+    assert pose is not None and motion is not None
     limit = obj.u_limit(problem.pole_margin)
     if max(abs(float(tip.initial[2])) for tip in problem.fingers) <= NEAR_BOUND * limit:
         return False
@@ -332,15 +344,11 @@ def switching_chart(problem: ManipulationProblem, joints: Callable[[], Sequence[
     :data:`NEAR_BOUND` of the bound at the start: nothing is predicted)."""
     from ocp.spec.chart_switch import ChartSwitchSpec
 
-    obj, pose, motion = problem.object, problem.initial_pose, problem.motion
-    if (obj.kind.side_surface(obj.dimensions) is None or problem.palm is not None
-            or problem.phases is not None or motion is None or pose is None
-            or problem.initial_input is not None or problem.reference is not None):
+    obj, motion = problem.object, problem.motion
+    if problem.initial_input is not None or problem.reference is not None \
+            or not _predictable(problem):
         return None
-    from ocp.robots.turn_reach import rolls
-
-    if not all(rolls(tip.finger) for tip in problem.fingers):
-        return None
+    assert motion is not None
     limit = obj.u_limit(problem.pole_margin)
     if obj.side_chart:  # every contact starts on its patch's equator: only a long motion
         from ocp.robots.first_grasp import desired_turns  # leaves it

@@ -34,6 +34,7 @@ across the switch from the state it reached, restated in the next chart.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import casadi as ca
@@ -57,10 +58,6 @@ class ChartSwitch:
     node: int
     model: Any
 
-    @property
-    def surface_name(self) -> str:
-        return str(self.model.surface.name)
-
 
 def n_refs(m: Any) -> int:
     """The number of reference values :func:`chart_map` takes (two per fingertip)."""
@@ -78,13 +75,14 @@ def _psi_matrix(psi: Any) -> Any:
     return ca.vertcat(ca.horzcat(c, -s, 0), ca.horzcat(-s, -c, 0), ca.horzcat(0, 0, -1))
 
 
+@lru_cache(maxsize=32)
 def chart_map(m_from: Any, m_to: Any) -> ca.Function:
     """``(x, u, shape, charts_from, charts_to, refs) -> (x_to, u_to)``: a state and input
     of the grasp (physical units) with its fingertip contacts in ``m_from``'s chart
     restated in ``m_to``'s (the module's map); ``refs`` (:func:`n_refs`): per fingertip
     the second chart's longitude and contact angle near which they are continued. The
     object's block and any contact but a fingertip's are the same in both (a switched
-    plan has no palm: :class:`ChartSwitch`)."""
+    plan has no palm: :class:`ChartSwitch`). Built once per pair of models."""
     if m_from.nx != m_to.nx or m_from.nu != m_to.nu or \
             m_from.surface.n_params != m_to.surface.n_params or \
             len(m_from.fingertips) != len(m_to.fingertips) or \
@@ -118,6 +116,19 @@ def chart_map(m_from: Any, m_to: Any) -> ca.Function:
                        [ca.vertcat(*xs), ca.vertcat(*us)],
                        ["x", "u", "shape", "charts_from", "charts_to", "refs"],
                        ["x_to", "u_to"])
+
+
+@lru_cache(maxsize=32)
+def _rate_map(m_from: Any, m_to: Any) -> ca.Function:
+    """``(x, x_dot, shape, charts_from, charts_to, refs) -> x_dot_to``: a state's rate
+    restated by :func:`chart_map`'s Jacobian (once per pair of models)."""
+    xs, xd = ca.SX.sym("x", m_from.nx), ca.SX.sym("xd", m_from.nx)
+    shape = ca.SX.sym("shape", m_from.surface.n_params)
+    nc = m_from.n_contacts
+    cf, ct = ca.SX.sym("cf", 9 * nc), ca.SX.sym("ct", 9 * nc)
+    refs = ca.SX.sym("refs", n_refs(m_from))
+    x_to = chart_map(m_from, m_to)(xs, ca.DM.zeros(m_from.nu), shape, cf, ct, refs)[0]
+    return ca.Function("rate_map", [xs, xd, shape, cf, ct, refs], [ca.jtimes(x_to, xs, xd)])
 
 
 def _outputs(result: Any) -> list[FloatArray]:
@@ -192,13 +203,8 @@ class PlanCharts:
 
     # -- the switch's map, numerically -------------------------------------------------
     def _map(self, backwards: bool) -> ca.Function:
-        key = "_back" if backwards else "_fwd"
-        fn = self.__dict__.get(key)
-        if fn is None:
-            a, b = self.models
-            fn = chart_map(b, a) if backwards else chart_map(a, b)
-            self.__dict__[key] = fn
-        return fn
+        a, b = self.models
+        return chart_map(b, a) if backwards else chart_map(a, b)
 
     def _charts(self, c: int) -> FloatArray:
         ns = self.first.surface.n_params
@@ -226,25 +232,14 @@ class PlanCharts:
 
     def rate_to_first(self, x: FloatArray, xdot: FloatArray) -> FloatArray:
         """A state's rate on the second chart as the first chart's (the map's Jacobian)."""
-        fn = self.__dict__.get("_rate")
-        if fn is None:
-            m = self.first
-            xs, xd = ca.SX.sym("x", m.nx), ca.SX.sym("xd", m.nx)
-            shape = ca.SX.sym("shape", m.surface.n_params)
-            cb, ca_ = ca.SX.sym("cb", 9 * m.n_contacts), ca.SX.sym("ca", 9 * m.n_contacts)
-            refs = ca.SX.sym("refs", n_refs(m))
-            xa = self._map(True)(xs, ca.DM.zeros(m.nu), shape, cb, ca_, refs)[0]
-            fn = ca.Function("rate_to_first", [xs, xd, shape, cb, ca_, refs],
-                             [ca.jtimes(xa, xs, xd)])
-            self.__dict__["_rate"] = fn
         m = self.first
+        fn = _rate_map(self.models[1], m)
         return np.asarray(fn(x, xdot, self.prms[0][:m.surface.n_params], self._charts(1),
                              self._charts(0), self.refs)).ravel()
 
     def refs_of(self, x: FloatArray) -> FloatArray:
         """A state's longitude and contact angle per fingertip (:func:`n_refs`)."""
-        return np.concatenate([[x[t.eta_cols.start + 3], x[t.eta_cols.start + 4]]
-                               for t in self.first.fingertips])
+        return np.asarray(x, dtype=float)[self.angle_columns()]
 
     def angle_columns(self) -> list[int]:
         """The fingertips' object longitude and contact-angle columns of the state."""

@@ -59,10 +59,9 @@ class _Placed:
     chart: Any = 0
 
 
-def _chart(kind: Any) -> Any:
-    """The chart of a block kind's key (its last item when it is a (mask, chart) pair)."""
-    return kind[1] if isinstance(kind, tuple) and len(kind) == 2 \
-        and not isinstance(kind[1], bool) and kind[1] in (0, 1, "switch") else 0
+def _second(kind: tuple[Any, Any]) -> Any:
+    """A (what, chart) block kind's chart."""
+    return kind[1]
 
 
 class PhasedNLP:
@@ -83,14 +82,14 @@ class PhasedNLP:
         # every point's contacts: a node has those of the intervals it joins
         nodes = [touching[0]] + [_union(touching[k - 1], touching[k])
                                  for k in range(1, n)] + [touching[-1]]
-        self.point_masks = nodes + touching  # nodes, then midpoints: the NLP's order
         ks = n + 1 if switch is None else switch.node  # the first point in the next chart
         if switch is not None and not 0 < ks < n:
             raise ValueError(f"a chart switch is at an inner node (1..{n - 1}), got {ks}")
-        #: every point's (contacts, chart): nodes from the switch on, and the midpoints of
-        #: the intervals after it, in the next chart
-        self.point_kinds = [(mask, int(j >= ks)) for j, mask in enumerate(nodes)] + \
-            [(mask, int(k >= ks)) for k, mask in enumerate(touching)]
+        #: every point's (contacts, chart), nodes then midpoints (the NLP's order): nodes
+        #: from the switch on, and the midpoints of the intervals after it, in the next
+        #: chart
+        self.point_kinds = [(mask, self.node_chart(j)) for j, mask in enumerate(nodes)] + \
+            [(mask, self.node_chart(k)) for k, mask in enumerate(touching)]
         self._points: dict[tuple[Any, ...], Block] = {}
         conditions = [self.model(c).phase(mask)
                       for mask, c in dict.fromkeys(self.point_kinds)]
@@ -111,7 +110,8 @@ class PhasedNLP:
         return self.switch.model if chart == 1 and self.switch is not None else self.m
 
     def node_chart(self, j: int) -> int:
-        """The chart of node ``j``'s state (1 from the switch node on)."""
+        """The chart of node ``j``'s state (1 from the switch node on), and of interval
+        ``j``'s midpoint."""
         return int(self.switch is not None and j >= self.switch.node)
 
     def build(self, t0: float) -> BlockNLP:
@@ -149,15 +149,17 @@ class PhasedNLP:
         lbg: list[float] = []
         ubg: list[float] = []
 
-        def group(kinds: list[Any], make: Any, z_of: Any, rows_of: Any) -> None:
-            """Place the instances (in g's order) of the blocks ``make(kind)``."""
+        def group(kinds: list[Any], make: Any, z_of: Any, rows_of: Any,
+                  chart_of: Any = None) -> None:
+            """Place the instances (in g's order) of the blocks ``make(kind)``, each kind
+            on the chart ``chart_of(kind)`` (None: the first)."""
             nonlocal row
             by_kind: dict[Any, _Placed] = {}
             for i, kind in enumerate(kinds):
                 if kind not in by_kind:
                     blk = make(kind)
                     by_kind[kind] = _Placed(blk, np.zeros((0, 0), dtype=np.int64), [], [],
-                                            _chart(kind))
+                                            0 if chart_of is None else chart_of(kind))
                 pl = by_kind[kind]
                 keep = rows_of(i, pl.block)
                 rmap = np.full(pl.block.n_rows, -1, dtype=np.int64)
@@ -187,7 +189,7 @@ class PhasedNLP:
         group(list(zip(self.touching, self.interval_charts, strict=True)), interval_of,
               lambda k, _: np.concatenate([Xi[:, k], Xmi[:, k], ex[:, k], Ui[:, lc[k]],
                                            Umi[:, k], eu[:, k], Si[:, k], Smi[:, k],
-                                           es[:, k]]), all_rows)
+                                           es[:, k]]), all_rows, _second)
         if stages is not None:  # the gap-closing rows: s_k+1 = copy_k
             arriving = np.vstack([Xi[:, 1:], Ui[:, rc], Si[:, 1:]])
             copies = np.vstack([ex, eu, es])
@@ -196,7 +198,7 @@ class PhasedNLP:
         # every point's rows (node 0: the given initial grasp, without tracking bounds)
         group(self.point_kinds, lambda k: self._points[k],
               lambda c, blk: point_vars[c][blk.z_map],
-              lambda c, blk: blk.keep0 if c == 0 else all_rows(c, blk))
+              lambda c, blk: blk.keep0 if c == 0 else all_rows(c, blk), _second)
         off_t = row
         tg_fn, tg_jac, tg_hess, Jt, Ht, n_t = self._targets()
         ends = hs.segment_end_nodes
@@ -209,14 +211,12 @@ class PhasedNLP:
         pairs = _node_input_pairs(hs, self.reference)
         users = {c: [k for k in range(n) if c in (lc[k], rc[k])] for _, c in pairs}
         rate_kinds = [(self._touching_of(users[c]), self.node_chart(k)) for k, c in pairs] + \
-            [(mask, int(self.interval_charts[k] == 1))
-             for k, mask in enumerate(self.touching)]
+            [(mask, self.node_chart(k)) for k, mask in enumerate(self.touching)]
         rate_z = [np.concatenate([Xi[:, k], Ui[:, c]]) for k, c in pairs] + \
             [np.concatenate([Xmi[:, k], Umi[:, k]]) for k in range(n)]
         if m.fingertips:
             group(rate_kinds, lambda k: rate_block(self.model(k[1]).phase(k[0])),
-                  lambda i, _: rate_z[i],
-                  all_rows)
+                  lambda i, _: rate_z[i], all_rows, _second)
         if self.smooth and m.effort_groups()[2]:
             group([None] * n, lambda _: accel_block(m, True),
                   lambda k, _: np.concatenate([Ui[:, lc[k]], Umi[:, k], eu[:, k]]),
@@ -230,7 +230,7 @@ class PhasedNLP:
         if landings:
             group([((self.touching[k], tips), self.node_chart(k)) for k, tips in landings],
                   lambda kt: touchdown_block(self.model(kt[1]).phase(kt[0][0]), kt[0][1]),
-                  lambda i, _: Xi[:, landings[i][0]], all_rows)
+                  lambda i, _: Xi[:, landings[i][0]], all_rows, _second)
         ng = row
         parked = self._parked(point_vars, placed, Ui, Umi, Xi, Xmi)
         t_rows = off_t + np.arange(n_t)
