@@ -48,7 +48,7 @@ def with_forces(model: Callable[[ManipulationProblem], GraspModel],
     Xall = np.vstack([col.X, col.Xm])
     pc = charts.point_charts(len(col.Xm))
     load = load_parameters(pf)
-    model_rows = _model_torques(pf, kin, col)
+    model_rows = _model_torques(pf, kin, col, m.fingertips)
     F = None
     iterations, t_build, t_stage = 0, 0.0, 0.0
     for c in sorted(set(pc.tolist())):  # the points of each chart: one stage each
@@ -112,11 +112,11 @@ def _stage_forces(stage: ForceStage, problem: ManipulationProblem, Xall: np.ndar
     return F, iterations
 
 
-def _model_torques(problem: ManipulationProblem, kin: ManipulationSolution, col: Any
-                   ) -> list[np.ndarray] | None:
-    """Per fingertip, what the hand's own model needs at each of the plan's points
-    (nodes, then midpoints; rows) on top of the contact forces' torques: its links'
-    weight, the joints' damping and springs, the motion's inertia (MuJoCo's, the
+def _model_torques(problem: ManipulationProblem, kin: ManipulationSolution, col: Any,
+                   tips: Any) -> list[np.ndarray] | None:
+    """Per fingertip (``tips``: the grasp model's), what the hand's own model needs at
+    each of the plan's points (nodes, then midpoints; rows) on top of the contact forces'
+    torques: its links' weight, the joints' damping and springs, the motion's inertia (MuJoCo's, the
     actuation's ``model_torques``, which the actuator check adds too); None where the
     actuation has no model (a URDF's)."""
     act = problem.actuation
@@ -129,7 +129,7 @@ def _model_torques(problem: ManipulationProblem, kin: ManipulationSolution, col:
         return [np.asarray(act.model_torques(t.finger.joint_names, smp.x[:, t.q_cols],
                                              smp.x_dot[:, t.q_cols],
                                              smp.x_ddot[:, t.q_cols]), dtype=float)
-                for t in kin._interpolant.m.fingertips]  # type: ignore[union-attr]
+                for t in tips]
     except (ValueError, AssertionError):  # a joint the file does not name; no polynomials
         return None
 
