@@ -139,6 +139,41 @@ def test_the_farthest_landing_touches_and_reaches_at_least_as_far_as_home() -> N
     assert moved >= 1
 
 
+def test_landings_drawn_over_the_joints_reach_farther_and_keep_apart() -> None:
+    """The landings of allegro_turn_90.json's searched grasp about +x may be drawn over
+    each finger's joints (not only its home contact rolled back): the thumb's reaches at
+    least 40 deg forward (48.6 measured; the best of its home contact rolled back: 21.7),
+    and every landing away from home keeps LANDING_GAP from the other fingertips' bodies
+    where they touch at home and where they land, its normal within LANDING_CONE of
+    home's."""
+    from ocp.gait.planner import LANDING_CONE, LANDING_GAP, farthest_landings, landing_gap
+    from ocp.robots.grasp_reach import roll, tip_state
+    from planner_service.planners import REQUEST
+    from planner_service.planners.cache import FingerCache
+    from planner_service.planners.manipulation import manipulation_problem
+
+    body = json.loads((ROOT / "examples" / "allegro_turn_90.json").read_text())
+    body["gait"].update(replace="spent", landing="farthest")
+    problem = manipulation_problem(REQUEST.validate_python(body), FingerCache())
+    q_home = tuple(np.asarray(t.q_seed, dtype=float) for t in problem.fingers)
+    centre = np.asarray(problem.initial_pose.position, dtype=float)
+    rho = float(problem.object.dimensions[0])
+    axis = np.array([1.0, 0.0, 0.0])
+    landed = farthest_landings(problem, q_home, centre, rho, axis, math.radians(30.0))
+    fingers = tuple(t.finger for t in problem.fingers)
+    thumb = [t.name for t in problem.fingers].index("thumb")
+    assert math.degrees(roll(fingers[thumb], landed[thumb], centre, rho, axis, math.pi,
+                             problem.pad_margin).reach) > 40.0
+    for k, (f, q0, q) in enumerate(zip(fingers, q_home, landed, strict=True)):
+        if np.abs(q - q0).max() < 1e-9:
+            continue
+        n0, n = tip_state(f, q0, centre, rho).n, tip_state(f, q, centre, rho).n
+        assert float(n0 @ n) >= math.cos(LANDING_CONE) - 1e-12
+        for at in (q_home, landed):
+            qs = tuple(q if j == k else at[j] for j in range(len(fingers)))
+            assert landing_gap(fingers, qs, k)[0] >= LANDING_GAP
+
+
 @pytest.mark.slow
 def test_farthest_landings_need_fewer_re_placements_and_execute() -> None:
     """About +y, with rolls of up to 30 deg: certified, fewer re-placements than landing

@@ -82,8 +82,9 @@ def test_a_body_that_moves_into_a_still_swings_path_is_avoided_when_known() -> N
 def test_a_gait_re_placing_during_rolls_is_certified_shorter_and_executes() -> None:
     """allegro_turn_90.json about +x with the spent fingertips landing where they roll
     farthest, rolls of up to 30 deg, fastest swings and rolls, and ``overlap``: certified;
-    most re-placements made during rolls; the motion shorter than the same gait's at rest
-    (15.3-24.5 s over the eight turns, docs/gait.md); in the samples the lifted fingertip
+    most re-placements made during rolls; the motion within the issue's 10 s with at most
+    10 re-placements (7.9 s and 9 measured; at rest 15.3-24.5 s over the eight turns,
+    docs/gait.md); in the samples the lifted fingertip
     touches nothing and carries no force during its roll, every joint is continuous at
     every switch; executed in MuJoCo."""
     from ocp.gait.samples import gait_samples, gait_times
@@ -95,7 +96,7 @@ def test_a_gait_re_placing_during_rolls_is_certified_shorter_and_executes() -> N
     request, problem, result, gait = planned_gait(body)
     assert math.degrees(gait.turned) == pytest.approx(90.0, abs=1e-3)
     assert len(gait.carried) >= len(gait.steps) // 2 and len(gait.carried) >= 4
-    assert gait.duration < 15.0  # measured: 9.5 s
+    assert gait.duration < 10.0 and len(gait.steps) <= 10  # measured: 7.9 s, 9
     # a hand-over: one ramp loads the last re-placed fingertip and unloads the next
     assert any(st.landing is not None for st in gait.steps)
     smp = gait_samples(gait, problem, gait_times(gait, 200.0))

@@ -48,6 +48,7 @@ from ocp.gait.step import (
     TorqueLimits,
     contact_of,
     deep_forces,
+    dense_enough,
     grasp_hold,
 )
 from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, SwingPlan, SwingSpec, plan_swing
@@ -258,6 +259,7 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
             if plan.status != "infeasible":
                 break
             plan = plan_swing(replace(spec, **narrow))  # type: ignore[arg-type]
+        plan = dense_enough(plan)  # (kept at its nodes, a moving neighbour's dips between)
         if plan.ok and limits is not None and limits.rate:
             over = limits.damping_overrun(k, plan.Q, plan.V)
             if over > 1.0:  # too fast for the joints' damping: slower, the roll with it

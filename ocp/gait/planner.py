@@ -800,45 +800,84 @@ RECUR_TOL = 0.05
 LANDING_SHARES = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: How far [m] a landing candidate's tip centre may be from where it touches the ball.
 LANDING_TOL = 1e-12
+#: A landing drawn over the finger's joints (not its home contact rolled back) is
+#: within this angle [rad] of home's normal on the ball ...
+LANDING_CONE = math.radians(45.0)
+#: ... and its tip body this far [m] from the other fingertips' at home and at their
+#: landings.
+LANDING_GAP = 3e-3
 
 
 def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, ...],
                       centre: FloatArray, rho: float, axis: FloatArray, back: float
                       ) -> tuple[FloatArray, ...]:
-    """Per fingertip, where a spent one lands: of its home contact (the joints ``q_home``)
-    and that contact rolled back about ``axis`` (:func:`~ocp.robots.grasp_reach.roll`
+    """Per fingertip, where a spent one lands: of its home contact (the joints ``q_home``),
+    that contact rolled back about ``axis`` (:func:`~ocp.robots.grasp_reach.roll`
     with the ball turned by -``back`` times each of :data:`LANDING_SHARES`, as far as it
     rolls back without stopping: never at a joint limit, a seam kept ``pad_margin`` away,
-    or a fold of its motion), the one from which it rolls forward the farthest, the
-    nearest home among those within 1 mrad of it; each placed on the ball to
-    :data:`LANDING_TOL` (the rolled joints drift by up to a micrometre;
+    or a fold of its motion) and the finger's other contacts on the ball
+    (:func:`~ocp.robots.first_grasp.finger_contacts`: its joints drawn over their ranges)
+    whose normal is within :data:`LANDING_CONE` of home's and whose tip body keeps
+    :data:`LANDING_GAP` from the other fingertips' where they touched when the gait began
+    and where they land (chosen in the fingers' order), the hand's links as far apart
+    (``template.collision``: at least the least of that gap and their clearance at home;
+    each candidate but home itself so kept), the one from which it rolls
+    forward the farthest, the nearest home among those within 1 mrad of it; each placed on
+    the ball to :data:`LANDING_TOL` (the rolled joints drift by up to a micrometre;
     :func:`~ocp.robots.grasp_reach.grasp_on_ball`, its couplings kept) so that the roll
     after its landing starts where its joints are."""
+    from ocp.robots.first_grasp import finger_contacts
     from ocp.robots.grasp_reach import grasp_on_ball, roll, tip_state
     from ocp.robots.turn_reach import rolls
 
-    out = []
-    for k, f in enumerate(template.fingers):
+    fingers = tuple(f.finger for f in template.fingers)
+    links = _link_gap(template, fingers, centre)  # (the hand's links, where modelled)
+    floor = min(LANDING_GAP, links(list(q_home)).value) if links is not None else 0.0
+    out: list[FloatArray] = []
+
+    def apart(k: int, q: FloatArray) -> bool:  # clear of the others, home and landed
+        beside = [tuple(q if j == k else at[j] for j in range(len(fingers)))
+                  for at in (q_home, (*out, *q_home[k:]))]
+        return min(landing_gap(fingers, qs, k)[0] for qs in beside) >= LANDING_GAP and (
+            links is None or min(links(list(qs)).value for qs in beside) >= floor)
+
+    for k, f in enumerate(fingers):
         best, best_reach = q_home[k], -1.0
-        if rolls(f.finger):
-            for share in LANDING_SHARES:
-                q = q_home[k]
-                if share > 0.0:
-                    behind = roll(f.finger, q_home[k], centre, rho, -axis, share * back,
-                                  template.pad_margin)
-                    if behind.why:  # stopped short (a joint limit, a seam, singular):
-                        break  # no landing at the edge of its reach
-                    # on the ball exactly: its contact's normal kept, the couplings too
-                    placed = grasp_on_ball(f.finger, behind.q, centre, rho,
-                                           tip_state(f.finger, behind.q, centre, rho).n,
-                                           LANDING_TOL, template.pad_margin)
-                    if placed is None:
-                        break
-                    q = placed
-                reach = roll(f.finger, q, centre, rho, axis, math.pi,
-                             template.pad_margin).reach
-                if reach > best_reach + 1e-3:
-                    best, best_reach = q, reach
+        if not rolls(f):
+            out.append(best)
+            continue
+        for share in LANDING_SHARES:
+            q = q_home[k]
+            if share > 0.0:
+                behind = roll(f, q_home[k], centre, rho, -axis, share * back,
+                              template.pad_margin)
+                if behind.why:  # stopped short (a joint limit, a seam, singular):
+                    break  # no landing at the edge of its reach
+                # on the ball exactly: its contact's normal kept, the couplings too
+                placed = grasp_on_ball(f, behind.q, centre, rho,
+                                       tip_state(f, behind.q, centre, rho).n,
+                                       LANDING_TOL, template.pad_margin)
+                if placed is None:
+                    break
+                if not apart(k, placed):
+                    continue
+                q = placed
+            reach = roll(f, q, centre, rho, axis, math.pi, template.pad_margin).reach
+            if reach > best_reach + 1e-3:
+                best, best_reach = q, reach
+        n_home = tip_state(f, q_home[k], centre, rho).n
+        drawn, _ = finger_contacts(f, centre, rho, seeds=(q_home[k],),
+                                   margin=template.pad_margin)
+        for c in drawn:
+            if float(c.normal @ n_home) < math.cos(LANDING_CONE):
+                continue
+            placed = grasp_on_ball(f, c.q, centre, rho, c.normal, LANDING_TOL,
+                                   template.pad_margin)
+            if placed is None or not apart(k, placed):
+                continue
+            reach = roll(f, placed, centre, rho, axis, math.pi, template.pad_margin).reach
+            if reach > best_reach + 1e-3:
+                best, best_reach = placed, reach
         out.append(best)
     return tuple(out)
 
@@ -1250,6 +1289,7 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                 waiting = None  # the last step, its checks waiting for its loading
                 switched = False  # whether k is a fingertip another's roll would strand
                 k: int | None = None
+                rested: set[int] = set()  # re-placed at rest since the last roll
                 while done < angle - 1e-12 and len(plan.rolls) < max_rolls:
                     if not switched:  # the spent one that reaches least
                         k = lift_next(*spent_reach(
@@ -1269,7 +1309,29 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                         continue
                     if isinstance(res, str):
                         plan.overlap_misses.append(res)
-                        break
+                        if k in rested:
+                            break
+                        # that fingertip alone re-placed with the ball still, and the
+                        # others on (once each until a roll is made): not every spent one
+                        if waiting is not None:  # loaded by itself
+                            checks += _step_checks(plan, waiting, load, template)
+                            waiting = None
+                        marks = (len(plan.phases), len(plan.steps), len(checks),
+                                 set(never_lifted))
+                        q_after, t_after = _replace_fingers(
+                            plan, checks, template, q_land, q_now, pose, t, load, swing,
+                            hold_time, never_lifted, [k], q_start)
+                        if plan.status != "solved" or never_lifted != marks[3]:
+                            del plan.phases[marks[0]:], plan.steps[marks[1]:]
+                            del checks[marks[2]:]
+                            plan.status, plan.message = "solved", ""
+                            never_lifted.clear()
+                            never_lifted.update(marks[3])
+                            break
+                        rested.add(k)
+                        q_now, t, switched = q_after, t_after, False
+                        continue
+                    rested.clear()
                     switched = False
                     if waiting is not None:  # loaded while the next one is unloaded
                         checks += _step_checks(plan, waiting, load, template)

@@ -133,7 +133,7 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
         pos[rows], wxyz[rows] = last[0], quaternion_wxyz(last[1])
         step = gait.steps[ph.index]
         k = step.finger
-        s = np.clip(tl / max(ph.end - ph.start, 1e-12), 0.0, 1.0)
+        s = step.ramp_share(tl / max(ph.end - ph.start, 1e-12))
         if ph.kind == "swing":
             force[rows] = np.insert(step.forces[1], k, 0.0, axis=0)
             assert step.swing is not None
