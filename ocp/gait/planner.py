@@ -547,18 +547,28 @@ def _clock_torques(plan: GaitPlan, r: int, template: ManipulationProblem, t0: fl
     clock = plan.clock(r)
     s = clock(tau)[0]
     q, v, _ = plan.roll_joints(r, tau)
-    static = plan.rolls[r].joint_torques(s)
-    cut = np.cumsum((0, *plan.nq))
+    worst, at = torque_overrun(limits, plan.fingers_of(r), plan.rolls[r].joint_torques(s),
+                               q, v, plan.nq)
+    return [Check(f"roll{r}_clock_torque", worst, 1.0 + 1e-9, CheckKind.LIMITS,
+                  time=t0 + float(tau[at]))]
+
+
+def torque_overrun(limits: TorqueLimits, fingers: list[int], static: list[FloatArray],
+                   q: FloatArray, v: FloatArray, nq: tuple[int, ...]) -> tuple[float, int]:
+    """(the largest share of its actuators' range a joint of the ``fingers`` (indices of
+    ``limits``' and of the joint rows ``q``, ``v``: every finger's, concatenated) needs,
+    the row where) for the torques ``static`` (per finger of ``fingers``, rows) plus its
+    joints' damping at the rates ``v``."""
+    cut = np.cumsum((0, *nq))
     worst, at = 0.0, 0
-    for c_i, i in enumerate(plan.fingers_of(r)):  # (a swinging fingertip's: its swing's)
+    for c_i, i in enumerate(fingers):  # (a swinging fingertip's: its swing's)
         c = np.asarray(limits.damping[i], dtype=float)
-        for k in range(len(tau)):
+        for k in range(len(q)):
             over = limits.overrun(i, q[k, cut[i]:cut[i + 1]],
                                   static[c_i][k] + c * v[k, cut[i]:cut[i + 1]])
             if over > worst:
                 worst, at = over, k
-    return [Check(f"roll{r}_clock_torque", worst, 1.0 + 1e-9, CheckKind.LIMITS,
-                  time=t0 + float(tau[at]))]
+    return worst, at
 
 
 #: How far [rad or m] a roll's first joints may be from the joints the phase before it
@@ -806,6 +816,9 @@ LANDING_CONE = math.radians(45.0)
 #: ... and its tip body this far [m] from the other fingertips' at home and at their
 #: landings.
 LANDING_GAP = 3e-3
+#: ... and reached by a swing from where the finger's home reach is spent: the farthest
+#: reaching this many of them are tried.
+LANDING_TRIES = 3
 
 
 def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, ...],
@@ -821,7 +834,10 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
     :data:`LANDING_GAP` from the other fingertips' where they touched when the gait began
     and where they land (chosen in the fingers' order), the hand's links as far apart
     (``template.collision``: at least the least of that gap and their clearance at home;
-    each candidate but home itself so kept), the one from which it rolls
+    each candidate but home itself so kept), a drawn one only when an at-rest swing
+    (:func:`~ocp.gait.step.replace_finger`) reaches it from where the finger's home reach
+    is spent (the others at home; the :data:`LANDING_TRIES` farthest tried), the one from
+    which it rolls
     forward the farthest, the nearest home among those within 1 mrad of it; each placed on
     the ball to :data:`LANDING_TOL` (the rolled joints drift by up to a micrometre;
     :func:`~ocp.robots.grasp_reach.grasp_on_ball`, its couplings kept) so that the roll
@@ -831,6 +847,9 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
     from ocp.robots.turn_reach import rolls
 
     fingers = tuple(f.finger for f in template.fingers)
+    names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
+    load, limits = load_parameters(template), torque_limits(template)
+    obstacles = swing_obstacles(template)
     links = _link_gap(template, fingers, centre)  # (the hand's links, where modelled)
     floor = min(LANDING_GAP, links(list(q_home)).value) if links is not None else 0.0
     out: list[FloatArray] = []
@@ -868,6 +887,7 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
         n_home = tip_state(f, q_home[k], centre, rho).n
         drawn, _ = finger_contacts(f, centre, rho, seeds=(q_home[k],),
                                    margin=template.pad_margin)
+        farther = []
         for c in drawn:
             if float(c.normal @ n_home) < math.cos(LANDING_CONE):
                 continue
@@ -877,7 +897,19 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
                 continue
             reach = roll(f, placed, centre, rho, axis, math.pi, template.pad_margin).reach
             if reach > best_reach + 1e-3:
-                best, best_reach = placed, reach
+                farther.append((reach, placed, c.normal))
+        # the farthest that a swing reaches from where the finger's home reach is spent
+        # (the others at home, the ball still): one a swing cannot reach strands it
+        # (four_finger_gait-018's middle finger, found by the bench family)
+        home = roll(f, q_home[k], centre, rho, axis, math.pi, template.pad_margin).reach
+        spent = roll(f, q_home[k], centre, rho, axis, max(home - REACH_MARGIN, 0.0),
+                     template.pad_margin).q
+        for _, placed, normal in sorted(farther, key=lambda x: -x[0])[:LANDING_TRIES]:
+            at = tuple(spent if j == k else q for j, q in enumerate(q_home))
+            if replace_finger(fingers, at, k, normal, placed, Held(centre, np.eye(3), rho),
+                              load, None, 0.2, None, names, limits, obstacles).ok:
+                best = placed
+                break
         out.append(best)
     return tuple(out)
 
@@ -1035,6 +1067,19 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
             if switch and blocker is not None and names[blocker] not in never_lifted:
                 return why, blocker  # the fingertip in its way is re-placed first
             return why
+        # the others' forces within their actuators (the roll's force stage keeps 90 % of
+        # their range where it can, and plans without the bound where it cannot:
+        # four_finger_gait-000's index 2.24 times its range, the ring lifted)
+        whole = torque_limits(sub, 1.0)  # (the others', in their order)
+        if whole is not None:
+            tau = np.linspace(0.0, float(got.sol.duration), CLOCK_SAMPLES + 1)
+            jt = got.sol.joint_trajectory(tau, efforts=False)
+            over, _ = torque_overrun(whole, list(range(len(nq_sub))),
+                                     got.sol.joint_torques(tau), jt.positions,
+                                     0.0 * jt.velocities, nq_sub)
+            if over > 1.0:
+                return (f"without {names[k]!r} the others' forces need {over:.2f} times "
+                        "an actuator's range")
         # the landing clear of the others where they rolled to
         apart, near = landing_gap(tuple(f.finger for f in template.fingers), got.q_after,
                                   k)
