@@ -281,6 +281,11 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                                                    load, limits)
     if F_rest_end is None or F_after is None:
         return None, f"the grasp with {names[k]} landed cannot hold the ball", None
+    # the ramps meet the roll where its own forces are (both hold the still ball there:
+    # every force on a ramp between them does too): the others' deep holds differed from
+    # the roll's first and last forces by up to 0.9 N, a step the servos were asked for
+    F_rest_start = sol.forces(np.array([0.0]))[0][0]
+    F_rest_end = sol.forces(np.array([float(sol.duration)]), side="left")[0][0]
     step = GaitStep(k, "solved", "", plan, (before, rest_start, rest_end, after),
                     (F_before, F_rest_start, F_rest_end, F_after),
                     (tuple(allf), tuple(rest), tuple(rest), tuple(allf)), hold_time,

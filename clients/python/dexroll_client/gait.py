@@ -61,10 +61,12 @@ class GaitModel(_Request):
     landing: Literal["home", "farthest"] = Field(
         default="home",
         description="where a spent fingertip lands (with replace 'spent'): 'home', where "
-                    "it touched when the gait began; 'farthest', of that contact and the "
+                    "it touched when the gait began; 'farthest', of that contact, the "
                     "contacts it would have rolled back to (the ball turned back by 1/4, "
-                    "1/2, 3/4 and all of roll_step), the one from which it rolls forward "
-                    "the farthest: fewer, longer rolls (docs/gait.md)")
+                    "1/2, 3/4 and all of roll_step) and contacts drawn over its joints "
+                    "(within 45 deg of home's normal, 3 mm from the other fingertips, "
+                    "reached by a swing), the one from which it rolls forward the "
+                    "farthest: fewer, longer rolls (docs/gait.md)")
 
     overlap: bool = Field(
         default=False,
