@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -110,12 +111,11 @@ def test_fast_rolls_are_certified_shorter_and_execute() -> None:
     assert report.passed, report.failures
 
 
-def test_the_farthest_landing_touches_and_reaches_at_least_as_far_as_home() -> None:
-    """ocp.gait.planner.farthest_landings on the searched grasp of allegro_turn_90.json:
-    every landing is on the ball (to 1e-9 m) and reaches forward at least as far as the
-    home contact, and at least one fingertip lands behind its home."""
+@pytest.fixture(scope="module")
+def landings() -> tuple[Any, ...]:
+    """allegro_turn_90.json's searched grasp about +x and its farthest landings (rolls of
+    30 deg): (problem, home joints, centre, radius, axis, landing joints)."""
     from ocp.gait.planner import farthest_landings
-    from ocp.robots.grasp_reach import roll, tip_state
     from planner_service.planners import REQUEST
     from planner_service.planners.cache import FingerCache
     from planner_service.planners.manipulation import manipulation_problem
@@ -128,6 +128,17 @@ def test_the_farthest_landing_touches_and_reaches_at_least_as_far_as_home() -> N
     rho = float(problem.object.dimensions[0])
     axis = np.array([1.0, 0.0, 0.0])
     landed = farthest_landings(problem, q_home, centre, rho, axis, math.radians(30.0))
+    return problem, q_home, centre, rho, axis, landed
+
+
+def test_the_farthest_landing_touches_and_reaches_at_least_as_far_as_home(
+        landings: tuple[Any, ...]) -> None:
+    """ocp.gait.planner.farthest_landings on the searched grasp of allegro_turn_90.json:
+    every landing is on the ball (to 1e-9 m) and reaches forward at least as far as the
+    home contact, and at least one fingertip lands behind its home."""
+    from ocp.robots.grasp_reach import roll, tip_state
+
+    problem, q_home, centre, rho, axis, landed = landings
     moved = 0
     for tip, q0, q in zip(problem.fingers, q_home, landed, strict=True):
         f = tip.finger
@@ -139,27 +150,18 @@ def test_the_farthest_landing_touches_and_reaches_at_least_as_far_as_home() -> N
     assert moved >= 1
 
 
-def test_landings_drawn_over_the_joints_reach_farther_and_keep_apart() -> None:
+def test_landings_drawn_over_the_joints_reach_farther_and_keep_apart(
+        landings: tuple[Any, ...]) -> None:
     """The landings of allegro_turn_90.json's searched grasp about +x may be drawn over
     each finger's joints (not only its home contact rolled back): the thumb's reaches at
     least 40 deg forward (48.6 measured; the best of its home contact rolled back: 21.7),
     and every landing away from home keeps LANDING_GAP from the other fingertips' bodies
     where they touch at home and where they land, its normal within LANDING_CONE of
     home's."""
-    from ocp.gait.planner import LANDING_CONE, LANDING_GAP, farthest_landings, landing_gap
+    from ocp.gait.planner import LANDING_CONE, LANDING_GAP, landing_gap
     from ocp.robots.grasp_reach import roll, tip_state
-    from planner_service.planners import REQUEST
-    from planner_service.planners.cache import FingerCache
-    from planner_service.planners.manipulation import manipulation_problem
 
-    body = json.loads((ROOT / "examples" / "allegro_turn_90.json").read_text())
-    body["gait"].update(replace="spent", landing="farthest")
-    problem = manipulation_problem(REQUEST.validate_python(body), FingerCache())
-    q_home = tuple(np.asarray(t.q_seed, dtype=float) for t in problem.fingers)
-    centre = np.asarray(problem.initial_pose.position, dtype=float)
-    rho = float(problem.object.dimensions[0])
-    axis = np.array([1.0, 0.0, 0.0])
-    landed = farthest_landings(problem, q_home, centre, rho, axis, math.radians(30.0))
+    problem, q_home, centre, rho, axis, landed = landings
     fingers = tuple(t.finger for t in problem.fingers)
     thumb = [t.name for t in problem.fingers].index("thumb")
     assert math.degrees(roll(fingers[thumb], landed[thumb], centre, rho, axis, math.pi,
