@@ -837,9 +837,8 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
     each candidate but home itself so kept), a drawn one only when an at-rest swing
     (:func:`~ocp.gait.step.replace_finger`) reaches it from where the finger's home reach
     is spent (the others at home; the :data:`LANDING_TRIES` farthest tried), the one from
-    which it rolls
-    forward the farthest, the nearest home among those within 1 mrad of it; each placed on
-    the ball to :data:`LANDING_TOL` (the rolled joints drift by up to a micrometre;
+    which it rolls forward the farthest, the nearest home among those within 1 mrad of it;
+    each placed on the ball to :data:`LANDING_TOL` (the rolled joints drift by up to a micrometre;
     :func:`~ocp.robots.grasp_reach.grasp_on_ball`, its couplings kept) so that the roll
     after its landing starts where its joints are."""
     from ocp.robots.first_grasp import finger_contacts
@@ -861,7 +860,7 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
             links is None or min(links(list(qs)).value for qs in beside) >= floor)
 
     for k, f in enumerate(fingers):
-        best, best_reach = q_home[k], -1.0
+        best, best_reach, home = q_home[k], -1.0, 0.0
         if not rolls(f):
             out.append(best)
             continue
@@ -882,6 +881,8 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
                     continue
                 q = placed
             reach = roll(f, q, centre, rho, axis, math.pi, template.pad_margin).reach
+            if share == 0.0:
+                home = reach
             if reach > best_reach + 1e-3:
                 best, best_reach = q, reach
         n_home = tip_state(f, q_home[k], centre, rho).n
@@ -901,11 +902,11 @@ def farthest_landings(template: ManipulationProblem, q_home: tuple[FloatArray, .
         # the farthest that a swing reaches from where the finger's home reach is spent
         # (the others at home, the ball still): one a swing cannot reach strands it
         # (four_finger_gait-018's middle finger, found by the bench family)
-        home = roll(f, q_home[k], centre, rho, axis, math.pi, template.pad_margin).reach
-        spent = roll(f, q_home[k], centre, rho, axis, max(home - REACH_MARGIN, 0.0),
-                     template.pad_margin).q
-        for _, placed, normal in sorted(farther, key=lambda x: -x[0])[:LANDING_TRIES]:
+        if farther:
+            spent = roll(f, q_home[k], centre, rho, axis, max(home - REACH_MARGIN, 0.0),
+                         template.pad_margin).q
             at = tuple(spent if j == k else q for j, q in enumerate(q_home))
+        for _, placed, normal in sorted(farther, key=lambda x: -x[0])[:LANDING_TRIES]:
             if replace_finger(fingers, at, k, normal, placed, Held(centre, np.eye(3), rho),
                               load, None, 0.2, None, names, limits, obstacles).ok:
                 best = placed
@@ -979,11 +980,24 @@ def _replace_spent(plan: GaitPlan, checks: list[Check], template: ManipulationPr
     (``q_home``; where it touched when the roll began, ``q_start``, when no swing home is
     found): (the joints after, the time). None, with ``plan``, ``checks`` and
     ``never_lifted`` as they were, when one of them cannot be lifted or a step fails."""
-    marks = (len(plan.phases), len(plan.steps), len(checks), set(never_lifted))
     which = spent_fingers(template, q_now, np.asarray(pose.position, float),
                           float(template.object.dimensions[0]), axis, upto, never_lifted,
                           pose.rotation)
-    q_after, t_after = _replace_fingers(plan, checks, template, q_home, q_now, pose, t,
+    return _replaced(plan, checks, template, q_home, q_start, q_now, pose, t, load, swing,
+                     hold_time, never_lifted, which)
+
+
+def _replaced(plan: GaitPlan, checks: list[Check], template: ManipulationProblem,
+              q_land: tuple[FloatArray, ...], q_start: tuple[FloatArray, ...],
+              q_now: tuple[FloatArray, ...], pose: ObjectPose, t: float, load: FloatArray,
+              swing: dict[str, Any] | None, hold_time: float, never_lifted: set[str],
+              which: list[int]) -> tuple[tuple[FloatArray, ...], float] | None:
+    """The fingertips ``which`` re-placed with the ball still (:func:`_replace_fingers`:
+    at ``q_land``, else where they touched when the roll began, ``q_start``): (the joints
+    after, the time), or None, with ``plan``, ``checks`` and ``never_lifted`` as they
+    were, when one of them cannot be lifted or a step fails."""
+    marks = (len(plan.phases), len(plan.steps), len(checks), set(never_lifted))
+    q_after, t_after = _replace_fingers(plan, checks, template, q_land, q_now, pose, t,
                                         load, swing, hold_time, never_lifted, which, q_start)
     if plan.status == "solved" and never_lifted == marks[3]:
         return q_after, t_after
@@ -1361,20 +1375,13 @@ def plan_gait(template: ManipulationProblem, qs: tuple[Any, ...], axis: Any, ang
                         if waiting is not None:  # loaded by itself
                             checks += _step_checks(plan, waiting, load, template)
                             waiting = None
-                        marks = (len(plan.phases), len(plan.steps), len(checks),
-                                 set(never_lifted))
-                        q_after, t_after = _replace_fingers(
-                            plan, checks, template, q_land, q_now, pose, t, load, swing,
-                            hold_time, never_lifted, [k], q_start)
-                        if plan.status != "solved" or never_lifted != marks[3]:
-                            del plan.phases[marks[0]:], plan.steps[marks[1]:]
-                            del checks[marks[2]:]
-                            plan.status, plan.message = "solved", ""
-                            never_lifted.clear()
-                            never_lifted.update(marks[3])
+                        alone = _replaced(plan, checks, template, q_land, q_start, q_now,
+                                          pose, t, load, swing, hold_time, never_lifted,
+                                          [k])
+                        if alone is None:
                             break
                         rested.add(k)
-                        q_now, t, switched = q_after, t_after, False
+                        (q_now, t), switched = alone, False
                         continue
                     rested.clear()
                     switched = False
