@@ -27,6 +27,8 @@ printed side by side.
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --replace --repeats 1
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --fast --repeats 1
     OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --shapes --warm --ref HEAD~1
+    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/gait_turns.py --options overlap --warm \
+        --ref HEAD~1 --repeats 1
 
 ``--shapes`` times the gaits of an egg, a capsule and a rounded cube (:func:`shape_targets`)
 instead; with ``--ref`` old and new side by side as for the ball's. ``--warm`` times each
@@ -228,6 +230,9 @@ def main() -> None:
     ap.add_argument("--overlap", action="store_true",
                     help="time FARTHEST's and OVERLAP's gait options side by side (this "
                          "tree)")
+    ap.add_argument("--options", choices=("fast", "farthest", "overlap"), default=None,
+                    help="plan both sides (this tree, and --ref's) with FAST's, FARTHEST's "
+                         "or OVERLAP's gait options instead of the requests' own")
     ap.add_argument("--shapes", action="store_true",
                     help="the gaits of other shapes (shape_targets) instead of the ball's")
     ap.add_argument("--warm", action="store_true",
@@ -244,13 +249,14 @@ def main() -> None:
     names = list(shape_targets() if args.shapes else targets())
     if args.turns:
         names = [n for n in names if n in args.turns.split(",")]
+    chosen = {"fast": FAST, "farthest": FARTHEST, "overlap": OVERLAP}.get(args.options or "")
     runs: dict[str, tuple[Path, dict[str, Any] | None]] = \
         {"all": (ROOT, {"replace": "all"}), "spent": (ROOT, {"replace": "spent"})} \
         if args.replace else {"default": (ROOT, None), "fast": (ROOT, FAST)} if args.fast \
         else {"fast": (ROOT, FAST), "farthest": (ROOT, FARTHEST)} if args.farthest \
         else {"farthest": (ROOT, FARTHEST), "overlap": (ROOT, OVERLAP)} if args.overlap \
-        else {"new": (ROOT, None)} if args.ref is None else \
-        {"old": (_worktree(args.ref), None), "new": (ROOT, None)}
+        else {"new": (ROOT, chosen)} if args.ref is None else \
+        {"old": (_worktree(args.ref), chosen), "new": (ROOT, chosen)}
     sides: dict[str, list[list[dict[str, Any]]]] = {side: [] for side in runs}
     for k in range(args.repeats):
         for side, (tree, gait) in runs.items():

@@ -109,6 +109,36 @@ def test_a_gait_is_planned_and_executed_over_http(live_server: Server) -> None:
                 wfd = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0],
                                 dR[1, 0] - dR[0, 1]]) / (2 * dt)
                 assert np.linalg.norm(wfd - w[i]) <= 0.05 * w_peak
+        # the contacts' velocities: the rate of their samples' points (as the ball's
+        # above), and their motion over the ball tangent to it where the tip touches, zero
+        # where the ball is still and the tip on it, and equal to their motion over the
+        # tip's own body (no slip: the two bodies' material points at the contact move
+        # together)
+        for f, c in zip(gait.samples.fingers, gait.samples.contacts, strict=True):
+            assert c.point_velocity is not None and c.velocity_over_object is not None
+            pv, over = np.array(c.point_velocity), np.array(c.velocity_over_object)
+            pts, nrm = np.array(c.point), np.array(c.normal)
+            on = np.array(c.touching, dtype=bool)
+            tp = np.array(f.tip_position)
+            TR = [_matrix(q_) for q_ in f.tip_orientation_wxyz]
+            for p in gait.phases:
+                inside = np.flatnonzero((t > p.start + 0.02) & (t < p.end - 0.02))
+                peak = np.linalg.norm(pv[inside], axis=1).max()
+                for i in inside[1:-1]:
+                    dt = t[i + 1] - t[i - 1]
+                    fd = (pts[i + 1] - pts[i - 1]) / dt
+                    assert np.linalg.norm(fd - pv[i]) <= 0.05 * peak + 1e-7, (p.kind, i)
+                    if not on[i]:
+                        continue
+                    assert abs(over[i] @ nrm[i]) <= 1e-6 * max(peak, 1.0)
+                    if p.kind != "roll":
+                        assert np.linalg.norm(over[i]) <= 1e-9
+                        continue
+                    dR = TR[i + 1] @ TR[i - 1].T
+                    w_tip = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0],
+                                      dR[1, 0] - dR[0, 1]]) / (2 * dt)
+                    v_tip = (tp[i + 1] - tp[i - 1]) / dt + np.cross(w_tip, pts[i] - tp[i])
+                    assert np.linalg.norm(pv[i] - v_tip - over[i]) <= 0.05 * peak + 1e-7
         # the tips' bodies: where a fingertip touches, its cap's surface meets the ball's
         # (the distance from the ball's centre to its cap's centre is the two radii)
         rho = float(small()["object"]["dimensions"][0])

@@ -242,6 +242,14 @@ def test_an_egg_turned_by_a_gait_is_certified_on_its_surface_and_executes() -> N
         caps = p + Rs @ tip_body(f).a
         gap = np.linalg.norm(caps - smp.point[on, k], axis=1) - tip_body(f).r
         assert np.abs(gap).max() < 2e-5  # the rolls' contact rows' accuracy
+        # the contact's motion over the egg: along its surface (the point stays on it as
+        # the egg turns), none while the egg is still
+        assert smp.point_velocity is not None and smp.over_object is not None
+        over, nrm = smp.over_object[on, k], smp.normal[on, k]
+        assert np.abs(np.sum(over * nrm, axis=1)).max() < 1e-7
+        still = np.linalg.norm(smp.object_angular_velocity[on], axis=1) == 0.0
+        assert still.any() and np.abs(over[still]).max() < 1e-9
+        assert np.linalg.norm(over[~still], axis=1).max() > 1e-3  # (and it rolls)
     report = simulate_result(result, request)
     assert report.passed, report.failures
     assert report.position_error.max < 2e-3 and report.angle_error.max < math.radians(3.0)

@@ -49,7 +49,9 @@ from ocp.gait.step import (
     contact_of,
     deep_forces,
     dense_enough,
+    find_swing,
     grasp_hold,
+    swing_spec,
 )
 from ocp.gait.swing import MIN_TIP_GAP, NARROW_SHARE, SwingPlan, SwingSpec, plan_swing
 from ocp.gait.warp import RollClock
@@ -213,10 +215,10 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
     fingers = tuple(f.finger for f in template.fingers)
     nf = len(fingers)
     allf, rest = list(range(nf)), [i for i in range(nf) if i != k]
-    before, rest_start, F_before, F_rest_start = _holds(fingers, q_now, k, centre, rho,
-                                                         rotation, load, limits)
-    if F_before is None or F_rest_start is None:
-        return None, f"the others cannot hold the ball with {names[k]} lifted", None
+    before, rest_start, F_before = _holds(fingers, q_now, k, centre, rho, rotation, load,
+                                          limits)
+    if F_before is None:
+        return None, "the fingertips cannot hold the ball", None
     sol = planner.solve(roll_problem, warm, reach_checked=True)
     if not (sol.ok and sol.certificate.passed):
         return None, f"the roll without {names[k]} was not certified: {sol.status}", None
@@ -253,10 +255,12 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                          centre_path=_centre_path(sol, clock), **spec_args)
         plan = plan_swing(spec, last_swing if last_swing is not None and len(
             last_swing.spec.others) == len(others) else None)
-        # the neighbours' gap narrowed as a swing at rest narrows it (replace_finger)
+        # the neighbours' gap narrowed as a swing at rest narrows it (replace_finger),
+        # where a gap is what it breaks (about +x the thumb's swings in 0.45 s broke only
+        # the ball's clearance: two narrowed tries, 593 IPOPT iterations, 1.6 s, for none)
         for narrow in ({"tip_gap": MIN_TIP_GAP},
                        {"tip_gap": MIN_TIP_GAP, "neighbour_share": NARROW_SHARE}):
-            if plan.status != "infeasible":
+            if plan.status != "infeasible" or not plan.gap_broken:
                 break
             plan = plan_swing(replace(spec, **narrow))  # type: ignore[arg-type]
         plan = dense_enough(plan)  # (kept at its nodes, a moving neighbour's dips between)
@@ -277,13 +281,14 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
         return None, why, blocker
     q_after = tuple(plan.Q[-1] if i == k else row for i, row in
                     zip(allf, _full_rows(sol, clock, clock.length, q_now, k), strict=True))
-    after, rest_end, F_after, F_rest_end = _holds(fingers, q_after, k, end, rho, rotation,
-                                                   load, limits)
-    if F_rest_end is None or F_after is None:
+    after, rest_end, F_after = _holds(fingers, q_after, k, end, rho, rotation, load,
+                                      limits)
+    if F_after is None:
         return None, f"the grasp with {names[k]} landed cannot hold the ball", None
     # the ramps meet the roll where its own forces are (both hold the still ball there:
     # every force on a ramp between them does too): the others' deep holds differed from
     # the roll's first and last forces by up to 0.9 N, a step the servos were asked for
+    # (the certified roll shows that the others hold the ball at its ends)
     F_rest_start = sol.forces(np.array([0.0]))[0][0]
     F_rest_end = sol.forces(np.array([float(sol.duration)]), side="left")[0][0]
     step = GaitStep(k, "solved", "", plan, (before, rest_start, rest_end, after),
@@ -308,16 +313,15 @@ def _centre_path(sol: Any, clock: RollClock) -> Any:
 
 def _holds(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
            centre: FloatArray, rho: float, rotation: FloatArray, load: FloatArray,
-           limits: TorqueLimits | None) -> tuple[Any, Any, Any, Any]:
+           limits: TorqueLimits | None) -> tuple[Any, Any, Any]:
     """The still ball held by every fingertip and by all but ``k`` at the joints ``qs``:
-    (both holds, their deep forces within the actuators, :func:`~ocp.gait.step.
-    deep_forces`; None where they cannot hold it)."""
+    (both holds, every fingertip's deep forces within the actuators, :func:`~ocp.gait.
+    step.deep_forces`, None where they cannot hold it). The others' forces are the roll's
+    own where it starts and ends (:func:`plan_overlap`)."""
     every = list(range(len(fingers)))
     rest = [i for i in every if i != k]
     holds = [grasp_hold(fingers, qs, w, Held(centre, rotation, rho)) for w in (every, rest)]
-    forces = [deep_forces(fingers, qs, w, h, load, rho, limits)
-              for w, h in zip((every, rest), holds, strict=True)]
-    return holds[0], holds[1], forces[0], forces[1]
+    return holds[0], holds[1], deep_forces(fingers, qs, every, holds[0], load, rho, limits)
 
 
 def _full_rows(sol: Any, clock: RollClock, t: float, q_now: tuple[FloatArray, ...],
@@ -338,20 +342,22 @@ def _full_rows(sol: Any, clock: RollClock, t: float, q_now: tuple[FloatArray, ..
 
 def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, ...],
                      lands: tuple[FloatArray, ...], centre: FloatArray, rho: float,
-                     which: list[int], plan: Any, load: FloatArray,
-                     limits: TorqueLimits | None, obstacles: Any,
-                     swing: dict[str, Any] | None) -> list[int]:
+                     which: list[int], plan: Any, limits: TorqueLimits | None,
+                     obstacles: Any, swing: dict[str, Any] | None) -> list[int]:
     """Of the fingertips ``which``, those that, with every finger at the joints ``q_after``
-    and the ball still, would find no swing to their landing joints ``lands`` (the
-    re-placement at rest a gait falls back to: :func:`~ocp.gait.step.replace_finger`,
-    with the hand's links; each warm-started from its last swing in ``plan``). A fingertip
-    rolled too far from its landing finds none, and a gait that leaves one there cannot
-    go on (measured about -x and +y: docs/gait.md). ``load``, ``limits``, ``obstacles``,
+    and the ball still, would find no swing to their landing joints ``lands`` (the swing
+    of the re-placement at rest a gait falls back to: :func:`~ocp.gait.step.swing_spec`
+    and :func:`~ocp.gait.step.find_swing`, with the hand's links; warm-started from the
+    fingertip's last swing at rest in ``plan``; warm-started from its last check's, the
+    checks took 1905 IPOPT iterations about +x against 707 cold). A fingertip rolled too
+    far from its landing finds none, and a gait that leaves one there cannot go on
+    (measured about -x and +y: docs/gait.md). Only the swing is planned: the holds around
+    it are the re-placement's own business (the fallback plans them; a check that planned
+    them too spent 1.3 of its 4.2 s on them, about +x). ``limits``, ``obstacles``,
     ``swing``: the gait's (:func:`~ocp.gait.step.replace_finger`'s arguments)."""
-    from ocp.gait.step import replace_finger
-
     fingers = tuple(f.finger for f in template.fingers)
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
+    held = Held(centre, np.eye(3), rho)
     out = []
     for j in which:
         if np.abs(np.asarray(q_after[j]) - np.asarray(lands[j])).max() < 1e-9:
@@ -359,10 +365,8 @@ def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, .
         last = next((st.swing for st in reversed(plan.steps) if st.finger == j
                      and st.swing is not None and st.swing.spec.moving is None), None)
         _, n_land = contact_of(fingers[j], lands[j], centre, rho)
-        gs = replace_finger(fingers, q_after, j, n_land, lands[j],
-                            Held(centre, np.eye(3), rho), load, swing, 0.2, last, names,
-                            limits, obstacles)
-        if gs.swing is not None and not gs.ok:
+        found = find_swing(swing_spec(fingers, q_after, j, n_land, lands[j], held, swing,
+                                      last, names, limits, obstacles), last)
+        if not found.ok:
             out.append(j)
     return out
-

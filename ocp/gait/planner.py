@@ -1108,7 +1108,7 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
             stranded = stranded_fingers(
                 template, got.q_after, lands, centre, rho,
                 [j for j in range(len(q_now)) if j != k and names[j] not in never_lifted],
-                plan, load, limits, obstacles, swing)
+                plan, limits, obstacles, swing)
             if not stranded:
                 break
             why = (f"finger {names[stranded[0]]!r} would find no swing to its landing "

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from ocp.gait.planner import GaitPlan
 from ocp.geometry.bodies import tip_body
-from ocp.geometry.rotations import quaternion_matrix, quaternion_wxyz
+from ocp.geometry.rotations import axis_angle_rotation, quaternion_matrix, quaternion_wxyz
 from ocp.solution import joint_torques
 
 __all__ = ["LINK_CHECK_RATE", "TRANSITION", "GaitSamples", "gait_samples", "gait_times",
@@ -62,6 +62,11 @@ class GaitSamples:
     #: swing phase carries (its unloading and loading touch; a switch's time belongs to
     #: the phase it starts)
     touching: NDArray[np.bool_] | None = None
+    #: per fingertip (axis 1) its contact point's velocity [m/s] (palm frame), and that
+    #: velocity less the object's material point's there: the contact's motion over the
+    #: object's surface (tangent to it while the tip touches; zero at rest)
+    point_velocity: FloatArray | None = None
+    over_object: FloatArray | None = None
 
 
 #: The least time [s] between two samples of a gait's trajectories.
@@ -150,11 +155,51 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
         ph = next((p for p in gait.phases if p.start <= t < p.end), gait.phases[-1])
         if ph.kind in ("swing", "roll") and ph.lifted is not None:
             touching[i, ph.lifted] = False
-    points, normals = np.zeros((n, nf, 3)), np.zeros((n, nf, 3))
-    tip_p, tip_q = np.zeros((n, nf, 3)), np.zeros((n, nf, 4))
     shape, dims = problem.object.kind, problem.object.dimensions
     axes = None if shape.ball_radius(dims) is not None else \
         np.array([quaternion_matrix(w) for w in wxyz])
+    points, normals, tip_p, tip_q = _contacts(problem, cut, Q, pos, axes, rho)
+    # the contact points' velocities: their central difference over the plan's own rates
+    # (the joints to second order, the object's pose to first; a switch's time with the
+    # phase it starts, as the rates are)
+    moved = []
+    for dt in (VELOCITY_STEP, -VELOCITY_STEP):
+        turned = None if axes is None else \
+            np.array([_turn(w, dt) @ R for w, R in zip(omega, axes, strict=True)])
+        moved.append(_contacts(problem, cut, Q + dt * QD + 0.5 * dt * dt * QDD,
+                               pos + dt * vel, turned, rho, poses=False)[0])
+    point_velocity = (moved[0] - moved[1]) / (2.0 * VELOCITY_STEP)
+    over = point_velocity - vel[:, None] - np.cross(omega[:, None], points - pos[:, None])
+    gravity = problem.forces.gravity if problem.forces is not None else (0.0, 0.0, 0.0)
+    effort = np.hstack([joint_torques(f, Q[:, cut[c]:cut[c + 1]], points[:, c],
+                                      normals[:, c], force[:, c], torsion[:, c], gravity)
+                        for c, f in enumerate(fingers)])
+    return GaitSamples(ts, Q, QD, QDD, pos, wxyz, points, normals, force, active, tip_p,
+                       tip_q, torsion, effort, vel, omega, touching, point_velocity, over)
+
+
+#: The time step [s] of the contact points' central differences (:func:`gait_samples`).
+VELOCITY_STEP = 1e-5
+
+
+def _turn(omega: FloatArray, dt: float) -> FloatArray:
+    """The rotation of angular velocity ``omega`` [rad/s] (palm frame) over ``dt``."""
+    w = float(np.linalg.norm(omega))
+    return np.eye(3) if w == 0.0 else axis_angle_rotation(omega / w, w * dt)
+
+
+def _contacts(problem: Any, cut: FloatArray, Q: FloatArray, pos: FloatArray,
+              axes: FloatArray | None, rho: float, poses: bool = True
+              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Per sample (rows of the joints ``Q``, the object's centre ``pos`` and orientation
+    ``axes``, None for a ball) and fingertip: the contact point and the object's outward
+    normal there, the tip frame's origin and orientation (w, x, y, z; zeros without
+    ``poses``)."""
+    fingers = tuple(f.finger for f in problem.fingers)
+    n, nf = Q.shape[0], len(fingers)
+    points, normals = np.zeros((n, nf, 3)), np.zeros((n, nf, 3))
+    tip_p, tip_q = np.zeros((n, nf, 3)), np.zeros((n, nf, 4))
+    shape, dims = problem.object.kind, problem.object.dimensions
     for c, f in enumerate(fingers):  # the caps' nearest points, every sample at once
         Rs, tip_p[:, c] = f.tip_poses(Q[:, cut[c]:cut[c + 1]])
         d = tip_p[:, c] + Rs @ tip_body(f).a - pos
@@ -165,13 +210,9 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
             x, nrm, _ = shape.nearest(dims, np.einsum("kji,kj->ki", axes, d))
             points[:, c] = pos + np.einsum("kij,kj->ki", axes, x)
             normals[:, c] = np.einsum("kij,kj->ki", axes, nrm)
-        tip_q[:, c] = quaternion_wxyz(Rs)
-    gravity = problem.forces.gravity if problem.forces is not None else (0.0, 0.0, 0.0)
-    effort = np.hstack([joint_torques(f, Q[:, cut[c]:cut[c + 1]], points[:, c],
-                                      normals[:, c], force[:, c], torsion[:, c], gravity)
-                        for c, f in enumerate(fingers)])
-    return GaitSamples(ts, Q, QD, QDD, pos, wxyz, points, normals, force, active, tip_p,
-                       tip_q, torsion, effort, vel, omega, touching)
+        if poses:
+            tip_q[:, c] = quaternion_wxyz(Rs)
+    return points, normals, tip_p, tip_q
 
 
 #: Samples a second at which a gait's links are checked (its rolls' own certificates check

@@ -27,7 +27,8 @@ from ocp.gait.swing import (
 from ocp.geometry.bodies import point_segment_distance, tip_body
 from ocp.shapes.held import Held
 
-__all__ = ["GaitStep", "contact_of", "grasp_hold", "liftable", "replace_finger"]
+__all__ = ["GaitStep", "contact_of", "find_swing", "grasp_hold", "liftable", "replace_finger",
+           "swing_spec"]
 
 FloatArray = NDArray[np.float64]
 
@@ -392,6 +393,69 @@ def deep_forces(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], which: lis
     return F
 
 
+def swing_spec(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
+               landing_normal: FloatArray, q_target: FloatArray, held: Held,
+               swing: dict[str, Any] | None, warm: SwingPlan | None,
+               names: tuple[str, ...], limits: TorqueLimits | None, obstacles: Any
+               ) -> SwingSpec:
+    """The swing of fingertip ``k`` of the still object ``held`` (every finger at ``qs``)
+    to its landing (:func:`replace_finger`'s arguments): the other tips and the nearest
+    links as its obstacles, the gaps and duration its last swing ``warm`` needed."""
+    centre = held.centre
+    rest = [i for i in range(len(fingers)) if i != k]
+    landing_point = None if held.ball else \
+        held.contact(fingers[k], np.asarray(q_target, dtype=float))[0]
+    others = []
+    for i in rest:
+        R, p = fingers[i].fingertip_pose_pin(qs[i])
+        a, b = tip_body(fingers[i]).placed(R, p)
+        others.append((a, b, tip_body(fingers[i]).r))
+    other_names = [names[i] for i in rest]
+    if obstacles is not None:
+        c = np.asarray(centre, dtype=float)
+        links = sorted(obstacles(qs, k, c), key=lambda o: float(
+            point_segment_distance(c, o[1][0], o[1][1])) - o[1][2])[:SWING_OBSTACLES]
+        far = c + 1.0
+        links += [("(none)", (far, far, 0.0))] * (SWING_OBSTACLES - len(links))
+        others += [seg for _, seg in links]
+        other_names += [n for n, _ in links]
+    spec = SwingSpec(fingers[k], np.asarray(qs[k], dtype=float),
+                     np.asarray(q_target, dtype=float), np.asarray(landing_normal, float),
+                     np.asarray(centre, dtype=float), float(held.radius), tuple(others),
+                     name=names[k], other_names=tuple(other_names),
+                     held=None if held.ball else held,
+                     landing_contact=None if held.ball else landing_point,
+                     **(swing or {}))
+    if warm is not None and warm.spec.tip_gap is not None:
+        # its last swing needed it
+        spec = replace(spec, tip_gap=warm.spec.tip_gap,
+                       neighbour_share=warm.spec.neighbour_share)
+    if warm is not None and limits is not None and warm.spec.duration > spec.duration:
+        spec = replace(spec, duration=warm.spec.duration)  # its last swing was slowed
+    return spec
+
+
+def find_swing(spec: SwingSpec, warm: SwingPlan | None = None) -> SwingPlan:
+    """The swing ``spec`` planned (warm-started from ``warm`` on a ball), with the
+    neighbours' gaps narrowed where keeping them leaves no path, and dense enough between
+    its nodes (:func:`dense_enough`)."""
+    # (a turned object that is not a ball asks no swing again: started cold, the egg's
+    # 90 deg gait took 31 s against 34 s from each finger's last swing, the same plan)
+    plan = plan_swing(spec, warm if spec.held is None else None)
+    if plan.status == "infeasible" and spec.tip_gap is None \
+            and max(spec.required_gaps(), default=0.0) > MIN_TIP_GAP:
+        # the clearance kept from the neighbours too left no path: keep the least gap
+        narrow = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP))
+        if narrow.ok:
+            plan = narrow
+    if plan.status == "infeasible" and spec.neighbour_share > NARROW_SHARE:
+        # a neighbour close at the start or the landing: keep half of that gap
+        closer = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP, neighbour_share=NARROW_SHARE))
+        if closer.ok:
+            plan = closer
+    return dense_enough(plan)
+
+
 def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                    landing_normal: FloatArray, q_target: FloatArray, held: Held,
                    load: FloatArray,
@@ -415,9 +479,6 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     ``q_target``. A grasp whose other fingertips cannot hold the object is
     ``infeasible`` at once, naming the finger."""
     L = held.radius
-    centre = held.centre
-    landing_point = None if held.ball else \
-        held.contact(fingers[k], np.asarray(q_target, dtype=float))[0]
     allf = list(range(len(fingers)))
     rest = [i for i in allf if i != k]
     before = grasp_hold(fingers, qs, allf, held)
@@ -442,48 +503,8 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
             why = hold_torque_refusal(fingers, qs, which, hold, load, L, full, names)
             if why:
                 return GaitStep(k, "infeasible", f"the hold{lifted}: {why}", None)
-    others = []
-    for i in rest:
-        R, p = fingers[i].fingertip_pose_pin(qs[i])
-        a, b = tip_body(fingers[i]).placed(R, p)
-        others.append((a, b, tip_body(fingers[i]).r))
-    other_names = [names[i] for i in rest]
-    if obstacles is not None:
-        c = np.asarray(centre, dtype=float)
-        links = sorted(obstacles(qs, k, c), key=lambda o: float(
-            point_segment_distance(c, o[1][0], o[1][1])) - o[1][2])[:SWING_OBSTACLES]
-        far = c + 1.0
-        links += [("(none)", (far, far, 0.0))] * (SWING_OBSTACLES - len(links))
-        others += [seg for _, seg in links]
-        other_names += [n for n, _ in links]
-    spec = SwingSpec(fingers[k], np.asarray(qs[k], dtype=float),
-                     np.asarray(q_target, dtype=float), np.asarray(landing_normal, float),
-                     np.asarray(centre, dtype=float), float(held.radius), tuple(others),
-                     name=name, other_names=tuple(other_names),
-                     held=None if held.ball else held,
-                     landing_contact=None if held.ball else landing_point,
-                     **(swing or {}))
-    if warm is not None and warm.spec.tip_gap is not None:
-        # its last swing needed it
-        spec = replace(spec, tip_gap=warm.spec.tip_gap,
-                       neighbour_share=warm.spec.neighbour_share)
-    if warm is not None and limits is not None and warm.spec.duration > spec.duration:
-        spec = replace(spec, duration=warm.spec.duration)  # its last swing was slowed
-    # (a turned object that is not a ball asks no swing again: started cold, the egg's
-    # 90 deg gait took 31 s against 34 s from each finger's last swing, the same plan)
-    plan = plan_swing(spec, warm if held.ball else None)
-    if plan.status == "infeasible" and spec.tip_gap is None \
-            and max(spec.required_gaps(), default=0.0) > MIN_TIP_GAP:
-        # the clearance kept from the neighbours too left no path: keep the least gap
-        narrow = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP))
-        if narrow.ok:
-            plan = narrow
-    if plan.status == "infeasible" and spec.neighbour_share > NARROW_SHARE:
-        # a neighbour close at the start or the landing: keep half of that gap
-        closer = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP, neighbour_share=NARROW_SHARE))
-        if closer.ok:
-            plan = closer
-    plan = dense_enough(plan)
+    plan = find_swing(swing_spec(fingers, qs, k, landing_normal, q_target, held, swing,
+                                 warm, names, limits, obstacles), warm)
     if plan.ok and limits is not None and limits.rate:
         # a swing faster than the joints' damping lets the actuators drive (at each
         # sample's joints: a servo near the end of its control range gives less): slower

@@ -234,6 +234,10 @@ class SwingPlan:
     #: a swing not found because of another body: its index in ``spec.others`` (the
     #: gap the last iterate breaks most is that body's), else None
     blocked_by: int | None = None
+    #: a swing not found: whether its last iterate breaks a gap to another body (else
+    #: only the ball's clearance, the joints' motion, ...: narrowing the gaps kept from
+    #: the other bodies is no remedy)
+    gap_broken: bool = False
 
     @property
     def ok(self) -> bool:
@@ -635,17 +639,18 @@ def _solve_swing(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArra
     ok = bool(st["success"])
     status = "solved" if ok else "infeasible" if "Infeasible" in st["return_status"] \
         else "failed"
-    message, blocker = "", None
+    message, blocker, gap_broken = "", None, False
     if not ok:
         rows = np.asarray(rows_of(x, _swing_params(spec))).ravel()
         broken = _broken(rows, lbg, ubg, kinds)
         message = (f"the swing of {_name(spec)} was not found (IPOPT "
                    f"{st['return_status']}): " + _cause(broken, spec))
         blocker = _blocker(broken)
+        gap_broken = any(_gap_index(k) is not None for k in broken)
     return SwingPlan(spec, status, message, np.linspace(0.0, T, n + 1), Qs, Vs, As, Js,
                      int(st["iter_count"]), elapsed,
                      (x, np.asarray(res["lam_x"]).ravel(), np.asarray(res["lam_g"]).ravel()),
-                     blocker)
+                     blocker, gap_broken)
 
 
 def _name(spec: SwingSpec) -> str:

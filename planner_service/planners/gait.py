@@ -185,6 +185,7 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float,
                                     _touching(names, smp))
         assert smp.touching is not None and smp.object_velocity is not None
         assert smp.object_angular_velocity is not None
+        assert smp.point_velocity is not None and smp.over_object is not None
         samples = GaitSamplesModel(
             t=smp.t.tolist(), object_position=rows(smp.object_position),
             object_orientation_wxyz=rows(smp.object_wxyz),
@@ -194,7 +195,9 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float,
                                        touching=smp.touching[:, k].tolist(),
                                        point=rows(smp.point[:, k]),
                                        normal=rows(smp.normal[:, k]),
-                                       force=rows(smp.force[:, k]))
+                                       force=rows(smp.force[:, k]),
+                                       point_velocity=rows(smp.point_velocity[:, k]),
+                                       velocity_over_object=rows(smp.over_object[:, k]))
                       for k, nm in enumerate(names)],
             fingers=[GaitFingerModel(name=nm, tip_position=rows(smp.tip_position[:, k]),
                                      tip_orientation_wxyz=rows(smp.tip_wxyz[:, k]),

@@ -140,6 +140,16 @@ class GaitContactModel(_Response):
     normal: Rows = Field(description="the ball's outward normal there")
     force: Rows = Field(description="the planned force the fingertip applies to the ball "
                                     "[N], palm frame (zero while lifted)")
+    point_velocity: Rows | None = Field(
+        default=None, description="the contact point's velocity [m/s], palm frame (of "
+                                  "`point`, from the plan's joint rates and the object's "
+                                  "velocities; a switch's time with the phase it starts)")
+    velocity_over_object: Rows | None = Field(
+        default=None, description="`point_velocity` less the velocity of the object's "
+                                  "material point there [m/s], palm frame: the contact's "
+                                  "motion over the object's surface (tangent to it while "
+                                  "the fingertip touches; zero while the object is at rest "
+                                  "and the fingertip on it)")
 
 
 class GaitTipModel(_Response):
@@ -178,8 +188,8 @@ class GaitSamplesModel(_Response):
     object_velocity: Rows | None = Field(default=None, description="the ball's velocity "
                                                                    "[m/s], palm frame")
     object_angular_velocity: Rows | None = Field(default=None, description=(
-        "the ball's angular velocity [rad/s], palm frame (zero while a fingertip is "
-        "re-placed: the ball at rest)"))
+        "the ball's angular velocity [rad/s], palm frame (zero in the holds and in swings "
+        "at rest; a swing during a roll (`overlap`) turns it)"))
     contacts: list[GaitContactModel]
     fingers: list[GaitFingerModel]
 
