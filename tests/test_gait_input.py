@@ -71,6 +71,14 @@ def test_a_farthest_landing_without_spent_re_placements_is_422(live_server: Serv
     assert "needs replace 'spent'" in reason
 
 
+def test_sample_times_are_422_a_gaits_duration_being_its_planners(live_server: Server
+                                                                   ) -> None:
+    body = copy.deepcopy(EXAMPLE)
+    body["sample_times"] = [0.0, 0.5, 1.0]
+    reason = _fields(_post(live_server, body))["sample_times"]
+    assert "give `sample_rate`" in reason and "its planner's" in reason
+
+
 def test_a_grasp_no_fingertip_of_which_can_be_lifted_is_infeasible(live_server: Server
                                                                     ) -> None:
     """Index, middle and thumb hold the ball (the request is valid, and rolls), but no two

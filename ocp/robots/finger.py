@@ -340,6 +340,18 @@ class FingerModel:
         """(R, p): the fingertip frame in the palm frame by Pinocchio [-, m]."""
         return self._pose_pin(self._check_q(q), self.data)
 
+    def pose_and_jacobian_pin(self, q: ArrayLike
+                              ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(R, p, J): :meth:`fingertip_pose_pin` and :meth:`frame_jacobian_pin` from one
+        Pinocchio pass (its frame Jacobian updates the frame's placement as its forward
+        kinematics does: the same numbers, one pass instead of two)."""
+        q = self._check_q(q)
+        J = self._jacobian_pin(q, self.data)
+        M = self.data.oMf[self.tip_frame_id]
+        R = self.base_rotation @ np.asarray(M.rotation)
+        p = self.base_rotation @ np.asarray(M.translation) + self.base_position
+        return R, p, J
+
     def frame_jacobian_pin(self, q: ArrayLike) -> FloatArray:
         """6 x nq Jacobian of the fingertip frame by Pinocchio, rows (v [m/s]; omega [rad/s])
         in palm coordinates (``LOCAL_WORLD_ALIGNED`` rotated by the base rotation)."""

@@ -66,12 +66,25 @@ def _rotation(axis: FloatArray, angle: float) -> FloatArray:
 
 
 def _tip(f: Any) -> tuple[FloatArray, FloatArray | None, float]:
-    """(the tip's centre, a capsule cap's outward axis or None, its radius), link frame."""
+    """(the tip's centre, a capsule cap's outward axis or None, its radius), link frame
+    (read once per tip surface: a gait asks it some 50 000 times)."""
     tip = f.tip_surface
+    known = _TIPS.get(id(tip))
+    if known is not None and known[0] is tip:
+        return known[1]
     if tip.kind not in ("sphere", "capsule"):
         raise ValueError(f"rolling reach needs a sphere or capsule tip, not {tip.kind!r}")
     axis = -np.asarray(tip.R)[:, 1] if tip.kind == "capsule" else None
-    return np.asarray(tip.p, dtype=float), axis, float(tip.params[0])
+    out = (np.asarray(tip.p, dtype=float), axis, float(tip.params[0]))
+    if len(_TIPS) >= 256:  # (a service builds hands per request: kept bounded)
+        _TIPS.clear()
+    _TIPS[id(tip)] = (tip, out)
+    return out
+
+
+#: :func:`_tip`'s answers by the tip surface's identity (the surface kept with its answer,
+#: so an id reused by another object is not mistaken for it)
+_TIPS: dict[int, tuple[Any, tuple[FloatArray, FloatArray | None, float]]] = {}
 
 
 @dataclass(frozen=True)
@@ -89,13 +102,14 @@ class TipState:
 
 
 def tip_state(f: Any, q: ArrayLike, centre: ArrayLike, radius: float,
-              held: Held | None = None) -> TipState:
+              held: Held | None = None,
+              pose: tuple[FloatArray, FloatArray] | None = None) -> TipState:
     """Finger ``f``'s round tip at joints ``q`` against the ball of ``radius`` at
     ``centre``: the contact where the line of centres meets the surfaces; against
     ``held`` (an object that is not a ball, where it is) the object's point nearest the
-    tip's centre."""
+    tip's centre. ``pose``: the tip link's (R, p) at ``q``, when known."""
     c = np.asarray(centre, dtype=float)
-    R_l, p_l = f.fingertip_pose_pin(np.asarray(q, dtype=float))
+    R_l, p_l = f.fingertip_pose_pin(np.asarray(q, dtype=float)) if pose is None else pose
     pc, ax, r = _tip(f)
     tc = p_l + R_l @ pc
     if held is not None and not held.ball:
@@ -118,8 +132,8 @@ def joint_rates(f: Any, q: FloatArray, centre: FloatArray, radius: float, omega:
     ``omega`` about its centre without slip or spin (least squares for a finger of more
     than 4 joints), with a feedback holding the tip on the object; and the system's
     condition number."""
-    s = tip_state(f, q, centre, radius, held)
-    J = f.frame_jacobian_pin(q)  # (v of the link's origin; omega), palm axes
+    R_l, p_l, J = f.pose_and_jacobian_pin(q)  # J: (v of the link's origin; omega), palm
+    s = tip_state(f, q, centre, radius, held, (R_l, p_l))
     Jp = J[:3] - _skew(s.contact - s.p_l) @ J[3:]  # the tip's material point at the contact
     A = np.vstack([Jp, s.n @ J[3:]])
     w = np.asarray(omega, dtype=float)

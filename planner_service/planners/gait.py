@@ -76,6 +76,11 @@ def gait_errors(request: ManipulationRequest, problem: ManipulationProblem) -> F
                                     f"yet on a {problem.object.shape}"))
     if request.palm is not None:
         errs.append(("palm", "a gait is planned for a ball held by fingertips alone"))
+    if request.sample_times:  # (accepted and ignored before 2026-12-07)
+        errs.append(("sample_times", "a gait's duration is its planner's (its rolls and "
+                                     "re-placements), not the request's: give "
+                                     "`sample_rate` (the gait is returned at that rate "
+                                     "over its whole duration and at every phase switch)"))
     if len(problem.fingers) < 3:
         errs.append(("fingers", "a gait lifts one fingertip while the others hold the ball: "
                                 f"at least three fingertips, got {len(problem.fingers)}"))

@@ -318,7 +318,7 @@ MAX_JOINT_ACCELERATION_DESCRIPTION = (
 SAMPLE_TIMES_DESCRIPTION = (
     "times [s] at which to return the plan (its collocation polynomials, the trajectory the "
     "certificate checked): `samples` and the `joint_trajectory`; null: the collocation "
-    "points")
+    "points (not with `gait`, whose duration is its planner's: give `sample_rate`)")
 SAMPLE_RATE_DESCRIPTION = (
     "a controller's rate [Hz]: the plan returned at k / rate for every k with k / rate < "
     "duration, then at duration (instead of `sample_times`)")
