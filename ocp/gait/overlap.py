@@ -353,7 +353,9 @@ def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, .
     far from its landing finds none, and a gait that leaves one there cannot go on
     (measured about -x and +y: docs/gait.md). Only the swing is planned: the holds around
     it are the re-placement's own business (the fallback plans them; a check that planned
-    them too spent 1.3 of its 4.2 s on them, about +x). ``limits``, ``obstacles``,
+    them too spent 1.3 of its 4.2 s on them, about +x), with the neighbours' gaps narrowed
+    only where a gap is what the swing not found breaks (about -x the middle's checks
+    broke only the ball's clearance, each planned three times). ``limits``, ``obstacles``,
     ``swing``: the gait's (:func:`~ocp.gait.step.replace_finger`'s arguments)."""
     fingers = tuple(f.finger for f in template.fingers)
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
@@ -366,7 +368,7 @@ def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, .
                      and st.swing is not None and st.swing.spec.moving is None), None)
         _, n_land = contact_of(fingers[j], lands[j], centre, rho)
         found = find_swing(swing_spec(fingers, q_after, j, n_land, lands[j], held, swing,
-                                      last, names, limits, obstacles), last)
+                                      last, names, limits, obstacles), last, narrow_any=False)
         if not found.ok:
             out.append(j)
     return out

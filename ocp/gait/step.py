@@ -435,13 +435,19 @@ def swing_spec(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     return spec
 
 
-def find_swing(spec: SwingSpec, warm: SwingPlan | None = None) -> SwingPlan:
+def find_swing(spec: SwingSpec, warm: SwingPlan | None = None, narrow_any: bool = True
+               ) -> SwingPlan:
     """The swing ``spec`` planned (warm-started from ``warm`` on a ball), with the
     neighbours' gaps narrowed where keeping them leaves no path, and dense enough between
-    its nodes (:func:`dense_enough`)."""
+    its nodes (:func:`dense_enough`). Without ``narrow_any`` the gaps are narrowed only
+    where the swing not found breaks one (:attr:`~ocp.gait.swing.SwingPlan.gap_broken`;
+    one that breaks only the ball's clearance or the joints' motion is not planned twice
+    more)."""
     # (a turned object that is not a ball asks no swing again: started cold, the egg's
     # 90 deg gait took 31 s against 34 s from each finger's last swing, the same plan)
     plan = plan_swing(spec, warm if spec.held is None else None)
+    if not (narrow_any or plan.gap_broken):
+        return dense_enough(plan)
     if plan.status == "infeasible" and spec.tip_gap is None \
             and max(spec.required_gaps(), default=0.0) > MIN_TIP_GAP:
         # the clearance kept from the neighbours too left no path: keep the least gap
