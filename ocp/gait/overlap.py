@@ -350,7 +350,7 @@ def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, .
     and the ball still, would find no swing to their landing joints ``lands`` (the swing
     of the re-placement at rest a gait falls back to: :func:`~ocp.gait.step.swing_spec`
     and :func:`~ocp.gait.step.find_swing`, with the hand's links; warm-started from the
-    fingertip's last swing at rest in ``plan``; warm-started from its last check's, the
+    fingertip's last swing at rest in ``plan``, not from its last check's: warmed so, the
     checks took 1905 IPOPT iterations about +x against 707 cold). A fingertip rolled too
     far from its landing finds none, and a gait that leaves one there cannot go on
     (measured about -x and +y: docs/gait.md). Only the swing is planned: the holds around

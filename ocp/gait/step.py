@@ -446,15 +446,14 @@ def find_swing(spec: SwingSpec, warm: SwingPlan | None = None, narrow_any: bool 
     # (a turned object that is not a ball asks no swing again: started cold, the egg's
     # 90 deg gait took 31 s against 34 s from each finger's last swing, the same plan)
     plan = plan_swing(spec, warm if spec.held is None else None)
-    if not (narrow_any or plan.gap_broken):
-        return dense_enough(plan)
-    if plan.status == "infeasible" and spec.tip_gap is None \
+    narrowing = narrow_any or plan.gap_broken
+    if narrowing and plan.status == "infeasible" and spec.tip_gap is None \
             and max(spec.required_gaps(), default=0.0) > MIN_TIP_GAP:
         # the clearance kept from the neighbours too left no path: keep the least gap
         narrow = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP))
         if narrow.ok:
             plan = narrow
-    if plan.status == "infeasible" and spec.neighbour_share > NARROW_SHARE:
+    if narrowing and plan.status == "infeasible" and spec.neighbour_share > NARROW_SHARE:
         # a neighbour close at the start or the landing: keep half of that gap
         closer = plan_swing(replace(spec, tip_gap=MIN_TIP_GAP, neighbour_share=NARROW_SHARE))
         if closer.ok:

@@ -325,6 +325,11 @@ class FingerModel:
 
     def _pose_pin(self, q: FloatArray, data: Any) -> tuple[FloatArray, FloatArray]:
         pin.framesForwardKinematics(self.model, data, q)
+        return self._placed_tip(data)
+
+    def _placed_tip(self, data: Any) -> tuple[FloatArray, FloatArray]:
+        """(R, p): the tip frame's placement in ``data`` (as the last Pinocchio pass left
+        it), in the palm frame."""
         M = data.oMf[self.tip_frame_id]
         R = self.base_rotation @ np.asarray(M.rotation)
         p = self.base_rotation @ np.asarray(M.translation) + self.base_position
@@ -345,12 +350,8 @@ class FingerModel:
         """(R, p, J): :meth:`fingertip_pose_pin` and :meth:`frame_jacobian_pin` from one
         Pinocchio pass (its frame Jacobian updates the frame's placement as its forward
         kinematics does: the same numbers, one pass instead of two)."""
-        q = self._check_q(q)
-        J = self._jacobian_pin(q, self.data)
-        M = self.data.oMf[self.tip_frame_id]
-        R = self.base_rotation @ np.asarray(M.rotation)
-        p = self.base_rotation @ np.asarray(M.translation) + self.base_position
-        return R, p, J
+        J = self._jacobian_pin(self._check_q(q), self.data)
+        return (*self._placed_tip(self.data), J)
 
     def frame_jacobian_pin(self, q: ArrayLike) -> FloatArray:
         """6 x nq Jacobian of the fingertip frame by Pinocchio, rows (v [m/s]; omega [rad/s])
