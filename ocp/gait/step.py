@@ -102,16 +102,19 @@ class GaitStep:
     def duration(self) -> float:
         return self.unload + (self.swing.duration if self.swing else 0.0) + self.load_time
 
-    @staticmethod
-    def ramp_share(x: FloatArray) -> FloatArray:
+    def ramp_share(self, x: FloatArray) -> FloatArray:
         """How far along a force ramp (0 to 1, :meth:`ramp_forces`' ``s``) its forces are
-        at the fractions ``x`` of its time: smoothstep, so that the forces' rates are zero
-        where the ramp starts and ends (continuous with the still or rolling phase beside
-        it). With a share linear in time the 180 deg turn about +z of ``benchmarks/
-        gait_turns.py``'s overlap options lost the middle fingertip's contact in MuJoCo for
-        1 ms (by 76 nm) 16 ms after a ramp's end; with this one it keeps it."""
+        at the fractions ``x`` of its time. A step made during a roll (``during_roll``):
+        smoothstep, so that the forces' rates are zero where the ramp starts and ends,
+        continuous with the roll beside it (with a share linear in time the 180 deg turn
+        about +z of ``benchmarks/gait_turns.py``'s overlap options lost the middle
+        fingertip's contact in MuJoCo for 1 ms, by 76 nm, 16 ms after a ramp's end). A
+        step with the object still: linear in time (smoothstep's steeper middle, 1.5
+        times the rate, lost the index's contact for 7.5 ms at t = 94.8 s of the 90 deg
+        gait on ``examples/own_hand.xml`` driven by the file's own servos,
+        ``tests/test_gait_mjcf.py``, while every ramp was smoothstep: 9a8671a to this)."""
         x = np.clip(np.asarray(x, dtype=float), 0.0, 1.0)
-        return x * x * (3.0 - 2.0 * x)
+        return x * x * (3.0 - 2.0 * x) if self.during_roll is not None else x
 
     def ramp_forces(self, which: str, s: float) -> FloatArray:
         """The forces of every contact of the grasp (a row each, zeros for the lifted one)
