@@ -538,6 +538,87 @@ def test_a_swing_is_slowed_to_what_the_joints_damping_lets_the_actuators_drive()
     assert slowed.swing.spec.duration > 1.9 * free.swing.spec.duration
 
 
+def _servo_limits(ctrl: list[list[tuple[float, float]]], torque: float, kp: float = 10.0,
+                  damping: float = 1.0, share: float = 0.9) -> object:
+    """TorqueLimits of position servos (stiffness ``kp``, control ranges ``ctrl`` per
+    finger and joint, torque range +-``torque``) on joints of viscous ``damping``, at
+    ``share`` of their range, as the gait makes them of an MJCF hand's (e.g.
+    examples/own_hand.xml: kp 10, forcerange 0.7 N m, damping 1 N m s/rad)."""
+    from ocp.gait.step import TorqueLimits
+    from ocp.robots.actuation import Actuator
+
+    acts = tuple(tuple(Actuator(n, n, "servo", 1.0, kp, (0.0, -kp, 0.0), (-torque, torque),
+                                ctrl[i][j]) for j, n in enumerate(f.joint_names))
+                 for i, f in enumerate(FINGERS))
+    lo = tuple(np.full(4, -share * torque) for _ in FINGERS)
+    return TorqueLimits(lo, tuple(-x for x in lo), np.array([0.0, 0.0, -9.81]),
+                        tuple(np.full(4, share * torque / damping) for _ in FINGERS), share,
+                        acts, tuple(np.full(4, damping) for _ in FINGERS))
+
+
+def test_the_swing_drive_is_what_the_actuators_give_at_every_joint_angle() -> None:
+    """TorqueLimits.drive (the swing NLP's rows against the damping): at any joint angles
+    ``max(torque_lower, slope q + end_lower) .. min(torque_upper, slope q + end_upper)``
+    is exactly TorqueLimits.at (the servos' control ranges reached there, within their
+    torque ranges, at the share); a finger whose joints are not damped has none."""
+    rng = np.random.default_rng(3)
+    ctrl = [[(float(f.lower[j]), float(f.upper[j])) for j in range(4)] for f in FINGERS]
+    limits = _servo_limits(ctrl, 0.7)
+    for i, f in enumerate(FINGERS):
+        drive = limits.drive(i)
+        assert drive is not None
+        for q in rng.uniform(np.asarray(f.lower) - 0.2, np.asarray(f.upper) + 0.2, (50, 4)):
+            lo, hi = limits.at(i, q)
+            np.testing.assert_allclose(
+                np.maximum(drive.torque_lower, drive.slope * q + drive.end_lower), lo,
+                rtol=0, atol=1e-12)
+            np.testing.assert_allclose(
+                np.minimum(drive.torque_upper, drive.slope * q + drive.end_upper), hi,
+                rtol=0, atol=1e-12)
+    undamped = dataclasses.replace(limits, damping=tuple(np.zeros(4) for _ in FINGERS))
+    assert undamped.drive(0) is None
+    lo_pt, hi_pt = dataclasses.replace(limits.drive(0), damping=np.array(
+        [1.0, 0.0, 1.0, 1.0])).row_bounds()
+    assert np.isinf(lo_pt[2:4]).all() and np.isinf(hi_pt[2:4]).all()
+    assert np.isfinite(lo_pt[[0, 1, 4, 5, 6, 7]]).all()
+
+
+def test_a_damped_swing_is_planned_within_its_actuators_and_faster_than_scaled() -> None:
+    """A swing whose rates, against its joints' damping, ask more than its servos give
+    (their torque range, and the less their control range reaches near its ends) is
+    planned again with the actuators' rows in its NLP (within_damping): the swing
+    returned keeps every joint's damping torque within what its actuator gives at that
+    angle densely (1000 samples), passes its own checks, and takes less time than the
+    same path slowed to its worst sample (the rule before the rows: 0.8 s x 1.63 x 1.05 =
+    1.37 s against 1.05 s measured)."""
+    from ocp.gait.step import DAMPING_SLACK
+
+    d, spec = stored_swing("gait_narrow_swing.json")
+    k = d["finger"]
+    args = (FINGERS, spec_joints(d), k, spec.landing_normal, spec.q_target,
+            Held(spec.centre, np.eye(3), spec.radius), LOAD)
+    free = replace_finger(*args)
+    assert free.ok, free.message
+    sw = free.swing
+    # control ranges 20 mrad past the free swing's extremes; 0.35 N m servos
+    ctrl = [[(float(f.lower[j]), float(f.upper[j])) for j in range(4)] for f in FINGERS]
+    ctrl[k] = [(float(sw.Q[:, j].min()) - 0.02, float(sw.Q[:, j].max()) + 0.02)
+               for j in range(4)]
+    limits = _servo_limits(ctrl, 0.35)
+    over = limits.damping_overrun(k, sw.Q, sw.V)
+    assert over > 1.5
+    step = replace_finger(*args, limits=limits)
+    assert step.ok, step.message
+    plan = step.swing
+    assert plan.spec.drive is not None
+    ts = np.linspace(0.0, plan.duration, 1001)
+    Q, V, _ = plan.sample(ts)
+    assert limits.damping_overrun(k, Q, V) <= 1.0 + 1e-9
+    assert plan.duration < 0.8 * sw.duration * over * DAMPING_SLACK
+    cert = step.checks("s", 0.0, LOAD, 0.5)
+    assert all(c.passed for c in cert), [c.failure for c in cert if not c.passed]
+
+
 def test_a_hold_no_forces_of_which_fit_the_actuators_is_named() -> None:
     """hold_torque_refusal: with the actuators capped below what any narrowing of the
     cones asks, the reason names the fingers, the joint, the torque and the range; with

@@ -43,12 +43,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ocp.gait.step import (
+    DAMPING_SLACK,
     SWING_OBSTACLES,
     GaitStep,
     TorqueLimits,
     contact_of,
     deep_forces,
     dense_enough,
+    driven_factors,
+    driven_overrun,
     find_swing,
     grasp_hold,
     swing_spec,
@@ -237,7 +240,13 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                  min(last_swing.duration, base))
     _, n_land = contact_of(fingers[k], q_land, end, rho)  # (a ball's: overlap is for one)
     why = "no swing"
-    for _ in range(OVERLAP_TRIES):
+    # the actuators' rows against the damping, once a swing without them asked too much
+    # of them (within_damping's reasons), and the slower swing planned before those rows
+    # when none is found with them
+    drive, fallback, driven = None, 0.0, []
+    tries, found = OVERLAP_TRIES, False
+    while tries > 0 and not found:
+        tries -= 1
         clock = RollClock.lasting(float(sol.duration), length)
         samples = [tuple(_full_rows(sol, clock, t, q_now, k))
                    for t in (0.0, 0.5 * length, length)]
@@ -251,7 +260,8 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                          duration=length, clearance=clearance, name=names[k],
                          other_names=tuple([names[i] for i in rest] + link_names),
                          moving=moving, node_margin=NODE_MARGIN,
-                         centre_path=_centre_path(sol, clock), **spec_args)
+                         centre_path=_centre_path(sol, clock), drive=drive,
+                         **spec_args)
         plan = plan_swing(spec, last_swing if last_swing is not None and len(
             last_swing.spec.others) == len(others) else None)
         # the neighbours' gap narrowed as a swing at rest narrows it (replace_finger),
@@ -264,14 +274,30 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
             plan = plan_swing(replace(spec, **narrow))  # type: ignore[arg-type]
         plan = dense_enough(plan)  # (kept at its nodes, a moving neighbour's dips between)
         if plan.ok and limits is not None and limits.rate:
-            over = limits.damping_overrun(k, plan.Q, plan.V)
+            over = limits.damping_overrun(k, plan.Q, plan.V) if drive is None else \
+                driven_overrun(limits, k, plan)
             if over > 1.0:  # too fast for the joints' damping: slower, the roll with it
-                length *= over * 1.05
                 why = f"{names[k]}'s swing is faster than its actuators' damping allows"
+                if drive is None and not fallback and limits.drive(k) is not None:
+                    drive = limits.drive(k)
+                    driven = [length * f for f in
+                              driven_factors(limits.rate_overrun(k, plan.V), over)]
+                    fallback = length * over * DAMPING_SLACK
+                    length = driven.pop(0)
+                    tries += 1 + len(driven)  # (the old slower swing stays the next)
+                else:
+                    length *= over * DAMPING_SLACK
                 continue
         if plan.ok:
+            found = True
             break
         why = plan.message
+        if drive is not None:  # the swing with the actuators' rows not found: longer,
+            if driven:  # then as before
+                length = driven.pop(0)
+            else:
+                drive, length = None, fallback
+            continue
         if plan.blocked_by is not None and plan.blocked_by < len(rest):
             # a rolling fingertip in its way, with the gaps narrowed too: named at once,
             # for it to be re-placed first (about -z the middle's swings were blocked by
@@ -279,7 +305,7 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
             # named)
             return None, why, rest[plan.blocked_by]
         length *= 1.4
-    else:
+    if not found:
         return None, why, None
     q_after = tuple(plan.Q[-1] if i == k else row for i, row in
                     zip(allf, _full_rows(sol, clock, clock.length, q_now, k), strict=True))

@@ -20,6 +20,7 @@ from ocp.gait.swing import (
     MIN_SWING,
     MIN_TIP_GAP,
     NARROW_SHARE,
+    SwingDrive,
     SwingPlan,
     SwingSpec,
     plan_swing,
@@ -27,8 +28,8 @@ from ocp.gait.swing import (
 from ocp.geometry.bodies import point_segment_distance, tip_body
 from ocp.shapes.held import Held
 
-__all__ = ["GaitStep", "contact_of", "find_swing", "grasp_hold", "liftable", "replace_finger",
-           "swing_spec"]
+__all__ = ["GaitStep", "contact_of", "driven_factors", "driven_overrun", "find_swing",
+           "grasp_hold", "liftable", "replace_finger", "swing_spec", "within_damping"]
 
 FloatArray = NDArray[np.float64]
 
@@ -220,6 +221,33 @@ class TorqueLimits:
         for q, v in zip(Q, V, strict=True):
             worst = max(worst, self.overrun(i, q, c * np.asarray(v, dtype=float)))
         return worst
+
+    def rate_overrun(self, i: int, V: FloatArray) -> float:
+        """How many times faster than its joints' damping lets the actuators' torque
+        ranges drive them finger ``i``'s rates ``V`` (rows) go at worst: the same path is
+        within those ranges in this many times its time (the control ranges, which depend
+        on the joints, aside: :meth:`damping_overrun`); 0 without limited rates."""
+        return float(np.max(np.abs(V) / self.rate[i], initial=0.0)) if self.rate else 0.0
+
+    def drive(self, i: int) -> SwingDrive | None:
+        """What finger ``i``'s actuators give its joints' damping, for its swing's NLP
+        (:class:`~ocp.gait.swing.SwingDrive`, at this share of their range; a servo's
+        control-range ends are affine in its joint: :meth:`~ocp.robots.actuation.
+        Actuator.range_at`); None when no joint of it is damped."""
+        if not self.damping or not np.any(np.asarray(self.damping[i]) > 0):
+            return None
+        nq = len(self.damping[i])
+        slope, lo_end, hi_end = np.zeros(nq), np.full(nq, -np.inf), np.full(nq, np.inf)
+        for j, a in enumerate(self.actuators[i] if self.actuators else ()):
+            if a.ctrl_range is None or a.kind == "none":
+                continue
+            g, (b0, b1, _) = a.gear, a.bias
+            ends = [self.share * g * (a.gain * c + b0) for c in a.ctrl_range]
+            slope[j] = self.share * g * g * b1
+            lo_end[j], hi_end[j] = min(ends), max(ends)
+        return SwingDrive(np.asarray(self.damping[i], dtype=float), slope, lo_end, hi_end,
+                          np.asarray(self.lower[i], dtype=float),
+                          np.asarray(self.upper[i], dtype=float))
 
     def overrun(self, i: int, q: Any, need: FloatArray) -> float:
         """How many times more than finger ``i``'s actuators give at its joints ``q``
@@ -464,6 +492,71 @@ def find_swing(spec: SwingSpec, warm: SwingPlan | None = None, narrow_any: bool 
     return dense_enough(plan)
 
 
+#: A swing made slower for its joints' damping is given this much more time than the
+#: overrun it corrects (the rates between the checked samples).
+DAMPING_SLACK = 1.05
+#: A swing planned again with the actuators' rows against the damping is given this
+#: share of the time its first path would need scaled to the torque ranges' rates: a
+#: rest-to-rest swing of least jerk peaks at 1.875 times its mean rate, one with the rows
+#: may run at the rate bound most of the way (0.6 x 1.875 = 1.125 times the time at the
+#: bound). On the MJCF hand's 90 deg turn every swing was found at 0.5 (1.09-1.65 times
+#: its own path's time at the bound), none slower than asked (docs/gait.md).
+DRIVEN_PACE = 0.6
+
+
+def within_damping(plan: SwingPlan, limits: TorqueLimits, k: int) -> SwingPlan:
+    """Finger ``k``'s swing ``plan`` (still bodies), or where it asks more of the
+    actuators than their range gives against its joints' damping (at each sample's
+    joints: a servo near the end of its control range gives less) a slower one: planned
+    again with the actuators' rows in its NLP (:meth:`TorqueLimits.drive`), in
+    :data:`DRIVEN_PACE` of the time the torque ranges alone need for its path
+    (:meth:`TorqueLimits.rate_overrun`; never faster than it was asked), free to run at
+    the rate bound and to move slowly where a servo gives little; else, as before those
+    rows, the same swing planned in the time its worst sample needs
+    (:data:`MAX_SLOWDOWN` at most). On the MJCF hand's 90 deg turn a swing whose start
+    lay 3 mrad inside a servo's control range was made 7 times slower by that sample
+    alone (8.4 s) where its rates needed 1.5 times (docs/gait.md)."""
+    over = limits.damping_overrun(k, plan.Q, plan.V)
+    if not 1.0 < over < MAX_SLOWDOWN:
+        return plan
+    drive = limits.drive(k)
+    if drive is not None:
+        for factor in driven_factors(limits.rate_overrun(k, plan.V), over):
+            driven = dense_enough(plan_swing(replace(plan.spec, drive=drive,
+                                                     duration=plan.spec.duration * factor)))
+            if driven.ok:
+                left = driven_overrun(limits, k, driven)
+                return driven if left <= 1.0 else driven.scaled(left * (1.0 + 1e-6))
+    slower = plan_swing(replace(plan.spec, duration=plan.spec.duration * over * DAMPING_SLACK))
+    return slower if slower.ok else plan
+
+
+#: Samples per interval at which a swing planned with the actuators' rows (kept at its
+#: nodes and midpoints) is measured against them.
+DRIVEN_SAMPLES = 8
+
+
+def driven_overrun(limits: TorqueLimits, k: int, plan: SwingPlan) -> float:
+    """:meth:`TorqueLimits.damping_overrun` of finger ``k``'s swing ``plan`` between its
+    nodes too (:data:`DRIVEN_SAMPLES` per interval): a swing with the actuators' rows
+    meets them at its nodes and midpoints, and may ask a little more between (0.4 % on a
+    test swing)."""
+    ts = np.linspace(0.0, plan.duration, DRIVEN_SAMPLES * (len(plan.t) - 1) + 1)
+    Q, V, _ = plan.sample(ts)
+    return limits.damping_overrun(k, Q, V)
+
+
+def driven_factors(pace: float, over: float) -> list[float]:
+    """The times (factors of a swing's) it is planned in with the actuators' rows when
+    its path asks ``pace`` times (:meth:`TorqueLimits.rate_overrun`) and ``over`` times
+    (:meth:`TorqueLimits.damping_overrun`) more than they give: :data:`DRIVEN_PACE` of
+    the pace (never faster than it was asked), then halfway (geometrically) to the time in
+    which the same path would do (``over`` and :data:`DAMPING_SLACK`), which the rows
+    admit, when that is 10 % longer."""
+    first, last = max(1.0, DRIVEN_PACE * pace), over * DAMPING_SLACK
+    return [first] + ([math.sqrt(first * last)] if last > 1.1 * first else [])
+
+
 def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
                    landing_normal: FloatArray, q_target: FloatArray, held: Held,
                    load: FloatArray,
@@ -514,13 +607,7 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
     plan = find_swing(swing_spec(fingers, qs, k, landing_normal, q_target, held, swing,
                                  warm, names, limits, obstacles), warm)
     if plan.ok and limits is not None and limits.rate:
-        # a swing faster than the joints' damping lets the actuators drive (at each
-        # sample's joints: a servo near the end of its control range gives less): slower
-        over = limits.damping_overrun(k, plan.Q, plan.V)
-        if 1.0 < over < MAX_SLOWDOWN:
-            slower = plan_swing(replace(plan.spec, duration=plan.spec.duration * over * 1.05))
-            if slower.ok:
-                plan = slower
+        plan = within_damping(plan, limits, k)
     if plan.ok and plan.spec.fastest:  # the same path as fast as the limits allow
         factor = max(plan.fastest_factor(), MIN_SWING / plan.duration)
         if limits is not None and limits.rate:

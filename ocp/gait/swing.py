@@ -33,7 +33,13 @@ The rows (at the nodes; the certificate samples the returned cubic densely):
 * joint limits (backed off as the rolling plan's) and velocity limits at the nodes, and
   between them exactly: each interval's cubic lies in the convex hull of its Bezier
   control points, bounded by the limits themselves (the rate's quadratic likewise); the
-  acceleration limit.
+  acceleration limit;
+* **the actuators against the joints' damping** (a hand file whose joints are damped:
+  :class:`SwingDrive`, the spec's ``drive``): at every node and interval midpoint the
+  torque ``c q_dot`` the damping asks of each joint's actuator within what it gives
+  there: its torque range, and for a servo whose control is limited the torques its
+  control range reaches at that joint angle (a position servo near the end of its
+  range gives little toward it, so the swing moves slowly there or away from it).
 
 The objective: the jerk's integral (squared, scaled), and the landing joints near the
 target's (the landing point fixes the cap's centre; a 4-joint finger keeps one degree of
@@ -57,7 +63,8 @@ from ocp.contacts.base import backed_off_joint_limits
 from ocp.geometry.bodies import TipBody, point_segment_distance, segment_distance, tip_body
 from ocp.shapes.base import CLEARANCE_PARAMS
 
-__all__ = ["SwingPlan", "SwingSpec", "plan_swing", "prepare_swings", "swing_key"]
+__all__ = ["SwingDrive", "SwingPlan", "SwingSpec", "plan_swing", "prepare_swings",
+           "swing_key"]
 
 FloatArray = NDArray[np.float64]
 
@@ -82,6 +89,42 @@ _IPOPT_WARM: dict[str, Any] = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_i
                                "ipopt.warm_start_slack_bound_push": 1e-9,
                                "ipopt.warm_start_slack_bound_frac": 1e-9,
                                "ipopt.warm_start_mult_bound_push": 1e-9}
+
+
+@dataclass(frozen=True)
+class SwingDrive:
+    """What a finger's actuators give its joints' viscous damping, per joint: a joint
+    moving at the rate ``v`` asks ``damping * v`` [N m] of its actuator, which gives
+    ``torque_lower .. torque_upper`` (its torque range, times the share the gait keeps to)
+    and, where its control is limited, ``slope * q + end_lower .. slope * q + end_upper``
+    at the joint angle ``q`` (a servo's control range reached there: a position servo of
+    stiffness kp has slope -kp; infinite ends without a limited control). The swing's NLP
+    keeps ``damping * v`` inside both at its nodes and interval midpoints
+    (:meth:`~ocp.gait.step.TorqueLimits.drive` makes one from the gait's limits)."""
+
+    damping: FloatArray
+    slope: FloatArray
+    end_lower: FloatArray
+    end_upper: FloatArray
+    torque_lower: FloatArray
+    torque_upper: FloatArray
+
+    def row_bounds(self) -> tuple[FloatArray, FloatArray]:
+        """(lower, upper) of one point's rows, per joint the control's row ``damping * v
+        - slope * q`` then the torque's ``damping * v`` (as :func:`_swing_nlp` orders
+        them); infinite where a joint has no damping."""
+        c = np.asarray(self.damping, dtype=float)
+        on = c > 0
+        inf = np.full(c.shape, np.inf)
+        lo = np.stack([np.where(on, self.end_lower, -inf),
+                       np.where(on, self.torque_lower, -inf)], axis=1).ravel()
+        hi = np.stack([np.where(on, self.end_upper, inf),
+                       np.where(on, self.torque_upper, inf)], axis=1).ravel()
+        return lo, hi
+
+    def digest(self) -> bytes:
+        return b"".join(np.ascontiguousarray(getattr(self, f.name), dtype=float).tobytes()
+                        for f in fields(self))
 
 
 @dataclass(frozen=True)
@@ -144,6 +187,11 @@ class SwingSpec:
     #: where the cap touches down on an object that is not a ball (palm frame; a ball's
     #: is where the landing normal meets it)
     landing_contact: Any = field(default=None, compare=False, repr=False)
+    #: the actuators against the joints' damping (:class:`SwingDrive`), kept at the NLP's
+    #: nodes and midpoints (a variant of the finger's swing NLP with those rows); None:
+    #: not in the NLP (a gait without damped joints, or a swing first planned without and
+    #: checked after: :meth:`~ocp.gait.step.TorqueLimits.damping_overrun`)
+    drive: SwingDrive | None = field(default=None, compare=False, repr=False)
 
     @property
     def body(self) -> TipBody:
@@ -347,12 +395,13 @@ _SOLVERS: OrderedDict[tuple[str, int, int, int, str],
 MAX_SWING_NLPS = 32
 
 
-def swing_key(f: Any, n: int, K: int, n_others: int, shape: str = ""
-              ) -> tuple[str, int, int, int, str]:
+def swing_key(f: Any, n: int, K: int, n_others: int, shape: str = "", driven: bool = False
+              ) -> tuple[Any, ...]:
     """The key of finger ``f``'s swing NLP on this grid: a hash of everything the NLP is
     built from (the chain's placements, axes and kinds, the base and tip placements, the
     joint and rate limits, the tip's body), so that equal fingers share it; ``shape``:
-    the name of an object that is not a ball ("" a ball's)."""
+    the name of an object that is not a ball ("" a ball's); ``driven``: the variant with
+    the actuators' rows against the damping (:class:`SwingDrive`)."""
     body = tip_body(f)
     arrays = [f.base_rotation, f.base_position, f.tip_rotation, f.tip_translation, f.lower,
               f.upper, f.velocity_limit, body.a, body.b, [body.r]]
@@ -365,7 +414,8 @@ def swing_key(f: Any, n: int, K: int, n_others: int, shape: str = ""
     digest = hashlib.sha256("/".join(kinds).encode())
     for a in arrays:
         digest.update(np.ascontiguousarray(a, dtype=float).tobytes())
-    return digest.hexdigest(), n, K, n_others, shape
+    key = (digest.hexdigest(), n, K, n_others, shape)
+    return (*key, "driven") if driven else key
 
 
 def _built(f: Any, n: int, K: int, n_others: int) -> bool:
@@ -379,22 +429,28 @@ def _built(f: Any, n: int, K: int, n_others: int) -> bool:
 BOUND_PARAMS = 9 + CLEARANCE_PARAMS
 
 
-def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int, shape: Any = None
+def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int, shape: Any = None,
+               driven: bool = False
                ) -> tuple[Any, FloatArray, FloatArray, Any, Any, tuple[str, ...]]:
     """(solver, lbg, ubg, the warm-start solver, the rows' function ``g(x, p)``, each
     row's kind in words) of the swing NLP of finger ``f`` (see the module's doc), built
     once; the parameters in :func:`_swing_params`' order. ``shape``: an object that is not
     a ball (:class:`~ocp.shapes.Shape`), its distance the shape's lower bound
     (:meth:`~ocp.shapes.Shape.segment_clearance` of the body's segment in its axes), the
-    last :data:`BOUND_PARAMS` parameters; None: a ball's."""
+    :data:`BOUND_PARAMS` parameters after the others; None: a ball's. ``driven``: with
+    the actuators' rows against the joints' damping last (:class:`SwingDrive`: its
+    ``damping`` and ``slope`` the last parameters, the rows' bounds
+    :meth:`SwingDrive.row_bounds` at each node 1..n-1, then at each interval's
+    midpoint; ``lbg``, ``ubg`` here infinite for them)."""
     bound = shape is not None
-    key = swing_key(f, n, K, n_others, shape.name if bound else "")
+    key = swing_key(f, n, K, n_others, shape.name if bound else "", driven)
     if key in _SOLVERS:
         _SOLVERS.move_to_end(key)
         return _SOLVERS[key]
     nq = int(f.nq)
     n_p = 2 * nq + 31 + 8 * n_others * n
-    P = ca.SX.sym("p", n_p + (BOUND_PARAMS if bound else 0))
+    n_b = n_p + (BOUND_PARAMS if bound else 0)
+    P = ca.SX.sym("p", n_b + (2 * nq if driven else 0))
     q_start, q_target = P[0:nq], P[nq:2 * nq]
     o = 2 * nq
     T, clearance, cap_sin, rho = P[o], P[o + 1], P[o + 2], P[o + 3]
@@ -496,6 +552,19 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int, shape: Any 
             for s in np.linspace(0.0, 1.0, SEGMENT_SAMPLES if capsule else 1):
                 x = a + float(s) * (b - a)
                 add((point_segment_distance(x, a1, b1) - r - r1 - need) / L, 0.0, np.inf)
+    if driven:  # the damping's torque within what the actuators give, at each point
+        damping, slope = P[n_b:n_b + nq], P[n_b + nq:n_b + 2 * nq]
+        points = [(Q[:, k], Vp[:, k]) for k in range(1, n)]
+        for k in range(n):  # the interval's midpoint on its cubic
+            qk, vk, ak, jk = Q[:, k], Vp[:, k], Ap[:, k], Jp[:, k]
+            points.append((qk + h / 2 * vk + h * h / 8 * ak + h**3 / 48 * jk,
+                           vk + h / 2 * ak + h * h / 8 * jk))
+        for q_pt, v_pt in points:
+            for i in range(nq):
+                kind = f"joint {f.joint_names[i]}'s actuator (its control range there)"
+                add(damping[i] * v_pt[i] - slope[i] * q_pt[i], -np.inf, np.inf)
+                kind = f"joint {f.joint_names[i]}'s actuator torque"
+                add(damping[i] * v_pt[i], -np.inf, np.inf)
     jref = 20.0 * n  # the jerk's scale in the effort
     cost = h / T * ca.sumsqr(Jp / jref) + 10.0 * ca.sumsqr(Q[:, n] - q_target)
     w = ca.vertcat(ca.vec(Q), ca.vec(V), ca.vec(A), ca.vec(Jn))
@@ -563,7 +632,9 @@ def _swing_params(spec: SwingSpec) -> FloatArray:
                             spec.radius],
                            spec.centre, p0 + R0 @ body.a, n0, *_tangents(n0),
                            spec.landing_point(), n1, *_tangents(n1),
-                           np.concatenate(others, axis=None) if others else [], *extra])
+                           np.concatenate(others, axis=None) if others else [], *extra,
+                           *(() if spec.drive is None else
+                             (spec.drive.damping, spec.drive.slope))])
 
 
 def plan_swing(spec: SwingSpec, warm: SwingPlan | None = None) -> SwingPlan:
@@ -576,6 +647,7 @@ def plan_swing(spec: SwingSpec, warm: SwingPlan | None = None) -> SwingPlan:
             and warm.spec.lift_intervals == spec.lift_intervals \
             and len(warm.spec.others) == len(spec.others) \
             and (warm.spec.held is None) == (spec.held is None) \
+            and (warm.spec.drive is None) == (spec.drive is None) \
             and (spec.held is None or warm.spec.held.shape is spec.held.shape):
         out = _solve_swing(spec, warm.point)
         if out.ok:
@@ -612,6 +684,8 @@ def _failed_key(spec: SwingSpec) -> str | None:
                 h.update(repr(float(r)).encode())
         elif isinstance(value, np.ndarray):
             h.update(np.asarray(value, dtype=float).tobytes())
+        elif isinstance(value, SwingDrive):
+            h.update(value.digest())
         else:
             h.update(repr(value).encode())
         h.update(b"|")
@@ -638,10 +712,14 @@ def _solve(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArray] | N
     nq, n, K = int(f.nq), spec.n_intervals, spec.lift_intervals
     T = float(spec.duration)
     h = T / n
-    solver, lbg, ubg, warm_solver, rows_of, kinds = _swing_nlp(f, body, n, K,
-                                                                len(spec.others),
-                                                                None if spec.held is None
-                                                                else spec.held.shape)
+    solver, lbg, ubg, warm_solver, rows_of, kinds = _swing_nlp(
+        f, body, n, K, len(spec.others), None if spec.held is None else spec.held.shape,
+        spec.drive is not None)
+    if spec.drive is not None:  # its rows last: 2 nq at each of n - 1 nodes, n midpoints
+        lo_pt, hi_pt = spec.drive.row_bounds()
+        m_drive = lo_pt.size * (2 * n - 1)
+        lbg = np.concatenate([lbg[:-m_drive], np.tile(lo_pt, 2 * n - 1)])
+        ubg = np.concatenate([ubg[:-m_drive], np.tile(hi_pt, 2 * n - 1)])
     vs, as_, js = 1.0 / T, 1.0 / T**2, 1.0 / T**3
     lo_q, hi_q = backed_off_joint_limits(f)
     vmax = np.asarray(f.velocity_limit, dtype=float)
