@@ -28,8 +28,9 @@ from ocp.gait.swing import (
 from ocp.geometry.bodies import point_segment_distance, tip_body
 from ocp.shapes.held import Held
 
-__all__ = ["GaitStep", "contact_of", "driven_factors", "driven_overrun", "find_swing",
-           "grasp_hold", "liftable", "replace_finger", "swing_spec", "within_damping"]
+__all__ = ["GaitStep", "contact_of", "driven_factors", "driven_overrun", "driven_passes",
+           "find_swing", "fit_driven", "grasp_hold", "liftable", "replace_finger",
+           "swing_spec", "within_damping"]
 
 FloatArray = NDArray[np.float64]
 
@@ -504,7 +505,8 @@ DAMPING_SLACK = 1.05
 DRIVEN_PACE = 0.6
 
 
-def within_damping(plan: SwingPlan, limits: TorqueLimits, k: int) -> SwingPlan:
+def within_damping(plan: SwingPlan, limits: TorqueLimits, k: int,
+                   warm: SwingPlan | None = None) -> SwingPlan:
     """Finger ``k``'s swing ``plan`` (still bodies), or where it asks more of the
     actuators than their range gives against its joints' damping (at each sample's
     joints: a servo near the end of its control range gives less) a slower one: planned
@@ -515,7 +517,8 @@ def within_damping(plan: SwingPlan, limits: TorqueLimits, k: int) -> SwingPlan:
     rows, the same swing planned in the time its worst sample needs
     (:data:`MAX_SLOWDOWN` at most). On the MJCF hand's 90 deg turn a swing whose start
     lay 3 mrad inside a servo's control range was made 7 times slower by that sample
-    alone (8.4 s) where its rates needed 1.5 times (docs/gait.md)."""
+    alone (8.4 s) where its rates needed 1.5 times (docs/gait.md). ``warm``: the
+    finger's last swing (:func:`~ocp.gait.swing.plan_swing`'s warm start)."""
     over = limits.damping_overrun(k, plan.Q, plan.V)
     if not 1.0 < over < MAX_SLOWDOWN:
         return plan
@@ -523,10 +526,10 @@ def within_damping(plan: SwingPlan, limits: TorqueLimits, k: int) -> SwingPlan:
     if drive is not None:
         for factor in driven_factors(limits.rate_overrun(k, plan.V), over):
             driven = dense_enough(plan_swing(replace(plan.spec, drive=drive,
-                                                     duration=plan.spec.duration * factor)))
-            if driven.ok:
-                left = driven_overrun(limits, k, driven)
-                return driven if left <= 1.0 else driven.scaled(left * (1.0 + 1e-6))
+                                                     duration=plan.spec.duration * factor),
+                                             warm))
+            if driven_passes(driven):
+                return fit_driven(driven, limits, k)
     slower = plan_swing(replace(plan.spec, duration=plan.spec.duration * over * DAMPING_SLACK))
     return slower if slower.ok else plan
 
@@ -544,6 +547,22 @@ def driven_overrun(limits: TorqueLimits, k: int, plan: SwingPlan) -> float:
     ts = np.linspace(0.0, plan.duration, DRIVEN_SAMPLES * (len(plan.t) - 1) + 1)
     Q, V, _ = plan.sample(ts)
     return limits.damping_overrun(k, Q, V)
+
+
+def driven_passes(plan: SwingPlan) -> bool:
+    """Whether a swing planned with the actuators' rows was found and passes its own
+    dense checks (:func:`~ocp.gait.checks.swing_checks`): one at its rate bound most of
+    the way may dip between its nodes where a slower one does not (on the MJCF hand a
+    landing that went 66 um into the ball and back, warm-started from the finger's last
+    swing), and then the swing is planned as before the rows."""
+    return plan.ok and all(c.passed for c in swing_checks(plan, "driven"))
+
+
+def fit_driven(plan: SwingPlan, limits: TorqueLimits, k: int) -> SwingPlan:
+    """Finger ``k``'s swing ``plan`` with the actuators' rows (still bodies), or the same
+    path in the little more time it needs between its nodes (:func:`driven_overrun`)."""
+    left = driven_overrun(limits, k, plan)
+    return plan if left <= 1.0 else plan.scaled(left * (1.0 + 1e-6))
 
 
 def driven_factors(pace: float, over: float) -> list[float]:
@@ -604,10 +623,20 @@ def replace_finger(fingers: tuple[Any, ...], qs: tuple[FloatArray, ...], k: int,
             why = hold_torque_refusal(fingers, qs, which, hold, load, L, full, names)
             if why:
                 return GaitStep(k, "infeasible", f"the hold{lifted}: {why}", None)
-    plan = find_swing(swing_spec(fingers, qs, k, landing_normal, q_target, held, swing,
-                                 warm, names, limits, obstacles), warm)
-    if plan.ok and limits is not None and limits.rate:
-        plan = within_damping(plan, limits, k)
+    spec = swing_spec(fingers, qs, k, landing_normal, q_target, held, swing, warm, names,
+                      limits, obstacles)
+    plan = None
+    if warm is not None and warm.spec.drive is not None and limits is not None:
+        # this finger's last swing needed the actuators' rows: this one with them at once,
+        # in that swing's time (the grasp recurs; one swing NLP instead of two), else as
+        # every swing
+        again = find_swing(replace(spec, drive=limits.drive(k),
+                                   duration=max(spec.duration, warm.spec.duration)), warm)
+        plan = fit_driven(again, limits, k) if driven_passes(again) else None
+    if plan is None:
+        plan = find_swing(spec, warm)
+        if plan.ok and limits is not None and limits.rate:
+            plan = within_damping(plan, limits, k, warm)
     if plan.ok and plan.spec.fastest:  # the same path as fast as the limits allow
         factor = max(plan.fastest_factor(), MIN_SWING / plan.duration)
         if limits is not None and limits.rate:

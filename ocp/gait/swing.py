@@ -640,14 +640,13 @@ def _swing_params(spec: SwingSpec) -> FloatArray:
 def plan_swing(spec: SwingSpec, warm: SwingPlan | None = None) -> SwingPlan:
     """Solve the swing's NLP (see the module's doc; built once per finger and grid).
     ``warm``: an earlier swing of this finger on this grid (in a gait, the one before: the
-    grasp recurs), whose primal-dual point starts IPOPT; when that does not solve, the
-    swing is solved from its own guess."""
+    grasp recurs; with or without the actuators' rows), whose primal-dual point starts
+    IPOPT; when that does not solve, the swing is solved from its own guess."""
     if warm is not None and warm.point is not None and warm.spec.finger is spec.finger \
             and warm.spec.n_intervals == spec.n_intervals \
             and warm.spec.lift_intervals == spec.lift_intervals \
             and len(warm.spec.others) == len(spec.others) \
             and (warm.spec.held is None) == (spec.held is None) \
-            and (warm.spec.drive is None) == (spec.drive is None) \
             and (spec.held is None or warm.spec.held.shape is spec.held.shape):
         out = _solve_swing(spec, warm.point)
         if out.ok:
@@ -745,7 +744,11 @@ def _solve(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArray] | N
     duals: dict[str, FloatArray] = {}
     if point is not None:
         solver = warm_solver
-        w0, duals = point[0], {"lam_x0": point[1], "lam_g0": point[2]}
+        # (a point of the finger's other variant, with or without the actuators' rows,
+        # which come last: their multipliers dropped, or zero)
+        lam_g = np.resize(point[2], lbg.size) if point[2].size > lbg.size else \
+            np.concatenate([point[2], np.zeros(lbg.size - point[2].size)])
+        w0, duals = point[0], {"lam_x0": point[1], "lam_g0": lam_g}
     t_start = time.perf_counter()
     res = solver(x0=np.clip(w0, lbw, ubw), p=_swing_params(spec), lbx=lbw, ubx=ubw,
                  lbg=lbg, ubg=ubg, **duals)
