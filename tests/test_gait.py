@@ -517,17 +517,24 @@ def test_a_holds_forces_keep_the_joints_torques_within_the_actuators() -> None:
     assert res.equilibrium < 1e-6 and res.normal_margin > -1e-6 and res.cone_margin > -1e-6
 
 
-def test_a_swing_is_slowed_to_what_the_joints_damping_lets_the_actuators_drive() -> None:
-    """A swing whose joint rates, against the file's joint damping, would ask more torque
-    than the actuators give is planned again, longer, within those rates."""
-    from ocp.gait.step import TorqueLimits
-
-    d, spec = stored_swing("gait_narrow_swing.json")
+def _stored_step(name: str) -> tuple[int, tuple, object]:
+    """The stored swing ``name``'s finger, replace_finger's arguments for it (the ball
+    still) and the re-placement they give without actuator limits."""
+    d, spec = stored_swing(name)
     k = d["finger"]
     args = (FINGERS, spec_joints(d), k, spec.landing_normal, spec.q_target,
             Held(spec.centre, np.eye(3), spec.radius), LOAD)
     free = replace_finger(*args)
     assert free.ok, free.message
+    return k, args, free
+
+
+def test_a_swing_is_slowed_to_what_the_joints_damping_lets_the_actuators_drive() -> None:
+    """A swing whose joint rates, against the file's joint damping, would ask more torque
+    than the actuators give is planned again, longer, within those rates."""
+    from ocp.gait.step import TorqueLimits
+
+    k, args, free = _stored_step("gait_narrow_swing.json")
     fast = float(np.abs(free.swing.V).max())
     inf = tuple(np.full(4, np.inf) for _ in FINGERS)
     rate = tuple(np.full(4, 0.5 * fast if i == k else np.inf) for i in range(len(FINGERS)))
@@ -593,12 +600,7 @@ def test_a_damped_swing_is_planned_within_its_actuators_and_faster_than_scaled()
     1.37 s against 1.05 s measured)."""
     from ocp.gait.step import DAMPING_SLACK
 
-    d, spec = stored_swing("gait_narrow_swing.json")
-    k = d["finger"]
-    args = (FINGERS, spec_joints(d), k, spec.landing_normal, spec.q_target,
-            Held(spec.centre, np.eye(3), spec.radius), LOAD)
-    free = replace_finger(*args)
-    assert free.ok, free.message
+    k, args, free = _stored_step("gait_narrow_swing.json")
     sw = free.swing
     # control ranges 20 mrad past the free swing's extremes; 0.35 N m servos
     ctrl = [[(float(f.lower[j]), float(f.upper[j])) for j in range(4)] for f in FINGERS]
