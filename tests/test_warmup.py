@@ -152,7 +152,8 @@ def test_swing_nlps_are_shared_by_equal_fingers_and_not_by_different_ones() -> N
 def test_a_gait_on_a_hand_with_links_warms_its_swings_with_their_obstacles() -> None:
     """On an MJCF hand whose links are checked, a gait's swings keep clear of
     SWING_OBSTACLES of them (one NLP per finger, with them among its 'others'): the
-    warm-up builds that NLP, not the one without."""
+    warm-up builds that NLP, not the one without; its joints are damped, so the variant
+    with the actuators' rows (ocp.gait.swing.SwingDrive) is built too."""
     from ocp.gait.step import SWING_OBSTACLES
     from ocp.gait.swing import _SOLVERS, SwingSpec, swing_key
     from planner_service.planners import REQUEST, ManipulationAdapter, Planners
@@ -169,5 +170,6 @@ def test_a_gait_on_a_hand_with_links_warms_its_swings_with_their_obstacles() -> 
     assert problem.collision is not None
     fingers = [tip.finger for tip in problem.fingers]
     for f in fingers:
-        assert swing_key(f, SwingSpec.n_intervals, SwingSpec.lift_intervals,
-                         len(fingers) - 1 + SWING_OBSTACLES) in _SOLVERS
+        for driven in (False, True):
+            assert swing_key(f, SwingSpec.n_intervals, SwingSpec.lift_intervals,
+                             len(fingers) - 1 + SWING_OBSTACLES, "", driven) in _SOLVERS

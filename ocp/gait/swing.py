@@ -424,9 +424,10 @@ def swing_key(f: Any, n: int, K: int, n_others: int, shape: str = "", driven: bo
     return (*key, "driven") if driven else key
 
 
-def _built(f: Any, n: int, K: int, n_others: int) -> bool:
-    """Whether finger ``f``'s swing NLP of this shape is built."""
-    return swing_key(f, n, K, n_others) in _SOLVERS
+def _built(f: Any, n: int, K: int, n_others: int, driven: bool = False) -> bool:
+    """Whether finger ``f``'s swing NLP of this shape (``driven``: its variant with the
+    actuators' rows) is built."""
+    return swing_key(f, n, K, n_others, "", driven) in _SOLVERS
 
 
 #: The parameters an object that is not a ball adds to a swing NLP's: its axes (palm
@@ -592,13 +593,15 @@ def _swing_nlp(f: Any, body: TipBody, n: int, K: int, n_others: int, shape: Any 
 
 
 def prepare_swings(fingers: tuple[Any, ...], n_intervals: int | None = None,
-                   lift_intervals: int | None = None, obstacles: int = 0) -> float:
+                   lift_intervals: int | None = None, obstacles: int = 0,
+                   driven: bool = False) -> float:
     """Build (and keep) the swing NLP of every round fingertip of a grasp of ``fingers``
     (the others its neighbours, and ``obstacles`` of the hand's links:
     :data:`ocp.gait.step.SWING_OBSTACLES` for a hand whose links are checked), as a
     gait's swings use them (``n_intervals`` and ``lift_intervals``: :class:`SwingSpec`'s
-    defaults when None), without solving: a service worker's warm-up. Returns the build
-    time [s] (0 when built already)."""
+    defaults when None; ``driven``: the variants with the actuators' rows too, for a hand
+    whose joints are damped), without solving: a service worker's warm-up. Returns the
+    build time [s] (0 when built already)."""
     n = SwingSpec.n_intervals if n_intervals is None else int(n_intervals)
     K = SwingSpec.lift_intervals if lift_intervals is None else int(lift_intervals)
     t0 = time.perf_counter()
@@ -609,9 +612,10 @@ def prepare_swings(fingers: tuple[Any, ...], n_intervals: int | None = None,
         except ValueError:  # a flat or spheroid tip: no gait
             continue
         others = len(fingers) - 1 + int(obstacles)
-        if not _built(f, n, K, others):
-            _swing_nlp(f, body, n, K, others)
-            built = True
+        for variant in (False, True) if driven else (False,):
+            if not _built(f, n, K, others, variant):
+                _swing_nlp(f, body, n, K, others, None, variant)
+                built = True
     return time.perf_counter() - t0 if built else 0.0
 
 

@@ -633,13 +633,15 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
             problem = manipulation_problem(request, fingers)
             general = fingers.manipulation
         built = general.prepare(problem)
-        if request.gait is not None:  # a gait's swings: one NLP per finger
-            from ocp.gait.step import SWING_OBSTACLES
+        if request.gait is not None:  # a gait's swings: one NLP per finger (two where
+            from ocp.gait.planner import torque_limits  # the joints are damped: with the
+            from ocp.gait.step import SWING_OBSTACLES  # actuators' rows too)
             from ocp.gait.swing import prepare_swings
 
+            limits = torque_limits(problem)
             built += prepare_swings(tuple(tip.finger for tip in problem.fingers),
                                     obstacles=SWING_OBSTACLES if problem.collision is not None
-                                    else 0)
+                                    else 0, driven=limits is not None and limits.damped)
         return built
 
     def summary(self, result: ManipulationResult, solution: Any) -> str:
