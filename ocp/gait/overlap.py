@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 
 from ocp.gait.step import (
     DAMPING_SLACK,
+    MAX_SLOWDOWN,
     SWING_OBSTACLES,
     GaitStep,
     TorqueLimits,
@@ -278,7 +279,9 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
             # the midpoints: between, a swing at its rate bound asks 0.01-0.2 % more, and
             # up to 6 % more where a servo gives 0.03 N m, which re-planned 5 % slower
             # each time found the same and fell back to a re-placement at rest)
-            over = limits.damping_overrun(k, plan.Q, plan.V)
+            # (an infinite overrun, a joint moving where its actuator gives nothing that
+            # way, is taken as MAX_SLOWDOWN's: the roll is slowed by a finite factor)
+            over = min(limits.damping_overrun(k, plan.Q, plan.V), MAX_SLOWDOWN)
             if over > 1.0:  # too fast for the joints' damping: slower, the roll with it
                 why = f"{names[k]}'s swing is faster than its actuators' damping allows"
                 if drive is None and not fallback and limits.drive(k) is not None:

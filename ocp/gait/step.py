@@ -514,22 +514,25 @@ def within_damping(plan: SwingPlan, limits: TorqueLimits, k: int,
     :data:`DRIVEN_PACE` of the time the torque ranges alone need for its path
     (:meth:`TorqueLimits.rate_overrun`; never faster than it was asked), free to run at
     the rate bound and to move slowly where a servo gives little; else, as before those
-    rows, the same swing planned in the time its worst sample needs
-    (:data:`MAX_SLOWDOWN` at most). On the MJCF hand's 90 deg turn a swing whose start
+    rows, the same swing planned in the time its worst sample needs (when that is less
+    than :data:`MAX_SLOWDOWN` times its own). On the MJCF hand's 90 deg turn a swing whose start
     lay 3 mrad inside a servo's control range was made 7 times slower by that sample
     alone (8.4 s) where its rates needed 1.5 times (docs/gait.md). ``warm``: the
     finger's last swing (:func:`~ocp.gait.swing.plan_swing`'s warm start)."""
     over = limits.damping_overrun(k, plan.Q, plan.V)
-    if not 1.0 < over < MAX_SLOWDOWN:
+    if over <= 1.0:
         return plan
     drive = limits.drive(k)
     if drive is not None:
-        for factor in driven_factors(limits.rate_overrun(k, plan.V), over):
+        for factor in driven_factors(limits.rate_overrun(k, plan.V),
+                                     min(over, MAX_SLOWDOWN)):
             driven = dense_enough(plan_swing(replace(plan.spec, drive=drive,
                                                      duration=plan.spec.duration * factor),
                                              warm))
             if driven_passes(driven):
                 return fit_driven(driven, limits, k)
+    if over >= MAX_SLOWDOWN:  # (a joint driven against an actuator that gives nothing
+        return plan  # that way: left to the actuators' check, as before the rows)
     slower = plan_swing(replace(plan.spec, duration=plan.spec.duration * over * DAMPING_SLACK))
     return slower if slower.ok else plan
 
