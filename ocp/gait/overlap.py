@@ -275,17 +275,16 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
             plan = plan_swing(replace(spec, **narrow))  # type: ignore[arg-type]
         plan = dense_enough(plan)  # (kept at its nodes, a moving neighbour's dips between)
         if plan.ok and limits is not None and limits.rate:
-            # (at its nodes, as before the actuators' rows, which keep them there and at
-            # the midpoints: between, a swing at its rate bound asks 0.01-0.2 % more, and
+            # At its nodes, as before the actuators' rows, which keep them there and at
+            # the midpoints (between, a swing at its rate bound asks 0.01-0.2 % more, and
             # up to 6 % more where a servo gives 0.03 N m, which re-planned 5 % slower
-            # each time found the same and fell back to a re-placement at rest)
-            # (an infinite overrun, a joint moving where its actuator gives nothing that
-            # way, is taken as MAX_SLOWDOWN's: the roll is slowed by a finite factor)
+            # each time found the same and fell back to a re-placement at rest); an
+            # infinite overrun (a joint moving where its actuator gives nothing that way)
+            # taken as MAX_SLOWDOWN's, so that the roll is slowed by a finite factor.
             over = min(limits.damping_overrun(k, plan.Q, plan.V), MAX_SLOWDOWN)
             if over > 1.0:  # too fast for the joints' damping: slower, the roll with it
                 why = f"{names[k]}'s swing is faster than its actuators' damping allows"
-                if drive is None and not fallback and limits.drive(k) is not None:
-                    drive = limits.drive(k)
+                if not fallback and (drive := limits.drive(k)) is not None:
                     driven = [length * f for f in
                               driven_factors(limits.rate_overrun(k, plan.V), over)]
                     fallback = length * over * DAMPING_SLACK

@@ -240,12 +240,9 @@ class TorqueLimits:
         nq = len(self.damping[i])
         slope, lo_end, hi_end = np.zeros(nq), np.full(nq, -np.inf), np.full(nq, np.inf)
         for j, a in enumerate(self.actuators[i] if self.actuators else ()):
-            if a.ctrl_range is None or a.kind == "none":
-                continue
-            g, (b0, b1, _) = a.gear, a.bias
-            ends = [self.share * g * (a.gain * c + b0) for c in a.ctrl_range]
-            slope[j] = self.share * g * g * b1
-            lo_end[j], hi_end[j] = min(ends), max(ends)
+            ends = a.control_ends()
+            if ends is not None:
+                slope[j], lo_end[j], hi_end[j] = (self.share * e for e in ends)
         return SwingDrive(np.asarray(self.damping[i], dtype=float), slope, lo_end, hi_end,
                           np.asarray(self.lower[i], dtype=float),
                           np.asarray(self.upper[i], dtype=float))

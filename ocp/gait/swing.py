@@ -760,7 +760,7 @@ def _solve(spec: SwingSpec, point: tuple[FloatArray, FloatArray, FloatArray] | N
         solver = warm_solver
         # (a point of the finger's other variant, with or without the actuators' rows,
         # which come last: their multipliers dropped, or zero)
-        lam_g = np.resize(point[2], lbg.size) if point[2].size > lbg.size else \
+        lam_g = point[2][:lbg.size] if point[2].size >= lbg.size else \
             np.concatenate([point[2], np.zeros(lbg.size - point[2].size)])
         w0, duals = point[0], {"lam_x0": point[1], "lam_g0": lam_g}
     t_start = time.perf_counter()

@@ -73,11 +73,22 @@ class Actuator:
         lo, hi = np.full(Q.shape, -np.inf), np.full(Q.shape, np.inf)
         if self.torque_range is not None:
             lo, hi = np.maximum(lo, self.torque_range[0]), np.minimum(hi, self.torque_range[1])
-        if self.ctrl_range is not None and self.kind != "none":
-            g, (b0, b1, _) = self.gear, self.bias
-            ends = [g * (self.gain * c + b0 + b1 * g * Q) for c in self.ctrl_range]
-            lo, hi = np.maximum(lo, np.minimum(*ends)), np.minimum(hi, np.maximum(*ends))
+        ends = self.control_ends()
+        if ends is not None:
+            slope, lo_end, hi_end = ends
+            lo, hi = np.maximum(lo, slope * Q + lo_end), np.minimum(hi, slope * Q + hi_end)
         return lo, hi
+
+    def control_ends(self) -> tuple[float, float, float] | None:
+        """Where its control is limited, the joint torques [N m] its control range's ends
+        give, affine in the joint position q: ``(slope, lower, upper)``, the torques
+        ``slope q + lower .. slope q + upper`` (a position servo of stiffness kp: slope
+        -kp g^2); None where the control is not limited (:meth:`range_at`)."""
+        if self.ctrl_range is None or self.kind == "none":
+            return None
+        g, (b0, b1, _) = self.gear, self.bias
+        ends = [g * (self.gain * c + b0) for c in self.ctrl_range]
+        return g * g * b1, min(ends), max(ends)
 
     def describe_range(self) -> str:
         if self.torque_range is None:
