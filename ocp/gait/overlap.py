@@ -73,7 +73,8 @@ FloatArray = NDArray[np.float64]
 #: is slowed to it when the roll alone is shorter.
 OVERLAP_SWING = 0.45
 #: How many times a swing during a roll is tried, each 1.4 times longer (the roll's clock
-#: slowed with it) when the last was not found.
+#: slowed with it) when the last was not found; one found after a length that was not is
+#: tried once more halfway between the two (:func:`plan_overlap`).
 OVERLAP_TRIES = 3
 #: The swing's clearance and gaps kept this much more [m] at its NLP's nodes: the others
 #: move between them (2.98 mm against 2.99 mm, 2.69 against 2.70, measured without).
@@ -215,7 +216,10 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
     ``q_now`` less ``k``'s; ``warm`` its warm start; ``speed_of(sol)`` its clock's speed).
     (the plan, "", None) or (None, why not, the rolling fingertip in the swing's way when
     that is why): the others cannot hold the ball, the roll is not certified, its centre
-    moves, or no swing is found on its clock."""
+    moves, or no swing is found on its clock. The swing is tried at lengths 1.4 times
+    apart (:data:`OVERLAP_TRIES`), the roll's clock slowed with it; one found after a
+    length that was not is tried once more at the geometric mean of the two, warm from
+    the one found, and that is kept when it is found and within the damping."""
     fingers = tuple(f.finger for f in template.fingers)
     nf = len(fingers)
     allf, rest = list(range(nf)), [i for i in range(nf) if i != k]
@@ -246,8 +250,8 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
     # when none is found with them
     drive, fallback, driven = None, 0.0, []
     tries, found = OVERLAP_TRIES, False
-    while tries > 0 and not found:
-        tries -= 1
+
+    def spec_at(length: float, drive: Any) -> tuple[RollClock, SwingSpec]:
         clock = RollClock.lasting(float(sol.duration), length)
         samples = [tuple(_full_rows(sol, clock, t, q_now, k))
                    for t in (0.0, 0.5 * length, length)]
@@ -256,15 +260,20 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
         at0 = moving(np.zeros(1))
         radii = [tip_body(fingers[i]).r for i in rest] + link_r
         others = tuple((a[0], b[0], r) for (a, b), r in zip(at0, radii, strict=True))
-        spec = SwingSpec(fingers[k], np.asarray(q_now[k], dtype=float),
-                         np.asarray(q_land, dtype=float), n_land, end, rho, others,
-                         duration=length, clearance=clearance, name=names[k],
-                         other_names=tuple([names[i] for i in rest] + link_names),
-                         moving=moving, node_margin=NODE_MARGIN,
-                         centre_path=_centre_path(sol, clock), drive=drive,
-                         **spec_args)
+        return clock, SwingSpec(fingers[k], np.asarray(q_now[k], dtype=float),
+                                np.asarray(q_land, dtype=float), n_land, end, rho, others,
+                                duration=length, clearance=clearance, name=names[k],
+                                other_names=tuple([names[i] for i in rest] + link_names),
+                                moving=moving, node_margin=NODE_MARGIN,
+                                centre_path=_centre_path(sol, clock), drive=drive,
+                                **spec_args)
+
+    short = None
+    while tries > 0 and not found:
+        tries -= 1
+        clock, spec = spec_at(length, drive)
         plan = plan_swing(spec, last_swing if last_swing is not None and len(
-            last_swing.spec.others) == len(others) else None)
+            last_swing.spec.others) == len(spec.others) else None)
         # the neighbours' gap narrowed as a swing at rest narrows it (replace_finger),
         # where a gap is what it breaks (about +x the thumb's swings in 0.45 s broke only
         # the ball's clearance: two narrowed tries, 593 IPOPT iterations, 1.6 s, for none)
@@ -309,9 +318,20 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
             # the index at each of three lengths: 11 infeasible solves, 4.3 s, and then
             # named)
             return None, why, rest[plan.blocked_by]
+        short = length
         length *= 1.4
     if not found:
         return None, why, None
+    if short is not None and drive is None:
+        # found only 1.4 times longer than a length that failed: once more halfway
+        # (geometrically), from the swing found (same rolls and re-placements over the
+        # seven target turns, 0.1-0.5 s less motion in five: docs/gait.md, session 32)
+        mid = math.sqrt(short * length)
+        clock_mid, spec_mid = spec_at(mid, None)
+        quicker = dense_enough(plan_swing(spec_mid, plan))
+        if quicker.ok and not (limits is not None and limits.rate and
+                               limits.damping_overrun(k, quicker.Q, quicker.V) > 1.0):
+            plan, clock, length = quicker, clock_mid, mid
     q_after = tuple(plan.Q[-1] if i == k else row for i, row in
                     zip(allf, _full_rows(sol, clock, clock.length, q_now, k), strict=True))
     after, rest_end, F_after = _holds(fingers, q_after, k, end, rho, rotation, load,
