@@ -163,3 +163,41 @@ def planned_gait(raw: dict[str, Any]) -> tuple[Any, Any, Any, Any]:
     assert gait.ok and result.certificate is not None and result.certificate.passed, \
         result.message
     return request, problem, result, gait
+
+
+def assert_gait_pieces(result: Any) -> None:
+    """The law of a gait result's ``gait.trajectory`` (its pieces as certified): the joint
+    trajectory's every sample is those pieces at its time (:meth:`GaitResultModel.
+    joints_at`, to rounding: the samples are made from the same polynomials), the samples'
+    forces inside each hold are its ramp's, and each roll's last collocation point has the
+    ball where the samples have it at the roll's end (its orientation in the palm
+    frame)."""
+    gait, jt = result.gait, result.joint_trajectory
+    assert gait is not None and gait.trajectory is not None and gait.samples is not None
+    assert jt is not None
+    pieces = gait.trajectory
+    kinds = [p.kind for p in gait.phases]
+    assert sorted(r.phase for r in pieces.rolls) == \
+        [i for i, k in enumerate(kinds) if k == "roll"]
+    assert sorted(h.phase for h in pieces.holds) == \
+        [i for i, k in enumerate(kinds) if k != "roll"]
+    assert len(pieces.swings) == gait.replacements
+    for p in jt.points:
+        q, v, a = (np.array(x) for x in gait.joints_at(p.t))
+        assert_close(q, np.array(p.positions), 1e-10, err_msg=f"q at {p.t}")
+        assert_close(v, np.array(p.velocities), 1e-8, err_msg=f"q_dot at {p.t}")
+        assert_close(a, np.array(p.accelerations), 1e-6, err_msg=f"q_ddot at {p.t}")
+    t = np.array(gait.samples.t)
+    for h in pieces.holds:
+        ph = gait.phases[h.phase]
+        for i in np.flatnonzero((t > ph.start + 1e-9) & (t < ph.end - 1e-9)):
+            x = (t[i] - ph.start) / (ph.end - ph.start)
+            s = x if h.profile == "linear" else x * x * (3.0 - 2.0 * x)
+            want = (1 - s) * np.array(h.forces_start) + s * np.array(h.forces_end)
+            got = np.array([c.force[i] for c in gait.samples.contacts])
+            assert_close(got, want, 1e-9, err_msg=f"hold forces at {t[i]}")
+    for r in pieces.rolls:
+        end = int(np.argmin(np.abs(t - gait.phases[r.phase].end)))
+        w0 = np.array(r.trajectory.object_orientation_wxyz[-1])
+        w1 = np.array(gait.samples.object_orientation_wxyz[end])
+        assert min(np.abs(w0 - w1).max(), np.abs(w0 + w1).max()) < 1e-6

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import planned_gait
+from helpers import assert_gait_pieces, planned_gait
 
 from ocp.gait.checks import swing_checks
 from ocp.gait.swing import MIN_TIP_GAP, plan_swing
@@ -116,6 +116,7 @@ def test_a_gait_re_placing_during_rolls_is_certified_shorter_and_executes() -> N
         # others' deep holds differed from them by up to 0.9 N)
         near = gait_samples(gait, problem, np.array([ph.start - 1e-7, ph.start + 1e-7]))
         assert np.abs(near.force[1] - near.force[0]).max() < 1e-4, ph
+    assert_gait_pieces(result)  # (the swings carried by rolls among them)
     report = simulate_result(result, request)
     assert report.passed, report.failures
 

@@ -13,6 +13,7 @@ from typing import Any
 
 import httpx
 import numpy as np
+from helpers import assert_gait_pieces
 
 from dexroll_client import ManipulationResult, PlanStatus
 from tests.conftest import Server
@@ -180,6 +181,9 @@ def test_a_gait_is_planned_and_executed_over_http(live_server: Server) -> None:
                 assert abs(t[at] - edge) < 1e-9 and np.abs(qdd[at]).max() < 1e-6, edge
         jerk = np.abs(np.diff(qdd, axis=0)).max(axis=1) / np.diff(t)
         assert jerk.max() < 2000.0  # rad/s^3: a jump of 1 rad/s^2 in one 10 ms sample fails
+        # the pieces as certified: the samples are them at their times (any time, by the
+        # client's GaitResultModel.joints_at)
+        assert_gait_pieces(result)
         # the ball turned by the request about its axis, its centre held (tracking 1 mm,
         # 1 deg)
         R = _matrix(gait.samples.object_orientation_wxyz[-1])

@@ -12,12 +12,17 @@ from typing import Any
 import numpy as np
 
 from dexroll_client.models import (
+    GaitClockModel,
     GaitContactModel,
     GaitFingerModel,
+    GaitHoldModel,
     GaitPhaseModel,
     GaitResultModel,
+    GaitRollModel,
     GaitSamplesModel,
+    GaitSwingModel,
     GaitTipModel,
+    GaitTrajectoryModel,
     ManipulationCertificateModel,
     ManipulationRequest,
     ManipulationResult,
@@ -41,6 +46,7 @@ from ocp.spec.grasp import ManipulationProblem
 from .common import finger_certificate, rows
 from .fields import FieldErrors
 from .samples import joint_trajectory_model
+from .trajectory import manipulation_trajectory
 
 __all__ = ["DEFAULT_GAIT_RATE", "gait_errors", "gait_result", "solve_gait"]
 
@@ -171,6 +177,47 @@ def _status(gait: GaitPlan) -> PlanStatus:
     return PlanStatus.INFEASIBLE
 
 
+def _pieces(gait: GaitPlan, names: list[str]) -> GaitTrajectoryModel | None:
+    """The gait's pieces as they were certified (the wire's ``gait.trajectory``): every
+    roll's plan at its collocation points with its clock, every swing's polynomials,
+    every hold's joints and force ramp. None when a roll's plan is not finite."""
+    rolls, swings, holds = [], [], []
+    carried = {i: r for r, i in gait.carried.items()}  # step -> the roll it is made in
+    for j, ph in enumerate(gait.phases):
+        if ph.kind == "roll":
+            r = ph.index
+            traj = manipulation_trajectory(gait.rolls[r], gait.frames[r])
+            if traj is None:
+                return None
+            c = gait.clock(r)
+            rolls.append(GaitRollModel(
+                phase=j, start=ph.start,
+                clock=GaitClockModel(duration=c.duration, ramp=c.ramp, speed=c.speed),
+                fingers=[names[i] for i in gait.fingers_of(r)], trajectory=traj))
+            continue
+        step = gait.steps[ph.index]
+        k = step.finger
+        q = gait.joints(0.5 * (ph.start + ph.end))[0]  # (still, but a swinging finger)
+        forces = (np.insert(step.forces[1], k, 0.0, axis=0),) * 2 if ph.kind == "swing" \
+            else (step.ramp_forces(ph.kind, 0.0), step.ramp_forces(ph.kind, 1.0))
+        if ph.kind == "swing" and step.swing is not None:
+            at = int(np.cumsum((0, *gait.nq))[k])
+            q[at:at + gait.nq[k]] = step.swing.Q[0]
+        holds.append(GaitHoldModel(
+            phase=j, q=q.tolist(), forces_start=rows(forces[0]), forces_end=rows(forces[1]),
+            profile="smoothstep" if step.during_roll is not None else "linear"))
+    for i, step in enumerate(gait.steps):
+        sw = step.swing
+        if sw is None:
+            continue
+        kind, index = ("roll", carried[i]) if i in carried else ("swing", i)
+        j = next(n for n, p in enumerate(gait.phases) if p.kind == kind and p.index == index)
+        swings.append(GaitSwingModel(phase=j, finger=names[step.finger],
+                                     start=gait.phases[j].start, t=rows(sw.t), q=rows(sw.Q),
+                                     q_dot=rows(sw.V), q_ddot=rows(sw.A), jerk=rows(sw.J)))
+    return GaitTrajectoryModel(rolls=rolls, swings=swings, holds=holds)
+
+
 def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float,
                 made: GaitSamples | None = None) -> ManipulationResult:
     """The wire result of a gait: its phases, the joints at ``rate`` [Hz] over the whole
@@ -216,7 +263,8 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float,
                                lifted_finger=None if p.lifted is None else names[p.lifted])
                 for p in gait.phases],
         turned=gait.turned, rolls=len(gait.rolls), replacements=len(gait.steps),
-        never_lifted=list(gait.never_lifted), wall_time=gait.wall_time, samples=samples)
+        never_lifted=list(gait.never_lifted), wall_time=gait.wall_time, samples=samples,
+        trajectory=_pieces(gait, names) if gait.phases else None)
     iterations = sum(r.iterations for r in gait.rolls) + \
         sum(s.swing.iterations for s in gait.steps if s.swing is not None)
     build = sum(r.build_time for r in gait.rolls)

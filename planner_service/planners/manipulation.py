@@ -11,8 +11,6 @@ import numpy as np
 
 from dexroll_client.models import (
     ContactChartModel,
-    ContactTrajectoryModel,
-    FingerJointsModel,
     GraspFingerModel,
     GraspSearchModel,
     GraspUsedModel,
@@ -20,7 +18,6 @@ from dexroll_client.models import (
     ManipulationRequest,
     ManipulationResult,
     ManipulationStatsModel,
-    ManipulationTrajectoryModel,
     MotionSamplesModel,
     PlanStatus,
 )
@@ -46,17 +43,16 @@ from .base import SOLVER_FIELDS, PlannerAdapter
 from .cache import FingerCache, Planners, hand_finger_name
 from .columns import ColumnNames, collocation_block, grasp_names, warm_start_of
 from .common import (
-    all_finite,
     finger_certificate,
     force_spec,
     hand_fingers,
     object_spec,
-    rows,
     solver_options,
 )
 from .fields import FieldErrors, FieldMap, Rule
 from .gait import gait_errors, solve_gait
 from .samples import joint_trajectory_block, requested_times, samples_block
+from .trajectory import manipulation_trajectory
 
 __all__ = [
     "ManipulationAdapter",
@@ -648,65 +644,13 @@ class ManipulationAdapter(PlannerAdapter[ManipulationRequest, ManipulationProble
         return manipulation_summary(result)
 
 
-def _manipulation_trajectory(sol: ManipulationSolution) -> ManipulationTrajectoryModel | None:
-    if sol.t.size == 0:
-        return None  # not planned (a turn beyond the grasp's rolled reach)
-    arrays: dict[str, Any] = {
-        "t": sol.t, "object_position": sol.object_position,
-        "object_rotation": sol.object_rotation, "object_velocity": sol.object_velocity,
-        "object_angular_velocity": sol.object_angular_velocity,
-        "grasp_angle": sol.grasp_angle, "cone_margin": sol.cone_margin}
-    optional = {"desired_position": sol.desired_position,
-                "desired_rotation": sol.desired_rotation,
-                "tracking_position_error": sol.tracking_position_error,
-                "tracking_angle_error": sol.tracking_angle_error}
-    arrays.update({k: v for k, v in optional.items() if v is not None})
-    for c in sol.contacts:
-        arrays.update({f"{c.name}.{k}": getattr(c, k) for k in
-                       ("eta", "eta_dot", "w", "point", "normal", "force_angle", "force",
-                        "torsion") if getattr(c, k) is not None})
-    for f in sol.fingers:
-        arrays.update({f"{f.name}.{k}": getattr(f, k) for k in
-                       ("q", "q_dot", "tip_position", "tip_rotation", "joint_torques")
-                       if getattr(f, k) is not None})
-    if not all_finite(arrays):
-        return None  # JSON has no NaN; a diverged last iterate is reported by its status
-    return ManipulationTrajectoryModel(
-        t=rows(sol.t), object_position=rows(sol.object_position),
-        object_orientation_wxyz=rows(quaternion_wxyz(sol.object_rotation)),
-        object_velocity=rows(sol.object_velocity),
-        object_angular_velocity=rows(sol.object_angular_velocity),
-        contacts=[ContactTrajectoryModel(
-            name=c.name, body="palm" if c.body == "palm" else "finger", eta=rows(c.eta),
-            eta_dot=rows(c.eta_dot), w=rows(c.w), point=rows(c.point),
-            normal=rows(c.normal), force_angle=rows(c.force_angle),
-            force=None if c.force is None else rows(c.force),
-            torsion=None if c.torsion is None else rows(c.torsion))
-            for c in sol.contacts],
-        fingers=[FingerJointsModel(
-            name=f.name, joint_names=list(f.joint_names), q=rows(f.q), q_dot=rows(f.q_dot),
-            tip_position=rows(f.tip_position),
-            tip_orientation_wxyz=rows(quaternion_wxyz(f.tip_rotation)),
-            joint_torques=None if f.joint_torques is None else rows(f.joint_torques))
-            for f in sol.fingers],
-        grasp_angle=rows(sol.grasp_angle), cone_margin=rows(sol.cone_margin),
-        desired_position=None if sol.desired_position is None else
-        rows(sol.desired_position),
-        desired_orientation_wxyz=None if sol.desired_rotation is None else
-        rows(quaternion_wxyz(sol.desired_rotation)),
-        tracking_position_error=None if sol.tracking_position_error is None else
-        rows(sol.tracking_position_error),
-        tracking_angle_error=None if sol.tracking_angle_error is None else
-        rows(sol.tracking_angle_error))
-
-
 def result_from_manipulation_solution(sol: ManipulationSolution, times: Any = None
                                       ) -> ManipulationResult:
     """The wire result of a manipulation plan (``times``: the request's sample times,
     :func:`~.samples.requested_times`). A plan with non-finite values (a diverged last
     iterate) keeps its status and drops its trajectory (JSON has no NaN)."""
     cert = finger_certificate(ManipulationCertificateModel, sol.certificate)
-    trajectory = _manipulation_trajectory(sol)
+    trajectory = manipulation_trajectory(sol)
     message = sol.message if trajectory is not None or sol.t.size == 0 else \
         sol.message + " (non-finite iterate omitted)"
     status = PlanStatus(sol.status.value)

@@ -42,13 +42,18 @@ from dexroll_client.common import (
     NlpPointModel,
 )
 from dexroll_client.gait import (
+    GaitClockModel,
     GaitContactModel,
     GaitFingerModel,
+    GaitHoldModel,
     GaitModel,
     GaitPhaseModel,
     GaitResultModel,
+    GaitRollModel,
     GaitSamplesModel,
+    GaitSwingModel,
     GaitTipModel,
+    GaitTrajectoryModel,
 )
 from dexroll_client.jobs import ErrorBody, Job, JobList, JobState
 from dexroll_client.requests import (
@@ -177,13 +182,18 @@ __all__ = [
     "FingerTrajectoryModel",
     "FingertipModel",
     "ForcesModel",
+    "GaitClockModel",
     "GaitContactModel",
     "GaitFingerModel",
+    "GaitHoldModel",
     "GaitModel",
     "GaitPhaseModel",
     "GaitResultModel",
+    "GaitRollModel",
     "GaitSamplesModel",
+    "GaitSwingModel",
     "GaitTipModel",
+    "GaitTrajectoryModel",
     "GraspFingerModel",
     "GraspModel",
     "GraspSearchModel",
