@@ -152,8 +152,8 @@ def test_a_landing_inside_a_neighbour_keeps_no_negative_gap() -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("example, axis, motion, replacements", [
-    ("allegro_turn_90.json", (0.0, 0.0, -1.0), 10.0, 10),  # measured: 7.99 s, 7
-    ("allegro_turn_180_z.json", None, 16.0, 12),  # measured: 10.53 s, 11
+    ("allegro_turn_90.json", (0.0, 0.0, -1.0), 10.0, 10),  # measured: 7.89 s, 7
+    ("allegro_turn_180_z.json", None, 16.0, 12),  # measured: 10.10 s, 11
 ])
 def test_the_issue_targets_turns_are_certified_within_their_time_and_execute(
         example: str, axis: tuple[float, float, float] | None, motion: float,
@@ -175,3 +175,29 @@ def test_the_issue_targets_turns_are_certified_within_their_time_and_execute(
     assert len(gait.steps) - len(gait.carried) <= 1  # at most one made at rest
     report = simulate_result(result, request)
     assert report.passed, report.failures
+
+
+@pytest.mark.slow
+def test_the_six_palm_axis_turns_meet_the_issues_median_motion() -> None:
+    """Issue 40's robot-time targets over benchmarks/gait_turns.py's six 90 deg turns with
+    its OVERLAP options: each certified within 10 s and 10 re-placements, the median
+    motion within 8 s and the median re-placements within 8 (measured: 4.89-8.73 s,
+    median 7.896 s; 5-10, median 8). An overlap swing found only after a shorter length
+    failed is tried halfway (ocp.gait.overlap.plan_overlap): without that the median was
+    8.005 s."""
+    import statistics
+
+    from benchmarks.gait_turns import OVERLAP, targets
+
+    motions, replacements = [], []
+    for name, body in targets(ROOT).items():
+        if not name.startswith("90 ") or "MJCF" in name:
+            continue
+        body["gait"].update(OVERLAP)
+        _, _, _, gait = planned_gait(body)
+        assert gait.duration < 10.0 and len(gait.steps) <= 10, name
+        motions.append(gait.duration)
+        replacements.append(len(gait.steps))
+    assert len(motions) == 6
+    assert statistics.median(motions) <= 8.0, motions
+    assert statistics.median(replacements) <= 8, replacements
