@@ -84,9 +84,15 @@ NARROW_SHARE = 0.5
 DRIVEN_LANDING_WEIGHT = 1e3
 #: Points of the moving tip's segment at which its distance to another tip is kept.
 SEGMENT_SAMPLES = 5
+#: IPOPT's options for a swing. ``expect_infeasible_problem``: its restoration phase
+#: called sooner, and left only with more of the rows' violation removed; a swing tried
+#: too short, or from where its landing is out of reach, is infeasible, and many a gait
+#: asks such swings (their lengths tried in turn, the stranded checks): about +z with the
+#: overlap options 1771 -> 1111 IPOPT iterations in the 33 swing solves, the same plan
+#: (docs/gait.md, session 32).
 _IPOPT: dict[str, Any] = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
                           "ipopt.tol": 1e-9, "ipopt.constr_viol_tol": 1e-10,
-                          "ipopt.max_iter": 500}
+                          "ipopt.max_iter": 500, "ipopt.expect_infeasible_problem": "yes"}
 #: Added for a swing started from a previous swing's primal-dual point (the same finger's
 #: previous swing in a gait: the grasp recurs, so it is nearly this one's optimum).
 _IPOPT_WARM: dict[str, Any] = {"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-6,
