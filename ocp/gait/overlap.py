@@ -268,6 +268,19 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                                 centre_path=_centre_path(sol, clock), drive=drive,
                                 **spec_args)
 
+    def overrun(p: SwingPlan) -> float:
+        """How many times the swing ``p`` asks more of the actuators than they give
+        against the joints' damping (0 without damping), judged at its nodes: the
+        actuators' rows keep its nodes and midpoints, and between them a swing at its
+        rate bound asks 0.01-0.2 % more (up to 6 % where a servo gives 0.03 N m), which,
+        re-planned 5 % slower each time, found the same and fell back to a re-placement
+        at rest. An infinite overrun (a joint moving where its actuator gives nothing
+        that way) counts as :data:`MAX_SLOWDOWN`, so that the roll is slowed by a finite
+        factor."""
+        if limits is None or not limits.rate:
+            return 0.0
+        return min(limits.damping_overrun(k, p.Q, p.V), MAX_SLOWDOWN)
+
     short = None
     while tries > 0 and not found:
         tries -= 1
@@ -283,16 +296,11 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
                 break
             plan = plan_swing(replace(spec, **narrow))  # type: ignore[arg-type]
         plan = dense_enough(plan)  # (kept at its nodes, a moving neighbour's dips between)
-        if plan.ok and limits is not None and limits.rate:
-            # At its nodes, as before the actuators' rows, which keep them there and at
-            # the midpoints (between, a swing at its rate bound asks 0.01-0.2 % more, and
-            # up to 6 % more where a servo gives 0.03 N m, which re-planned 5 % slower
-            # each time found the same and fell back to a re-placement at rest); an
-            # infinite overrun (a joint moving where its actuator gives nothing that way)
-            # taken as MAX_SLOWDOWN's, so that the roll is slowed by a finite factor.
-            over = min(limits.damping_overrun(k, plan.Q, plan.V), MAX_SLOWDOWN)
+        if plan.ok:
+            over = overrun(plan)
             if over > 1.0:  # too fast for the joints' damping: slower, the roll with it
                 why = f"{names[k]}'s swing is faster than its actuators' damping allows"
+                assert limits is not None
                 if not fallback and (drive := limits.drive(k)) is not None:
                     driven = [length * f for f in
                               driven_factors(limits.rate_overrun(k, plan.V), over)]
@@ -329,8 +337,7 @@ def plan_overlap(template: ManipulationProblem, planner: Any, k: int,
         mid = math.sqrt(short * length)
         clock_mid, spec_mid = spec_at(mid, None)
         quicker = dense_enough(plan_swing(spec_mid, plan))
-        if quicker.ok and not (limits is not None and limits.rate and
-                               limits.damping_overrun(k, quicker.Q, quicker.V) > 1.0):
+        if quicker.ok and overrun(quicker) <= 1.0:
             plan, clock, length = quicker, clock_mid, mid
     q_after = tuple(plan.Q[-1] if i == k else row for i, row in
                     zip(allf, _full_rows(sol, clock, clock.length, q_now, k), strict=True))

@@ -116,7 +116,7 @@ class GaitPlan:
             q, v, a = self.roll_joints(ph.index, np.array([t - ph.start]))
             return q[0], v[0], a[0]
         step = self.steps[ph.index]
-        q = self._before(ph.index)
+        q = self.still_joints(ph)
         zero = np.zeros_like(q)
         if ph.kind == "swing" and step.swing is not None:
             qk, vk, ak = step.swing.sample(t - ph.start)
@@ -125,9 +125,15 @@ class GaitPlan:
             q, v, a = q.copy(), zero.copy(), zero.copy()
             q[cut[k]:cut[k + 1]], v[cut[k]:cut[k + 1]], a[cut[k]:cut[k + 1]] = qk[0], vk[0], ak[0]
             return q, v, a
-        if ph.kind == "load":
-            q = np.concatenate(step.q_after)
         return q, zero, zero
+
+    def still_joints(self, ph: GaitPhase) -> FloatArray:
+        """Every finger's joints (concatenated) held in a phase with the ball still (an
+        unload, a swing or a load): its step's after a load, else before it (in a swing,
+        the swinging finger's where it starts)."""
+        if ph.kind == "load":
+            return np.concatenate(self.steps[ph.index].q_after)
+        return self._before(ph.index)
 
     def rotation(self, r: int, R: FloatArray) -> FloatArray:
         """Roll ``r``'s ball rotations ``R`` (its plan's: from its start) in the palm

@@ -140,7 +140,7 @@ def gait_samples(gait: GaitPlan, problem: Any, ts: FloatArray) -> GaitSamples:
         k = step.finger
         s = step.ramp_share(tl / max(ph.end - ph.start, 1e-12))
         if ph.kind == "swing":
-            force[rows] = np.insert(step.forces[1], k, 0.0, axis=0)
+            force[rows] = step.ramp_forces("swing", 0.0)
             assert step.swing is not None
             active[rows, k] = [0.0 if step.swing.segment(float(x)) == "clear"
                                else TRANSITION for x in tl]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -104,6 +104,12 @@ class GaitStep:
     def duration(self) -> float:
         return self.unload + (self.swing.duration if self.swing else 0.0) + self.load_time
 
+    @property
+    def ramp_profile(self) -> Literal["linear", "smoothstep"]:
+        """How its force ramps move in time (:meth:`ramp_share`): ``"smoothstep"`` for a
+        step made during a roll, ``"linear"`` with the object still."""
+        return "smoothstep" if self.during_roll is not None else "linear"
+
     def ramp_share(self, x: FloatArray) -> FloatArray:
         """How far along a force ramp (0 to 1, :meth:`ramp_forces`' ``s``) its forces are
         at the fractions ``x`` of its time. A step made during a roll (``during_roll``):
@@ -116,19 +122,21 @@ class GaitStep:
         gait on ``examples/own_hand.xml`` driven by the file's own servos,
         ``tests/test_gait_mjcf.py``, while every ramp was smoothstep: 9a8671a to this)."""
         x = np.clip(np.asarray(x, dtype=float), 0.0, 1.0)
-        return x * x * (3.0 - 2.0 * x) if self.during_roll is not None else x
+        return x * x * (3.0 - 2.0 * x) if self.ramp_profile == "smoothstep" else x
 
     def ramp_forces(self, which: str, s: float) -> FloatArray:
         """The forces of every contact of the grasp (a row each, zeros for the lifted one)
         at the fraction ``s`` of the ``"unload"`` or ``"load"`` ramp (a step during a roll
         has the others' forces at the roll's start and at its end: ``forces[1]`` and
-        ``forces[2]``)."""
+        ``forces[2]``), or of the ``"swing"`` (the others' hold, whatever ``s``)."""
         full_before, full_after = self.forces[0], self.forces[-1]
         n = len(self.which[0])
         k = self.which[0].index(self.finger)
         lifted = self.forces[1] if which == "unload" else self.forces[-2]
         mid = np.insert(lifted, k, 0.0, axis=0)
         assert len(mid) == n
+        if which == "swing":
+            return mid
         if which == "unload":
             return (1 - s) * full_before + s * mid
         return (1 - s) * mid + s * full_after

@@ -196,16 +196,11 @@ def _pieces(gait: GaitPlan, names: list[str]) -> GaitTrajectoryModel | None:
                 fingers=[names[i] for i in gait.fingers_of(r)], trajectory=traj))
             continue
         step = gait.steps[ph.index]
-        k = step.finger
-        q = gait.joints(0.5 * (ph.start + ph.end))[0]  # (still, but a swinging finger)
-        forces = (np.insert(step.forces[1], k, 0.0, axis=0),) * 2 if ph.kind == "swing" \
-            else (step.ramp_forces(ph.kind, 0.0), step.ramp_forces(ph.kind, 1.0))
-        if ph.kind == "swing" and step.swing is not None:
-            at = int(np.cumsum((0, *gait.nq))[k])
-            q[at:at + gait.nq[k]] = step.swing.Q[0]
         holds.append(GaitHoldModel(
-            phase=j, q=q.tolist(), forces_start=rows(forces[0]), forces_end=rows(forces[1]),
-            profile="smoothstep" if step.during_roll is not None else "linear"))
+            phase=j, q=gait.still_joints(ph).tolist(),
+            forces_start=rows(step.ramp_forces(ph.kind, 0.0)),
+            forces_end=rows(step.ramp_forces(ph.kind, 1.0)),
+            profile=step.ramp_profile))
     for i, step in enumerate(gait.steps):
         sw = step.swing
         if sw is None:
