@@ -11,6 +11,7 @@ the same file with actuators of 2 N m, where every fingertip is re-placed."""
 from __future__ import annotations
 
 import copy
+import itertools
 import json
 import math
 from pathlib import Path
@@ -145,7 +146,12 @@ def test_a_gait_on_a_users_mjcf_hand() -> None:
     assert float(np.linalg.norm(centre - centre[0], axis=1).max()) <= 1e-3
 
 
-def _executes_on_own_servos(example: str, gait: dict | None = None) -> ManipulationResult:
+OVERLAP = {"replace": "spent", "fastest_swings": True, "fastest_rolls": True,
+           "landing": "farthest", "roll_step": 0.5236, "overlap": True}
+
+
+def _executes_on_own_servos(example: str, gait: dict | None = None,
+                            mjcf: str | None = None) -> ManipulationResult:
     """The gait request examples/``example`` on own_hand.xml (its grasp searched; ``gait``:
     fields set in its gait options): planned within its 0.7 N m actuators, certified, and
     executed on the file's own actuators, contact settings and solver options, open loop,
@@ -154,7 +160,7 @@ def _executes_on_own_servos(example: str, gait: dict | None = None) -> Manipulat
     from planner_service.planners import REQUEST, solve
 
     body = json.loads((ROOT / "examples" / example).read_text())
-    body["hand"] = {"mjcf": (ROOT / "examples" / "own_hand.xml").read_text(),
+    body["hand"] = {"mjcf": mjcf or (ROOT / "examples" / "own_hand.xml").read_text(),
                     "tips": [{"name": n} for n in TIPS]}
     body["gait"].update(gait or {})
     req = REQUEST.validate_python(body)
@@ -196,12 +202,37 @@ def test_the_90_degree_overlap_gait_swings_within_the_damped_actuators() -> None
     it), so no swing is stretched by one such sample: 22.7 s of motion on 2026-12-07,
     42.4 s before (docs/gait.md, "Session 31"); certified and executed on the file's own
     servos like the others, their loads within range. About 60 s."""
-    result = _executes_on_own_servos("allegro_turn_90.json", {
-        "replace": "spent", "fastest_swings": True, "fastest_rolls": True,
-        "landing": "farthest", "roll_step": 0.5236, "overlap": True})
+    result = _executes_on_own_servos("allegro_turn_90.json", OVERLAP)
     assert result.gait is not None
     assert result.gait.replacements >= 5
     assert result.gait.phases[-1].end < 30.0
+
+
+@pytest.mark.slow
+def test_the_overlap_gait_on_a_hand_with_tendon_coupled_joints() -> None:
+    """The same turn on own_hand.xml with each finger's distal joint coupled to its medial
+    one by a limited fixed tendon (the Shadow hand's style, tests/test_couplings.py): a
+    fingertip that has just landed and that the next roll would strand is not re-placed
+    again first (it is where it lands): the roll is halved; and a fingertip re-placed
+    alone at rest lands clear of the others' bodies. Before (2026-12-07) every other
+    roll re-placed the middle fingertip at rest right after its overlap landing, and then
+    every fingertip at rest: 52.5 s of motion, 26 re-placements; now 32.3 s, 16. The
+    couplings kept (the certificate's), executed on the file's own servos and tendons
+    (which the execution reports as kept); no fingertip swung at rest right after its
+    own swing. About 150 s."""
+    from tests.test_couplings import coupled_hand
+
+    result = _executes_on_own_servos("allegro_turn_90.json", OVERLAP, coupled_hand())
+    assert result.gait is not None and result.certificate is not None
+    values = result.certificate.values
+    coupling = [v for k, v in values.items() if "coupling" in k]
+    assert coupling and max(coupling) <= 1e-6
+    assert result.gait.phases[-1].end < 40.0
+    # a swing at rest right after the same fingertip's swing (at rest, or during a roll)
+    moves = [(p.kind, p.lifted_finger) for p in result.gait.phases
+             if p.kind in ("roll", "swing")]
+    again = [b for a, b in itertools.pairwise(moves) if b[0] == "swing" and a[1] == b[1]]
+    assert not again, moves
 
 
 def test_an_egg_gait_on_the_files_damped_joints_and_own_actuators() -> None:

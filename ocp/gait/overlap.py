@@ -63,8 +63,8 @@ from ocp.geometry.bodies import point_segment_distance, tip_body
 from ocp.shapes.held import Held
 from ocp.spec.grasp import ManipulationProblem
 
-__all__ = ["OVERLAP_HOLD_DEPTH", "OVERLAP_SWING", "OverlapRoll", "hold_depth", "lift_next",
-           "plan_overlap", "stranded_fingers", "without"]
+__all__ = ["OVERLAP_HOLD_DEPTH", "OVERLAP_SWING", "OverlapRoll", "at_landing", "hold_depth",
+           "lift_next", "plan_overlap", "stranded_fingers", "without"]
 
 FloatArray = NDArray[np.float64]
 
@@ -400,6 +400,12 @@ def _full_rows(sol: Any, clock: RollClock, t: float, q_now: tuple[FloatArray, ..
     return out
 
 
+def at_landing(q: FloatArray, land: FloatArray, tol: float = 1e-9) -> bool:
+    """Whether a fingertip at the joints ``q`` is where it lands (``land``), every joint
+    within ``tol`` [rad]: its re-placement would move it nowhere."""
+    return bool(np.abs(np.asarray(q) - np.asarray(land)).max() < tol)
+
+
 def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, ...],
                      lands: tuple[FloatArray, ...], centre: FloatArray, rho: float,
                      which: list[int], plan: Any, limits: TorqueLimits | None,
@@ -422,7 +428,7 @@ def stranded_fingers(template: ManipulationProblem, q_after: tuple[FloatArray, .
     held = Held(centre, np.eye(3), rho)
     out = []
     for j in which:
-        if np.abs(np.asarray(q_after[j]) - np.asarray(lands[j])).max() < 1e-9:
+        if at_landing(q_after[j], lands[j]):
             continue  # where it lands
         last = next((st.swing for st in reversed(plan.steps) if st.finger == j
                      and st.swing is not None and st.swing.spec.moving is None), None)

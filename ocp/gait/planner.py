@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from ocp.certify.certificate import Certificate, Check, CheckKind
 from ocp.gait.overlap import (
     OVERLAP_HOLD_DEPTH,
+    at_landing,
     hold_depth,
     lift_next,
     plan_overlap,
@@ -812,6 +813,12 @@ SPENT_MARGIN = 1.0
 #: every joint starts within this [rad] of where the last one started (the grasp recurs;
 #: re-placing every one, it recurs but for the never-lifted fingertips, and always is).
 RECUR_TOL = 0.05
+#: A fingertip within this [rad] of its landing joints in every joint is where it lands:
+#: an overlap roll that would strand it is halved rather than it re-placed first (a swing
+#: lands on its landing point, its joints within 2e-5 rad of the landing's on a hand with
+#: coupled joints, where re-placing the one just landed, at rest, came before every
+#: re-placement at rest again: docs/gait.md, session 33).
+LANDED_TOL = 1e-3
 #: The landing candidates of :func:`farthest_landings`: shares of the turn back.
 LANDING_SHARES = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: How far [m] a landing candidate's tip centre may be from where it touches the ball.
@@ -1001,11 +1008,17 @@ def _replaced(plan: GaitPlan, checks: list[Check], template: ManipulationProblem
     """The fingertips ``which`` re-placed with the ball still (:func:`_replace_fingers`:
     at ``q_land``, else where they touched when the roll began, ``q_start``): (the joints
     after, the time), or None, with ``plan``, ``checks`` and ``never_lifted`` as they
-    were, when one of them cannot be lifted or a step fails."""
+    were, when one of them cannot be lifted, a step fails, or one lands within
+    :data:`ROLL_TIP_GAP` of another fingertip's body (the others rolled toward where it
+    lands, as an overlap roll's landing is checked: on a hand with coupled joints a lone
+    re-placement landed the middle 0.49 mm from the index, which the service's link
+    clearance refused)."""
     marks = (len(plan.phases), len(plan.steps), len(checks), set(never_lifted))
     q_after, t_after = _replace_fingers(plan, checks, template, q_land, q_now, pose, t,
                                         load, swing, hold_time, never_lifted, which, q_start)
-    if plan.status == "solved" and never_lifted == marks[3]:
+    fingers = tuple(f.finger for f in template.fingers)
+    if plan.status == "solved" and never_lifted == marks[3] and all(
+            landing_gap(fingers, q_after, k)[0] >= ROLL_TIP_GAP for k in which):
         return q_after, t_after
     del plan.phases[marks[0]:], plan.steps[marks[1]:], checks[marks[2]:]
     plan.status, plan.message = "solved", ""
@@ -1036,7 +1049,8 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
     as they were). A roll after which another fingertip that can be lifted
     (not in ``never_lifted``) would find no swing to its landing (:func:`~ocp.gait.overlap.
     stranded_fingers`) is halved, up to :data:`MAX_ROLL_RETRIES` times; with ``switch``,
-    (why, that fingertip) is returned at once instead: it is to be re-placed first."""
+    (why, that fingertip) is returned at once instead: it is to be re-placed first, unless
+    it is where it lands (within :data:`LANDED_TOL`: re-placing it moves it nowhere)."""
     centre = np.asarray(pose.position, dtype=float)
     rho = float(template.object.dimensions[0])
     names = tuple(f.name or f"finger{i}" for i, f in enumerate(template.fingers))
@@ -1119,8 +1133,12 @@ def _overlap_roll(plan: GaitPlan, checks: list[Check], template: ManipulationPro
                 break
             why = (f"finger {names[stranded[0]]!r} would find no swing to its landing "
                    f"after {math.degrees(step):.1f} deg")
-            if switch:  # that one is re-placed first
-                return why, stranded[0]
+            # that one is re-placed first, unless it is where it lands (it has just
+            # landed: re-placing it moves it nowhere, and this roll would strand it
+            # again): then the roll is halved
+            movable = [j for j in stranded if not at_landing(q_now[j], lands[j], LANDED_TOL)]
+            if switch and movable:
+                return why, movable[0]
         step /= 2.0
         if step < MIN_ROLL:
             return why
