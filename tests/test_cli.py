@@ -28,7 +28,9 @@ EXAMPLES = [p for p in sorted((ROOT / "examples").glob("*.json"))
             if p.stem not in SAME_AS_ALLEGRO_TURN | GAITS]
 #: Examples whose `dexroll plan` run tests/test_sim.py makes too (the same CLI process,
 #: its result certified and executed in MuJoCo) in another worker: their summaries here
-#: are slow-marked (16-19 s of planning each, the default run's longest duplicates).
+#: are slow-marked (16-19 s of planning each, the default run's longest duplicates); test_sim
+#: slow-marks their executions too (its SLOW_PLANS): `make test-slow` plans and executes
+#: them.
 PLANNED_IN_TEST_SIM = {"capsule_roll", "ellipsoid_two_fingers", "egg_turn"}
 
 

@@ -103,6 +103,7 @@ def test_a_gaits_search_on_an_egg_finds_a_grasp_every_fingertip_of_which_can_be_
     assert request_errors(req, CACHE) == []
 
 
+@pytest.mark.slow  # by default a searched grasp's egg gait executes: tests/test_gait_shapes.py
 @pytest.mark.parametrize(("obj", "orientation"), [(CAPSULE, UPRIGHT), (EGG, ACROSS)],
                          ids=["capsule-upright", "egg-across"])
 def test_a_searched_grasp_turns_the_object_in_mujoco(obj: dict[str, Any],

@@ -235,6 +235,7 @@ def test_the_overlap_gait_on_a_hand_with_tendon_coupled_joints() -> None:
     assert not again, moves
 
 
+@pytest.mark.slow
 def test_an_egg_gait_on_the_files_damped_joints_and_own_actuators() -> None:
     """An egg (30, 30, 40 mm, 60 g, mu 0.9) turned 20 deg about +y by a gait on own_hand.xml,
     its grasp searched: the file's joints are damped (1 N m s/rad) against 0.7 N m

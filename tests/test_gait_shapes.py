@@ -255,6 +255,7 @@ def test_an_egg_turned_by_a_gait_is_certified_on_its_surface_and_executes() -> N
     assert report.position_error.max < 2e-3 and report.angle_error.max < math.radians(3.0)
 
 
+@pytest.mark.slow  # the egg's and the rounded cube's gaits above run by default
 def test_a_capsule_turned_about_its_axis_by_a_gait_is_certified_and_executes() -> None:
     """examples/capsule_roll.json's upright capsule turned 10 deg about its axis in rolls
     of 5 deg (every fingertip re-placed after the first): certified, its swings' clearance

@@ -285,11 +285,13 @@ def test_the_nlps_length_scale_is_the_values() -> None:
         assert float(f(obj.params)) == obj.length_scale == max(shape_of(shape).semi_axes(dims))
 
 
-@pytest.mark.parametrize("obj", [{"shape": "ellipsoid", "dimensions": [0.03, 0.0305, 0.031]},
-                                 {"shape": "superellipsoid",
-                                  "dimensions": [0.03, 0.03, 0.03, 0.024]},
-                                 {"shape": "capsule", "dimensions": [0.03, 0.0128]}],
-                         ids=["triaxial", "superellipsoid", "capsule"])
+@pytest.mark.parametrize("obj", [  # the capsule by default, the two others slow
+    pytest.param({"shape": "ellipsoid", "dimensions": [0.03, 0.0305, 0.031]},
+                 marks=pytest.mark.slow),
+    pytest.param({"shape": "superellipsoid", "dimensions": [0.03, 0.03, 0.03, 0.024]},
+                 marks=pytest.mark.slow),
+    {"shape": "capsule", "dimensions": [0.03, 0.0128]}],
+    ids=["triaxial", "superellipsoid", "capsule"])
 def test_a_users_own_hand_turns_other_shapes_on_its_own_actuators(obj: dict) -> None:
     """The Menagerie-style MJCF hand (examples/own_hand.xml) in the built-in hand's nominal
     grasp turns a three-axis ellipsoid, a rounded cube (its mesh written inline in the

@@ -149,6 +149,7 @@ def test_swing_nlps_are_shared_by_equal_fingers_and_not_by_different_ones() -> N
     assert swing_key(a[1], n, K, 2) != keys[1]
 
 
+@pytest.mark.slow
 def test_a_gait_on_a_hand_with_links_warms_its_swings_with_their_obstacles() -> None:
     """On an MJCF hand whose links are checked, a gait's swings keep clear of
     SWING_OBSTACLES of them (one NLP per finger, with them among its 'others'): the
