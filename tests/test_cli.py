@@ -22,8 +22,8 @@ SAME_AS_ALLEGRO_TURN = {"hand_from_mjcf", "hand_from_urdf"}
 #: 180 deg: 4 min each, docs/gait.md): tests/test_gait_service.py
 #: plans a smaller gait of the same request through the same adapter and executes it
 #: (egg_gait: tests/test_gait_shapes.py).
-GAITS = {"allegro_gait", "allegro_turn_90", "allegro_turn_180_z", "egg_gait",
-         "rounded_cube_gait"}
+GAITS = {"allegro_gait", "allegro_turn_90", "allegro_turn_90_overlap", "allegro_turn_180_z",
+         "egg_gait", "rounded_cube_gait"}
 EXAMPLES = [p for p in sorted((ROOT / "examples").glob("*.json"))
             if p.stem not in SAME_AS_ALLEGRO_TURN | GAITS]
 #: Examples whose `dexroll plan` run tests/test_sim.py makes too (the same CLI process,

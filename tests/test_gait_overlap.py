@@ -80,19 +80,21 @@ def test_a_body_that_moves_into_a_still_swings_path_is_avoided_when_known() -> N
 
 @pytest.mark.slow
 def test_a_gait_re_placing_during_rolls_is_certified_shorter_and_executes() -> None:
-    """allegro_turn_90.json about +x with the spent fingertips landing where they roll
-    farthest, rolls of up to 30 deg, fastest swings and rolls, and ``overlap``: certified;
+    """examples/allegro_turn_90_overlap.json: allegro_turn_90.json about +x with the spent
+    fingertips landing where they roll farthest, rolls of up to 30 deg, fastest swings and
+    rolls, and ``overlap`` (benchmarks/gait_turns.py's OVERLAP options): certified;
     most re-placements made during rolls; the motion within the issue's 10 s with at most
     10 re-placements (7.9 s and 9 measured; at rest 15.3-24.5 s over the eight turns,
     docs/gait.md); in the samples the lifted fingertip
     touches nothing and carries no force during its roll, every joint and planned force
     is continuous at every switch; executed in MuJoCo."""
+    from benchmarks.gait_turns import OVERLAP
     from ocp.gait.samples import gait_samples, gait_times
     from planner_service.execution import simulate_result
 
-    body = json.loads((ROOT / "examples" / "allegro_turn_90.json").read_text())
-    body["gait"].update(replace="spent", fastest_swings=True, fastest_rolls=True,
-                        landing="farthest", roll_step=math.radians(30.0), overlap=True)
+    body = json.loads((ROOT / "examples" / "allegro_turn_90_overlap.json").read_text())
+    base = json.loads((ROOT / "examples" / "allegro_turn_90.json").read_text())
+    assert body["gait"] == {**base["gait"], **OVERLAP}  # the example is the bench's turn
     request, problem, result, gait = planned_gait(body)
     assert math.degrees(gait.turned) == pytest.approx(90.0, abs=1e-3)
     assert len(gait.carried) >= len(gait.steps) // 2 and len(gait.carried) >= 4
