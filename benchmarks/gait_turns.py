@@ -132,7 +132,7 @@ def _worker(names: list[str], options: dict[str, Any] | None = None,
         print(json.dumps({
             "name": name, "status": res.status.value,
             "certified": bool(res.certificate is not None and res.certificate.passed),
-            "rolls": len(gait.rolls), "replacements": len(gait.steps),
+            "rolls": len(gait.rolls), "replacements": gait.replacements,
             "during_rolls": len(gait.carried),
             "robot": gait.duration if gait.phases else None,
             "wall": t3 - t0, "grasp": t1 - t0, "swing_build": swings,

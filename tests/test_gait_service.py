@@ -227,3 +227,26 @@ def _axis_angle(axis: tuple[float, float, float], angle: float) -> np.ndarray:
     k = np.asarray(axis) / np.linalg.norm(axis)
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def test_a_gait_whose_swing_is_not_found_is_a_typed_result_over_http(
+        live_server: Server) -> None:
+    """A clearance no swing can keep (50 mm from the ball): the first re-placement is not
+    found, the rolls are halved twice, and the answer is a result naming the swing, with
+    the roll that was made. (The failed step is kept with the swing it did not find and
+    has no phase: the result's pieces raised StopIteration on it, and the job failed.)"""
+    from dexroll_client import DexrollClient
+
+    body = small()
+    body["gait"]["clearance"] = 0.05
+    with DexrollClient.from_url(live_server.url, timeout=120) as client:
+        result = client.plan(body, timeout=600).result
+    assert isinstance(result, ManipulationResult), result
+    assert result.status is PlanStatus.INFEASIBLE, result.message
+    assert "the swing of finger 'index' was not found" in result.message
+    assert "clearance from the ball" in result.message
+    gait = result.gait
+    assert gait is not None and gait.rolls == 1 and gait.replacements == 0
+    assert [p.kind for p in gait.phases] == ["roll"]
+    assert gait.trajectory is not None and gait.trajectory.swings == []
+    assert len(gait.trajectory.rolls) == 1

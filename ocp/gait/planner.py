@@ -108,6 +108,12 @@ class GaitPlan:
     def duration(self) -> float:
         return self.phases[-1].end if self.phases else 0.0
 
+    @property
+    def replacements(self) -> int:
+        """The re-placements made: the steps but a failed gait's last, which is kept with
+        the swing it did not find (its message) and has no phase."""
+        return sum(1 for st in self.steps if st.ok)
+
     def joints(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(q, q_dot, q_ddot) of every finger's joints (concatenated) at time ``t``: the
         phase's own motion (a roll's returned polynomials, a swing's cubics; still in

@@ -203,12 +203,13 @@ def _pieces(gait: GaitPlan, names: list[str]) -> GaitTrajectoryModel | None:
             profile=step.ramp_profile))
     for i, step in enumerate(gait.steps):
         sw = step.swing
-        if sw is None:
-            continue
         kind, index = ("roll", carried[i]) if i in carried else ("swing", i)
-        j = next(n for n, p in enumerate(gait.phases) if p.kind == kind and p.index == index)
-        swings.append(GaitSwingModel(phase=j, finger=names[step.finger],
-                                     start=gait.phases[j].start, t=rows(sw.t), q=rows(sw.Q),
+        at = next((n for n, p in enumerate(gait.phases) if p.kind == kind and p.index == index),
+                  None)
+        if sw is None or at is None:  # no swing, or one not made (a failed gait's last
+            continue  # step is kept with the swing it did not find, and has no phase)
+        swings.append(GaitSwingModel(phase=at, finger=names[step.finger],
+                                     start=gait.phases[at].start, t=rows(sw.t), q=rows(sw.Q),
                                      q_dot=rows(sw.V), q_ddot=rows(sw.A), jerk=rows(sw.J)))
     return GaitTrajectoryModel(rolls=rolls, swings=swings, holds=holds)
 
@@ -257,7 +258,7 @@ def gait_result(gait: GaitPlan, problem: ManipulationProblem, rate: float,
                                touching=list(p.touching),
                                lifted_finger=None if p.lifted is None else names[p.lifted])
                 for p in gait.phases],
-        turned=gait.turned, rolls=len(gait.rolls), replacements=len(gait.steps),
+        turned=gait.turned, rolls=len(gait.rolls), replacements=gait.replacements,
         never_lifted=list(gait.never_lifted), wall_time=gait.wall_time, samples=samples,
         trajectory=_pieces(gait, names) if gait.phases else None)
     iterations = sum(r.iterations for r in gait.rolls) + \
