@@ -20,7 +20,7 @@ from ocp.control import ControllerOptions, WindowController
 from ocp.spec.problem import ProblemError
 from planner_service.execution.closed_loop import FirstPlan
 from planner_service.planners import REQUEST
-from tests.window_helpers import experiment2, pushed_estimate
+from tests.window_helpers import NO_DEADLINE, experiment2, pushed_estimate
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENT2 = ROOT / "examples" / "experiment2_two_fingers.json"
@@ -79,7 +79,8 @@ def test_a_pushed_grasp_is_tracked_back_from_where_it_is(first: FirstPlan) -> No
     estimated state and, asked to, its input; it ends nearer the reference than it
     started, and, converged, is certified."""
     c = WindowController(first.problem, first.plan,
-                         ControllerOptions(max_iter=40, fix_start=True))
+                         ControllerOptions(max_iter=40, fix_start=True,
+                                           time_limit=NO_DEADLINE))
     t = 2.0
     est = pushed_estimate(c, first, t, (0.0, 1e-3, 0.0))
     tick = c.tick(t, est.x, est.u)

@@ -12,12 +12,16 @@ import json
 import math
 from pathlib import Path
 
+import pytest
+
 from dexroll_client import ManipulationResult, PlanStatus
 from planner_service.cli import plan_request
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow  # (16-24 s; by default test_gait_service's gait whose swing is never found
+# halves its rolls twice and keeps only the roll it made)
 def test_a_failed_re_placement_rolls_again_half_as_far() -> None:
     body = copy.deepcopy(json.loads((ROOT / "examples" / "allegro_turn_90.json").read_text()))
     body["motion"]["steps"][0]["axis"] = [-1.0, 0.0, 0.0]

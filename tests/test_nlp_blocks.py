@@ -94,6 +94,7 @@ def test_block_jacobian_and_hessian_are_the_nlps_own(name: str) -> None:
         assert_close(np.asarray(nlp.options["jac_g"](w0, p)[0]).ravel(), g_ref, atol=0.0)
 
 
+@pytest.mark.slow  # (gcc, 10-15 s: the service's opt-in DEXROLL_COMPILE_DIR)
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 def test_the_compiled_nlp_plans_what_the_virtual_machine_plans(tmp_path: Path) -> None:
     # not refined: the certificate of the returned trajectory asks for 192 intervals,

@@ -384,8 +384,8 @@ def turn_request(obj: ObjectSpec, orientation: tuple[float, ...],
         "forces": {"mass": 0.06}, "mu": 0.9, "duration": 2.0, "n_intervals": 20}
 
 
-PLANS = [(EGG, ACROSS, Q_EGG_ACROSS), (TRIAXIAL, UPRIGHT, Q_TRIAXIAL_UPRIGHT),
-         (EGG, UPRIGHT, None)]
+PLANS = [pytest.param(EGG, ACROSS, Q_EGG_ACROSS, marks=pytest.mark.slow),  # (10-13 s)
+         (TRIAXIAL, UPRIGHT, Q_TRIAXIAL_UPRIGHT), (EGG, UPRIGHT, None)]
 
 
 @pytest.mark.parametrize(("obj", "orientation", "qs"), PLANS,

@@ -21,7 +21,7 @@ from ocp.solve.backend import IpoptWindow, window_backend
 from ocp.solve.rti import RtiBackend, rti_support
 from ocp.spec.problem import ProblemError
 from planner_service.execution.closed_loop import FirstPlan
-from tests.window_helpers import experiment2, pushed_estimate
+from tests.window_helpers import NO_DEADLINE, experiment2, pushed_estimate
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -42,7 +42,8 @@ def test_the_shooting_form_is_the_same_nlp(first: FirstPlan) -> None:
     1e-7 in the scaled units) and their bounds; the linearisation's Jacobian and the
     objective's gradient are the rows' and objective's derivatives (a random step of
     1e-6: agreement to second order)."""
-    c = WindowController(first.problem, first.plan, ControllerOptions(max_iter=50))
+    c = WindowController(first.problem, first.plan,
+                         ControllerOptions(max_iter=50, time_limit=NO_DEADLINE))
     t = 1.0
     tick = c.tick(t, c.state_at(t)[0])
     assert tick.status == "converged"

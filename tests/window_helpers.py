@@ -15,6 +15,10 @@ from planner_service.execution.closed_loop import FirstPlan, first_plan
 from planner_service.planners import REQUEST
 
 EXPERIMENT2 = Path(__file__).resolve().parents[1] / "examples" / "experiment2_two_fingers.json"
+#: A tick's wall-clock safety for the tests whose law is a window's convergence within an
+#: iteration budget, not the real-time budget: with the default 1 s, 40 iterations under
+#: the suite's load ran out of time and the tick was "tracked", not "converged".
+NO_DEADLINE = 600.0
 
 
 def experiment2() -> FirstPlan:
