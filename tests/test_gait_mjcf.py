@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from benchmarks.gait_turns import OVERLAP
 from dexroll_client import ManipulationResult, PlanStatus
 from ocp.robots.mjcf_frames import mujoco_text
 from planner_service.cli import plan_request
@@ -144,10 +145,6 @@ def test_a_gait_on_a_users_mjcf_hand() -> None:
     angle = 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), abs(w))
     assert abs(math.degrees(angle) - 8.0) <= 1.0
     assert float(np.linalg.norm(centre - centre[0], axis=1).max()) <= 1e-3
-
-
-OVERLAP = {"replace": "spent", "fastest_swings": True, "fastest_rolls": True,
-           "landing": "farthest", "roll_step": 0.5236, "overlap": True}
 
 
 def _executes_on_own_servos(example: str, gait: dict | None = None,

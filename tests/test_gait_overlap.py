@@ -165,13 +165,13 @@ def test_the_issue_targets_turns_are_certified_within_their_time_and_execute(
     About -z an overlap roll is not found once (the middle finger stranded, the ring
     stopping without it): that fingertip alone is re-placed at rest and the gait goes on
     overlapping (four at rest before, 10.4 s). Executed in MuJoCo in dexroll's scene."""
+    from benchmarks.gait_turns import OVERLAP
     from planner_service.execution import simulate_result
 
     body = json.loads((ROOT / "examples" / example).read_text())
     if axis is not None:
         body["motion"]["steps"][0]["axis"] = list(axis)
-    body["gait"].update(replace="spent", fastest_swings=True, fastest_rolls=True,
-                        landing="farthest", roll_step=math.radians(30.0), overlap=True)
+    body["gait"].update(OVERLAP)
     request, _, result, gait = planned_gait(body)
     assert gait.duration < motion and len(gait.steps) <= replacements
     assert len(gait.steps) - len(gait.carried) <= 1  # at most one made at rest

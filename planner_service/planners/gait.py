@@ -203,11 +203,13 @@ def _pieces(gait: GaitPlan, names: list[str]) -> GaitTrajectoryModel | None:
             profile=step.ramp_profile))
     for i, step in enumerate(gait.steps):
         sw = step.swing
+        if sw is None:
+            continue
         kind, index = ("roll", carried[i]) if i in carried else ("swing", i)
         at = next((n for n, p in enumerate(gait.phases) if p.kind == kind and p.index == index),
                   None)
-        if sw is None or at is None:  # no swing, or one not made (a failed gait's last
-            continue  # step is kept with the swing it did not find, and has no phase)
+        if at is None:  # a swing not made: a failed gait's last step is kept with the swing
+            continue    # it did not find, and has no phase
         swings.append(GaitSwingModel(phase=at, finger=names[step.finger],
                                      start=gait.phases[at].start, t=rows(sw.t), q=rows(sw.Q),
                                      q_dot=rows(sw.V), q_ddot=rows(sw.A), jerk=rows(sw.J)))
